@@ -1,0 +1,1 @@
+"""The ``metro`` command line (typer). Thin: parse, call one library function, print or write."""

@@ -1,0 +1,58 @@
+"""Shared CLI plumbing: one-line errors with exit code 2, JSON output."""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+
+import typer
+
+EXIT_BAD_INPUT = 2
+
+
+def fail(message: str) -> None:
+    """Print ``error: message`` on one line to stderr and exit with code 2."""
+    typer.echo(f"error: {' '.join(str(message).split())}", err=True)
+    raise typer.Exit(EXIT_BAD_INPUT)
+
+
+def guarded(fn):
+    """Turn ``ValueError``/``OSError`` from the library into a one-line error, exit 2."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except (ValueError, OSError) as exc:
+            fail(str(exc))
+
+    return wrapper
+
+
+def to_jsonable(obj):
+    """Convert numpy scalars/arrays (and NaN) to plain JSON values."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if np.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    return obj
+
+
+def dumps(obj) -> str:
+    return json.dumps(to_jsonable(obj), indent=2, sort_keys=False)
+
+
+def echo_json(obj) -> None:
+    sys.stdout.write(dumps(obj) + "\n")

@@ -1,0 +1,21 @@
+"""metro: metrology for robotic drilling.
+
+Public names are listed in ``__all__``. Heavy libraries (Open3D, trimesh, scipy, filterpy,
+matplotlib) are imported inside the functions that need them, so importing this package
+is cheap.
+"""
+
+from .layout import SensorLayout, load_layout, save_layout
+from .model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
+from .normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
+from .plane import Plane, fit_plane_tls
+
+__all__ = [
+    "SensorLayout", "load_layout", "save_layout",
+    "readings", "jacobian_raw", "jacobian_tangent", "direction_from_tangent", "gauge_null_vector",
+    "projection_points", "normal_eq18", "normal_lsq", "micro_plane_normal", "attitude_angles",
+    "normal_from_angles", "angle_between",
+    "Plane", "fit_plane_tls",
+]
+
+__version__ = "0.1.0"
