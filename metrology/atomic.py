@@ -10,6 +10,12 @@ from pathlib import Path
 __all__ = ["atomic_path", "write_text"]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextmanager
 def atomic_path(path, suffix=None):
     """Yield a temporary path beside ``path``; move it onto ``path`` only on success.
@@ -22,6 +28,7 @@ def atomic_path(path, suffix=None):
         raise ValueError(f"{path}: directory {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent or ".")
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
     try:
         yield Path(tmp)
         os.replace(tmp, path)
