@@ -21,3 +21,19 @@ WEAK_RTOL = 1e-3
 #: a point cloud whose second singular value is below this fraction of its first is
 #: collinear (unitless)
 COLLINEAR_RTOL = 1e-9
+
+#: correlations of a sensor's parameters are reported above this |r| (unitless)
+CORRELATION_REPORT = 0.9
+
+#: variance inflation factors above this are reported as poorly separated parameters
+#: (unitless; the standard error is more than sqrt(10) = 3.2 times what it would be if the
+#: pose set decoupled the parameter: the usual rule of thumb). Informational: the pivot of
+#: a beam about its spot gives VIFs in the thousands for any pose set a 20 mm range allows,
+#: so warnings are raised on the standard errors against the target instead
+VIF_WARN = 10.0
+
+#: default wanted 1-sigma of a calibrated zero point (mm) and beam tilt (deg): either
+#: alone, uncompensated, would tilt the measured normal by about 0.05 deg over the ~50 mm
+#: between opposite spots, a tenth of the 0.5 deg drilling requirement of the paper
+TARGET_ZERO_MM = 0.05
+TARGET_TILT_DEG = 0.05

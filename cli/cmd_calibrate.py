@@ -1,0 +1,70 @@
+"""``metro calibrate`` and ``metro validate``: sensor calibration from measured files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ._common import echo_json, fail, guarded
+
+METHODS = ("lsq", "iekf", "ekf", "ekf_paper", "method1")
+
+
+def _check_out_dir(path: Optional[Path], what: str) -> None:
+    """Fail before any work when an output's directory does not exist (nothing written)."""
+    if path is not None and not Path(path).resolve().parent.is_dir():
+        fail(f"{what} {path}: directory {Path(path).parent} does not exist")
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("calibrate")
+    @guarded
+    def calibrate_cmd(
+        export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)."),
+        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
+        layout: Path = typer.Option(..., "--layout", help="Nominal sensor layout TOML."),
+        method: str = typer.Option("lsq", "--method", help=f"Estimator: {', '.join(METHODS)}."),
+        json_out: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+        out: Optional[Path] = typer.Option(None, "--out", help="Write the calibrated layout TOML here."),
+        plot: Optional[Path] = typer.Option(None, "--plot", help="Write convergence and residual PNGs into DIR."),
+        target_mm: float = typer.Option(0.05, "--target-mm", help="Wanted 1-sigma of the zero points, mm."),
+        target_deg: float = typer.Option(0.05, "--target-deg", help="Wanted 1-sigma of the beam tilts, deg."),
+    ) -> None:
+        """Calibrate the normal sensors from a tracker export, the datum and the nominal layout."""
+        if method not in METHODS:
+            fail(f"--method {method!r}: expected one of {', '.join(METHODS)}")
+        if not (target_mm > 0 and target_deg > 0):
+            fail(f"--target-mm and --target-deg must be positive, got {target_mm:g} and {target_deg:g}")
+        _check_out_dir(out, "--out")
+        import math
+
+        from metrology.calibration import calibrate_files
+
+        report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
+                                 out=out, plot_dir=plot)
+        if json_out:
+            echo_json(report.to_dict())
+        else:
+            typer.echo(report.text())
+
+    @app.command("validate")
+    @guarded
+    def validate_cmd(
+        export: Path = typer.Argument(..., help="Tracker export CSV of the validation poses."),
+        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
+        layout: Path = typer.Option(..., "--layout", help="Layout TOML to validate (usually the calibrated one)."),
+        layout_before: Optional[Path] = typer.Option(None, "--layout-before", help="Layout to compare with (nominal)."),
+        json_out: bool = typer.Option(False, "--json", help="Print max_deg, mean_deg, std_deg per layout as JSON."),
+        plot: Optional[Path] = typer.Option(None, "--plot", help="Write the deviation per pose as a PNG here."),
+    ) -> None:
+        """Angular deviation of the measured normal from the datum normal, per pose and layout."""
+        _check_out_dir(plot, "--plot")
+        from metrology.calibration import validate_files
+
+        report = validate_files(export, plane, layout, layout_before, plot=plot)
+        if json_out:
+            echo_json(report.to_dict())
+        else:
+            typer.echo(report.text())
