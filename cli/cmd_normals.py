@@ -1,0 +1,50 @@
+"""``metro normals``: micro-plane against micro-sphere normals on a CAD panel (issue 5)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._common import echo_json, guarded
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("normals")
+    @guarded
+    def normals(
+        panel: Path = typer.Argument(..., help="Panel mesh in mm (STL, OBJ, PLY, GLB/GLTF; STEP with cascadio)."),
+        layout: Path = typer.Option(..., "--layout", help="Sensor layout TOML (nominal or calibrated)."),
+        points: Path = typer.Option(None, "--points", help="CSV of drilling points x,y,z[,i,j,k] (mm; approach = feed)."),
+        grid: float = typer.Option(None, "--grid", help="Regular grid of drilling points, spacing in mm."),
+        tilt_deg: float = typer.Option(1.0, "--tilt-deg", help="Initial attitude error of the tool axis (random azimuth)."),
+        standoff_mm: float = typer.Option(None, "--standoff-mm", help="Sensor-zero plane to drilling point along the tool axis; default from the layout."),
+        noise_mm: float = typer.Option(None, "--noise-mm", help="Reading noise, 1 sigma; default the layout's noise_mm (0 where absent)."),
+        seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same output)."),
+        tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Attitude-loop tolerance."),
+        engine: str = typer.Option("auto", "--engine", help="Ray engine: auto, trimesh, embree, open3d."),
+        out: Path = typer.Option(None, "--out", help="Per-point results, .csv or .json."),
+        as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+        plot: Path = typer.Option(None, "--plot", help="PNG map of the errors over the panel."),
+        true_layout: Path = typer.Option(None, "--true-layout", help="Simulate the head as this layout (default: --layout)."),
+        motion_repeat_deg: float = typer.Option(0.02, "--motion-repeat-deg", help="Robot: random rotation error per adjustment, 1 sigma per axis."),
+        motion_scale: float = typer.Option(0.03, "--motion-scale", help="Robot: relative error of a commanded rotation, 1 sigma."),
+        motion_position_mm: float = typer.Option(0.05, "--motion-position-mm", help="Robot: TCP position error per adjustment, 1 sigma per axis."),
+        sphere_prior_radius_mm: float = typer.Option(100.0, "--sphere-prior-radius-mm", help="Micro-sphere curvature prior (1 sigma = 1/this); inf = exact sphere."),
+        no_loop: bool = typer.Option(False, "--no-loop", help="Measure once; skip the attitude loop."),
+    ) -> None:
+        """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
+        from metrology.panel import normals_job, summary_text
+
+        summary = normals_job(
+            panel, layout, points_path=points, grid_mm=grid, tilt_deg=tilt_deg, standoff_mm=standoff_mm,
+            noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
+            true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
+            motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
+        )
+        for w in summary["warnings"]:
+            typer.echo(f"warning: {w}", err=True)
+        if as_json:
+            echo_json(summary)
+        else:
+            typer.echo(summary_text(summary))
