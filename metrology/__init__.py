@@ -9,13 +9,19 @@ from .layout import SensorLayout, load_layout, save_layout
 from .model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
 from .normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
 from .plane import Plane, fit_plane_tls
+from .planefit import PlaneFit, fit_plane_robust, fit_plane_file
+from .clouds import read_cloud
+from .calibration import CalibrationReport, calibrate_dataset, validate
+from .panel import load_panel, run_normals, micro_sphere_normal, fit_algebraic_sphere
 
 __all__ = [
     "SensorLayout", "load_layout", "save_layout",
     "readings", "jacobian_raw", "jacobian_tangent", "direction_from_tangent", "gauge_null_vector",
     "projection_points", "normal_eq18", "normal_lsq", "micro_plane_normal", "attitude_angles",
     "normal_from_angles", "angle_between",
-    "Plane", "fit_plane_tls",
+    "Plane", "fit_plane_tls", "PlaneFit", "fit_plane_robust", "fit_plane_file", "read_cloud",
+    "CalibrationReport", "calibrate_dataset", "validate",
+    "load_panel", "run_normals", "micro_sphere_normal", "fit_algebraic_sphere",
 ]
 
 __version__ = "0.1.0"

@@ -32,10 +32,15 @@ def load_plane(path):
     path = Path(path)
     if path.suffix.lower() == ".json":
         return Plane.from_json(path), None
-    from .planefit import fit_cloud_file
+    from .clouds import read_cloud
+    from .planefit import fit_plane_robust
 
-    result = fit_cloud_file(path)
-    return result.plane, result.inlier_points
+    points = read_cloud(path)
+    try:
+        fit = fit_plane_robust(points)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return fit.plane, points[fit.inliers(points)]
 
 
 @dataclass(frozen=True)

@@ -280,11 +280,11 @@ def test_fixture_regenerates_byte_for_byte(tmp_path):
 
 
 def test_fixture_plane_json_matches_the_datum_cloud():
-    from metrology import planefit
+    from metrology.clouds import read_cloud
+    from metrology.dataset import load_plane
     from metrology.plane import Plane, fit_plane_tls
 
-    pts = np.asarray(__import__("metrology._o3d", fromlist=["open3d"]).open3d().io.read_point_cloud(
-        str(FIX / "datum.ply")).points)
+    pts = read_cloud(FIX / "datum.ply")
     assert 2000 <= len(pts) <= 3000
     plane = Plane.from_json(PLANE)
     r = plane.distance(pts)
@@ -292,7 +292,8 @@ def test_fixture_plane_json_matches_the_datum_cloud():
     assert 0.95 < inliers.mean() < 0.99  # a few % outliers
     tls, _, rms = fit_plane_tls(pts[inliers])
     assert np.degrees(np.arccos(abs(tls.normal @ plane.normal))) < 1e-3
-    if hasattr(planefit, "fit_cloud_file"):
-        fitted = planefit.fit_cloud_file(FIX / "datum.ply").plane
-        assert np.degrees(np.arccos(abs(fitted.normal @ plane.normal))) < 2e-3
-        assert abs(fitted.offset - plane.offset) < 0.01
+    # --plane accepts the cloud itself: the robust fit agrees with the JSON
+    fitted, inlier_pts = load_plane(FIX / "datum.ply")
+    assert np.degrees(np.arccos(abs(fitted.normal @ plane.normal))) < 2e-3
+    assert abs(fitted.offset - plane.offset) < 0.01
+    assert 0.95 < len(inlier_pts) / len(pts) < 0.99
