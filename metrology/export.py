@@ -19,7 +19,7 @@ import numpy as np
 from .atomic import write_text
 from .tolerances import QUATERNION_NORM
 
-__all__ = ["TrackerExport", "read_export", "write_export", "export_to_csv"]
+__all__ = ["TrackerExport", "read_export", "write_export", "export_to_csv", "read_csv_rows"]
 
 REQUIRED = ("pose_id", "x", "y", "z", "qw", "qx", "qy", "qz")
 OPTIONAL = ("time_s", "temp_c")
@@ -91,16 +91,21 @@ def _float(path, line, column, text, allow_empty=False):
     return value
 
 
-def read_export(path) -> TrackerExport:
-    """Read a tracker export CSV; every error names the file, line and column."""
+def read_csv_rows(path, what: str) -> list:
+    """All rows of a UTF-8 CSV file (a BOM is accepted); a one-line ValueError naming the
+    file when it cannot be read as text. ``what`` names the file's role in the error."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+            return list(csv.reader(fh))
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read export ({exc.strerror})") from None
+        raise ValueError(f"{path}: cannot read {what} ({exc.strerror})") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a UTF-8 text CSV") from None
-    rows = [r for r in rows if any(c.strip() for c in r)]
+
+
+def read_export(path) -> TrackerExport:
+    """Read a tracker export CSV; every error names the file, line and column."""
+    rows = [r for r in read_csv_rows(path, "export") if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{path}: empty file, expected a header line {','.join(REQUIRED)},d_<sensor>,...")
     header = [h.strip() for h in rows[0]]

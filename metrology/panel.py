@@ -554,14 +554,10 @@ def read_points(path) -> DrillPoints:
     ValueError
         Naming the file, the line and the value.
     """
+    from .export import read_csv_rows
+
     path = str(path)
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read points ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a text CSV file") from None
+    rows = read_csv_rows(path, "points")
     pts, app, labels = [], [], []
     ncol = None
     for lineno, row in enumerate(rows, start=1):
