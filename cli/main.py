@@ -16,17 +16,10 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-from . import cmd_core  # noqa: E402
+from . import cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_normals  # noqa: E402
 
-cmd_core.register(app)
-for _name in ("cmd_fit_plane", "cmd_calibrate", "cmd_normals", "cmd_diagnose"):
-    try:
-        _mod = __import__(f"cli.{_name}", fromlist=["register"])
-    except ModuleNotFoundError as _exc:  # a command module not yet written
-        if _exc.name != f"cli.{_name}":
-            raise
-        continue
-    _mod.register(app)
+for _module in (cmd_fit_plane, cmd_calibrate, cmd_normals, cmd_diagnose, cmd_core):
+    _module.register(app)
 
 
 def main() -> None:

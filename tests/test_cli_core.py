@@ -59,3 +59,21 @@ def test_reproduce_bad_input_is_one_line_exit_2(tmp_path):
         assert r.exit_code == 2
         assert msg in r.output and len(r.output.strip().splitlines()) == 1
     assert not (tmp_path / "never").exists()
+
+
+def test_demo_runs_the_whole_walk_through(tmp_path):
+    from pathlib import Path
+
+    fixtures = Path(__file__).resolve().parent.parent / "fixtures"
+    r = runner.invoke(app, ["demo", "--fixtures", str(fixtures), "--out", str(tmp_path / "demo")])
+    assert r.exit_code == 0, r.output
+    for step in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
+        assert f"$ metro {step}" in r.output
+    assert "cause:" in r.output and "recommendation:" in r.output
+    for name in ("plane.json", "calibrated.toml", "validation.png", "panel_errors.png"):
+        assert (tmp_path / "demo" / name).stat().st_size > 0
+
+
+def test_demo_without_fixtures_is_one_line_exit_2(tmp_path):
+    r = runner.invoke(app, ["demo", "--fixtures", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "fixtures not found" in r.output and len(r.output.strip().splitlines()) == 1
