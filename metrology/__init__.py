@@ -13,6 +13,7 @@ from .planefit import PlaneFit, fit_plane_robust, fit_plane_file
 from .clouds import read_cloud
 from .calibration import CalibrationReport, calibrate_dataset, validate
 from .panel import load_panel, run_normals, micro_sphere_normal, fit_algebraic_sphere
+from .diagnosis import diagnose
 
 __all__ = [
     "SensorLayout", "load_layout", "save_layout",
@@ -22,6 +23,7 @@ __all__ = [
     "Plane", "fit_plane_tls", "PlaneFit", "fit_plane_robust", "fit_plane_file", "read_cloud",
     "CalibrationReport", "calibrate_dataset", "validate",
     "load_panel", "run_normals", "micro_sphere_normal", "fit_algebraic_sphere",
+    "diagnose",
 ]
 
 __version__ = "0.1.0"
