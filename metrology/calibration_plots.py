@@ -20,23 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_path
+from .plots import pyplot
 
 __all__ = ["plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
 
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _save(fig, path):
-    plt = _pyplot()
+    plt = pyplot()
     try:
         with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=110)
@@ -60,7 +52,7 @@ def plot_convergence(report, path, convergence=None) -> Path:
     cal = report.calibration
     names = cal.nominal.names
     n = len(names)
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(n, 2, figsize=(11, 2.4 * n), sharex=True, squeeze=False)
     if cal.history:
         for i in range(n):
@@ -109,7 +101,7 @@ def plot_residuals(report, path) -> Path:
     res, inc = residual_table(report.layout, report.dataset.obs)
     d = report.dataset.obs.d
     names = report.layout.names
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
     idx = np.arange(1, len(d) + 1)
     for i, name in enumerate(names):
@@ -135,7 +127,7 @@ def plot_residuals(report, path) -> Path:
 
 def plot_validation(vreport, path) -> Path:
     """Angular deviation per pose, one series per layout (Figure 12)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 4))
     x = np.arange(1, len(vreport.pose_id) + 1)
     markers = ("o", "s", "^", "D", "v")

@@ -968,11 +968,11 @@ def diagnose_files(export_path, plane_path, layout_path, **kw) -> Diagnosis:
 
 def plot_report(diag: Diagnosis, out_dir) -> list:
     """Residual plots that made the case, before and after; returns the files written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from pathlib import Path
+
+    from .plots import pyplot
+
+    plt = pyplot()
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -1429,10 +1429,9 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
     """A PNG map of both methods' errors over the panel (its best-fit plane), as bytes."""
     import io
 
-    import matplotlib
+    from .plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     pts = run.points
     c = pts.mean(axis=0)

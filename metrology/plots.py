@@ -6,12 +6,13 @@ import numpy as np
 
 from .atomic import atomic_path
 
-__all__ = ["figure7", "figure8"]
+__all__ = ["figure7", "figure8", "pyplot"]
 
 RAW_LABELS = ("dx [mm]", "dy [mm]", "dz [mm]", "dm", "dn", "dq")
 
 
-def _plt():
+def pyplot():
+    """``matplotlib.pyplot`` on the headless Agg backend (imported on first use)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,7 +31,7 @@ def figure7(history, true_errors, names, path, title="Paper's EKF: estimated par
     names : sequence of str, sensor names
     path : output PNG path (written atomically)
     """
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), sharex=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, ax in enumerate(axes.flat):
@@ -58,7 +59,7 @@ def figure8(deviation_deg, path, title="Angular deviation of the measured normal
     deviation_deg : dict method -> (m,) float, deg
     path : output PNG path (written atomically)
     """
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.8))
     markers = "osv^D*xP"
     for k, (name, dev) in enumerate(deviation_deg.items()):

@@ -22,7 +22,7 @@ import numpy as np
 
 from .frames import plane_in_tcs
 from .layout import SensorLayout
-from .model import readings
+from .model import direction_basis, readings
 
 __all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points", "plane_basis"]
 
@@ -56,12 +56,9 @@ class Poses:
 
 
 def plane_basis(normal):
-    """Two unit vectors ``(2, 3)`` spanning the plane perpendicular to ``normal (3,)``."""
-    n = np.asarray(normal, float) / np.linalg.norm(normal)
-    a = np.eye(3)[np.argmin(np.abs(n))]
-    e1 = a - (a @ n) * n
-    e1 /= np.linalg.norm(e1)
-    return np.stack([e1, np.cross(n, e1)])
+    """Two unit vectors ``(2, 3)`` spanning the plane perpendicular to ``normal (3,)``
+    (:func:`metrology.model.direction_basis` of one vector)."""
+    return direction_basis(np.asarray(normal, float)[None])[0]
 
 
 def _axis_height(layout: SensorLayout, reading_mm: float, axis_sign: float) -> float:
