@@ -13,7 +13,7 @@ The detectable range of an effect is the sizes at which the right cause is named
 90 % of the trials. ``--wide`` repeats with a wider pose set (stand-off 34-66 mm, tilt <= 10
 deg) to show what poses separate scale and incidence from the geometry.
 
-    python benchmarks/study_diagnose.py [--trials 10] [--null 100] [--poses 80] [--wide] [--jobs 2]
+    python benchmarks/study_diagnose.py [--trials 10] [--null 100] [--poses 80] [--folds 5] [--wide] [--jobs 2]
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from multiprocessing import Pool
 import numpy as np
 
 SIZES = {
-    "scale": [2e-3, 4e-3, 8e-3, 1.6e-2],
+    "scale": [2e-3, 3e-3, 4e-3, 6e-3, 8e-3, 1.6e-2],
     "incidence": [0.05, 0.1, 0.2, 0.4],
     "drift": [0.001, 0.002, 0.004, 0.008, 0.03],
     "nonlinearity": [0.01, 0.02, 0.04, 0.08, 0.3],
     "plane_form": [0.001, 0.002, 0.004, 0.008, 0.05],
-    "pose_error": [0.0005, 0.001, 0.002, 0.004, 0.03],
+    "pose_error": [0.001, 0.002, 0.003, 0.004, 0.006, 0.03],
     "outliers": [0.015, 0.02, 0.03, 0.06, 1.0],
     "periodic": [0.003, 0.006, 0.012, 0.024],
 }
@@ -47,7 +47,7 @@ def trial(args):
     from metrology.simulation import PoseSpec
     from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_run, typical_layouts
 
-    effect, size, seed, n_poses, wide = args
+    effect, size, seed, n_poses, wide, folds = args
     rng = np.random.default_rng([seed, list(SIZES).index(effect) + 1 if effect in SIZES else 0, int(round(size * 1e6))])
     nominal, true = typical_layouts(range_mm=(20.0, 80.0) if wide else (30.0, 70.0))
     plane = Plane(TABLE5_PLANE[:3], TABLE5_PLANE[3])
@@ -58,7 +58,7 @@ def trial(args):
         sensor = None if effect in SETUP_EFFECTS else nominal.names[int(rng.integers(nominal.n))]
         hidden = [HiddenEffect(effect, sensor, size)]
     export, truth = synth_run(rng, true, plane, n_poses, hidden, spec)
-    d = diagnose(Dataset(check(export, nominal), nominal, plane), folds=4, sim_reps=1)
+    d = diagnose(Dataset(check(export, nominal), nominal, plane), folds=folds, sim_reps=1)
     right = (d.cause == effect) and (effect in SETUP_EFFECTS or d.sensors == [sensor])
     return {"effect": effect, "size": size, "seed": seed, "cause": d.cause, "sensors": d.sensors,
             "confidence": d.confidence, "right": bool(right) if effect != "null" else d.cause == "none",
@@ -72,19 +72,20 @@ def main(argv=None):
     ap.add_argument("--poses", type=int, default=80)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--wide", action="store_true")
+    ap.add_argument("--folds", type=int, default=5, help="k of the k-fold (the CLI default: 5)")
     ap.add_argument("--only", default=None, help="comma-separated effects")
     ap.add_argument("--json", default=None, help="write the raw results here")
     a = ap.parse_args(argv)
-    jobs = [("null", 0.0, s, a.poses, a.wide) for s in range(a.null)]
+    jobs = [("null", 0.0, s, a.poses, a.wide, a.folds) for s in range(a.null)]
     effects = SIZES if a.only is None else {k: SIZES[k] for k in a.only.split(",")}
     for e, sizes in effects.items():
-        jobs += [(e, z, s, a.poses, a.wide) for z in sizes for s in range(a.trials)]
+        jobs += [(e, z, s, a.poses, a.wide, a.folds) for z in sizes for s in range(a.trials)]
     t0 = time.time()
     with Pool(a.jobs) as pool:
         res = pool.map(trial, jobs, chunksize=1)
     dt = time.time() - t0
     null = [r for r in res if r["effect"] == "null"]
-    print(f"pose set: {'wide' if a.wide else 'typical'}, {a.poses} poses; {len(res)} diagnoses in {dt:.0f} s "
+    print(f"pose set: {'wide' if a.wide else 'typical'}, {a.poses} poses, {a.folds} folds; {len(res)} diagnoses in {dt:.0f} s "
           f"({dt / max(len(res), 1) * a.jobs:.1f} s each)")
     if null:
         fa = sum(not r["right"] for r in null)

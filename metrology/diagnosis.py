@@ -25,8 +25,8 @@ The procedure (issue 6):
 3. **Extension.** The named component is re-identified with the base parameters; each extra
    parameter comes with its standard error (``s^2 (J^T J)^-1``). The extended model drives
    the simulator, and the side-by-side table is repeated with it.
-4. **Gain.** k-fold by pose: held-out residual RMS (dof-corrected for per-pose parameters)
-   and normal angular deviation, base against extended, and their ratio.
+4. **Gain.** k-fold by pose: held-out residual RMS (a per-pose value predicted from the
+   other sensors of its pose) and normal angular deviation, base against extended, and their ratio.
 """
 
 from __future__ import annotations
@@ -445,9 +445,15 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True):
 
 
 def battery_on(tests, sensors):
-    """Bonferroni p-value of the tests of :func:`noise_tests` that involve ``sensors`` (indices)."""
+    """Bonferroni p-value of the tests of :func:`noise_tests` that involve ``sensors`` (indices).
+
+    The family is the whole battery (its ``n_tests``), not the subset: the check after an
+    extension is then no stricter than the verdict on the base residuals, and the same
+    residuals cannot pass the base battery yet fail the subset's (a chance correlation of
+    two sensors at p = 0.001 does that with a 6-test subset).
+    """
     ps = [p for p, inv in tests["_p"] if inv & set(sensors)]
-    return min(1.0, min(ps) * len(ps)) if ps else 1.0
+    return min(1.0, min(ps) * tests["n_tests"]) if ps else 1.0
 
 
 def structure(residual, d0, cov: Covariates, names):
@@ -501,9 +507,9 @@ def _folds(p, k):
 def _heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
     """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
 
-    Per-pose components are re-estimated on each held-out pose (linear least squares) and
-    their parameters counted as lost degrees of freedom. Returns (residual, lost_dof (h,),
-    normal deviation (h,) rad).
+    A per-pose component's value of a held-out pose is fitted, for each reading, to the other
+    sensors of that pose (leave one sensor out), so every residual is a prediction. Returns
+    (residual (h, n) mm, normal deviation (h,) rad).
     """
     from .normals import angle_between, micro_plane_normal
 
@@ -511,7 +517,6 @@ def _heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
     zero, u = _geometry(nominal, f.theta)
     d0, _ = readings(zero, u, o.normal, o.offset)
     terms = np.zeros_like(d0)
-    lost = np.zeros(len(test))
     per_pose = []
     for comp in f.components:
         if comp.per_pose:
@@ -521,19 +526,23 @@ def _heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
         else:
             terms += comp.evaluate(comp.values, d0, c)
     res = o.d - d0 - terms
-    for comp in per_pose:  # one value per held-out pose, fitted to that pose's readings
+    for comp in per_pose:
+        # a per-pose value is not known before the pose is measured: each reading is predicted
+        # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
+        # the held-out residual is a true prediction and nothing is charged as lost dof
         B = comp.basis(d0, c)  # (h, n, h)
         diag = B[np.arange(len(test)), :, np.arange(len(test))]  # (h, n)
         w = np.where(np.isfinite(res), diag / sigma[None, :], 0.0)
         r = np.where(np.isfinite(res), res / sigma[None, :], 0.0)
-        e = np.sum(w * r, axis=1) / np.maximum(np.sum(w * w, axis=1), 1e-300)
-        res = res - diag * e[:, None]
-        terms = terms + diag * e[:, None]
-        lost += 1
+        wr, ww = np.sum(w * r, axis=1, keepdims=True), np.sum(w * w, axis=1, keepdims=True)
+        e_loso = (wr - w * r) / np.maximum(ww - w * w, 1e-300)  # (h, n): without reading i
+        e_all = wr[:, 0] / np.maximum(ww[:, 0], 1e-300)  # (h,): for the normal, every reading
+        res = res - diag * e_loso
+        terms = terms + diag * e_all[:, None]
     dc = o.d - terms
     nrm = micro_plane_normal(zero, u, dc)
     dev = angle_between(nrm, o.normal)
-    return res, lost, dev
+    return res, dev
 
 
 @dataclass(frozen=True)
@@ -542,46 +551,39 @@ class HeldOut:
 
     Attributes
     ----------
-    residual : (p, n) float, mm, held-out residuals
-    lost : (p,) float, degrees of freedom spent per pose on per-pose parameters
+    residual : (p, n) float, mm, held-out residuals (predictions: see :func:`_heldout_eval`)
     normal_dev : (p,) float, rad, held-out normal deviation
     """
 
     residual: np.ndarray
-    lost: np.ndarray
     normal_dev: np.ndarray
 
     def chi2_pose(self, sigma, cols=None, exclude=None):
-        """Per-pose held-out chi-square, dof-corrected to the pose's reading count, (p,)."""
+        """Per-pose held-out chi-square ``(p,)`` over the sensors ``cols`` (default all),
+        leaving out the readings ``exclude`` ((p, n) bool) if given."""
         r = self.residual if exclude is None else np.where(exclude, np.nan, self.residual)
         r = r if cols is None else r[:, cols]
         s = sigma if cols is None else sigma[cols]
-        z = (r / s) ** 2
-        cnt = np.isfinite(z).sum(axis=1)
-        frac = len(cols) / len(sigma) if cols is not None else 1.0
-        lost = self.lost * frac
-        return np.nansum(z, axis=1) * cnt / np.maximum(cnt - lost, 1e-9)
+        return np.nansum((r / s) ** 2, axis=1)
 
     def rms(self, cols=None, exclude=None):
+        """Held-out residual RMS, mm, over the sensors ``cols`` (default all)."""
         r = self.residual if exclude is None else np.where(exclude, np.nan, self.residual)
         r = r if cols is None else r[:, cols]
-        cnt = np.isfinite(r).sum()
-        frac = (len(cols) / self.residual.shape[1]) if cols is not None else 1.0
-        return float(np.sqrt(np.nansum(r**2) / max(cnt - frac * self.lost.sum(), 1)))
+        return float(np.sqrt(np.nanmean(r**2)))
 
 
 def kfold(nominal, obs, cov, sigma, components, k, theta0):
     """k-fold-by-pose held-out figures of the base model plus ``components``."""
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
-    lost = np.zeros(p)
     dev = np.full(p, np.nan)
     for test in _folds(p, k):
         train = np.setdiff1d(np.arange(p), test)
         comps = [c.select(train) for c in components]
         f = _fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
-        res[test], lost[test], dev[test] = _heldout_eval(nominal, obs, cov, sigma, f, test)
-    return HeldOut(res, lost, dev)
+        res[test], dev[test] = _heldout_eval(nominal, obs, cov, sigma, f, test)
+    return HeldOut(res, dev)
 
 
 def _fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
@@ -782,6 +784,10 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
             "significant": bool(sig), "_fit": f, "_ho": ho, "_comp": c, "_ce": ce,
         })
     sig_list = sorted([s for s in scored if s["significant"]], key=lambda s: -s["heldout_chi2_reduction"])
+    # the strongest candidate significant in sample only: a lead, never a name
+    in_only = sorted([s for s in scored if not s["significant"] and s["p_insample"] < THRESHOLDS["alpha_candidates"] / n_cand],
+                     key=lambda s: s["p_insample"])
+    lead = in_only[0] if in_only else None
 
     # decision
     named = None
@@ -803,7 +809,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
                 break
     if best is None:
         cause = "none" if tests_base["consistent"] else "unexplained"
-        confidence = "high" if tests_base["consistent"] else "low"
+        confidence = "high" if tests_base["consistent"] and lead is None else "low"
         sensors = []
     else:
         best["_fit"] = _fit_any(nominal, obs, cov, sigma, (best["_comp"],), theta0, "lsq")
@@ -881,7 +887,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
             "normal_ratio": float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)),
             "p_heldout": best["p_heldout"],
         })
-    summary = _summary(cause, confidence, best, sig_list, tests_base, tests_ext, names)
+    summary = _summary(cause, confidence, best, tests_base, tests_ext, lead)
     public = [{k: v for k, v in s.items() if not k.startswith("_")} for s in scored]
     public.sort(key=lambda s: -s["heldout_chi2_reduction"])
     plot = {"base": base, "cov": cov, "d0": d0_base, "best": best, "names": names, "sigma": sigma,
@@ -937,15 +943,22 @@ def _describe_named(best, f: Fit, nominal, obs, cov, sigma, rng):
     return d
 
 
-def _summary(cause, confidence, best, sig_list, tb, te, names):
+def _summary(cause, confidence, best, tb, te, in_only=None):
+    """One paragraph of the verdict; ``in_only`` is the strongest candidate significant in
+    sample only (its held-out gain not), reported as a lead when nothing is named."""
     worst = max(tb["sensors"].items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
+    lead = ""
+    if in_only is not None:
+        lead = (f"; {in_only['label']} fits in sample (p = {in_only['p_insample']:.2g}) but does not predict held-out "
+                f"poses significantly better (p = {in_only['p_heldout']:.2g}, RMS ratio "
+                f"{in_only['heldout_rms_ratio']:.3g}): too small, or too confounded, to name")
     if cause == "none":
         return (f"residuals consistent with the stated noise (battery p = {tb['p_bonferroni']:.2g}); "
-                "no candidate gives a significant held-out gain")
+                "no candidate gives a significant held-out gain" + lead)
     if best is None:
         return (f"residuals inconsistent with the noise model (battery p = {tb['p_bonferroni']:.2g}, worst "
                 f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm) and no catalogued effect gives a "
-                "significant held-out gain")
+                "significant held-out gain" + lead)
     if cause == "unexplained":
         return (f"{best['label']} gives a significant held-out gain (RMS ratio {best['heldout_rms_ratio']:.3g}) but "
                 f"leaves the residuals of its sensors inconsistent with the noise model (battery p = "

@@ -19,16 +19,16 @@ from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_run, typical_layo
 
 PLANE = Plane(TABLE5_PLANE[:3], TABLE5_PLANE[3])
 N_POSES = 80
-FOLDS = 4
+FOLDS = 5  # the CLI default
 
 #: detectable ranges measured by benchmarks/study_diagnose.py on the typical pose set
 #: (>= 90 % right cause and sensor over 10 seeded trials at both ends; see docs/readme_diagnose.md)
 DETECTABLE = {
-    "scale": (0.004, 0.008),  # gain error (unitless)
+    "scale": (0.004, 0.016),  # gain error (unitless)
     "drift": (0.002, 0.03),  # mm/K
     "nonlinearity": (0.04, 0.3),  # mm (c3)
     "plane_form": (0.004, 0.05),  # mm (b_ss)
-    "pose_error": (0.002, 0.03),  # mm (1 sigma per axis)
+    "pose_error": (0.004, 0.03),  # mm (1 sigma per axis)
     "outliers": (0.06, 1.0),  # mm
 }
 #: magnitude check: estimate within K_SIGMA of its own standard error (plus model error)
@@ -196,14 +196,32 @@ def test_hidden_effect_named_blind(effect):
     _check_named(d, effect, he.sensor, truth["effects"][0])
 
 
+#: the blind set's claim: inside the detectable ranges the right cause, sensor and magnitude
+#: in >= 90 % of draws (the ranges are where >= 90 % was measured), and never a wrong
+#: catalogued cause; with 30 draws at a true 95 %, 4 or more misses happen 6 % of the time
+BLIND_SEEDS = range(1, 6)
+BLIND_MAX_MISSES = 3
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", range(1, 6))
-@pytest.mark.parametrize("effect", sorted(DETECTABLE))
-def test_hidden_effect_named_blind_many(effect, seed):
-    he = _draw(effect, seed)
-    ds, truth = run([he], 1000 * seed + len(effect))
-    d = diagnose(ds, folds=FOLDS, sim_reps=1)
-    _check_named(d, effect, he.sensor, truth["effects"][0])
+def test_hidden_effects_blind_set():
+    """5 seeded draws per effect: misses are `none` or `unexplained` (at most 3 of 30), and a
+    named catalogued cause is always the right one, on the right sensor, of the right size."""
+    misses, wrong = [], []
+    for effect in sorted(DETECTABLE):
+        for seed in BLIND_SEEDS:
+            he = _draw(effect, seed)
+            ds, truth = run([he], 1000 * seed + len(effect))
+            d = diagnose(ds, folds=FOLDS, sim_reps=1)
+            if d.cause in ("none", "unexplained"):
+                misses.append((he, d.cause, d.summary))
+                continue
+            try:
+                _check_named(d, effect, he.sensor, truth["effects"][0])
+            except AssertionError as exc:
+                wrong.append((he, d.cause, d.sensors, str(exc)))
+    assert not wrong, wrong
+    assert len(misses) <= BLIND_MAX_MISSES, misses
 
 
 def test_extended_simulation_predicts_measured_rms():
