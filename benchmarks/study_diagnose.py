@@ -7,7 +7,10 @@ For the typical pose set (metro's PoseSpec: stand-off 40-60 mm, tilt <= 5 deg, s
 * each catalogued effect at a ladder of sizes on a sensor drawn per trial: the fraction
   with the right cause (and sensor);
 * the out-of-catalogue periodic error: the fraction named as a catalogued cause with
-  confidence ``high``.
+  confidence ``high``;
+* for ``plane_form``, a tracker scan of the same surface is given as the datum cloud: the
+  fraction in which the readings' form agrees with the cloud's (1 % false disagreement by
+  construction).
 
 The detectable range of an effect is the sizes at which the right cause is named in at least
 90 % of the trials. ``--wide`` repeats with a wider pose set (stand-off 34-66 mm, tilt <= 10
@@ -45,7 +48,7 @@ def trial(args):
     from metrology.paper import TABLE5_PLANE
     from metrology.plane import Plane
     from metrology.simulation import PoseSpec
-    from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_run, typical_layouts
+    from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_cloud, synth_run, typical_layouts
 
     effect, size, seed, n_poses, wide, folds = args
     rng = np.random.default_rng([seed, list(SIZES).index(effect) + 1 if effect in SIZES else 0, int(round(size * 1e6))])
@@ -58,11 +61,14 @@ def trial(args):
         sensor = None if effect in SETUP_EFFECTS else nominal.names[int(rng.integers(nominal.n))]
         hidden = [HiddenEffect(effect, sensor, size)]
     export, truth = synth_run(rng, true, plane, n_poses, hidden, spec)
-    d = diagnose(Dataset(check(export, nominal), nominal, plane), folds=folds, sim_reps=1)
+    # a datum form comes with a tracker scan of the same surface: the cross-check's agreement
+    points = synth_cloud(rng, plane, hidden) if effect == "plane_form" else None
+    d = diagnose(Dataset(check(export, nominal), nominal, plane, points), folds=folds, sim_reps=1)
     right = (d.cause == effect) and (effect in SETUP_EFFECTS or d.sensors == [sensor])
     return {"effect": effect, "size": size, "seed": seed, "cause": d.cause, "sensors": d.sensors,
             "confidence": d.confidence, "right": bool(right) if effect != "null" else d.cause == "none",
-            "catalogued_high": d.cause not in ("none", "unexplained") and d.confidence == "high"}
+            "catalogued_high": d.cause not in ("none", "unexplained") and d.confidence == "high",
+            "cloud_agrees": None if d.datum_form is None else d.datum_form["against_readings"]["agree"]}
 
 
 def main(argv=None):
@@ -101,7 +107,9 @@ def main(argv=None):
             verdicts = {}
             for r in rs:
                 verdicts[r["cause"]] = verdicts.get(r["cause"], 0) + 1
-            print(f"{e:14s}{z:10.4g}{right:5d}/{len(rs):<3d}{high:4d}/{len(rs):<3d} {verdicts}")
+            agree = [r["cloud_agrees"] for r in rs if r["cloud_agrees"] is not None]
+            extra = f"  datum cloud agrees {sum(agree)}/{len(agree)}" if agree else ""
+            print(f"{e:14s}{z:10.4g}{right:5d}/{len(rs):<3d}{high:4d}/{len(rs):<3d} {verdicts}{extra}")
             if e != "periodic" and len(rs) and right >= 0.9 * len(rs):
                 good.append(z)
         if e != "periodic":

@@ -56,6 +56,16 @@ def _report_text(d) -> str:
                      f"{h['base_normal_deg']:.5f} -> {h['extended_normal_deg']:.5f} deg (ratio {h['normal_ratio']:.3f})")
     for c in D["confounding"]:
         lines.append(f"confounding: {c['message']}")
+    df = D["datum_form"]
+    if df is not None:
+        q = "  ".join(f"{k[:-3]} {v['value'] * 1e3:.2f} +- {v['stderr'] * 1e3:.2f}" for k, v in df["params"].items()
+                      if k in ("b_ss_mm", "b_st_mm", "b_tt_mm"))
+        vis = ", ".join(f"{1e3 * v:.2f}" for v in df["visible_rms_mm"])
+        ag = df["against_readings"]
+        lines += ["", f"datum cloud ({df['points']} points): form {q} um at {df['radius_mm']:g} mm "
+                      f"(quadratic p = {max(df['p_quadratic'], 1e-300):.3g})",
+                  f"  at this run's spots it would leave {vis} um RMS in the base residuals (per sensor)",
+                  f"  the readings' plane_form {'agrees' if ag['agree'] else 'DISAGREES'} with it (p = {ag['p']:.3g})"]
     return "\n".join(lines)
 
 
@@ -96,14 +106,17 @@ def register(app: typer.Typer) -> None:
         poses: int = typer.Option(80, "--poses", help="number of poses"),
         seed: int = typer.Option(0, "--seed", help="random seed"),
         json_out: bool = typer.Option(False, "--json", help="print what was hidden as JSON"),
+        cloud: Path = typer.Option(None, "--cloud", help="also write a tracker scan of the datum (PLY), with the "
+                                   "plane_form effect if hidden"),
     ) -> None:
         """Write a synthetic export hiding an effect of chosen size on a chosen sensor."""
         import numpy as np
 
+        from metrology.clouds import write_ply
         from metrology.export import write_export
         from metrology.layout import load_layout
         from metrology.plane import Plane
-        from metrology.synth import HiddenEffect, synth_run
+        from metrology.synth import HiddenEffect, synth_cloud, synth_run
 
         if (effect is None) != (size is None):
             fail("--effect and --size go together")
@@ -112,10 +125,19 @@ def register(app: typer.Typer) -> None:
         effects = [] if effect is None else [HiddenEffect(effect, sensor, size)]
         if effect is None and sensor is not None:
             fail("--sensor needs --effect")
-        export, truth = synth_run(np.random.default_rng(seed), lay, pl, poses, effects)
+        if cloud is not None and cloud.suffix.lower() != ".ply":
+            fail(f"--cloud {cloud}: expected a .ply path")
+        if cloud is not None and not cloud.parent.is_dir():
+            fail(f"--cloud {cloud}: directory {cloud.parent} does not exist")
+        rng = np.random.default_rng(seed)
+        export, truth = synth_run(rng, lay, pl, poses, effects)
+        points = None if cloud is None else synth_cloud(rng, pl, effects)
         write_export(export, out)
+        if points is not None:
+            write_ply(cloud, points, [f"metro simulate: tracker scan of the datum, mm, tracker frame (seed {seed})"])
         if json_out:
             echo_json(truth)
         else:
             typer.echo(f"wrote {out}: {poses} poses" + (f", hiding {effect} of size {size:g}"
-                                                       + (f" on {sensor}" if sensor else "") if effect else ""))
+                                                       + (f" on {sensor}" if sensor else "") if effect else "")
+                       + (f"; {cloud}: {len(points)} datum points" if points is not None else ""))

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_cloud", "cloud_format", "CLOUD_SUFFIXES"]
+__all__ = ["read_cloud", "cloud_format", "write_ply", "CLOUD_SUFFIXES"]
 
 #: file suffix -> format name
 CLOUD_SUFFIXES = {
@@ -60,6 +60,21 @@ _CHUNK = 1 << 20
 _AXIS_TOKEN = re.compile(r"[^a-z0-9]+")
 _WHITE_FIELD = re.compile(r"\"[^\"]*\"|'[^']*'|\S+")
 _UNIT_ONLY = re.compile(r"[\[(].*[\])]")
+
+
+def write_ply(path, points, comments=()) -> None:
+    """Write ``points (m, 3)`` float, mm, as a binary little-endian PLY with double x, y, z,
+    atomically; ``comments`` are header comment lines."""
+    from .atomic import atomic_path
+
+    P = np.ascontiguousarray(points, dtype="<f8")
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"{path}: points must be (m, 3), got shape {P.shape}")
+    header = ("ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
+              + f"element vertex {len(P)}\nproperty double x\nproperty double y\nproperty double z\nend_header\n")
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(P.tobytes())
 
 
 def cloud_format(path) -> str:

@@ -39,9 +39,9 @@ from .effects import (Covariates, Drift, ExtendedModel, Incidence, Nonlinearity,
                       Outliers, PlaneForm, PoseError, Scale)
 from .estimators import Observations
 from .layout import SensorLayout
-from .model import direction_basis, direction_from_tangent, jacobian_tangent, readings
+from .model import direction_basis, direction_from_tangent, jacobian_raw, jacobian_tangent, readings
 
-__all__ = ["THRESHOLDS", "Fit", "fit", "Diagnosis", "diagnose", "diagnose_files", "candidates_for",
+__all__ = ["THRESHOLDS", "Fit", "fit", "Diagnosis", "diagnose", "diagnose_files", "candidates_for", "datum_form",
            "covariates_for", "ADVICE"]
 
 #: decision thresholds (family-wise levels, Bonferroni-split over the candidates / tests),
@@ -86,6 +86,8 @@ class Fit:
     sensors : tuple of int, the sensors whose parameters were free
     corr_base : (k,) float, per extra parameter the largest |correlation| with a base parameter
     corr_with : tuple of str, the base parameter of that correlation
+    extra_cov : (k, k) float, covariance of the parameters of the components that are not per
+        pose, in their order (``s^2 (J^T J)^-1``)
     """
 
     theta: np.ndarray
@@ -97,6 +99,7 @@ class Fit:
     sensors: tuple
     corr_base: np.ndarray = field(default_factory=lambda: np.zeros(0))
     corr_with: tuple = ()
+    extra_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def model(self, nominal: SensorLayout) -> ExtendedModel:
         zero = nominal.zero + self.theta[:, :3]
@@ -295,7 +298,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
             corr_w.append(base_names[a])
         j += kk
     return Fit(th, theta_se, tuple(out), res, chi2, int(dof), tuple(int(i) for i in S), np.array(corr_b),
-               tuple(corr_w))
+               tuple(corr_w), C[nb:, nb:])
 
 
 def _gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
@@ -598,7 +601,7 @@ def _fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
         S = list(f.sensors)
         th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
         return Fit(th, se, f.components, res, f.chi2 + _chi2_other(base, sigma, S), f.dof, f.sensors,
-                   f.corr_base, f.corr_with)
+                   f.corr_base, f.corr_with, f.extra_cov)
     th = np.zeros((nominal.n, 5))
     se = np.zeros((nominal.n, 5))
     res = np.full(obs.d.shape, np.nan)
@@ -644,6 +647,7 @@ class Diagnosis:
     base_theta: np.ndarray
     base_stderr: np.ndarray
     thresholds: dict
+    datum_form: dict | None = None
     # for plots
     plot_data: dict = field(default_factory=dict, repr=False)
 
@@ -657,6 +661,7 @@ class Diagnosis:
             "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
                      "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
             "thresholds": self.thresholds,
+            "datum_form": _public(self.datum_form),
         }
 
 
@@ -744,6 +749,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     tests_base = noise_tests(base.residual, sigma, dof_base, names)
     struct = structure(base.residual, d0_base, cov, names)
     ho_base = kfold(nominal, obs, cov, sigma, (), folds, theta0)
+    datum = None if ds.datum_points is None else datum_form(ds, zero, u, obs, cov, d0_base, sigma)
 
     # 2. candidates
     flags, p_out = _flag_outliers(nominal, obs, cov, sigma, theta0)
@@ -888,12 +894,79 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
             "p_heldout": best["p_heldout"],
         })
     summary = _summary(cause, confidence, best, tests_base, tests_ext, lead)
+    if datum is not None:
+        # the readings' own plane_form (the named fit, else the candidate's) against the cloud's
+        pf = best["_fit"] if cause == "plane_form" else next(s["_fit"] for s in scored if s["cause"] == "plane_form")
+        datum["against_readings"] = _form_agreement(datum, pf)
+        if not datum["against_readings"]["agree"]:
+            summary += (f"; the datum cloud's form disagrees with the readings' (p = {datum['against_readings']['p']:.2g}): "
+                        "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
     public = [{k: v for k, v in s.items() if not k.startswith("_")} for s in scored]
     public.sort(key=lambda s: -s["heldout_chi2_reduction"])
     plot = {"base": base, "cov": cov, "d0": d0_base, "best": best, "names": names, "sigma": sigma,
             "flags": flags, "structure": struct}
     return Diagnosis(cause, sensors, confidence, summary, named, public, tests_base, tests_ext, struct, discrepancy,
-                     heldout, confounding, base.theta, base.theta_stderr, dict(THRESHOLDS), plot)
+                     heldout, confounding, base.theta, base.theta_stderr, dict(THRESHOLDS), datum, plot)
+
+
+#: the datum form's quadratic coefficients (bow, saddle, twist), compared cloud against readings
+FORM_QUADRATIC = ("b_ss_mm", "b_st_mm", "b_tt_mm")
+
+
+def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
+    """The datum's form measured by the tracker cloud, and what it would do to the readings.
+
+    The cloud is an independent measurement of the surface the beams see:
+    :meth:`~metrology.effects.PlaneForm.from_cloud` in the axes of the readings' covariates.
+    Its quadratic part (bow, saddle, twist) is tested against zero (Wald, chi-square with 3
+    dof) and evaluated at this run's spots; ``visible_rms_mm`` is the part of that term the
+    base geometry cannot absorb (per sensor, the residual of its least-squares projection on
+    the base Jacobian), i.e. the misfit the form would leave in the base residuals.
+
+    zero : (n, 3) float, mm, TCS, u : (n, 3) float, unit, TCS: the base calibration;
+    d0 : (p, n) float, mm, its readings; sigma : (n,) float, mm.
+    """
+    from scipy import stats
+
+    pts = ds.datum_points
+    form, C = PlaneForm.from_cloud(pts, ds.plane.normal, ds.plane.offset, np.mean(pts, axis=0), names=ds.layout.names)
+    q, Cq = form.values[2:], C[2:, 2:]
+    wald = float(q @ np.linalg.lstsq(Cq, q, rcond=None)[0])
+    quad = form.with_values(np.r_[0.0, 0.0, q])
+    term = quad.evaluate(quad.values, d0, cov)
+    J = jacobian_raw(zero, u, obs.normal, obs.offset)
+    visible = []
+    for i in range(term.shape[1]):
+        ok = np.isfinite(obs.d[:, i]) & np.isfinite(term[:, i])
+        r = term[ok, i] - J[ok, i] @ np.linalg.lstsq(J[ok, i], term[ok, i], rcond=None)[0]
+        visible.append(float(np.sqrt(np.mean(r**2))) if ok.any() else float("nan"))
+    params = form.describe()["params"]
+    return {
+        "points": int(len(pts)), "radius_mm": form.radius_mm, "params": params,
+        "p_quadratic": float(stats.chi2.sf(wald, 3)), "_values": form.values, "_cov": C,
+        "visible_rms_mm": visible, "visible_over_noise": [v / s for v, s in zip(visible, sigma)],
+    }
+
+
+def _form_agreement(datum: dict, readings_fit: Fit) -> dict:
+    """Quadratic coefficients of the cloud against those of the ``plane_form`` fitted to the
+    readings: per coefficient the difference in combined standard errors, and the Wald
+    chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_battery``."""
+    from scipy import stats
+
+    comp = readings_fit.components[0]
+    idx = [comp.param_names.index(k) for k in FORM_QUADRATIC]
+    v_r, C_r = comp.values[idx], readings_fit.extra_cov[np.ix_(idx, idx)]
+    v_c, C_c = datum["_values"][2:], datum["_cov"][2:, 2:]
+    diff = v_r - v_c
+    Cd = C_r + C_c
+    z = diff / np.sqrt(np.diag(Cd))
+    wald = float(diff @ np.linalg.solve(Cd, diff))
+    p = float(stats.chi2.sf(wald, 3))
+    return {"readings": dict(zip(FORM_QUADRATIC, v_r.tolist())),
+            "readings_stderr": dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
+            "z": dict(zip(FORM_QUADRATIC, z.tolist())), "chi2": wald, "p": p,
+            "agree": bool(p >= THRESHOLDS["alpha_battery"])}
 
 
 #: simulated noise-only copies used to measure the noise floor of the per-pose estimates

@@ -20,7 +20,7 @@ normalised over the sensor's range ``[lo, hi]``):
 
 ``scale``        ``k d0``                         gain error of the sensor (unitless ``k``)
 ``incidence``    ``c tan^2(gamma)``               spot/speckle bias growing with tilt (``c`` mm)
-``drift``        ``r (T - T_ref)`` or ``r (t - t_ref)``  thermal zero drift (mm/K or mm/h)
+``drift``        ``r (T - 20 C)`` or ``r t``      thermal zero drift (mm/K or mm/h)
 ``nonlinearity`` ``c2 P2(x) + c3 P3(x)``          linearity error: bow and S-shape (mm)
 ``plane_form``   ``w(s, t) / (N.u)``, ``w = b_s s + b_t t + b_ss s^2 + b_st s t + b_tt t^2``,
                  ``(s, t)`` the spot's in-plane coordinates on the datum (tracker frame) over
@@ -56,12 +56,15 @@ __all__ = [
     "CATALOGUE",
     "VERDICTS",
     "SECONDS_PER_HOUR",
+    "REFERENCE_TEMP_C",
 ]
 
 #: names of the catalogued effects (the ``cause`` of a diagnosis) and the two verdicts
 CATALOGUE = ("scale", "incidence", "drift", "nonlinearity", "plane_form", "pose_error", "outliers")
 VERDICTS = ("none", "unexplained")
 SECONDS_PER_HOUR = 3600.0
+#: reference temperature of dimensional metrology (ISO 1), deg C
+REFERENCE_TEMP_C = 20.0
 
 
 @dataclass(frozen=True)
@@ -276,10 +279,18 @@ class Incidence(Component):
 class Drift(Component):
     """Zero drift ``r (T - T_ref)`` with temperature (``variable="temp"``, mm/K) or
     ``r (t - t_ref)`` with time (``variable="time"``, mm/h): warm-up of the sensor and
-    thermal growth of its mount. ``T_ref`` / ``t_ref`` is the first pose (its constant part
-    is a zero shift)."""
+    thermal growth of its mount.
+
+    ``ref`` is a fixed reference, never the first pose of whatever subset is evaluated (a
+    k-fold held-out set would then be shifted by ``r`` times the difference of its first
+    temperature and the training set's): by default :data:`REFERENCE_TEMP_C` (20 deg C, the
+    reference temperature of dimensional metrology, ISO 1), so the zero points of the
+    extended model are those at 20 deg C, and 0 h (the run's first pose) for time. Any
+    constant part is a zero shift, so ``ref`` changes the zero point, not the fit.
+    """
 
     variable: str = "temp"
+    ref: float | None = None
 
     name = "drift"
 
@@ -294,6 +305,8 @@ class Drift(Component):
     def __post_init__(self):
         if self.variable not in ("temp", "time"):
             raise ValueError(f"drift variable must be 'temp' or 'time', got {self.variable!r}")
+        if self.ref is None:
+            object.__setattr__(self, "ref", REFERENCE_TEMP_C if self.variable == "temp" else 0.0)
         super().__post_init__()
 
     @property
@@ -301,10 +314,16 @@ class Drift(Component):
         return super().label + ("@temp" if self.variable == "temp" else "@time")
 
     def covariate(self, cov):
+        """``(p,)``: ``T - ref`` (K) or ``t - ref`` (h) of the poses of ``cov``."""
         x = cov.temp_c if self.variable == "temp" else cov.time_h
         if not np.all(np.isfinite(x)):
             raise ValueError(f"drift with {self.variable}: the export has no {self.variable} column")
-        return x - x[0]
+        return x - self.ref
+
+    def describe(self):
+        out = super().describe()
+        out["reference"] = {"value": float(self.ref), "unit": "deg C" if self.variable == "temp" else "h"}
+        return out
 
     def basis(self, d0, cov):
         x = np.broadcast_to(self.covariate(cov)[:, None], d0.shape)
@@ -363,9 +382,58 @@ class PlaneForm(Component):
     param_names = ("b_s_mm", "b_t_mm", "b_ss_mm", "b_st_mm", "b_tt_mm")
     param_units = ("mm",) * 5
 
+    def monomials(self, st_mm):
+        """``(..., 5)``: ``s, t, s^2, s t, t^2`` at in-plane positions ``st_mm (..., 2)`` mm."""
+        s, t = st_mm[..., 0] / self.radius_mm, st_mm[..., 1] / self.radius_mm
+        return np.stack([s, t, s * s, s * t, t * t], axis=-1)
+
+    def height(self, st_mm):
+        """``w (...)`` mm: the datum's deviation along its normal at ``st_mm (..., 2)`` mm."""
+        return self.monomials(st_mm) @ self.values
+
     def basis(self, d0, cov):
-        s, t = cov.spot_st[..., 0] / self.radius_mm, cov.spot_st[..., 1] / self.radius_mm
-        return np.stack([s, t, s * s, s * t, t * t], axis=-1) * cov.inv_nu[..., None]
+        return self.monomials(cov.spot_st) * cov.inv_nu[..., None]
+
+    @classmethod
+    def from_cloud(cls, points, plane_normal, plane_offset, centre, radius_mm=100.0, names=()):
+        """The datum's form measured by the tracker, as a component (values and stderr).
+
+        Least squares of the points' signed distance to the plane on ``1`` and
+        :meth:`monomials`, in the axes the readings' component uses
+        (:func:`~metrology.simulation.plane_basis` of the normal, from ``centre``): an
+        independent measurement of the surface the beams see. Its quadratic part (bow,
+        saddle, twist) must agree with a ``plane_form`` fitted to the readings; the constant
+        is the plane's offset (dropped), the linear part the cloud's tilt against the plane
+        given (zero when that plane was fitted to this cloud).
+
+        Parameters
+        ----------
+        points : (m, 3) float, mm, tracker frame, m >= 7
+        plane_normal : (3,) float, unit, tracker frame; plane_offset : float, mm
+        centre : (3,) float, mm, tracker frame (as in :func:`metrology.diagnosis.covariates_for`)
+        radius_mm : float, the unit of ``s, t``
+
+        Returns
+        -------
+        form : PlaneForm, values with stderr
+        cov : (5, 5) float, covariance of the values, ``s^2 (A^T A)^-1`` with ``s`` the
+            residual scatter (which also takes up any form beyond quadratic)
+        """
+        from .simulation import plane_basis
+
+        P = np.asarray(points, float)
+        if P.ndim != 2 or P.shape[1] != 3 or len(P) < 7:
+            raise ValueError(f"datum cloud: need (m >= 7, 3) points, got shape {P.shape}")
+        n = np.asarray(plane_normal, float)
+        w = P @ n + float(plane_offset)
+        form = cls((), names=tuple(names), radius_mm=radius_mm)
+        A = np.concatenate([np.ones((len(P), 1)), form.monomials((P - np.asarray(centre, float)) @ plane_basis(n).T)],
+                           axis=1)
+        coef, *_ = np.linalg.lstsq(A, w, rcond=None)
+        r = w - A @ coef
+        C = np.linalg.pinv(A.T @ A) * (float(r @ r) / max(len(w) - 6, 1))
+        C5 = C[1:, 1:]
+        return form.with_values(coef[1:], np.sqrt(np.maximum(np.diag(C5), 0.0))), C5
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from .model import readings
 from .plane import Plane
 from .simulation import PoseSpec, random_poses
 
-__all__ = ["HiddenEffect", "SIZE_MEANING", "EFFECTS", "SETUP_EFFECTS", "OUTSIDE", "warmup", "synth_run",
+__all__ = ["HiddenEffect", "SIZE_MEANING", "EFFECTS", "SETUP_EFFECTS", "OUTSIDE", "warmup", "synth_run", "synth_cloud",
            "typical_layouts", "TYPICAL_NOISE_MM", "TYPICAL_RANGE_MM", "N_OUTLIERS", "PERIOD_POSES"]
 
 SIZE_MEANING = {
@@ -50,6 +50,10 @@ SETUP_EFFECTS = ("plane_form", "pose_error")
 OUTSIDE = ("periodic",)
 N_OUTLIERS = 3
 PERIOD_POSES = 6.5
+#: the simulated tracker scan of the datum: points, half-width of the square (mm), noise (mm)
+CLOUD_POINTS = 4000
+CLOUD_HALF_WIDTH_MM = 150.0
+CLOUD_NOISE_MM = 0.010
 #: the typical sensors: 3 um repeatability (the paper's R = 9e-6 mm^2), 30-70 mm range
 TYPICAL_NOISE_MM = 0.003
 TYPICAL_RANGE_MM = (30.0, 70.0)
@@ -182,3 +186,25 @@ def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane,
     export = TrackerExport(tuple(f"P{j + 1:03d}" for j in range(n_poses)), time_s, temp_c, quat, trans,
                            lt.names, d)
     return export, truth
+
+
+def synth_cloud(rng: np.random.Generator, plane: Plane, effects=(), n_points=CLOUD_POINTS,
+                half_width_mm=CLOUD_HALF_WIDTH_MM, noise_mm=CLOUD_NOISE_MM):
+    """A tracker scan of the datum of :func:`synth_run`: points uniform over a square of
+    ``2 half_width_mm`` around the datum centre, displaced along the normal by the datum's
+    form (the ``plane_form`` effect among ``effects``, if any: the same surface the beams
+    see) plus Gaussian noise of ``noise_mm`` along the normal.
+
+    Returns
+    -------
+    points : (n_points, 3) float, mm, tracker frame
+    """
+    from .simulation import plane_basis
+
+    centre = -plane.offset * plane.normal  # as in synth_run
+    st = rng.uniform(-half_width_mm, half_width_mm, size=(n_points, 2))
+    w = rng.normal(0.0, noise_mm, n_points)
+    for e in effects:
+        if e.name == "plane_form":
+            w = w + _component(e, None).height(st)
+    return centre + st @ plane_basis(plane.normal) + w[:, None] * plane.normal

@@ -15,7 +15,8 @@ from metrology.estimators import lsq
 from metrology.layout import SensorLayout
 from metrology.paper import TABLE5_PLANE
 from metrology.plane import Plane
-from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_run, typical_layouts
+from metrology.simulation import plane_basis
+from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_cloud, synth_run, typical_layouts
 
 PLANE = Plane(TABLE5_PLANE[:3], TABLE5_PLANE[3])
 N_POSES = 80
@@ -88,6 +89,19 @@ def test_components_act_only_on_their_sensors():
             others = [i for i in range(4) if i not in c.sensors]
             assert np.all(f[:, others] == 0), c.label
             assert np.any(f[:, list(c.sensors)] != 0), c.label
+
+
+def test_components_evaluate_the_same_on_a_subset_of_poses():
+    """A held-out fold is a subset of poses: a term must not depend on which poses are given
+    (a drift referenced to the subset's first pose would shift every held-out prediction)."""
+    ds, cov = small_case()
+    d0 = ds.export.d
+    idx = np.arange(3, cov.n_poses, 4)
+    for c in all_components(ds, cov):
+        if c.per_pose or isinstance(c, Outliers):
+            continue
+        np.testing.assert_allclose(c.evaluate(c.values, d0[idx], cov.select(idx)), c.evaluate(c.values, d0, cov)[idx],
+                                   atol=1e-12, err_msg=c.label)
 
 
 def test_name_clash_raises():
@@ -268,6 +282,55 @@ def test_scale_with_little_standoff_spread_is_reported_confounded_or_not_named()
 
 
 # ---------------------------------------------------------------------------------------
+# the datum cloud: an independent measurement of the datum's form
+
+
+def test_plane_form_from_cloud_recovers_the_form_within_its_stderr():
+    rng = np.random.default_rng(8)
+    he = HiddenEffect("plane_form", None, 0.02)
+    pts = synth_cloud(rng, PLANE, [he])
+    centre = -PLANE.offset * PLANE.normal + 5.0 * PLANE.normal  # off the plane: only in-plane position matters
+    form, C = PlaneForm.from_cloud(pts, PLANE.normal, PLANE.offset, centre)
+    true = np.array([0.0, 0.0, 0.02, 0.006, -0.01])
+    z = (form.values - true) / form.stderr
+    assert np.all(np.abs(z) < K_SIGMA), z
+    np.testing.assert_allclose(np.sqrt(np.diag(C)), form.stderr)
+    # the form evaluated where it was measured reproduces the points' heights
+    st = (pts - centre) @ plane_basis(PLANE.normal).T
+    w = pts @ PLANE.normal + PLANE.offset
+    assert np.std(w - form.height(st)) < 1.1 * 0.010
+    with pytest.raises(ValueError, match="m >= 7"):
+        PlaneForm.from_cloud(pts[:5], PLANE.normal, PLANE.offset, centre)
+
+
+@pytest.mark.parametrize("cloud_has_form", [True, False])
+def test_datum_cloud_cross_checks_the_readings_form(cloud_has_form):
+    """Readings hide a datum bow; a cloud of the same surface agrees with the readings' fit, a
+    flat cloud (the datum changed since the scan) is reported as disagreeing."""
+    nominal, true = typical_layouts()
+    he = HiddenEffect("plane_form", None, 0.01)
+    rng = np.random.default_rng(21)
+    export, _ = synth_run(rng, true, PLANE, N_POSES, [he])
+    pts = synth_cloud(rng, PLANE, [he] if cloud_has_form else [])
+    d = diagnose(Dataset(check(export, nominal), nominal, PLANE, pts), folds=FOLDS, sim_reps=1)
+    assert d.cause == "plane_form"
+    df = d.to_dict()["datum_form"]
+    ag = df["against_readings"]
+    if cloud_has_form:
+        assert df["p_quadratic"] < 1e-6 and ag["agree"] and ag["p"] > 0.01
+        assert min(df["visible_rms_mm"]) > 0.003  # a 10 um bow shows as more than the noise
+        assert "disagrees" not in d.summary
+    else:
+        assert df["p_quadratic"] > 1e-3 and not ag["agree"]
+        assert "disagrees" in d.summary
+
+
+def test_no_datum_cloud_no_form_section():
+    ds, _ = run([], 3, 30)
+    assert diagnose(ds, folds=3, sim_reps=1).to_dict()["datum_form"] is None
+
+
+# ---------------------------------------------------------------------------------------
 # the demo data set and the CLI
 
 
@@ -301,6 +364,7 @@ def test_cli_simulate_then_diagnose(tmp_path):
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
     assert out["cause"] == "outliers" and out["sensors"] == ["L4"]
+    assert out["datum_form"] is None
     assert {"heldout", "candidates", "extended", "discrepancy"} <= set(out)
     assert all("p_heldout" in c and "p_insample" in c for c in out["candidates"])
     assert (tmp_path / "rep" / "residuals_named.png").exists()
@@ -326,3 +390,30 @@ def test_cli_errors_are_one_line_exit_2(tmp_path):
                             "--sensor", "L9", "--size", "0.001"])
     assert r.exit_code == 2 and "L9" in r.output
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_cli_simulate_writes_a_datum_cloud_that_diagnose_reads(tmp_path):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from metrology.clouds import read_cloud
+    from metrology.layout import save_layout
+
+    nominal, _ = typical_layouts()
+    save_layout(nominal, tmp_path / "layout.toml")
+    (tmp_path / "plane.json").write_text(json.dumps({"normal": PLANE.normal.tolist(), "offset": PLANE.offset}))
+    runner = CliRunner()
+    base = ["simulate", "--layout", str(tmp_path / "layout.toml"), "--plane", str(tmp_path / "plane.json"),
+            "--out", str(tmp_path / "x.csv"), "--effect", "plane_form", "--size", "0.01", "--seed", "5"]
+    r = runner.invoke(app, base + ["--cloud", str(tmp_path / "datum.xyz")])
+    assert r.exit_code == 2 and "datum.xyz" in r.output and ".ply" in r.output
+    assert not (tmp_path / "x.csv").exists()
+    r = runner.invoke(app, base + ["--cloud", str(tmp_path / "datum.ply")])
+    assert r.exit_code == 0, r.output
+    pts = read_cloud(tmp_path / "datum.ply")
+    assert pts.shape == (4000, 3)
+    r = runner.invoke(app, ["diagnose", str(tmp_path / "x.csv"), "--plane", str(tmp_path / "datum.ply"), "--layout",
+                            str(tmp_path / "layout.toml"), "--folds", "3"])
+    assert r.exit_code == 0, r.output
+    assert "cause: plane_form" in r.output and "datum cloud (3" in r.output and "RMS in the base residuals" in r.output
+    assert "the readings' plane_form" in r.output  # agrees or DISAGREES: the verdict is tested in the library
