@@ -899,6 +899,8 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         pf = best["_fit"] if cause == "plane_form" else next(s["_fit"] for s in scored if s["cause"] == "plane_form")
         datum["against_readings"] = _form_agreement(datum, pf)
         if not datum["against_readings"]["agree"]:
+            if cause == "none":
+                confidence = "low"  # the inputs contradict each other
             summary += (f"; the datum cloud's form disagrees with the readings' (p = {datum['against_readings']['p']:.2g}): "
                         "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
     public = [{k: v for k, v in s.items() if not k.startswith("_")} for s in scored]

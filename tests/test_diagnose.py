@@ -325,6 +325,16 @@ def test_datum_cloud_cross_checks_the_readings_form(cloud_has_form):
         assert "disagrees" in d.summary
 
 
+def test_flat_readings_against_a_bowed_cloud_lower_the_confidence_of_none():
+    nominal, true = typical_layouts()
+    rng = np.random.default_rng(22)
+    export, _ = synth_run(rng, true, PLANE, N_POSES, [])
+    pts = synth_cloud(rng, PLANE, [HiddenEffect("plane_form", None, 0.01)])
+    d = diagnose(Dataset(check(export, nominal), nominal, PLANE, pts), folds=FOLDS, sim_reps=1)
+    assert d.cause == "none" and d.confidence == "low" and "disagrees" in d.summary
+    assert not d.datum_form["against_readings"]["agree"]
+
+
 def test_no_datum_cloud_no_form_section():
     ds, _ = run([], 3, 30)
     assert diagnose(ds, folds=3, sim_reps=1).to_dict()["datum_form"] is None
