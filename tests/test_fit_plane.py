@@ -289,7 +289,7 @@ def test_datum_fixture_recovers_its_truth_and_its_form():
 
 def test_fixture_script_is_deterministic(tmp_path):
     p1, o1 = make_datum_cloud.make_cloud(np.random.default_rng(make_datum_cloud.SEED))
-    make_datum_cloud.write_ply(tmp_path / "c.ply", p1)
+    make_datum_cloud.write_ply(tmp_path / "c.ply", p1, make_datum_cloud.COMMENTS)
     assert (tmp_path / "c.ply").read_bytes() == Path("fixtures/datum_cloud.ply").read_bytes()
     assert int(o1.sum()) == 100
 
