@@ -115,8 +115,9 @@ def main(argv=None):
         if e != "periodic":
             print(f"  detectable (>= 90 % right): {', '.join(f'{g:g}' for g in good) if good else 'none of the tested sizes'}")
     if a.json:
-        with open(a.json, "w") as fh:
-            json.dump(res, fh, indent=1)
+        from metrology.atomic import write_text
+
+        write_text(a.json, json.dumps(res, indent=1))
     return 0
 
 

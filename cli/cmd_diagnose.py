@@ -10,6 +10,11 @@ import typer
 from ._common import dumps, echo_json, fail, guarded
 
 
+def _p(p: float) -> str:
+    """``= 0.0123`` or ``< 1e-300`` (a p-value that underflowed)."""
+    return "< 1e-300" if p < 1e-300 else f"= {p:.3g}"
+
+
 def _report_text(d) -> str:
     D = d.to_dict()
     lines = [f"cause: {D['cause']}" + (f" ({', '.join(D['sensors'])})" if D["sensors"] else "")
@@ -62,10 +67,11 @@ def _report_text(d) -> str:
                       if k in ("b_ss_mm", "b_st_mm", "b_tt_mm"))
         vis = ", ".join(f"{1e3 * v:.2f}" for v in df["visible_rms_mm"])
         ag = df["against_readings"]
-        lines += ["", f"datum cloud ({df['points']} points): form {q} um at {df['radius_mm']:g} mm "
-                      f"(quadratic p = {max(df['p_quadratic'], 1e-300):.3g})",
+        lines += ["", f"datum cloud ({df['points_used']} of {df['points']} points, {df['window']}): form {q} um at "
+                      f"{df['radius_mm']:g} mm (quadratic p {_p(df['p_quadratic'])})",
                   f"  at this run's spots it would leave {vis} um RMS in the base residuals (per sensor)",
-                  f"  the readings' plane_form {'agrees' if ag['agree'] else 'DISAGREES'} with it (p = {ag['p']:.3g})"]
+                  f"  the readings' plane_form ({' + '.join(ag['fitted_with'])}) {'agrees' if ag['agree'] else 'DISAGREES'} "
+                  f"with it (p {_p(ag['p'])})"]
     return "\n".join(lines)
 
 
@@ -112,6 +118,7 @@ def register(app: typer.Typer) -> None:
         """Write a synthetic export hiding an effect of chosen size on a chosen sensor."""
         import numpy as np
 
+        from metrology.atomic import atomic_path
         from metrology.clouds import write_ply
         from metrology.export import write_export
         from metrology.layout import load_layout
@@ -132,9 +139,12 @@ def register(app: typer.Typer) -> None:
         rng = np.random.default_rng(seed)
         export, truth = synth_run(rng, lay, pl, poses, effects)
         points = None if cloud is None else synth_cloud(rng, pl, effects)
-        write_export(export, out)
-        if points is not None:
-            write_ply(cloud, points, [f"metro simulate: tracker scan of the datum, mm, tracker frame (seed {seed})"])
+        if points is None:
+            write_export(export, out)
+        else:  # both files or neither: each is written to a temporary beside it, moved at the end
+            with atomic_path(out) as tmp_out, atomic_path(cloud) as tmp_cloud:
+                write_export(export, tmp_out)
+                write_ply(tmp_cloud, points, [f"metro simulate: tracker scan of the datum, mm, tracker frame (seed {seed})"])
         if json_out:
             echo_json(truth)
         else:

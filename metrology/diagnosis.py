@@ -35,7 +35,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .effects import (Covariates, Drift, ExtendedModel, Incidence, Nonlinearity,
+from .effects import (VERDICTS, Covariates, Drift, ExtendedModel, Incidence, Nonlinearity,
                       Outliers, PlaneForm, PoseError, Scale)
 from .estimators import Observations
 from .layout import SensorLayout
@@ -53,6 +53,7 @@ THRESHOLDS = {
     "alpha_outlier": 0.01,  # family-wise level of the largest standardised residual
     "alpha_confound": 0.05,  # runner-up's gain not distinguishable from the winner's at this level
     "corr_confound": 0.95,  # |correlation| of a component parameter with a base parameter
+    "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
 }
 
 #: the poses that separate each cause from the others
@@ -381,9 +382,11 @@ def candidates_for(layout: SensorLayout, cov: Covariates, flags=None):
         out.append(Scale((i,), names=names))
         out.append(Incidence((i,), names=names))
         out.append(Nonlinearity((i,), names=names))
+        # the reference is fixed once per data set (every fold evaluates against it) at the
+        # run's mean, where the rate is least correlated with the zero point
         if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
-            out.append(Drift((i,), names=names, variable="temp"))
-        out.append(Drift((i,), names=names, variable="time"))
+            out.append(Drift((i,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
+        out.append(Drift((i,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
     out.append(PlaneForm((), names=names))
     out.append(PoseError((), names=names, n_poses=cov.n_poses))
     if flags is not None and np.any(flags):
@@ -895,12 +898,21 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         })
     summary = _summary(cause, confidence, best, tests_base, tests_ext, lead)
     if datum is not None:
-        # the readings' own plane_form (the named fit, else the candidate's) against the cloud's
-        pf = best["_fit"] if cause == "plane_form" else next(s["_fit"] for s in scored if s["cause"] == "plane_form")
+        # the readings' own form against the cloud's: plane_form fitted together with the named
+        # cause (a pose error, say, correlates the sensors of a pose; a form fitted without it
+        # would carry standard errors too small for the comparison)
+        if cause == "plane_form":
+            pf = best["_fit"]
+        else:
+            comps = [PlaneForm((), names=names)]
+            if best is not None and cause not in VERDICTS:
+                comps.append(replace(best["_comp"], values=None, stderr=None))
+            pf = _fit_any(nominal, obs, cov, sigma, comps, theta0)
         datum["against_readings"] = _form_agreement(datum, pf)
+        datum["against_readings"]["fitted_with"] = [c.label for c in pf.components]
         if not datum["against_readings"]["agree"]:
-            if cause == "none":
-                confidence = "low"  # the inputs contradict each other
+            if cause in ("none", "plane_form"):
+                confidence = "low"  # the inputs contradict each other on the datum
             summary += (f"; the datum cloud's form disagrees with the readings' (p = {datum['against_readings']['p']:.2g}): "
                         "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
     public = [{k: v for k, v in s.items() if not k.startswith("_")} for s in scored]
@@ -913,13 +925,18 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
 
 #: the datum form's quadratic coefficients (bow, saddle, twist), compared cloud against readings
 FORM_QUADRATIC = ("b_ss_mm", "b_st_mm", "b_tt_mm")
+#: fewest cloud points under the spots' footprint to fit the form there (else the whole cloud)
+MIN_FORM_POINTS = 50
 
 
 def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
     """The datum's form measured by the tracker cloud, and what it would do to the readings.
 
     The cloud is an independent measurement of the surface the beams see:
-    :meth:`~metrology.effects.PlaneForm.from_cloud` in the axes of the readings' covariates.
+    :meth:`~metrology.effects.PlaneForm.from_cloud` in the axes of the readings' covariates,
+    fitted to the points under the spots' footprint (the box of their in-plane positions;
+    the whole cloud if fewer than :data:`MIN_FORM_POINTS` fall in it), because form beyond
+    quadratic gives other quadratic coefficients on other regions of a real plate.
     Its quadratic part (bow, saddle, twist) is tested against zero (Wald, chi-square with 3
     dof) and evaluated at this run's spots; ``visible_rms_mm`` is the part of that term the
     base geometry cannot absorb (per sensor, the residual of its least-squares projection on
@@ -930,8 +947,19 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
     """
     from scipy import stats
 
+    from .simulation import plane_basis
+
     pts = ds.datum_points
-    form, C = PlaneForm.from_cloud(pts, ds.plane.normal, ds.plane.offset, np.mean(pts, axis=0), names=ds.layout.names)
+    centre = np.mean(pts, axis=0)
+    # only the part of the datum the beams saw: form beyond quadratic gives other quadratic
+    # coefficients on other regions of a real plate
+    st = (pts - centre) @ plane_basis(ds.plane.normal).T
+    spots = cov.spot_st[np.isfinite(obs.d)]
+    under = np.all((st >= spots.min(axis=0)) & (st <= spots.max(axis=0)), axis=1)
+    window = "under the spots" if under.sum() >= MIN_FORM_POINTS else "whole cloud"
+    if window == "whole cloud":
+        under = np.ones(len(pts), bool)
+    form, C = PlaneForm.from_cloud(pts[under], ds.plane.normal, ds.plane.offset, centre, names=ds.layout.names)
     q, Cq = form.values[2:], C[2:, 2:]
     wald = float(q @ np.linalg.lstsq(Cq, q, rcond=None)[0])
     quad = form.with_values(np.r_[0.0, 0.0, q])
@@ -944,7 +972,10 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
         visible.append(float(np.sqrt(np.mean(r**2))) if ok.any() else float("nan"))
     params = form.describe()["params"]
     return {
-        "points": int(len(pts)), "radius_mm": form.radius_mm, "params": params,
+        "points": int(len(pts)), "points_used": int(under.sum()), "window": window,
+        "window_mm": {"s": [float(spots[:, 0].min()), float(spots[:, 0].max())],
+                      "t": [float(spots[:, 1].min()), float(spots[:, 1].max())]},
+        "radius_mm": form.radius_mm, "params": params,
         "p_quadratic": float(stats.chi2.sf(wald, 3)), "_values": form.values, "_cov": C,
         "visible_rms_mm": visible, "visible_over_noise": [v / s for v, s in zip(visible, sigma)],
     }
@@ -953,12 +984,17 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
 def _form_agreement(datum: dict, readings_fit: Fit) -> dict:
     """Quadratic coefficients of the cloud against those of the ``plane_form`` fitted to the
     readings: per coefficient the difference in combined standard errors, and the Wald
-    chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_battery``."""
+    chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_form``."""
     from scipy import stats
 
-    comp = readings_fit.components[0]
+    off = 0
+    for comp in readings_fit.components:  # extra_cov covers the components not per pose, in order
+        if isinstance(comp, PlaneForm):
+            break
+        off += 0 if comp.per_pose else comp.n_params
     idx = [comp.param_names.index(k) for k in FORM_QUADRATIC]
-    v_r, C_r = comp.values[idx], readings_fit.extra_cov[np.ix_(idx, idx)]
+    v_r = comp.values[idx]
+    C_r = readings_fit.extra_cov[np.ix_([off + i for i in idx], [off + i for i in idx])]
     v_c, C_c = datum["_values"][2:], datum["_cov"][2:, 2:]
     diff = v_r - v_c
     Cd = C_r + C_c
@@ -968,7 +1004,7 @@ def _form_agreement(datum: dict, readings_fit: Fit) -> dict:
     return {"readings": dict(zip(FORM_QUADRATIC, v_r.tolist())),
             "readings_stderr": dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
             "z": dict(zip(FORM_QUADRATIC, z.tolist())), "chi2": wald, "p": p,
-            "agree": bool(p >= THRESHOLDS["alpha_battery"])}
+            "agree": bool(p >= THRESHOLDS["alpha_form"])}
 
 
 #: simulated noise-only copies used to measure the noise floor of the per-pose estimates

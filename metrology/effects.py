@@ -283,10 +283,12 @@ class Drift(Component):
 
     ``ref`` is a fixed reference, never the first pose of whatever subset is evaluated (a
     k-fold held-out set would then be shifted by ``r`` times the difference of its first
-    temperature and the training set's): by default :data:`REFERENCE_TEMP_C` (20 deg C, the
-    reference temperature of dimensional metrology, ISO 1), so the zero points of the
-    extended model are those at 20 deg C, and 0 h (the run's first pose) for time. Any
-    constant part is a zero shift, so ``ref`` changes the zero point, not the fit.
+    temperature and the training set's). The zero points of the extended model are those at
+    ``ref``; a constant part is a zero shift, so ``ref`` changes the zero point, not the rate
+    or the fit, but it sets how strongly the rate correlates with the zero point (least at
+    the run's mean, which the diagnosis uses). Default :data:`REFERENCE_TEMP_C` (20 deg C,
+    the reference temperature of dimensional metrology, ISO 1) for temperature, 0 h (the
+    run's first pose) for time.
     """
 
     variable: str = "temp"

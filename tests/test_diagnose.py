@@ -210,9 +210,11 @@ def test_hidden_effect_named_blind(effect):
     _check_named(d, effect, he.sensor, truth["effects"][0])
 
 
-#: the blind set's claim: inside the detectable ranges the right cause, sensor and magnitude
-#: in >= 90 % of draws (the ranges are where >= 90 % was measured), and never a wrong
-#: catalogued cause; with 30 draws at a true 95 %, 4 or more misses happen 6 % of the time
+#: the blind set's claim: inside the detectable ranges never a wrong catalogued cause, and the
+#: right cause, sensor and magnitude in all but a few draws. The ranges' ends are where >= 90 %
+#: of 10 trials was measured; inside them the rate is higher (the study: 100 % at most inner
+#: sizes; this set: 30/30). At a true 95 %, 4 or more misses of 30 happen 6 % of the time; at
+#: a true 90 %, 35 % (seeded, so a failure means the code changed, not chance)
 BLIND_SEEDS = range(1, 6)
 BLIND_MAX_MISSES = 3
 
@@ -335,6 +337,37 @@ def test_flat_readings_against_a_bowed_cloud_lower_the_confidence_of_none():
     assert not d.datum_form["against_readings"]["agree"]
 
 
+@pytest.mark.parametrize("with_pose_error", [True, False])
+def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
+    """Readings with pose errors, a flat datum and a flat cloud: the readings' form fitted with
+    the pose error agrees with the cloud's as chi-square(3) says (mean 3; 10 seeds: sd 0.8).
+    A form fitted without it has standard errors ~1.8x too small (mean chi-square ~11)."""
+    from metrology.diagnosis import _form_agreement, datum_form
+    from metrology.model import direction_from_tangent, readings
+
+    nominal, true = typical_layouts()
+    chi2 = []
+    for seed in range(10):
+        rng = np.random.default_rng([31, seed])
+        export, _ = synth_run(rng, true, PLANE, N_POSES, [HiddenEffect("pose_error", None, 0.02)])
+        ds = Dataset(check(export, nominal), nominal, PLANE, synth_cloud(rng, PLANE))
+        sigma = nominal.noise_mm
+        base = _fit_any(nominal, ds.obs, covariates_for(ds, nominal), sigma, (), None, "lsq")
+        zero = nominal.zero + base.theta[:, :3]
+        u = direction_from_tangent(nominal.direction, base.theta[:, 3:])
+        cov = covariates_for(ds, nominal.with_params(zero, u))
+        comps = [PlaneForm((), names=nominal.names)]
+        if with_pose_error:
+            comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
+        pf = _fit_any(nominal, ds.obs, cov, sigma, comps, base.theta)
+        d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
+        chi2.append(_form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
+    if with_pose_error:
+        assert np.mean(chi2) < 6.0, chi2
+    else:  # the reason the diagnosis fits the form together with the named cause
+        assert np.mean(chi2) > 6.0, chi2
+
+
 def test_no_datum_cloud_no_form_section():
     ds, _ = run([], 3, 30)
     assert diagnose(ds, folds=3, sim_reps=1).to_dict()["datum_form"] is None
@@ -425,5 +458,5 @@ def test_cli_simulate_writes_a_datum_cloud_that_diagnose_reads(tmp_path):
     r = runner.invoke(app, ["diagnose", str(tmp_path / "x.csv"), "--plane", str(tmp_path / "datum.ply"), "--layout",
                             str(tmp_path / "layout.toml"), "--folds", "3"])
     assert r.exit_code == 0, r.output
-    assert "cause: plane_form" in r.output and "datum cloud (3" in r.output and "RMS in the base residuals" in r.output
+    assert "cause: plane_form" in r.output and "points, under the spots)" in r.output and "RMS in the base residuals" in r.output
     assert "the readings' plane_form" in r.output  # agrees or DISAGREES: the verdict is tested in the library
