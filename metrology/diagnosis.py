@@ -903,10 +903,10 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         # would carry standard errors too small for the comparison)
         if cause == "plane_form":
             pf = best["_fit"]
+        elif cause in VERDICTS:  # nothing named: the plane_form candidate's own fit
+            pf = next(s["_fit"] for s in scored if s["cause"] == "plane_form")
         else:
-            comps = [PlaneForm((), names=names)]
-            if best is not None and cause not in VERDICTS:
-                comps.append(replace(best["_comp"], values=None, stderr=None))
+            comps = [PlaneForm((), names=names), replace(best["_comp"], values=None, stderr=None)]
             pf = _fit_any(nominal, obs, cov, sigma, comps, theta0)
         datum["against_readings"] = _form_agreement(datum, pf)
         datum["against_readings"]["fitted_with"] = [c.label for c in pf.components]
