@@ -41,9 +41,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from metrology._o3d import open3d  # noqa: E402
-from metrology.clouds import read_cloud  # noqa: E402
-from metrology.planefit import fit_plane_robust  # noqa: E402
+from metrology.io._o3d import open3d  # noqa: E402
+from metrology.io.clouds import read_cloud  # noqa: E402
+from metrology.datum.planefit import fit_plane_robust  # noqa: E402
 
 MEASURE = (
     "import resource, subprocess, sys, time\n"
@@ -54,7 +54,7 @@ MEASURE = (
 )
 BASELINE = (
     "import sys\n"
-    "from metrology._o3d import open3d\n"
+    "from metrology.io._o3d import open3d\n"
     "o3d = open3d()\n"
     "o3d.utility.random.seed(0)\n"
     "cloud = o3d.io.read_point_cloud(sys.argv[1])\n"

@@ -30,8 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from metrology import panel as pn  # noqa: E402
-from metrology.paper import table6_layouts  # noqa: E402
+from metrology.panel import panel as pn  # noqa: E402
+from metrology.core.paper import table6_layouts  # noqa: E402
 
 
 def _rays(surf, m, rng, half=150.0):

@@ -43,12 +43,12 @@ SIZES = {
 
 def trial(args):
     """One seeded run: (effect, size, seed, n_poses, wide) -> dict with the verdict."""
-    from metrology.dataset import Dataset, check
-    from metrology.diagnosis import diagnose
-    from metrology.paper import TABLE5_PLANE
-    from metrology.plane import Plane
-    from metrology.simulation import PoseSpec
-    from metrology.synth import SETUP_EFFECTS, HiddenEffect, synth_cloud, synth_run, typical_layouts
+    from metrology.calibration.dataset import Dataset, check
+    from metrology.diagnosis.diagnosis import diagnose
+    from metrology.core.paper import TABLE5_PLANE
+    from metrology.core.plane import Plane
+    from metrology.sim.simulation import PoseSpec
+    from metrology.sim.synth import SETUP_EFFECTS, HiddenEffect, synth_cloud, synth_run, typical_layouts
 
     effect, size, seed, n_poses, wide, folds = args
     rng = np.random.default_rng([seed, list(SIZES).index(effect) + 1 if effect in SIZES else 0, int(round(size * 1e6))])
@@ -115,7 +115,7 @@ def main(argv=None):
         if e != "periodic":
             print(f"  detectable (>= 90 % right): {', '.join(f'{g:g}' for g in good) if good else 'none of the tested sizes'}")
     if a.json:
-        from metrology.atomic import write_text
+        from metrology.io.atomic import write_text
 
         write_text(a.json, json.dumps(res, indent=1))
     return 0

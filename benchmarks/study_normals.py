@@ -26,8 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from metrology import panel as pn  # noqa: E402
-from metrology.paper import table2_layouts, table6_layouts  # noqa: E402
+from metrology.panel import panel as pn  # noqa: E402
+from metrology.core.paper import table2_layouts, table6_layouts  # noqa: E402
 
 PANELS = {
     "flat": ("flat", math.inf),
@@ -167,7 +167,7 @@ def main(argv=None) -> int:
     print(text)
     print(f"<!-- {time.perf_counter() - t0:.0f} s -->", file=sys.stderr)
     if a.out:
-        from metrology.atomic import write_text
+        from metrology.io.atomic import write_text
 
         write_text(a.out, text)
     return 0

@@ -3,7 +3,7 @@
 The paper's simulation predicts a mean normal deviation after calibration of 0.0412 deg; its
 robot measures 0.1048 deg (Table 8). Its simulation knows only zero points, beam directions
 and white reading noise. This study asks, for each catalogued effect of
-:mod:`metrology.effects` alone: how large must it be for a calibration with the base model to
+:mod:`metrology.core.effects` alone: how large must it be for a calibration with the base model to
 leave a mean normal deviation of 0.1048 deg on workpieces? A size far beyond what sensors
 and trackers do rules the effect out as the sole cause; a plausible size makes it a suspect,
 and ``metro diagnose``'s detectable range says whether a calibration run would have shown it.
@@ -63,12 +63,12 @@ PLAUSIBLE = {
 
 def trial(args):
     """(effect, size, seed) -> mean workpiece normal deviation (deg) after an lsq calibration."""
-    from metrology.dataset import Dataset
-    from metrology.estimators import calibrate
-    from metrology.normals import angle_between, micro_plane_normal
-    from metrology.paper import TABLE5_PLANE
-    from metrology.plane import Plane
-    from metrology.synth import HiddenEffect, synth_run, typical_layouts
+    from metrology.calibration.dataset import Dataset
+    from metrology.calibration.estimators import calibrate
+    from metrology.core.normals import angle_between, micro_plane_normal
+    from metrology.core.paper import TABLE5_PLANE
+    from metrology.core.plane import Plane
+    from metrology.sim.synth import HiddenEffect, synth_run, typical_layouts
 
     effect, size, seed = args
     rng = np.random.default_rng([seed, list(SIZES).index(effect), int(round(size * 1e6))])
@@ -130,7 +130,7 @@ def main(argv=None):
             at = f"{c:.3g}" if c is not None else f"beyond {sizes[-1]:g}"
             print(f"  reaches {PAPER_EXPERIMENT_DEG} deg at size {at}   (plausible: {PLAUSIBLE[e]})")
     if a.json:
-        from metrology.atomic import write_text
+        from metrology.io.atomic import write_text
 
         write_text(a.json, json.dumps(res, indent=1))
     return 0

@@ -13,8 +13,8 @@ import argparse
 
 import numpy as np
 
-from metrology.reproduce import ReproduceConfig, run_trials
-from metrology.simulation import PoseSpec
+from metrology.sim.reproduce import ReproduceConfig, run_trials
+from metrology.sim.simulation import PoseSpec
 
 
 def main() -> None:

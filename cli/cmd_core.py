@@ -126,8 +126,8 @@ def register(app: typer.Typer) -> None:
         """Reproduce the paper's simulation (section 5): Tables 1, 3, 4 and Figures 7, 8."""
         import numpy as np
 
-        from metrology.reproduce import ReproduceConfig, run_trials, summarise
-        from metrology.simulation import PoseSpec
+        from metrology.sim.reproduce import ReproduceConfig, run_trials, summarise
+        from metrology.sim.simulation import PoseSpec
 
         if standoff_mm[0] >= standoff_mm[1] or standoff_mm[0] <= 0:
             fail(f"--standoff-mm {standoff_mm[0]:g} {standoff_mm[1]:g}: expected 0 < min < max")
@@ -141,7 +141,7 @@ def register(app: typer.Typer) -> None:
                 results = run_trials(cfg, seed, trials, progress=lambda: bar.update(1))
         summary = summarise(cfg, results, seed)
         if fig_dir is not None:
-            from metrology.plots import figure7, figure8
+            from metrology.report.plots import figure7, figure8
 
             fig_dir.mkdir(parents=True, exist_ok=True)
             nominal, true, _, _ = cfg.tables()

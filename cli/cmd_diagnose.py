@@ -88,7 +88,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
-        from metrology.diagnosis import diagnose_files, plot_report
+        from metrology.diagnosis.diagnosis import diagnose_files, plot_report
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
@@ -118,12 +118,12 @@ def register(app: typer.Typer) -> None:
         """Write a synthetic export hiding an effect of chosen size on a chosen sensor."""
         import numpy as np
 
-        from metrology.atomic import atomic_path
-        from metrology.clouds import write_ply
-        from metrology.export import write_export
-        from metrology.layout import load_layout
-        from metrology.plane import Plane
-        from metrology.synth import HiddenEffect, synth_cloud, synth_run
+        from metrology.io.atomic import atomic_path
+        from metrology.io.clouds import write_ply
+        from metrology.io.export import write_export
+        from metrology.core.layout import load_layout
+        from metrology.core.plane import Plane
+        from metrology.sim.synth import HiddenEffect, synth_cloud, synth_run
 
         if (effect is None) != (size is None):
             fail("--effect and --size go together")

@@ -5,15 +5,15 @@ matplotlib) are imported inside the functions that need them, so importing this 
 is cheap.
 """
 
-from .layout import SensorLayout, load_layout, save_layout
-from .model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
-from .normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
-from .plane import Plane, fit_plane_tls
-from .planefit import PlaneFit, fit_plane_robust, fit_plane_file
-from .clouds import read_cloud
-from .calibration import CalibrationReport, calibrate_dataset, validate
-from .panel import load_panel, run_normals, micro_sphere_normal, fit_algebraic_sphere
-from .diagnosis import diagnose
+from metrology.core.layout import SensorLayout, load_layout, save_layout
+from metrology.core.model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
+from metrology.core.normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
+from metrology.core.plane import Plane, fit_plane_tls
+from metrology.datum.planefit import PlaneFit, fit_plane_robust, fit_plane_file
+from metrology.io.clouds import read_cloud
+from metrology.calibration.calibration import CalibrationReport, calibrate_dataset, validate
+from metrology.panel.panel import load_panel, run_normals, micro_sphere_normal, fit_algebraic_sphere
+from metrology.diagnosis.diagnosis import diagnose
 
 __all__ = [
     "SensorLayout", "load_layout", "save_layout",

@@ -9,18 +9,18 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
-from metrology.calibration import (
+from metrology.calibration.calibration import (
     DEFAULT_METHOD,
     calibrate_dataset,
     describe_combination,
     identifiability,
     validate,
 )
-from metrology.dataset import load_dataset
-from metrology.estimators import Observations
-from metrology.layout import load_layout
-from metrology.model import direction_basis, tangent_from_direction
-from metrology.tolerances import RANK_RTOL
+from metrology.calibration.dataset import load_dataset
+from metrology.calibration.estimators import Observations
+from metrology.core.layout import load_layout
+from metrology.core.model import direction_basis, tangent_from_direction
+from metrology.core.tolerances import RANK_RTOL
 
 FIX = Path(__file__).resolve().parent.parent / "fixtures" / "measured"
 CAL, VAL = FIX / "calibration.csv", FIX / "validation.csv"
@@ -114,7 +114,7 @@ def test_identifiability_flags_a_pose_set_without_tilt(report):
     normal = np.repeat(obs.normal.mean(axis=0, keepdims=True), 30, axis=0)
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     offset = np.linspace(obs.offset.min(), obs.offset.max(), 30)
-    from metrology.model import readings
+    from metrology.core.model import readings
 
     flat = Observations(normal, offset, readings(layout.zero, layout.direction, normal, offset)[0])
     idents = identifiability(nominal, layout, report.calibration.theta, flat, np.full(4, 0.003))
@@ -280,9 +280,10 @@ def test_fixture_regenerates_byte_for_byte(tmp_path):
 
 
 def test_fixture_plane_json_matches_the_datum_cloud():
-    from metrology.clouds import read_cloud
-    from metrology.dataset import load_plane
-    from metrology.plane import Plane, fit_plane_tls
+    from metrology.io.clouds import read_cloud
+    from metrology.calibration.dataset import load_plane
+    from metrology.core.normals import angle_between
+    from metrology.core.plane import Plane, fit_plane_tls
 
     pts = read_cloud(FIX / "datum.ply")
     assert 2000 <= len(pts) <= 3000
@@ -291,7 +292,8 @@ def test_fixture_plane_json_matches_the_datum_cloud():
     inliers = np.abs(r) < 5 * 0.015
     assert 0.95 < inliers.mean() < 0.99  # a few % outliers
     tls, _, rms = fit_plane_tls(pts[inliers])
-    assert np.degrees(np.arccos(abs(tls.normal @ plane.normal))) < 1e-3
+    # arctan2 of |cross| and |dot|: no arccos of a dot product that rounds above 1
+    assert np.degrees(angle_between(tls.normal, plane.normal)) < 1e-3
     # --plane accepts the cloud itself: the robust fit agrees with the JSON
     fitted, inlier_pts = load_plane(FIX / "datum.ply")
     assert np.degrees(np.arccos(abs(fitted.normal @ plane.normal))) < 2e-3

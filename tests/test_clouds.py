@@ -5,8 +5,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from metrology._o3d import open3d
-from metrology.clouds import read_cloud
+from metrology.io._o3d import open3d
+from metrology.io.clouds import read_cloud
 
 PTS = np.array([[1.5, -2.25, 3.0], [1000.125, 2000.5, -14.75], [0.0, 1e-3, 7.0], [-5.5, 6.5, 1690.2827]])
 

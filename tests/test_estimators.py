@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from metrology.estimators import Observations, calibrate
-from metrology.model import tangent_from_direction
-from metrology.paper import EKF_PRESETS, TABLE1_PLANE, table2_layouts, table6_layouts
-from metrology.plane import Plane
-from metrology.simulation import PoseSpec, random_poses, simulate_readings
+from metrology.calibration.estimators import Observations, calibrate
+from metrology.core.model import tangent_from_direction
+from metrology.core.paper import EKF_PRESETS, TABLE1_PLANE, table2_layouts, table6_layouts
+from metrology.core.plane import Plane
+from metrology.sim.simulation import PoseSpec, random_poses, simulate_readings
 
 TRUE_PLANE = Plane(TABLE1_PLANE[:3], TABLE1_PLANE[3])
 

@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from metrology.export import TrackerExport, read_export, write_export
-from metrology.layout import SensorLayout, load_layout, save_layout
-from metrology.paper import table6_layouts
+from metrology.io.export import TrackerExport, read_export, write_export
+from metrology.core.layout import SensorLayout, load_layout, save_layout
+from metrology.core.paper import table6_layouts
 
 
 def test_layout_round_trip(tmp_path):

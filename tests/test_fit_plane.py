@@ -11,9 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
-from metrology.paper import TABLE1_FITTED, TABLE1_PLANE, TABLE5_PLANE
-from metrology.plane import Plane
-from metrology.planefit import PlaneForm, fit_plane_file, fit_plane_robust, lqs_scale, truncated_normal_std
+from metrology.core.paper import TABLE1_FITTED, TABLE1_PLANE, TABLE5_PLANE
+from metrology.core.plane import Plane
+from metrology.datum.planefit import PlaneForm, fit_plane_file, fit_plane_robust, lqs_scale, truncated_normal_std
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fixtures"))
 import make_datum_cloud  # noqa: E402

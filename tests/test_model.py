@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from metrology.frames import random_rotation
-from metrology.model import (
+from metrology.core.frames import random_rotation
+from metrology.core.model import (
     direction_from_tangent,
     gauge_null_vector,
     jacobian_raw,
@@ -14,7 +14,7 @@ from metrology.model import (
     readings,
     tangent_from_direction,
 )
-from metrology.paper import table2_layouts, table6_layouts
+from metrology.core.paper import table2_layouts, table6_layouts
 
 
 def test_known_answer_by_hand():

@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from metrology.frames import random_rotation
-from metrology.model import readings
-from metrology.normals import (
+from metrology.core.frames import random_rotation
+from metrology.core.model import readings
+from metrology.core.normals import (
     angle_between,
     attitude_angles,
     micro_plane_normal,
@@ -18,7 +18,7 @@ from metrology.normals import (
     rot_x,
     rot_y,
 )
-from metrology.paper import table2_layouts, table6_layouts
+from metrology.core.paper import table2_layouts, table6_layouts
 
 
 def test_projection_points_refuse_non_unit_direction():

@@ -1,4 +1,4 @@
-"""Tests of metrology.panel and ``metro normals`` (issue 5)."""
+"""Tests of metrology.panel.panel and ``metro normals`` (issue 5)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from metrology import panel as pn
-from metrology.layout import SensorLayout, save_layout
-from metrology.normals import angle_between
-from metrology.paper import table2_layouts, table6_layouts
+from metrology.panel import panel as pn
+from metrology.core.layout import SensorLayout, save_layout
+from metrology.core.normals import angle_between
+from metrology.core.paper import table2_layouts, table6_layouts
 
 LAYOUTS = {"table6": table6_layouts()[1], "table2": table2_layouts()[1]}
 
@@ -141,7 +141,7 @@ def test_three_sensors_fall_back_to_the_plane():
     layout = LAYOUTS["table6"].subset(["L1", "L2", "L3"])
     d = np.array([[40.0, 41.0, 40.5]])
     n_s, rad, _, _ = pn.micro_sphere_normal(layout.zero, layout.direction, d, axis=pn.tool_axis_tcs(layout))
-    from metrology.normals import micro_plane_normal
+    from metrology.core.normals import micro_plane_normal
 
     n_p = micro_plane_normal(layout.zero, layout.direction, d)
     assert np.isinf(rad[0])

@@ -1,0 +1,455 @@
+"""Estimators of the sensor parameters: the paper's EKF (section 3.2) and better ones.
+
+All estimators share the measurement model of :mod:`metrology.core.model` and its analytic
+Jacobian, take a nominal :class:`~metrology.layout.SensorLayout` and
+:class:`Observations`, and return a :class:`Calibration` (a fitted copy of the layout
+with standard errors); the input layout is never changed.
+
+``ekf_paper``
+    Eqs. 10-16 as printed, with filterpy's ``ExtendedKalmanFilter``: state = the six raw
+    errors (dx, dy, dz, dm, dn, dq) of one sensor, random walk with ``Q``, ``P0 = I`` (mixed
+    units: 1 mm^2 and 1 (unit of direction)^2), linear innovation ``Z - H X`` (Eq. 16) with
+    ``H`` evaluated at the current estimate, stop at ``||X_k - X_k-1|| < delta``.
+``ekf``
+    filterpy EKF on the five identifiable parameters (x, y, z, a, b) of metro's chart, a
+    prior in consistent units (``P0 = diag((2 mm)^2 x3, (0.1 rad)^2 x2)`` by default), the
+    full nonlinear measurement function ``h(x) = d(x)`` and ``R`` from the stated noise.
+``iekf``
+    The same filter run in passes, each linearised at the previous pass's estimate:
+    Gauss-Newton on the MAP cost in filter form; converges to batch least squares with
+    the prior.
+``lsq``
+    Batch nonlinear least squares (``scipy.optimize.least_squares``) on the readings.
+``method1``
+    The paper's baseline (method 1): least squares on the plane-fitting residual, the
+    distance from the point Eq. 17 predicts to the datum, with unit directions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from metrology.core.layout import SensorLayout
+from metrology.core.model import (
+    direction_basis,
+    direction_from_tangent,
+    jacobian_raw,
+    jacobian_tangent,
+    readings,
+)
+
+__all__ = [
+    "Observations",
+    "Calibration",
+    "calibrate",
+    "ekf_paper",
+    "ekf",
+    "iekf",
+    "lsq",
+    "method1",
+    "METHODS",
+    "DEFAULT_P0_SIGMA",
+]
+
+#: default 1-sigma prior of the well-posed EKFs: zero-point error (mm) and direction tilt
+#: (rad, 5.7 deg), wide enough to cover the assembly tolerance of a machined pressure foot
+DEFAULT_P0_SIGMA = (2.0, 0.1)
+
+
+@dataclass(frozen=True)
+class Observations:
+    """The datum plane in each pose's TCS and the readings.
+
+    Attributes
+    ----------
+    normal : (p, 3) float, unit, TCS
+    offset : (p,) float, mm
+    d : (p, n) float, mm; NaN = no reading
+    """
+
+    normal: np.ndarray
+    offset: np.ndarray
+    d: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "normal", np.atleast_2d(np.asarray(self.normal, float)))
+        object.__setattr__(self, "offset", np.atleast_1d(np.asarray(self.offset, float)))
+        object.__setattr__(self, "d", np.atleast_2d(np.asarray(self.d, float)))
+        p = len(self.offset)
+        if self.normal.shape != (p, 3) or self.d.shape[0] != p:
+            raise ValueError(f"observations: normal {self.normal.shape}, offset {self.offset.shape}, d {self.d.shape} disagree")
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.offset)
+
+    def select(self, idx) -> "Observations":
+        return Observations(self.normal[idx], self.offset[idx], self.d[idx])
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A fitted copy of the nominal layout.
+
+    Attributes
+    ----------
+    method : str
+    nominal : SensorLayout
+    layout : SensorLayout
+        Calibrated (unit directions), with ``zero_stderr_mm`` and ``direction_stderr_deg``.
+    theta : (n, 5) float
+        Chart errors ``(dx, dy, dz)`` mm and ``(a, b)`` rad around the nominal direction.
+    cov : (n, 5, 5) float
+        Covariance of ``theta`` (mm, rad).
+    delta_raw : (n, 6) float
+        The paper's error vector ``(dx, dy, dz, dm, dn, dq)``: zero mm, unit-direction change.
+    n_used : (n,) int
+        Readings used per sensor.
+    n_converged : (n,) int
+        EKF only: measurements to the stopping rule (-1: never met); absent (empty) otherwise.
+    history : list of (k, 6) float arrays, per sensor
+        EKF only: the raw error estimate after each measurement (Figures 7 and 11).
+    residual_rms : (n,) float, mm
+        RMS of ``d_measured - d_predicted`` per sensor, over the readings used to fit.
+    sigma_mm : (n,) float, mm
+        The reading noise the standard errors are scaled with.
+    unidentified : str
+        What the data cannot determine, in words (always the direction scale, the gauge).
+    raw_cov : (n, 6, 6) float or None
+        ``ekf_paper`` only: its ``P``, whose gauge direction ``(0, 0, 0, u)`` is never updated.
+    """
+
+    method: str
+    nominal: SensorLayout
+    layout: SensorLayout
+    theta: np.ndarray
+    cov: np.ndarray
+    delta_raw: np.ndarray
+    n_used: np.ndarray
+    residual_rms: np.ndarray
+    sigma_mm: np.ndarray
+    n_converged: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    history: list = field(default_factory=list)
+    unidentified: str = "direction scale (gauge): readings do not depend on |u|; directions are unit vectors"
+    raw_cov: np.ndarray | None = None
+
+    @property
+    def stderr(self) -> np.ndarray:
+        """(n, 5) float: standard errors of ``theta`` (mm, rad)."""
+        return np.sqrt(np.maximum(np.einsum("nii->ni", self.cov), 0.0))
+
+
+# ---------------------------------------------------------------------------------------
+# shared helpers
+
+
+def _sigma(nominal: SensorLayout, sigma_mm):
+    """Per-sensor reading sigma (n,) mm: the argument, else the layout's noise_mm, else NaN."""
+    if sigma_mm is not None:
+        return np.broadcast_to(np.asarray(sigma_mm, float), (nominal.n,)).copy()
+    return nominal.noise_mm.copy()
+
+
+def _finish(method, nominal, obs, theta, cov, sigma, **extra) -> Calibration:
+    """Build the calibrated layout and residuals from chart errors ``theta (n, 5)``."""
+    zero = nominal.zero + theta[:, :3]
+    u = direction_from_tangent(nominal.direction, theta[:, 3:])
+    pred, _ = readings(zero, u, obs.normal, obs.offset)
+    res = obs.d - pred
+    ok = np.isfinite(res)
+    n_used = ok.sum(axis=0)
+    rms = np.sqrt(np.nansum(np.where(ok, res, 0.0) ** 2, axis=0) / np.maximum(n_used, 1))
+    se = np.sqrt(np.maximum(np.einsum("nii->ni", cov), 0.0))
+    layout = nominal.with_params(zero, u, zero_stderr_mm=se[:, :3], direction_stderr_deg=np.rad2deg(se[:, 3:]))
+    delta_raw = np.concatenate([theta[:, :3], u - nominal.direction], axis=1)
+    return Calibration(method, nominal, layout, theta, cov, delta_raw, n_used, rms, sigma, **extra)
+
+
+def _pose_order(obs: Observations, i: int):
+    """Indices of the poses with a reading of sensor ``i``, in file order."""
+    return np.flatnonzero(np.isfinite(obs.d[:, i]))
+
+
+def _chart_cov_from_raw(P6, u_nom):
+    """Project a raw 6x6 covariance onto the chart (x, y, z, a, b) at small errors."""
+    basis = direction_basis(u_nom[None])[0]  # (2, 3)
+    T = np.zeros((5, 6))
+    T[:3, :3] = np.eye(3)
+    T[3:, 3:] = basis
+    return T @ P6 @ T.T
+
+
+# ---------------------------------------------------------------------------------------
+# the paper's EKF
+
+
+def ekf_paper(nominal: SensorLayout, obs: Observations, Q=1e-10, R=8e-5, delta=1e-4, P0=1.0,
+              stop=True) -> Calibration:
+    """The EKF of Eqs. 10-16 exactly as printed, one filter per sensor (filterpy).
+
+    Parameters
+    ----------
+    nominal : SensorLayout
+    obs : Observations
+    Q : float
+        Process noise, ``Q = Q I`` (6 x 6), mixed units as in the paper.
+    R : float, mm^2
+    delta : float
+        Stopping rule ``||X_k - X_k-1|| < delta`` (mixed units).
+    P0 : float
+        ``P0 = P0 I``.
+    stop : bool
+        Stop at the rule (the paper) or run through all measurements.
+
+    Returns
+    -------
+    Calibration
+        ``theta`` is the raw estimate's direction normalised and projected on the chart;
+        ``cov`` is ``P`` projected on the chart; ``raw_cov`` keeps ``P`` itself.
+    """
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    n = nominal.n
+    theta = np.zeros((n, 5))
+    cov = np.zeros((n, 5, 5))
+    raw_cov = np.zeros((n, 6, 6))
+    n_conv = np.full(n, -1)
+    history = []
+    for i in range(n):
+        E0, u0 = nominal.zero[i], nominal.direction[i]
+        kf = ExtendedKalmanFilter(dim_x=6, dim_z=1)
+        kf.x = np.zeros((6, 1))
+        kf.P = np.eye(6) * P0
+        kf.Q = np.eye(6) * Q
+        kf.R = np.array([[R]])
+        hist = []
+        for k, p in enumerate(_pose_order(obs, i)):
+            N, D = obs.normal[p : p + 1], obs.offset[p : p + 1]
+            d_nom = readings(E0[None], u0[None], N, D)[0][0, 0]
+            z = np.array([[obs.d[p, i] - d_nom]])  # Z_k = d_meas - d_nom (Eq. 11)
+
+            def H_jac(x, N=N, D=D):
+                # H_k = J at the current estimate Phi_nom + X (Eq. 9)
+                return jacobian_raw(E0[None] + x[:3, 0], u0[None] + x[3:, 0], N, D)[0]
+
+            x_prev = kf.x.copy()
+            kf.predict()  # Eqs. 12-13 (F = I)
+            if not np.all(np.isfinite(H_jac(kf.x))):
+                break  # the estimate left the region where the beam meets the datum
+            kf.update(z, H_jac, lambda x, H_jac=H_jac: H_jac(x) @ x)  # Eqs. 14-16: Z - H X
+            hist.append(kf.x[:, 0].copy())
+            if np.linalg.norm(kf.x - x_prev) < delta and n_conv[i] < 0:
+                n_conv[i] = k + 1
+                if stop:
+                    break
+        history.append(np.array(hist).reshape(-1, 6))
+        x = kf.x[:, 0]
+        u = u0 + x[3:]
+        unit = u / np.linalg.norm(u)
+        basis = direction_basis(u0[None])[0]
+        theta[i, :3] = x[:3]
+        theta[i, 3:] = basis @ unit / (unit @ u0)
+        raw_cov[i] = kf.P
+        cov[i] = _chart_cov_from_raw(kf.P, u0)
+    sigma = np.full(n, np.sqrt(R))
+    return _finish("ekf_paper", nominal, obs, theta, cov, sigma, n_converged=n_conv, history=history, raw_cov=raw_cov)
+
+
+# ---------------------------------------------------------------------------------------
+# well-posed sequential filters on the five-parameter chart
+
+
+def _prior(P0_sigma):
+    s_pos, s_dir = P0_sigma
+    return np.diag([s_pos**2] * 3 + [s_dir**2] * 2)
+
+
+def _h_and_H(nominal, i, x, N, D):
+    E = nominal.zero[i] + x[:3]
+    u0 = nominal.direction[i][None]
+    d = readings(E[None], direction_from_tangent(u0, x[None, 3:]), N, D)[0][0, 0]
+    H = jacobian_tangent(E[None], u0, x[None, 3:], N, D)[0]  # (1, 5)
+    return d, H
+
+
+def _ekf_pass(nominal, i, obs, R, P0, Q, x_ref=None):
+    """One filterpy EKF pass over sensor ``i``'s readings, from the prior ``N(0, P0)``.
+
+    ``x_ref`` None: linearise at the running estimate (the ordinary EKF). Otherwise
+    linearise every measurement at ``x_ref`` (a previous pass's estimate): with ``Q = 0``
+    the pass is then one Gauss-Newton step on the MAP cost, in filter form.
+    """
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    kf = ExtendedKalmanFilter(dim_x=5, dim_z=1)
+    kf.x = np.zeros((5, 1))
+    kf.P = P0.copy()
+    kf.Q = np.eye(5) * Q
+    kf.R = np.array([[R]])
+    hist = []
+    for p in _pose_order(obs, i):
+        N, D = obs.normal[p : p + 1], obs.offset[p : p + 1]
+        if x_ref is None:
+            HJ = lambda x, N=N, D=D: _h_and_H(nominal, i, x[:, 0], N, D)[1]  # noqa: E731
+            Hx = lambda x, N=N, D=D: np.array([[_h_and_H(nominal, i, x[:, 0], N, D)[0]]])  # noqa: E731
+        else:
+            h_ref, H_ref = _h_and_H(nominal, i, x_ref, N, D)
+            HJ = lambda x, H_ref=H_ref: H_ref  # noqa: E731
+            Hx = lambda x, h_ref=h_ref, H_ref=H_ref: np.array([[h_ref]]) + H_ref @ (x - x_ref[:, None])  # noqa: E731
+        kf.predict()
+        kf.update(np.array([[obs.d[p, i]]]), HJ, Hx)
+        hist.append(kf.x[:, 0].copy())
+    return kf.x[:, 0].copy(), (kf.P + kf.P.T) / 2, np.array(hist).reshape(-1, 5)
+
+
+def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol):
+    sigma = _sigma(nominal, sigma_mm)
+    if not np.all(np.isfinite(sigma)):
+        raise ValueError(f"{name} needs the reading noise: give sigma_mm or noise_mm in the layout")
+    n = nominal.n
+    theta, cov, history = np.zeros((n, 5)), np.zeros((n, 5, 5)), []
+    P0 = _prior(P0_sigma)
+    for i in range(n):
+        x, P, hist = _ekf_pass(nominal, i, obs, sigma[i] ** 2, P0, Q)
+        hists = [hist]
+        for _ in range(passes - 1):
+            x_new, P, hist = _ekf_pass(nominal, i, obs, sigma[i] ** 2, P0, Q, x_ref=x)
+            hists.append(hist)
+            step = np.abs(x_new - x)
+            x = x_new
+            if np.all(step[:3] < tol[0]) and np.all(step[3:] < tol[1]):
+                break
+        theta[i], cov[i] = x, P
+        history.append(_raw_history(nominal, i, np.concatenate(hists)))
+    return _finish(name, nominal, obs, theta, cov, sigma, history=history)
+
+
+def ekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, Q=0.0) -> Calibration:
+    """filterpy EKF on the chart ``(x, y, z, a, b)`` with a consistent prior and ``h(x) = d(x)``.
+
+    Parameters
+    ----------
+    sigma_mm : float or (n,) float, mm, optional
+        Reading noise (default: the layout's ``noise_mm``); sets ``R = sigma^2``.
+    P0_sigma : (float, float)
+        Prior 1-sigma of the zero-point error (mm) and of the direction tilt (rad).
+    Q : float
+        Process noise on every state (default 0: the parameters are constant).
+    """
+    return _sequential("ekf", nominal, obs, sigma_mm, P0_sigma, Q, 1, (0.0, 0.0))
+
+
+def iekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, passes=10,
+         tol=(1e-6, 1e-8)) -> Calibration:
+    """Iterated EKF: passes of the filter, each linearised at the previous pass's estimate.
+
+    Pass 1 is :func:`ekf`. Every later pass restarts from the prior ``N(0, P0)`` and
+    linearises all measurements at the previous estimate, which with ``Q = 0`` is one
+    Gauss-Newton step on the MAP cost; passes stop when the estimate moves less than
+    ``tol`` (mm, rad). The result is the batch MAP estimate with the prior, in filter form.
+    """
+    return _sequential("iekf", nominal, obs, sigma_mm, P0_sigma, 0.0, passes, tol)
+
+
+def _raw_history(nominal, i, hist5):
+    """Chart history (k, 5) to the paper's raw errors (k, 6) for plotting."""
+    if len(hist5) == 0:
+        return np.zeros((0, 6))
+    u0 = np.repeat(nominal.direction[i][None], len(hist5), axis=0)
+    u = direction_from_tangent(u0, hist5[:, 3:])
+    return np.concatenate([hist5[:, :3], u - u0], axis=1)
+
+
+# ---------------------------------------------------------------------------------------
+# batch least squares
+
+
+def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear"):
+    from scipy.optimize import least_squares
+
+    rows = _pose_order(obs, i)
+    if len(rows) < 5:
+        raise ValueError(f"sensor {nominal.names[i]}: {len(rows)} readings, need at least 5 for 5 parameters")
+    N, D, z = obs.normal[rows], obs.offset[rows], obs.d[rows, i]
+    fun, jac = residual(nominal, i, N, D, z)
+    sol = least_squares(fun, np.zeros(5) if x0 is None else x0, jac=jac, method="trf", loss=loss,
+                        x_scale=np.array([1.0, 1.0, 1.0, 0.05, 0.05]), xtol=1e-14, ftol=1e-14, gtol=1e-14,
+                        max_nfev=200)
+    if not np.all(np.isfinite(sol.x)):
+        raise ValueError(f"sensor {nominal.names[i]}: least squares did not converge")
+    J = sol.jac
+    dof = max(len(rows) - 5, 1)
+    s2 = float(np.sum(sol.fun**2) / dof)
+    JTJ = J.T @ J
+    cov = np.linalg.pinv(JTJ) * s2
+    return sol.x, cov, np.sqrt(s2)
+
+
+def _reading_residual(nominal, i, N, D, z):
+    u0 = nominal.direction[i][None]
+
+    def fun(x):
+        E = nominal.zero[i][None] + x[:3]
+        d, _ = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)
+        return np.nan_to_num(z - d[:, 0], nan=1e6)
+
+    def jac(x):
+        E = nominal.zero[i][None] + x[:3]
+        return -jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
+
+    return fun, jac
+
+
+def _plane_residual(nominal, i, N, D, z):
+    """Distance (mm) from the Eq. 17 point ``E + d u`` (unit u) to the datum."""
+    u0 = nominal.direction[i][None]
+    basis = direction_basis(u0)[0]  # (2, 3)
+
+    def fun(x):
+        E = nominal.zero[i] + x[:3]
+        u = direction_from_tangent(u0, x[None, 3:])[0]
+        return N @ E + D + z * (N @ u)
+
+    def jac(x):
+        u = direction_from_tangent(u0, x[None, 3:])[0]
+        w = u0[0] + basis.T @ x[3:]
+        wn = np.linalg.norm(w)
+        du_dab = (basis.T - np.outer(u, u @ basis.T)) / wn  # (3, 2)
+        return np.concatenate([N, z[:, None] * (N @ du_dab)], axis=1)
+
+    return fun, jac
+
+
+def lsq(nominal: SensorLayout, obs: Observations, loss="linear") -> Calibration:
+    """Batch nonlinear least squares on the readings, per sensor (``scipy.optimize.least_squares``).
+
+    Standard errors are ``s^2 (J^T J)^-1`` with ``s`` the residual RMS (``m - 5`` degrees of
+    freedom): honest also when the stated noise is wrong. ``sigma_mm`` reports ``s``.
+    """
+    n = nominal.n
+    theta, cov, sig = np.zeros((n, 5)), np.zeros((n, 5, 5)), np.zeros(n)
+    for i in range(n):
+        theta[i], cov[i], sig[i] = _lsq_sensor(nominal, i, obs, _reading_residual, loss=loss)
+    return _finish("lsq", nominal, obs, theta, cov, sig)
+
+
+def method1(nominal: SensorLayout, obs: Observations) -> Calibration:
+    """The paper's method 1: least squares on the plane-fitting residual (unit directions)."""
+    n = nominal.n
+    theta, cov, sig = np.zeros((n, 5)), np.zeros((n, 5, 5)), np.zeros(n)
+    for i in range(n):
+        theta[i], cov[i], sig[i] = _lsq_sensor(nominal, i, obs, _plane_residual)
+    return _finish("method1", nominal, obs, theta, cov, sig)
+
+
+#: estimator name -> function; ``calibrate`` dispatches on these
+METHODS = {"ekf_paper": ekf_paper, "ekf": ekf, "iekf": iekf, "lsq": lsq, "method1": method1}
+
+
+def calibrate(nominal: SensorLayout, obs: Observations, method: str = "lsq", **kwargs) -> Calibration:
+    """Run the estimator ``method`` (a key of :data:`METHODS`) and return its fitted copy."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}, expected one of {', '.join(METHODS)}")
+    return METHODS[method](nominal, obs, **kwargs)

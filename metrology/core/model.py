@@ -1,0 +1,228 @@
+"""The measurement model of the paper, section 3.1 (Eqs. 1-9), vectorised.
+
+A sensor has a zero point ``E`` (mm, TCS) and a beam direction ``u`` (TCS). A plane is
+``N . p + D = 0`` with unit ``N``. The beam ``E + t u`` meets the plane at
+``t = -(N.E + D) / (N.u)`` and the reading is the distance from ``E`` to that point,
+
+    d = -(N.E + D) |u| / (N.u)                                    (Eqs. 1-3)
+
+which does not change when ``u`` is scaled: of the six numbers (x, y, z, m, n, q) only
+five are identifiable (the *gauge*: the direction scale). The raw six-number Jacobian of
+Eq. 9 is given for the paper's EKF; it always has ``[0, 0, 0, u]`` in its null space.
+The well-posed parametrisation used by metro's own estimators is the five-number chart
+
+    theta = (x, y, z, a, b),    u(a, b) = normalise(u0 + a e1 + b e2)
+
+around a reference direction ``u0`` with ``e1, e2`` an orthonormal basis of the plane
+perpendicular to ``u0`` (``a``, ``b`` are the tangents of the tilt angles, in rad at
+small angles).
+
+Invalid geometry (beam parallel to the plane, plane behind the sensor, NaN input) is
+returned as a ``valid`` mask and NaN readings, never as a silent number.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from metrology.core.tolerances import BEAM_PARALLEL_COS
+
+__all__ = [
+    "readings",
+    "jacobian_raw",
+    "direction_basis",
+    "direction_from_tangent",
+    "tangent_from_direction",
+    "jacobian_tangent",
+    "gauge_null_vector",
+    "PARAMS_RAW",
+    "PARAMS_TANGENT",
+]
+
+#: names of the paper's six sensor parameters (Eq. 9), in order
+PARAMS_RAW = ("x", "y", "z", "m", "n", "q")
+#: names of the five identifiable parameters of metro's chart
+PARAMS_TANGENT = ("x", "y", "z", "a", "b")
+
+
+def _geometry(zero, direction, normal, offset):
+    """Broadcast inputs; return (s, nu, unorm) with shapes (p, n)."""
+    zero = np.asarray(zero, dtype=float)
+    direction = np.asarray(direction, dtype=float)
+    normal = np.atleast_2d(np.asarray(normal, dtype=float))
+    offset = np.atleast_1d(np.asarray(offset, dtype=float))
+    if zero.ndim != 2 or zero.shape[-1] != 3:
+        raise ValueError(f"zero: expected shape (n, 3), got {zero.shape}")
+    if direction.shape != zero.shape:
+        raise ValueError(f"direction: expected shape {zero.shape}, got {direction.shape}")
+    if normal.shape[-1] != 3 or offset.shape != normal.shape[:1]:
+        raise ValueError(f"plane: normal (p, 3) and offset (p,) expected, got {normal.shape}, {offset.shape}")
+    s = -(normal @ zero.T + offset[:, None])  # (p, n): signed distance of E behind the plane
+    nu = normal @ direction.T  # (p, n)
+    unorm = np.linalg.norm(direction, axis=1)[None, :]  # (1, n)
+    return s, nu, unorm
+
+
+def readings(zero, direction, normal, offset):
+    """Predicted readings of every sensor on every plane (Eqs. 1-3).
+
+    Parameters
+    ----------
+    zero : (n, 3) float, mm, TCS
+        Sensor zero points.
+    direction : (n, 3) float, TCS
+        Beam directions; any non-zero scale (the reading does not depend on it).
+    normal : (p, 3) float, TCS
+        Unit normals of the plane at each pose.
+    offset : (p,) float, mm
+        Plane offsets ``D`` at each pose (``N . p + D = 0``).
+
+    Returns
+    -------
+    d : (p, n) float, mm
+        Distance from the zero point to the beam-plane intersection; NaN where invalid.
+    valid : (p, n) bool
+        False where the beam is parallel to the plane (|cos| < ``BEAM_PARALLEL_COS``),
+        the intersection lies behind the sensor, or an input is not finite.
+    """
+    s, nu, unorm = _geometry(zero, direction, normal, offset)
+    cos = np.divide(nu, unorm, out=np.zeros_like(nu), where=unorm > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = s * unorm / nu
+    valid = np.isfinite(d) & (np.abs(cos) >= BEAM_PARALLEL_COS) & (d >= 0)
+    return np.where(valid, d, np.nan), valid
+
+
+def jacobian_raw(zero, direction, normal, offset):
+    """Jacobian of the readings w.r.t. the paper's six parameters (Eq. 9).
+
+    Parameters are as in :func:`readings`.
+
+    Returns
+    -------
+    J : (p, n, 6) float
+        ``dd/d(x, y, z)`` (unitless) and ``dd/d(m, n, q)`` (mm per unit of direction).
+        Its null space always contains ``(0, 0, 0, u)``: scaling the direction.
+    """
+    direction = np.asarray(direction, dtype=float)
+    normal = np.atleast_2d(np.asarray(normal, dtype=float))
+    s, nu, unorm = _geometry(zero, direction, normal, offset)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = s * unorm / nu
+        dE = -(unorm / nu)[..., None] * normal[:, None, :]  # (p, n, 3)
+        du = d[..., None] * (
+            direction[None, :, :] / (unorm**2)[..., None] - normal[:, None, :] / nu[..., None]
+        )
+    return np.concatenate([dE, du], axis=-1)
+
+
+def direction_basis(u0):
+    """Orthonormal basis ``(e1, e2)`` of the plane perpendicular to each direction.
+
+    Parameters
+    ----------
+    u0 : (n, 3) float, TCS
+        Reference directions (normalised here).
+
+    Returns
+    -------
+    basis : (n, 2, 3) float, TCS
+        ``basis[i, 0] = e1``, ``basis[i, 1] = e2`` with ``e1 x e2 = u0``. ``e1`` is the
+        component of the TCS axis least aligned with ``u0``, made orthogonal to it: a
+        deterministic choice, so a chart is reproducible from the layout alone.
+    """
+    u0 = np.asarray(u0, dtype=float)
+    u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
+    axis = np.eye(3)[np.argmin(np.abs(u0), axis=1)]
+    e1 = axis - np.sum(axis * u0, axis=1, keepdims=True) * u0
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(u0, e1)
+    return np.stack([e1, e2], axis=1)
+
+
+def direction_from_tangent(u0, ab):
+    """Unit direction ``normalise(u0 + a e1 + b e2)``.
+
+    Parameters
+    ----------
+    u0 : (n, 3) float, TCS
+        Reference directions (the chart's centre).
+    ab : (n, 2) float, rad (tangent of the tilt)
+        Chart coordinates.
+
+    Returns
+    -------
+    u : (n, 3) float, unit, TCS
+    """
+    u0 = np.asarray(u0, dtype=float)
+    u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
+    basis = direction_basis(u0)
+    w = u0 + np.einsum("nk,nkj->nj", np.asarray(ab, dtype=float), basis)
+    return w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
+def tangent_from_direction(u0, u):
+    """Chart coordinates of direction ``u`` around ``u0`` (inverse of :func:`direction_from_tangent`).
+
+    Parameters
+    ----------
+    u0, u : (n, 3) float, TCS
+        Reference and target directions; ``u`` must be within 90 deg of ``u0``.
+
+    Returns
+    -------
+    ab : (n, 2) float, rad (tangent of the tilt)
+    """
+    u0 = np.asarray(u0, dtype=float)
+    u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
+    u = np.asarray(u, dtype=float)
+    along = np.sum(u * u0, axis=1)
+    if np.any(along <= 0):
+        raise ValueError("direction more than 90 deg from its reference: outside the chart")
+    basis = direction_basis(u0)
+    return np.einsum("nj,nkj->nk", u, basis) / along[:, None]
+
+
+def jacobian_tangent(zero, u0, ab, normal, offset):
+    """Jacobian of the readings w.r.t. the five chart parameters ``(x, y, z, a, b)``.
+
+    Parameters
+    ----------
+    zero : (n, 3) float, mm, TCS
+    u0 : (n, 3) float, TCS
+        Chart centres.
+    ab : (n, 2) float, rad
+        Chart coordinates of the current directions.
+    normal : (p, 3) float, TCS
+    offset : (p,) float, mm
+
+    Returns
+    -------
+    J : (p, n, 5) float
+        Columns ``dd/dx, dd/dy, dd/dz`` (unitless) and ``dd/da, dd/db`` (mm/rad).
+    """
+    u0 = np.asarray(u0, dtype=float)
+    u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
+    basis = direction_basis(u0)
+    w = u0 + np.einsum("nk,nkj->nj", np.asarray(ab, dtype=float), basis)
+    # d is invariant to the scale of w, so differentiate w.r.t. w itself
+    J6 = jacobian_raw(zero, w, normal, offset)
+    dab = np.einsum("pnj,nkj->pnk", J6[..., 3:], basis)
+    return np.concatenate([J6[..., :3], dab], axis=-1)
+
+
+def gauge_null_vector(direction):
+    """The unidentifiable combination of the six raw parameters of each sensor.
+
+    Parameters
+    ----------
+    direction : (n, 3) float, TCS
+
+    Returns
+    -------
+    v : (n, 6) float, unit
+        ``(0, 0, 0, u/|u|)``: scaling the beam direction does not change any reading.
+    """
+    direction = np.asarray(direction, dtype=float)
+    u = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    return np.concatenate([np.zeros_like(u), u], axis=1)

@@ -1,0 +1,76 @@
+"""Figures of the reproduction (the paper's Figures 7 and 8). matplotlib is imported lazily."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from metrology.io.atomic import atomic_path
+
+__all__ = ["figure7", "figure8", "pyplot"]
+
+RAW_LABELS = ("dx [mm]", "dy [mm]", "dz [mm]", "dm", "dn", "dq")
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the headless Agg backend (imported on first use)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def figure7(history, true_errors, names, path, title="Paper's EKF: estimated parameter errors"):
+    """Estimated errors against the measurement index, one panel per parameter.
+
+    Parameters
+    ----------
+    history : list of (k_i, 6) float, per sensor, raw errors (mm; unitless for directions)
+    true_errors : (n, 6) float, the errors that generated the data (dashed lines)
+    names : sequence of str, sensor names
+    path : output PNG path (written atomically)
+    """
+    plt = pyplot()
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), sharex=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, ax in enumerate(axes.flat):
+        for i, (h, name) in enumerate(zip(history, names)):
+            c = colours[i % len(colours)]
+            ax.plot(np.arange(1, len(h) + 1), h[:, j], color=c, lw=1.2, label=name)
+            ax.axhline(true_errors[i, j], color=c, ls="--", lw=0.8)
+        ax.set_title(RAW_LABELS[j])
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("measurement")
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(f"{title} (dashed: truth)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def figure8(deviation_deg, path, title="Angular deviation of the measured normal"):
+    """Angular deviation per workpiece pose for each method (log scale).
+
+    Parameters
+    ----------
+    deviation_deg : dict method -> (m,) float, deg
+    path : output PNG path (written atomically)
+    """
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(9, 4.8))
+    markers = "osv^D*xP"
+    for k, (name, dev) in enumerate(deviation_deg.items()):
+        ax.plot(np.arange(1, len(dev) + 1), dev, marker=markers[k % len(markers)], ms=4, lw=1, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("workpiece pose")
+    ax.set_ylabel("angular deviation [deg]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, ncol=4)
+    ax.set_title(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
