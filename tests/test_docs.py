@@ -1,0 +1,100 @@
+"""The README and docs/ stay in sync with the code: every quoted command, option, library
+name and link exists. (The pages are written by hand; this is what keeps them honest.)"""
+
+from __future__ import annotations
+
+import importlib
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def _commands():
+    from typer.main import get_command
+
+    from cli.main import app
+
+    group = get_command(app)
+    return {name: {o for p in cmd.params for o in (*p.opts, *p.secondary_opts)} | {"--help", "-h"}
+            for name, cmd in group.commands.items()}
+
+
+def _metro_lines(text: str):
+    """Each ``metro <command> ...`` invocation in code blocks and inline code (line, words)."""
+    blocks = re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S)
+    inline = re.findall(r"`(metro [^`]+)`", text)
+    for chunk in [*blocks, *inline]:
+        for line in chunk.splitlines():
+            line = line.split("#")[0].strip().lstrip("$ ").strip()
+            for part in re.split(r"&&|\|", line):
+                part = part.strip()
+                if part.startswith("metro "):
+                    try:
+                        yield part, shlex.split(part)
+                    except ValueError:
+                        yield part, part.split()
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_quoted_command_and_option_exists(page):
+    commands = _commands()
+    bad = []
+    for line, words in _metro_lines(page.read_text()):
+        if len(words) < 2 or words[1].startswith("-"):
+            continue
+        name = words[1]
+        if name not in commands:
+            bad.append(f"{line!r}: no command {name!r}")
+            continue
+        for w in words[2:]:
+            opt = w.split("=")[0]
+            if opt.startswith("-") and opt != "-" and not re.fullmatch(r"-\d.*", opt) and opt not in commands[name]:
+                bad.append(f"{line!r}: {name} has no option {opt}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_quoted_library_name_imports(page):
+    bad = []
+    for dotted in sorted(set(re.findall(r"`(metrology(?:\.\w+)+)", page.read_text()))):
+        parts = dotted.split(".")
+        for cut in range(len(parts), 0, -1):
+            try:
+                obj = importlib.import_module(".".join(parts[:cut]))
+            except ImportError:
+                continue
+            try:
+                for attr in parts[cut:]:
+                    obj = getattr(obj, attr)
+            except AttributeError:
+                bad.append(dotted)
+            break
+        else:
+            bad.append(dotted)
+    assert not bad, f"{page.name} quotes names that do not import: {bad}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_relative_link_resolves(page):
+    links = re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", page.read_text())
+    missing = [link for link in links if not (page.parent / link).exists()]
+    assert not missing, f"{page.name}: broken links {missing}"
+
+
+def test_the_check_sees_a_wrong_option():
+    """The command check can fail: a made-up option is reported."""
+    commands = _commands()
+    [(line, words)] = list(_metro_lines("```bash\nmetro calibrate x.csv --no-such-option\n```"))
+    assert words[1] in commands and "--no-such-option" not in commands[words[1]]
+
+
+def test_readme_front_page_is_short_and_has_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    assert 'pip install . && metro demo' in text
+    assert 'pip install ".[test]" && pytest' in text
