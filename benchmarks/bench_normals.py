@@ -30,7 +30,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from metrology.panel import panel as pn  # noqa: E402
+from metrology.panel.mesh import Panel  # noqa: E402
+from metrology.panel.points import DrillPoints  # noqa: E402
+from metrology.panel.rays import RayCaster, available_engines  # noqa: E402
+from metrology.panel.run import run_normals  # noqa: E402
+from metrology.panel.surfaces import ParametricSurface, panel_mesh  # noqa: E402
 from metrology.core.paper import table6_layouts  # noqa: E402
 
 
@@ -48,14 +52,14 @@ def main(argv=None) -> int:
     ap.add_argument("--trimesh-rays", type=int, default=1000, help="rays for the slow pure-numpy engine")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(0)
-    surf = pn.ParametricSurface("sphere", 800.0)
+    surf = ParametricSurface("sphere", 800.0)
     t0 = time.perf_counter()
-    mesh = pn.panel_mesh(surf, 200.0, 200.0, a.spacing)
+    mesh = panel_mesh(surf, 200.0, 200.0, a.spacing)
     import os
 
     print(f"# {platform.machine()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; "
           f"{len(mesh.faces):,} triangles (generated in {time.perf_counter() - t0:.2f} s)")
-    engines = pn.available_engines()
+    engines = available_engines()
     print(f"# engines available: {', '.join(engines)}")
     layout = table6_layouts()[1]
     n_rays = 4 * a.points
@@ -65,7 +69,7 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|")
     for eng in engines:
         m = a.trimesh_rays if eng == "trimesh" else n_rays
-        caster = pn.RayCaster(mesh, eng)
+        caster = RayCaster(mesh, eng)
         t0 = time.perf_counter()
         caster.build()
         t_build = time.perf_counter() - t0
@@ -81,10 +85,10 @@ def main(argv=None) -> int:
         npts = a.points if eng != "trimesh" else a.trimesh_rays // 4
         xy = rng.uniform(-120, 120, (npts, 2))
         pts = np.column_stack([xy, surf.height(xy[:, 0], xy[:, 1])])
-        drill = pn.DrillPoints(pts, np.full_like(pts, np.nan), tuple(map(str, range(npts))))
-        panel = pn.Panel(mesh, "bench", [], surf)
+        drill = DrillPoints(pts, np.full_like(pts, np.nan), tuple(map(str, range(npts))))
+        panel = Panel(mesh, "bench", [], surf)
         t0 = time.perf_counter()
-        run = pn.run_normals(panel, layout, drill, np.random.default_rng(1), tilt=math.radians(1.0), noise=0.005,
+        run = run_normals(panel, layout, drill, np.random.default_rng(1), tilt=math.radians(1.0), noise=0.005,
                              engine=eng, loop=False)
         t_all = time.perf_counter() - t0
         ok = int(np.sum(run.status == "ok"))
@@ -102,7 +106,7 @@ def main(argv=None) -> int:
         mesh_s = mesh.copy()
         mesh_s.apply_translation(shift)
         for centred in (True, False):
-            caster = pn.RayCaster(mesh_s, "open3d")
+            caster = RayCaster(mesh_s, "open3d")
             if not centred:
                 caster._centre = np.zeros(3)
             tri, t, _ = caster.cast(o[:m] + shift, d[:m])
@@ -111,7 +115,7 @@ def main(argv=None) -> int:
             err = np.abs(raw[ok] - t[ok]) * 1e3
             print(f"| {'origin' if not shift.any() else 'x = 12.5 m'} | {'yes' if centred else 'no'} | {err.max():.3f} | {np.percentile(err, 99):.3f} |")
     if "embree" in engines:
-        caster = pn.RayCaster(mesh, "embree").build()
+        caster = RayCaster(mesh, "embree").build()
         res = caster._impl._scene.run(o[:m], d[:m], output=1)
         tfar = np.asarray(res["tfar"], float) / caster._impl._scale if isinstance(res, dict) and "tfar" in res else None
         if tfar is not None:

@@ -26,7 +26,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from metrology.panel import panel as pn  # noqa: E402
+from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM  # noqa: E402
+from metrology.panel.mesh import Panel  # noqa: E402
+from metrology.panel.points import DrillPoints  # noqa: E402
+from metrology.panel.rays import RayCaster  # noqa: E402
+from metrology.panel.run import run_normals  # noqa: E402
+from metrology.panel.surfaces import ParametricSurface, panel_mesh  # noqa: E402
 from metrology.core.paper import table2_layouts, table6_layouts  # noqa: E402
 
 PANELS = {
@@ -47,21 +52,21 @@ _cache = {}
 def panel(name):
     if name not in _cache:
         kind, R = PANELS[name]
-        surf = pn.ParametricSurface(kind, R)
+        surf = ParametricSurface(kind, R)
         sy = 5.0 if kind in ("flat", "cylinder") else 0.5
-        mesh = pn.panel_mesh(surf, 100.0, 100.0, 0.5, sy)
-        p = pn.Panel(mesh, name, [], surf)
-        _cache[name] = (p, pn.RayCaster(mesh, "auto").build())
+        mesh = panel_mesh(surf, 100.0, 100.0, 0.5, sy)
+        p = Panel(mesh, name, [], surf)
+        _cache[name] = (p, RayCaster(mesh, "auto").build())
     return _cache[name]
 
 
-def run(name, layout, tilt_deg, noise, m, seed, loop=False, prior=pn.SPHERE_PRIOR_RADIUS_MM):
+def run(name, layout, tilt_deg, noise, m, seed, loop=False, prior=SPHERE_PRIOR_RADIUS_MM):
     p, caster = panel(name)
     rng = np.random.default_rng([seed, sum(map(ord, name))])
     xy = rng.uniform(-40, 40, (m, 2))
     pts = np.column_stack([xy, p.surface.height(xy[:, 0], xy[:, 1])])
-    drill = pn.DrillPoints(pts, np.full_like(pts, np.nan), tuple(map(str, range(m))))
-    r = pn.run_normals(p, layout, drill, rng, tilt=math.radians(tilt_deg), noise=noise, loop=loop, caster=caster,
+    drill = DrillPoints(pts, np.full_like(pts, np.nan), tuple(map(str, range(m))))
+    r = run_normals(p, layout, drill, rng, tilt=math.radians(tilt_deg), noise=noise, loop=loop, caster=caster,
                        prior_radius_mm=prior)
     if not np.all(r.status == "ok"):
         raise RuntimeError(f"{name}: {dict(zip(*np.unique(r.status, return_counts=True)))}")

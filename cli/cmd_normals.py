@@ -34,7 +34,8 @@ def register(app: typer.Typer) -> None:
         no_loop: bool = typer.Option(False, "--no-loop", help="Measure once; skip the attitude loop."),
     ) -> None:
         """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
-        from metrology.panel.panel import normals_job, summary_text
+        from metrology.jobs.normals import normals_job
+        from metrology.report.normals import summary_text
 
         summary = normals_job(
             panel, layout, points_path=points, grid_mm=grid, tilt_deg=tilt_deg, standoff_mm=standoff_mm,

@@ -12,7 +12,9 @@ from metrology.core.plane import Plane, fit_plane_tls
 from metrology.datum.planefit import PlaneFit, fit_plane_robust, fit_plane_file
 from metrology.io.clouds import read_cloud
 from metrology.calibration.calibration import CalibrationReport, calibrate_dataset, validate
-from metrology.panel.panel import load_panel, run_normals, micro_sphere_normal, fit_algebraic_sphere
+from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
+from metrology.panel.mesh import load_panel
+from metrology.panel.run import run_normals
 from metrology.diagnosis.diagnosis import diagnose
 
 __all__ = [

@@ -11,7 +11,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from metrology.panel import panel as pn
+from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
+from metrology.panel.attitude import MotionError
+from metrology.panel.head import default_standoff, tool_axis_tcs
+from metrology.panel.mesh import Panel, load_panel
+from metrology.panel.points import DrillPoints, grid_points, read_points, snap_points
+from metrology.panel.rays import RayCaster, available_engines
+from metrology.panel.run import run_normals
+from metrology.panel.surfaces import ParametricSurface, panel_mesh, write_binary_stl
+from metrology.report.normals import per_point_text
 from metrology.core.layout import SensorLayout, save_layout
 from metrology.core.normals import angle_between
 from metrology.core.paper import table2_layouts, table6_layouts
@@ -20,14 +28,14 @@ LAYOUTS = {"table6": table6_layouts()[1], "table2": table2_layouts()[1]}
 
 
 def _panel(kind, radius=math.inf, half=80.0, spacing=1.0):
-    surf = pn.ParametricSurface(kind, radius)
-    return pn.Panel(pn.panel_mesh(surf, half, half, spacing), kind, [], surf)
+    surf = ParametricSurface(kind, radius)
+    return Panel(panel_mesh(surf, half, half, spacing), kind, [], surf)
 
 
 def _drill(surf, rng, m=20, half=30.0):
     xy = rng.uniform(-half, half, (m, 2))
     pts = np.column_stack([xy, surf.height(xy[:, 0], xy[:, 1])])
-    return pn.DrillPoints(pts, np.full_like(pts, np.nan), tuple(str(i) for i in range(m)))
+    return DrillPoints(pts, np.full_like(pts, np.nan), tuple(str(i) for i in range(m)))
 
 
 def _random_rotation(rng):
@@ -43,7 +51,7 @@ def _random_rotation(rng):
 def test_flat_panel_both_methods_exact_without_noise(lname):
     panel = _panel("flat")
     rng = np.random.default_rng(1)
-    run = pn.run_normals(panel, LAYOUTS[lname], _drill(panel.surface, rng), rng, tilt=math.radians(3), noise=0.0, loop=False)
+    run = run_normals(panel, LAYOUTS[lname], _drill(panel.surface, rng), rng, tilt=math.radians(3), noise=0.0, loop=False)
     assert np.all(run.status == "ok")
     assert np.max(run.err_plane) < 1e-9
     assert np.max(run.err_sphere) < 1e-9
@@ -53,8 +61,8 @@ def test_flat_panel_both_methods_exact_without_noise(lname):
 
 def _sphere_spots(layout, R_sphere, tilt, rng):
     """Beams of a tilted head meeting an analytic sphere; exact spots (TCS) and the true normal (TCS)."""
-    a = pn.tool_axis_tcs(layout)
-    standoff = pn.default_standoff(layout)
+    a = tool_axis_tcs(layout)
+    standoff = default_standoff(layout)
     z0 = float(np.mean(layout.zero @ a))
     # TCS: drilling point on the axis at z0 + standoff; sphere centre behind it along the tilted normal
     P = a * (z0 + standoff)
@@ -78,7 +86,7 @@ def test_micro_sphere_exact_on_a_sphere_without_noise(lname, R_sphere):
     rng = np.random.default_rng(7)
     for _ in range(5):
         d, n_out = _sphere_spots(layout, R_sphere, math.radians(2.0), rng)
-        n, rad, _, miss = pn.micro_sphere_normal(layout.zero, layout.direction, d[None], axis=pn.tool_axis_tcs(layout),
+        n, rad, _, miss = micro_sphere_normal(layout.zero, layout.direction, d[None], axis=tool_axis_tcs(layout),
                                                  prior_radius_mm=math.inf)
         assert not miss[0]
         assert rad[0] == pytest.approx(R_sphere, rel=1e-5)
@@ -88,7 +96,7 @@ def test_micro_sphere_exact_on_a_sphere_without_noise(lname, R_sphere):
 def test_micro_sphere_through_the_mesh_on_a_sphere_panel():
     panel = _panel("sphere", 800.0, half=80.0, spacing=0.5)
     rng = np.random.default_rng(3)
-    run = pn.run_normals(panel, LAYOUTS["table2"], _drill(panel.surface, rng), rng, tilt=math.radians(2), noise=0.0, loop=False)
+    run = run_normals(panel, LAYOUTS["table2"], _drill(panel.surface, rng), rng, tilt=math.radians(2), noise=0.0, loop=False)
     # the micro-plane is biased by the curvature, the micro-sphere is not
     assert np.degrees(np.max(run.err_sphere)) < 0.005
     assert np.degrees(np.mean(run.err_plane)) > 10 * np.degrees(np.mean(run.err_sphere))
@@ -97,7 +105,7 @@ def test_micro_sphere_through_the_mesh_on_a_sphere_panel():
 def test_analytic_normals_against_the_height_field():
     rng = np.random.default_rng(0)
     for kind, R in (("cylinder", 300.0), ("sphere", 800.0), ("saddle", 500.0), ("flat", math.inf)):
-        s = pn.ParametricSurface(kind, R)
+        s = ParametricSurface(kind, R)
         xy = rng.uniform(-100, 100, (50, 2))
         h = 1e-5
         gx = (s.height(xy[:, 0] + h, xy[:, 1]) - s.height(xy[:, 0] - h, xy[:, 1])) / (2 * h)
@@ -121,7 +129,7 @@ def test_sphere_through_coplanar_points_is_the_plane(seed, r, n):
     local = np.column_stack([rad * np.cos(ang), rad * np.sin(ang), np.zeros(n)])
     Rm = _random_rotation(rng)
     S = local @ Rm.T + rng.uniform(-500, 500, 3)
-    u, c, s = pn.fit_algebraic_sphere(S[None])
+    u, c, s = fit_algebraic_sphere(S[None])
     assert np.all(np.isfinite(u))
     assert abs(u[0, 0]) < 1e-6  # A ~ 0: a plane
     assert angle_between(u[0, 1:4], Rm[:, 2]) < 1e-6
@@ -132,7 +140,7 @@ def test_nearly_flat_sphere_does_not_blow_up():
     rng = np.random.default_rng(2)
     for R in (1e4, 1e6, 1e9, 1e12):
         d, n_out = _sphere_spots(layout, R, math.radians(1.0), rng)
-        n, rad, pt, _ = pn.micro_sphere_normal(layout.zero, layout.direction, d[None], axis=pn.tool_axis_tcs(layout))
+        n, rad, pt, _ = micro_sphere_normal(layout.zero, layout.direction, d[None], axis=tool_axis_tcs(layout))
         assert np.all(np.isfinite(n)) and np.all(np.isfinite(pt))
         assert angle_between(n[0], n_out, oriented=True) < math.radians(0.01)
 
@@ -140,7 +148,7 @@ def test_nearly_flat_sphere_does_not_blow_up():
 def test_three_sensors_fall_back_to_the_plane():
     layout = LAYOUTS["table6"].subset(["L1", "L2", "L3"])
     d = np.array([[40.0, 41.0, 40.5]])
-    n_s, rad, _, _ = pn.micro_sphere_normal(layout.zero, layout.direction, d, axis=pn.tool_axis_tcs(layout))
+    n_s, rad, _, _ = micro_sphere_normal(layout.zero, layout.direction, d, axis=tool_axis_tcs(layout))
     from metrology.core.normals import micro_plane_normal
 
     n_p = micro_plane_normal(layout.zero, layout.direction, d)
@@ -151,7 +159,7 @@ def test_three_sensors_fall_back_to_the_plane():
 def test_nan_reading_gives_nan_not_a_number():
     layout = LAYOUTS["table2"]
     d = np.array([[50.0, np.nan, 50.0, 50.0]])
-    n, rad, _, _ = pn.micro_sphere_normal(layout.zero, layout.direction, d, axis=pn.tool_axis_tcs(layout))
+    n, rad, _, _ = micro_sphere_normal(layout.zero, layout.direction, d, axis=tool_axis_tcs(layout))
     assert np.all(np.isnan(n)) and np.isnan(rad[0])
 
 
@@ -165,8 +173,8 @@ def test_engines_agree_after_double_refinement():
     dirs = np.tile([0.0, 0.0, -1.0], (200, 1)) + rng.normal(0, 0.02, (200, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     ts = {}
-    for eng in pn.available_engines():
-        tri, t, _ = pn.RayCaster(panel.mesh, eng).cast(o, dirs)
+    for eng in available_engines():
+        tri, t, _ = RayCaster(panel.mesh, eng).cast(o, dirs)
         assert np.all(tri >= 0)
         ts[eng] = t
     ref = ts["trimesh"]
@@ -176,7 +184,7 @@ def test_engines_agree_after_double_refinement():
 
 def test_unknown_engine_is_an_error():
     with pytest.raises(ValueError, match="engine must be"):
-        pn.RayCaster(_panel("flat", half=10).mesh, "optix")
+        RayCaster(_panel("flat", half=10).mesh, "optix")
 
 
 # --- the attitude loop ----------------------------------------------------------------------
@@ -186,7 +194,7 @@ def test_unknown_engine_is_an_error():
 def test_attitude_loop_converges(lname):
     panel = _panel("cylinder", 800.0)
     rng = np.random.default_rng(11)
-    run = pn.run_normals(panel, LAYOUTS[lname], _drill(panel.surface, rng), rng, tilt=math.radians(5), noise=0.003,
+    run = run_normals(panel, LAYOUTS[lname], _drill(panel.surface, rng), rng, tilt=math.radians(5), noise=0.003,
                          tolerance=math.radians(0.5))
     lp = run.loop["plane"]
     assert np.all(lp["converged"])
@@ -201,8 +209,8 @@ def test_attitude_loop_converges(lname):
 def test_attitude_loop_without_motion_error_reaches_the_measured_normal():
     panel = _panel("flat")
     rng = np.random.default_rng(4)
-    run = pn.run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, rng), rng, tilt=math.radians(4), noise=0.0,
-                         tolerance=math.radians(0.01), motion=pn.MotionError(0.0, 0.0, 0.0))
+    run = run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, rng), rng, tilt=math.radians(4), noise=0.0,
+                         tolerance=math.radians(0.01), motion=MotionError(0.0, 0.0, 0.0))
     for m in ("plane", "sphere"):
         assert np.all(run.loop[m]["iterations"] == 1)
         assert np.max(run.loop[m]["final_dev"]) < 1e-8
@@ -210,9 +218,9 @@ def test_attitude_loop_without_motion_error_reaches_the_measured_normal():
 
 def test_same_seed_same_result():
     panel = _panel("saddle", 800.0)
-    a = pn.run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, np.random.default_rng(0)), np.random.default_rng(9), noise=0.01)
-    b = pn.run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, np.random.default_rng(0)), np.random.default_rng(9), noise=0.01)
-    assert pn.per_point_text(a, "csv") == pn.per_point_text(b, "csv")
+    a = run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, np.random.default_rng(0)), np.random.default_rng(9), noise=0.01)
+    b = run_normals(panel, LAYOUTS["table6"], _drill(panel.surface, np.random.default_rng(0)), np.random.default_rng(9), noise=0.01)
+    assert per_point_text(a, "csv") == per_point_text(b, "csv")
 
 
 # --- input ------------------------------------------------------------------------------
@@ -225,7 +233,7 @@ def test_read_points_round_trip(tmp_path_factory, pts, header):
     path = tmp_path_factory.mktemp("p") / "p.csv"
     text = ("x,y,z\n" if header else "") + "".join(f"{x!r},{y!r},{z!r}\n" for x, y, z in pts)
     path.write_text(text)
-    d = pn.read_points(path)
+    d = read_points(path)
     assert np.array_equal(d.points, np.array(pts, float))
     assert np.all(np.isnan(d.approach))
 
@@ -241,23 +249,23 @@ def test_read_points_errors(tmp_path, text, match):
     p = tmp_path / "p.csv"
     p.write_text(text)
     with pytest.raises(ValueError, match=match):
-        pn.read_points(p)
+        read_points(p)
 
 
 def test_panel_in_metres_warns(tmp_path):
-    surf = pn.ParametricSurface("flat")
-    mesh = pn.panel_mesh(surf, 0.2, 0.2, 0.05)
+    surf = ParametricSurface("flat")
+    mesh = panel_mesh(surf, 0.2, 0.2, 0.05)
     path = tmp_path / "m.stl"
-    pn.write_binary_stl(mesh, path)
-    assert any("in m or inch" in w for w in pn.load_panel(path).warnings)
+    write_binary_stl(mesh, path)
+    assert any("in m or inch" in w for w in load_panel(path).warnings)
 
 
 def test_inconsistent_winding_is_repaired(tmp_path):
-    mesh = pn.panel_mesh(pn.ParametricSurface("flat"), 50, 50, 10)
+    mesh = panel_mesh(ParametricSurface("flat"), 50, 50, 10)
     mesh.faces[::3] = mesh.faces[::3, ::-1]
     path = tmp_path / "w.stl"
-    pn.write_binary_stl(mesh, path)
-    p = pn.load_panel(path)
+    write_binary_stl(mesh, path)
+    p = load_panel(path)
     assert p.mesh.is_winding_consistent
     assert any("repaired" in w for w in p.warnings)
 
@@ -268,8 +276,8 @@ def test_inconsistent_winding_is_repaired(tmp_path):
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("normals")
-    surf = pn.ParametricSurface("cylinder", 800.0)
-    pn.write_binary_stl(pn.panel_mesh(surf, 100, 100, 1.0, 20.0), d / "cyl.stl", surf.tag)
+    surf = ParametricSurface("cylinder", 800.0)
+    write_binary_stl(panel_mesh(surf, 100, 100, 1.0, 20.0), d / "cyl.stl", surf.tag)
     save_layout(table6_layouts()[0], d / "t6.toml")
     (d / "pts.csv").write_text("x,y,z\n0,0,0\n20,10,-0.25\n0,0,50\n")
     (d / "off.csv").write_text("0,0,50\n10,10,60\n")
@@ -349,8 +357,8 @@ def test_per_point_statuses_edge_and_approach():
     app = np.full((4, 3), np.nan)
     app[2] = surf.normal(pts[2:3])[0]  # feed pointing out of the panel: the head is behind it
     app[3] = -surf.normal(pts[3:4])[0]  # a proper approach direction
-    drill = pn.DrillPoints(pts, app, ("a", "b", "c", "d"))
-    run = pn.run_normals(panel, LAYOUTS["table6"], drill, np.random.default_rng(0), tilt=0.0, noise=0.0, loop=False)
+    drill = DrillPoints(pts, app, ("a", "b", "c", "d"))
+    run = run_normals(panel, LAYOUTS["table6"], drill, np.random.default_rng(0), tilt=0.0, noise=0.0, loop=False)
     assert run.status.tolist() == ["ok", "beam_miss", "approach_behind", "ok"]
     # the point at x = 58 loses the beams on the +x side (L2, L3 of Table 6 land at x + 22)
     assert run.detail[1].endswith("missed") and "L2" in run.detail[1] and run.detail[0] == ""
@@ -361,8 +369,8 @@ def test_per_point_statuses_edge_and_approach():
 
 def test_grid_points_cover_the_panel_on_its_axes():
     panel = _panel("cylinder", 300.0, half=50.0, spacing=2.0)
-    caster = pn.RayCaster(panel.mesh)
-    g = pn.grid_points(panel, 15.0, caster)  # 6 steps of 15 over 100 mm: nodes at -45..45
+    caster = RayCaster(panel.mesh)
+    g = grid_points(panel, 15.0, caster)  # 6 steps of 15 over 100 mm: nodes at -45..45
     assert len(g.points) == 7 * 7
     # on the surface and on a grid aligned with the panel's x and y
     # within the chord sag of a 2 mm grid on R 300 (h^2 / 8R = 1.7 um)
@@ -372,19 +380,19 @@ def test_grid_points_cover_the_panel_on_its_axes():
 
 @pytest.mark.parametrize("ext", ["stl", "obj", "ply", "glb"])
 def test_load_panel_formats(tmp_path, ext):
-    mesh = pn.panel_mesh(pn.ParametricSurface("sphere", 300.0), 40, 40, 4)
+    mesh = panel_mesh(ParametricSurface("sphere", 300.0), 40, 40, 4)
     path = tmp_path / f"p.{ext}"
     mesh.export(path)
-    p = pn.load_panel(path)
+    p = load_panel(path)
     assert len(p.mesh.faces) == len(mesh.faces)
     assert np.allclose(np.sort(p.mesh.vertices, axis=0), np.sort(mesh.vertices, axis=0), atol=1e-5)
 
 
 def test_generated_stl_carries_its_analytic_surface(tmp_path):
-    surf = pn.ParametricSurface("saddle", 800.0)
+    surf = ParametricSurface("saddle", 800.0)
     path = tmp_path / "s.stl"
-    pn.write_binary_stl(pn.panel_mesh(surf, 30, 30, 3), path, surf.tag)
-    assert pn.load_panel(path).surface == surf
+    write_binary_stl(panel_mesh(surf, 30, 30, 3), path, surf.tag)
+    assert load_panel(path).surface == surf
 
 
 def test_study_claims():
@@ -392,7 +400,7 @@ def test_study_claims():
     def err(kind, R, layout, noise, tilt=1.0, m=60):
         panel = _panel(kind, R, half=100.0, spacing=0.5)
         rng = np.random.default_rng(0)
-        run = pn.run_normals(panel, layout, _drill(panel.surface, rng, m, 40.0), rng, tilt=math.radians(tilt),
+        run = run_normals(panel, layout, _drill(panel.surface, rng, m, 40.0), rng, tilt=math.radians(tilt),
                              noise=noise, loop=False)
         return np.degrees(run.err_plane), np.degrees(run.err_sphere)
 
@@ -415,11 +423,11 @@ def test_step_panel_loads_in_mm():
     pytest.importorskip("cascadio")
     from pathlib import Path
 
-    p = pn.load_panel(Path(__file__).resolve().parents[1] / "fixtures" / "panel_cyl800.step")
+    p = load_panel(Path(__file__).resolve().parents[1] / "fixtures" / "panel_cyl800.step")
     assert np.allclose(p.mesh.bounds[:, :2], [[-100, -100], [100, 100]], atol=1e-3)
-    surf = pn.ParametricSurface("cylinder", 800.0)
+    surf = ParametricSurface("cylinder", 800.0)
     # within the 1 um chord tolerance of the tessellation
     assert np.max(np.abs(p.mesh.vertices[:, 2] - surf.height(p.mesh.vertices[:, 0], p.mesh.vertices[:, 1]))) < 1e-3
-    c = pn.RayCaster(p.mesh)
-    pts, _, n = pn.snap_points(p, c, np.array([[0.0, 0.0, 0.0], [50.0, 20.0, -1.5]]))
+    c = RayCaster(p.mesh)
+    pts, _, n = snap_points(p, c, np.array([[0.0, 0.0, 0.0], [50.0, 20.0, -1.5]]))
     assert np.max(angle_between(n, surf.normal(pts), oriented=True)) < math.radians(0.01)

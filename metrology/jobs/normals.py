@@ -1,0 +1,70 @@
+"""The ``metro normals`` job: files in (panel, layout, points), files out (summary, per-point table, map)."""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
+from metrology.panel.attitude import MotionError, STATUS
+from metrology.panel.mesh import load_panel
+from metrology.panel.points import grid_points, read_points
+from metrology.panel.rays import RayCaster
+from metrology.panel.run import run_normals
+from metrology.report.normals import per_point_text, plot_error_map, summarize
+
+
+def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt_deg=1.0, standoff_mm=None,
+                noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
+                true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True) -> dict:
+    """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
+
+    Degrees appear only here, at the edge. Output files are written only after every
+    point has been computed (each atomically); a fatal error writes nothing.
+
+    Returns
+    -------
+    dict: the :func:`summarize` summary plus ``warnings`` (list of str) and ``points``
+    (how many given)
+    """
+    from metrology.core.layout import load_layout
+
+    if (points_path is None) == (grid_mm is None):
+        raise ValueError("give exactly one of --points FILE or --grid SPACING_MM")
+    for name, v in (("tilt", tilt_deg), ("tolerance", tolerance_deg), ("motion repeat", motion_repeat_deg)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite angle >= 0 deg, got {v}")
+    out_fmt = None
+    if out_path is not None:
+        out_fmt = str(out_path).lower().rsplit(".", 1)[-1]
+        if out_fmt not in ("csv", "json"):
+            raise ValueError(f"{out_path}: the per-point output must end in .csv or .json")
+    if plot_path is not None and not str(plot_path).lower().endswith(".png"):
+        raise ValueError(f"{plot_path}: the plot must be a .png file")
+    layout = load_layout(layout_path)
+    layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
+    panel = load_panel(panel_path)
+    caster = RayCaster(panel.mesh, engine)
+    drill = read_points(points_path) if points_path is not None else grid_points(panel, float(grid_mm), caster)
+    rng = np.random.default_rng(seed)
+    motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
+    run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
+                      tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
+                      caster=caster, prior_radius_mm=prior_radius_mm)
+    if not np.any(run.status == "ok"):
+        counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
+        where = points_path if points_path is not None else f"grid {grid_mm} mm"
+        raise ValueError(f"{where}: no drilling point could be measured ({counts})")
+    summary = summarize(run)
+    summary["warnings"] = list(panel.warnings)
+    summary["points"] = len(run.labels)
+    text = per_point_text(run, out_fmt) if out_fmt else None
+    png = plot_error_map(run, tolerance_deg) if plot_path is not None else None
+    from metrology.io.atomic import atomic_path, write_text
+
+    if text is not None:
+        write_text(out_path, text)
+    if png is not None:
+        with atomic_path(plot_path) as tmp:
+            tmp.write_bytes(png)
+    return summary

@@ -1,0 +1,158 @@
+"""A CAD panel: the mesh (STL, OBJ, PLY, GLB, STEP through cascadio), its analytic surface when known, and its plane."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+import numpy as np
+from metrology.panel.surfaces import ParametricSurface
+
+
+#: a drilling point farther than this from the mesh is "off the panel" (mm)
+ON_PANEL_MM = 1.0
+
+
+#: bounding-box diagonal outside this interval: warn "is the panel in mm?" (mm)
+PLAUSIBLE_DIAGONAL_MM = (20.0, 50_000.0)
+
+
+#: STEP tessellation (OpenCASCADE through cascadio): chord tolerance (mm) and angular
+#: deflection (rad); 1 um chords keep the tessellation error far under reading noise
+STEP_TOL_LINEAR_MM = 1e-3
+
+
+STEP_TOL_ANGULAR_RAD = 5e-3
+
+
+@dataclass
+class Panel:
+    """A loaded, validated panel mesh.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh, mm, panel frame; faces consistently wound, normals out
+    source : str, where it came from (for messages)
+    warnings : list of str, things repaired or suspicious (printed by the CLI)
+    surface : ParametricSurface or None, the analytic surface when the file says so
+    """
+
+    mesh: object
+    source: str = "<mesh>"
+    warnings: list = field(default_factory=list)
+    surface: ParametricSurface | None = None
+
+    def vertex_normal_at(self, tri, bary):
+        """Interpolated vertex normals.
+
+        Parameters
+        ----------
+        tri : (m,) int, face indices (no misses)
+        bary : (m, 3) float, barycentric coordinates
+
+        Returns
+        -------
+        n : (m, 3) float, unit, panel frame
+        """
+        vn = np.asarray(self.mesh.vertex_normals)[np.asarray(self.mesh.faces)[tri]]  # (m, 3, 3)
+        n = np.einsum("mk,mkj->mj", bary, vn)
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _surface_from_header(text: str):
+    m = re.search(r"metro-panel kind=(\w+)(?: radius_mm=([0-9.eE+-]+))?", text or "")
+    if not m:
+        return None
+    try:
+        return ParametricSurface(m.group(1), float(m.group(2)) if m.group(2) else math.inf)
+    except ValueError:
+        return None
+
+
+def load_panel(path) -> Panel:
+    """Load and validate a panel mesh (units mm).
+
+    STEP files are tessellated by OpenCASCADE (the ``cascadio`` wheel) with 1 um chords
+    (:data:`STEP_TOL_LINEAR_MM`) and converted from the intermediate glTF's metres to mm.
+
+    A panel is an open surface, not a solid: it is refused only when it is empty, when its
+    faces are all degenerate, or when its winding is inconsistent and cannot be repaired.
+    Degenerate and duplicate faces are dropped and reported in ``warnings``; a bounding
+    box outside :data:`PLAUSIBLE_DIAGONAL_MM` adds a warning (not in mm?).
+
+    Raises
+    ------
+    ValueError
+        With the file name and what was wrong.
+    """
+    import trimesh
+
+    path = str(path)
+    is_step = path.lower().endswith((".step", ".stp"))
+    kw = {"tol_linear": STEP_TOL_LINEAR_MM, "tol_angular": STEP_TOL_ANGULAR_RAD} if is_step else {}
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False, **kw)
+    except ImportError:
+        raise ValueError(f"{path}: reading STEP needs the cascadio wheel (pip install cascadio)") from None
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except (ValueError, KeyError, IndexError, TypeError, NotImplementedError, OSError) as exc:
+        raise ValueError(f"{path}: cannot read mesh ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+    except Exception as exc:  # trimesh raises its own types for unknown formats
+        raise ValueError(f"{path}: cannot read mesh ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError(f"{path}: the mesh is empty (no triangles)")
+    mesh = loaded
+    warnings = []
+    if is_step:
+        # cascadio tessellates in the file's unit (mm) and hands over a glTF, which is in
+        # metres by specification: back to mm
+        mesh.apply_scale(1000.0)
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ValueError(f"{path}: vertices contain NaN or infinite coordinates")
+    n0 = len(mesh.faces)
+    mesh.merge_vertices()
+    keep = mesh.nondegenerate_faces(height=1e-9) & mesh.unique_faces()
+    if not np.any(keep):
+        raise ValueError(f"{path}: all {n0} faces are degenerate (zero area)")
+    if not np.all(keep):
+        mesh.update_faces(keep)
+        mesh.remove_unreferenced_vertices()
+        warnings.append(f"{path}: dropped {n0 - int(keep.sum())} degenerate or duplicate faces of {n0}")
+    if not mesh.is_winding_consistent:
+        try:
+            trimesh.repair.fix_winding(mesh)
+        except ImportError:
+            raise ValueError(f"{path}: inconsistently oriented faces; repairing them needs networkx (pip install networkx)") from None
+        if not mesh.is_winding_consistent:
+            raise ValueError(f"{path}: inconsistently oriented faces that cannot be repaired (non-manifold edges?)")
+        warnings.append(f"{path}: face winding was inconsistent and has been repaired")
+    diag = float(np.linalg.norm(mesh.extents))
+    lo, hi = PLAUSIBLE_DIAGONAL_MM
+    if not lo <= diag <= hi:
+        warnings.append(f"{path}: bounding-box diagonal {diag:.4g} is implausible for a panel in mm (expected {lo:g}..{hi:g} mm); is it in m or inch?")
+    header = mesh.metadata.get("header", "") if isinstance(mesh.metadata, dict) else ""
+    return Panel(mesh, path, warnings, _surface_from_header(header))
+
+
+def panel_plane(mesh):
+    """Area-weighted best-fit plane of a mesh.
+
+    Returns
+    -------
+    centre : (3,) float, mm, panel frame
+    basis : (3, 3) float, rows e1, e2, n (n: the side the faces' normals point to; e1 the
+        projection of the panel-frame axis closest to the plane)
+    """
+    w = np.asarray(mesh.area_faces)
+    c = np.asarray(mesh.triangles_center)
+    centre = (w[:, None] * c).sum(0) / w.sum()
+    Q = (c - centre) * np.sqrt(w)[:, None]
+    vt = np.linalg.svd(Q, full_matrices=False)[2]
+    n = vt[2] if np.dot(vt[2], (w[:, None] * mesh.face_normals).sum(0)) >= 0 else -vt[2]
+    # e1: the panel-frame axis most in the plane, projected (CAD grids follow the axes;
+    # the in-plane principal axes of a square panel are arbitrary)
+    k = int(np.argmin(np.abs(n)))
+    e1 = np.eye(3)[k] - n[k] * n
+    e1 /= np.linalg.norm(e1)
+    return centre, np.vstack([e1, np.cross(n, e1), n])

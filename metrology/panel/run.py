@@ -1,0 +1,170 @@
+"""One normals run over a panel's drilling points: micro-plane against micro-sphere, per point and in summary."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+import numpy as np
+from metrology.core.layout import SensorLayout
+from metrology.core.normals import angle_between
+from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
+from metrology.panel.attitude import MotionError, _beam_detail, _normal_from, _readings, attitude_loop
+from metrology.panel.head import MAX_TILT, default_standoff, orientation_from_feed, place_head, tilted_feed, tool_axis_tcs
+from metrology.panel.mesh import ON_PANEL_MM, Panel
+from metrology.panel.points import DrillPoints, snap_points
+from metrology.panel.rays import RayCaster
+
+
+@dataclass
+class NormalsRun:
+    """Per-point results of :func:`run_normals`; arrays of length m unless stated.
+
+    Attributes
+    ----------
+    labels : tuple of str
+    points : (m, 3) float, mm, panel frame, drilling points on the panel
+    status : (m,) str, a key of :data:`STATUS`
+    off_mm : (m,) float, mm, distance of the given point from the panel
+    n_true : (m, 3) float, unit, panel frame, interpolated vertex normal, out
+    n_analytic : (m, 3) float or None, unit, panel frame, for generated panels
+    n_plane, n_sphere : (m, 3) float, unit, panel frame, out; NaN unless status ok
+    err_plane, err_sphere : (m,) float, rad, angle to the reference normal (:attr:`n_ref`)
+    sphere_radius : (m,) float, mm, inf where the sphere degraded to the plane
+    readings : (m, n) float, mm
+    initial_tilt : (m,) float, rad, true deviation of the initial tool axis
+    loop : dict method -> dict of arrays (see :func:`attitude_loop`), or empty
+    engine : str; info : dict of run settings
+    detail : (m,) str, why a point was not measured (which beams, how far off), '' if ok
+    """
+
+    labels: tuple
+    points: np.ndarray
+    status: np.ndarray
+    off_mm: np.ndarray
+    n_true: np.ndarray
+    n_analytic: np.ndarray | None
+    n_plane: np.ndarray
+    n_sphere: np.ndarray
+    err_plane: np.ndarray
+    err_sphere: np.ndarray
+    sphere_radius: np.ndarray
+    readings: np.ndarray
+    initial_tilt: np.ndarray
+    loop: dict
+    engine: str
+    info: dict
+    detail: np.ndarray
+
+    @property
+    def n_ref(self):
+        """The reference normal: analytic where known, else the interpolated vertex normal."""
+        return self.n_analytic if self.n_analytic is not None else self.n_true
+
+
+def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, tilt=math.radians(1.0),
+                standoff=None, noise=None, tolerance=math.radians(0.5), engine="auto",
+                motion: MotionError = MotionError(), layout_true: SensorLayout | None = None,
+                loop=True, caster: RayCaster | None = None,
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM) -> NormalsRun:
+    """Measure the normal at each drilling point by both methods, and run the attitude loop.
+
+    Parameters
+    ----------
+    panel : Panel
+    layout : SensorLayout, used to compute the normals (nominal or calibrated)
+    drill : DrillPoints
+    rng : numpy.random.Generator, the only source of randomness
+    tilt : float, rad, attitude error of the initial tool axis (random azimuth)
+    standoff : float, mm, or None for :func:`default_standoff`
+    noise : (n,) or scalar float, mm, reading noise 1 sigma; None: the layout's ``noise_mm``
+        (0 where not stated)
+    tolerance : float, rad, of the attitude loop
+    engine : {"auto", "trimesh", "embree", "open3d"}
+    motion : MotionError
+    layout_true : SensorLayout, the head as it really is (default ``layout``)
+    loop : bool, run the attitude loop
+    caster : RayCaster, to reuse a built scene (its mesh must be ``panel.mesh``)
+    prior_radius_mm : float, mm, the micro-sphere's curvature prior (see
+        :func:`fit_algebraic_sphere`); inf for the exact interpolating sphere
+
+    Returns
+    -------
+    NormalsRun
+    """
+    layout_true = layout if layout_true is None else layout_true
+    if layout_true.n != layout.n:
+        raise ValueError(f"true and estimating layouts differ in sensor count ({layout_true.n} vs {layout.n})")
+    if layout.n < 3:
+        raise ValueError(f"a layout needs at least 3 sensors, got {layout.n}")
+    if not (0 <= tilt < MAX_TILT):
+        raise ValueError(f"tilt must be in [0, {math.degrees(MAX_TILT):g}) deg, got {math.degrees(tilt):g} deg")
+    if not (tolerance > 0 and math.isfinite(tolerance)):
+        raise ValueError(f"tolerance must be a positive angle, got {tolerance}")
+    if not prior_radius_mm > 0:
+        raise ValueError(f"the micro-sphere's prior radius must be > 0 mm (inf: no prior), got {prior_radius_mm}")
+    a_tcs = tool_axis_tcs(layout)
+    if not np.array_equal(tool_axis_tcs(layout_true), a_tcs):
+        raise ValueError(f"the true layout's beams point {tool_axis_tcs(layout_true)[2]:+.0f}z, the layout's "
+                         f"{a_tcs[2]:+.0f}z: they are not the same head")
+    standoff = default_standoff(layout) if standoff is None else float(standoff)
+    if not (math.isfinite(standoff) and standoff > 0):
+        raise ValueError(f"stand-off must be a positive number of mm, got {standoff}")
+    if noise is None:
+        noise = np.nan_to_num(layout_true.noise_mm, nan=0.0)
+    noise = np.broadcast_to(np.asarray(noise, float), (layout.n,)).copy()
+    if np.any(~np.isfinite(noise)) or np.any(noise < 0):
+        raise ValueError(f"reading noise must be finite and >= 0 mm, got {noise.tolist()}")
+    caster = RayCaster(panel.mesh, engine) if caster is None else caster
+    m = len(drill.points)
+    pts, off, n_true = snap_points(panel, caster, drill.points)
+    status = np.full(m, "ok", dtype=object)
+    status[off > ON_PANEL_MM] = "off_panel"
+    has_app = np.all(np.isfinite(drill.approach), axis=1)
+    behind_app = has_app & (np.sum(drill.approach * n_true, axis=1) >= 0)
+    status[(status == "ok") & behind_app] = "approach_behind"
+    n_an = panel.surface.normal(pts) if panel.surface is not None else None
+    n_ref = n_an if n_an is not None else n_true
+    # initial feed: the approach direction where given, else the inward normal; tilted
+    base = np.where(has_app[:, None], -drill.approach, n_ref)
+    feed = tilted_feed(base, tilt, rng)
+    R0 = orientation_from_feed(feed, a_tcs)
+    T0 = place_head(pts, R0, a_tcs, layout, standoff)
+    rng_read, rng_loop_p, rng_loop_s = rng.spawn(3)
+    # both methods see the same noisy readings at the first pose
+    d, miss_b, beh_b, oor_b = _readings(caster, layout_true, R0, T0, noise, rng_read)
+    miss, beh, oor = np.any(miss_b, axis=1), np.any(beh_b, axis=1), np.any(oor_b, axis=1)
+    n_plane, _ = _normal_from(layout, a_tcs, R0, d, "plane")
+    n_sphere, rad = _normal_from(layout, a_tcs, R0, d, "sphere", float(np.mean(noise)), prior_radius_mm)
+    for flag, name in ((oor, "out_of_range"), (beh, "beam_behind"), (miss, "beam_miss")):
+        status[(status == "ok") & flag] = name
+    good = status == "ok"
+    detail = np.array(_beam_detail(layout_true.names, miss_b, beh_b, oor_b), dtype=object)
+    detail[status == "off_panel"] = np.char.mod("%.3f mm from the panel", off[status == "off_panel"]).astype(object)
+    detail[status == "approach_behind"] = "approach direction points out of the panel"
+    detail[good] = ""
+    n_plane[~good] = np.nan
+    n_sphere[~good] = np.nan
+    rad[~good] = np.nan
+    err_p = np.where(good, angle_between(n_plane, n_ref, oriented=True), np.nan)
+    err_s = np.where(good, angle_between(n_sphere, n_ref, oriented=True), np.nan)
+    init_tilt = angle_between(R0 @ a_tcs, -n_ref, oriented=True)
+    loops = {}
+    if loop and np.any(good):
+        for method, r in (("plane", rng_loop_p), ("sphere", rng_loop_s)):
+            res = attitude_loop(caster, panel, layout_true, layout, pts[good], R0[good], standoff, noise, r,
+                                method, tolerance, motion, prior_radius_mm=prior_radius_mm)
+            full = {}
+            for k, v in res.items():
+                arr = np.full(m, np.nan) if v.dtype.kind == "f" else np.zeros(m, v.dtype)
+                if v.dtype.kind == "i":
+                    arr = np.full(m, -1, int)
+                arr[good] = v
+                full[k] = arr
+            loops[method] = full
+    info = {"engine": caster.engine, "standoff_mm": standoff, "tilt_deg": math.degrees(tilt),
+            "noise_mm": noise.tolist(), "tolerance_deg": math.degrees(tolerance),
+            "motion": {"repeat_deg": math.degrees(motion.repeat), "scale": motion.scale, "position_mm": motion.position_mm},
+            "tool_axis_tcs": a_tcs.tolist(), "reference_normal": "analytic" if n_an is not None else "interpolated vertex normals",
+            "sensors": layout.n, "sphere_prior_radius_mm": prior_radius_mm}
+    return NormalsRun(drill.labels, pts, status.astype(str), off, n_true, n_an, n_plane, n_sphere, err_p, err_s,
+                      rad, d, init_tilt, loops, caster.engine, info, detail.astype(str))
