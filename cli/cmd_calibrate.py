@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
         _check_out_dir(out, "--out")
         import math
 
-        from metrology.calibration.calibration import calibrate_files
+        from metrology.jobs.calibrate import calibrate_files
 
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
                                  out=out, plot_dir=plot)
@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
-        from metrology.calibration.calibration import validate_files
+        from metrology.jobs.calibrate import validate_files
 
         report = validate_files(export, plane, layout, layout_before, plot=plot)
         if json_out:

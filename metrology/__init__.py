@@ -11,7 +11,8 @@ from metrology.core.normals import projection_points, normal_eq18, normal_lsq, m
 from metrology.core.plane import Plane, fit_plane_tls
 from metrology.datum.planefit import PlaneFit, fit_plane_robust, fit_plane_file
 from metrology.io.clouds import read_cloud
-from metrology.calibration.calibration import CalibrationReport, calibrate_dataset, validate
+from metrology.calibration.calibrate import CalibrationReport, calibrate_dataset
+from metrology.calibration.validation import validate
 from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
 from metrology.panel.mesh import load_panel
 from metrology.panel.run import run_normals

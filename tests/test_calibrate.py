@@ -9,15 +9,11 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
-from metrology.calibration.calibration import (
-    DEFAULT_METHOD,
-    calibrate_dataset,
-    describe_combination,
-    identifiability,
-    validate,
-)
+from metrology.calibration.calibrate import DEFAULT_METHOD, calibrate_dataset
+from metrology.calibration.identifiability import describe_combination, identifiability
+from metrology.calibration.validation import validate
 from metrology.calibration.dataset import load_dataset
-from metrology.calibration.estimators import Observations
+from metrology.core.observations import Observations
 from metrology.core.layout import load_layout
 from metrology.core.model import direction_basis, tangent_from_direction
 from metrology.core.tolerances import RANK_RTOL

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from metrology.calibration.estimators import Observations, calibrate
+from metrology.calibration.estimators import calibrate
+from metrology.core.observations import Observations
 from metrology.core.model import tangent_from_direction
 from metrology.core.paper import EKF_PRESETS, TABLE1_PLANE, table2_layouts, table6_layouts
 from metrology.core.plane import Plane

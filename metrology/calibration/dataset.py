@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from metrology.calibration.estimators import Observations
+from metrology.core.observations import Observations
 from metrology.io.export import TrackerExport, read_export
 from metrology.core.layout import SensorLayout, load_layout
 from metrology.core.plane import Plane

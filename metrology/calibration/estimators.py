@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrology.core.layout import SensorLayout
+from metrology.core.observations import Observations
 from metrology.core.model import (
     direction_basis,
     direction_from_tangent,
@@ -41,7 +42,6 @@ from metrology.core.model import (
 )
 
 __all__ = [
-    "Observations",
     "Calibration",
     "calibrate",
     "ekf_paper",
@@ -56,37 +56,6 @@ __all__ = [
 #: default 1-sigma prior of the well-posed EKFs: zero-point error (mm) and direction tilt
 #: (rad, 5.7 deg), wide enough to cover the assembly tolerance of a machined pressure foot
 DEFAULT_P0_SIGMA = (2.0, 0.1)
-
-
-@dataclass(frozen=True)
-class Observations:
-    """The datum plane in each pose's TCS and the readings.
-
-    Attributes
-    ----------
-    normal : (p, 3) float, unit, TCS
-    offset : (p,) float, mm
-    d : (p, n) float, mm; NaN = no reading
-    """
-
-    normal: np.ndarray
-    offset: np.ndarray
-    d: np.ndarray
-
-    def __post_init__(self):
-        object.__setattr__(self, "normal", np.atleast_2d(np.asarray(self.normal, float)))
-        object.__setattr__(self, "offset", np.atleast_1d(np.asarray(self.offset, float)))
-        object.__setattr__(self, "d", np.atleast_2d(np.asarray(self.d, float)))
-        p = len(self.offset)
-        if self.normal.shape != (p, 3) or self.d.shape[0] != p:
-            raise ValueError(f"observations: normal {self.normal.shape}, offset {self.offset.shape}, d {self.d.shape} disagree")
-
-    @property
-    def n_poses(self) -> int:
-        return len(self.offset)
-
-    def select(self, idx) -> "Observations":
-        return Observations(self.normal[idx], self.offset[idx], self.d[idx])
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ import numpy as np
 
 from metrology.core.effects import (VERDICTS, Covariates, Drift, ExtendedModel, Incidence, Nonlinearity,
                       Outliers, PlaneForm, PoseError, Scale)
-from metrology.calibration.estimators import Observations
+from metrology.core.observations import Observations
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, jacobian_tangent, readings
 

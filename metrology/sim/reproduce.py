@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrology.core import paper
-from metrology.calibration.estimators import Observations, calibrate
+from metrology.calibration.estimators import calibrate
+from metrology.core.observations import Observations
 from metrology.core.normals import angle_between, micro_plane_normal
 from metrology.core.plane import Plane, fit_plane_tls
 from metrology.sim.simulation import PoseSpec, datum_points, random_poses, simulate_readings

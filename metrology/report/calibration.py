@@ -47,7 +47,7 @@ def plot_convergence(report, path, convergence=None) -> Path:
         :func:`metrology.calibration.batch_convergence` output for a batch method
         (computed here when needed).
     """
-    from metrology.calibration.calibration import batch_convergence
+    from metrology.calibration.calibrate import batch_convergence
 
     cal = report.calibration
     names = cal.nominal.names
@@ -96,7 +96,7 @@ def plot_convergence(report, path, convergence=None) -> Path:
 
 def plot_residuals(report, path) -> Path:
     """Residuals of the calibrated layout vs reading, incidence angle and pose index."""
-    from metrology.calibration.calibration import residual_table
+    from metrology.calibration.calibrate import residual_table
 
     res, inc = residual_table(report.layout, report.dataset.obs)
     d = report.dataset.obs.d

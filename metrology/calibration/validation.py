@@ -1,0 +1,96 @@
+"""Validation on held-out poses: the normal deviation per pose for each layout (nominal, calibrated)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import numpy as np
+from metrology.calibration.dataset import Dataset, check
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """Angular deviation of the measured normal from the datum normal, per layout.
+
+    Attributes
+    ----------
+    pose_id : tuple of str, length p
+    labels : tuple of str, one per layout
+    deviation : (k, p) float, rad; NaN where fewer than 3 readings
+    n_readings : (p,) int, readings per pose
+    n_sensors : int
+    sources : dict
+    """
+
+    pose_id: tuple
+    labels: tuple
+    deviation: np.ndarray
+    n_readings: np.ndarray
+    n_sensors: int
+    sources: dict = field(default_factory=dict)
+
+    def stats_deg(self, k: int) -> dict:
+        """max / mean / std (sample, ddof=1) of the deviation of layout ``k``, deg."""
+        a = np.rad2deg(self.deviation[k])
+        a = a[np.isfinite(a)]
+        return {"max_deg": float(np.max(a)), "mean_deg": float(np.mean(a)),
+                "std_deg": float(np.std(a, ddof=1)) if len(a) > 1 else 0.0, "n_poses": int(len(a))}
+
+    def to_dict(self) -> dict:
+        return {
+            "sources": self.sources,
+            "n_poses": len(self.pose_id),
+            "layouts": {lab: {**self.stats_deg(k), "deviation_deg": np.rad2deg(self.deviation[k])}
+                        for k, lab in enumerate(self.labels)},
+            "pose_id": list(self.pose_id),
+            "n_readings": self.n_readings,
+        }
+
+    def text(self) -> str:
+        w = max(14, *(len(lab) for lab in self.labels))
+        lines = [f"{'layout':<{w}} {'max [deg]':>10} {'mean [deg]':>10} {'std [deg]':>10} {'poses':>6}  file"]
+        for k, lab in enumerate(self.labels):
+            s = self.stats_deg(k)
+            lines.append(f"{lab:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
+                         f"{self.sources.get(lab, '')}")
+        partial = int(np.sum((self.n_readings < self.n_sensors) & (self.n_readings >= 3)))
+        none = int(np.sum(self.n_readings < 3))
+        if none:
+            lines.append(f"{none} pose(s) with fewer than 3 readings: no normal, left out")
+        if partial:
+            lines.append(f"{partial} pose(s) with a missing reading: normal from the least-squares plane of the rest")
+        return "\n".join(lines)
+
+
+def validate(dataset: Dataset, layouts: dict, sources=None) -> ValidationReport:
+    """Angular deviation of the sensors' normal from the datum normal, per pose and layout.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Validation poses, readings and the datum (its own layout is not used).
+    layouts : dict of label -> SensorLayout
+        Each is checked against the export (same sensors, readings within range).
+
+    Returns
+    -------
+    ValidationReport
+        The normal of each pose is Eqs. 17-19 with all four readings, or the
+        least-squares plane of the projection points when a reading is missing (NaN with
+        fewer than 3); compared, unoriented, with the datum normal in that pose's TCS.
+    """
+    from metrology.core.normals import angle_between, micro_plane_normal
+
+    if not layouts:
+        raise ValueError("validate: no layout given")
+    obs = dataset.obs
+    dev = []
+    for label, layout in layouts.items():
+        export = check(dataset.export, layout, f"layout {label}")
+        n = micro_plane_normal(layout.zero, layout.direction, export.d)
+        dev.append(angle_between(n, obs.normal))
+    dev = np.array(dev)
+    if not np.any(np.isfinite(dev[0])):
+        raise ValueError("validate: no pose has 3 or more readings")
+    nread = np.isfinite(dataset.export.d).sum(axis=1)
+    return ValidationReport(tuple(dataset.export.pose_id), tuple(layouts), dev, nread, int(dataset.export.d.shape[1]),
+                            dict(sources or {}))
