@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 
 from metrology.io._o3d import open3d  # noqa: E402
 from metrology.io.clouds import read_cloud  # noqa: E402
-from metrology.datum.planefit import fit_plane_robust  # noqa: E402
+from metrology.datum.robust import fit_plane_robust  # noqa: E402
 
 MEASURE = (
     "import resource, subprocess, sys, time\n"

@@ -121,7 +121,7 @@ def register(app: typer.Typer) -> None:
         from metrology.io.atomic import atomic_path
         from metrology.io.clouds import write_ply
         from metrology.io.export import write_export
-        from metrology.core.layout import load_layout
+        from metrology.io.layout import load_layout
         from metrology.core.plane import Plane
         from metrology.sim.synth import HiddenEffect, synth_cloud, synth_run
 

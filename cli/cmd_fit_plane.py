@@ -69,7 +69,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
-        from metrology.datum.planefit import fit_plane_file
+        from metrology.jobs.fit_plane import fit_plane_file
 
         fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot)
         if as_json:

@@ -14,7 +14,7 @@ from metrology.calibration.identifiability import describe_combination, identifi
 from metrology.calibration.validation import validate
 from metrology.calibration.dataset import load_dataset
 from metrology.core.observations import Observations
-from metrology.core.layout import load_layout
+from metrology.io.layout import load_layout
 from metrology.core.model import direction_basis, tangent_from_direction
 from metrology.core.tolerances import RANK_RTOL
 

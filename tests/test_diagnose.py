@@ -15,7 +15,7 @@ from metrology.calibration.estimators import lsq
 from metrology.core.layout import SensorLayout
 from metrology.core.paper import TABLE5_PLANE
 from metrology.core.plane import Plane
-from metrology.sim.simulation import plane_basis
+from metrology.core.plane import plane_basis
 from metrology.sim.synth import SETUP_EFFECTS, HiddenEffect, synth_cloud, synth_run, typical_layouts
 
 PLANE = Plane(TABLE5_PLANE[:3], TABLE5_PLANE[3])
@@ -394,7 +394,7 @@ def test_cli_simulate_then_diagnose(tmp_path):
     from typer.testing import CliRunner
 
     from cli.main import app
-    from metrology.core.layout import save_layout
+    from metrology.io.layout import save_layout
 
     nominal, _ = typical_layouts()
     save_layout(nominal, tmp_path / "layout.toml")
@@ -426,7 +426,7 @@ def test_cli_errors_are_one_line_exit_2(tmp_path):
     assert r.exit_code == 2
     assert "error:" in r.output and "Traceback" not in r.output
     nominal, _ = typical_layouts()
-    from metrology.core.layout import save_layout
+    from metrology.io.layout import save_layout
 
     save_layout(nominal, tmp_path / "layout.toml")
     (tmp_path / "plane.json").write_text(json.dumps({"normal": PLANE.normal.tolist(), "offset": PLANE.offset}))
@@ -442,7 +442,7 @@ def test_cli_simulate_writes_a_datum_cloud_that_diagnose_reads(tmp_path):
 
     from cli.main import app
     from metrology.io.clouds import read_cloud
-    from metrology.core.layout import save_layout
+    from metrology.io.layout import save_layout
 
     nominal, _ = typical_layouts()
     save_layout(nominal, tmp_path / "layout.toml")

@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from metrology.io.export import TrackerExport, read_export, write_export
-from metrology.core.layout import SensorLayout, load_layout, save_layout
+from metrology.core.layout import SensorLayout
+from metrology.io.layout import load_layout, save_layout
 from metrology.core.paper import table6_layouts
 
 

@@ -13,7 +13,9 @@ from typer.testing import CliRunner
 from cli.main import app
 from metrology.core.paper import TABLE1_FITTED, TABLE1_PLANE, TABLE5_PLANE
 from metrology.core.plane import Plane
-from metrology.datum.planefit import PlaneForm, fit_plane_file, fit_plane_robust, lqs_scale, truncated_normal_std
+from metrology.datum.result import DatumForm, truncated_normal_std
+from metrology.datum.robust import fit_plane_robust, lqs_scale
+from metrology.jobs.fit_plane import fit_plane_file
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fixtures"))
 import make_datum_cloud  # noqa: E402
@@ -400,6 +402,6 @@ def test_cli_bad_output_paths_write_nothing(tmp_path):
 def test_plane_form_dict_round_trips_to_json():
     fit = fit_plane_file("fixtures/datum_cloud.ply")
     d = json.loads(json.dumps(fit.to_dict()))
-    assert isinstance(fit.form, PlaneForm)
+    assert isinstance(fit.form, DatumForm)
     assert d["form"]["coefficients"]["cuu_per_mm"] == fit.form.coefficients[3]
     assert d["normal_sigma_deg"] == pytest.approx(math.degrees(fit.normal_sigma))

@@ -20,7 +20,8 @@ from metrology.panel.rays import RayCaster, available_engines
 from metrology.panel.run import run_normals
 from metrology.panel.surfaces import ParametricSurface, panel_mesh, write_binary_stl
 from metrology.report.normals import per_point_text
-from metrology.core.layout import SensorLayout, save_layout
+from metrology.core.layout import SensorLayout
+from metrology.io.layout import save_layout
 from metrology.core.normals import angle_between
 from metrology.core.paper import table2_layouts, table6_layouts
 

@@ -12,7 +12,8 @@ import numpy as np
 
 from metrology.core.observations import Observations
 from metrology.io.export import TrackerExport, read_export
-from metrology.core.layout import SensorLayout, load_layout
+from metrology.core.layout import SensorLayout
+from metrology.io.layout import load_layout
 from metrology.core.plane import Plane
 
 __all__ = ["Dataset", "load_plane", "load_dataset", "MIN_READINGS"]
@@ -33,7 +34,7 @@ def load_plane(path):
     if path.suffix.lower() == ".json":
         return Plane.from_json(path), None
     from metrology.io.clouds import read_cloud
-    from metrology.datum.planefit import fit_plane_robust
+    from metrology.datum.robust import fit_plane_robust
 
     points = read_cloud(path)
     try:

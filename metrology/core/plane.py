@@ -114,3 +114,11 @@ def fit_plane_tls(points):
     cov[3, 3] += sigma2 / m
     rms = float(sv[2] / np.sqrt(m))
     return plane, cov, rms
+
+
+def plane_basis(normal):
+    """Two unit vectors ``(2, 3)`` spanning the plane perpendicular to ``normal (3,)``
+    (:func:`metrology.core.model.direction_basis` of one vector)."""
+    from metrology.core.model import direction_basis
+
+    return direction_basis(np.asarray(normal, float)[None])[0]

@@ -15,7 +15,7 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     with ``zero_stderr_mm`` and ``direction_stderr_deg`` added).
     """
     from metrology.calibration.dataset import load_dataset
-    from metrology.core.layout import save_layout
+    from metrology.io.layout import save_layout
 
     dataset = load_dataset(export_path, plane_path, layout_path)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
@@ -42,7 +42,7 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
     writes the deviation per pose as a PNG (atomically).
     """
     from metrology.calibration.dataset import load_dataset
-    from metrology.core.layout import load_layout
+    from metrology.io.layout import load_layout
 
     dataset = load_dataset(export_path, plane_path, layout_path)
     layouts = {}

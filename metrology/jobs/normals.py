@@ -27,7 +27,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     dict: the :func:`summarize` summary plus ``warnings`` (list of str) and ``points``
     (how many given)
     """
-    from metrology.core.layout import load_layout
+    from metrology.io.layout import load_layout
 
     if (points_path is None) == (grid_mm is None):
         raise ValueError("give exactly one of --points FILE or --grid SPACING_MM")

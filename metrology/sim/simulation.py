@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.frames import plane_in_tcs
+from metrology.core.plane import plane_basis
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, readings
 
@@ -55,10 +56,6 @@ class Poses:
         return plane_in_tcs(normal_tracker, offset_tracker, self.tcs2tracker_rot, self.tcs2tracker_trans)
 
 
-def plane_basis(normal):
-    """Two unit vectors ``(2, 3)`` spanning the plane perpendicular to ``normal (3,)``
-    (:func:`metrology.model.direction_basis` of one vector)."""
-    return direction_basis(np.asarray(normal, float)[None])[0]
 
 
 def _axis_height(layout: SensorLayout, reading_mm: float, axis_sign: float) -> float:
