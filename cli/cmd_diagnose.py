@@ -88,7 +88,8 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
-        from metrology.diagnosis.diagnosis import diagnose_files, plot_report
+        from metrology.jobs.diagnose import diagnose_files
+        from metrology.report.diagnose import plot_report
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from metrology.calibration.dataset import Dataset, check
-from metrology.diagnosis.diagnosis import _fit_any, covariates_for, diagnose, fit
+from metrology.diagnosis.candidates import covariates_for
+from metrology.diagnosis.decide import diagnose
+from metrology.diagnosis.fit import _fit_any, fit
 from metrology.core.effects import (Covariates, Drift, ExtendedModel, Incidence, Nonlinearity, Outliers, PlaneForm,
                                PoseError, Scale)
 from metrology.calibration.estimators import lsq
@@ -344,7 +346,7 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
     """Readings with pose errors, a flat datum and a flat cloud: the readings' form fitted with
     the pose error agrees with the cloud's as chi-square(3) says (mean 3; 10 seeds: sd 0.8).
     A form fitted without it has standard errors ~1.8x too small (mean chi-square ~11)."""
-    from metrology.diagnosis.diagnosis import _form_agreement, datum_form
+    from metrology.diagnosis.datum import _form_agreement, datum_form
     from metrology.core.model import direction_from_tangent, readings
 
     nominal, true = typical_layouts()
@@ -382,7 +384,7 @@ def test_no_datum_cloud_no_form_section():
 def test_fixture_hidden_is_diagnosed():
     from pathlib import Path
 
-    from metrology.diagnosis.diagnosis import diagnose_files
+    from metrology.jobs.diagnose import diagnose_files
 
     here = Path(__file__).parent.parent / "fixtures" / "hidden"
     d = diagnose_files(here / "export.csv", here / "plane.json", here / "layout.toml", folds=FOLDS, sim_reps=1)
