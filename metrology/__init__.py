@@ -9,7 +9,8 @@ from metrology.core.layout import SensorLayout, load_layout, save_layout
 from metrology.core.model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
 from metrology.core.normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
 from metrology.core.plane import Plane, fit_plane_tls
-from metrology.datum.planefit import PlaneFit, fit_plane_robust, fit_plane_file
+from metrology.datum import PlaneFit, fit_plane_robust
+from metrology.jobs.fit_plane import fit_plane_file
 from metrology.io.clouds import read_cloud
 from metrology.calibration.calibration import CalibrationReport, calibrate_dataset, validate
 from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal

@@ -117,7 +117,7 @@ class Covariates:
         """
         from metrology.core.frames import points_tracker_from_tcs
         from metrology.core.model import readings
-        from metrology.sim.simulation import plane_basis
+        from metrology.core.plane import plane_basis
 
         p = len(offset_tcs)
         d, _ = readings(zero, direction, normal_tcs, offset_tcs)
@@ -421,7 +421,7 @@ class PlaneForm(Component):
         cov : (5, 5) float, covariance of the values, ``s^2 (A^T A)^-1`` with ``s`` the
             residual scatter (which also takes up any form beyond quadratic)
         """
-        from metrology.sim.simulation import plane_basis
+        from metrology.core.plane import plane_basis
 
         P = np.asarray(points, float)
         if P.ndim != 2 or P.shape[1] != 3 or len(P) < 7:

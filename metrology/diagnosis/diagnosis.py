@@ -947,7 +947,7 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
     """
     from scipy import stats
 
-    from metrology.sim.simulation import plane_basis
+    from metrology.core.plane import plane_basis
 
     pts = ds.datum_points
     centre = np.mean(pts, axis=0)

@@ -199,7 +199,7 @@ def synth_cloud(rng: np.random.Generator, plane: Plane, effects=(), n_points=CLO
     -------
     points : (n_points, 3) float, mm, tracker frame
     """
-    from metrology.sim.simulation import plane_basis
+    from metrology.core.plane import plane_basis
 
     centre = -plane.offset * plane.normal  # as in synth_run
     st = rng.uniform(-half_width_mm, half_width_mm, size=(n_points, 2))

@@ -1,0 +1,67 @@
+"""``metro fit-plane`` as a job: a cloud file in, the plane JSON and the residual map out."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from dataclasses import replace
+from pathlib import Path
+
+from metrology.datum import PlaneFit, fit_plane_robust
+
+__all__ = ["fit_plane_file"]
+
+_PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
+
+
+def _check_output(path, what, suffixes=None):
+    p = Path(path)
+    if not p.parent.exists():
+        raise ValueError(f"{path}: directory {p.parent} does not exist (for the {what})")
+    if p.is_dir():
+        raise ValueError(f"{path}: is a directory (for the {what})")
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise ValueError(f"{path}: the {what} must be one of {', '.join(sorted(suffixes))}")
+
+
+def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> PlaneFit:
+    """Read a cloud, fit its datum plane, and write the JSON and the residual map.
+
+    Parameters
+    ----------
+    cloud : str or os.PathLike
+        Any format :func:`metrology.clouds.read_cloud` reads.
+    threshold_mm, seed
+        As :func:`fit_plane_robust`.
+    out : str or os.PathLike or None
+        JSON file (``PlaneFit.to_dict()``), readable by ``Plane.from_json``.
+    plot : str or os.PathLike or None
+        Residual map (``.png``, ``.pdf``, ``.svg``).
+
+    Both outputs are written atomically and together: on any error neither exists.
+    Errors are ValueError naming the file.
+    """
+    from metrology.io.atomic import atomic_path
+    from metrology.io.clouds import cloud_format, read_cloud
+
+    fmt = cloud_format(cloud)
+    if out is not None:
+        _check_output(out, "plane JSON")
+    if plot is not None:
+        _check_output(plot, "residual plot", _PLOT_SUFFIXES)
+    points = read_cloud(cloud)
+    try:
+        fit = fit_plane_robust(points, threshold_mm=threshold_mm, seed=seed)
+    except ValueError as exc:
+        raise ValueError(f"{cloud}: {exc}") from None
+    fit = replace(fit, source=str(cloud), format=fmt)
+    with contextlib.ExitStack() as stack:
+        if out is not None:
+            tmp = stack.enter_context(atomic_path(out))
+            tmp.write_text(json.dumps(fit.to_dict(), indent=2) + "\n", encoding="utf-8")
+        if plot is not None:
+            tmp = stack.enter_context(atomic_path(plot))
+            from metrology.report.datum import plot_residuals
+
+            plot_residuals(points, fit, tmp)
+    return fit
