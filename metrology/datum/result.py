@@ -114,7 +114,7 @@ class PlaneFit:
 
     def to_dict(self) -> dict:
         """Plain-JSON view (degrees named ``_deg``; NaN as None). ``normal`` and ``offset``
-        are what :meth:`metrology.plane.Plane.from_json` reads."""
+        are what :meth:`metrology.core.plane.Plane.from_json` reads."""
 
         def num(x):
             x = float(x)

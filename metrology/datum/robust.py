@@ -41,7 +41,7 @@ in 2000 seeded trials. It assumes independent residuals; a datum with significan
 With few points (``residual_dof`` small) the 1-sigma values are estimates from
 ``n - 3`` degrees of freedom: use Student-t factors for coverage.
 
-The sign convention is :class:`metrology.plane.Plane`'s: unit normal, ``D <= 0``.
+The sign convention is :class:`metrology.core.plane.Plane`'s: unit normal, ``D <= 0``.
 """
 
 from __future__ import annotations

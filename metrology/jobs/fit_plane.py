@@ -30,7 +30,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> Pla
     Parameters
     ----------
     cloud : str or os.PathLike
-        Any format :func:`metrology.clouds.read_cloud` reads.
+        Any format :func:`metrology.io.clouds.read_cloud` reads.
     threshold_mm, seed
         As :func:`fit_plane_robust`.
     out : str or os.PathLike or None
