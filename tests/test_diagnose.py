@@ -346,7 +346,7 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
     """Readings with pose errors, a flat datum and a flat cloud: the readings' form fitted with
     the pose error agrees with the cloud's as chi-square(3) says (mean 3; 10 seeds: sd 0.8).
     A form fitted without it has standard errors ~1.8x too small (mean chi-square ~11)."""
-    from metrology.diagnosis.datum import _form_agreement, datum_form
+    from metrology.diagnosis.datum import form_agreement, datum_form
     from metrology.core.model import direction_from_tangent, readings
 
     nominal, true = typical_layouts()
@@ -365,7 +365,7 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
             comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
         pf = _fit_any(nominal, ds.obs, cov, sigma, comps, base.theta)
         d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
-        chi2.append(_form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
+        chi2.append(form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
     if with_pose_error:
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause

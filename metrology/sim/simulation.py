@@ -23,9 +23,10 @@ import numpy as np
 from metrology.core.frames import plane_in_tcs
 from metrology.core.plane import plane_basis
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_basis, readings
+from metrology.core.model import readings
+from metrology.core.plane import plane_basis
 
-__all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points", "plane_basis"]
+__all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points"]
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,6 @@ class Poses:
     def plane_in_tcs(self, normal_tracker, offset_tracker):
         """The tracker-frame plane in each pose's TCS: ``(p, 3)`` normals, ``(p,)`` offsets mm."""
         return plane_in_tcs(normal_tracker, offset_tracker, self.tcs2tracker_rot, self.tcs2tracker_trans)
-
-
 
 
 def _axis_height(layout: SensorLayout, reading_mm: float, axis_sign: float) -> float:

@@ -64,7 +64,7 @@ def test_reproduce_bad_input_is_one_line_exit_2(tmp_path):
 def test_demo_runs_the_whole_walk_through(tmp_path):
     from pathlib import Path
 
-    fixtures = Path(__file__).resolve().parent.parent / "fixtures"
+    fixtures = Path(__file__).resolve().parents[2] / "fixtures"
     r = runner.invoke(app, ["demo", "--fixtures", str(fixtures), "--out", str(tmp_path / "demo")])
     assert r.exit_code == 0, r.output
     for step in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
