@@ -14,13 +14,18 @@ from ._common import dumps, fail, guarded
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
-        fixtures: Path = typer.Option(Path("fixtures"), help="The bundled fixtures directory (run from the repository root)."),
-        out: Path = typer.Option(Path("metro-demo"), help="Directory for the demo's outputs."),
+        fixtures: Optional[Path] = typer.Option(None, help="Data to run on (default: the data shipped with metro)."),
+        out: Optional[Path] = typer.Option(None, help="Folder for the outputs (default: a new folder metro-demo "
+                                           "in the current directory; metro-demo-2, ... if that one is taken)."),
     ) -> None:
-        """Run the main job on the bundled fixtures: fit-plane -> calibrate -> validate -> diagnose -> normals."""
+        """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals."""
         from typer.main import get_command
 
-        from metrology.jobs.demo import run_demo
+        from metrology.io.data import DATA_DIR
+        from metrology.jobs.demo import new_output_dir, run_demo
+
+        fixtures = DATA_DIR if fixtures is None else fixtures
+        out = new_output_dir() if out is None else out
 
         command = get_command(app)
 

@@ -9,7 +9,7 @@ from metrology.core.observations import Observations
 from metrology.core.model import readings
 from metrology.diagnosis.candidates import ADVICE, candidates_for, covariates_for
 from metrology.diagnosis.datum import DatumCheck, datum_form, form_agreement
-from metrology.diagnosis.fit import Fit, _fit_any, _geometry, fit
+from metrology.diagnosis.fit import Fit, fit_model, _geometry, fit
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import THRESHOLDS, NoiseTests, battery_on, noise_tests, structure
 from metrology.diagnosis.summary import _describe_named, _summary
@@ -136,7 +136,7 @@ def _simulated_figures(nominal, obs, cov, sigma, model: ExtendedModel, k, theta0
         d = d_model + rng.normal(0.0, 1.0, d_model.shape) * sigma[None, :]
         d = np.where(np.isfinite(obs.d), d, np.nan)
         o = Observations(obs.normal, obs.offset, d)
-        b = _fit_any(nominal, o, cov, sigma, (), theta0)
+        b = fit_model(nominal, o, cov, sigma, (), theta0)
         rms.append(np.sqrt(np.nanmean(b.residual**2, axis=0)))
         ndev.append(np.nanmean(kfold(nominal, o, cov, sigma, (), k, theta0).normal_dev))
     return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
@@ -174,14 +174,14 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     # 1. base calibration (per sensor) with covariates at the nominal geometry, then recomputed
     cov0 = covariates_for(ds, nominal)
     sig_fit = np.where(np.isfinite(sigma), sigma, 1.0)
-    base0 = _fit_any(nominal, obs, cov0, sig_fit, (), None, "lsq")
+    base0 = fit_model(nominal, obs, cov0, sig_fit, (), None, "lsq")
     if not np.all(np.isfinite(sigma)):  # no stated noise: the base fit's own scatter
         sigma = np.where(np.isfinite(sigma), sigma, np.sqrt(np.nanmean(base0.residual**2, axis=0)))
     zero, u = _geometry(nominal, base0.theta)
     calibrated = nominal.with_params(zero, u)
     cov = covariates_for(ds, calibrated)
     theta0 = base0.theta
-    base = _fit_any(nominal, obs, cov, sigma, (), theta0, "lsq")
+    base = fit_model(nominal, obs, cov, sigma, (), theta0, "lsq")
     d0_base = readings(zero, u, obs.normal, obs.offset)[0]
     dof_base = np.isfinite(obs.d).sum(axis=0) - 5
     tests_base = noise_tests(base.residual, sigma, dof_base, names)
@@ -195,7 +195,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     n_cand = len(cands)
     scored = []
     for c in cands:
-        f = _fit_any(nominal, obs, cov, sigma, (c,), theta0)
+        f = fit_model(nominal, obs, cov, sigma, (c,), theta0)
         k = c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))
         S = list(f.sensors)
         chi2_b = float(np.nansum((base.residual[:, S] / sigma[S]) ** 2))
@@ -255,7 +255,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         confidence = "high" if tests_base["consistent"] and lead is None else "low"
         sensors = []
     else:
-        best = replace(best, fit=_fit_any(nominal, obs, cov, sigma, (best.component,), theta0, "lsq"))
+        best = replace(best, fit=fit_model(nominal, obs, cov, sigma, (best.component,), theta0, "lsq"))
         f = best.fit
         # a per-pose component makes the sensors of a pose correlated by construction
         tests_ext = noise_tests(f.residual, sigma, _dof_per_sensor(f, obs, n), names,
@@ -341,7 +341,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
             pf = next(s.fit for s in scored if s["cause"] == "plane_form")
         else:
             comps = [PlaneForm((), names=names), replace(best.component, values=None, stderr=None)]
-            pf = _fit_any(nominal, obs, cov, sigma, comps, theta0)
+            pf = fit_model(nominal, obs, cov, sigma, comps, theta0)
         datum.summary["against_readings"] = form_agreement(datum, pf)
         datum.summary["against_readings"]["fitted_with"] = [c.label for c in pf.components]
         if not datum["against_readings"]["agree"]:

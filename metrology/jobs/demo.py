@@ -26,6 +26,18 @@ DEMO_STEPS = (
 )
 
 
+def new_output_dir(base="metro-demo") -> Path:
+    """A folder for the demo's outputs that holds nothing yet: ``base`` if it is absent or
+    empty, else ``base-2``, ``base-3``, ... (a second run never overwrites the first)."""
+    base = Path(base)
+    k = 1
+    cand = base
+    while cand.exists() and (not cand.is_dir() or any(cand.iterdir())):
+        k += 1
+        cand = base.with_name(f"{base.name}-{k}")
+    return cand
+
+
 def run_demo(fixtures, out, run_step, announce=print) -> int:
     """Run :data:`DEMO_STEPS` on the fixtures, writing into ``out``.
 
@@ -53,7 +65,8 @@ def run_demo(fixtures, out, run_step, announce=print) -> int:
     """
     fixtures, out = Path(fixtures), Path(out)
     if not (fixtures / "measured").is_dir():
-        raise ValueError(f"{fixtures}: bundled fixtures not found (run from the repository root, or pass --fixtures DIR)")
+        raise ValueError(f"{fixtures}: bundled fixtures not found (expected measured/, hidden/ and the layouts; "
+                         "omit --fixtures to use the data shipped with metro)")
     out.mkdir(parents=True, exist_ok=True)
     for title, line in DEMO_STEPS:
         args = shlex.split(line.format(fx=fixtures, out=out))

@@ -7,6 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from metrology.io.data import DATA_DIR
 from metrology.core.plane import Plane
 
 runner = CliRunner()
@@ -16,7 +17,7 @@ def test_cli_two_runs_identical_bytes(tmp_path):
     outs = []
     for k in range(2):
         out = tmp_path / f"p{k}.json"
-        r = runner.invoke(app, ["fit-plane", "fixtures/datum_cloud.ply", "--out", str(out), "--seed", "3"])
+        r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--out", str(out), "--seed", "3"])
         assert r.exit_code == 0, r.output
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
@@ -24,11 +25,11 @@ def test_cli_two_runs_identical_bytes(tmp_path):
 
 def test_cli_table_json_out_plot(tmp_path):
     out, png = tmp_path / "plane.json", tmp_path / "res.png"
-    r = runner.invoke(app, ["fit-plane", "fixtures/datum_cloud.ply"])
+    r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply")])
     assert r.exit_code == 0, r.output
     for key in ("normal (A, B, C)", "offset D", "inliers", "flatness (P-V)", "uncertainty (1 sd)", "form (quadratic)", "SIGNIFICANT"):
         assert key in r.stdout
-    r = runner.invoke(app, ["fit-plane", "fixtures/datum_cloud.ply", "--json", "--out", str(out), "--plot", str(png)])
+    r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--json", "--out", str(out), "--plot", str(png)])
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)
     assert out.read_text() == r.stdout  # --json and --out carry the same bytes
@@ -90,8 +91,8 @@ def test_cli_bad_inputs(tmp_path, make, extra, match):
 
 
 def test_cli_bad_output_paths_write_nothing(tmp_path):
-    r = runner.invoke(app, ["fit-plane", "fixtures/datum_cloud.ply", "--out", str(tmp_path / "p.json"), "--plot", str(tmp_path / "r.bmp")])
+    r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--out", str(tmp_path / "p.json"), "--plot", str(tmp_path / "r.bmp")])
     assert r.exit_code == 2 and "must be one of .pdf, .png, .svg" in r.stderr
-    r = runner.invoke(app, ["fit-plane", "fixtures/datum_cloud.ply", "--plot", str(tmp_path / "r.png"), "--out", str(tmp_path / "no" / "p.json")])
+    r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--plot", str(tmp_path / "r.png"), "--out", str(tmp_path / "no" / "p.json")])
     assert r.exit_code == 2 and "does not exist" in r.stderr
     assert list(tmp_path.iterdir()) == []

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from metrology.io.data import DATA_DIR
 from metrology.datum import DatumForm, fit_plane_robust
 from metrology.jobs.fit_plane import fit_plane_file
 from tests.datum.synthetic import plate_cloud
@@ -53,7 +54,7 @@ def test_form_is_none_with_few_inliers():
 
 
 def test_plane_form_dict_round_trips_to_json():
-    fit = fit_plane_file("fixtures/datum_cloud.ply")
+    fit = fit_plane_file(str(DATA_DIR / "datum_cloud.ply"))
     d = json.loads(json.dumps(fit.to_dict()))
     assert isinstance(fit.form, DatumForm)
     assert d["form"]["coefficients"]["cuu_per_mm"] == fit.form.coefficients[3]

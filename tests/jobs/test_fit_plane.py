@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from metrology.io.data import DATA_DIR
 from metrology.core.paper import TABLE5_PLANE
 from metrology.core.plane import Plane
 from metrology.datum import truncated_normal_std
@@ -17,7 +18,7 @@ import make_datum_cloud  # noqa: E402
 
 
 def test_datum_fixture_recovers_its_truth_and_its_form():
-    fit = fit_plane_file("fixtures/datum_cloud.ply")
+    fit = fit_plane_file(str(DATA_DIR / "datum_cloud.ply"))
     n_true, d_true, centre, (eu, ev) = make_datum_cloud.truth()
     truth = Plane(n_true, d_true)
     assert normal_chi2(fit, truth) < CHI2_2DOF_3SIGMA
@@ -40,5 +41,5 @@ def test_datum_fixture_recovers_its_truth_and_its_form():
 def test_fixture_script_is_deterministic(tmp_path):
     p1, o1 = make_datum_cloud.make_cloud(np.random.default_rng(make_datum_cloud.SEED))
     make_datum_cloud.write_ply(tmp_path / "c.ply", p1, make_datum_cloud.COMMENTS)
-    assert (tmp_path / "c.ply").read_bytes() == Path("fixtures/datum_cloud.ply").read_bytes()
+    assert (tmp_path / "c.ply").read_bytes() == Path(str(DATA_DIR / "datum_cloud.ply")).read_bytes()
     assert int(o1.sum()) == 100
