@@ -98,7 +98,11 @@ def random_poses(rng: np.random.Generator, layout: SensorLayout, normal, offset,
     # R0 maps the beam side of the tool axis (axis_sign * e_z) onto -n: beams go into the plane
     target = -n
     src = np.array([0.0, 0.0, axis_sign])
-    R0 = Rotation.align_vectors(target[None], src[None])[0]
+    # the shortest rotation taking src onto target, written out: scipy's align_vectors of one
+    # vector pair returned another rotation (any spin about target) before scipy 1.12
+    axis = np.cross(src, target)
+    R0 = Rotation.from_rotvec(axis / max(np.linalg.norm(axis), 1e-300) * np.arctan2(np.linalg.norm(axis), src @ target)
+                              if np.linalg.norm(axis) > 1e-12 else (np.zeros(3) if src @ target > 0 else np.array([np.pi, 0.0, 0.0])))
     rots, trans = [], []
     for _ in range(n_poses):
         spin = Rotation.from_rotvec([0.0, 0.0, rng.uniform(0, 2 * np.pi) if spec.spin else 0.0])
