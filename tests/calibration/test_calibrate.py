@@ -18,7 +18,7 @@ from metrology.io.layout import load_layout
 from metrology.core.model import direction_basis, tangent_from_direction
 from metrology.core.tolerances import RANK_RTOL
 
-FIX = Path(__file__).resolve().parent.parent / "fixtures" / "measured"
+FIX = Path(__file__).resolve().parents[2] / "fixtures" / "measured"
 CAL, VAL = FIX / "calibration.csv", FIX / "validation.csv"
 PLANE, NOMINAL, TRUTH = FIX / "plane.json", FIX / "nominal.toml", FIX / "truth.toml"
 runner = CliRunner()
