@@ -1,0 +1,317 @@
+"""The extended fit: the base model plus effect components, by least squares.
+
+:func:`fit` solves with ``scipy.optimize.least_squares`` or its own Gauss-Newton
+(:func:`gauss_newton`, the same minimum, faster inside the k-fold loops); :func:`fit_any` fits
+the sensors separately when no component couples them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from metrology.core.effects import Covariates, ExtendedModel
+from metrology.core.layout import SensorLayout
+from metrology.core.model import direction_basis, direction_from_tangent, jacobian_tangent, readings
+from metrology.core.observations import Observations
+
+__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry"]
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fitted extended model.
+
+    Attributes
+    ----------
+    theta : (n, 5) float, chart errors (mm, rad) around the nominal layout
+    theta_stderr : (n, 5) float
+    components : tuple of Component with values and stderr
+    residual : (p, n) float, mm, measured minus predicted; NaN where no reading
+    chi2 : float, sum of squared residuals over noise_mm (the fitted sensors)
+    dof : int, readings minus free parameters (fitted sensors)
+    sensors : tuple of int, the sensors whose parameters were free
+    corr_base : (k,) float, per extra parameter the largest |correlation| with a base parameter
+    corr_with : tuple of str, the base parameter of that correlation
+    extra_cov : (k, k) float, covariance of the parameters of the components that are not per
+        pose, in their order (``s^2 (J^T J)^-1``)
+    """
+
+    theta: np.ndarray
+    theta_stderr: np.ndarray
+    components: tuple
+    residual: np.ndarray
+    chi2: float
+    dof: int
+    sensors: tuple
+    corr_base: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    corr_with: tuple = ()
+    extra_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def model(self, nominal: SensorLayout) -> ExtendedModel:
+        zero = nominal.zero + self.theta[:, :3]
+        u = direction_from_tangent(nominal.direction, self.theta[:, 3:])
+        return ExtendedModel(nominal.with_params(zero, u), self.components)
+
+
+
+def geometry(nominal, theta):
+    """Zero points ``(n, 3)`` mm TCS and unit directions ``(n, 3)`` TCS of the chart errors
+    ``theta (n, 5)`` around ``nominal``."""
+    zero = nominal.zero + theta[:, :3]
+    u = direction_from_tangent(nominal.direction, theta[:, 3:])
+    return zero, u
+
+
+def _project_per_pose(Bw, X, A):
+    """Remove per-pose common modes: ``X - Bw e`` with ``e`` the weighted least-squares fit of
+    each pose's rows of ``X`` on ``Bw`` under the gauge ``A^T e = 0``.
+
+    Bw : (p, s) float, the per-pose column (zero where no reading); X : (p, s) or (p, s, k);
+    A : (p, g) float, the gauge modes (for pose errors: the plane normal in each TCS, since a
+    translation of every zero point by ``v`` is the per-pose error ``e_p = -N_p . v``).
+    Returns (projected X, e (p,) or (p, k)).
+    """
+    bb = np.maximum(np.sum(Bw * Bw, axis=1), 1e-300)  # (p,)
+    squeeze = X.ndim == 2
+    Xk = X[..., None] if squeeze else X
+    br = np.einsum("ps,psk->pk", Bw, Xk)  # (p, k)
+    AW = A / bb[:, None]  # W^-1 A
+    lam = np.linalg.solve(A.T @ AW, AW.T @ br)  # (g, k)
+    e = (br - A @ lam) / bb[:, None]
+    out = Xk - Bw[..., None] * e[:, None, :]
+    return (out[..., 0], e[:, 0]) if squeeze else (out, e)
+
+
+def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
+        theta0=None, loss="linear", solver="lsq") -> Fit:
+    """Least squares of the base model plus ``components`` (analytic Jacobian).
+
+    Parameters
+    ----------
+    nominal : SensorLayout, the chart's centre
+    obs : Observations
+    cov : Covariates, same poses as ``obs``
+    sigma : (n,) float, mm, reading noise used as weights
+    components : sequence of Component (values are the starting point)
+    sensors : sequence of int or None, the sensors whose base parameters are free and whose
+        readings are fitted (default: every sensor if a component is of the set-up, else the
+        components' sensors, else all)
+    theta0 : (n, 5) float or None, start (and the fixed values of the other sensors)
+    loss : ``"linear"`` or ``"soft_l1"`` (robust, scale 1 sigma)
+    solver : ``"lsq"`` (``scipy.optimize.least_squares``, trf) or ``"gn"`` (Gauss-Newton on
+        the same residual and Jacobian with step halving: the same minimum, several times
+        faster; used inside the k-fold loops)
+
+    A per-pose component (:class:`~metrology.effects.PoseError`) is profiled out exactly:
+    its basis does not depend on the parameters, so for any base parameters the optimal
+    per-pose values are a fixed linear map of the residual (variable projection); its values
+    are then recovered with standard errors ``s / ||b_p||`` (reading noise only).
+    """
+    from scipy.optimize import least_squares
+
+    n = nominal.n
+    comps = tuple(components)
+    ExtendedModel(nominal, comps)  # name clashes raise
+    if loss not in ("linear", "soft_l1"):
+        raise ValueError(f"loss must be 'linear' or 'soft_l1', got {loss!r}")
+    if sensors is None:
+        if not comps or any(not c.sensors for c in comps):
+            sensors = range(n)
+        else:
+            sensors = sorted({i for c in comps for i in c.sensors})
+    S = np.array(sorted(sensors), int)
+    theta0 = np.zeros((n, 5)) if theta0 is None else np.array(theta0, float)
+    N, D = obs.normal, obs.offset
+    ok = np.isfinite(obs.d)[:, S]
+    dS = np.where(ok, obs.d[:, S], 0.0)
+    sig = np.asarray(sigma, float)[S]
+    prof = [c for c in comps if c.per_pose]
+    free = [c for c in comps if not c.per_pose]
+    if len(prof) > 1:
+        raise ValueError("at most one per-pose component per fit")
+    k_comp = [c.n_params for c in free]
+    nb = 5 * len(S)
+    x0 = np.concatenate([theta0[S].ravel()] + [c.values for c in free])
+    zero_all, u_all = geometry(nominal, theta0)
+    d_full0 = readings(zero_all, u_all, N, D)[0]
+    basis0 = direction_basis(nominal.direction[S])
+    u0S = nominal.direction[S]
+    Bw = None
+    if prof:
+        Bw = np.where(ok, prof[0].basis(d_full0, cov)[np.arange(len(D)), :, np.arange(len(D))][:, S] / sig, 0.0)
+
+    def unpack(x):
+        th = theta0.copy()
+        th[S] = x[:nb].reshape(-1, 5)
+        vals, j = [], nb
+        for k in k_comp:
+            vals.append(x[j:j + k])
+            j += k
+        return th, vals
+
+    def predict(x):
+        th, vals = unpack(x)
+        w = u0S + np.einsum("nk,nkj->nj", th[S, 3:], basis0)
+        d0s, _ = readings(nominal.zero[S] + th[S, :3], w, N, D)
+        d0 = d_full0.copy()
+        d0[:, S] = d0s
+        f = np.zeros_like(d0)
+        for c, v in zip(free, vals):
+            f += c.evaluate(v, d0, cov)
+        return th, vals, d0, f
+
+    def residual_matrix(x):
+        th, vals, d0, f = predict(x)
+        R = np.where(ok, (dS - d0[:, S] - f[:, S]) / sig, 0.0)
+        e = None
+        if Bw is not None:
+            R, e = _project_per_pose(Bw, R, N)
+        return R, e, th, vals, d0
+
+    def fun(x):
+        R, _, th, vals, _ = residual_matrix(x)
+        extra = [c.constraint(v)[0] for c, v in zip(free, vals)]
+        return np.concatenate([R[ok]] + extra)
+
+    def jac(x):
+        th, vals, d0, f = predict(x)
+        J0 = jacobian_tangent(nominal.zero[S] + th[S, :3], u0S, th[S, 3:], N, D)  # (p, s, 5)
+        g = np.ones_like(d0)
+        for c, v in zip(free, vals):
+            if c.uses_d0:
+                g += c.d_dd0(v, d0, cov)
+        J0 = J0 * g[:, S, None]
+        p, s = ok.shape
+        Jb = np.zeros((p, s, nb))
+        for a in range(s):
+            Jb[:, a, 5 * a:5 * a + 5] = J0[:, a]
+        blocks = [Jb] + [c.jacobian(v, d0, cov)[:, S] for c, v in zip(free, vals)]
+        Jr = -np.concatenate(blocks, axis=-1) / sig[None, :, None]
+        Jr = np.where(ok[..., None], Jr, 0.0)
+        if Bw is not None:
+            Jr, _ = _project_per_pose(Bw, Jr, N)
+        rows = [Jr[ok]]
+        off = nb
+        for c, v, k in zip(free, vals, k_comp):
+            Jc = c.constraint(v)[1]
+            if len(Jc):
+                Rr = np.zeros((len(Jc), rows[0].shape[1]))
+                Rr[:, off:off + k] = Jc
+                rows.append(Rr)
+            off += k
+        return np.concatenate(rows, axis=0)
+
+    if solver == "lsq":
+        kw = {} if loss == "linear" else {"loss": loss, "f_scale": 1.0}
+        x = least_squares(fun, x0, jac=jac, method="trf", x_scale="jac", **kw).x
+    elif solver == "gn":
+        x = gauss_newton(fun, jac, x0, loss)
+    else:
+        raise ValueError(f"solver must be 'lsq' or 'gn', got {solver!r}")
+    R, e, th, vals, d0 = residual_matrix(x)
+    J = jac(x)
+    f = predict(x)[3]
+    res = np.full(obs.d.shape, np.nan)
+    res[:, S] = np.where(ok, R * sig, np.nan)
+    others = np.setdiff1d(np.arange(n), S)
+    res[:, others] = obs.d[:, others] - d_full0[:, others] - f[:, others]
+    rS = R[ok]
+    m = rS.size
+    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (len(e) - N.shape[1] if e is not None else 0)
+    dof = m - k
+    chi2 = float(np.sum(rS**2))
+    s2 = chi2 / max(dof, 1)
+    # covariance s^2 (J^T J)^-1, column-scaled normal equations (small: base + few extras)
+    scale = np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    Js = J / scale
+    C = np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True) / np.outer(scale, scale) * s2
+    se = np.sqrt(np.maximum(np.diag(C), 0.0))
+    theta_se = np.zeros((n, 5))
+    theta_se[S] = se[:nb].reshape(-1, 5)
+    out, j = [], nb
+    corr_b, corr_w = [], []
+    base_names = [f"{nominal.names[i]}.{q}" for i in S for q in ("x", "y", "z", "a", "b")]
+    it_free = iter(zip(free, vals))
+    for c in comps:
+        if c.per_pose:
+            bb = np.sqrt(np.maximum(np.sum(Bw * Bw, axis=1), 1e-300))
+            out.append(c.with_values(e, np.sqrt(s2) / bb))
+            continue
+        c2, v = next(it_free)
+        kk = c2.n_params
+        out.append(c2.with_values(v, se[j:j + kk]))
+        for q in range(kk):
+            cc = C[j + q, :nb] / np.maximum(se[j + q] * se[:nb], 1e-300)
+            a = int(np.argmax(np.abs(cc)))
+            corr_b.append(float(np.abs(cc[a])))
+            corr_w.append(base_names[a])
+        j += kk
+    return Fit(th, theta_se, tuple(out), res, chi2, int(dof), tuple(int(i) for i in S), np.array(corr_b),
+               tuple(corr_w), C[nb:, nb:])
+
+
+def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
+    """Gauss-Newton with step halving (IRLS weights for ``soft_l1``) on column-scaled normal
+    equations; stops when the cost changes by less than ``tol`` relative."""
+
+    def cost_of(r):
+        z = r * r
+        return float(np.sum(z) if loss == "linear" else np.sum(2 * (np.sqrt(1 + z) - 1)))
+
+    x = np.array(x0, float)
+    r = fun(x)
+    cost = cost_of(r)
+    for _ in range(max_iter):
+        J = jac(x)
+        w = np.ones_like(r) if loss == "linear" else 1.0 / np.sqrt(np.sqrt(1 + r * r))
+        Jw, rw = J * w[:, None], r * w
+        scale = np.maximum(np.linalg.norm(Jw, axis=0), 1e-300)
+        Js = Jw / scale
+        step = -np.linalg.lstsq(Js, rw, rcond=1e-12)[0] / scale
+        t = 1.0
+        while True:
+            xn = x + t * step
+            rn = fun(xn)
+            cn = cost_of(rn)
+            if cn <= cost or t < 1e-4:
+                break
+            t *= 0.5
+        done = abs(cost - cn) <= tol * max(cost, 1e-300)
+        if cn <= cost:
+            x, r, cost = xn, rn, cn
+        if done or cn > cost:
+            break
+    return x
+
+
+def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
+    """:func:`fit`, with the sensors fitted separately when no component couples them (faster, identical)."""
+    if comps:
+        f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver)
+        if len(f.sensors) == nominal.n:
+            return f
+        # the other sensors keep the base fit of this subset
+        base = fit_any(nominal, obs, cov, sigma, (), theta0, solver)
+        th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
+        S = list(f.sensors)
+        th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
+        return Fit(th, se, f.components, res, f.chi2 + _chi2_other(base, sigma, S), f.dof, f.sensors,
+                   f.corr_base, f.corr_with, f.extra_cov)
+    th = np.zeros((nominal.n, 5))
+    se = np.zeros((nominal.n, 5))
+    res = np.full(obs.d.shape, np.nan)
+    chi2, dof = 0.0, 0
+    for i in range(nominal.n):
+        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, solver=solver)
+        th[i], se[i], res[:, i] = f.theta[i], f.theta_stderr[i], f.residual[:, i]
+        chi2 += f.chi2
+        dof += f.dof
+    return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
+
+
+def _chi2_other(base, sigma, S):
+    other = [i for i in range(base.residual.shape[1]) if i not in S]
+    r = base.residual[:, other] / sigma[other]
+    return float(np.nansum(r**2))

@@ -1,0 +1,101 @@
+"""k-fold-by-pose held-out evaluation: every residual a prediction."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from metrology.core.effects import Outliers
+from metrology.core.model import readings
+from metrology.diagnosis.fit import Fit, fit_any, geometry
+
+__all__ = ["folds", "heldout_eval", "HeldOut", "kfold"]
+
+
+def folds(p, k):
+    """Interleaved folds by pose (pose j in fold j mod k): each fold spans the whole run."""
+    return [np.arange(j, p, k) for j in range(k)]
+
+
+def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
+    """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
+
+    A per-pose component's value of a held-out pose is fitted, for each reading, to the other
+    sensors of that pose (leave one sensor out), so every residual is a prediction. Returns
+    (residual (h, n) mm, normal deviation (h,) rad).
+    """
+    from metrology.core.normals import angle_between, micro_plane_normal
+
+    o, c = obs.select(test), cov.select(test)
+    zero, u = geometry(nominal, f.theta)
+    d0, _ = readings(zero, u, o.normal, o.offset)
+    terms = np.zeros_like(d0)
+    per_pose = []
+    for comp in f.components:
+        if comp.per_pose:
+            per_pose.append(replace(comp, n_poses=len(test), values=None, stderr=None))
+        elif isinstance(comp, Outliers):
+            continue  # flagged held-out readings are left out of the figures
+        else:
+            terms += comp.evaluate(comp.values, d0, c)
+    res = o.d - d0 - terms
+    for comp in per_pose:
+        # a per-pose value is not known before the pose is measured: each reading is predicted
+        # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
+        # the held-out residual is a true prediction and nothing is charged as lost dof
+        B = comp.basis(d0, c)  # (h, n, h)
+        diag = B[np.arange(len(test)), :, np.arange(len(test))]  # (h, n)
+        w = np.where(np.isfinite(res), diag / sigma[None, :], 0.0)
+        r = np.where(np.isfinite(res), res / sigma[None, :], 0.0)
+        wr, ww = np.sum(w * r, axis=1, keepdims=True), np.sum(w * w, axis=1, keepdims=True)
+        e_loso = (wr - w * r) / np.maximum(ww - w * w, 1e-300)  # (h, n): without reading i
+        e_all = wr[:, 0] / np.maximum(ww[:, 0], 1e-300)  # (h,): for the normal, every reading
+        res = res - diag * e_loso
+        terms = terms + diag * e_all[:, None]
+    dc = o.d - terms
+    nrm = micro_plane_normal(zero, u, dc)
+    dev = angle_between(nrm, o.normal)
+    return res, dev
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """k-fold held-out figures of one model.
+
+    Attributes
+    ----------
+    residual : (p, n) float, mm, held-out residuals (predictions: see :func:`heldout_eval`)
+    normal_dev : (p,) float, rad, held-out normal deviation
+    """
+
+    residual: np.ndarray
+    normal_dev: np.ndarray
+
+    def chi2_pose(self, sigma, cols=None, exclude=None):
+        """Per-pose held-out chi-square ``(p,)`` over the sensors ``cols`` (default all),
+        leaving out the readings ``exclude`` ((p, n) bool) if given."""
+        r = self.residual if exclude is None else np.where(exclude, np.nan, self.residual)
+        r = r if cols is None else r[:, cols]
+        s = sigma if cols is None else sigma[cols]
+        return np.nansum((r / s) ** 2, axis=1)
+
+    def rms(self, cols=None, exclude=None):
+        """Held-out residual RMS, mm, over the sensors ``cols`` (default all)."""
+        r = self.residual if exclude is None else np.where(exclude, np.nan, self.residual)
+        r = r if cols is None else r[:, cols]
+        return float(np.sqrt(np.nanmean(r**2)))
+
+
+def kfold(nominal, obs, cov, sigma, components, k, theta0):
+    """k-fold-by-pose held-out figures of the base model plus ``components``."""
+    p = obs.n_poses
+    res = np.full(obs.d.shape, np.nan)
+    dev = np.full(p, np.nan)
+    for test in folds(p, k):
+        train = np.setdiff1d(np.arange(p), test)
+        comps = [c.select(train) for c in components]
+        f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
+        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test)
+    return HeldOut(res, dev)
+

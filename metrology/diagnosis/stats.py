@@ -1,0 +1,146 @@
+"""Statistics of the residuals: the noise-model battery and the structure table."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from metrology.core.effects import Covariates
+from metrology.diagnosis.thresholds import THRESHOLDS
+
+__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "structure"]
+
+
+@dataclass(frozen=True)
+class NoiseTests:
+    """The noise-model battery on one set of residuals (:func:`noise_tests`).
+
+    Attributes
+    ----------
+    sensors : dict, sensor name -> chi2, dof, sigma_est_mm, p_chi2, p_whiteness, p_normality
+    pairs : dict, "A-B" -> within-pose correlation r and its p-value
+    n_tests : int, the size of the family
+    p_bonferroni : float, Bonferroni-combined p-value
+    consistent : bool, at ``alpha_battery``
+    pvalues : tuple of (p, set of sensor indices), every test with the sensors it involves
+    p_concerned : float or None, :func:`battery_on` the sensors of an extension (after one)
+    """
+
+    sensors: dict
+    pairs: dict
+    n_tests: int
+    p_bonferroni: float
+    consistent: bool
+    pvalues: tuple = ()
+    p_concerned: float | None = None
+
+    def to_dict(self) -> dict:
+        out = {"sensors": self.sensors, "pairs": self.pairs, "n_tests": self.n_tests,
+               "p_bonferroni": self.p_bonferroni, "consistent": self.consistent}
+        if self.p_concerned is not None:
+            out["p_concerned"] = self.p_concerned
+        return out
+
+
+def ljung_box(x, lags):
+    """Ljung-Box portmanteau p-value of the series ``x`` (1-D, in order) up to ``lags``."""
+    from scipy.stats import chi2
+
+    x = np.asarray(x, float)
+    x = x - x.mean()
+    m = len(x)
+    c0 = x @ x
+    if c0 <= 0 or m <= lags + 1:
+        return 1.0
+    rho = np.array([x[k:] @ x[:-k] / c0 for k in range(1, lags + 1)])
+    q = m * (m + 2) * np.sum(rho**2 / (m - np.arange(1, lags + 1)))
+    return float(chi2.sf(q, lags))
+
+
+def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True) -> NoiseTests:
+    """Tests of the residuals ``(p, n)`` mm against white Gaussian noise of ``sigma (n,)`` mm.
+
+    Returns a :class:`NoiseTests`: per-sensor chi-square (upper tail), Ljung-Box and Shapiro-Wilk
+    p-values, pairwise within-pose correlations with p-values, the Bonferroni-combined
+    p-value and ``consistent`` at ``alpha_battery``.
+    """
+    from scipy import stats
+
+    n = residual.shape[1]
+    per = {}
+    pvals = []
+    for i in range(n):
+        r = residual[:, i]
+        r = r[np.isfinite(r)]
+        chi2 = float(np.sum((r / sigma[i]) ** 2))
+        dof = max(int(dof_per_sensor[i]), 1)
+        p_chi = float(stats.chi2.sf(chi2, dof))
+        p_lb = ljung_box(r, min(10, max(len(r) // 5, 1)))
+        p_sw = float(stats.shapiro(r).pvalue) if len(r) >= 3 else 1.0
+        per[names[i]] = {"chi2": chi2, "dof": dof, "sigma_est_mm": float(np.sqrt(chi2 / dof)) * sigma[i],
+                         "p_chi2": p_chi, "p_whiteness": p_lb, "p_normality": p_sw}
+        pvals += [(p_chi, {i}), (p_lb, {i}), (p_sw, {i})]
+    pair_out = {}
+    for i in range(n if pairs else 0):
+        for j in range(i + 1, n):
+            ok = np.isfinite(residual[:, i]) & np.isfinite(residual[:, j])
+            if ok.sum() < 4:
+                continue
+            rr, pp = stats.pearsonr(residual[ok, i], residual[ok, j])
+            pair_out[f"{names[i]}-{names[j]}"] = {"r": float(rr), "p": float(pp)}
+            pvals.append((float(pp), {i, j}))
+    p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
+    return NoiseTests(per, pair_out, len(pvals), p_all, bool(p_all >= THRESHOLDS["alpha_battery"]), tuple(pvals))
+
+
+def battery_on(tests: NoiseTests, sensors) -> float:
+    """Bonferroni p-value of the tests of :func:`noise_tests` that involve ``sensors`` (indices).
+
+    The family is the whole battery (its ``n_tests``), not the subset: the check after an
+    extension is then no stricter than the verdict on the base residuals, and the same
+    residuals cannot pass the base battery yet fail the subset's (a chance correlation of
+    two sensors at p = 0.001 does that with a 6-test subset).
+    """
+    ps = [p for p, inv in tests.pvalues if inv & set(sensors)]
+    return min(1.0, min(ps) * tests.n_tests) if ps else 1.0
+
+
+def structure(residual, d0, cov: Covariates, names):
+    """Residuals against each covariate: per sensor, the quadratic-fit R^2 and F-test p-value.
+
+    Returns dict covariate -> sensor -> {"r2", "p"}.
+    """
+    from scipy import stats
+
+    p, n = residual.shape
+    variables = {
+        "d_mm": d0,
+        "incidence_deg": np.rad2deg(np.arccos(np.clip(cov.cos_inc, -1, 1))),
+        "time_h": np.broadcast_to(cov.time_h[:, None], (p, n)),
+        "temp_c": np.broadcast_to(cov.temp_c[:, None], (p, n)),
+        "spot_s_mm": cov.spot_st[..., 0],
+        "spot_t_mm": cov.spot_st[..., 1],
+        "pose_index": np.broadcast_to(np.arange(p, dtype=float)[:, None], (p, n)),
+    }
+    out = {}
+    for key, X in variables.items():
+        if not np.all(np.isfinite(X)):
+            continue
+        row = {}
+        for i in range(n):
+            ok = np.isfinite(residual[:, i])
+            y, x = residual[ok, i], X[ok, i]
+            if np.ptp(x) == 0 or len(y) < 6:
+                continue
+            xs = (x - x.mean()) / np.ptp(x)
+            A = np.stack([np.ones_like(xs), xs, xs**2], axis=1)
+            coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+            ss_res = float(np.sum((y - A @ coef) ** 2))
+            ss_tot = float(np.sum((y - y.mean()) ** 2))
+            r2 = 1 - ss_res / ss_tot if ss_tot > 0 else 0.0
+            F = (ss_tot - ss_res) / 2 / max(ss_res / (len(y) - 3), 1e-300)
+            row[names[i]] = {"r2": r2, "p": float(stats.f.sf(F, 2, len(y) - 3))}
+        out[key] = row
+    return out
+
