@@ -44,7 +44,7 @@ SIZES = {
 def trial(args):
     """One seeded run: (effect, size, seed, n_poses, wide) -> dict with the verdict."""
     from metrology.calibration.dataset import Dataset, check
-    from metrology.diagnosis.decide import diagnose
+    from metrology.diagnosis import diagnose
     from metrology.core.paper import TABLE5_PLANE
     from metrology.core.plane import Plane
     from metrology.sim.simulation import PoseSpec

@@ -18,7 +18,7 @@ from metrology.calibration.validation import validate
 from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
 from metrology.panel.mesh import load_panel
 from metrology.panel.run import run_normals
-from metrology.diagnosis.decide import diagnose
+from metrology.diagnosis import diagnose
 
 __all__ = [
     "SensorLayout", "load_layout", "save_layout",

@@ -1,15 +1,20 @@
-"""The covariates a cause can depend on, and the candidate components tried for a layout."""
+"""The candidates: covariates of a data set, the catalogue's candidate components, and how
+each is scored (in-sample F-test and k-fold held-out gain)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-from metrology.core.effects import REGISTRY, Covariates
+
+from metrology.core.effects import REGISTRY, Component, Covariates, Outliers
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
+from metrology.diagnosis.fit import Fit, fit, fit_any
+from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.thresholds import THRESHOLDS
 
-
-#: the poses that separate each cause from the others (read from the registry)
-ADVICE = {name: cls.advice for name, cls in REGISTRY.items()}
+__all__ = ["covariates_for", "candidates_for", "flag_outliers", "CandidateResult", "score_candidate"]
 
 
 def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -42,8 +47,11 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
                                     ex.temp_c if has_T else None)
 
 
-def candidates_for(layout: SensorLayout, cov: Covariates, flags=None):
-    """Every catalogued candidate component for this data set (values zero).
+
+def candidates_for(layout: SensorLayout, cov: Covariates, flags=None) -> list:
+    """Every catalogued candidate component for this data set (values zero), from the effect
+    registry: per sensor each effect's :meth:`~metrology.core.effects.Component.candidates_for_sensor`,
+    then each effect's :meth:`~metrology.core.effects.Component.candidates_for_setup`.
 
     ``flags`` (p, n) bool: readings flagged as gross (the ``outliers`` candidate); none if
     None or empty.
@@ -52,9 +60,116 @@ def candidates_for(layout: SensorLayout, cov: Covariates, flags=None):
     out = []
     for i in range(layout.n):
         for cls in REGISTRY.values():
-            if cls.per_sensor:
-                out += cls.candidates(i, names, cov, flags)
+            out += cls.candidates_for_sensor(i, names, cov)
     for cls in REGISTRY.values():
-        if not cls.per_sensor:
-            out += cls.candidates(None, names, cov, flags)
+        out += cls.candidates_for_setup(names, cov, flags)
     return out
+
+
+def flag_outliers(nominal, obs, cov, sigma, theta0):
+    """Robust per-sensor fit; flag |r| / s > t with t at ``alpha_outlier`` family-wise.
+
+    ``s`` is the larger of the stated noise and the residuals' robust (MAD) scale. Returns
+    (flags (p, n) bool, p-value of the largest standardised residual).
+    """
+    from scipy import stats
+
+    p, n = obs.d.shape
+    m = int(np.isfinite(obs.d).sum())
+    z = np.full((p, n), np.nan)
+    for i in range(n):
+        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, loss="soft_l1", solver="gn")
+        r = f.residual[:, i]
+        mad = 1.4826 * np.nanmedian(np.abs(r - np.nanmedian(r)))
+        z[:, i] = r / max(sigma[i], mad)
+    zmax = float(np.nanmax(np.abs(z)))
+    p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
+    t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
+    flags = np.isfinite(z) & (np.abs(z) > t)
+    return flags, p_max
+
+
+
+@dataclass(frozen=True)
+class CandidateResult:
+    """One candidate scored against the base model (:func:`score_candidate`).
+
+    Attributes
+    ----------
+    component : Component, the candidate (values zero)
+    fit : Fit, the base model plus the candidate on all poses
+    heldout : HeldOut, its k-fold held-out figures
+    chi2_pose : (p,) float, per-pose held-out chi-square of the extended model (all sensors)
+    label, cause : str; sensors : list of str; n_params : int, the free parameters it adds
+    p_insample : float, the F-test of the nested models (or the largest residual's test)
+    p_heldout : float, one-sided paired t-test of the held-out gain on its sensors
+    heldout_chi2_reduction : float, the held-out chi-square gain (all sensors, for ranking)
+    heldout_rms_base_mm, heldout_rms_extended_mm, heldout_rms_ratio : float, its sensors
+    heldout_normal_base_deg, heldout_normal_extended_deg : float
+    significant : bool
+    """
+
+    label: str
+    cause: str
+    sensors: list
+    n_params: int
+    p_insample: float
+    p_heldout: float
+    heldout_chi2_reduction: float
+    heldout_rms_base_mm: float
+    heldout_rms_extended_mm: float
+    heldout_rms_ratio: float
+    heldout_normal_base_deg: float
+    heldout_normal_extended_deg: float
+    significant: bool
+    component: Component
+    fit: Fit
+    heldout: HeldOut
+    chi2_pose: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {
+            "label": self.label, "cause": self.cause, "sensors": self.sensors, "n_params": self.n_params,
+            "p_insample": self.p_insample, "p_heldout": self.p_heldout,
+            "heldout_chi2_reduction": self.heldout_chi2_reduction, "heldout_rms_base_mm": self.heldout_rms_base_mm,
+            "heldout_rms_extended_mm": self.heldout_rms_extended_mm, "heldout_rms_ratio": self.heldout_rms_ratio,
+            "heldout_normal_base_deg": self.heldout_normal_base_deg,
+            "heldout_normal_extended_deg": self.heldout_normal_extended_deg, "significant": self.significant,
+        }
+
+
+def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: HeldOut, flags, p_out, folds,
+                    theta0, n_cand) -> CandidateResult:
+    """Score the candidate ``c``: in-sample F-test of the nested models against ``base`` (for
+    ``outliers`` the largest residual's own test ``p_out``) and the k-fold held-out gain
+    against ``ho_base``; significant when both pass (``n_cand``: the Bonferroni family)."""
+    from scipy import stats
+
+    names = nominal.names
+    f = fit_any(nominal, obs, cov, sigma, (c,), theta0)
+    k = c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))
+    S = list(f.sensors)
+    chi2_b = float(np.nansum((base.residual[:, S] / sigma[S]) ** 2))
+    chi2_e = float(np.nansum((f.residual[:, S] / sigma[S]) ** 2))
+    m_S = int(np.isfinite(obs.d[:, S]).sum())
+    dof_e = m_S - 5 * len(S) - k
+    if isinstance(c, Outliers):
+        p_in = p_out  # selection by the largest residual: its own test
+    else:
+        F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
+        p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
+    ho = kfold(nominal, obs, cov, sigma, (c,), folds, theta0)
+    excl = flags if isinstance(c, Outliers) else None
+    cb = ho_base.chi2_pose(sigma, exclude=excl)
+    ce = ho.chi2_pose(sigma, exclude=excl)
+    diff = cb - ce  # all sensors: comparable between candidates (ranking)
+    diff_S = ho_base.chi2_pose(sigma, S, excl) - ho.chi2_pose(sigma, S, excl)  # its sensors: the test
+    if np.allclose(diff_S, 0):
+        p_ho = 1.0
+    else:
+        p_ho = float(stats.ttest_1samp(diff_S, 0.0, alternative="greater").pvalue)
+    rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
+    nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
+    sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_
+    return CandidateResult(c.label, c.name, [names[i] for i in c.sensors], k, p_in, p_ho, float(np.sum(diff)), rb, re_,
+                           rb / re_, float(np.rad2deg(nb_)), float(np.rad2deg(ne_)), bool(sig), c, f, ho, ce)

@@ -1,49 +1,63 @@
-"""The datum cloud as an independent witness: its form under the spots, against the readings' form."""
+"""The datum check: the form the tracker cloud measures, against the readings' own."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
 from metrology.core.effects import Covariates, PlaneForm
 from metrology.core.model import jacobian_raw
-from metrology.diagnosis.stats import THRESHOLDS
 from metrology.diagnosis.fit import Fit
+from metrology.diagnosis.thresholds import THRESHOLDS
 
+__all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS"]
 
 #: the datum form's quadratic coefficients (bow, saddle, twist), compared cloud against readings
-FORM_QUADRATIC = ("b_ss_mm", "b_st_mm", "b_tt_mm")
-
-
+FORM_QUADRATIC = PlaneForm.key_params
 #: fewest cloud points under the spots' footprint to fit the form there (else the whole cloud)
 MIN_FORM_POINTS = 50
 
 
 @dataclass(frozen=True)
-class DatumCheck:
-    """The datum cloud's form under the spots (:func:`datum_form`).
+class DatumFormCheck:
+    """The datum's form measured by the tracker cloud (:func:`datum_form`).
 
     Attributes
     ----------
-    summary : dict
-        The public result (``--json``'s ``datum_form``); read as ``check[key]``;
-        ``against_readings`` is added once the readings' form is known.
-    values : (5,) float, the form's coefficients (``PlaneForm`` parameters, mm at its radius)
-    cov : (5, 5) float, their covariance
+    points, points_used : int; window : str, ``"under the spots"`` or ``"whole cloud"``
+    window_mm : dict, the spots' box ``{"s": [lo, hi], "t": [lo, hi]}`` mm
+    radius_mm : float; params : dict, the form's parameters (value, unit, stderr)
+    p_quadratic : float, Wald test of the quadratic part against zero
+    values : (5,) float, mm, the form's values; cov : (5, 5) float, mm^2, their covariance
+    visible_rms_mm : list of float, per sensor; visible_over_noise : list of float
+    against_readings : dict or None, :func:`form_agreement` with ``fitted_with`` (after a diagnosis)
     """
 
-    summary: dict
+    points: int
+    points_used: int
+    window: str
+    window_mm: dict
+    radius_mm: float
+    params: dict
+    p_quadratic: float
     values: np.ndarray
     cov: np.ndarray
-
-    def __getitem__(self, key):
-        return self.summary[key]
+    visible_rms_mm: list
+    visible_over_noise: list
+    against_readings: dict | None = None
 
     def to_dict(self) -> dict:
-        return dict(self.summary)
+        out = {"points": self.points, "points_used": self.points_used, "window": self.window,
+               "window_mm": self.window_mm, "radius_mm": self.radius_mm, "params": self.params,
+               "p_quadratic": self.p_quadratic, "visible_rms_mm": self.visible_rms_mm,
+               "visible_over_noise": self.visible_over_noise}
+        if self.against_readings is not None:
+            out["against_readings"] = self.against_readings
+        return out
 
 
-def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
+def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> DatumFormCheck:
     """The datum's form measured by the tracker cloud, and what it would do to the readings.
 
     The cloud is an independent measurement of the surface the beams see:
@@ -85,17 +99,14 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
         r = term[ok, i] - J[ok, i] @ np.linalg.lstsq(J[ok, i], term[ok, i], rcond=None)[0]
         visible.append(float(np.sqrt(np.mean(r**2))) if ok.any() else float("nan"))
     params = form.describe()["params"]
-    return DatumCheck({
-        "points": int(len(pts)), "points_used": int(under.sum()), "window": window,
-        "window_mm": {"s": [float(spots[:, 0].min()), float(spots[:, 0].max())],
-                      "t": [float(spots[:, 1].min()), float(spots[:, 1].max())]},
-        "radius_mm": form.radius_mm, "params": params,
-        "p_quadratic": float(stats.chi2.sf(wald, 3)),
-        "visible_rms_mm": visible, "visible_over_noise": [v / s for v, s in zip(visible, sigma)],
-    }, form.values, C)
+    return DatumFormCheck(
+        int(len(pts)), int(under.sum()), window,
+        {"s": [float(spots[:, 0].min()), float(spots[:, 0].max())], "t": [float(spots[:, 1].min()), float(spots[:, 1].max())]},
+        form.radius_mm, params, float(stats.chi2.sf(wald, 3)), form.values, C,
+        visible, [v / s for v, s in zip(visible, sigma)])
 
 
-def form_agreement(datum: DatumCheck, readings_fit: Fit) -> dict:
+def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> dict:
     """Quadratic coefficients of the cloud against those of the ``plane_form`` fitted to the
     readings: per coefficient the difference in combined standard errors, and the Wald
     chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_form``."""

@@ -1,80 +1,67 @@
-"""The decision: discrepancy, candidates, confounding, extension and gain, as one :class:`Diagnosis`."""
+"""The diagnosis: the base model's discrepancy, the candidates, the decision, the gain.
+
+:func:`diagnose` is a sequence of named steps (see :mod:`metrology.diagnosis` for the
+procedure): :func:`base_analysis`, :func:`score_candidates`, :func:`choose`, :func:`verdict`,
+:func:`side_by_side`, :func:`check_datum`.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+
 import numpy as np
-from metrology.core.effects import VERDICTS, ExtendedModel, Outliers, PlaneForm
-from metrology.core.observations import Observations
+
+from metrology.core.effects import VERDICTS, ExtendedModel, PlaneForm
+from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
-from metrology.diagnosis.candidates import ADVICE, candidates_for, covariates_for
-from metrology.diagnosis.datum import DatumCheck, datum_form, form_agreement
-from metrology.diagnosis.fit import Fit, fit_model, _geometry, fit
+from metrology.diagnosis.candidates import (CandidateResult, candidates_for, covariates_for, flag_outliers,
+                                            score_candidate)
+from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
+from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures
+from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.stats import THRESHOLDS, NoiseTests, battery_on, noise_tests, structure
-from metrology.diagnosis.summary import _describe_named, _summary
+from metrology.diagnosis.stats import NoiseTests, battery_on, noise_tests, structure
+from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
+from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
-
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """One candidate component scored against the base model.
-
-    Attributes
-    ----------
-    score : dict
-        The public result (``--json``'s ``candidates`` entry: p-values, held-out chi-square
-        reduction, RMS and normal deviation, ``significant``); read as ``candidate[key]``.
-    fit : Fit
-        The extended fit on all poses.
-    heldout : HeldOut
-        Its k-fold held-out predictions.
-    component : Component
-        The fitted component.
-    chi2_pose : (p,) float
-        Held-out chi-square per pose, all sensors (the ranking between candidates).
-    """
-
-    score: dict
-    fit: Fit
-    heldout: HeldOut
-    component: object
-    chi2_pose: np.ndarray
-
-    def __getitem__(self, key):
-        return self.score[key]
-
-    def to_dict(self) -> dict:
-        return dict(self.score)
+__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "diagnose", "base_analysis", "score_candidates",
+           "choose", "verdict", "side_by_side", "check_datum"]
 
 
 @dataclass(frozen=True)
 class PlotData:
-    """What the figures of :mod:`metrology.report.diagnose` draw: the base fit, the covariates,
-    the base readings ``d0 : (p, n) float, mm``, the named candidate (or None), sensor names,
-    stated noise ``sigma : (n,) float, mm``, gross-reading flags and the structure table."""
+    """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
+
+    base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
+    (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
+    """
 
     base: Fit
     cov: object
     d0: np.ndarray
-    best: Candidate | None
+    best: CandidateResult | None
     names: tuple
     sigma: np.ndarray
-    flags: np.ndarray | None
+    flags: np.ndarray
     structure: dict
 
 
-@dataclass
+@dataclass(frozen=True)
 class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output."""
+    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
+
+    ``candidates`` are the scored candidates, largest held-out gain first; ``tests_base`` and
+    ``tests_extended`` the noise-model battery before and after the extension;
+    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw.
+    """
 
     cause: str
     sensors: list
     confidence: str
     summary: str
     named: dict | None
-    candidates: list
+    candidates: tuple
     tests_base: NoiseTests
     tests_extended: NoiseTests | None
     structure_base: dict
@@ -84,15 +71,14 @@ class Diagnosis:
     base_theta: np.ndarray
     base_stderr: np.ndarray
     thresholds: dict
-    datum_form: DatumCheck | None = None
-    # for the figures
-    plot_data: PlotData | None = field(default=None, repr=False)
+    datum_form: DatumFormCheck | None = None
+    plot_data: PlotData | None = None
 
     def to_dict(self):
         return {
             "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
             "extended": self.named, "heldout": self.heldout, "discrepancy": self.discrepancy,
-            "candidates": self.candidates, "confounding": self.confounding,
+            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
             "tests": {"base": self.tests_base.to_dict(),
                       "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
             "structure": self.structure_base,
@@ -103,204 +89,178 @@ class Diagnosis:
         }
 
 
-def _flag_outliers(nominal, obs, cov, sigma, theta0):
-    """Robust per-sensor fit; flag |r| / s > t with t at ``alpha_outlier`` family-wise.
+@dataclass(frozen=True)
+class BaseAnalysis:
+    """Step 1: the base calibration and its residuals.
 
-    ``s`` is the larger of the stated noise and the residuals' robust (MAD) scale. Returns
-    (flags (p, n) bool, p-value of the largest standardised residual).
+    sigma : (n,) float, mm, the stated noise (or the base fit's own scatter where none);
+    cov : Covariates at the calibrated geometry; calibrated : SensorLayout; theta0 : (n, 5)
+    float, the start of every later fit; fit : Fit; d0 : (p, n) float, mm; tests : NoiseTests;
+    structure : dict; heldout : HeldOut; datum : DatumFormCheck or None
     """
-    from scipy import stats
 
-    p, n = obs.d.shape
-    m = int(np.isfinite(obs.d).sum())
-    z = np.full((p, n), np.nan)
-    for i in range(n):
-        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, loss="soft_l1", solver="gn")
-        r = f.residual[:, i]
-        mad = 1.4826 * np.nanmedian(np.abs(r - np.nanmedian(r)))
-        z[:, i] = r / max(sigma[i], mad)
-    zmax = float(np.nanmax(np.abs(z)))
-    p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
-    t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
-    flags = np.isfinite(z) & (np.abs(z) > t)
-    return flags, p_max
+    sigma: np.ndarray
+    cov: object
+    calibrated: SensorLayout
+    theta0: np.ndarray
+    fit: Fit
+    d0: np.ndarray
+    tests: NoiseTests
+    structure: dict
+    heldout: HeldOut
+    datum: DatumFormCheck | None
 
 
-def _simulated_figures(nominal, obs, cov, sigma, model: ExtendedModel, k, theta0, rng, reps, per_pose_sigma=None):
-    """Simulation of this data set under ``model`` plus the stated noise, analysed with the
-    base model: in-sample residual RMS per sensor (n,) mm and held-out normal deviation mean
-    (rad), averaged over ``reps`` draws."""
-    d_model = model.predict(obs.normal, obs.offset, cov)
-    rms, ndev = [], []
-    for _ in range(reps):
-        d = d_model + rng.normal(0.0, 1.0, d_model.shape) * sigma[None, :]
-        d = np.where(np.isfinite(obs.d), d, np.nan)
-        o = Observations(obs.normal, obs.offset, d)
-        b = fit_model(nominal, o, cov, sigma, (), theta0)
-        rms.append(np.sqrt(np.nanmean(b.residual**2, axis=0)))
-        ndev.append(np.nanmean(kfold(nominal, o, cov, sigma, (), k, theta0).normal_dev))
-    return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
+@dataclass(frozen=True)
+class Verdict:
+    """Steps 3-4: the cause, its sensors and confidence, the named candidate (refitted by
+    ``lsq``, or None), the noise tests after the extension, the confounding notes and the
+    named component's description."""
+
+    cause: str
+    sensors: list
+    confidence: str
+    best: CandidateResult | None
+    tests_extended: NoiseTests | None
+    confounding: list
+    named: dict | None
 
 
-def _dof_per_sensor(f: Fit, obs, n):
-    cnt = np.isfinite(obs.d).sum(axis=0).astype(float)
-    dof = cnt - 5
-    for c in f.components:
-        if c.sensors:
-            for i in c.sensors:
-                dof[i] -= c.n_params / len(c.sensors)
-        else:
-            dof -= (c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))) / n
-    return dof
-
-
-def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
-    """Run the full diagnosis on a :class:`~metrology.dataset.Dataset` (see the module doc).
-
-    ``folds``: k of the k-fold by pose; ``sim_reps``: simulated copies of the data set per
-    side-by-side figure; ``seed``: of the simulation's noise (the diagnosis itself is
-    deterministic).
-    """
-    from scipy import stats
-
-    nominal = ds.layout
-    obs = ds.obs
-    p, n = obs.d.shape
-    if p < 2 * folds:
-        raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
+def base_analysis(ds, folds) -> BaseAnalysis:
+    """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
+    calibrated one) and test its residuals."""
+    nominal, obs = ds.layout, ds.obs
     names = nominal.names
     sigma = nominal.noise_mm.copy()
-    rng = np.random.default_rng(seed)
-    # 1. base calibration (per sensor) with covariates at the nominal geometry, then recomputed
     cov0 = covariates_for(ds, nominal)
     sig_fit = np.where(np.isfinite(sigma), sigma, 1.0)
-    base0 = fit_model(nominal, obs, cov0, sig_fit, (), None, "lsq")
+    base0 = fit_any(nominal, obs, cov0, sig_fit, (), None, "lsq")
     if not np.all(np.isfinite(sigma)):  # no stated noise: the base fit's own scatter
         sigma = np.where(np.isfinite(sigma), sigma, np.sqrt(np.nanmean(base0.residual**2, axis=0)))
-    zero, u = _geometry(nominal, base0.theta)
+    zero, u = geometry(nominal, base0.theta)
     calibrated = nominal.with_params(zero, u)
     cov = covariates_for(ds, calibrated)
     theta0 = base0.theta
-    base = fit_model(nominal, obs, cov, sigma, (), theta0, "lsq")
-    d0_base = readings(zero, u, obs.normal, obs.offset)[0]
+    base = fit_any(nominal, obs, cov, sigma, (), theta0, "lsq")
+    d0 = readings(zero, u, obs.normal, obs.offset)[0]
     dof_base = np.isfinite(obs.d).sum(axis=0) - 5
-    tests_base = noise_tests(base.residual, sigma, dof_base, names)
-    struct = structure(base.residual, d0_base, cov, names)
+    tests = noise_tests(base.residual, sigma, dof_base, names)
+    struct = structure(base.residual, d0, cov, names)
     ho_base = kfold(nominal, obs, cov, sigma, (), folds, theta0)
-    datum = None if ds.datum_points is None else datum_form(ds, zero, u, obs, cov, d0_base, sigma)
+    datum = None if ds.datum_points is None else datum_form(ds, zero, u, obs, cov, d0, sigma)
+    return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
-    # 2. candidates
-    flags, p_out = _flag_outliers(nominal, obs, cov, sigma, theta0)
-    cands = candidates_for(nominal, cov, flags)
-    n_cand = len(cands)
-    scored = []
-    for c in cands:
-        f = fit_model(nominal, obs, cov, sigma, (c,), theta0)
-        k = c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))
-        S = list(f.sensors)
-        chi2_b = float(np.nansum((base.residual[:, S] / sigma[S]) ** 2))
-        chi2_e = float(np.nansum((f.residual[:, S] / sigma[S]) ** 2))
-        m_S = int(np.isfinite(obs.d[:, S]).sum())
-        dof_e = m_S - 5 * len(S) - k
-        if isinstance(c, Outliers):
-            p_in = p_out  # selection by the largest residual: its own test
-        else:
-            F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
-            p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
-        ho = kfold(nominal, obs, cov, sigma, (c,), folds, theta0)
-        excl = flags if isinstance(c, Outliers) else None
-        cb = ho_base.chi2_pose(sigma, exclude=excl)
-        ce = ho.chi2_pose(sigma, exclude=excl)
-        diff = cb - ce  # all sensors: comparable between candidates (ranking)
-        diff_S = ho_base.chi2_pose(sigma, S, excl) - ho.chi2_pose(sigma, S, excl)  # its sensors: the test
-        if np.allclose(diff_S, 0):
-            p_ho = 1.0
-        else:
-            p_ho = float(stats.ttest_1samp(diff_S, 0.0, alternative="greater").pvalue)
-        rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
-        nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
-        sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_
-        scored.append(Candidate({
-            "label": c.label, "cause": c.name, "sensors": [names[i] for i in c.sensors], "n_params": k,
-            "p_insample": p_in, "p_heldout": p_ho, "heldout_chi2_reduction": float(np.sum(diff)),
-            "heldout_rms_base_mm": rb, "heldout_rms_extended_mm": re_, "heldout_rms_ratio": rb / re_,
-            "heldout_normal_base_deg": float(np.rad2deg(nb_)), "heldout_normal_extended_deg": float(np.rad2deg(ne_)),
-            "significant": bool(sig)}, f, ho, c, ce))
-    sig_list = sorted([s for s in scored if s["significant"]], key=lambda s: -s["heldout_chi2_reduction"])
+
+def score_candidates(ds, b: BaseAnalysis, folds):
+    """Step 2: flag gross readings, build every catalogued candidate and score it.
+    Returns (list of CandidateResult in candidate order, flags (p, n) bool)."""
+    nominal, obs = ds.layout, ds.obs
+    flags, p_out = flag_outliers(nominal, obs, b.cov, b.sigma, b.theta0)
+    cands = candidates_for(nominal, b.cov, flags)
+    scored = [score_candidate(c, nominal, obs, b.cov, b.sigma, b.fit, b.heldout, flags, p_out, folds, b.theta0,
+                              len(cands)) for c in cands]
+    return scored, flags
+
+
+def _p_separation(other: CandidateResult, best: CandidateResult) -> float:
+    """One-sided paired test that ``best``'s per-pose held-out chi-square is below ``other``'s."""
+    from scipy import stats
+
+    d = other.chi2_pose - best.chi2_pose
+    return float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
+
+
+def choose(scored):
+    """The significant candidates, largest held-out gain first (a time drift yields to the
+    temperature drift of the same sensors when the data cannot tell them apart), and the
+    lead: the strongest candidate significant in sample only. Returns (sig_list, lead)."""
+    n_cand = len(scored)
+    sig_list = sorted([s for s in scored if s.significant], key=lambda s: -s.heldout_chi2_reduction)
     # the strongest candidate significant in sample only: a lead, never a name
-    in_only = sorted([s for s in scored if not s["significant"] and s["p_insample"] < THRESHOLDS["alpha_candidates"] / n_cand],
-                     key=lambda s: s["p_insample"])
+    in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
+                     key=lambda s: s.p_insample)
     lead = in_only[0] if in_only else None
-
-    # decision
-    named = None
-    tests_ext = None
-    confounding = []
     best = sig_list[0] if sig_list else None
-    if best is not None and best["cause"] == "drift" and best.component.variable == "time":
+    if best is not None and best.cause == "drift" and best.component.variable == "time":
         # tie-break: temperature is the physical cause, time its proxy; prefer it when the
         # data cannot tell the two apart
         for other in sig_list[1:]:
             oc = other.component
             if oc.name == "drift" and oc.variable == "temp" and oc.sensors == best.component.sensors:
-                d = other.chi2_pose - best.chi2_pose
-                p_sep = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
-                if p_sep >= THRESHOLDS["alpha_confound"]:
+                if _p_separation(other, best) >= THRESHOLDS["alpha_confound"]:
                     sig_list.remove(other)
                     sig_list.insert(0, other)
-                    best = other
                 break
-    if best is None:
-        cause = "none" if tests_base["consistent"] else "unexplained"
-        confidence = "high" if tests_base["consistent"] and lead is None else "low"
-        sensors = []
-    else:
-        best = replace(best, fit=fit_model(nominal, obs, cov, sigma, (best.component,), theta0, "lsq"))
-        f = best.fit
-        # a per-pose component makes the sensors of a pose correlated by construction
-        tests_ext = noise_tests(f.residual, sigma, _dof_per_sensor(f, obs, n), names,
-                                pairs=not any(c.per_pose for c in f.components))
-        concerned = list(f.sensors)
-        p_concerned = battery_on(tests_ext, concerned)
-        tests_ext.summary["p_concerned"] = p_concerned
-        if p_concerned >= THRESHOLDS["alpha_battery"]:
-            cause, sensors = best["cause"], best["sensors"]
-            # its own sensors are explained; others that still fail are a separate matter
-            confidence = "high" if tests_ext["consistent"] else "partial"
-        else:
-            cause, confidence = "unexplained", "low"
-            sensors = []
-        # runner-ups that explain as much (a different cause or sensor)
-        for other in sig_list[1:]:
-            if other["cause"] == best["cause"] and other["sensors"] == best["sensors"]:
-                continue
-            d = other.chi2_pose - best.chi2_pose
-            p_sep = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
-            if p_sep >= THRESHOLDS["alpha_confound"]:
-                confounding.append({
-                    "between": [best["label"], other["label"]], "p_separation": p_sep,
-                    "message": f"the data cannot tell {best['label']} from {other['label']} (held-out gains "
-                               f"indistinguishable, p = {p_sep:.2g}); to separate them: "
-                               f"{ADVICE[best['cause']]}; {ADVICE[other['cause']]}",
-                })
-        fc = f.components[0]
-        for q, (cb_, w) in enumerate(zip(f.corr_base, f.corr_with)):
-            if cb_ > THRESHOLDS["corr_confound"]:
-                confounding.append({
-                    "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
-                    "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
-                               f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
-                })
-        if confounding and confidence == "high":
-            confidence = "ambiguous"
-        named = _describe_named(best, f, nominal, obs, cov, sigma, rng)
+    return sig_list, lead
 
-    # 3-4. side by side and held-out gains
-    base_model = ExtendedModel(calibrated, ())
-    sim_rms_b, sim_nd_b, sim_nd_b_sd = _simulated_figures(nominal, obs, cov, sigma, base_model, folds, theta0, rng, sim_reps)
-    meas_rms = np.sqrt(np.nanmean(base.residual**2, axis=0))
+
+def _confounding(best: CandidateResult, sig_list) -> list:
+    """Runner-ups that explain as much (a different cause or sensor), and parameters of the
+    named component too correlated with the base geometry."""
+    out = []
+    for other in sig_list[1:]:
+        if other.cause == best.cause and other.sensors == best.sensors:
+            continue
+        p_sep = _p_separation(other, best)
+        if p_sep >= THRESHOLDS["alpha_confound"]:
+            out.append({
+                "between": [best.label, other.label], "p_separation": p_sep,
+                "message": f"the data cannot tell {best.label} from {other.label} (held-out gains "
+                           f"indistinguishable, p = {p_sep:.2g}); to separate them: "
+                           f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
+            })
+    f = best.fit
+    fc = f.components[0]
+    for q, (cb_, w) in enumerate(zip(f.corr_base, f.corr_with)):
+        if cb_ > THRESHOLDS["corr_confound"]:
+            out.append({
+                "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
+                "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
+                           f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
+            })
+    return out
+
+
+def verdict(ds, b: BaseAnalysis, sig_list, lead, rng) -> Verdict:
+    """Steps 3-4: name the best significant candidate if its sensors' residuals become
+    consistent with noise, re-identify it (``lsq``) and describe it with its confounding."""
+    nominal, obs = ds.layout, ds.obs
+    n = obs.d.shape[1]
+    best = sig_list[0] if sig_list else None
+    if best is None:
+        cause = "none" if b.tests.consistent else "unexplained"
+        confidence = "high" if b.tests.consistent and lead is None else "low"
+        return Verdict(cause, [], confidence, None, None, [], None)
+    f = fit_any(nominal, obs, b.cov, b.sigma, (best.component,), b.theta0, "lsq")
+    best = replace(best, fit=f)
+    # a per-pose component makes the sensors of a pose correlated by construction
+    tests_ext = noise_tests(f.residual, b.sigma, dof_per_sensor(f, obs, n), nominal.names,
+                            pairs=not any(c.per_pose for c in f.components))
+    p_concerned = battery_on(tests_ext, list(f.sensors))
+    tests_ext = replace(tests_ext, p_concerned=p_concerned)
+    if p_concerned >= THRESHOLDS["alpha_battery"]:
+        cause, sensors = best.cause, best.sensors
+        # its own sensors are explained; others that still fail are a separate matter
+        confidence = "high" if tests_ext.consistent else "partial"
+    else:
+        cause, confidence, sensors = "unexplained", "low", []
+    confounding = _confounding(best, sig_list)
+    if confounding and confidence == "high":
+        confidence = "ambiguous"
+    named = describe_named(f, nominal, obs, b.cov, b.sigma, rng)
+    return Verdict(cause, sensors, confidence, best, tests_ext, confounding, named)
+
+
+def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
+    """The simulation of this data set under the base (and the extended) model beside the
+    measurement, and the held-out gains. Returns (discrepancy dict, heldout dict)."""
+    nominal, obs, sigma, cov, theta0, ho_base = ds.layout, ds.obs, b.sigma, b.cov, b.theta0, b.heldout
+    base_model = ExtendedModel(b.calibrated, ())
+    sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(nominal, obs, cov, sigma, base_model, folds, theta0, rng,
+                                                         sim_reps)
+    meas_rms = np.sqrt(np.nanmean(b.fit.residual**2, axis=0))
     discrepancy = {
-        "sensors": list(names),
+        "sensors": list(nominal.names),
         "stated_noise_mm": sigma.tolist(),
         "measured_residual_rms_mm": meas_rms.tolist(),
         "simulated_base_residual_rms_mm": sim_rms_b.tolist(),
@@ -309,48 +269,79 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         "simulated_base_heldout_normal_sd_deg": float(np.rad2deg(sim_nd_b_sd)),
         "sim_reps": sim_reps,
     }
-    heldout = {"folds": folds, "base_rms_mm": ho_base.rms(), "base_normal_deg": float(np.rad2deg(np.nanmean(ho_base.normal_dev)))}
-    if best is not None:
-        fm = best.fit.model(nominal)
-        sim_rms_e, sim_nd_e, sim_nd_e_sd = _simulated_figures(nominal, obs, cov, sigma, fm, folds, theta0, rng, sim_reps)
-        discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
-        discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
-        discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
-        discrepancy["extended_model"] = best["label"]
-        ho_e = best.heldout
-        excl = flags if best["cause"] == "outliers" else None
-        S = list(best.fit.sensors)
-        heldout.update({
-            "model": best["label"],
-            "base_rms_mm": ho_base.rms(None, excl), "extended_rms_mm": ho_e.rms(None, excl),
-            "rms_ratio": ho_base.rms(None, excl) / ho_e.rms(None, excl),
-            "base_rms_concerned_mm": ho_base.rms(S, excl), "extended_rms_concerned_mm": ho_e.rms(S, excl),
-            "rms_ratio_concerned": ho_base.rms(S, excl) / ho_e.rms(S, excl),
-            "extended_normal_deg": float(np.rad2deg(np.nanmean(ho_e.normal_dev))),
-            "normal_ratio": float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)),
-            "p_heldout": best["p_heldout"],
-        })
-    summary = _summary(cause, confidence, best, tests_base, tests_ext, lead)
+    heldout = {"folds": folds, "base_rms_mm": ho_base.rms(),
+               "base_normal_deg": float(np.rad2deg(np.nanmean(ho_base.normal_dev)))}
+    if best is None:
+        return discrepancy, heldout
+    fm = best.fit.model(nominal)
+    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(nominal, obs, cov, sigma, fm, folds, theta0, rng, sim_reps)
+    discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
+    discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
+    discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
+    discrepancy["extended_model"] = best.label
+    ho_e = best.heldout
+    excl = flags if best.cause == "outliers" else None
+    S = list(best.fit.sensors)
+    heldout.update({
+        "model": best.label,
+        "base_rms_mm": ho_base.rms(None, excl), "extended_rms_mm": ho_e.rms(None, excl),
+        "rms_ratio": ho_base.rms(None, excl) / ho_e.rms(None, excl),
+        "base_rms_concerned_mm": ho_base.rms(S, excl), "extended_rms_concerned_mm": ho_e.rms(S, excl),
+        "rms_ratio_concerned": ho_base.rms(S, excl) / ho_e.rms(S, excl),
+        "extended_normal_deg": float(np.rad2deg(np.nanmean(ho_e.normal_dev))),
+        "normal_ratio": float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)),
+        "p_heldout": best.p_heldout,
+    })
+    return discrepancy, heldout
+
+
+def check_datum(ds, b: BaseAnalysis, v: Verdict, scored, confidence, summary):
+    """The readings' own form against the datum cloud's. Returns (datum check with
+    ``against_readings``, confidence, summary), lowered and extended when they disagree."""
+    # plane_form fitted together with the named cause (a pose error, say, correlates the
+    # sensors of a pose; a form fitted without it would carry standard errors too small for
+    # the comparison)
+    if v.cause == "plane_form":
+        pf = v.best.fit
+    elif v.cause in VERDICTS:  # nothing named: the plane_form candidate's own fit
+        pf = next(s.fit for s in scored if s.cause == "plane_form")
+    else:
+        comps = [PlaneForm((), names=ds.layout.names), replace(v.best.component, values=None, stderr=None)]
+        pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
+    ag = form_agreement(b.datum, pf)
+    ag["fitted_with"] = [c.label for c in pf.components]
+    if not ag["agree"]:
+        if v.cause in ("none", "plane_form"):
+            confidence = "low"  # the inputs contradict each other on the datum
+        summary += DATUM_DISAGREES.format(p=ag["p"])
+    return replace(b.datum, against_readings=ag), confidence, summary
+
+
+def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
+    """Run the full diagnosis on a :class:`~metrology.calibration.dataset.Dataset` (see
+    :mod:`metrology.diagnosis`).
+
+    ``folds``: k of the k-fold by pose; ``sim_reps``: simulated copies of the data set per
+    side-by-side figure; ``seed``: of the simulation's noise (the diagnosis itself is
+    deterministic).
+    """
+    p = ds.obs.d.shape[0]
+    if p < 2 * folds:
+        raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
+    rng = np.random.default_rng(seed)
+    b = base_analysis(ds, folds)
+    scored, flags = score_candidates(ds, b, folds)
+    sig_list, lead = choose(scored)
+    v = verdict(ds, b, sig_list, lead, rng)
+    if v.best is not None:  # the named candidate carries its lsq refit from here on
+        scored = [v.best if s is sig_list[0] else s for s in scored]
+    discrepancy, heldout = side_by_side(ds, b, v.best, flags, folds, sim_reps, rng)
+    confidence = v.confidence
+    summary = verdict_summary(v.cause, confidence, v.best, b.tests, v.tests_extended, lead)
+    datum = b.datum
     if datum is not None:
-        # the readings' own form against the cloud's: plane_form fitted together with the named
-        # cause (a pose error, say, correlates the sensors of a pose; a form fitted without it
-        # would carry standard errors too small for the comparison)
-        if cause == "plane_form":
-            pf = best.fit
-        elif cause in VERDICTS:  # nothing named: the plane_form candidate's own fit
-            pf = next(s.fit for s in scored if s["cause"] == "plane_form")
-        else:
-            comps = [PlaneForm((), names=names), replace(best.component, values=None, stderr=None)]
-            pf = fit_model(nominal, obs, cov, sigma, comps, theta0)
-        datum.summary["against_readings"] = form_agreement(datum, pf)
-        datum.summary["against_readings"]["fitted_with"] = [c.label for c in pf.components]
-        if not datum["against_readings"]["agree"]:
-            if cause in ("none", "plane_form"):
-                confidence = "low"  # the inputs contradict each other on the datum
-            summary += (f"; the datum cloud's form disagrees with the readings' (p = {datum['against_readings']['p']:.2g}): "
-                        "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
-    public = [s.to_dict() for s in scored]
-    public.sort(key=lambda s: -s["heldout_chi2_reduction"])
-    plot = PlotData(base, cov, d0_base, best, names, sigma, flags, struct)
-    return Diagnosis(cause, sensors, confidence, summary, named, public, tests_base, tests_ext, struct, discrepancy,
-                     heldout, confounding, base.theta, base.theta_stderr, dict(THRESHOLDS), datum, plot)
+        datum, confidence, summary = check_datum(ds, b, v, scored, confidence, summary)
+    ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
+    plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags, b.structure)
+    return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, ranked, b.tests, v.tests_extended, b.structure,
+                     discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr, dict(THRESHOLDS), datum, plot)

@@ -1,14 +1,22 @@
-"""The extended fit: the base geometry (five parameters per sensor) plus effect components, fitted jointly (Gauss-Newton or scipy least squares)."""
+"""The extended fit: the base model plus effect components, by least squares.
+
+:func:`fit` solves with ``scipy.optimize.least_squares`` or its own Gauss-Newton
+(:func:`gauss_newton`, the same minimum, faster inside the k-fold loops); :func:`fit_any` fits
+the sensors separately when no component couples them.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
 import numpy as np
+
 from metrology.core.effects import Covariates, ExtendedModel
-from metrology.core.observations import Observations
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_tangent, readings
-from metrology.diagnosis.stats import _chi2_other
+from metrology.core.observations import Observations
+
+__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry"]
 
 
 @dataclass(frozen=True)
@@ -47,7 +55,10 @@ class Fit:
         return ExtendedModel(nominal.with_params(zero, u), self.components)
 
 
-def _geometry(nominal, theta):
+
+def geometry(nominal, theta):
+    """Zero points ``(n, 3)`` mm TCS and unit directions ``(n, 3)`` TCS of the chart errors
+    ``theta (n, 5)`` around ``nominal``."""
     zero = nominal.zero + theta[:, :3]
     u = direction_from_tangent(nominal.direction, theta[:, 3:])
     return zero, u
@@ -123,7 +134,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     k_comp = [c.n_params for c in free]
     nb = 5 * len(S)
     x0 = np.concatenate([theta0[S].ravel()] + [c.values for c in free])
-    zero_all, u_all = _geometry(nominal, theta0)
+    zero_all, u_all = geometry(nominal, theta0)
     d_full0 = readings(zero_all, u_all, N, D)[0]
     basis0 = direction_basis(nominal.direction[S])
     u0S = nominal.direction[S]
@@ -196,7 +207,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         kw = {} if loss == "linear" else {"loss": loss, "f_scale": 1.0}
         x = least_squares(fun, x0, jac=jac, method="trf", x_scale="jac", **kw).x
     elif solver == "gn":
-        x = _gauss_newton(fun, jac, x0, loss)
+        x = gauss_newton(fun, jac, x0, loss)
     else:
         raise ValueError(f"solver must be 'lsq' or 'gn', got {solver!r}")
     R, e, th, vals, d0 = residual_matrix(x)
@@ -241,7 +252,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
                tuple(corr_w), C[nb:, nb:])
 
 
-def _gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
+def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
     """Gauss-Newton with step halving (IRLS weights for ``soft_l1``) on column-scaled normal
     equations; stops when the cost changes by less than ``tol`` relative."""
 
@@ -275,15 +286,14 @@ def _gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
     return x
 
 
-def fit_model(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
-    """The extended fit of ``comps`` (none: the base model) as :func:`fit` returns it; sensors
-    no component couples are fitted separately (faster, identical)."""
+def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
+    """:func:`fit`, with the sensors fitted separately when no component couples them (faster, identical)."""
     if comps:
         f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver)
         if len(f.sensors) == nominal.n:
             return f
         # the other sensors keep the base fit of this subset
-        base = fit_model(nominal, obs, cov, sigma, (), theta0, solver)
+        base = fit_any(nominal, obs, cov, sigma, (), theta0, solver)
         th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
         S = list(f.sensors)
         th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
@@ -299,3 +309,9 @@ def fit_model(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
         chi2 += f.chi2
         dof += f.dof
     return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
+
+
+def _chi2_other(base, sigma, S):
+    other = [i for i in range(base.residual.shape[1]) if i not in S]
+    r = base.residual[:, other] / sigma[other]
+    return float(np.nansum(r**2))

@@ -1,20 +1,24 @@
-"""Held-out scoring: k folds interleaved in pose order; every held-out residual is a prediction."""
+"""k-fold-by-pose held-out evaluation: every residual a prediction."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+
 import numpy as np
+
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
-from metrology.diagnosis.fit import Fit, fit_model, _geometry
+from metrology.diagnosis.fit import Fit, fit_any, geometry
+
+__all__ = ["folds", "heldout_eval", "HeldOut", "kfold"]
 
 
-def _folds(p, k):
+def folds(p, k):
     """Interleaved folds by pose (pose j in fold j mod k): each fold spans the whole run."""
     return [np.arange(j, p, k) for j in range(k)]
 
 
-def _heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
+def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
     """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
 
     A per-pose component's value of a held-out pose is fitted, for each reading, to the other
@@ -24,7 +28,7 @@ def _heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
     from metrology.core.normals import angle_between, micro_plane_normal
 
     o, c = obs.select(test), cov.select(test)
-    zero, u = _geometry(nominal, f.theta)
+    zero, u = geometry(nominal, f.theta)
     d0, _ = readings(zero, u, o.normal, o.offset)
     terms = np.zeros_like(d0)
     per_pose = []
@@ -61,7 +65,7 @@ class HeldOut:
 
     Attributes
     ----------
-    residual : (p, n) float, mm, held-out residuals (predictions: see :func:`_heldout_eval`)
+    residual : (p, n) float, mm, held-out residuals (predictions: see :func:`heldout_eval`)
     normal_dev : (p,) float, rad, held-out normal deviation
     """
 
@@ -88,9 +92,10 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
-    for test in _folds(p, k):
+    for test in folds(p, k):
         train = np.setdiff1d(np.arange(p), test)
         comps = [c.select(train) for c in components]
-        f = fit_model(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
-        res[test], dev[test] = _heldout_eval(nominal, obs, cov, sigma, f, test)
+        f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
+        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test)
     return HeldOut(res, dev)
+

@@ -1,47 +1,46 @@
-"""Residuals against the noise model: chi-square, whiteness (Ljung-Box), normality, correlation between sensors, and structure against each covariate."""
+"""Statistics of the residuals: the noise-model battery and the structure table."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
 from metrology.core.effects import Covariates
+from metrology.diagnosis.thresholds import THRESHOLDS
 
-
-#: decision thresholds (family-wise levels, Bonferroni-split over the candidates / tests),
-#: set a priori and checked on null data (benchmarks/study_diagnose.py, docs/readme_diagnose.md)
-THRESHOLDS = {
-    "alpha_candidates": 0.01,  # family-wise level of the in-sample F-tests over all candidates
-    "alpha_heldout": 0.05,  # level of the one-sided held-out gain test (confirms the F-test)
-    "alpha_battery": 0.01,  # family-wise level of the noise-model tests on the residuals
-    "alpha_outlier": 0.01,  # family-wise level of the largest standardised residual
-    "alpha_confound": 0.05,  # runner-up's gain not distinguishable from the winner's at this level
-    "corr_confound": 0.95,  # |correlation| of a component parameter with a base parameter
-    "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
-}
+__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "structure"]
 
 
 @dataclass(frozen=True)
 class NoiseTests:
-    """The noise-model battery of :func:`noise_tests`.
+    """The noise-model battery on one set of residuals (:func:`noise_tests`).
 
     Attributes
     ----------
-    summary : dict
-        The public result (``sensors``, ``pairs``, ``n_tests``, ``p_bonferroni``,
-        ``consistent``; ``p_concerned`` added after an extension); read as ``tests[key]``.
-    pvalues : tuple of (float, set of int)
-        Every test's p-value with the sensors it involves (for :func:`battery_on`).
+    sensors : dict, sensor name -> chi2, dof, sigma_est_mm, p_chi2, p_whiteness, p_normality
+    pairs : dict, "A-B" -> within-pose correlation r and its p-value
+    n_tests : int, the size of the family
+    p_bonferroni : float, Bonferroni-combined p-value
+    consistent : bool, at ``alpha_battery``
+    pvalues : tuple of (p, set of sensor indices), every test with the sensors it involves
+    p_concerned : float or None, :func:`battery_on` the sensors of an extension (after one)
     """
 
-    summary: dict
-    pvalues: tuple
-
-    def __getitem__(self, key):
-        return self.summary[key]
+    sensors: dict
+    pairs: dict
+    n_tests: int
+    p_bonferroni: float
+    consistent: bool
+    pvalues: tuple = ()
+    p_concerned: float | None = None
 
     def to_dict(self) -> dict:
-        return dict(self.summary)
+        out = {"sensors": self.sensors, "pairs": self.pairs, "n_tests": self.n_tests,
+               "p_bonferroni": self.p_bonferroni, "consistent": self.consistent}
+        if self.p_concerned is not None:
+            out["p_concerned"] = self.p_concerned
+        return out
 
 
 def ljung_box(x, lags):
@@ -59,10 +58,10 @@ def ljung_box(x, lags):
     return float(chi2.sf(q, lags))
 
 
-def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True):
+def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True) -> NoiseTests:
     """Tests of the residuals ``(p, n)`` mm against white Gaussian noise of ``sigma (n,)`` mm.
 
-    Returns a dict with per-sensor chi-square (upper tail), Ljung-Box and Shapiro-Wilk
+    Returns a :class:`NoiseTests`: per-sensor chi-square (upper tail), Ljung-Box and Shapiro-Wilk
     p-values, pairwise within-pose correlations with p-values, the Bonferroni-combined
     p-value and ``consistent`` at ``alpha_battery``.
     """
@@ -92,11 +91,10 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True):
             pair_out[f"{names[i]}-{names[j]}"] = {"r": float(rr), "p": float(pp)}
             pvals.append((float(pp), {i, j}))
     p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
-    return NoiseTests({"sensors": per, "pairs": pair_out, "n_tests": len(pvals), "p_bonferroni": p_all,
-                       "consistent": bool(p_all >= THRESHOLDS["alpha_battery"])}, tuple(pvals))
+    return NoiseTests(per, pair_out, len(pvals), p_all, bool(p_all >= THRESHOLDS["alpha_battery"]), tuple(pvals))
 
 
-def battery_on(tests, sensors):
+def battery_on(tests: NoiseTests, sensors) -> float:
     """Bonferroni p-value of the tests of :func:`noise_tests` that involve ``sensors`` (indices).
 
     The family is the whole battery (its ``n_tests``), not the subset: the check after an
@@ -105,7 +103,7 @@ def battery_on(tests, sensors):
     two sensors at p = 0.001 does that with a 6-test subset).
     """
     ps = [p for p, inv in tests.pvalues if inv & set(sensors)]
-    return min(1.0, min(ps) * tests["n_tests"]) if ps else 1.0
+    return min(1.0, min(ps) * tests.n_tests) if ps else 1.0
 
 
 def structure(residual, d0, cov: Covariates, names):
@@ -146,8 +144,3 @@ def structure(residual, d0, cov: Covariates, names):
         out[key] = row
     return out
 
-
-def _chi2_other(base, sigma, S):
-    other = [i for i in range(base.residual.shape[1]) if i not in S]
-    r = base.residual[:, other] / sigma[other]
-    return float(np.nansum(r**2))

@@ -1,16 +1,88 @@
-"""Figures of a diagnosis: base residuals against every covariate, and the named cause before and after."""
+"""Words and figures of a diagnosis: the text report and the residual plots."""
 
 from __future__ import annotations
 
 import numpy as np
+
+from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
+from metrology.io.atomic import atomic_path
+
+__all__ = ["report_text", "plot_report", "p_text", "simulate_text"]
+
+
+def p_text(p: float) -> str:
+    """``= 0.0123`` or ``< 1e-300`` (a p-value that underflowed)."""
+    return "< 1e-300" if p < 1e-300 else f"= {p:.3g}"
+
+
+def report_text(d: Diagnosis) -> str:
+    """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
+    D = d.to_dict()
+    lines = [f"cause: {D['cause']}" + (f" ({', '.join(D['sensors'])})" if D["sensors"] else "")
+             + f"   confidence: {D['confidence']}", f"  {D['summary']}", ""]
+    disc = D["discrepancy"]
+    lines.append("discrepancy (residual RMS um per sensor; held-out normal deviation deg)")
+    head = f"  {'':28s}" + "".join(f"{n:>9s}" for n in disc["sensors"]) + f"{'normal':>11s}"
+    lines.append(head)
+
+    def row(label, rms, nd):
+        return f"  {label:28s}" + "".join(f"{1e3 * v:9.2f}" for v in rms) + ("" if nd is None else f"{nd:11.5f}")
+
+    lines.append(row("stated noise", disc["stated_noise_mm"], None))
+    lines.append(row("simulation, base model", disc["simulated_base_residual_rms_mm"],
+                     disc["simulated_base_heldout_normal_deg"]))
+    lines.append(row("measured", disc["measured_residual_rms_mm"], disc["measured_heldout_normal_deg"]))
+    if "simulated_extended_residual_rms_mm" in disc:
+        lines.append(row(f"simulation, + {disc['extended_model']}", disc["simulated_extended_residual_rms_mm"],
+                         disc["simulated_extended_heldout_normal_deg"]))
+    lines.append("")
+    tb = D["tests"]["base"]
+    lines.append(f"noise-model tests on the base residuals (Bonferroni p = {tb['p_bonferroni']:.3g}, "
+                 f"{tb['n_tests']} tests): " + ("consistent" if tb["consistent"] else "INCONSISTENT"))
+    for n, t in tb["sensors"].items():
+        lines.append(f"  {n}: sigma {1e3 * t['sigma_est_mm']:.2f} um  p_chi2 {t['p_chi2']:.3g}  "
+                     f"p_white {t['p_whiteness']:.3g}  p_normal {t['p_normality']:.3g}")
+    lines.append("")
+    lines.append("candidates (held-out k-fold by pose), best first")
+    lines.append(f"  {'candidate':22s}{'p in-sample':>12s}{'p held-out':>12s}{'chi2 gain':>11s}{'RMS ratio':>11s}  sig")
+    for c in D["candidates"][:10]:
+        lines.append(f"  {c['label']:22s}{c['p_insample']:12.3g}{c['p_heldout']:12.3g}"
+                     f"{c['heldout_chi2_reduction']:11.1f}{c['heldout_rms_ratio']:11.3f}  {'*' if c['significant'] else ''}")
+    if len(D["candidates"]) > 10:
+        lines.append(f"  ... {len(D['candidates']) - 10} more in --json")
+    if D["extended"]:
+        lines.append("")
+        lines.append(f"extended model: {D['extended']['label']}")
+        for k, v in D["extended"]["params"].items():
+            se = "" if v["stderr"] is None else f" +- {v['stderr']:.3g}"
+            lines.append(f"  {k} = {v['value']:.4g}{se} {v['unit']}")
+        h = D["heldout"]
+        lines.append(f"held-out ({h['folds']}-fold): RMS {1e3 * h['base_rms_mm']:.3f} -> {1e3 * h['extended_rms_mm']:.3f} um "
+                     f"(ratio {h['rms_ratio']:.3f}; its sensors {h['rms_ratio_concerned']:.3f}), normal "
+                     f"{h['base_normal_deg']:.5f} -> {h['extended_normal_deg']:.5f} deg (ratio {h['normal_ratio']:.3f})")
+    for c in D["confounding"]:
+        lines.append(f"confounding: {c['message']}")
+    df = D["datum_form"]
+    if df is not None:
+        q = "  ".join(f"{k[:-3]} {v['value'] * 1e3:.2f} +- {v['stderr'] * 1e3:.2f}" for k, v in df["params"].items()
+                      if k in REGISTRY["plane_form"].key_params)
+        vis = ", ".join(f"{1e3 * v:.2f}" for v in df["visible_rms_mm"])
+        ag = df["against_readings"]
+        lines += ["", f"datum cloud ({df['points_used']} of {df['points']} points, {df['window']}): form {q} um at "
+                      f"{df['radius_mm']:g} mm (quadratic p {p_text(df['p_quadratic'])})",
+                  f"  at this run's spots it would leave {vis} um RMS in the base residuals (per sensor)",
+                  f"  the readings' plane_form ({' + '.join(ag['fitted_with'])}) {'agrees' if ag['agree'] else 'DISAGREES'} "
+                  f"with it (p {p_text(ag['p'])})"]
+    return "\n".join(lines)
+
 
 
 def plot_report(diag: Diagnosis, out_dir) -> list:
-    """Residual plots that made the case, before and after; returns the files written."""
+    """Residual plots that made the case, before and after, each written atomically; returns
+    the files written."""
     from pathlib import Path
 
-    from metrology.io.atomic import atomic_path
     from metrology.report.plots import pyplot
 
     plt = pyplot()
@@ -43,14 +115,14 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
     fig.tight_layout()
     f1 = out / "residuals_base.png"
     with atomic_path(f1) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
+        fig.savefig(tmp, dpi=90)
     plt.close(fig)
     files.append(str(f1))
     best = P.best
     if best is not None:
         f = best.fit
         comp = f.components[0]
-        key = comp.plot_key  # the registry entry names the covariate
+        key = comp.plot_key  # from the effect registry
         cols = list(comp.sensors) if comp.sensors else list(range(n))
         fig, axes = plt.subplots(len(cols), 2, figsize=(9, 2.4 * len(cols)), squeeze=False, sharey="row")
         X = variables.get(key, variables["pose_index"])
@@ -59,7 +131,7 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
             a0, a1 = axes[r]
             a0.plot(X[:, i], base.residual[:, i] * 1e3, ".", ms=3, label="base residual")
             order = np.argsort(X[:, i])
-            if comp.name not in ("pose_error", "outliers"):
+            if comp.plot_term:
                 a0.plot(X[order, i], (term[order, i] - np.nanmean(term[:, i]) + np.nanmean(base.residual[:, i])) * 1e3,
                         "-", color="C3", label=f"fitted {comp.name}")
             a1.plot(X[:, i], f.residual[:, i] * 1e3, ".", ms=3, color="C2")
@@ -73,7 +145,15 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
         fig.tight_layout()
         f2 = out / "residuals_named.png"
         with atomic_path(f2) as tmp:
-            fig.savefig(tmp, dpi=90, format="png")
+            fig.savefig(tmp, dpi=90)
         plt.close(fig)
         files.append(str(f2))
     return files
+
+
+
+def simulate_text(out, poses, effect, sensor, size, cloud, n_points) -> str:
+    """The one line ``metro simulate`` prints: what was written and what it hides."""
+    return (f"wrote {out}: {poses} poses" + (f", hiding {effect} of size {size:g}"
+                                              + (f" on {sensor}" if sensor else "") if effect else "")
+            + (f"; {cloud}: {n_points} datum points" if n_points is not None else ""))

@@ -35,11 +35,10 @@ from metrology.sim.simulation import PoseSpec, random_poses
 __all__ = ["HiddenEffect", "SIZE_MEANING", "EFFECTS", "SETUP_EFFECTS", "OUTSIDE", "warmup", "synth_run", "synth_cloud",
            "typical_layouts", "TYPICAL_NOISE_MM", "TYPICAL_RANGE_MM", "N_OUTLIERS", "PERIOD_POSES"]
 
-SIZE_MEANING = {name: cls.size_meaning for name, cls in REGISTRY.items()} | {
-    "periodic": "amplitude mm of a cyclic error in pose index (outside the catalogue)",
-}
+SIZE_MEANING = {name: cls.size_meaning for name, cls in REGISTRY.items()}
+SIZE_MEANING["periodic"] = "amplitude mm of a cyclic error in pose index (outside the catalogue)"
 EFFECTS = tuple(k for k in SIZE_MEANING if k != "periodic")
-SETUP_EFFECTS = ("plane_form", "pose_error")
+SETUP_EFFECTS = tuple(name for name, cls in REGISTRY.items() if cls.setup)
 OUTSIDE = ("periodic",)
 N_OUTLIERS = 3
 PERIOD_POSES = 6.5
@@ -99,7 +98,9 @@ def warmup(rng: np.random.Generator, n_poses: int, dt_s=(20.0, 40.0), start_c=20
 
 
 def _component(effect: HiddenEffect, i):
-    return REGISTRY[effect.name].hidden(effect.size, i)
+    if effect.name not in REGISTRY:
+        raise ValueError(effect.name)
+    return REGISTRY[effect.name].hidden(i, effect.size)
 
 
 def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane, n_poses: int,

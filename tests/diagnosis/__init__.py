@@ -1,0 +1,1 @@
+"""Tests of metrology.diagnosis and the effect catalogue it reads."""

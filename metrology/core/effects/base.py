@@ -1,53 +1,21 @@
-"""The catalogue of physical effects that extend the measurement model, as components.
+"""The base of the effect catalogue: the covariates an effect depends on and :class:`Component`.
 
-The base model of :mod:`metrology.core.model` predicts a reading ``d0`` from the sensor's zero
-point and beam direction and the datum plane in the pose's TCS. Each effect is a small
-named component that adds a term to it::
-
-    d = d0(theta) + sum_c f_c(values_c; d0, covariates)                     (mm)
-
-A component has named parameters, a pure :meth:`Component.evaluate` (the additive term,
-``(p, n)`` mm, zero on sensors it does not concern), an analytic :meth:`Component.jacobian`
-(``(p, n, k)``) and, when the term depends on ``d0``, its derivative ``df/dd0`` (so the
-Jacobian of the full model w.r.t. the base parameters is ``(1 + sum df/dd0) J0``).
-A :class:`ExtendedModel` is the base geometry plus a list of components; parameter names are
-``<component>.<sensor>.<param>`` and a clash raises. The same components drive the simulator
-(:mod:`metrology.sim.synth`) and the extended fit (:mod:`metrology.diagnosis.fit`).
-
-Catalogue (formulas with ``gamma`` the beam's incidence angle on the datum, ``N.u`` the cosine
-between the TCS plane normal and the beam, ``x = (2 d0 - lo - hi) / (hi - lo)`` the reading
-normalised over the sensor's range ``[lo, hi]``):
-
-``scale``        ``k d0``                         gain error of the sensor (unitless ``k``)
-``incidence``    ``c tan^2(gamma)``               spot/speckle bias growing with tilt (``c`` mm)
-``drift``        ``r (T - 20 C)`` or ``r t``      thermal zero drift (mm/K or mm/h)
-``nonlinearity`` ``c2 P2(x) + c3 P3(x)``          linearity error: bow and S-shape (mm)
-``plane_form``   ``w(s, t) / (N.u)``, ``w = b_s s + b_t t + b_ss s^2 + b_st s t + b_tt t^2``,
-                 ``(s, t)`` the spot's in-plane coordinates on the datum (tracker frame) over
-                 ``R``: datum tilt, bow and twist (mm at ``R`` from the datum centre)
-``pose_error``   ``e_p / (N.u)``                  TCS position error along the datum normal, one
-                 number per pose (mm; gauge ``sum e_p = 0``)
-``outliers``     ``g_j`` on flagged readings      gross readings (mm), equivalent to dropping them
-
-A constant term is absorbed by the zero point along the beam (an exact degeneracy: moving
-``E`` by ``delta u`` changes every reading by ``-delta``), so components carry no constant.
-The covariates ``gamma``, ``N.u`` and the spot position are evaluated at the base
-calibration and held fixed in the extended fit (their dependence on the tilt parameters is
-second order: a product of two small numbers); ``d0`` is live.
+A registry entry (:data:`metrology.core.effects.REGISTRY`) is one :class:`Component` subclass;
+its class attributes and classmethods are everything the consumers (candidates, advice, plots,
+the simulator, the text report) read about the effect.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+
 import numpy as np
 
+__all__ = ["Covariates", "Component", "VERDICTS", "SECONDS_PER_HOUR", "REFERENCE_TEMP_C"]
 
+#: the two verdicts of a diagnosis that name no catalogued effect
 VERDICTS = ("none", "unexplained")
-
-
 SECONDS_PER_HOUR = 3600.0
-
-
 #: reference temperature of dimensional metrology (ISO 1), deg C
 REFERENCE_TEMP_C = 20.0
 
@@ -146,33 +114,36 @@ class Component:
     #: the term depends on d0
     uses_d0 = False
 
-    # -- the registry entry: every consumer (candidates, advice, figures, simulator, CLI)
-    #    reads these, so adding an effect is one class and one line in ``REGISTRY``
-    #: one candidate per sensor (True) or one for the whole set-up (False)
-    per_sensor = True
-    #: the poses that separate this cause from the others, in words
+    # -- the registry entry (what every consumer reads about the effect) ----------------
+    #: the poses that separate this effect from the others (the diagnosis' advice)
     advice = ""
-    #: the covariate the named-cause figure plots the residual against (a key of
-    #: :func:`metrology.diagnosis.stats.structure`'s variables)
-    plot_variable = "pose_index"
-    #: what ``metro simulate --size`` means for this effect, with its unit
+    #: what ``size`` means for the simulator (:mod:`metrology.sim.synth`)
     size_meaning = ""
+    #: the covariate its residual plot is drawn against (a key of the structure table)
+    plot_key = "pose_index"
+    #: the residual plot draws the fitted term over the base residuals
+    plot_term = True
+    #: the parameters the text report prints (empty: all of them)
+    key_params = ()
+    #: an effect of the set-up (acts on every sensor; the simulator takes no sensor for it)
+    setup = False
 
     @classmethod
-    def candidates(cls, sensor, names, cov, flags=None) -> list:
-        """The candidates of this effect for one sensor (``per_sensor``) or for the set-up
-        (``sensor`` None), with zero values; ``flags`` (p, n) bool are gross readings."""
-        return [cls(() if sensor is None else (sensor,), names=names)]
+    def candidates_for_sensor(cls, i, names, cov) -> list:
+        """The candidates of this effect on sensor ``i`` (values zero); none by default."""
+        return []
 
     @classmethod
-    def hidden(cls, size: float, sensor) -> "Component":
-        """The component a simulator hides for ``size`` (in :attr:`size_meaning`'s unit)."""
-        raise ValueError(f"{cls.name}: the simulator draws it itself, not as a component")
+    def candidates_for_setup(cls, names, cov, flags=None) -> list:
+        """The candidates of this effect that are not per sensor (values zero); none by default.
+        ``flags`` (p, n) bool: readings flagged as gross, or None."""
+        return []
 
-    @property
-    def plot_key(self) -> str:
-        """The covariate of this component's figure (:attr:`plot_variable`)."""
-        return self.plot_variable
+    @classmethod
+    def hidden(cls, i, size) -> "Component":
+        """The component the simulator hides for ``size`` (see :attr:`size_meaning`) on sensor
+        ``i`` (None for an effect of the set-up)."""
+        raise ValueError(cls.name)
 
     def __post_init__(self):
         k = self.n_params

@@ -1,10 +1,14 @@
-"""The extended model: the base geometry plus a list of effect components, with unique parameter names."""
+"""The base geometry plus a list of effect components."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
+
 from metrology.core.effects.base import Covariates
+
+__all__ = ["ExtendedModel"]
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,14 @@
-"""Effects of one sensor: its gain (scale), its linearity, its incidence bias and its drift."""
+"""Effects of one sensor: gain, incidence, drift, linearity (registry entries)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
-from metrology.core.effects.base import Component, REFERENCE_TEMP_C, _sensor_basis
+
+from metrology.core.effects.base import REFERENCE_TEMP_C, Component, _sensor_basis
+
+__all__ = ["Scale", "Incidence", "Drift", "Nonlinearity"]
 
 
 @dataclass(frozen=True)
@@ -12,16 +16,20 @@ class Scale(Component):
     """Gain error ``k``: the reading is ``(1 + k) d0`` (a constant part is a zero shift)."""
 
     name = "scale"
-    advice = "readings over the whole measuring range (a wider spread of stand-off)"
-    plot_variable = "d_mm"
-    size_meaning = "gain error k (unitless)"
-
-    @classmethod
-    def hidden(cls, size, sensor):
-        return cls((sensor,), [size])
     param_names = ("k",)
     param_units = ("1",)
     uses_d0 = True
+    advice = "readings over the whole measuring range (a wider spread of stand-off)"
+    size_meaning = "gain error k (unitless)"
+    plot_key = "d_mm"
+
+    @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return [cls((i,), names=names)]
+
+    @classmethod
+    def hidden(cls, i, size):
+        return cls((i,), [size])
 
     def basis(self, d0, cov):
         return _sensor_basis(d0[..., None], d0.shape[1], self.sensors)
@@ -41,15 +49,19 @@ class Incidence(Component):
     """
 
     name = "incidence"
-    advice = "a wider spread of tilt against the datum (incidence angles)"
-    plot_variable = "incidence_deg"
-    size_meaning = "c mm (bias at 45 deg incidence)"
-
-    @classmethod
-    def hidden(cls, size, sensor):
-        return cls((sensor,), [size])
     param_names = ("c_mm",)
     param_units = ("mm",)
+    advice = "a wider spread of tilt against the datum (incidence angles)"
+    size_meaning = "c mm (bias at 45 deg incidence)"
+    plot_key = "incidence_deg"
+
+    @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return [cls((i,), names=names)]
+
+    @classmethod
+    def hidden(cls, i, size):
+        return cls((i,), [size])
 
     def basis(self, d0, cov):
         t2 = 1.0 / cov.cos_inc**2 - 1.0
@@ -79,23 +91,23 @@ class Drift(Component):
     advice = "poses repeated cold and warm, interleaved rather than in one sweep"
     size_meaning = "rate mm/K (temperature)"
 
+    @property
+    def plot_key(self):
+        return "temp_c" if self.variable == "temp" else "time_h"
+
     @classmethod
-    def candidates(cls, sensor, names, cov, flags=None):
+    def candidates_for_sensor(cls, i, names, cov):
         # the reference is fixed once per data set (every fold evaluates against it) at the
         # run's mean, where the rate is least correlated with the zero point
         out = []
         if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
-            out.append(cls((sensor,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
-        out.append(cls((sensor,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
+            out.append(cls((i,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
+        out.append(cls((i,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
         return out
 
     @classmethod
-    def hidden(cls, size, sensor):
-        return cls((sensor,), [size], variable="temp")
-
-    @property
-    def plot_key(self):
-        return "temp_c" if self.variable == "temp" else "time_h"
+    def hidden(cls, i, size):
+        return cls((i,), [size], variable="temp")
 
     @property
     def param_names(self):
@@ -148,16 +160,20 @@ class Nonlinearity(Component):
     """
 
     name = "nonlinearity"
-    advice = "readings over the whole measuring range (a wider spread of stand-off)"
-    plot_variable = "d_mm"
-    size_meaning = "c3 mm at the range end (c2 = c3/2)"
-
-    @classmethod
-    def hidden(cls, size, sensor):
-        return cls((sensor,), [0.5 * size, size])
     param_names = ("c2_mm", "c3_mm")
     param_units = ("mm", "mm")
     uses_d0 = True
+    advice = "readings over the whole measuring range (a wider spread of stand-off)"
+    size_meaning = "c3 mm at the range end (c2 = c3/2)"
+    plot_key = "d_mm"
+
+    @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return [cls((i,), names=names)]
+
+    @classmethod
+    def hidden(cls, i, size):
+        return cls((i,), [0.5 * size, size])
 
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
@@ -172,3 +188,4 @@ class Nonlinearity(Component):
         x, dx = self._x(d0, cov)
         deriv = (values[0] * 3 * x + values[1] * 0.5 * (15 * x**2 - 3)) * dx[None, :]
         return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)
+

@@ -1,10 +1,14 @@
-"""Effects of the set-up, common to every sensor of a pose: the datum's form, the tracker's pose error, gross readings."""
+"""Effects of the set-up and of single readings: datum form, pose error, outliers (registry entries)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+
 import numpy as np
+
 from metrology.core.effects.base import Component
+
+__all__ = ["PlaneForm", "PoseError", "Outliers"]
 
 
 @dataclass(frozen=True)
@@ -22,16 +26,22 @@ class PlaneForm(Component):
     radius_mm: float = 100.0
 
     name = "plane_form"
-    per_sensor = False
-    advice = "spots over the whole datum, each region seen at several tilts"
-    plot_variable = "spot_s_mm"
-    size_meaning = "bow b_ss mm at 100 mm (b_st = 0.3, b_tt = -0.5 of it)"
-
-    @classmethod
-    def hidden(cls, size, sensor):
-        return cls((), [0.0, 0.0, size, 0.3 * size, -0.5 * size])
     param_names = ("b_s_mm", "b_t_mm", "b_ss_mm", "b_st_mm", "b_tt_mm")
     param_units = ("mm",) * 5
+    advice = "spots over the whole datum, each region seen at several tilts"
+    size_meaning = "bow b_ss mm at 100 mm (b_st = 0.3, b_tt = -0.5 of it)"
+    plot_key = "spot_s_mm"
+    #: the quadratic part (bow, saddle, twist): what the datum cloud is compared on
+    key_params = ("b_ss_mm", "b_st_mm", "b_tt_mm")
+    setup = True
+
+    @classmethod
+    def candidates_for_setup(cls, names, cov, flags=None):
+        return [cls((), names=names)]
+
+    @classmethod
+    def hidden(cls, i, size):
+        return cls((), [0.0, 0.0, size, 0.3 * size, -0.5 * size])
 
     def monomials(self, st_mm):
         """``(..., 5)``: ``s, t, s^2, s t, t^2`` at in-plane positions ``st_mm (..., 2)`` mm."""
@@ -99,14 +109,15 @@ class PoseError(Component):
     n_poses: int = 0
 
     name = "pose_error"
-    per_sensor = False
+    per_pose = True
     advice = "repeated poses, or more sensors per pose"
     size_meaning = "1-sigma TCS position error per axis, mm"
+    plot_term = False
+    setup = True
 
     @classmethod
-    def candidates(cls, sensor, names, cov, flags=None):
+    def candidates_for_setup(cls, names, cov, flags=None):
         return [cls((), names=names, n_poses=cov.n_poses)]
-    per_pose = True
     #: weight of the gauge row (per mm of sum), large against 1/sigma
     GAUGE_WEIGHT = 1e4
 
@@ -147,12 +158,12 @@ class Outliers(Component):
     flags: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
 
     name = "outliers"
-    per_sensor = False
     advice = "the flagged poses repeated"
     size_meaning = "3 gross readings of +-size mm"
+    plot_term = False
 
     @classmethod
-    def candidates(cls, sensor, names, cov, flags=None):
+    def candidates_for_setup(cls, names, cov, flags=None):
         if flags is None or not np.any(flags):
             return []
         return [cls(tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), names=names, flags=flags)]
@@ -178,3 +189,4 @@ class Outliers(Component):
         B = np.zeros((p, n, len(cells)))
         B[cells[:, 0], cells[:, 1], np.arange(len(cells))] = 1.0
         return B
+
