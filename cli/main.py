@@ -11,10 +11,33 @@ import typer
 app = typer.Typer(
     name="metro",
     help="Metrology for robotic drilling: datum planes, normal-sensor calibration, normals.",
-    no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("metro")
+        except PackageNotFoundError:  # run from a source tree that is not installed
+            v = "unknown (not installed)"
+        typer.echo(f"metro {v}")
+        raise typer.Exit()
+
+
+@app.callback(invoke_without_command=True)
+def _root(
+    ctx: typer.Context,
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print metro's version and exit."),
+) -> None:
+    """Metrology for robotic drilling: datum planes, normal-sensor calibration, normals."""
+    if ctx.invoked_subcommand is None:  # `metro` alone: the help, and success
+        typer.echo(ctx.get_help())
+        raise typer.Exit(0)
 
 from . import cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_normals  # noqa: E402
 

@@ -88,3 +88,13 @@ def test_demo_never_writes_into_a_used_folder(tmp_path):
 def test_demo_without_fixtures_is_one_line_exit_2(tmp_path):
     r = runner.invoke(app, ["demo", "--fixtures", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
     assert r.exit_code == 2 and "fixtures not found" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_version_help_and_bare_metro():
+    r = runner.invoke(app, ["--version"])
+    assert r.exit_code == 0 and r.output.startswith("metro ")
+    for args in (["-h"], ["--help"], []):
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0 and "fit-plane" in r.output and "calibrate" in r.output, args
+    r = runner.invoke(app, ["calibrate", "-h"])
+    assert r.exit_code == 0 and "--plane" in r.output
