@@ -41,10 +41,12 @@ def register(app: typer.Typer) -> None:
         import math
 
         from metrology.jobs.calibrate import calibrate_files
-        from metrology.report.calibration import calibration_text
+        from metrology.report.calibration import calibration_text, calibration_warnings
 
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
                                  out=out, plot_dir=plot)
+        for w in calibration_warnings(report):
+            typer.echo(f"warning: {w}", err=True)
         if json_out:
             echo_json(report.to_dict())
         else:

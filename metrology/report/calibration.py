@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from metrology.core.tolerances import CORRELATION_REPORT
+
 from metrology.calibration.calibrate import CalibrationReport
 from metrology.calibration.convergence import batch_convergence, residual_table
 from metrology.calibration.identifiability import sigma_words
@@ -64,17 +66,69 @@ def calibration_text(report: CalibrationReport) -> str:
                                                   zip(("e1", "e2"), e["tilt_deg"], e["tilt_stderr_deg"]))
                      + f" deg (total {e['tilt_total_deg']:.4f} deg)")
         lines.append("  corrected    zero " + _vec(c["zero_mm"], 4) + " mm, direction " + _vec(c["direction"], 6))
-        for r in s["correlations"]:
-            lines.append(f"  correlation  {r['a']}-{r['b']} {r['r']:+.3f}")
+        if s["correlations"]:
+            lines.append(f"  correlations above {CORRELATION_REPORT:g}: "
+                         + ", ".join(f"{r['a']}-{r['b']} {r['r']:+.2f}" for r in s["correlations"]))
     lines.append(f"unidentified: {d['unidentified']}")
     for ident in report.identifiability:
         sv = " ".join(f"{v:.2g}" for v in ident.chart_singular)
         lines.append(f"{ident.name}: chart singular values (relative) {sv}; raw null direction: {ident.raw_null_words}")
         lines.append(f"  least determined: {ident.words[-1]} (1 sigma {sigma_words(ident.combination_sigma[-1])}; "
                      f"moves the measured normal by {np.rad2deg(ident.normal_effect[-1]):.2g} deg RMS)")
-    for w in report.warnings:
-        lines.append(f"warning: {w}")
+    lines += precision_advice(report) + noise_advice(report)
     return "\n".join(lines)
+
+
+def noise_advice(report: CalibrationReport, alpha: float = 1e-3) -> list:
+    """A pointer to ``metro diagnose`` when the residuals exceed the stated noise: chi-square of
+    each sensor's residuals against ``noise_mm`` (dof = readings - 5), one-sided at ``alpha``."""
+    from scipy import stats
+
+    d = report.to_dict()
+    high = []
+    for s in d["sensors"]:
+        dof = s["n_readings"] - 5
+        if dof > 0 and s["noise_mm"] > 0:
+            chi2 = s["n_readings"] * (s["residual_rms_mm"] / s["noise_mm"]) ** 2
+            if stats.chi2.sf(chi2, dof) < alpha:
+                high.append(f"{s['name']} {1e3 * s['residual_rms_mm']:.1f} um")
+    if not high:
+        return []
+    return [f"residuals above the stated noise ({', '.join(high)}; chi-square p < {alpha:g}): the model misses "
+            "something. Run `metro diagnose` on the same files to name it."]
+
+
+def precision_advice(report: CalibrationReport) -> list:
+    """What to do when the poses leave the parameters less precise than the target: one line
+    for all sensors (the precision reached, and the pose spread or count that would reach the
+    target). Advice, not a failure: the calibration itself is valid."""
+    short = [ident for ident in report.identifiability if ident.fix]
+    if not short:
+        return []
+    pse = np.array([ident.predicted_stderr for ident in short])
+    z, tilt = pse[:, :3], np.rad2deg(pse[:, 3:])
+    fix = short[0].fix
+    target = fix["target"]
+    ways = [ident.fix["within_range"] for ident in short if ident.fix.get("within_range")]
+    lines = [f"precision: 1 sigma up to {np.nanmax(z):.3g} mm (zero points) and {np.nanmax(tilt):.3g} deg (beams) on "
+             f"{', '.join(ident.name for ident in short)}, against a target of {target['zero_mm']:g} mm / "
+             f"{target['tilt_deg']:g} deg (--target-mm, --target-deg)."]
+    now = f"now tilts up to {short[0].tilt_max_deg:.1f} deg, stand-off spread {short[0].standoff_spread_mm:.1f} mm"
+    more = max((ident.fix["poses_needed_at_current_spread"] or 0) for ident in short)
+    if ways:
+        lines.append(f"  to reach it: poses tilted up to {max(w['tilt_max_deg'] for w in ways):g} deg with a stand-off "
+                     f"spread of {max(w['standoff_spread_mm'] for w in ways):g} mm ({now}), or about {more} poses "
+                     "at the current spread.")
+    elif more:
+        lines.append(f"  to reach it: about {more} poses at the current spread ({now}); see --json for the scan.")
+    return lines
+
+
+def calibration_warnings(report: CalibrationReport) -> list:
+    """What the poses cannot determine at all (rank-deficient or weak combinations): warnings
+    for stderr. The precision advice is in :func:`precision_advice`."""
+    return [w for ident in report.identifiability for w in ident.warnings
+            if "not determined" in w or "weakly determined" in w]
 
 
 def validation_text(report: ValidationReport) -> str:

@@ -127,6 +127,21 @@ def test_identifiability_flags_a_pose_set_without_tilt(report):
 # the command line
 
 
+def test_calibrate_text_advises_and_warns_on_stderr_only():
+    """The report says what to do (the precision against the target and how to reach it; the
+    residuals above the stated noise point to diagnose) and prints no warning on stdout."""
+    r = runner.invoke(app, ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL)])
+    assert r.exit_code == 0, r.output
+    assert "warning" not in r.stdout
+    assert "precision: 1 sigma up to" in r.stdout and "to reach it: poses tilted up to" in r.stdout
+    # the fixture carries tracker pose noise: 6-8 um residuals against 3 um stated
+    assert "metro diagnose" in r.stdout
+    # a target the poses already meet: no precision advice
+    r = runner.invoke(app, ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL),
+                            "--target-mm", "1", "--target-deg", "1"])
+    assert r.exit_code == 0 and "precision:" not in r.stdout
+
+
 def test_calibrate_cli_json_and_outputs(tmp_path):
     out = tmp_path / "calibrated.toml"
     r = runner.invoke(app, ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL), "--json",
