@@ -73,6 +73,7 @@ class PlaneFit:
     window_k: float = math.inf
     source: str = ""
     format: str = ""
+    threshold_ran_away: bool = False
 
     @property
     def inlier_ratio(self) -> float:
@@ -134,7 +135,10 @@ class PlaneFit:
             "n_inliers": int(self.n_inliers),
             "inlier_ratio": float(self.inlier_ratio),
             "threshold_mm": float(self.threshold),
-            "threshold_source": f"auto: {INLIER_K_SIGMA:g} x robust sigma" if self.threshold_auto else "user",
+            "threshold_source": ("user" if not self.threshold_auto else
+                                 f"auto: {INLIER_K_SIGMA:g} x robust sigma" if not self.threshold_ran_away else
+                                 f"auto: {INLIER_K_SIGMA:g} x the least-quantile sigma of the densest plane (the refined "
+                                 "threshold ran away: more than one surface near the datum)"),
             "noise_sigma_mm": num(self.noise_sigma),
             "residual_dof": int(self.n_inliers - 3),
             "window_sigmas": num(self.window_k),

@@ -103,9 +103,19 @@ def _ransac(sub, threshold, rng):
 
 
 def _refine(sub, normal, offset, threshold, auto):
-    """Alternate inlier selection and TLS on the subsample (and, if ``auto``, the threshold)."""
+    """Alternate inlier selection and TLS on the subsample (and, if ``auto``, the threshold).
+
+    Returns ``(normal, offset, threshold, ran_away)``. With ``auto`` the threshold starts
+    above the robust scale and settles downwards on a single plane; if it grows past its
+    start instead, the band holds more than one surface (several planes, objects on the
+    datum) and ``ran_away`` is True: the caller keeps the robust scale of the dominant
+    plane's band rather than a threshold that swallows the scene.
+    """
     g = truncated_normal_std(INLIER_K_SIGMA)
     mask = None
+    # the least-quantile scale is reliable from LQS_POINTS points on; below, it runs low and
+    # the threshold must be free to grow (a 20-point cloud has no second surface to run over)
+    cap = threshold if len(sub) >= LQS_POINTS else math.inf
     for _ in range(REFINE_MAX):
         new = np.abs(sub @ normal + offset) <= threshold
         k = int(new.sum())
@@ -118,15 +128,55 @@ def _refine(sub, normal, offset, threshold, auto):
             r = sub[new] @ normal + offset
             sigma = math.sqrt(float(r @ r) / max(k - 3, 1)) / g
             new_t = max(INLIER_K_SIGMA * sigma, THRESHOLD_FLOOR_MM)
+            if new_t > cap:
+                return normal, offset, threshold, True
         # the same inliers give the same plane and threshold: a fixed point
         settled = mask is not None and np.array_equal(new, mask)
         mask, threshold = new, new_t
         if settled:
             break
-    return normal, offset, threshold
+    return normal, offset, threshold, False
+
+
+class NoDatumPlane(ValueError):
+    """No plane holds enough of the cloud, or the best one is not thin (a ``ValueError``)."""
+
+
+#: on a refused automatic fit, thresholds tried below the automatic one: halving, this many times
+SUGGEST_STEPS = 12
+#: a suggested threshold must hold a Gaussian band: its window is at least this many noise sigmas
+#: (residuals filling the window evenly, as other surfaces do, give about 1.7)
+SUGGEST_WINDOW_K = 2.5
 
 
 def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
+    """Fit the datum plane to a cloud with gross outliers (see :func:`_fit_plane`).
+
+    When the automatic threshold finds no datum plane (a scene with several surfaces), the
+    thresholds below it are tried, halving, and the refusal names the largest one that fits
+    the densest plane: ``--threshold-mm X`` then works, and says what it found.
+    """
+    try:
+        return _fit_plane(points, threshold_mm, seed)
+    except NoDatumPlane as exc:
+        if threshold_mm is not None or exc.args[1:] == ():
+            raise
+        start = exc.args[1]
+        for k in range(1, SUGGEST_STEPS + 1):
+            t = start / 2**k
+            try:
+                fit = _fit_plane(points, t, seed)
+            except ValueError:
+                continue
+            if not fit.window_k >= SUGGEST_WINDOW_K:  # the band is filled by other surfaces, not noise
+                continue
+            raise NoDatumPlane(f"{exc.args[0]}; --threshold-mm {t:.3g} fits the densest plane ({fit.n_inliers} of "
+                               f"{fit.n_points} points, noise {fit.noise_sigma:.3g} mm): pass it, or crop the cloud "
+                               "to the datum") from None
+        raise NoDatumPlane(exc.args[0]) from None
+
+
+def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
     """Fit the datum plane to a cloud with gross outliers.
 
     Parameters
@@ -193,7 +243,13 @@ def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
         # fixed point, and does not collapse onto a thin subset when the first scale
         # was low (as the least-quantile scale of a small cloud is)
         threshold *= REFINE_START
-    normal, offset, threshold = _refine(sub, normal, offset, threshold, auto)
+    lqs_threshold = threshold / REFINE_START if auto else threshold
+    normal, offset, threshold, ran_away = _refine(sub, normal, offset, threshold, auto)
+    if ran_away:
+        # several surfaces near the datum: the dominant plane's band (its least-quantile
+        # scale) sets the threshold, fixed; the refinement only re-selects the plane
+        threshold = lqs_threshold
+        normal, offset, threshold, _ = _refine(sub, normal, offset, threshold, False)
     selection = np.append(normal, offset)
 
     # the selection frame: origin o (subsample centroid), axes (e_u, e_v, normal); the
@@ -253,15 +309,16 @@ def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
         raise ValueError(f"the {cnt} inliers are collinear (or coincident): no unique plane")
     ratio = cnt / m
     if ratio < MIN_INLIER_RATIO:
-        raise ValueError(
+        raise NoDatumPlane(
             f"no datum plane: the best plane holds {cnt} of {m} points ({ratio:.1%}) within {threshold:.3g} mm, "
-            f"need at least {MIN_INLIER_RATIO:.0%}; the cloud is all outliers (crop it, or set the threshold)"
+            f"need at least {MIN_INLIER_RATIO:.0%}; the cloud is all outliers (crop it to the datum, or set "
+            "--threshold-mm)", *([threshold] if auto else [])
         )
     thick, wide = math.sqrt(evals[0] / cnt), math.sqrt(evals[1] / cnt)
     if thick > MAX_THICKNESS_RATIO * wide:
-        raise ValueError(
+        raise NoDatumPlane(
             f"no datum plane: the cloud is {thick:.3g} mm thick (RMS about its best plane) for {wide:.3g} mm wide; "
-            "it is all outliers, or not a plate"
+            "it is all outliers, or not a plate", *([threshold] if auto else [])
         )
     centroid = o + R1 @ mean
     vecs = R1 @ evecs  # eigenvectors in the cloud frame, ascending eigenvalues
@@ -311,6 +368,7 @@ def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
         n_inliers=cnt,
         threshold=float(threshold),
         threshold_auto=auto,
+        threshold_ran_away=ran_away,
         noise_sigma=float(math.sqrt(sigma2)) if dof > 0 else math.nan,
         rms=float(math.sqrt(rss / cnt)),
         residual_min=rmin,

@@ -149,3 +149,35 @@ def test_two_runs_identical_bytes(tmp_path):
     assert a == b
     c = fit_plane_robust(pts, seed=5)
     assert normal_angle_deg(c.plane.normal, fit_plane_robust(pts, seed=4).plane.normal) < 1e-5
+
+
+def _cluttered_floor(rng, floor_fraction, clutter_mm, noise=0.3, n=20000):
+    """A floor (z = 0, noise 0.3 mm) under objects whose points thin out with height
+    (exponential, scale ``clutter_mm``): a scene of several surfaces, not a plate alone."""
+    k0 = int(floor_fraction * n)
+    floor = np.column_stack([rng.uniform(0, 1000, k0), rng.uniform(0, 1000, k0), rng.normal(0, noise, k0)])
+    k1 = n - k0
+    h = rng.exponential(clutter_mm, k1) + rng.normal(0, noise, k1)
+    return np.vstack([floor, np.column_stack([rng.uniform(0, 1000, k1), rng.uniform(0, 1000, k1), h])])
+
+
+def test_automatic_threshold_does_not_run_away_over_other_surfaces():
+    """30 % floor under clutter: the refined threshold would grow over the clutter (the old
+    code refused: "not a plate"); it keeps the densest plane's scale and says so."""
+    pts = _cluttered_floor(np.random.default_rng(5), 0.3, 30.0)
+    fit = fit_plane_robust(pts, seed=0)
+    assert fit.threshold_ran_away and "ran away" in fit.to_dict()["threshold_source"]
+    assert abs(fit.plane.normal[2]) > np.cos(np.radians(0.05)) and abs(fit.plane.offset) < 2.0
+    assert fit.threshold < 10.0
+
+
+def test_refusal_names_a_threshold_that_works():
+    """20 % floor: no automatic datum; the message names a --threshold-mm that then fits the floor."""
+    import re
+
+    pts = _cluttered_floor(np.random.default_rng(5), 0.2, 30.0)
+    with pytest.raises(ValueError, match=r"--threshold-mm [0-9.]+ fits the densest plane") as info:
+        fit_plane_robust(pts, seed=0)
+    t = float(re.search(r"--threshold-mm ([0-9.e-]+) fits", str(info.value)).group(1))
+    fit = fit_plane_robust(pts, threshold_mm=t, seed=0)
+    assert abs(fit.plane.normal[2]) > np.cos(np.radians(0.05)) and abs(fit.plane.offset) < 2.0
