@@ -8,7 +8,7 @@ outliers up to 5 mm, a random rigid transform; seeded) is written as a binary PL
 of ``--repeat`` runs, the candidates run in turn so that load from other processes on
 the machine hits them alike):
 
-- ``metro``: :func:`metrology.planefit.fit_plane_robust` (subsample RANSAC, refinement,
+- ``metro``: :func:`metrology.datum.fit_plane_robust` (subsample RANSAC, refinement,
   one pass over all points for the TLS plane and the form, one for the residual range,
   the uncertainty);
 - ``o3d``: Open3D's ``segment_plane`` alone on all points (``ransac_n=3``,
@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 
 from metrology.io._o3d import open3d  # noqa: E402
 from metrology.io.clouds import read_cloud  # noqa: E402
-from metrology.datum.robust import fit_plane_robust  # noqa: E402
+from metrology.datum import fit_plane_robust  # noqa: E402
 
 MEASURE = (
     "import resource, subprocess, sys, time\n"

@@ -41,13 +41,14 @@ def register(app: typer.Typer) -> None:
         import math
 
         from metrology.jobs.calibrate import calibrate_files
+        from metrology.report.calibration import calibration_text
 
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
                                  out=out, plot_dir=plot)
         if json_out:
             echo_json(report.to_dict())
         else:
-            typer.echo(report.text())
+            typer.echo(calibration_text(report))
 
     @app.command("validate")
     @guarded
@@ -62,9 +63,10 @@ def register(app: typer.Typer) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
         from metrology.jobs.calibrate import validate_files
+        from metrology.report.calibration import validation_text
 
         report = validate_files(export, plane, layout, layout_before, plot=plot)
         if json_out:
             echo_json(report.to_dict())
         else:
-            typer.echo(report.text())
+            typer.echo(validation_text(report))

@@ -10,8 +10,7 @@ from metrology.io.layout import load_layout, save_layout
 from metrology.core.model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
 from metrology.core.normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
 from metrology.core.plane import Plane, fit_plane_tls
-from metrology.datum.result import PlaneFit
-from metrology.datum.robust import fit_plane_robust
+from metrology.datum import PlaneFit, fit_plane_robust
 from metrology.jobs.fit_plane import fit_plane_file
 from metrology.io.clouds import read_cloud
 from metrology.calibration.calibrate import CalibrationReport, calibrate_dataset

@@ -86,6 +86,15 @@ def test_every_relative_link_resolves(page):
     assert not missing, f"{page.name}: broken links {missing}"
 
 
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_quoted_repository_path_exists(page):
+    """Paths in backticks that start at a top-level folder of the repository exist."""
+    tops = ("metrology/", "cli/", "tests/", "benchmarks/", "fixtures/", "docs/")
+    paths = {p for p in re.findall(r"`([A-Za-z0-9_./-]+)`", page.read_text()) if p.startswith(tops)}
+    missing = sorted(p for p in paths if not (ROOT / p).exists())
+    assert not missing, f"{page.name} quotes paths that do not exist: {missing}"
+
+
 def test_the_check_sees_a_wrong_option():
     """The command check can fail: a made-up option is reported."""
     commands = _commands()

@@ -34,7 +34,7 @@ def load_plane(path):
     if path.suffix.lower() == ".json":
         return Plane.from_json(path), None
     from metrology.io.clouds import read_cloud
-    from metrology.datum.robust import fit_plane_robust
+    from metrology.datum import fit_plane_robust
 
     points = read_cloud(path)
     try:

@@ -351,7 +351,7 @@ def identifiability(nominal: SensorLayout, layout: SensorLayout, theta, obs: Obs
             if np.all(np.isfinite(pse)):
                 warnings.append(f"{name}: 1 sigma above target ({target[0]:g} mm, {np.rad2deg(target[1]):g} deg): "
                                 f"{', '.join(bad)}; least determined: {words[-1]}, 1 sigma "
-                                f"{_sigma_words(comb_sigma[-1])}, which moves the measured normal by "
+                                f"{sigma_words(comb_sigma[-1])}, which moves the measured normal by "
                                 f"{np.rad2deg(effect[-1]):.2g} deg RMS")
             in_range = _find_fix(layout, nominal, theta[i], i, obs, spots, sigma_mm[i], target, True)
             free = _find_fix(layout, nominal, theta[i], i, obs, spots, sigma_mm[i], target, False)
@@ -367,7 +367,8 @@ def identifiability(nominal: SensorLayout, layout: SensorLayout, theta, obs: Obs
     return out
 
 
-def _sigma_words(v):
+def sigma_words(v):
+    """``v`` (5,) float, mm/rad, a chart-parameter vector, as "<zero norm> mm and <tilt norm> deg"."""
     return f"{np.linalg.norm(v[:3]):.3g} mm and {np.rad2deg(np.linalg.norm(v[3:])):.3g} deg"
 
 

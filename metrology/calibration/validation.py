@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import numpy as np
 from metrology.calibration.dataset import Dataset, check
+from metrology.core.stats import describe
 
 
 @dataclass(frozen=True)
@@ -29,11 +30,9 @@ class ValidationReport:
     sources: dict = field(default_factory=dict)
 
     def stats_deg(self, k: int) -> dict:
-        """max / mean / std (sample, ddof=1) of the deviation of layout ``k``, deg."""
+        """max / mean / std (sample, ddof=1) of the deviation of layout ``k``, deg, and the poses counted."""
         a = np.rad2deg(self.deviation[k])
-        a = a[np.isfinite(a)]
-        return {"max_deg": float(np.max(a)), "mean_deg": float(np.mean(a)),
-                "std_deg": float(np.std(a, ddof=1)) if len(a) > 1 else 0.0, "n_poses": int(len(a))}
+        return {**describe(a), "n_poses": int(np.isfinite(a).sum())}
 
     def to_dict(self) -> dict:
         return {
@@ -44,21 +43,6 @@ class ValidationReport:
             "pose_id": list(self.pose_id),
             "n_readings": self.n_readings,
         }
-
-    def text(self) -> str:
-        w = max(14, *(len(lab) for lab in self.labels))
-        lines = [f"{'layout':<{w}} {'max [deg]':>10} {'mean [deg]':>10} {'std [deg]':>10} {'poses':>6}  file"]
-        for k, lab in enumerate(self.labels):
-            s = self.stats_deg(k)
-            lines.append(f"{lab:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
-                         f"{self.sources.get(lab, '')}")
-        partial = int(np.sum((self.n_readings < self.n_sensors) & (self.n_readings >= 3)))
-        none = int(np.sum(self.n_readings < 3))
-        if none:
-            lines.append(f"{none} pose(s) with fewer than 3 readings: no normal, left out")
-        if partial:
-            lines.append(f"{partial} pose(s) with a missing reading: normal from the least-squares plane of the rest")
-        return "\n".join(lines)
 
 
 def validate(dataset: Dataset, layouts: dict, sources=None) -> ValidationReport:

@@ -12,9 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.core.model import direction_basis
 from metrology.core.tolerances import COLLINEAR_RTOL
 
-__all__ = ["Plane", "fit_plane_tls", "canonical_sign"]
+__all__ = ["Plane", "fit_plane_tls", "principal_axes", "plane_basis", "canonical_sign"]
 
 
 def canonical_sign(normal, offset):
@@ -116,9 +117,34 @@ def fit_plane_tls(points):
     return plane, cov, rms
 
 
+def principal_axes(points):
+    """Total-least-squares plane of ``points`` by the eigen-decomposition of their scatter.
+
+    The same plane as :func:`fit_plane_tls` (which takes the SVD, better conditioned for a
+    few points, and adds the covariance); this form returns the scatter's eigenvalues,
+    which the robust datum fit needs, and no checks.
+
+    Parameters
+    ----------
+    points : (k, 3) float, mm, any frame
+
+    Returns
+    -------
+    centroid : (3,) float, mm
+    normal : (3,) float, unit
+        Eigenvector of the smallest eigenvalue (sign as ``numpy.linalg.eigh`` returns it).
+    evals : (3,) float, mm^2
+        Eigenvalues of the scatter matrix ``sum (p - c)(p - c)^T``, ascending.
+    evecs : (3, 3) float
+        The eigenvectors as columns, in the order of ``evals``.
+    """
+    c = points.mean(axis=0)
+    q = points - c
+    evals, evecs = np.linalg.eigh(q.T @ q)
+    return c, evecs[:, 0], evals, evecs
+
+
 def plane_basis(normal):
     """Two unit vectors ``(2, 3)`` spanning the plane perpendicular to ``normal (3,)``
     (:func:`metrology.core.model.direction_basis` of one vector)."""
-    from metrology.core.model import direction_basis
-
     return direction_basis(np.asarray(normal, float)[None])[0]

@@ -1,29 +1,85 @@
-"""The datum's form beyond the plane: a quadratic in the plane's own axes, tested against the noise (F-test)."""
+"""The datum's form: a quadratic surface fitted to the inliers' residuals, with an F-test
+of its three quadratic terms against the plane."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
+
 import numpy as np
-from metrology.core.tolerances import COLLINEAR_RTOL
-from metrology.datum.result import DatumForm
+
+__all__ = ["DatumForm", "fit_form", "quadratic_in", "FORM_ALPHA"]
+
+#: significance level of the F-test of the quadratic form (unitless)
+FORM_ALPHA = 0.01
 
 
-def _tls(points):
-    """Centroid ``(3,)``, normal ``(3,)`` and scatter eigenvalues/vectors of ``points`` ``(k, 3)``."""
-    c = points.mean(axis=0)
-    q = points - c
-    evals, evecs = np.linalg.eigh(q.T @ q)
-    return c, evecs[:, 0], evals, evecs
+@dataclass(frozen=True)
+class DatumForm:
+    """The quadratic form of the datum over its best-fit plane.
+
+    ``r(u, v) = c0 + cu u + cv v + cuu u^2 + cuv u v + cvv v^2``, ``r`` the signed
+    residual (mm, positive on the normal's side), ``(u, v)`` mm along ``axes`` from
+    ``origin``.
+
+    Attributes
+    ----------
+    origin : (3,) float, mm, cloud frame
+        The inliers' centroid.
+    axes : (2, 3) float, unit, cloud frame
+        ``u`` (largest in-plane spread) and ``v``; ``(u, v, normal)`` is right-handed.
+    coefficients : (6,) float
+        ``c0`` mm, ``cu, cv`` unitless, ``cuu, cuv, cvv`` 1/mm.
+    stderr : (6,) float
+        1-sigma of ``coefficients``, same units.
+    f_statistic : float
+        F of the three quadratic terms against the plane, ``(3, n - 6)`` degrees of freedom.
+    p_value : float
+        Probability of an F this large from a flat datum with Gaussian noise.
+    pv : float, mm
+        Peak-to-valley of the fitted quadratic surface over the (subsampled) inliers.
+    """
+
+    origin: np.ndarray
+    axes: np.ndarray
+    coefficients: np.ndarray
+    stderr: np.ndarray
+    f_statistic: float
+    p_value: float
+    dof: tuple
+    pv: float
+    alpha: float = FORM_ALPHA
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.p_value < self.alpha)
+
+    def evaluate(self, u, v):
+        """Fitted residual (mm) at in-plane coordinates ``u, v`` (mm, any matching shapes)."""
+        c = self.coefficients
+        return c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v
+
+    def to_dict(self) -> dict:
+        c, s = self.coefficients, self.stderr
+        names = ("c0_mm", "cu", "cv", "cuu_per_mm", "cuv_per_mm", "cvv_per_mm")
+        return {
+            "model": "r = c0 + cu*u + cv*v + cuu*u^2 + cuv*u*v + cvv*v^2 (r, u, v in mm)",
+            "origin": [float(x) for x in self.origin],
+            "u_axis": [float(x) for x in self.axes[0]],
+            "v_axis": [float(x) for x in self.axes[1]],
+            "coefficients": {k: float(x) for k, x in zip(names, c)},
+            "sigma": {k: float(x) for k, x in zip(names, s)},
+            "f_statistic": float(self.f_statistic),
+            "dof": [int(self.dof[0]), int(self.dof[1])],
+            "p_value": float(self.p_value),
+            "alpha": float(self.alpha),
+            "significant": self.significant,
+            "pv_mm": float(self.pv),
+        }
 
 
-def _collinear(evals) -> bool:
-    """Scatter eigenvalues (ascending) of a collinear or coincident set (in singular values)."""
-    s = np.sqrt(np.clip(evals, 0.0, None))
-    return bool(s[1] <= COLLINEAR_RTOL * max(s[2], 1e-300))
 
-
-def _quadratic_in(c, A, b):
+def quadratic_in(c, A, b):
     """Coefficients ``(6,)`` of ``q(A x + b)`` for the quadratic ``q`` with coefficients ``c``
     ``(c0, cu, cv, cuu, cuv, cvv)``; ``A`` (2, 2), ``b`` (2,)."""
     H = np.array([[c[3], 0.5 * c[4]], [0.5 * c[4], c[5]]])
@@ -34,7 +90,7 @@ def _quadratic_in(c, A, b):
     return np.array([c0, gn[0], gn[1], Hn[0, 0], 2 * Hn[0, 1], Hn[1, 1]])
 
 
-def _form(G7, lin, n, length, shift, centroid, axes, sub, selection, threshold):
+def fit_form(G7, lin, n, length, shift, centroid, axes, sub, selection, threshold):
     """Quadratic form of the residuals from the Gram matrix ``G7`` of
     ``[1, u, v, u^2, u v, v^2, w]`` (``u, v`` scaled by ``length``, selection frame).
 
@@ -73,7 +129,7 @@ def _form(G7, lin, n, length, shift, centroid, axes, sub, selection, threshold):
     cov = np.linalg.inv(G) * s2 * np.outer(unscale, unscale)
     # from the selection frame to the centroid and the final axes
     A, b = shift
-    T = np.column_stack([_quadratic_in(e, A, b) for e in np.eye(6)])
+    T = np.column_stack([quadratic_in(e, A, b) for e in np.eye(6)])
     coef = T @ coef
     cov = T @ cov @ T.T
     form = DatumForm(
@@ -90,3 +146,4 @@ def _form(G7, lin, n, length, shift, centroid, axes, sub, selection, threshold):
     uv = (inl - centroid) @ axes.T
     z = form.evaluate(uv[:, 0], uv[:, 1])
     return replace(form, pv=float(z.max() - z.min()) if len(z) else 0.0)
+

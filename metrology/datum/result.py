@@ -1,118 +1,19 @@
-"""The result of a datum-plane fit: the plane, its covariance, the inlier statistics and the form test."""
+"""The result of the robust datum-plane fit: :class:`PlaneFit`."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
 import numpy as np
+
 from metrology.core.plane import Plane
+from metrology.datum.form import DatumForm
+from metrology.datum.scale import INLIER_K_SIGMA, truncated_normal_std
 
-
-#: default inlier threshold, in robust standard deviations of the residuals (unitless)
-INLIER_K_SIGMA = 3.0
-
-#: significance level of the F-test of the quadratic form (unitless)
-FORM_ALPHA = 0.01
-
+__all__ = ["PlaneFit", "SIGN_CONVENTION"]
 
 SIGN_CONVENTION = "A^2 + B^2 + C^2 = 1 and D <= 0: the normal points from the frame origin towards the plane"
-
-
-def truncated_normal_std(k: float) -> float:
-    """Standard deviation of a standard normal variable truncated to ``[-k, k]`` (unitless)."""
-    phi = math.exp(-0.5 * k * k) / math.sqrt(2 * math.pi)
-    mass = math.erf(k / math.sqrt(2))
-    return math.sqrt(1.0 - 2.0 * k * phi / mass)
-
-
-def window_sigmas(threshold: float, sigma_kept: float) -> float:
-    """The window half-width ``k`` (in noise sigmas) that leaves Gaussian residuals
-    truncated to ``+-threshold`` with standard deviation ``sigma_kept``.
-
-    Solves ``g(k) / k = sigma_kept / threshold`` (``g`` = :func:`truncated_normal_std`),
-    decreasing from ``1/sqrt(3)`` at ``k -> 0`` (residuals filling the window evenly) to 0.
-    Clamped to ``[1, 40]``: below 1 the Gaussian model does not describe the residuals,
-    above 40 the window is wide open. Unitless.
-    """
-    if not (threshold > 0) or not (sigma_kept >= 0):
-        return math.inf
-    target = sigma_kept / threshold
-    lo, hi = 1.0, 40.0
-    if target >= truncated_normal_std(lo) / lo:
-        return lo
-    if target <= truncated_normal_std(hi) / hi:
-        return hi
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if truncated_normal_std(mid) / mid > target:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-@dataclass(frozen=True)
-class DatumForm:
-    """The quadratic form of the datum over its best-fit plane.
-
-    ``r(u, v) = c0 + cu u + cv v + cuu u^2 + cuv u v + cvv v^2``, ``r`` the signed
-    residual (mm, positive on the normal's side), ``(u, v)`` mm along ``axes`` from
-    ``origin``.
-
-    Attributes
-    ----------
-    origin : (3,) float, mm, cloud frame
-        The inliers' centroid.
-    axes : (2, 3) float, unit, cloud frame
-        ``u`` (largest in-plane spread) and ``v``; ``(u, v, normal)`` is right-handed.
-    coefficients : (6,) float
-        ``c0`` mm, ``cu, cv`` unitless, ``cuu, cuv, cvv`` 1/mm.
-    stderr : (6,) float
-        1-sigma of ``coefficients``, same units.
-    f_statistic : float
-        F of the three quadratic terms against the plane, ``(3, n - 6)`` degrees of freedom.
-    p_value : float
-        Probability of an F this large from a flat datum with Gaussian noise.
-    pv : float, mm
-        Peak-to-valley of the fitted quadratic surface over the (subsampled) inliers.
-    """
-
-    origin: np.ndarray
-    axes: np.ndarray
-    coefficients: np.ndarray
-    stderr: np.ndarray
-    f_statistic: float
-    p_value: float
-    dof: tuple
-    pv: float
-    alpha: float = FORM_ALPHA
-
-    @property
-    def significant(self) -> bool:
-        return bool(self.p_value < self.alpha)
-
-    def evaluate(self, u, v):
-        """Fitted residual (mm) at in-plane coordinates ``u, v`` (mm, any matching shapes)."""
-        c = self.coefficients
-        return c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v
-
-    def to_dict(self) -> dict:
-        c, s = self.coefficients, self.stderr
-        names = ("c0_mm", "cu", "cv", "cuu_per_mm", "cuv_per_mm", "cvv_per_mm")
-        return {
-            "model": "r = c0 + cu*u + cv*v + cuu*u^2 + cuv*u*v + cvv*v^2 (r, u, v in mm)",
-            "origin": [float(x) for x in self.origin],
-            "u_axis": [float(x) for x in self.axes[0]],
-            "v_axis": [float(x) for x in self.axes[1]],
-            "coefficients": {k: float(x) for k, x in zip(names, c)},
-            "sigma": {k: float(x) for k, x in zip(names, s)},
-            "f_statistic": float(self.f_statistic),
-            "dof": [int(self.dof[0]), int(self.dof[1])],
-            "p_value": float(self.p_value),
-            "alpha": float(self.alpha),
-            "significant": self.significant,
-            "pv_mm": float(self.pv),
-        }
 
 
 @dataclass(frozen=True)
@@ -213,7 +114,7 @@ class PlaneFit:
 
     def to_dict(self) -> dict:
         """Plain-JSON view (degrees named ``_deg``; NaN as None). ``normal`` and ``offset``
-        are what :meth:`metrology.plane.Plane.from_json` reads."""
+        are what :meth:`metrology.core.plane.Plane.from_json` reads."""
 
         def num(x):
             x = float(x)

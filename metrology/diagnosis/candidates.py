@@ -3,21 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
-from metrology.core.effects import Covariates, Drift, Incidence, Nonlinearity, Outliers, PlaneForm, PoseError, Scale
+from metrology.core.effects import REGISTRY, Covariates
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 
 
-#: the poses that separate each cause from the others
-ADVICE = {
-    "scale": "readings over the whole measuring range (a wider spread of stand-off)",
-    "nonlinearity": "readings over the whole measuring range (a wider spread of stand-off)",
-    "incidence": "a wider spread of tilt against the datum (incidence angles)",
-    "drift": "poses repeated cold and warm, interleaved rather than in one sweep",
-    "plane_form": "spots over the whole datum, each region seen at several tilts",
-    "pose_error": "repeated poses, or more sensors per pose",
-    "outliers": "the flagged poses repeated",
-}
+#: the poses that separate each cause from the others (read from the registry)
+ADVICE = {name: cls.advice for name, cls in REGISTRY.items()}
 
 
 def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -59,16 +51,10 @@ def candidates_for(layout: SensorLayout, cov: Covariates, flags=None):
     names = layout.names
     out = []
     for i in range(layout.n):
-        out.append(Scale((i,), names=names))
-        out.append(Incidence((i,), names=names))
-        out.append(Nonlinearity((i,), names=names))
-        # the reference is fixed once per data set (every fold evaluates against it) at the
-        # run's mean, where the rate is least correlated with the zero point
-        if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
-            out.append(Drift((i,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
-        out.append(Drift((i,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
-    out.append(PlaneForm((), names=names))
-    out.append(PoseError((), names=names, n_poses=cov.n_poses))
-    if flags is not None and np.any(flags):
-        out.append(Outliers(tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), names=names, flags=flags))
+        for cls in REGISTRY.values():
+            if cls.per_sensor:
+                out += cls.candidates(i, names, cov, flags)
+    for cls in REGISTRY.values():
+        if not cls.per_sensor:
+            out += cls.candidates(None, names, cov, flags)
     return out

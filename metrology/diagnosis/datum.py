@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from metrology.core.effects import Covariates, PlaneForm
 from metrology.core.model import jacobian_raw
@@ -15,6 +17,30 @@ FORM_QUADRATIC = ("b_ss_mm", "b_st_mm", "b_tt_mm")
 
 #: fewest cloud points under the spots' footprint to fit the form there (else the whole cloud)
 MIN_FORM_POINTS = 50
+
+
+@dataclass(frozen=True)
+class DatumCheck:
+    """The datum cloud's form under the spots (:func:`datum_form`).
+
+    Attributes
+    ----------
+    summary : dict
+        The public result (``--json``'s ``datum_form``); read as ``check[key]``;
+        ``against_readings`` is added once the readings' form is known.
+    values : (5,) float, the form's coefficients (``PlaneForm`` parameters, mm at its radius)
+    cov : (5, 5) float, their covariance
+    """
+
+    summary: dict
+    values: np.ndarray
+    cov: np.ndarray
+
+    def __getitem__(self, key):
+        return self.summary[key]
+
+    def to_dict(self) -> dict:
+        return dict(self.summary)
 
 
 def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
@@ -59,17 +85,17 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> dict:
         r = term[ok, i] - J[ok, i] @ np.linalg.lstsq(J[ok, i], term[ok, i], rcond=None)[0]
         visible.append(float(np.sqrt(np.mean(r**2))) if ok.any() else float("nan"))
     params = form.describe()["params"]
-    return {
+    return DatumCheck({
         "points": int(len(pts)), "points_used": int(under.sum()), "window": window,
         "window_mm": {"s": [float(spots[:, 0].min()), float(spots[:, 0].max())],
                       "t": [float(spots[:, 1].min()), float(spots[:, 1].max())]},
         "radius_mm": form.radius_mm, "params": params,
-        "p_quadratic": float(stats.chi2.sf(wald, 3)), "_values": form.values, "_cov": C,
+        "p_quadratic": float(stats.chi2.sf(wald, 3)),
         "visible_rms_mm": visible, "visible_over_noise": [v / s for v, s in zip(visible, sigma)],
-    }
+    }, form.values, C)
 
 
-def _form_agreement(datum: dict, readings_fit: Fit) -> dict:
+def form_agreement(datum: DatumCheck, readings_fit: Fit) -> dict:
     """Quadratic coefficients of the cloud against those of the ``plane_form`` fitted to the
     readings: per coefficient the difference in combined standard errors, and the Wald
     chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_form``."""
@@ -83,7 +109,7 @@ def _form_agreement(datum: dict, readings_fit: Fit) -> dict:
     idx = [comp.param_names.index(k) for k in FORM_QUADRATIC]
     v_r = comp.values[idx]
     C_r = readings_fit.extra_cov[np.ix_([off + i for i in idx], [off + i for i in idx])]
-    v_c, C_c = datum["_values"][2:], datum["_cov"][2:, 2:]
+    v_c, C_c = datum.values[2:], datum.cov[2:, 2:]
     diff = v_r - v_c
     Cd = C_r + C_c
     z = diff / np.sqrt(np.diag(Cd))

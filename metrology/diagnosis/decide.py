@@ -8,17 +8,61 @@ from metrology.core.effects import VERDICTS, ExtendedModel, Outliers, PlaneForm
 from metrology.core.observations import Observations
 from metrology.core.model import readings
 from metrology.diagnosis.candidates import ADVICE, candidates_for, covariates_for
-from metrology.diagnosis.datum import _form_agreement, datum_form
-from metrology.diagnosis.fit import Fit, _fit_any, _geometry, fit
-from metrology.diagnosis.heldout import kfold
-from metrology.diagnosis.stats import THRESHOLDS, battery_on, noise_tests, structure
+from metrology.diagnosis.datum import DatumCheck, datum_form, form_agreement
+from metrology.diagnosis.fit import Fit, fit_model, _geometry, fit
+from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.stats import THRESHOLDS, NoiseTests, battery_on, noise_tests, structure
 from metrology.diagnosis.summary import _describe_named, _summary
 
 
 
 
-def _public(d):
-    return None if d is None else {k: v for k, v in d.items() if not k.startswith("_")}
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate component scored against the base model.
+
+    Attributes
+    ----------
+    score : dict
+        The public result (``--json``'s ``candidates`` entry: p-values, held-out chi-square
+        reduction, RMS and normal deviation, ``significant``); read as ``candidate[key]``.
+    fit : Fit
+        The extended fit on all poses.
+    heldout : HeldOut
+        Its k-fold held-out predictions.
+    component : Component
+        The fitted component.
+    chi2_pose : (p,) float
+        Held-out chi-square per pose, all sensors (the ranking between candidates).
+    """
+
+    score: dict
+    fit: Fit
+    heldout: HeldOut
+    component: object
+    chi2_pose: np.ndarray
+
+    def __getitem__(self, key):
+        return self.score[key]
+
+    def to_dict(self) -> dict:
+        return dict(self.score)
+
+
+@dataclass(frozen=True)
+class PlotData:
+    """What the figures of :mod:`metrology.report.diagnose` draw: the base fit, the covariates,
+    the base readings ``d0 : (p, n) float, mm``, the named candidate (or None), sensor names,
+    stated noise ``sigma : (n,) float, mm``, gross-reading flags and the structure table."""
+
+    base: Fit
+    cov: object
+    d0: np.ndarray
+    best: Candidate | None
+    names: tuple
+    sigma: np.ndarray
+    flags: np.ndarray | None
+    structure: dict
 
 
 @dataclass
@@ -31,8 +75,8 @@ class Diagnosis:
     summary: str
     named: dict | None
     candidates: list
-    tests_base: dict
-    tests_extended: dict | None
+    tests_base: NoiseTests
+    tests_extended: NoiseTests | None
     structure_base: dict
     discrepancy: dict
     heldout: dict
@@ -40,21 +84,22 @@ class Diagnosis:
     base_theta: np.ndarray
     base_stderr: np.ndarray
     thresholds: dict
-    datum_form: dict | None = None
-    # for plots
-    plot_data: dict = field(default_factory=dict, repr=False)
+    datum_form: DatumCheck | None = None
+    # for the figures
+    plot_data: PlotData | None = field(default=None, repr=False)
 
     def to_dict(self):
         return {
             "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
             "extended": self.named, "heldout": self.heldout, "discrepancy": self.discrepancy,
             "candidates": self.candidates, "confounding": self.confounding,
-            "tests": {"base": _public(self.tests_base), "extended": _public(self.tests_extended)},
+            "tests": {"base": self.tests_base.to_dict(),
+                      "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
             "structure": self.structure_base,
             "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
                      "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
             "thresholds": self.thresholds,
-            "datum_form": _public(self.datum_form),
+            "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
         }
 
 
@@ -91,7 +136,7 @@ def _simulated_figures(nominal, obs, cov, sigma, model: ExtendedModel, k, theta0
         d = d_model + rng.normal(0.0, 1.0, d_model.shape) * sigma[None, :]
         d = np.where(np.isfinite(obs.d), d, np.nan)
         o = Observations(obs.normal, obs.offset, d)
-        b = _fit_any(nominal, o, cov, sigma, (), theta0)
+        b = fit_model(nominal, o, cov, sigma, (), theta0)
         rms.append(np.sqrt(np.nanmean(b.residual**2, axis=0)))
         ndev.append(np.nanmean(kfold(nominal, o, cov, sigma, (), k, theta0).normal_dev))
     return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
@@ -129,14 +174,14 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     # 1. base calibration (per sensor) with covariates at the nominal geometry, then recomputed
     cov0 = covariates_for(ds, nominal)
     sig_fit = np.where(np.isfinite(sigma), sigma, 1.0)
-    base0 = _fit_any(nominal, obs, cov0, sig_fit, (), None, "lsq")
+    base0 = fit_model(nominal, obs, cov0, sig_fit, (), None, "lsq")
     if not np.all(np.isfinite(sigma)):  # no stated noise: the base fit's own scatter
         sigma = np.where(np.isfinite(sigma), sigma, np.sqrt(np.nanmean(base0.residual**2, axis=0)))
     zero, u = _geometry(nominal, base0.theta)
     calibrated = nominal.with_params(zero, u)
     cov = covariates_for(ds, calibrated)
     theta0 = base0.theta
-    base = _fit_any(nominal, obs, cov, sigma, (), theta0, "lsq")
+    base = fit_model(nominal, obs, cov, sigma, (), theta0, "lsq")
     d0_base = readings(zero, u, obs.normal, obs.offset)[0]
     dof_base = np.isfinite(obs.d).sum(axis=0) - 5
     tests_base = noise_tests(base.residual, sigma, dof_base, names)
@@ -150,7 +195,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     n_cand = len(cands)
     scored = []
     for c in cands:
-        f = _fit_any(nominal, obs, cov, sigma, (c,), theta0)
+        f = fit_model(nominal, obs, cov, sigma, (c,), theta0)
         k = c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))
         S = list(f.sensors)
         chi2_b = float(np.nansum((base.residual[:, S] / sigma[S]) ** 2))
@@ -175,13 +220,12 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
         nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
         sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_
-        scored.append({
+        scored.append(Candidate({
             "label": c.label, "cause": c.name, "sensors": [names[i] for i in c.sensors], "n_params": k,
             "p_insample": p_in, "p_heldout": p_ho, "heldout_chi2_reduction": float(np.sum(diff)),
             "heldout_rms_base_mm": rb, "heldout_rms_extended_mm": re_, "heldout_rms_ratio": rb / re_,
             "heldout_normal_base_deg": float(np.rad2deg(nb_)), "heldout_normal_extended_deg": float(np.rad2deg(ne_)),
-            "significant": bool(sig), "_fit": f, "_ho": ho, "_comp": c, "_ce": ce,
-        })
+            "significant": bool(sig)}, f, ho, c, ce))
     sig_list = sorted([s for s in scored if s["significant"]], key=lambda s: -s["heldout_chi2_reduction"])
     # the strongest candidate significant in sample only: a lead, never a name
     in_only = sorted([s for s in scored if not s["significant"] and s["p_insample"] < THRESHOLDS["alpha_candidates"] / n_cand],
@@ -193,13 +237,13 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     tests_ext = None
     confounding = []
     best = sig_list[0] if sig_list else None
-    if best is not None and best["cause"] == "drift" and best["_comp"].variable == "time":
+    if best is not None and best["cause"] == "drift" and best.component.variable == "time":
         # tie-break: temperature is the physical cause, time its proxy; prefer it when the
         # data cannot tell the two apart
         for other in sig_list[1:]:
-            oc = other["_comp"]
-            if oc.name == "drift" and oc.variable == "temp" and oc.sensors == best["_comp"].sensors:
-                d = other["_ce"] - best["_ce"]
+            oc = other.component
+            if oc.name == "drift" and oc.variable == "temp" and oc.sensors == best.component.sensors:
+                d = other.chi2_pose - best.chi2_pose
                 p_sep = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
                 if p_sep >= THRESHOLDS["alpha_confound"]:
                     sig_list.remove(other)
@@ -211,14 +255,14 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         confidence = "high" if tests_base["consistent"] and lead is None else "low"
         sensors = []
     else:
-        best["_fit"] = _fit_any(nominal, obs, cov, sigma, (best["_comp"],), theta0, "lsq")
-        f = best["_fit"]
+        best = replace(best, fit=fit_model(nominal, obs, cov, sigma, (best.component,), theta0, "lsq"))
+        f = best.fit
         # a per-pose component makes the sensors of a pose correlated by construction
         tests_ext = noise_tests(f.residual, sigma, _dof_per_sensor(f, obs, n), names,
                                 pairs=not any(c.per_pose for c in f.components))
         concerned = list(f.sensors)
         p_concerned = battery_on(tests_ext, concerned)
-        tests_ext["p_concerned"] = p_concerned
+        tests_ext.summary["p_concerned"] = p_concerned
         if p_concerned >= THRESHOLDS["alpha_battery"]:
             cause, sensors = best["cause"], best["sensors"]
             # its own sensors are explained; others that still fail are a separate matter
@@ -230,7 +274,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         for other in sig_list[1:]:
             if other["cause"] == best["cause"] and other["sensors"] == best["sensors"]:
                 continue
-            d = other["_ce"] - best["_ce"]
+            d = other.chi2_pose - best.chi2_pose
             p_sep = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
             if p_sep >= THRESHOLDS["alpha_confound"]:
                 confounding.append({
@@ -267,15 +311,15 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     }
     heldout = {"folds": folds, "base_rms_mm": ho_base.rms(), "base_normal_deg": float(np.rad2deg(np.nanmean(ho_base.normal_dev)))}
     if best is not None:
-        fm = best["_fit"].model(nominal)
+        fm = best.fit.model(nominal)
         sim_rms_e, sim_nd_e, sim_nd_e_sd = _simulated_figures(nominal, obs, cov, sigma, fm, folds, theta0, rng, sim_reps)
         discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
         discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
         discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
         discrepancy["extended_model"] = best["label"]
-        ho_e = best["_ho"]
+        ho_e = best.heldout
         excl = flags if best["cause"] == "outliers" else None
-        S = list(best["_fit"].sensors)
+        S = list(best.fit.sensors)
         heldout.update({
             "model": best["label"],
             "base_rms_mm": ho_base.rms(None, excl), "extended_rms_mm": ho_e.rms(None, excl),
@@ -292,22 +336,21 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         # cause (a pose error, say, correlates the sensors of a pose; a form fitted without it
         # would carry standard errors too small for the comparison)
         if cause == "plane_form":
-            pf = best["_fit"]
+            pf = best.fit
         elif cause in VERDICTS:  # nothing named: the plane_form candidate's own fit
-            pf = next(s["_fit"] for s in scored if s["cause"] == "plane_form")
+            pf = next(s.fit for s in scored if s["cause"] == "plane_form")
         else:
-            comps = [PlaneForm((), names=names), replace(best["_comp"], values=None, stderr=None)]
-            pf = _fit_any(nominal, obs, cov, sigma, comps, theta0)
-        datum["against_readings"] = _form_agreement(datum, pf)
-        datum["against_readings"]["fitted_with"] = [c.label for c in pf.components]
+            comps = [PlaneForm((), names=names), replace(best.component, values=None, stderr=None)]
+            pf = fit_model(nominal, obs, cov, sigma, comps, theta0)
+        datum.summary["against_readings"] = form_agreement(datum, pf)
+        datum.summary["against_readings"]["fitted_with"] = [c.label for c in pf.components]
         if not datum["against_readings"]["agree"]:
             if cause in ("none", "plane_form"):
                 confidence = "low"  # the inputs contradict each other on the datum
             summary += (f"; the datum cloud's form disagrees with the readings' (p = {datum['against_readings']['p']:.2g}): "
                         "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
-    public = [{k: v for k, v in s.items() if not k.startswith("_")} for s in scored]
+    public = [s.to_dict() for s in scored]
     public.sort(key=lambda s: -s["heldout_chi2_reduction"])
-    plot = {"base": base, "cov": cov, "d0": d0_base, "best": best, "names": names, "sigma": sigma,
-            "flags": flags, "structure": struct}
+    plot = PlotData(base, cov, d0_base, best, names, sigma, flags, struct)
     return Diagnosis(cause, sensors, confidence, summary, named, public, tests_base, tests_ext, struct, discrepancy,
                      heldout, confounding, base.theta, base.theta_stderr, dict(THRESHOLDS), datum, plot)

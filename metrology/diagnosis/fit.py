@@ -275,14 +275,15 @@ def _gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
     return x
 
 
-def _fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
-    """Fit: sensors fitted separately when no component couples them (faster, identical)."""
+def fit_model(nominal, obs, cov, sigma, comps, theta0, solver="gn"):
+    """The extended fit of ``comps`` (none: the base model) as :func:`fit` returns it; sensors
+    no component couples are fitted separately (faster, identical)."""
     if comps:
         f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver)
         if len(f.sensors) == nominal.n:
             return f
         # the other sensors keep the base fit of this subset
-        base = _fit_any(nominal, obs, cov, sigma, (), theta0, solver)
+        base = fit_model(nominal, obs, cov, sigma, (), theta0, solver)
         th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
         S = list(f.sensors)
         th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]

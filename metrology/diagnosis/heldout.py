@@ -6,7 +6,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
-from metrology.diagnosis.fit import Fit, _fit_any, _geometry
+from metrology.diagnosis.fit import Fit, fit_model, _geometry
 
 
 def _folds(p, k):
@@ -91,6 +91,6 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     for test in _folds(p, k):
         train = np.setdiff1d(np.arange(p), test)
         comps = [c.select(train) for c in components]
-        f = _fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
+        f = fit_model(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
         res[test], dev[test] = _heldout_eval(nominal, obs, cov, sigma, f, test)
     return HeldOut(res, dev)

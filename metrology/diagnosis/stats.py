@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from metrology.core.effects import Covariates
 
@@ -17,6 +19,29 @@ THRESHOLDS = {
     "corr_confound": 0.95,  # |correlation| of a component parameter with a base parameter
     "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
 }
+
+
+@dataclass(frozen=True)
+class NoiseTests:
+    """The noise-model battery of :func:`noise_tests`.
+
+    Attributes
+    ----------
+    summary : dict
+        The public result (``sensors``, ``pairs``, ``n_tests``, ``p_bonferroni``,
+        ``consistent``; ``p_concerned`` added after an extension); read as ``tests[key]``.
+    pvalues : tuple of (float, set of int)
+        Every test's p-value with the sensors it involves (for :func:`battery_on`).
+    """
+
+    summary: dict
+    pvalues: tuple
+
+    def __getitem__(self, key):
+        return self.summary[key]
+
+    def to_dict(self) -> dict:
+        return dict(self.summary)
 
 
 def ljung_box(x, lags):
@@ -67,8 +92,8 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True):
             pair_out[f"{names[i]}-{names[j]}"] = {"r": float(rr), "p": float(pp)}
             pvals.append((float(pp), {i, j}))
     p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
-    return {"sensors": per, "pairs": pair_out, "n_tests": len(pvals), "p_bonferroni": p_all, "_p": pvals,
-            "consistent": bool(p_all >= THRESHOLDS["alpha_battery"])}
+    return NoiseTests({"sensors": per, "pairs": pair_out, "n_tests": len(pvals), "p_bonferroni": p_all,
+                       "consistent": bool(p_all >= THRESHOLDS["alpha_battery"])}, tuple(pvals))
 
 
 def battery_on(tests, sensors):
@@ -79,7 +104,7 @@ def battery_on(tests, sensors):
     residuals cannot pass the base battery yet fail the subset's (a chance correlation of
     two sensors at p = 0.001 does that with a 6-test subset).
     """
-    ps = [p for p, inv in tests["_p"] if inv & set(sensors)]
+    ps = [p for p, inv in tests.pvalues if inv & set(sensors)]
     return min(1.0, min(ps) * tests["n_tests"]) if ps else 1.0
 
 

@@ -1,4 +1,4 @@
-"""The ``metro fit-plane`` job: a cloud file in, the plane JSON and the residual figure out."""
+"""``metro fit-plane`` as a job: a cloud file in, the plane JSON and the residual map out."""
 
 from __future__ import annotations
 
@@ -6,9 +6,12 @@ import contextlib
 import json
 from dataclasses import replace
 from pathlib import Path
-from metrology.datum.result import PlaneFit
-from metrology.datum.robust import fit_plane_robust
-from metrology.report.datum import _PLOT_SUFFIXES, plot_residuals
+
+from metrology.datum import PlaneFit, fit_plane_robust
+
+__all__ = ["fit_plane_file"]
+
+_PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
 
 
 def _check_output(path, what, suffixes=None):
@@ -27,7 +30,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> Pla
     Parameters
     ----------
     cloud : str or os.PathLike
-        Any format :func:`metrology.clouds.read_cloud` reads.
+        Any format :func:`metrology.io.clouds.read_cloud` reads.
     threshold_mm, seed
         As :func:`fit_plane_robust`.
     out : str or os.PathLike or None
@@ -58,5 +61,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> Pla
             tmp.write_text(json.dumps(fit.to_dict(), indent=2) + "\n", encoding="utf-8")
         if plot is not None:
             tmp = stack.enter_context(atomic_path(plot))
+            from metrology.report.datum import plot_residuals
+
             plot_residuals(points, fit, tmp)
     return fit

@@ -1,4 +1,7 @@
-"""Figures of a calibration and a validation (PNG, written atomically).
+"""Text and figures of a calibration and a validation (PNG, written atomically).
+
+:func:`calibration_text` and :func:`validation_text` are what ``metro calibrate`` and
+``metro validate`` print.
 
 ``convergence.png``
     The estimated errors of every parameter against the number of measurements, one row
@@ -19,10 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
+from metrology.calibration.calibrate import CalibrationReport
+from metrology.calibration.convergence import batch_convergence, residual_table
+from metrology.calibration.identifiability import sigma_words
+from metrology.calibration.validation import ValidationReport
 from metrology.io.atomic import atomic_path
 from metrology.report.plots import pyplot
 
-__all__ = ["plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
+__all__ = ["calibration_text", "validation_text",
+           "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
 
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
@@ -36,7 +44,57 @@ def _save(fig, path):
         plt.close(fig)
 
 
-def plot_convergence(report, path, convergence=None) -> Path:
+def _vec(v, digits):
+    return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
+
+
+def calibration_text(report: CalibrationReport) -> str:
+    """A human-readable calibration report (what ``metro calibrate`` prints)."""
+    d = report.to_dict()
+    lines = [f"method {d['method']}: {d['n_poses']} poses, datum normal {np.round(d['datum']['normal'], 6).tolist()} "
+             f"offset {d['datum']['offset_mm']:.4f} mm (tracker frame)"]
+    for s in d["sensors"]:
+        e, c = s["error"], s["corrected"]
+        conv = "" if s["n_converged"] is None else f", converged after {s['n_converged']} measurements"
+        lines.append(f"{s['name']}: {s['n_readings']} readings, residual RMS {s['residual_rms_mm']:.4f} mm "
+                     f"(stated noise {s['noise_mm']:.4g} mm){conv}")
+        lines.append("  zero error   " + "  ".join(f"{p} {v:+.4f} +- {u:.4f}" for p, v, u in
+                                                  zip("xyz", e["zero_mm"], e["zero_stderr_mm"])) + " mm")
+        lines.append("  beam tilt    " + "  ".join(f"{p} {v:+.4f} +- {u:.4f}" for p, v, u in
+                                                  zip(("e1", "e2"), e["tilt_deg"], e["tilt_stderr_deg"]))
+                     + f" deg (total {e['tilt_total_deg']:.4f} deg)")
+        lines.append("  corrected    zero " + _vec(c["zero_mm"], 4) + " mm, direction " + _vec(c["direction"], 6))
+        for r in s["correlations"]:
+            lines.append(f"  correlation  {r['a']}-{r['b']} {r['r']:+.3f}")
+    lines.append(f"unidentified: {d['unidentified']}")
+    for ident in report.identifiability:
+        sv = " ".join(f"{v:.2g}" for v in ident.chart_singular)
+        lines.append(f"{ident.name}: chart singular values (relative) {sv}; raw null direction: {ident.raw_null_words}")
+        lines.append(f"  least determined: {ident.words[-1]} (1 sigma {sigma_words(ident.combination_sigma[-1])}; "
+                     f"moves the measured normal by {np.rad2deg(ident.normal_effect[-1]):.2g} deg RMS)")
+    for w in report.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+def validation_text(report: ValidationReport) -> str:
+    """The validation table (what ``metro validate`` prints): max / mean / std per layout."""
+    w = max(14, *(len(lab) for lab in report.labels))
+    lines = [f"{'layout':<{w}} {'max [deg]':>10} {'mean [deg]':>10} {'std [deg]':>10} {'poses':>6}  file"]
+    for k, lab in enumerate(report.labels):
+        s = report.stats_deg(k)
+        lines.append(f"{lab:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
+                     f"{report.sources.get(lab, '')}")
+    partial = int(np.sum((report.n_readings < report.n_sensors) & (report.n_readings >= 3)))
+    none = int(np.sum(report.n_readings < 3))
+    if none:
+        lines.append(f"{none} pose(s) with fewer than 3 readings: no normal, left out")
+    if partial:
+        lines.append(f"{partial} pose(s) with a missing reading: normal from the least-squares plane of the rest")
+    return "\n".join(lines)
+
+
+def plot_convergence(report: CalibrationReport, path, convergence=None) -> Path:
     """Convergence of each parameter of each sensor (Figures 7 and 11).
 
     Parameters
@@ -44,11 +102,9 @@ def plot_convergence(report, path, convergence=None) -> Path:
     report : CalibrationReport
     path : str or Path, PNG
     convergence : list, optional
-        :func:`metrology.calibration.batch_convergence` output for a batch method
+        :func:`metrology.calibration.convergence.batch_convergence` output for a batch method
         (computed here when needed).
     """
-    from metrology.calibration.calibrate import batch_convergence
-
     cal = report.calibration
     names = cal.nominal.names
     n = len(names)
@@ -94,10 +150,8 @@ def plot_convergence(report, path, convergence=None) -> Path:
     return Path(path)
 
 
-def plot_residuals(report, path) -> Path:
+def plot_residuals(report: CalibrationReport, path) -> Path:
     """Residuals of the calibrated layout vs reading, incidence angle and pose index."""
-    from metrology.calibration.calibrate import residual_table
-
     res, inc = residual_table(report.layout, report.dataset.obs)
     d = report.dataset.obs.d
     names = report.layout.names
@@ -125,7 +179,7 @@ def plot_residuals(report, path) -> Path:
     return Path(path)
 
 
-def plot_validation(vreport, path) -> Path:
+def plot_validation(vreport: ValidationReport, path) -> Path:
     """Angular deviation per pose, one series per layout (Figure 12)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -150,7 +204,7 @@ def plot_validation(vreport, path) -> Path:
     return Path(path)
 
 
-def write_calibration_plots(report, directory) -> list:
+def write_calibration_plots(report: CalibrationReport, directory) -> list:
     """Write ``convergence.png`` and ``residuals.png`` into ``directory`` (created if
     missing); return their paths."""
     directory = Path(directory)

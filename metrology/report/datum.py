@@ -1,13 +1,60 @@
-"""Figures of a datum-plane fit: residuals over the plane and their histogram."""
+"""Text and figures of ``metro fit-plane``: the plane report and the residual map."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import TYPE_CHECKING
+
 import numpy as np
-from metrology.datum.result import PlaneFit
+
+if TYPE_CHECKING:
+    from metrology.datum import PlaneFit
+
+__all__ = ["format_plane_fit", "plot_residuals"]
 
 
-_PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
+def format_plane_fit(fit: PlaneFit) -> str:
+    """The readable report of a :class:`metrology.datum.PlaneFit`."""
+    d = fit.to_dict()
+    n = d["normal"]
+    lines = [
+        f"datum plane of {d['source']} ({d['format']}, {d['n_points']} points, cloud frame, mm)",
+        f"  normal (A, B, C)     {n[0]: .10f} {n[1]: .10f} {n[2]: .10f}",
+        f"  offset D             {d['offset']: .6f} mm",
+        "  convention           A^2 + B^2 + C^2 = 1, D <= 0 (the normal points from the origin towards the plane)",
+        f"  inliers              {d['n_inliers']} of {d['n_points']} ({100 * d['inlier_ratio']:.2f} %)"
+        f" within {d['threshold_mm']:.4g} mm ({d['threshold_source']})",
+        f"  residuals (inliers)  RMS {d['rms_mm']:.5f} mm, max |r| {d['max_abs_residual_mm']:.5f} mm,"
+        f" flatness (P-V) {d['flatness_mm']:.5f} mm",
+    ]
+    if d["normal_sigma_deg"] is None:
+        lines.append("  uncertainty (1 sd)   not available: 3 inliers leave no residual degrees of freedom")
+    else:
+        lines.append(
+            f"  uncertainty (1 sd)   normal {d['normal_sigma_deg']:.3g} deg, offset D {d['offset_sigma_mm']:.3g} mm"
+            f" ({d['offset_sigma_at_centroid_mm']:.3g} mm at the centroid), noise {d['noise_sigma_mm']:.4g} mm"
+        )
+    c = d["centroid"]
+    lines.append(f"  centroid             {c[0]:.4f} {c[1]:.4f} {c[2]:.4f} mm")
+    f = d["form"]
+    if f is None:
+        lines.append("  form (quadratic)     not computed: fewer than 7 inliers, or they do not span the plane")
+    else:
+        verdict = "SIGNIFICANT: the datum is not flat" if f["significant"] else "not significant"
+        p = f["p_value"]
+        ptxt = f"{p:.3g}" if p >= 1e-300 else "< 1e-300"
+        fstat = f["f_statistic"]
+        lines.append(
+            f"  form (quadratic)     P-V {f['pv_mm']:.5f} mm, F({f['dof'][0]}, {f['dof'][1]}) = "
+            f"{fstat:.4g}, p = {ptxt}: {verdict} (alpha {f['alpha']:g})"
+        )
+        co, sd = f["coefficients"], f["sigma"]
+        terms = []
+        for key, label in (("cuu_per_mm", "u^2"), ("cuv_per_mm", "uv"), ("cvv_per_mm", "v^2")):
+            terms.append(f"{label} {co[key]:.3e} +- {sd[key]:.1e}" if math.isfinite(sd[key]) else f"{label} {co[key]:.3e}")
+        lines.append(f"                       {', '.join(terms)} /mm (u, v: in-plane axes from the centroid)")
+    return "\n".join(lines)
 
 
 _PLOT_MAX_POINTS = 200_000

@@ -18,7 +18,7 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     P = diag.plot_data
-    base, cov, names, d0 = P["base"], P["cov"], P["names"], P["d0"]
+    base, cov, names, d0 = P.base, P.cov, P.names, P.d0
     files = []
     p, n = base.residual.shape
     variables = {
@@ -46,14 +46,11 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
         fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
     files.append(str(f1))
-    best = P["best"]
+    best = P.best
     if best is not None:
-        f = best["_fit"]
+        f = best.fit
         comp = f.components[0]
-        key = {"scale": "d_mm", "nonlinearity": "d_mm", "incidence": "incidence_deg", "plane_form": "spot_s_mm",
-               "pose_error": "pose_index", "outliers": "pose_index"}.get(comp.name)
-        if comp.name == "drift":
-            key = "temp_c" if comp.variable == "temp" else "time_h"
+        key = comp.plot_key  # the registry entry names the covariate
         cols = list(comp.sensors) if comp.sensors else list(range(n))
         fig, axes = plt.subplots(len(cols), 2, figsize=(9, 2.4 * len(cols)), squeeze=False, sharey="row")
         X = variables.get(key, variables["pose_index"])

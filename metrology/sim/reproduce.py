@@ -27,9 +27,10 @@ from metrology.calibration.estimators import calibrate
 from metrology.core.observations import Observations
 from metrology.core.normals import angle_between, micro_plane_normal
 from metrology.core.plane import Plane, fit_plane_tls
+from metrology.core.stats import describe
 from metrology.sim.simulation import PoseSpec, datum_points, random_poses, simulate_readings
 
-__all__ = ["ReproduceConfig", "Trial", "run_trial", "run_trials", "summarise", "METHOD_ORDER"]
+__all__ = ["ReproduceConfig", "Trial", "run_trial", "run_trials", "summarize", "METHOD_ORDER"]
 
 #: columns of Table 4, left to right: before calibration, the estimators, the truth floor
 METHOD_ORDER = ("before", "method1", "ekf_paper", "ekf", "iekf", "lsq", "true")
@@ -160,18 +161,13 @@ def run_trials(cfg: ReproduceConfig, seed: int, trials: int, progress=None) -> l
     return out
 
 
-def _stats(x):
-    x = np.asarray(x, float)
-    return {"max_deg": float(x.max()), "mean_deg": float(x.mean()), "std_deg": float(x.std(ddof=1)) if len(x) > 1 else 0.0}
-
-
-def summarise(cfg: ReproduceConfig, trials: list, seed: int) -> dict:
+def summarize(cfg: ReproduceConfig, trials: list, seed: int) -> dict:
     """Tables 1, 3 and 4 analogues (per trial statistics, then mean and spread over trials)."""
     nominal, true, table_plane, preset = cfg.tables()
     t0 = trials[0]
     table4 = {}
     for m in METHOD_ORDER:
-        per = [_stats(t.deviation_deg[m]) for t in trials]
+        per = [describe(t.deviation_deg[m]) for t in trials]
         row = {}
         for key in ("max_deg", "mean_deg", "std_deg"):
             vals = np.array([p[key] for p in per])

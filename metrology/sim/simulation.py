@@ -23,9 +23,10 @@ import numpy as np
 from metrology.core.frames import plane_in_tcs
 from metrology.core.plane import plane_basis
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_basis, readings
+from metrology.core.model import readings
+from metrology.core.plane import plane_basis
 
-__all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points", "plane_basis"]
+__all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points"]
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,6 @@ class Poses:
     def plane_in_tcs(self, normal_tracker, offset_tracker):
         """The tracker-frame plane in each pose's TCS: ``(p, 3)`` normals, ``(p,)`` offsets mm."""
         return plane_in_tcs(normal_tracker, offset_tracker, self.tcs2tracker_rot, self.tcs2tracker_trans)
-
-
 
 
 def _axis_height(layout: SensorLayout, reading_mm: float, axis_sign: float) -> float:
@@ -99,7 +98,11 @@ def random_poses(rng: np.random.Generator, layout: SensorLayout, normal, offset,
     # R0 maps the beam side of the tool axis (axis_sign * e_z) onto -n: beams go into the plane
     target = -n
     src = np.array([0.0, 0.0, axis_sign])
-    R0 = Rotation.align_vectors(target[None], src[None])[0]
+    # the shortest rotation taking src onto target, written out: scipy's align_vectors of one
+    # vector pair returned another rotation (any spin about target) before scipy 1.12
+    axis = np.cross(src, target)
+    R0 = Rotation.from_rotvec(axis / max(np.linalg.norm(axis), 1e-300) * np.arctan2(np.linalg.norm(axis), src @ target)
+                              if np.linalg.norm(axis) > 1e-12 else (np.zeros(3) if src @ target > 0 else np.array([np.pi, 0.0, 0.0])))
     rots, trans = [], []
     for _ in range(n_poses):
         spin = Rotation.from_rotvec([0.0, 0.0, rng.uniform(0, 2 * np.pi) if spec.spin else 0.0])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.effects import Covariates, Drift, Incidence, Nonlinearity, PlaneForm, Scale
+from metrology.core.effects import REGISTRY, Covariates
 from metrology.io.export import TrackerExport
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
@@ -35,14 +35,7 @@ from metrology.sim.simulation import PoseSpec, random_poses
 __all__ = ["HiddenEffect", "SIZE_MEANING", "EFFECTS", "SETUP_EFFECTS", "OUTSIDE", "warmup", "synth_run", "synth_cloud",
            "typical_layouts", "TYPICAL_NOISE_MM", "TYPICAL_RANGE_MM", "N_OUTLIERS", "PERIOD_POSES"]
 
-SIZE_MEANING = {
-    "scale": "gain error k (unitless)",
-    "incidence": "c mm (bias at 45 deg incidence)",
-    "drift": "rate mm/K (temperature)",
-    "nonlinearity": "c3 mm at the range end (c2 = c3/2)",
-    "plane_form": "bow b_ss mm at 100 mm (b_st = 0.3, b_tt = -0.5 of it)",
-    "pose_error": "1-sigma TCS position error per axis, mm",
-    "outliers": "3 gross readings of +-size mm",
+SIZE_MEANING = {name: cls.size_meaning for name, cls in REGISTRY.items()} | {
     "periodic": "amplitude mm of a cyclic error in pose index (outside the catalogue)",
 }
 EFFECTS = tuple(k for k in SIZE_MEANING if k != "periodic")
@@ -106,18 +99,7 @@ def warmup(rng: np.random.Generator, n_poses: int, dt_s=(20.0, 40.0), start_c=20
 
 
 def _component(effect: HiddenEffect, i):
-    s = effect.size
-    if effect.name == "scale":
-        return Scale((i,), [s])
-    if effect.name == "incidence":
-        return Incidence((i,), [s])
-    if effect.name == "drift":
-        return Drift((i,), [s], variable="temp")
-    if effect.name == "nonlinearity":
-        return Nonlinearity((i,), [0.5 * s, s])
-    if effect.name == "plane_form":
-        return PlaneForm((), [0.0, 0.0, s, 0.3 * s, -0.5 * s])
-    raise ValueError(effect.name)
+    return REGISTRY[effect.name].hidden(effect.size, i)
 
 
 def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane, n_poses: int,

@@ -61,17 +61,28 @@ def test_reproduce_bad_input_is_one_line_exit_2(tmp_path):
     assert not (tmp_path / "never").exists()
 
 
-def test_demo_runs_the_whole_walk_through(tmp_path):
-    from pathlib import Path
-
-    fixtures = Path(__file__).resolve().parent.parent / "fixtures"
-    r = runner.invoke(app, ["demo", "--fixtures", str(fixtures), "--out", str(tmp_path / "demo")])
+def test_demo_runs_from_an_empty_folder_on_the_shipped_data(tmp_path, monkeypatch):
+    """No option, an empty current folder: the shipped data, outputs in ./metro-demo."""
+    monkeypatch.chdir(tmp_path)
+    r = runner.invoke(app, ["demo"])
     assert r.exit_code == 0, r.output
     for step in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
         assert f"$ metro {step}" in r.output
     assert "cause:" in r.output and "recommendation:" in r.output
     for name in ("plane.json", "calibrated.toml", "validation.png", "panel_errors.png"):
-        assert (tmp_path / "demo" / name).stat().st_size > 0
+        assert (tmp_path / "metro-demo" / name).stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metro-demo"]
+
+
+def test_demo_never_writes_into_a_used_folder(tmp_path):
+    from metrology.jobs.demo import new_output_dir
+
+    base = tmp_path / "metro-demo"
+    assert new_output_dir(base) == base
+    base.mkdir()
+    assert new_output_dir(base) == base  # empty: used as it is
+    (base / "plane.json").write_text("{}")
+    assert new_output_dir(base) == tmp_path / "metro-demo-2"
 
 
 def test_demo_without_fixtures_is_one_line_exit_2(tmp_path):

@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from metrology.io.data import DATA_DIR
 from metrology.calibration.calibrate import DEFAULT_METHOD, calibrate_dataset
 from metrology.calibration.identifiability import describe_combination, identifiability
 from metrology.calibration.validation import validate
@@ -18,7 +19,7 @@ from metrology.io.layout import load_layout
 from metrology.core.model import direction_basis, tangent_from_direction
 from metrology.core.tolerances import RANK_RTOL
 
-FIX = Path(__file__).resolve().parent.parent / "fixtures" / "measured"
+FIX = DATA_DIR / "measured"
 CAL, VAL = FIX / "calibration.csv", FIX / "validation.csv"
 PLANE, NOMINAL, TRUTH = FIX / "plane.json", FIX / "nominal.toml", FIX / "truth.toml"
 runner = CliRunner()
@@ -266,7 +267,8 @@ def test_unknown_method_is_one_line_error():
 def test_fixture_regenerates_byte_for_byte(tmp_path):
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("make_measured", FIX.parent / "make_measured.py")
+    spec = importlib.util.spec_from_file_location(
+        "make_measured", Path(__file__).resolve().parents[2] / "fixtures" / "make_measured.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     mod.main(tmp_path)

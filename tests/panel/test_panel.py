@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from metrology.io.data import DATA_DIR
 from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
 from metrology.panel.attitude import MotionError
 from metrology.panel.head import default_standoff, tool_axis_tcs
@@ -424,7 +425,7 @@ def test_step_panel_loads_in_mm():
     pytest.importorskip("cascadio")
     from pathlib import Path
 
-    p = load_panel(Path(__file__).resolve().parents[1] / "fixtures" / "panel_cyl800.step")
+    p = load_panel(DATA_DIR / "panel_cyl800.step")
     assert np.allclose(p.mesh.bounds[:, :2], [[-100, -100], [100, 100]], atol=1e-3)
     surf = ParametricSurface("cylinder", 800.0)
     # within the 1 um chord tolerance of the tessellation

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from metrology.io.data import DATA_DIR
 from metrology.io._o3d import open3d
 from metrology.io.clouds import read_cloud
 
@@ -58,7 +59,7 @@ def test_pcd_binary_compressed(tmp_path):
 
 
 def test_fixture_ply_is_read(tmp_path):
-    pts = read_cloud("fixtures/datum_cloud.ply")
+    pts = read_cloud(str(DATA_DIR / "datum_cloud.ply"))
     assert pts.shape == (3300, 3) and pts.dtype == np.float64
 
 

@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 
+from metrology.io.data import DATA_DIR
 from metrology.calibration.dataset import Dataset, check
 from metrology.diagnosis.candidates import covariates_for
 from metrology.diagnosis.decide import diagnose
-from metrology.diagnosis.fit import _fit_any, fit
+from metrology.diagnosis.fit import fit_model, fit
 from metrology.core.effects import (Covariates, Drift, ExtendedModel, Incidence, Nonlinearity, Outliers, PlaneForm,
                                PoseError, Scale)
 from metrology.calibration.estimators import lsq
@@ -126,7 +127,7 @@ def test_drift_without_temperature_raises():
 
 def test_base_fit_equals_estimators_lsq():
     ds, cov = small_case(1, 40)
-    f = _fit_any(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
+    f = fit_model(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
     cal = lsq(ds.layout, ds.obs)
     # Two solvers of one problem agree far inside the estimate's own uncertainty; how far
     # depends on their stopping rules and the wheels' LAPACK, so the bound is 1e-3 sigma.
@@ -140,7 +141,7 @@ def test_extended_fit_recovers_exact_effect_and_solvers_agree(solver):
     quiet = SensorLayout(true.names, true.zero, true.direction, np.full(4, 1e-12), true.range_mm)
     export, _ = synth_run(np.random.default_rng(2), quiet, PLANE, 40, [HiddenEffect("nonlinearity", "L2", 0.02)])
     ds = Dataset(check(export, nominal), nominal, PLANE)
-    cal = _fit_any(nominal, ds.obs, covariates_for(ds, nominal), np.full(4, 0.003), (), None, "lsq")
+    cal = fit_model(nominal, ds.obs, covariates_for(ds, nominal), np.full(4, 0.003), (), None, "lsq")
     zero = nominal.zero + cal.theta[:, :3]
     from metrology.core.model import direction_from_tangent
     cov = covariates_for(ds, nominal.with_params(zero, direction_from_tangent(nominal.direction, cal.theta[:, 3:])))
@@ -154,7 +155,7 @@ def test_extended_fit_recovers_exact_effect_and_solvers_agree(solver):
 def test_pose_error_profiled_recovers_sigma():
     ds, truth = run([HiddenEffect("pose_error", None, 0.005)], 11)
     cov = covariates_for(ds, ds.layout)
-    base = _fit_any(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
+    base = fit_model(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
     f = fit(ds.layout, ds.obs, cov, ds.layout.noise_mm, [PoseError((), n_poses=N_POSES)], theta0=base.theta,
             solver="gn")
     e, se = f.components[0].values, f.components[0].stderr
@@ -346,7 +347,7 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
     """Readings with pose errors, a flat datum and a flat cloud: the readings' form fitted with
     the pose error agrees with the cloud's as chi-square(3) says (mean 3; 10 seeds: sd 0.8).
     A form fitted without it has standard errors ~1.8x too small (mean chi-square ~11)."""
-    from metrology.diagnosis.datum import _form_agreement, datum_form
+    from metrology.diagnosis.datum import form_agreement, datum_form
     from metrology.core.model import direction_from_tangent, readings
 
     nominal, true = typical_layouts()
@@ -356,16 +357,16 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error):
         export, _ = synth_run(rng, true, PLANE, N_POSES, [HiddenEffect("pose_error", None, 0.02)])
         ds = Dataset(check(export, nominal), nominal, PLANE, synth_cloud(rng, PLANE))
         sigma = nominal.noise_mm
-        base = _fit_any(nominal, ds.obs, covariates_for(ds, nominal), sigma, (), None, "lsq")
+        base = fit_model(nominal, ds.obs, covariates_for(ds, nominal), sigma, (), None, "lsq")
         zero = nominal.zero + base.theta[:, :3]
         u = direction_from_tangent(nominal.direction, base.theta[:, 3:])
         cov = covariates_for(ds, nominal.with_params(zero, u))
         comps = [PlaneForm((), names=nominal.names)]
         if with_pose_error:
             comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
-        pf = _fit_any(nominal, ds.obs, cov, sigma, comps, base.theta)
+        pf = fit_model(nominal, ds.obs, cov, sigma, comps, base.theta)
         d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
-        chi2.append(_form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
+        chi2.append(form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
     if with_pose_error:
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause
@@ -386,7 +387,7 @@ def test_fixture_hidden_is_diagnosed():
 
     from metrology.jobs.diagnose import diagnose_files
 
-    here = Path(__file__).parent.parent / "fixtures" / "hidden"
+    here = DATA_DIR / "hidden"
     d = diagnose_files(here / "export.csv", here / "plane.json", here / "layout.toml", folds=FOLDS, sim_reps=1)
     assert d.cause != "none"
     assert d.named is not None and d.heldout["rms_ratio_concerned"] > 1.0

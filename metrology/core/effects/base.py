@@ -1,0 +1,253 @@
+"""The catalogue of physical effects that extend the measurement model, as components.
+
+The base model of :mod:`metrology.core.model` predicts a reading ``d0`` from the sensor's zero
+point and beam direction and the datum plane in the pose's TCS. Each effect is a small
+named component that adds a term to it::
+
+    d = d0(theta) + sum_c f_c(values_c; d0, covariates)                     (mm)
+
+A component has named parameters, a pure :meth:`Component.evaluate` (the additive term,
+``(p, n)`` mm, zero on sensors it does not concern), an analytic :meth:`Component.jacobian`
+(``(p, n, k)``) and, when the term depends on ``d0``, its derivative ``df/dd0`` (so the
+Jacobian of the full model w.r.t. the base parameters is ``(1 + sum df/dd0) J0``).
+A :class:`ExtendedModel` is the base geometry plus a list of components; parameter names are
+``<component>.<sensor>.<param>`` and a clash raises. The same components drive the simulator
+(:mod:`metrology.sim.synth`) and the extended fit (:mod:`metrology.diagnosis.fit`).
+
+Catalogue (formulas with ``gamma`` the beam's incidence angle on the datum, ``N.u`` the cosine
+between the TCS plane normal and the beam, ``x = (2 d0 - lo - hi) / (hi - lo)`` the reading
+normalised over the sensor's range ``[lo, hi]``):
+
+``scale``        ``k d0``                         gain error of the sensor (unitless ``k``)
+``incidence``    ``c tan^2(gamma)``               spot/speckle bias growing with tilt (``c`` mm)
+``drift``        ``r (T - 20 C)`` or ``r t``      thermal zero drift (mm/K or mm/h)
+``nonlinearity`` ``c2 P2(x) + c3 P3(x)``          linearity error: bow and S-shape (mm)
+``plane_form``   ``w(s, t) / (N.u)``, ``w = b_s s + b_t t + b_ss s^2 + b_st s t + b_tt t^2``,
+                 ``(s, t)`` the spot's in-plane coordinates on the datum (tracker frame) over
+                 ``R``: datum tilt, bow and twist (mm at ``R`` from the datum centre)
+``pose_error``   ``e_p / (N.u)``                  TCS position error along the datum normal, one
+                 number per pose (mm; gauge ``sum e_p = 0``)
+``outliers``     ``g_j`` on flagged readings      gross readings (mm), equivalent to dropping them
+
+A constant term is absorbed by the zero point along the beam (an exact degeneracy: moving
+``E`` by ``delta u`` changes every reading by ``-delta``), so components carry no constant.
+The covariates ``gamma``, ``N.u`` and the spot position are evaluated at the base
+calibration and held fixed in the extended fit (their dependence on the tilt parameters is
+second order: a product of two small numbers); ``d0`` is live.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import numpy as np
+
+
+VERDICTS = ("none", "unexplained")
+
+
+SECONDS_PER_HOUR = 3600.0
+
+
+#: reference temperature of dimensional metrology (ISO 1), deg C
+REFERENCE_TEMP_C = 20.0
+
+
+@dataclass(frozen=True)
+class Covariates:
+    """What the effects depend on, per pose and reading, besides ``d0``.
+
+    Attributes
+    ----------
+    time_h : (p,) float, h, since the first pose (pose index when the export has no time)
+    temp_c : (p,) float, deg C; NaN where the export has none
+    cos_inc : (p, n) float, |cos| of the beam's incidence angle on the datum (unitless)
+    inv_nu : (p, n) float, 1 / (N_tcs . u) (signed; ``dd/dw`` for a datum displaced by ``w``)
+    spot_st : (p, n, 2) float, mm, spot position on the datum in the plane's own axes
+        (tracker frame), relative to the datum centre
+    range_mm : (n, 2) float, mm, the readings' normalisation interval ``[lo, hi]``
+    """
+
+    time_h: np.ndarray
+    temp_c: np.ndarray
+    cos_inc: np.ndarray
+    inv_nu: np.ndarray
+    spot_st: np.ndarray
+    range_mm: np.ndarray
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.time_h)
+
+    def select(self, idx) -> "Covariates":
+        """The poses ``idx``."""
+        return replace(self, time_h=self.time_h[idx], temp_c=self.temp_c[idx], cos_inc=self.cos_inc[idx],
+                       inv_nu=self.inv_nu[idx], spot_st=self.spot_st[idx])
+
+    @classmethod
+    def from_geometry(cls, zero, direction, normal_tcs, offset_tcs, tcs2tracker_rot, tcs2tracker_trans,
+                      plane_normal, plane_centre, range_mm, time_s=None, temp_c=None):
+        """Covariates of sensors ``(zero, direction)`` on the datum seen from each pose.
+
+        Parameters
+        ----------
+        zero : (n, 3) float, mm, TCS
+        direction : (n, 3) float, unit, TCS
+        normal_tcs : (p, 3) float, unit, TCS; offset_tcs : (p,) float, mm
+        tcs2tracker_rot : (p, 3, 3) float; tcs2tracker_trans : (p, 3) float, mm, tracker frame
+        plane_normal : (3,) float, unit, tracker frame
+        plane_centre : (3,) float, mm, tracker frame, a point of the datum (its centre)
+        range_mm : (n, 2) float, mm
+        time_s : (p,) float, s, or None (then the pose index stands for time, "hours" = index)
+        temp_c : (p,) float, deg C, or None
+        """
+        from metrology.core.frames import points_tracker_from_tcs
+        from metrology.core.model import readings
+        from metrology.core.plane import plane_basis
+
+        p = len(offset_tcs)
+        d, _ = readings(zero, direction, normal_tcs, offset_tcs)
+        nu = normal_tcs @ np.asarray(direction, float).T  # (p, n)
+        spot_tcs = zero[None] + d[..., None] * direction[None]
+        spot = points_tracker_from_tcs(spot_tcs, tcs2tracker_rot, tcs2tracker_trans)
+        basis = plane_basis(plane_normal)  # (2, 3)
+        spot_st = np.einsum("pnj,kj->pnk", spot - np.asarray(plane_centre, float), basis)
+        if time_s is None or not np.all(np.isfinite(time_s)):
+            time_h = np.arange(p, dtype=float)
+        else:
+            time_h = (np.asarray(time_s, float) - float(np.min(time_s))) / SECONDS_PER_HOUR
+        temp = np.full(p, np.nan) if temp_c is None else np.asarray(temp_c, float)
+        return cls(time_h, temp, np.abs(nu), 1.0 / nu, spot_st, np.asarray(range_mm, float))
+
+
+@dataclass(frozen=True)
+class Component:
+    """Base class: a named effect with parameters, acting on the sensors ``sensors``.
+
+    Attributes
+    ----------
+    sensors : tuple of int
+        Indices of the sensors the term acts on; empty for an effect of the set-up (it acts on
+        every sensor).
+    values : (k,) float, the parameters, in :attr:`param_units`
+    stderr : (k,) float or None, after a fit
+    names : tuple of str, the layout's sensor names (for labels)
+    """
+
+    sensors: tuple = ()
+    values: np.ndarray | None = None
+    stderr: np.ndarray | None = None
+    names: tuple = ()
+
+    name = "component"
+    param_names = ()
+    param_units = ()
+    #: its parameters are one per pose (re-estimated on held-out poses, not predicted)
+    per_pose = False
+    #: the term depends on d0
+    uses_d0 = False
+
+    # -- the registry entry: every consumer (candidates, advice, figures, simulator, CLI)
+    #    reads these, so adding an effect is one class and one line in ``REGISTRY``
+    #: one candidate per sensor (True) or one for the whole set-up (False)
+    per_sensor = True
+    #: the poses that separate this cause from the others, in words
+    advice = ""
+    #: the covariate the named-cause figure plots the residual against (a key of
+    #: :func:`metrology.diagnosis.stats.structure`'s variables)
+    plot_variable = "pose_index"
+    #: what ``metro simulate --size`` means for this effect, with its unit
+    size_meaning = ""
+
+    @classmethod
+    def candidates(cls, sensor, names, cov, flags=None) -> list:
+        """The candidates of this effect for one sensor (``per_sensor``) or for the set-up
+        (``sensor`` None), with zero values; ``flags`` (p, n) bool are gross readings."""
+        return [cls(() if sensor is None else (sensor,), names=names)]
+
+    @classmethod
+    def hidden(cls, size: float, sensor) -> "Component":
+        """The component a simulator hides for ``size`` (in :attr:`size_meaning`'s unit)."""
+        raise ValueError(f"{cls.name}: the simulator draws it itself, not as a component")
+
+    @property
+    def plot_key(self) -> str:
+        """The covariate of this component's figure (:attr:`plot_variable`)."""
+        return self.plot_variable
+
+    def __post_init__(self):
+        k = self.n_params
+        v = np.zeros(k) if self.values is None else np.asarray(self.values, float).reshape(k)
+        object.__setattr__(self, "values", v)
+        object.__setattr__(self, "sensors", tuple(int(i) for i in self.sensors))
+
+    # -- parameters --------------------------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        return len(self.param_names)
+
+    @property
+    def label(self) -> str:
+        """``name`` or ``name.L2``: the prefix of this component's parameter names."""
+        if not self.sensors:
+            return self.name
+        return self.name + "." + "+".join(self.names[i] if self.names else str(i) for i in self.sensors)
+
+    @property
+    def full_param_names(self) -> tuple:
+        return tuple(f"{self.label}.{p}" for p in self.param_names)
+
+    def with_values(self, values, stderr=None) -> "Component":
+        return replace(self, values=np.asarray(values, float), stderr=None if stderr is None else np.asarray(stderr, float))
+
+    def select(self, idx) -> "Component":
+        """The component restricted to the poses ``idx`` (only per-pose state changes)."""
+        return self
+
+    def _mask(self, n):
+        m = np.zeros(n, bool)
+        m[list(self.sensors) if self.sensors else slice(None)] = True
+        return m
+
+    # -- the term ----------------------------------------------------------------------
+    def basis(self, d0, cov: Covariates):
+        """``(p, n, k)``: the term is linear in the values, ``f = basis @ values``."""
+        raise NotImplementedError
+
+    def evaluate(self, values, d0, cov: Covariates):
+        """Additive reading term ``(p, n)`` mm for parameters ``values (k,)``.
+
+        Parameters
+        ----------
+        values : (k,) float
+        d0 : (p, n) float, mm, the base model's readings
+        cov : Covariates
+        """
+        return self.basis(d0, cov) @ np.asarray(values, float)
+
+    def jacobian(self, values, d0, cov: Covariates):
+        """``(p, n, k)``: ``df/dvalues`` (every catalogued term is linear in its values)."""
+        return self.basis(d0, cov)
+
+    def d_dd0(self, values, d0, cov: Covariates):
+        """``(p, n)``: ``df/dd0`` (zero unless the term depends on the reading)."""
+        return np.zeros_like(d0)
+
+    def constraint(self, values):
+        """Gauge rows ``(r (c,), J (c, k))`` appended to the weighted residuals (none by default)."""
+        return np.zeros(0), np.zeros((0, self.n_params))
+
+    def describe(self) -> dict:
+        out = {"component": self.name, "label": self.label,
+               "sensors": [self.names[i] if self.names else i for i in self.sensors], "params": {}}
+        for j, pn in enumerate(self.param_names):
+            out["params"][pn] = {"value": float(self.values[j]), "unit": self.param_units[j],
+                                 "stderr": None if self.stderr is None else float(self.stderr[j])}
+        return out
+
+
+def _sensor_basis(cols, n, sensors):
+    """Place per-sensor columns ``(p, n, k)`` on the chosen sensors only."""
+    out = np.zeros_like(cols)
+    idx = list(sensors)
+    out[:, idx] = cols[:, idx]
+    return out

@@ -1,0 +1,174 @@
+"""Effects of one sensor: its gain (scale), its linearity, its incidence bias and its drift."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import numpy as np
+from metrology.core.effects.base import Component, REFERENCE_TEMP_C, _sensor_basis
+
+
+@dataclass(frozen=True)
+class Scale(Component):
+    """Gain error ``k``: the reading is ``(1 + k) d0`` (a constant part is a zero shift)."""
+
+    name = "scale"
+    advice = "readings over the whole measuring range (a wider spread of stand-off)"
+    plot_variable = "d_mm"
+    size_meaning = "gain error k (unitless)"
+
+    @classmethod
+    def hidden(cls, size, sensor):
+        return cls((sensor,), [size])
+    param_names = ("k",)
+    param_units = ("1",)
+    uses_d0 = True
+
+    def basis(self, d0, cov):
+        return _sensor_basis(d0[..., None], d0.shape[1], self.sensors)
+
+    def d_dd0(self, values, d0, cov):
+        return np.where(self._mask(d0.shape[1])[None, :], values[0], 0.0) * np.ones_like(d0)
+
+
+@dataclass(frozen=True)
+class Incidence(Component):
+    """Bias ``c tan^2(gamma)``: grows from zero at normal incidence, ``c`` mm at 45 deg.
+
+    A triangulation sensor's spot elongates as ``1/cos(gamma)`` on a tilted surface and the
+    centroid of its image shifts with the speckle and intensity gradient across it; the
+    manufacturers' curves of error against tilt are even in the angle and grow faster than
+    linearly: ``tan^2`` is the lowest-order even form that vanishes at normal incidence.
+    """
+
+    name = "incidence"
+    advice = "a wider spread of tilt against the datum (incidence angles)"
+    plot_variable = "incidence_deg"
+    size_meaning = "c mm (bias at 45 deg incidence)"
+
+    @classmethod
+    def hidden(cls, size, sensor):
+        return cls((sensor,), [size])
+    param_names = ("c_mm",)
+    param_units = ("mm",)
+
+    def basis(self, d0, cov):
+        t2 = 1.0 / cov.cos_inc**2 - 1.0
+        return _sensor_basis(t2[..., None], d0.shape[1], self.sensors)
+
+
+@dataclass(frozen=True)
+class Drift(Component):
+    """Zero drift ``r (T - T_ref)`` with temperature (``variable="temp"``, mm/K) or
+    ``r (t - t_ref)`` with time (``variable="time"``, mm/h): warm-up of the sensor and
+    thermal growth of its mount.
+
+    ``ref`` is a fixed reference, never the first pose of whatever subset is evaluated (a
+    k-fold held-out set would then be shifted by ``r`` times the difference of its first
+    temperature and the training set's). The zero points of the extended model are those at
+    ``ref``; a constant part is a zero shift, so ``ref`` changes the zero point, not the rate
+    or the fit, but it sets how strongly the rate correlates with the zero point (least at
+    the run's mean, which the diagnosis uses). Default :data:`REFERENCE_TEMP_C` (20 deg C,
+    the reference temperature of dimensional metrology, ISO 1) for temperature, 0 h (the
+    run's first pose) for time.
+    """
+
+    variable: str = "temp"
+    ref: float | None = None
+
+    name = "drift"
+    advice = "poses repeated cold and warm, interleaved rather than in one sweep"
+    size_meaning = "rate mm/K (temperature)"
+
+    @classmethod
+    def candidates(cls, sensor, names, cov, flags=None):
+        # the reference is fixed once per data set (every fold evaluates against it) at the
+        # run's mean, where the rate is least correlated with the zero point
+        out = []
+        if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
+            out.append(cls((sensor,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
+        out.append(cls((sensor,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
+        return out
+
+    @classmethod
+    def hidden(cls, size, sensor):
+        return cls((sensor,), [size], variable="temp")
+
+    @property
+    def plot_key(self):
+        return "temp_c" if self.variable == "temp" else "time_h"
+
+    @property
+    def param_names(self):
+        return ("rate_mm_per_K",) if self.variable == "temp" else ("rate_mm_per_h",)
+
+    @property
+    def param_units(self):
+        return ("mm/K",) if self.variable == "temp" else ("mm/h",)
+
+    def __post_init__(self):
+        if self.variable not in ("temp", "time"):
+            raise ValueError(f"drift variable must be 'temp' or 'time', got {self.variable!r}")
+        if self.ref is None:
+            object.__setattr__(self, "ref", REFERENCE_TEMP_C if self.variable == "temp" else 0.0)
+        super().__post_init__()
+
+    @property
+    def label(self):
+        return super().label + ("@temp" if self.variable == "temp" else "@time")
+
+    def covariate(self, cov):
+        """``(p,)``: ``T - ref`` (K) or ``t - ref`` (h) of the poses of ``cov``."""
+        x = cov.temp_c if self.variable == "temp" else cov.time_h
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"drift with {self.variable}: the export has no {self.variable} column")
+        return x - self.ref
+
+    def describe(self):
+        out = super().describe()
+        out["reference"] = {"value": float(self.ref), "unit": "deg C" if self.variable == "temp" else "h"}
+        return out
+
+    def basis(self, d0, cov):
+        x = np.broadcast_to(self.covariate(cov)[:, None], d0.shape)
+        return _sensor_basis(x[..., None], d0.shape[1], self.sensors)
+
+
+def _legendre23(x):
+    return 0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)
+
+
+@dataclass(frozen=True)
+class Nonlinearity(Component):
+    """Linearity error ``c2 P2(x) + c3 P3(x)`` over the normalised range ``x`` in [-1, 1].
+
+    The datasheet's linearity error is the deviation from the best straight line over the
+    full range, so its constant and linear parts are zero by definition: the first two
+    Legendre polynomials orthogonal to them are the bow (``P2``) and the S-shape (``P3``);
+    ``c2``, ``c3`` are their values at the end of the range (mm).
+    """
+
+    name = "nonlinearity"
+    advice = "readings over the whole measuring range (a wider spread of stand-off)"
+    plot_variable = "d_mm"
+    size_meaning = "c3 mm at the range end (c2 = c3/2)"
+
+    @classmethod
+    def hidden(cls, size, sensor):
+        return cls((sensor,), [0.5 * size, size])
+    param_names = ("c2_mm", "c3_mm")
+    param_units = ("mm", "mm")
+    uses_d0 = True
+
+    def _x(self, d0, cov):
+        lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
+        return (2 * d0 - lo - hi) / (hi - lo), 2.0 / (hi - lo)
+
+    def basis(self, d0, cov):
+        x, _ = self._x(d0, cov)
+        p2, p3 = _legendre23(x)
+        return _sensor_basis(np.stack([p2, p3], axis=-1), d0.shape[1], self.sensors)
+
+    def d_dd0(self, values, d0, cov):
+        x, dx = self._x(d0, cov)
+        deriv = (values[0] * 3 * x + values[1] * 0.5 * (15 * x**2 - 3)) * dx[None, :]
+        return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)

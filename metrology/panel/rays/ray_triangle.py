@@ -1,0 +1,21 @@
+"""trimesh's pure-numpy engine (an r-tree of the triangles, double precision)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from metrology.panel.rays.base import RayCaster
+
+
+class TriangleCaster(RayCaster):
+    engine = "trimesh"
+
+    def _build(self):
+        from trimesh.ray.ray_triangle import RayMeshIntersector
+
+        impl = RayMeshIntersector(self.mesh)
+        self.mesh.triangles_tree  # noqa: B018  (the r-tree, built now)
+        return impl
+
+    def _first_triangle(self, origins, directions):
+        return np.asarray(self._impl.intersects_first(origins, directions), dtype=np.int64)

@@ -1,0 +1,61 @@
+"""The datum's quadratic form and its F-test (metrology.datum.form)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from metrology.io.data import DATA_DIR
+from metrology.datum import DatumForm, fit_plane_robust
+from metrology.jobs.fit_plane import fit_plane_file
+from tests.datum.synthetic import plate_cloud
+
+
+def test_quadratic_form_is_recovered_in_its_own_axes():
+    cuu, cuv, cvv = 2.0e-7, -1.2e-7, 3.5e-7  # 1/mm
+    rng = np.random.default_rng(11)
+    pts, truth, R, t = plate_cloud(rng, 40000, sigma=0.002, outliers=0.02, form=lambda u, v: cuu * u * u + cuv * u * v + cvv * v * v)
+    # the form (P-V ~0.02 mm) dwarfs the noise here: a band of 3 noise sigma about the
+    # plane would clip its extremes, so the threshold is set wide enough (see the docs)
+    fit = fit_plane_robust(pts, seed=3, threshold_mm=0.05)
+    f = fit.form
+    assert f.significant and f.p_value < 1e-100
+    # the truth's Hessian, in the fit's (u, v) axes
+    M = fit.axes @ R[:, :2]  # fit axes in the plate's (u, v) basis
+    sign = np.sign(fit.plane.normal @ R[:, 2])  # residuals are signed along the fit's normal
+    H = sign * M @ np.array([[2 * cuu, cuv], [cuv, 2 * cvv]]) @ M.T
+    got = np.array([[2 * f.coefficients[3], f.coefficients[4]], [f.coefficients[4], 2 * f.coefficients[5]]])
+    sd = np.array([[2 * f.stderr[3], f.stderr[4]], [f.stderr[4], 2 * f.stderr[5]]])
+    assert np.all(np.abs(got - H) < 4 * sd + 1e-12)
+    # the fitted surface reproduces the form: what is left about it is the noise
+    inl = pts[fit.inliers(pts)]
+    uv = (inl - fit.centroid) @ fit.axes.T
+    left = fit.residuals(inl) - f.evaluate(uv[:, 0], uv[:, 1])
+    assert np.std(left) == pytest.approx(0.002, rel=0.05)
+    assert fit.rms > 1.5 * 0.002  # the plane alone leaves the form in its residuals
+    assert f.pv == pytest.approx(np.ptp(f.evaluate(uv[:, 0], uv[:, 1])), rel=0.05)
+
+
+def test_flat_plate_form_false_alarm_rate():
+    """A flat plate: the F-test at alpha = 0.01 fires in about 1 % of seeded trials."""
+    alarms = 0
+    for seed in range(200):
+        rng = np.random.default_rng(1000 + seed)
+        pts, _, _, _ = plate_cloud(rng, 300, outliers=0.0)
+        alarms += fit_plane_robust(pts, seed=seed).form.significant
+    assert alarms <= 8  # binomial(200, 0.01): P(>= 9) < 1e-3
+
+
+def test_form_is_none_with_few_inliers():
+    pts = np.array([[0, 0, 0], [100, 0, 0.01], [0, 100, -0.01], [100, 100, 0.0], [50, 50, 0.02], [30, 70, -0.01]], float)
+    fit = fit_plane_robust(pts, threshold_mm=1.0)
+    assert fit.form is None and fit.n_inliers == 6 and fit.to_dict()["form"] is None
+
+
+def test_plane_form_dict_round_trips_to_json():
+    fit = fit_plane_file(str(DATA_DIR / "datum_cloud.ply"))
+    d = json.loads(json.dumps(fit.to_dict()))
+    assert isinstance(fit.form, DatumForm)
+    assert d["form"]["coefficients"]["cuu_per_mm"] == fit.form.coefficients[3]
+    assert d["normal_sigma_deg"] == pytest.approx(math.degrees(fit.normal_sigma))
