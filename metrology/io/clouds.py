@@ -181,7 +181,7 @@ def read_cloud_checked(path, *, units=None, nonfinite="drop", min_points=3, hint
     min_points : int
         Fewest points left after dropping; fewer is an error.
     hint : bool
-        Compute :attr:`CloudRead.units_hint` (a k-d tree on up to 10^5 points).
+        Compute :attr:`CloudRead.units_hint` (a k-d tree on up to 2 x 10^4 points: ~0.1 s).
 
     Returns
     -------

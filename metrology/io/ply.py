@@ -164,16 +164,46 @@ def vertex_element(header: PlyHeader):
     return next((e for e in header.elements if e.name == "vertex"), None)
 
 
+def _walk_rows(path, data, pos, size, e, order):
+    """Byte offset after element ``e`` (rows with lists) starting at ``pos``; raise if the
+    file ends inside it. Rows of one list property all of the first row's length (a
+    triangle mesh's faces) are checked at once; others one by one."""
+    if len(e.properties) == 1 and e.count:
+        p = e.properties[0]
+        c = np.dtype(order + p.count_dtype)
+        if pos + c.itemsize <= size:
+            m = int(np.frombuffer(data, c, 1, pos)[0])
+            row = c.itemsize + m * np.dtype(p.dtype).itemsize
+            if m >= 0 and pos + e.count * row <= size:
+                block = np.frombuffer(data, np.uint8, e.count * row, pos).reshape(e.count, row)[:, :c.itemsize]
+                if (np.ascontiguousarray(block).view(c).ravel() == m).all():
+                    return pos + e.count * row
+    for r in range(e.count):
+        for p in e.properties:
+            if p.count_dtype is not None:
+                c = np.dtype(order + p.count_dtype)
+                if pos + c.itemsize > size:
+                    raise ValueError(f"{path}: truncated: the file ends in row {r + 1} of element {e.name!r} "
+                                     f"(the count of list {p.name!r}), expected {e.count} rows")
+                m = int(np.frombuffer(data, c, 1, pos)[0])
+                if m < 0:
+                    raise ValueError(f"{path}: row {r + 1} of element {e.name!r}: list {p.name!r} of {m} items, expected a count >= 0")
+                pos += c.itemsize + m * np.dtype(p.dtype).itemsize
+            else:
+                pos += np.dtype(p.dtype).itemsize
+            if pos > size:
+                raise ValueError(f"{path}: truncated: the file ends in row {r + 1} of element {e.name!r} "
+                                 f"(property {p.name!r}), expected {e.count} rows")
+    return pos
+
+
 def check_binary_size(path, header: PlyHeader) -> None:
-    """Refuse a binary body shorter than the elements up to the vertex element declare (or,
-    when every element has fixed-size rows, longer): RPly fills missing vertices from
-    uninitialised memory. Rows with list properties before or in the vertex element are
-    walked one by one (their length is in the data)."""
+    """Refuse a binary body shorter or longer than its declared elements: RPly fills
+    missing vertices from uninitialised memory. Elements with list properties are walked
+    (their row lengths are in the data)."""
     size = Path(path).stat().st_size - header.body_offset
     order = "<" if header.format == "binary_little_endian" else ">"
-    fixed = all(e.row_bytes is not None for e in header.elements)
-    data = None
-    pos = 0
+    data, pos = None, 0
     for e in header.elements:
         if e.row_bytes is not None:
             if e.name == "vertex":
@@ -181,32 +211,15 @@ def check_binary_size(path, header: PlyHeader) -> None:
                 if have < e.count:
                     raise ValueError(f"{path}: truncated: the header declares {e.count} vertices, the file holds {have}")
             pos += e.count * e.row_bytes
+            if pos > size:
+                raise ValueError(f"{path}: truncated: the file ends in element {e.name!r}, "
+                                 f"expected {e.count} rows of {e.row_bytes} bytes")
         else:
-            if data is None:
-                with open(path, "rb") as fh:
-                    fh.seek(header.body_offset)
-                    data = fh.read()
-            for r in range(e.count):
-                for p in e.properties:
-                    if p.count_dtype is not None:
-                        c = np.dtype(order + p.count_dtype)
-                        if pos + c.itemsize > size:
-                            raise ValueError(f"{path}: truncated: the file ends in row {r + 1} of element {e.name!r} "
-                                             f"(the count of list {p.name!r}), expected {e.count} rows")
-                        m = int(np.frombuffer(data, c, 1, pos)[0])
-                        if m < 0:
-                            raise ValueError(f"{path}: row {r + 1} of element {e.name!r}: list {p.name!r} of {m} items, expected a count >= 0")
-                        pos += c.itemsize + m * np.dtype(p.dtype).itemsize
-                    else:
-                        pos += np.dtype(p.dtype).itemsize
-                    if pos > size:
-                        raise ValueError(f"{path}: truncated: the file ends in row {r + 1} of element {e.name!r} "
-                                         f"(property {p.name!r}), expected {e.count} rows")
-        if e.name == "vertex" and not fixed:
-            return
-    if fixed and size != pos:
-        what = "truncated" if size < pos else f"{size - pos} byte(s) after the last element"
-        raise ValueError(f"{path}: {what}: the header declares {pos} bytes of data "
+            if data is None:  # mapped, not read: a mesh's face list may be large
+                data = np.memmap(path, np.uint8, "r", offset=header.body_offset) if size else b""
+            pos = _walk_rows(path, data, pos, size, e, order)
+    if size != pos:
+        raise ValueError(f"{path}: {size - pos} byte(s) after the last element: the header declares {pos} bytes of data "
                          f"({', '.join(f'{e.count} {e.name}' for e in header.elements)}), the file holds {size}")
 
 

@@ -118,3 +118,35 @@ def test_arguments_are_checked(tmp_path):
         read_cloud_checked(path, units="cm")
     with pytest.raises(ValueError, match=r"nonfinite 'keep': expected 'drop' or 'refuse'"):
         read_cloud_checked(path, nonfinite="keep")
+
+
+def test_binary_ply_with_a_truncated_face_list_after_good_vertices(tmp_path, capfd):
+    # RPly reads the 4 vertices, prints an error of its own about the faces, and Open3D
+    # returns the cloud; metro walks the face list and refuses the truncated file
+    head = (b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty double x\nproperty double y\n"
+            b"property double z\nelement face 3\nproperty list uchar int vertex_indices\nend_header\n")
+    faces = np.array([(3, (0, 1, 2))] * 3, dtype=[("n", "u1"), ("i", "<i4", (3,))]).tobytes()
+    vertices = np.arange(12, dtype="<f8").tobytes()
+    path = tmp_path / "mesh.ply"
+    path.write_bytes(head + vertices + faces)
+    np.testing.assert_array_equal(read_cloud(path), np.arange(12.0).reshape(4, 3))
+    path.write_bytes(head + vertices + faces[:-3])
+    with pytest.raises(ValueError, match=r"mesh\.ply: truncated: the file ends in row 3 of element 'face' \(property 'vertex_indices'\)"):
+        read_cloud(path)
+    path.write_bytes(head + vertices + faces + b"\0")
+    with pytest.raises(ValueError, match=r"mesh\.ply: 1 byte\(s\) after the last element"):
+        read_cloud(path)
+    assert capfd.readouterr().out == ""
+
+
+def test_binary_ply_with_mixed_face_sizes_is_walked_row_by_row(tmp_path):
+    head = (b"ply\nformat binary_big_endian 1.0\nelement face 2\nproperty list uchar int vertex_indices\n"
+            b"element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n")
+    faces = bytes([3]) + np.array([0, 1, 2], ">i4").tobytes() + bytes([4]) + np.array([0, 1, 2, 0], ">i4").tobytes()
+    xyz = np.array([[1.5, 2, 3], [4, 5, 6], [7, 8, 9.25]], ">f4")
+    path = tmp_path / "mixed.ply"
+    path.write_bytes(head + faces + xyz.tobytes())
+    np.testing.assert_array_equal(read_cloud(path), xyz.astype(float))
+    path.write_bytes(head + faces[:-1] + xyz.tobytes())  # one byte short: the vertices are shifted
+    with pytest.raises(ValueError, match=r"mixed\.ply: truncated: the header declares 3 vertices, the file holds 2"):
+        read_cloud(path)
