@@ -1,18 +1,32 @@
 """Point-cloud readers: PLY, PCD, E57, XYZ/XYZN/PTS and CSV/TXT, as ``(m, 3)`` arrays in mm.
 
-Which reader reads what:
+Two entry points:
 
-- ``.ply`` (ASCII and binary) is read by Open3D, after metro has checked the header
-  against the file's length: Open3D (RPly) returns a truncated binary PLY with its
-  missing vertices filled from uninitialised memory.
-- ``.pcd``: ``binary_compressed`` is read by Open3D; ``ascii`` and ``binary`` are read
-  by metro, because Open3D 0.20 reads 8-byte (double) binary coordinates as zeros.
+- :func:`read_cloud` ``(path) -> (m, 3) float, mm``: strict, any NaN or inf refused;
+- :func:`read_cloud_checked` ``(path, *, units=None, nonfinite="drop", min_points=3,
+  hint=True) -> CloudRead``: drops NaN points (missing returns of organized depth scans)
+  and counts them in ``n_dropped_nonfinite``, scales ``units`` ("mm", "m", "in") to mm,
+  and returns a :class:`metrology.io.units.UnitsHint` saying whether the extent and the
+  point spacing look like metres (the rule is in :mod:`metrology.io.units`).
+
+Which reader reads what (every malformed file is refused with one ``ValueError``:
+``<file>: line <n>[, column <c>]: <what was found>, expected <what>``, or for binary
+bodies the byte or point count that is wrong):
+
+- ``.ply`` ASCII is read by metro's strict parser (:mod:`metrology.io.ply`): Open3D's
+  (RPly's) ASCII reader, on a bad token or a short row, returns the declared number of
+  points padded with uninitialised memory. Binary PLY is read by Open3D after metro has
+  checked the header's grammar and the body's length against it (RPly fills a truncated
+  file from uninitialised memory too); Open3D's console output goes to stderr.
+- ``.pcd``: ``binary_compressed`` is read by Open3D; ``ascii`` (as strictly as ASCII PLY)
+  and ``binary`` (length checked both ways) by metro, because Open3D 0.20 reads 8-byte
+  (double) binary coordinates as zeros.
 - ``.e57`` is read by the optional package ``pye57`` (E57 stores metres; metro converts to
   mm). All scans of the file are read, each placed in the file's frame by its pose.
 - ``.xyz``, ``.xyzn``, ``.xyzrgb``, ``.pts``, ``.csv`` and ``.txt`` are read by metro's own
-  text parser. Open3D reads ``.xyz``/``.xyzn``/``.pts`` too, but skips a malformed line
-  without a word (``4 5 abc`` simply disappears from the cloud); a metrology tool must not
-  drop measurements silently, so metro parses text itself and names the bad line.
+  text parser (:mod:`metrology.io.text_clouds`). Open3D reads ``.xyz``/``.xyzn``/``.pts``
+  too, but skips a malformed line without a word (``4 5 abc`` simply disappears from the
+  cloud); a metrology tool must not drop measurements silently.
 
 Text files: one point per line; blank lines and lines starting with ``#`` or ``//`` are
 skipped. Fields are separated by ``;``, ``,`` or white space (whichever the first data
@@ -21,25 +35,33 @@ accepted. A first line that names its columns is a header: the x, y and z column
 ones named ``x``, ``y``, ``z`` (case-insensitive; a unit in brackets and words around
 them are ignored: ``X [mm]``, ``Point_X``, ``pos x``). Without a header, x, y and z are
 the first three numeric columns of the first data line (a leading point-name column such
-as ``P1`` is skipped); other columns are ignored. A ``.pts`` file may start with a line
-holding the point count, which is then checked.
+as ``P1`` is skipped); other columns are ignored, but every data line must hold as many
+fields as the first. A ``.pts`` file may start with a line holding the point count,
+which is then checked.
 
-Coordinates are returned as read: metro treats them as mm in the cloud's own frame
-(except E57, converted from metres).
+NaN and inf: NaN marks a missing return (organized scans write it for pixels without
+depth); :func:`read_cloud_checked` drops such points and counts them. An infinite
+coordinate is not a measurement and is always refused, with its line or point number.
+
+Coordinates are returned as read unless ``units`` says otherwise: metro treats them as
+mm in the cloud's own frame (except E57, converted from metres).
 """
 
 from __future__ import annotations
 
 import contextlib
-import math
 import os
-import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_cloud", "cloud_format", "write_ply", "CLOUD_SUFFIXES"]
+from metrology.io.ply import PlyElement, PlyProperty, body_lines, check_binary_size, parse_rows, read_ascii_ply, read_ply_header, vertex_element
+from metrology.io.text_clouds import read_text_cloud
+from metrology.io.units import UnitsHint, infer_units, mm_per_unit
+
+__all__ = ["read_cloud", "read_cloud_checked", "CloudRead", "cloud_format", "write_ply", "CLOUD_SUFFIXES"]
 
 #: file suffix -> format name
 CLOUD_SUFFIXES = {
@@ -57,9 +79,6 @@ _TEXT = {".xyz", ".xyzn", ".xyzrgb", ".pts", ".csv", ".txt"}
 #: E57 stores cartesian coordinates in metres (ASTM E2807)
 _MM_PER_M = 1000.0
 _CHUNK = 1 << 20
-_AXIS_TOKEN = re.compile(r"[^a-z0-9]+")
-_WHITE_FIELD = re.compile(r"\"[^\"]*\"|'[^']*'|\S+")
-_UNIT_ONLY = re.compile(r"[\[(].*[\])]")
 
 
 def write_ply(path, points, comments=()) -> None:
@@ -86,8 +105,39 @@ def cloud_format(path) -> str:
     return CLOUD_SUFFIXES[suffix]
 
 
+@dataclass(frozen=True)
+class CloudRead:
+    """A point cloud as read, with what the reader did to it.
+
+    Attributes
+    ----------
+    points : (m, 3) float, mm, cloud frame
+        All finite, m >= ``min_points``.
+    n_in_file : int
+        Points the file holds (before dropping).
+    n_dropped_nonfinite : int
+        Points dropped because a coordinate is NaN (missing returns of organized scans).
+    units : str
+        The unit the file was read in (``"mm"`` unless the caller said otherwise; E57: ``"m"``).
+    units_hint : UnitsHint or None
+        What the cloud's extent and spacing suggest (:func:`metrology.io.units.infer_units`),
+        computed on the file's numbers; ``None`` when not asked for.
+    """
+
+    points: np.ndarray
+    n_in_file: int
+    n_dropped_nonfinite: int
+    units: str
+    units_hint: UnitsHint | None = None
+
+    def to_dict(self) -> dict:
+        return {"n_points": len(self.points), "n_in_file": self.n_in_file,
+                "n_dropped_nonfinite": self.n_dropped_nonfinite, "units": self.units,
+                "units_hint": None if self.units_hint is None else self.units_hint.to_dict()}
+
+
 def read_cloud(path):
-    """Read a point cloud file.
+    """Read a point cloud file, strictly: any NaN or inf coordinate is refused.
 
     Parameters
     ----------
@@ -97,15 +147,49 @@ def read_cloud(path):
     Returns
     -------
     points : (m, 3) float, mm, cloud frame
-        m >= 3, all finite. For PLY/PCD this is a view of Open3D's buffer (no copy).
+        m >= 3, all finite. For binary PLY and compressed PCD this is a view of Open3D's
+        buffer (no copy).
 
     Raises
     ------
     ValueError
         One line naming the file and the problem: missing or empty file, unknown
-        extension, unreadable content, a non-numeric field (with its line and column),
-        NaN or inf (with its line or point number), fewer than 3 points.
+        extension, a malformed header or row (with its line and value), NaN or inf
+        (with its line or point number), fewer than 3 points.
+
+    See Also
+    --------
+    read_cloud_checked : drops NaN points with a count, converts units, guesses units.
     """
+    return read_cloud_checked(path, nonfinite="refuse", hint=False).points
+
+
+def read_cloud_checked(path, *, units=None, nonfinite="drop", min_points=3, hint=True) -> CloudRead:
+    """Read a point cloud file and say what was done to it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        As :func:`read_cloud`.
+    units : {None, "mm", "m", "in"}
+        The unit of the file's numbers; the points are scaled to mm. ``None`` means mm
+        (E57 files are in metres by definition and take ``None`` or ``"m"``).
+    nonfinite : {"drop", "refuse"}
+        ``"drop"``: points with a NaN coordinate (missing returns of organized depth
+        scans) are dropped and counted; ``"refuse"``: any is an error. An infinite
+        coordinate is always refused (it is not a measurement).
+    min_points : int
+        Fewest points left after dropping; fewer is an error.
+    hint : bool
+        Compute :attr:`CloudRead.units_hint` (a k-d tree on up to 2 x 10^4 points: ~0.1 s).
+
+    Returns
+    -------
+    CloudRead
+    """
+    if nonfinite not in ("drop", "refuse"):
+        raise ValueError(f"nonfinite {nonfinite!r}: expected 'drop' or 'refuse'")
+    scale = 1.0 if units is None else mm_per_unit(units)
     fmt = cloud_format(path)
     p = Path(path)
     if not p.exists():
@@ -115,92 +199,78 @@ def read_cloud(path):
     if p.stat().st_size == 0:
         raise ValueError(f"{path}: empty file")
     suffix = p.suffix.lower()
+    allow_nan = nonfinite == "drop"
     if suffix == ".ply":
-        expected = _ply_vertex_count(path)
-        points = _read_open3d(path, fmt)
-        if expected is not None and len(points) != expected:
-            raise ValueError(f"{path}: the header declares {expected} vertices, {len(points)} were read")
+        points = _read_ply(path)
     elif suffix == ".pcd":
         points = _read_pcd(path)
     elif suffix == ".e57":
-        points = _read_e57(path)
+        if units not in (None, "m"):
+            raise ValueError(f"{path}: E57 stores metres (ASTM E2807); units={units!r} does not apply")
+        points, scale, units = _read_e57(path), _MM_PER_M, "m"
     else:
-        points = _read_text(path, suffix)
-    return _checked(points, path)
-
-
-def _checked(points, path):
-    """Check shape, count and finiteness of points read from a binary format."""
+        points = read_text_cloud(path, suffix, allow_nan)
+    n_file = len(points)
+    points, dropped = _finite(points, path, allow_nan, fmt)
     m = len(points)
     if m == 0:
-        raise ValueError(f"{path}: no points in the file")
-    if m < 3:
-        raise ValueError(f"{path}: {m} point{'s' if m != 1 else ''}, need at least 3")
+        raise ValueError(f"{path}: no points in the file" + (f" ({dropped} NaN points dropped)" if dropped else ""))
+    if m < min_points:
+        why = f" of {n_file} ({dropped} with NaN dropped)" if dropped else ""
+        raise ValueError(f"{path}: {m} point{'s' if m != 1 else ''}{why}, need at least {min_points}")
+    guess = infer_units(points) if hint and suffix != ".e57" else None
+    if scale != 1.0:
+        points = points * scale
+    return CloudRead(points, n_file, dropped, units or "mm", guess)
+
+
+def _finite(points, path, allow_nan, fmt):
+    """Drop (``allow_nan``) or refuse points with a NaN coordinate; always refuse inf."""
+    m = len(points)
+    keep = None
     for start in range(0, m, _CHUNK):
-        bad = ~np.isfinite(points[start : start + _CHUNK]).all(axis=1)
+        block = points[start : start + _CHUNK]
+        ok = np.isfinite(block).all(axis=1)
+        if ok.all():
+            continue
+        bad = ~ok if not allow_nan else np.isinf(block).any(axis=1)
         if bad.any():
             i = start + int(np.argmax(bad))
-            raise ValueError(f"{path}: point {i + 1} is {points[i].tolist()}: coordinates must be finite (no NaN or inf)")
-    return points
+            raise ValueError(f"{path}: point {i + 1} is {points[i].tolist()}: coordinates must be finite (no NaN or inf)"
+                             if not allow_nan else f"{path}: point {i + 1} is {points[i].tolist()}: coordinates must not be infinite")
+        if keep is None:
+            keep = np.ones(m, dtype=bool)
+        keep[start : start + _CHUNK] = ok
+    if keep is None:
+        return points, 0
+    return points[keep], int(m - keep.sum())
 
 
 def _read_open3d(path, fmt):
     from metrology.io._o3d import open3d
 
     o3d = open3d()
-    cloud = o3d.io.read_point_cloud(os.fspath(path), format="auto", remove_nan_points=False, remove_infinite_points=False)
+    with _redirect_fd(1, 2):  # Open3D's own console messages never reach stdout
+        cloud = o3d.io.read_point_cloud(os.fspath(path), format="auto", remove_nan_points=False, remove_infinite_points=False)
     if not cloud.has_points():
         raise ValueError(f"{path}: no points read (not a valid {fmt} file, or it holds no vertices)")
     return np.asarray(_CloudBuffer(cloud))
 
 
-_PLY_SIZES = {
-    "char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-    "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8,
-}
-
-
-def _ply_vertex_count(path):
-    """Check a PLY header against the file's length; return the declared vertex count.
-
-    Open3D (RPly) reports a truncated file on stderr but still returns the declared
-    number of vertices, the missing ones filled with whatever was in memory; metro
-    checks the length itself. Returns None when the header is not one it can check.
-    """
-    with open(path, "rb") as fh:
-        head = fh.read(65536)
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        raise ValueError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
-    nl = head.find(b"\n", end)
-    body_start = (nl + 1) if nl >= 0 else len(head)
-    lines = head[:end].decode("ascii", "replace").splitlines()
-    fmt, elements = None, []
-    for line in lines:
-        t = line.split()
-        if not t:
-            continue
-        if t[0] == "format" and len(t) > 1:
-            fmt = t[1]
-        elif t[0] == "element" and len(t) == 3:
-            try:
-                elements.append([t[1], int(t[2]), 0])
-            except ValueError:
-                raise ValueError(f"{path}: bad PLY header line {line!r}") from None
-        elif t[0] == "property" and elements:
-            if t[1] == "list" or t[1] not in _PLY_SIZES:
-                elements[-1][2] = None  # variable or unknown size: cannot check
-            elif elements[-1][2] is not None:
-                elements[-1][2] += _PLY_SIZES[t[1]]
-    vertex = [e for e in elements if e[0] == "vertex"]
-    if not vertex:
-        raise ValueError(f"{path}: the PLY header declares no vertex element")
-    count = vertex[0][1]
-    if fmt in ("binary_little_endian", "binary_big_endian") and elements[0][0] == "vertex" and elements[0][2]:
-        have = (Path(path).stat().st_size - body_start) // elements[0][2]
-        if have < count:
-            raise ValueError(f"{path}: truncated: the header declares {count} vertices, the file holds {have}")
-    return count
+def _read_ply(path):
+    """ASCII PLY by metro's strict parser; binary PLY by Open3D after the header and the
+    body's length are checked (RPly fills missing vertices from uninitialised memory)."""
+    header = read_ply_header(path)
+    if header.format == "ascii":
+        return read_ascii_ply(path, header)
+    check_binary_size(path, header)
+    count = vertex_element(header).count
+    if count == 0:
+        return np.empty((0, 3))
+    points = _read_open3d(path, "PLY")
+    if len(points) != count:
+        raise ValueError(f"{path}: the header declares {count} vertices, {len(points)} were read")
+    return points
 
 
 _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8",
@@ -232,13 +302,19 @@ def _read_pcd(path):
         raise ValueError(f"{path}: not a PCD file (no FIELDS ... DATA header)")
     fields = header["FIELDS"]
     n_f = len(fields)
-    sizes = [int(x) for x in header.get("SIZE", ["4"] * n_f)]
+
+    def ints(key, default):
+        vals = header.get(key, default)
+        if not vals or not all(v.isdigit() for v in vals):
+            raise ValueError(f"{path}: header line {key} {' '.join(vals)!r}, expected non-negative integers")
+        return [int(v) for v in vals]
+
+    sizes = ints("SIZE", ["4"] * n_f)
     types = [x.upper() for x in header.get("TYPE", ["F"] * n_f)]
-    counts = [int(x) for x in header.get("COUNT", ["1"] * n_f)]
-    try:
-        npts = int(header["POINTS"][0]) if "POINTS" in header else int(header["WIDTH"][0]) * int(header["HEIGHT"][0])
-    except (KeyError, ValueError, IndexError):
-        raise ValueError(f"{path}: the PCD header gives no point count (POINTS or WIDTH x HEIGHT)") from None
+    counts = ints("COUNT", ["1"] * n_f)
+    if "POINTS" not in header and not ("WIDTH" in header and "HEIGHT" in header):
+        raise ValueError(f"{path}: the PCD header gives no point count (POINTS or WIDTH x HEIGHT)")
+    npts = ints("POINTS", None)[0] if "POINTS" in header else ints("WIDTH", None)[0] * ints("HEIGHT", None)[0]
     if not all(a in fields for a in "xyz"):
         raise ValueError(f"{path}: the PCD has no x, y, z fields (FIELDS {' '.join(fields)})")
     if not (len(sizes) == len(types) == len(counts) == n_f):
@@ -248,24 +324,7 @@ def _read_pcd(path):
             raise ValueError(f"{path}: binary_compressed PCD with 8-byte coordinates is not supported; save it as binary")
         return _read_open3d(path, "PCD")
     if data_mode == "ascii":
-        text = raw[pos:].decode("utf-8", "replace") if Path(path).stat().st_size <= len(raw) else None
-        if text is None:
-            with open(path, "rb") as fh:
-                fh.seek(pos)
-                text = fh.read().decode("utf-8", "replace")
-        body = text.splitlines()
-        first_line = raw[:pos].count(b"\n")  # header lines before the data
-        rows = [i for i, line in enumerate(body) if line.strip()]
-        col = np.cumsum([0] + counts)
-        cols = tuple(int(col[fields.index(a)]) for a in "xyz")
-        if len(rows) != npts:
-            raise ValueError(f"{path}: the header declares {npts} points, the file holds {len(rows)}")
-        lines_all = [""] * first_line + body
-        data = [first_line + i for i in rows]
-        pts = _fast_parse(lines_all, data, None, cols)
-        if pts is None:
-            pts = _slow_parse(path, lines_all, data, None, cols, False)
-        return pts
+        return _read_pcd_ascii(path, pos, raw[:pos].count(b"\n"), fields, types, sizes, counts, npts)
     if data_mode != "binary":
         raise ValueError(f"{path}: unknown PCD DATA mode {data_mode!r}")
     try:
@@ -275,11 +334,34 @@ def _read_pcd(path):
     have = (Path(path).stat().st_size - pos) // dtype.itemsize
     if have < npts:
         raise ValueError(f"{path}: truncated: the header declares {npts} points, the file holds {have}")
+    extra = Path(path).stat().st_size - pos - npts * dtype.itemsize
+    if extra > 0:
+        raise ValueError(f"{path}: {extra} byte(s) after the {npts} declared points, expected the end of the file")
     rec = np.fromfile(path, dtype=dtype, count=npts, offset=pos)
     pts = np.empty((npts, 3))
     for j, a in enumerate("xyz"):
         pts[:, j] = rec[f"f{fields.index(a)}"]
     return pts
+
+
+def _read_pcd_ascii(path, offset, header_lines, fields, types, sizes, counts, npts):
+    """ASCII PCD, strictly: one row per point, each with exactly the declared values, each
+    value of its declared TYPE and SIZE; ``nan`` allowed in F fields (organized scans)."""
+    props = []
+    for name, t, z, c in zip(fields, types, sizes, counts):
+        code = _PCD_TYPES.get((t, z))
+        if code is None:
+            raise ValueError(f"{path}: unsupported PCD field type {t} of size {z} (field {name!r})")
+        props += [PlyProperty(name if c == 1 else f"{name}[{i}]", code) for i in range(c)]
+    lines = body_lines(path, offset)
+    while lines and not lines[-1].strip():
+        lines.pop()
+    if len(lines) != npts:
+        raise ValueError(f"{path}: the header declares {npts} points, the file holds {len(lines)}")
+    element = PlyElement("point", npts, tuple(props), header_lines)
+    values = parse_rows(path, lines, 0, element, header_lines + 1)
+    col = np.cumsum([0] + counts)
+    return values[:, [int(col[fields.index(a)]) for a in "xyz"]]
 
 
 class _CloudBuffer:
@@ -303,7 +385,7 @@ def _read_e57(path):
         raise ValueError(f"{path}: reading E57 needs the optional package pye57 (pip install pye57)") from None
     e57_error = getattr(getattr(pye57, "libe57", None), "E57Exception", RuntimeError)
     try:
-        with _quiet_stderr():  # libE57Format prints a multi-line report of its own
+        with _redirect_fd(2, None):  # libE57Format prints a multi-line report of its own
             e57 = pye57.E57(os.fspath(path))
             parts = []
             for i in range(e57.scan_count):
@@ -317,157 +399,26 @@ def _read_e57(path):
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0].strip()
         raise ValueError(f"{path}: not a readable E57 point cloud with cartesian coordinates ({msg})") from None
     points = np.concatenate(parts) if parts else np.empty((0, 3))
-    return points * _MM_PER_M
+    return points  # metres
 
 
 @contextlib.contextmanager
-def _quiet_stderr():
-    """Silence file descriptor 2 (C++ libraries' own diagnostics) for the block."""
+def _redirect_fd(fd_no, target):
+    """Send file descriptor ``fd_no`` (C++ libraries' own console output) to descriptor
+    ``target`` (``None``: /dev/null) for the block."""
+    stream = sys.stdout if fd_no == 1 else sys.stderr
     try:
-        fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):  # no real stderr (e.g. captured by a test runner)
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):  # no real descriptor (e.g. captured by a test runner)
         yield
         return
-    sys.stderr.flush()
+    stream.flush()
     saved = os.dup(fd)
     try:
         with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), fd)
+            os.dup2(null.fileno() if target is None else target, fd)
             yield
     finally:
+        stream.flush()
         os.dup2(saved, fd)
         os.close(saved)
-
-
-# ---------------------------------------------------------------------------------------
-# text formats
-
-
-def _is_data(line: str) -> bool:
-    s = line.strip()
-    return bool(s) and not s.startswith("#") and not s.startswith("//")
-
-
-def _split(line: str, delim):
-    s = line.strip()
-    fields = _WHITE_FIELD.findall(s) if delim is None else [f.strip() for f in s.split(delim)]
-    return [f.strip("\"'") for f in fields]
-
-
-def _number(field: str, decimal_comma: bool):
-    """``float(field)`` or ``None`` when it is not a number (NaN/inf parse: checked later)."""
-    if decimal_comma:
-        field = field.replace(",", ".")
-    try:
-        return float(field)
-    except ValueError:
-        return None
-
-
-def _axis_name(field: str):
-    """``'x'``, ``'y'`` or ``'z'`` if the header field names that coordinate, else ``None``."""
-    name = re.sub(r"[\[(].*?[\])]", " ", field.lower())
-    tokens = [t for t in _AXIS_TOKEN.split(name) if t]
-    hits = {t for t in tokens if t in ("x", "y", "z")}
-    return hits.pop() if len(hits) == 1 else None
-
-
-def _layout(path, first_fields, decimal_comma, lineno):
-    """Decide whether the first data line is a header, and which columns hold x, y, z."""
-    names = [_axis_name(f) for f in first_fields]
-    numeric = [_number(f, decimal_comma) is not None for f in first_fields]
-    named = {a: [i for i, n in enumerate(names) if n == a] for a in "xyz"}
-    has_names = all(named[a] for a in "xyz")
-    header = has_names or not any(numeric)
-    if header:
-        if not has_names:
-            shown = ", ".join(repr(f) for f in first_fields)
-            raise ValueError(f"{path}: line {lineno} is a header without x, y, z columns (got {shown}); name the columns x, y, z")
-        cols = []
-        for a in "xyz":
-            if len(named[a]) > 1:
-                exact = [i for i in named[a] if first_fields[i].strip().lower() == a]
-                if len(exact) != 1:
-                    shown = ", ".join(repr(first_fields[i]) for i in named[a])
-                    raise ValueError(f"{path}: header names {a} more than once ({shown})")
-                named[a] = exact
-            cols.append(named[a][0])
-        return True, tuple(cols)
-    cols = [i for i, ok in enumerate(numeric) if ok][:3]
-    if len(cols) < 3:
-        raise ValueError(f"{path}: line {lineno} has {len(cols)} numeric field(s), expected x, y, z")
-    return False, tuple(cols)
-
-
-def _read_text(path, suffix):
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            lines = fh.read().splitlines()
-    except UnicodeDecodeError:
-        with open(path, encoding="latin-1") as fh:
-            lines = fh.read().splitlines()
-    data = [i for i, line in enumerate(lines) if _is_data(line)]
-    if not data:
-        raise ValueError(f"{path}: no points in the file (only blank or comment lines)")
-    expected = None
-    if suffix == ".pts":
-        head = lines[data[0]].split()
-        if len(head) == 1 and re.fullmatch(r"\d+", head[0]):
-            expected = int(head[0])
-            data = data[1:]
-            if not data:
-                raise ValueError(f"{path}: no points in the file (only the point count {expected})")
-    first = lines[data[0]].strip()
-    delim = ";" if ";" in first else ("," if "," in first else None)
-    fields = _split(first, delim)
-    if delim is None and not all(_number(f, False) is not None for f in fields):
-        # a white-space header may carry its units as separate fields: "X [mm] Y [mm] Z [mm]"
-        fields = [f for f in fields if not _UNIT_ONLY.fullmatch(f)]
-    # with ';' a ',' inside a field is a decimal comma (look past a possible header line)
-    decimal_comma = delim == ";" and any("," in line for line in (lines[i] for i in data[:2]))
-    header, cols = _layout(path, fields, decimal_comma, data[0] + 1)
-    if header:
-        data = data[1:]
-    if expected is not None and expected != len(data):
-        raise ValueError(f"{path}: the first line says {expected} points, the file holds {len(data)}")
-    if not data:
-        raise ValueError(f"{path}: no points in the file (a header only)")
-    if len(data) < 3:
-        raise ValueError(f"{path}: {len(data)} point{'s' if len(data) != 1 else ''}, need at least 3")
-    points = None
-    if not decimal_comma:
-        points = _fast_parse(lines, data, delim, cols)
-    if points is None:
-        points = _slow_parse(path, lines, data, delim, cols, decimal_comma)
-    return points
-
-
-def _fast_parse(lines, data, delim, cols):
-    """numpy's C parser over the data lines; ``None`` on any problem (the slow path names it)."""
-    try:
-        points = np.loadtxt(
-            (lines[i] for i in data), delimiter=delim, usecols=cols, dtype=float, ndmin=2, quotechar='"'
-        )
-    except (ValueError, IndexError):
-        return None
-    if points.shape != (len(data), 3) or not np.isfinite(points).all():
-        return None
-    return points
-
-
-def _slow_parse(path, lines, data, delim, cols, decimal_comma):
-    """Parse line by line; raise naming the first bad line, column and field."""
-    out = np.empty((len(data), 3))
-    need = max(cols) + 1
-    for k, i in enumerate(data):
-        fields = _split(lines[i], delim)
-        if len(fields) < need:
-            raise ValueError(f"{path}: line {i + 1}: {len(fields)} field(s), expected at least {need} (x, y, z in columns {', '.join(str(c + 1) for c in cols)})")
-        for j, c in enumerate(cols):
-            v = _number(fields[c], decimal_comma)
-            if v is None:
-                raise ValueError(f"{path}: line {i + 1}, column {c + 1}: {fields[c]!r} is not a number ({'xyz'[j]} expected)")
-            if not math.isfinite(v):
-                raise ValueError(f"{path}: line {i + 1}, column {c + 1}: {fields[c]!r}: coordinates must be finite (no NaN or inf)")
-            out[k, j] = v
-    return out
