@@ -21,13 +21,17 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print the result as JSON instead of a table."),
         out: Optional[str] = typer.Option(None, "--out", help="Write the plane JSON (other commands' --plane)."),
         plot: Optional[str] = typer.Option(None, "--plot", help="Write a residual map over the plate (.png/.pdf/.svg)."),
+        units: Optional[str] = typer.Option(None, "--units", help="Unit of the cloud's numbers: mm (default), m or in."),
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
         from metrology.jobs.fit_plane import fit_plane_file
         from metrology.report.datum import format_plane_fit
 
-        fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot)
+        if units is not None and units not in ("mm", "m", "in"):
+            raise ValueError(f"--units {units!r}: expected mm, m or in")
+        fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units,
+                             warn=lambda message: typer.echo(f"warning: {message}", err=True))
         if as_json:
             echo_json(fit.to_dict())
         else:

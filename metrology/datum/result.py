@@ -74,6 +74,8 @@ class PlaneFit:
     source: str = ""
     format: str = ""
     threshold_ran_away: bool = False
+    #: what the reader did (:meth:`metrology.io.clouds.CloudRead.to_dict`), when read from a file
+    read: dict | None = None
 
     @property
     def inlier_ratio(self) -> float:
@@ -153,4 +155,6 @@ class PlaneFit:
             "seed": int(self.seed),
             "ransac_points": int(self.ransac_points),
         }
+        if self.read is not None:
+            out["read"] = self.read
         return out

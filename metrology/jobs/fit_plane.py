@@ -24,7 +24,7 @@ def _check_output(path, what, suffixes=None):
         raise ValueError(f"{path}: the {what} must be one of {', '.join(sorted(suffixes))}")
 
 
-def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> PlaneFit:
+def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None) -> PlaneFit:
     """Read a cloud, fit its datum plane, and write the JSON and the residual map.
 
     Parameters
@@ -37,24 +37,42 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None) -> Pla
         JSON file (``PlaneFit.to_dict()``), readable by ``Plane.from_json``.
     plot : str or os.PathLike or None
         Residual map (``.png``, ``.pdf``, ``.svg``).
+    units : {None, "mm", "m", "in"}
+        The unit of the file's numbers (None: mm); the fit is in mm.
+    warn : callable or None
+        ``warn(message)`` for what the caller should know but is not an error: points with
+        NaN coordinates dropped (organized scans), a cloud whose size suggests metres. None:
+        :func:`warnings.warn`.
 
     Both outputs are written atomically and together: on any error neither exists.
     Errors are ValueError naming the file.
     """
     from metrology.io.atomic import atomic_path
-    from metrology.io.clouds import cloud_format, read_cloud
+    from metrology.io.clouds import cloud_format, read_cloud_checked
 
     fmt = cloud_format(cloud)
     if out is not None:
         _check_output(out, "plane JSON")
     if plot is not None:
         _check_output(plot, "residual plot", _PLOT_SUFFIXES)
-    points = read_cloud(cloud)
+    if warn is None:
+        import warnings
+
+        def warn(message):
+            warnings.warn(message, stacklevel=2)
+
+    read = read_cloud_checked(cloud, units=units, nonfinite="drop", hint=units is None)
+    if read.n_dropped_nonfinite:
+        warn(f"{cloud}: {read.n_dropped_nonfinite} of {read.n_in_file} points have NaN coordinates "
+             "(missing returns of an organized scan): dropped")
+    if units is None and read.units_hint is not None and read.units_hint.likely != "mm":
+        warn(f"{cloud}: {read.units_hint.sentence}")
+    points = read.points
     try:
         fit = fit_plane_robust(points, threshold_mm=threshold_mm, seed=seed)
     except ValueError as exc:
         raise ValueError(f"{cloud}: {exc}") from None
-    fit = replace(fit, source=str(cloud), format=fmt)
+    fit = replace(fit, source=str(cloud), format=fmt, read=read.to_dict())
     with contextlib.ExitStack() as stack:
         if out is not None:
             tmp = stack.enter_context(atomic_path(out))

@@ -66,7 +66,8 @@ def _collinear(tmp_path):
         (lambda d: _write(d, "empty.ply", ""), [], r"empty\.ply: empty file"),
         (lambda d: _write(d, "two.csv", "1,2,3\n4,5,6\n"), [], r"two\.csv: 2 points, need at least 3"),
         (_collinear, [], r"line\.csv: points are collinear"),
-        (lambda d: _write(d, "nan.xyz", "1 2 3\n4 5 6\nnan 1 1\n7 8 9\n"), [], r"nan\.xyz: line 3, column 1: 'nan'"),
+        # NaN rows are missing returns: dropped with a count, refused only when too few remain
+        (lambda d: _write(d, "nan.xyz", "1 2 3\nnan 1 1\nnan 5 6\n7 8 9\n"), [], r"nan\.xyz: 2 points of 4 \(2 with NaN dropped\), need at least 3"),
         (lambda d: _write(d, "abc.csv", "x,y,z\n1,2,3\n4,5,6\n7,8,z9\n"), [], r"abc\.csv: line 4, column 3: 'z9' is not a number"),
         (lambda d: _write(d, "cloud.stl", "solid\n"), [], r"cloud\.stl: unknown point-cloud extension"),
         (_cube, [], r"cube\.xyz: no datum plane: the cloud is .* thick"),
@@ -96,3 +97,24 @@ def test_cli_bad_output_paths_write_nothing(tmp_path):
     r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--plot", str(tmp_path / "r.png"), "--out", str(tmp_path / "no" / "p.json")])
     assert r.exit_code == 2 and "does not exist" in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_metres_and_nan_rows_are_said_on_stderr_and_units_m_fits_in_mm(tmp_path):
+    """A plate scanned in metres with missing returns: the NaN rows are dropped with a count,
+    the size says metres (stderr, not the report), and --units m gives the plane in mm."""
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    xy = rng.uniform([-0.2, -0.15], [0.2, 0.15], (3000, 2))
+    pts = np.column_stack([xy, 0.5 + 0.01 * xy[:, 0] + rng.normal(0, 2e-5, len(xy))])  # metres
+    pts[::10] = np.nan
+    f = tmp_path / "scan.xyz"
+    f.write_text("".join(f"{x:.7f} {y:.7f} {z:.7f}\n" for x, y, z in pts).replace("nan", "NaN"))
+    r = runner.invoke(app, ["fit-plane", str(f), "--json"])
+    assert "300 of 3000 points have NaN coordinates" in r.stderr and "looks like metres; pass --units m" in r.stderr
+    r = runner.invoke(app, ["fit-plane", str(f), "--json", "--units", "m"])
+    assert r.exit_code == 0, r.output
+    assert "looks like metres" not in r.stderr and "300 of 3000" in r.stderr
+    d = json.loads(r.stdout)
+    assert d["read"]["n_dropped_nonfinite"] == 300 and d["read"]["units"] == "m"
+    assert d["n_points"] == 2700 and abs(d["noise_sigma_mm"] - 0.02) < 0.005  # 20 um, in mm
