@@ -25,11 +25,11 @@ import numpy as np
 
 from metrology.sim.forward.surface import DatumSurface
 
-__all__ = ["BeamHits", "cast_beams", "CAST_TOL_MM"]
+__all__ = ["BeamHits", "cast_beams", "CAST_TOL_MM", "MAX_NEWTON"]
 
 #: Newton stops when the step is below this, mm
 CAST_TOL_MM = 1e-9
-_MAX_NEWTON = 60
+MAX_NEWTON = 60
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def _bracket(surface, a, b, d_max, n_scan=400):
 
 
 def cast_beams(surface: DatumSurface, zero, direction, tcs2tracker_rot, tcs2tracker_trans,
-               d_max: float = 500.0) -> BeamHits:
+               d_max: float = 500.0, max_newton: int = MAX_NEWTON) -> BeamHits:
     """True distances and incidence angles of every beam at every pose.
 
     Parameters
@@ -85,6 +85,7 @@ def cast_beams(surface: DatumSurface, zero, direction, tcs2tracker_rot, tcs2trac
     tcs2tracker_rot : (p, 3, 3) float
     tcs2tracker_trans : (p, 3) float, mm, tracker frame
     d_max : float, mm, longest distance searched by the fallback
+    max_newton : int, Newton iterations before a beam falls back to the scan and Brent's method
 
     Returns
     -------
@@ -103,7 +104,7 @@ def cast_beams(surface: DatumSurface, zero, direction, tcs2tracker_rot, tcs2trac
         d = -((a - surface.origin) @ surface.normal) / nb
     d = np.where(np.isfinite(d), d, 0.0)
     done = np.zeros(d.shape, bool)
-    for _ in range(_MAX_NEWTON):
+    for _ in range(max_newton):
         f, df = _residual(surface, a, b, d)
         with np.errstate(divide="ignore", invalid="ignore"):
             step = np.where(done, 0.0, f / df)

@@ -84,6 +84,18 @@ def test_cast_distance_lies_on_strongly_formed_surfaces(rng):
         assert np.max(np.abs(w - surf.height(s, t))) < 1e-9
 
 
+def test_bracketing_fallback_agrees_with_newton(rng):
+    surf, _ = draw_surface(rng, form_mm=2.0, shape="mixed")
+    R, T = _pose_over(surf, 25.0, np.radians(12), s=-40.0, t=60.0)
+    zero = np.array([[40.0, 0, -30], [-20, 35, -30], [-20, -35, -30]])
+    u = np.array([[-0.4, 0, 1], [0.2, -0.35, 1], [0.2, 0.35, 1]])
+    newton = cast_beams(surf, zero, u, R, T)
+    brent = cast_beams(surf, zero, u, R, T, max_newton=0)  # every beam through the fallback
+    assert np.all(brent.valid)
+    assert np.max(np.abs(brent.d - newton.d)) < 1e-9
+    assert np.allclose(brent.incidence, newton.incidence, atol=1e-10)
+
+
 def test_misses_are_nan():
     surf = flat_surface([0.0, 0.0, 2000.0], [0.0, 0.0, -1.0], half_extent=(100.0, 100.0))
     R, T = _pose_over(surf, 40.0)
