@@ -1,0 +1,31 @@
+"""An independent forward simulator: readings made by casting beams at an explicit datum surface.
+
+Written from the physics (issue 12), apart from the measurement model and its effects: nothing
+here imports ``metrology.core.model``, ``metrology.core.effects``, the calibration, the diagnosis
+or the older simulators, so data drawn here are data the fit's formulas did not make.
+
+Modules: :mod:`.surface` (datum height field), :mod:`.beams` (beam casting), :mod:`.head`
+(sensor rings), :mod:`.poses` (poses and pose error), :mod:`.characteristic` (reading error vs
+distance), :mod:`.drift` (time, temperature, drift), :mod:`.incidence` (incidence bias),
+:mod:`.errors` (noise, gross readings, blanks, periodic error, cross-talk), :mod:`.families`
+(the causes and their sizes), :mod:`.cases` (blind cases), :mod:`.write` (case files).
+"""
+
+from metrology.sim.forward.beams import BeamHits, cast_beams
+from metrology.sim.forward.cases import Case, draw_case, draw_cases, draw_pair
+from metrology.sim.forward.characteristic import Characteristic, draw_curve
+from metrology.sim.forward.drift import Drift, TemperatureProfile, draw_drift, draw_temperature, draw_times
+from metrology.sim.forward.families import CATALOGUE, FAMILIES, OUT_OF_CATALOGUE, Effect, FamilySpec
+from metrology.sim.forward.head import Head, draw_head, perturb_layout
+from metrology.sim.forward.incidence import IncidenceBias, draw_incidence
+from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
+from metrology.sim.forward.surface import DatumSurface, draw_surface, flat_surface, sample_cloud
+from metrology.sim.forward.write import CASE_FILES, write_case
+
+__all__ = [
+    "BeamHits", "cast_beams", "Case", "draw_case", "draw_cases", "draw_pair", "Characteristic", "draw_curve",
+    "Drift", "TemperatureProfile", "draw_drift", "draw_temperature", "draw_times", "CATALOGUE", "FAMILIES",
+    "OUT_OF_CATALOGUE", "Effect", "FamilySpec", "Head", "draw_head", "perturb_layout", "IncidenceBias",
+    "draw_incidence", "draw_poses", "perturb_poses", "tilt_of", "DatumSurface", "draw_surface", "flat_surface",
+    "sample_cloud", "CASE_FILES", "write_case",
+]

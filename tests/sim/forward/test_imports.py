@@ -1,0 +1,57 @@
+"""The simulator is independent of the fit: it imports nothing that computes readings or effects."""
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[3]
+FORWARD = ROOT / "metrology" / "sim" / "forward"
+FORBIDDEN = ("metrology.core.model", "metrology.core.effects", "metrology.calibration", "metrology.diagnosis",
+             "metrology.sim.synth", "metrology.sim.simulation")
+
+# ``metrology/__init__.py`` re-exports the whole library (the model included), so the check loads
+# the ``metrology`` package without running it: what remains in sys.modules is what the forward
+# package itself pulls in. Running a case and writing it executes the lazy imports too.
+SCRIPT = f"""
+import json, sys, tempfile, types
+import numpy as np
+pkg = types.ModuleType("metrology"); pkg.__path__ = [{str(ROOT / "metrology")!r}]
+sys.modules["metrology"] = pkg
+import metrology.sim.forward as fw
+with tempfile.TemporaryDirectory() as d:
+    fw.write_case(fw.draw_pair(np.random.default_rng(3), "drift", "pose_error"), d)
+print(json.dumps(sorted(m for m in sys.modules if m.startswith("metrology"))))
+"""
+
+
+def _forbidden(mods):
+    return [m for m in mods if any(m == f or m.startswith(f + ".") for f in FORBIDDEN)]
+
+
+def test_forward_package_loads_no_model_effect_fit_or_old_simulator():
+    out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, cwd=ROOT, check=True)
+    mods = json.loads(out.stdout.strip().splitlines()[-1])
+    assert "metrology.sim.forward.cases" in mods  # the check did load the package
+    assert _forbidden(mods) == []
+
+
+def test_the_check_would_catch_a_forbidden_import():
+    script = SCRIPT.replace("import metrology.sim.forward as fw", "import metrology.sim.forward as fw\nimport metrology.core.model")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert _forbidden(json.loads(out.stdout.strip().splitlines()[-1])) == ["metrology.core.model"]
+
+
+def test_no_forbidden_import_anywhere_in_the_source():
+    """Static check, in-function imports included (a lazy import the run above did not reach)."""
+    for path in sorted(FORWARD.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            assert _forbidden(names) == [], f"{path.name} imports {names}"
+            if isinstance(node, ast.ImportFrom):
+                assert node.level == 0, f"{path.name}: relative import"
