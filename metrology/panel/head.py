@@ -56,7 +56,12 @@ def default_standoff(layout: SensorLayout) -> float:
 
 
 def _perp_basis(v):
-    """Two unit vectors ``(m, 3)`` perpendicular to unit ``v (m, 3)`` and to each other."""
+    """Two unit vectors ``(m, 3)`` perpendicular to unit ``v (m, 3)`` and to each other.
+
+    Not :func:`metrology.core.model.direction_basis`: its ``e1`` is another vector of the
+    same plane, so the random azimuths of :func:`tilted_feed` would land on other feeds and
+    every seeded run would change. Kept so that same seed gives the same bytes as before.
+    """
     helper = np.where(np.abs(v[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
     e1 = np.cross(v, helper)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
@@ -141,7 +146,7 @@ def cast_beams(caster: RayCaster, layout: SensorLayout, R, T):
     tri, t, _ = caster.cast(origins, dirs)
     behind = np.zeros(len(tri), bool)
     hit = tri >= 0
-    v = caster._tri[tri[hit]]  # face normals of the hit faces only (not of the whole mesh)
+    v = caster.triangles[tri[hit]]  # face normals of the hit faces only (not of the whole mesh)
     fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     behind[hit] = np.sum(fn * dirs[hit], axis=1) > 0
     t = np.where(behind | ~hit | (t < 0), np.nan, t)

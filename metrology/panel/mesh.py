@@ -150,9 +150,27 @@ def panel_plane(mesh):
     Q = (c - centre) * np.sqrt(w)[:, None]
     vt = np.linalg.svd(Q, full_matrices=False)[2]
     n = vt[2] if np.dot(vt[2], (w[:, None] * mesh.face_normals).sum(0)) >= 0 else -vt[2]
-    # e1: the panel-frame axis most in the plane, projected (CAD grids follow the axes;
-    # the in-plane principal axes of a square panel are arbitrary)
+    return centre, np.vstack([*plane_axes(n), n])
+
+
+def plane_axes(n):
+    """Two in-plane axes of the plane of unit normal ``n``, as CAD grids lay them out.
+
+    ``e1`` is the panel-frame axis most in the plane, projected onto it (CAD grids follow
+    the axes; the in-plane principal axes of a square panel are arbitrary); ``e2 = n x e1``.
+    The same choice as :func:`metrology.core.model.direction_basis`, except that ``n`` is
+    used as given, not normalised again: the grids and maps stay bit-for-bit those of
+    earlier versions (renormalising moves them by about one ulp).
+
+    Parameters
+    ----------
+    n : (3,) float, unit, panel frame
+
+    Returns
+    -------
+    e1, e2 : (3,) float, unit, panel frame
+    """
     k = int(np.argmin(np.abs(n)))
     e1 = np.eye(3)[k] - n[k] * n
     e1 /= np.linalg.norm(e1)
-    return centre, np.vstack([e1, np.cross(n, e1), n])
+    return e1, np.cross(n, e1)

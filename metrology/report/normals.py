@@ -6,16 +6,10 @@ import csv
 import math
 import numpy as np
 from metrology.core.normals import angle_between
+from metrology.core.stats import describe
 from metrology.panel.attitude import STATUS
+from metrology.panel.mesh import plane_axes
 from metrology.panel.run import NormalsRun
-
-
-def _stats(err):
-    e = np.degrees(err[np.isfinite(err)])
-    if not len(e):
-        return {"n": 0, "max_deg": math.nan, "mean_deg": math.nan, "std_deg": math.nan, "p95_deg": math.nan}
-    return {"n": int(len(e)), "max_deg": float(e.max()), "mean_deg": float(e.mean()),
-            "std_deg": float(e.std(ddof=1)) if len(e) > 1 else 0.0, "p95_deg": float(np.percentile(e, 95))}
 
 
 def summarize(run: NormalsRun) -> dict:
@@ -33,7 +27,7 @@ def summarize(run: NormalsRun) -> dict:
     tol = math.radians(run.info["tolerance_deg"])
     out = {}
     for name, err in (("plane", run.err_plane), ("sphere", run.err_sphere)):
-        s = _stats(err)
+        s = describe(np.degrees(err), p95=True, count=True)
         fin = np.isfinite(err)
         s["within_tolerance"] = float(np.mean(err[fin] < tol)) if np.any(fin) else math.nan
         lp = run.loop.get(name)
@@ -157,10 +151,7 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
     c = pts.mean(axis=0)
     n = np.linalg.svd(pts - c, full_matrices=False)[2][-1] if len(pts) >= 3 else np.array([0.0, 0.0, 1.0])
     n = n if np.all(np.isfinite(n)) and np.linalg.norm(n) > 0.5 else np.array([0.0, 0.0, 1.0])
-    k = int(np.argmin(np.abs(n)))  # as in panel_plane: e1 from the panel-frame axis
-    e1 = np.eye(3)[k] - n[k] * n
-    e1 /= np.linalg.norm(e1)
-    uv = (pts - c) @ np.vstack([e1, np.cross(n, e1)]).T
+    uv = (pts - c) @ np.vstack(plane_axes(n)).T  # the axes of panel_plane
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), constrained_layout=True)
     ep, es = np.degrees(run.err_plane), np.degrees(run.err_sphere)
     vmax = float(np.nanmax(np.concatenate([ep, es, [tolerance_deg]])))

@@ -19,6 +19,7 @@ class RayCaster:
     Attributes
     ----------
     mesh : trimesh.Trimesh, mm, panel frame
+    triangles : (f, 3, 3) float, mm, panel frame, the mesh's triangles in double precision
     engine : str, the engine's name
     """
 
@@ -33,7 +34,7 @@ class RayCaster:
 
     def __init__(self, mesh, engine: str = "auto"):
         self.mesh = mesh
-        self._tri = np.asarray(mesh.triangles, dtype=float)
+        self.triangles = np.asarray(mesh.triangles, dtype=float)
         self._centre = np.asarray(mesh.bounds, float).mean(axis=0)
         self._impl = None
         self._closest_scene = None
@@ -93,7 +94,7 @@ class RayCaster:
         bary = np.full((len(tri), 3), np.nan)
         hit = tri >= 0
         if np.any(hit):
-            v0, v1, v2 = (self._tri[tri[hit], k] for k in range(3))
+            v0, v1, v2 = (self.triangles[tri[hit], k] for k in range(3))
             e1, e2 = v1 - v0, v2 - v0
             d = directions[hit]
             pv = np.cross(d, e2)
@@ -140,4 +141,4 @@ class RayCaster:
         points = np.asarray(points, float).reshape(-1, 3)
         ans = self._closest_scene.compute_closest_points(o3d.core.Tensor((points - self._centre).astype(np.float32)))
         tri = ans["primitive_ids"].numpy().astype(np.int64)
-        return tri, trimesh.triangles.closest_point(self._tri[tri], points)
+        return tri, trimesh.triangles.closest_point(self.triangles[tri], points)

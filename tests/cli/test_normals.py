@@ -1,0 +1,90 @@
+"""Tests of ``metro normals``: JSON and per-point output, same seed same bytes, one-line fatal errors, the map."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from metrology.core.layout import SensorLayout
+from metrology.core.paper import table6_layouts
+from metrology.io.layout import save_layout
+from metrology.panel.surfaces import ParametricSurface, panel_mesh, write_binary_stl
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("normals")
+    surf = ParametricSurface("cylinder", 800.0)
+    write_binary_stl(panel_mesh(surf, 100, 100, 1.0, 20.0), d / "cyl.stl", surf.tag)
+    save_layout(table6_layouts()[0], d / "t6.toml")
+    (d / "pts.csv").write_text("x,y,z\n0,0,0\n20,10,-0.25\n0,0,50\n")
+    (d / "off.csv").write_text("0,0,50\n10,10,60\n")
+    (d / "empty.stl").write_text("solid empty\nendsolid empty\n")
+    two = SensorLayout(("A", "B", "C"), np.zeros((3, 3)), np.tile([0, 0, 1.0], (3, 1)))
+    save_layout(two, d / "three.toml")
+    txt = (d / "three.toml").read_text()
+    (d / "two.toml").write_text(txt[: txt.rindex("[[sensors]]")])
+    return d
+
+
+def _invoke(args):
+    from cli.main import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def test_cli_json_summary_and_per_point(files, tmp_path):
+    out = tmp_path / "pp.json"
+    r = _invoke(["normals", files / "cyl.stl", "--layout", files / "t6.toml", "--points", files / "pts.csv",
+                 "--json", "--out", out, "--tilt-deg", "2", "--noise-mm", "0.005"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    for m in ("plane", "sphere"):
+        assert set(s[m]) >= {"max_deg", "mean_deg", "std_deg"}
+        assert s[m]["n"] == 2
+    assert s["recommendation"]["method"] in ("plane", "sphere")
+    assert s["status"]["off_panel"] == 1
+    rows = json.loads(out.read_text())
+    assert [row["status"] for row in rows] == ["ok", "ok", "off_panel"]
+    assert rows[2]["plane_err_deg"] is None
+    assert rows[2]["detail"].endswith("mm from the panel")
+
+
+def test_cli_same_seed_same_bytes(files, tmp_path):
+    outs = []
+    for k in range(2):
+        o = tmp_path / f"o{k}.csv"
+        r = _invoke(["normals", files / "cyl.stl", "--layout", files / "t6.toml", "--grid", "40", "--seed", "3",
+                     "--noise-mm", "0.01", "--out", o])
+        assert r.exit_code == 0, r.output
+        outs.append(o.read_bytes())
+    assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("args, match", [
+    (["empty.stl", "--layout", "t6.toml", "--grid", "20"], "empty"),
+    (["cyl.stl", "--layout", "two.toml", "--grid", "20"], "at least 3 sensors"),
+    (["cyl.stl", "--layout", "t6.toml", "--points", "off.csv"], "no drilling point could be measured"),
+    (["cyl.stl", "--layout", "t6.toml"], "exactly one of --points"),
+    (["cyl.stl", "--layout", "t6.toml", "--grid", "20", "--engine", "optix"], "engine must be"),
+    (["missing.stl", "--layout", "t6.toml", "--grid", "20"], "missing.stl"),
+])
+def test_cli_fatal_errors_one_line_exit_2_no_output(files, tmp_path, args, match):
+    out = tmp_path / "never.csv"
+    full = ["normals"] + [files / a if a.endswith((".stl", ".toml", ".csv")) else a for a in args] + ["--out", out]
+    r = _invoke(full)
+    assert r.exit_code == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and match in lines[0]
+    assert not out.exists()
+    assert "Traceback" not in r.output
+
+
+def test_cli_plot(files, tmp_path):
+    png = tmp_path / "map.png"
+    r = _invoke(["normals", files / "cyl.stl", "--layout", files / "t6.toml", "--grid", "30", "--plot", png, "--no-loop"])
+    assert r.exit_code == 0, r.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

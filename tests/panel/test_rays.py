@@ -1,0 +1,31 @@
+"""Tests of metrology.panel.rays: every engine behind RayCaster."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from metrology.panel.rays import RayCaster, available_engines
+
+from .helpers import make_panel
+
+
+def test_engines_agree_after_double_refinement():
+    panel = make_panel("sphere", 300.0, half=60.0, spacing=2.0)
+    rng = np.random.default_rng(5)
+    o = np.column_stack([rng.uniform(-30, 30, (200, 2)), np.full(200, 100.0)])
+    dirs = np.tile([0.0, 0.0, -1.0], (200, 1)) + rng.normal(0, 0.02, (200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    ts = {}
+    for eng in available_engines():
+        tri, t, _ = RayCaster(panel.mesh, eng).cast(o, dirs)
+        assert np.all(tri >= 0)
+        ts[eng] = t
+    ref = ts["trimesh"]
+    for eng, t in ts.items():
+        assert np.max(np.abs(t - ref)) < 1e-9, eng
+
+
+def test_unknown_engine_is_an_error():
+    with pytest.raises(ValueError, match="engine must be"):
+        RayCaster(make_panel("flat", half=10).mesh, "optix")
