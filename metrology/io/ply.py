@@ -300,7 +300,9 @@ def _parse_rows_slow(path, lines, first, element, first_line_no):
 def _parse_rows_fast(lines, first, element):
     """numpy's C parser over a scalar-only element: ``None`` on any doubt (the slow path decides)."""
     props = element.properties
-    dtype = [(f"p{i}", p.dtype if np.dtype(p.dtype).kind in "iu" else "f8") for i, p in enumerate(props)]
+    # every column as float64, integers checked below: numpy < 2 reads '3.3', 'Inf' or '256'
+    # into a uint8 field without a word, so its integer parsing cannot be the check
+    dtype = [(f"p{i}", "f8") for i, p in enumerate(props)]
     block = lines[first:first + element.count]
     try:
         rec = np.loadtxt(block, dtype=dtype, comments=None, ndmin=1)
@@ -311,9 +313,15 @@ def _parse_rows_fast(lines, first, element):
     out = np.empty((element.count, len(props)))
     for i, p in enumerate(props):
         col = rec[f"p{i}"]
-        if np.dtype(p.dtype).kind == "f":
-            limit = _F32_MAX if np.dtype(p.dtype).itemsize == 4 else np.inf
+        kind = np.dtype(p.dtype)
+        if kind.kind == "f":
+            limit = _F32_MAX if kind.itemsize == 4 else np.inf
             if np.any(np.abs(col) > limit) or np.isinf(col).any():
+                return None
+        else:  # an integer: finite, whole, inside the type's range (else the slow path names it)
+            info = np.iinfo(kind)
+            if not (np.all(np.isfinite(col)) and np.all(col == np.round(col))
+                    and np.all(col >= info.min) and np.all(col <= info.max)):
                 return None
         out[:, i] = col
     return out
