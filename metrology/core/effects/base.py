@@ -130,8 +130,9 @@ class Component:
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov) -> list:
-        """The candidates of this effect on sensor ``i`` (values zero); none by default."""
-        return []
+        """The candidates of this effect on sensor ``i`` (values zero): one, unless the effect
+        belongs to the set-up (:attr:`setup`)."""
+        return [] if cls.setup else [cls((i,), names=names)]
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None) -> list:
@@ -142,8 +143,11 @@ class Component:
     @classmethod
     def hidden(cls, i, size) -> "Component":
         """The component the simulator hides for ``size`` (see :attr:`size_meaning`) on sensor
-        ``i`` (None for an effect of the set-up)."""
-        raise ValueError(cls.name)
+        ``i`` (None for an effect of the set-up). By default a one-parameter sensor effect
+        whose parameter is the size; others say how their size maps to their parameters."""
+        if cls.setup or len(cls.param_names) != 1:
+            raise ValueError(cls.name)
+        return cls((i,), [size])
 
     def __post_init__(self):
         k = self.n_params

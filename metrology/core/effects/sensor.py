@@ -23,14 +23,6 @@ class Scale(Component):
     size_meaning = "gain error k (unitless)"
     plot_key = "d_mm"
 
-    @classmethod
-    def candidates_for_sensor(cls, i, names, cov):
-        return [cls((i,), names=names)]
-
-    @classmethod
-    def hidden(cls, i, size):
-        return cls((i,), [size])
-
     def basis(self, d0, cov):
         return _sensor_basis(d0[..., None], d0.shape[1], self.sensors)
 
@@ -54,14 +46,6 @@ class Incidence(Component):
     advice = "a wider spread of tilt against the datum (incidence angles)"
     size_meaning = "c mm (bias at 45 deg incidence)"
     plot_key = "incidence_deg"
-
-    @classmethod
-    def candidates_for_sensor(cls, i, names, cov):
-        return [cls((i,), names=names)]
-
-    @classmethod
-    def hidden(cls, i, size):
-        return cls((i,), [size])
 
     def basis(self, d0, cov):
         t2 = 1.0 / cov.cos_inc**2 - 1.0
@@ -166,10 +150,6 @@ class Nonlinearity(Component):
     advice = "readings over the whole measuring range (a wider spread of stand-off)"
     size_meaning = "c3 mm at the range end (c2 = c3/2)"
     plot_key = "d_mm"
-
-    @classmethod
-    def candidates_for_sensor(cls, i, names, cov):
-        return [cls((i,), names=names)]
 
     @classmethod
     def hidden(cls, i, size):

@@ -163,6 +163,10 @@ class Outliers(Component):
     plot_term = False
 
     @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return []  # one candidate for all flagged readings: candidates_for_setup
+
+    @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
         if flags is None or not np.any(flags):
             return []
