@@ -174,6 +174,11 @@ class Mismatch:
     def message(self, source: str) -> str:
         """The one-line error."""
         first = self.as_read
+        if self.mistake is not None and not (first.geometry_fails or np.any(first.noise_fails)):
+            f = self.fitted
+            return (f"{source}: {self.mistake}: read that way the fit stays within {np.max(f.zero_shift_mm):.2g} mm "
+                    f"and {np.max(f.tilt_deg):.2g} deg of the layout, while as read {first.describe()} "
+                    f"(residual RMS {f.rms_text()} both ways); {self.fix}")
         if self.mistake is not None:
             against = (f"against {first.rms_text()} as read ({first.describe()})" if np.isfinite(first.score)
                        else f"while as read {first.describe()}")
@@ -183,7 +188,7 @@ class Mismatch:
             worst, code = f"; {first.worst[0]}", f"{first.worst[1]:g}"
         return (f"{source}: the readings do not fit the poses and the datum: {first.describe()}{worst}; "
                 f"none of the usual export mistakes explains it ({len(self.tried)} tried: quaternion order, position "
-                "and reading units, swapped sensor columns); if {code} is "
+                f"and reading units, swapped sensor columns); if {code} is "
                 f"the PLC's 'no reading' code, pass --no-reading {code}")
 
 
