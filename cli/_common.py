@@ -30,6 +30,18 @@ def guarded(fn):
     return wrapper
 
 
+QUATERNION_HELP = ("What the columns qw,qx,qy,qz hold: wxyz (scalar first, the format) or xyzw (a scalar-last "
+                   "export under the same header).")
+POSITION_HELP = "Unit of the export's x,y,z columns: mm, m or in (converted to mm)."
+NO_READING_HELP = ("The PLC's 'no reading' code in the d_ columns (default 0 where the sensor's range excludes it): "
+                   "dropped and counted, never used as a distance.")
+
+
+def warn(line: str) -> None:
+    """Print ``warning: line`` to stderr."""
+    typer.echo(f"warning: {line}", err=True)
+
+
 def to_jsonable(obj):
     """Convert numpy scalars/arrays (and NaN) to plain JSON values."""
     import numpy as np

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import echo_json, fail, guarded
+from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, warn
 
 METHODS = ("lsq", "iekf", "ekf", "ekf_paper", "method1")
 
@@ -31,6 +31,9 @@ def register(app: typer.Typer) -> None:
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write convergence and residual PNGs into DIR."),
         target_mm: float = typer.Option(0.05, "--target-mm", help="Wanted 1-sigma of the zero points, mm."),
         target_deg: float = typer.Option(0.05, "--target-deg", help="Wanted 1-sigma of the beam tilts, deg."),
+        quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
+        position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
+        no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
     ) -> None:
         """Calibrate the normal sensors from a tracker export, the datum and the nominal layout."""
         if method not in METHODS:
@@ -44,7 +47,8 @@ def register(app: typer.Typer) -> None:
         from metrology.report.calibration import calibration_text, calibration_warnings
 
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
-                                 out=out, plot_dir=plot)
+                                 out=out, plot_dir=plot, quaternion_order=quaternion_order,
+                                 position_units=position_units, no_reading=no_reading, warn=warn)
         for w in calibration_warnings(report):
             typer.echo(f"warning: {w}", err=True)
         if json_out:
@@ -61,13 +65,17 @@ def register(app: typer.Typer) -> None:
         layout_before: Optional[Path] = typer.Option(None, "--layout-before", help="Layout to compare with (nominal)."),
         json_out: bool = typer.Option(False, "--json", help="Print max_deg, mean_deg, std_deg per layout as JSON."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write the deviation per pose as a PNG here."),
+        quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
+        position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
+        no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
     ) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
         from metrology.jobs.calibrate import validate_files
         from metrology.report.calibration import validation_text
 
-        report = validate_files(export, plane, layout, layout_before, plot=plot)
+        report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
+                                position_units=position_units, no_reading=no_reading, warn=warn)
         if json_out:
             echo_json(report.to_dict())
         else:

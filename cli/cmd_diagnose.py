@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import dumps, echo_json, fail, guarded
+from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo_json, fail, guarded, warn
 
 
 def register(app: typer.Typer) -> None:
@@ -21,6 +21,9 @@ def register(app: typer.Typer) -> None:
         report: Path = typer.Option(None, "--report", help="directory for the residual plots"),
         folds: int = typer.Option(5, "--folds", help="k of the k-fold-by-pose held-out figures"),
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
+        quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
+        position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
+        no_reading: float = typer.Option(None, "--no-reading", help=NO_READING_HELP),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
         from metrology.jobs.diagnose import diagnose_files
@@ -28,7 +31,8 @@ def register(app: typer.Typer) -> None:
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
-        d = diagnose_files(export, plane, layout, folds=folds, seed=seed)
+        d = diagnose_files(export, plane, layout, quaternion_order, position_units, no_reading, warn=warn, folds=folds,
+                           seed=seed)
         text = dumps(d.to_dict()) if json_out else report_text(d)
         if report is not None:
             files = plot_report(d, report)

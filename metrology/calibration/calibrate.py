@@ -64,6 +64,7 @@ class CalibrationReport:
         return [w for ident in self.identifiability for w in ident.warnings]
 
     def to_dict(self) -> dict:
+        """The report as plain data; ``no_reading`` (value, count, readings) only when codes were dropped."""
         cal, nom = self.calibration, self.calibration.nominal
         basis = direction_basis(nom.direction)
         se = cal.stderr
@@ -89,7 +90,7 @@ class CalibrationReport:
                               "direction": cal.layout.direction[i], "direction_stderr_deg": np.rad2deg(se[i, 3:])},
                 "correlations": _correlations(cal.cov[i]),
             })
-        return {
+        out = {
             "method": cal.method,
             "sources": self.sources,
             "n_poses": self.dataset.export.n_poses,
@@ -99,6 +100,9 @@ class CalibrationReport:
             "identifiability": [ident.to_dict() for ident in self.identifiability],
             "warnings": self.warnings,
         }
+        if self.dataset.dropped:
+            out["no_reading"] = self.dataset.no_reading_dict()
+        return out
 
 
 def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=None, target=None,

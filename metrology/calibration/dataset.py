@@ -16,10 +16,14 @@ from metrology.core.layout import SensorLayout
 from metrology.io.layout import load_layout
 from metrology.core.plane import Plane
 
-__all__ = ["Dataset", "load_plane", "load_dataset", "MIN_READINGS"]
+__all__ = ["Dataset", "load_plane", "load_dataset", "drop_no_reading", "MIN_READINGS", "NO_READING"]
 
 #: fewest readings per sensor: the five identifiable parameters plus one to see a residual
 MIN_READINGS = 6
+
+#: the PLC's "no reading" code when none is given: a reading of exactly 0 is no reading for
+#: every sensor whose stated range does not contain 0 (a triangulation sensor never reads 0)
+NO_READING = 0.0
 
 
 def load_plane(path):
@@ -54,12 +58,18 @@ class Dataset:
     layout : SensorLayout (nominal or calibrated)
     plane : Plane, tracker frame
     datum_points : (m, 3) float, mm, tracker frame, or None
+    dropped : tuple of (pose_id, sensor name)
+        Readings equal to the "no reading" code, dropped on loading (see :func:`drop_no_reading`).
+    no_reading : float
+        That code.
     """
 
     export: TrackerExport
     layout: SensorLayout
     plane: Plane
     datum_points: np.ndarray | None = None
+    dropped: tuple = ()
+    no_reading: float = NO_READING
 
     @property
     def obs(self) -> Observations:
@@ -71,7 +81,72 @@ class Dataset:
         return Observations(normal, offset, self.export.d)
 
     def select(self, idx) -> "Dataset":
-        return Dataset(self.export.select(idx), self.layout, self.plane, self.datum_points)
+        return Dataset(self.export.select(idx), self.layout, self.plane, self.datum_points, self.dropped,
+                       self.no_reading)
+
+    def no_reading_summary(self) -> str | None:
+        """One line on the dropped "no reading" codes (for stderr), or None when none was."""
+        if not self.dropped:
+            return None
+        poses = sorted({p for p, _ in self.dropped})
+        shown = ", ".join(f"{p} d_{n}" for p, n in self.dropped[:4]) + (", ..." if len(self.dropped) > 4 else "")
+        return (f"{len(self.dropped)} reading(s) equal to the no-reading code {self.no_reading:g} dropped in "
+                f"{len(poses)} pose(s) ({shown}); not used as distances")
+
+    def no_reading_dict(self) -> dict:
+        """The dropped codes for a JSON report: value, count and (pose_id, sensor) pairs."""
+        return {"value": self.no_reading, "dropped": len(self.dropped),
+                "readings": [{"pose_id": p, "sensor": n} for p, n in self.dropped]}
+
+
+def drop_no_reading(export: TrackerExport, layout: SensorLayout, value=None) -> tuple:
+    """Readings equal to the PLC's "no reading" code become NaN (no reading), never a distance.
+
+    One rule for all values that are not distances: an empty cell and the code ``value`` are no
+    reading (dropped, counted); any other reading outside the sensor's ``range_mm`` is refused by
+    :func:`check`, naming the pose. The default code :data:`NO_READING` (0) applies to the sensors
+    whose range does not contain it; an explicit ``value`` applies to every sensor.
+
+    Parameters
+    ----------
+    export : TrackerExport, columns in ``layout.names`` order
+    layout : SensorLayout
+    value : float, optional, mm
+
+    Returns
+    -------
+    export : TrackerExport, the codes replaced by NaN
+    dropped : tuple of (pose_id, sensor name), in file order
+    """
+    from dataclasses import replace
+
+    code = NO_READING if value is None else float(value)
+    if not np.isfinite(code):
+        raise ValueError(f"--no-reading {value}: expected a finite number")
+    hit = export.d == code
+    if value is None:
+        lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
+        hit &= ~((lo <= code) & (code <= hi))
+    if not np.any(hit):
+        return export, ()
+    dropped = tuple((export.pose_id[p], export.names[i]) for p, i in np.argwhere(hit))
+    return replace(export, d=np.where(hit, np.nan, export.d)), dropped
+
+
+def _range_hint(d, bad, lo, hi) -> str:
+    """What the out-of-range readings look like: another unit, or a repeated "no reading" code."""
+    finite = np.isfinite(d)
+    if bad.sum() > 0.5 * finite.sum():
+        for factor, what in ((1000.0, "metres"), (1e-3, "microns")):
+            scaled = d * factor
+            if np.mean(((lo <= scaled) & (scaled <= hi))[finite]) > 0.9:
+                return f"; the readings look like {what} (x{factor:g} puts them in range): write them in mm"
+    uniq, counts = np.unique(d[bad], return_counts=True)
+    k = int(np.argmax(counts))
+    if counts[k] >= 2:
+        return (f"; {counts[k]} of them read exactly {uniq[k]:g}: if that is the PLC's 'no reading' code, "
+                f"pass --no-reading {uniq[k]:g}")
+    return ""
 
 
 def check(export: TrackerExport, layout: SensorLayout, source="export") -> TrackerExport:
@@ -90,6 +165,7 @@ def check(export: TrackerExport, layout: SensorLayout, source="export") -> Track
         raise ValueError(
             f"{source}: pose {export.pose_id[p]}: d_{layout.names[i]} = {export.d[p, i]:g} mm outside the "
             f"sensor's range [{lo[i]:g}, {hi[i]:g}] mm ({bad.sum()} reading(s) out of range)"
+            + _range_hint(export.d, bad, lo, hi)
         )
     counts = np.isfinite(export.d).sum(axis=0)
     if np.any(counts < MIN_READINGS):
@@ -99,9 +175,21 @@ def check(export: TrackerExport, layout: SensorLayout, source="export") -> Track
     return export
 
 
-def load_dataset(export_path, plane_path, layout_path) -> Dataset:
-    """Read and cross-check the three files of a run (errors name the file and the problem)."""
+def load_dataset(export_path, plane_path, layout_path, quaternion_order: str = "wxyz", position_units: str = "mm",
+                 no_reading=None) -> Dataset:
+    """Read and cross-check the three files of a run (errors name the file and the problem).
+
+    ``quaternion_order`` and ``position_units`` are passed to
+    :func:`~metrology.io.export.read_export`; ``no_reading`` is the PLC's "no reading" code
+    (default 0, see :func:`drop_no_reading`).
+    """
     layout = load_layout(layout_path)
-    export = check(read_export(export_path), layout, str(export_path))
+    export = read_export(export_path, quaternion_order, position_units)
+    if sorted(export.names) == sorted(layout.names):
+        export = export.reordered(layout.names)
+        export, dropped = drop_no_reading(export, layout, no_reading)
+    else:
+        dropped = ()
+    export = check(export, layout, str(export_path))
     plane, points = load_plane(plane_path)
-    return Dataset(export, layout, plane, points)
+    return Dataset(export, layout, plane, points, dropped, NO_READING if no_reading is None else float(no_reading))

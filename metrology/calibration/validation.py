@@ -20,6 +20,8 @@ class ValidationReport:
     n_readings : (p,) int, readings per pose
     n_sensors : int
     sources : dict
+    no_reading : dict or None
+        The "no reading" codes dropped on loading (value, count, readings), None when none was.
     """
 
     pose_id: tuple
@@ -28,6 +30,7 @@ class ValidationReport:
     n_readings: np.ndarray
     n_sensors: int
     sources: dict = field(default_factory=dict)
+    no_reading: dict | None = None
 
     def stats_deg(self, k: int) -> dict:
         """max / mean / std (sample, ddof=1) of the deviation of layout ``k``, deg, and the poses counted."""
@@ -42,6 +45,7 @@ class ValidationReport:
                         for k, lab in enumerate(self.labels)},
             "pose_id": list(self.pose_id),
             "n_readings": self.n_readings,
+            **({"no_reading": self.no_reading} if self.no_reading else {}),
         }
 
 
@@ -77,4 +81,4 @@ def validate(dataset: Dataset, layouts: dict, sources=None) -> ValidationReport:
         raise ValueError("validate: no pose has 3 or more readings")
     nread = np.isfinite(dataset.export.d).sum(axis=1)
     return ValidationReport(tuple(dataset.export.pose_id), tuple(layouts), dev, nread, int(dataset.export.d.shape[1]),
-                            dict(sources or {}))
+                            dict(sources or {}), dataset.no_reading_dict() if dataset.dropped else None)

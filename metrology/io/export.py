@@ -5,6 +5,10 @@ unit quaternion ``(qw, qx, qy, qz)`` (scalar first) give the TCS in the tracker 
 ``p_tracker = R(q) p_tcs + (x, y, z)``. ``d_<name>`` is the reading of sensor ``<name>`` in mm;
 an empty cell is no reading (out of range), which drops that reading, not the pose.
 ``time_s`` and ``temp_c`` are optional columns.
+
+Two common export settings are read on request (:func:`read_export`): quaternions written
+scalar-last under the same header (``quaternion_order="xyzw"``: the columns ``qw, qx, qy, qz``
+hold ``x, y, z, w``) and positions in metres or inches (``position_units``).
 """
 
 from __future__ import annotations
@@ -19,7 +23,14 @@ import numpy as np
 from metrology.io.atomic import write_text
 from metrology.core.tolerances import QUATERNION_NORM
 
-__all__ = ["TrackerExport", "read_export", "write_export", "export_to_csv", "read_csv_rows"]
+__all__ = ["TrackerExport", "read_export", "write_export", "export_to_csv", "read_csv_rows",
+           "QUATERNION_ORDERS", "POSITION_UNITS"]
+
+#: what the four columns ``qw, qx, qy, qz`` hold -> the column indices of (w, x, y, z)
+QUATERNION_ORDERS = {"wxyz": [0, 1, 2, 3], "xyzw": [3, 0, 1, 2]}
+
+#: unit of the position columns ``x, y, z`` -> mm per unit
+POSITION_UNITS = {"mm": 1.0, "m": 1000.0, "in": 25.4}
 
 REQUIRED = ("pose_id", "x", "y", "z", "qw", "qx", "qy", "qz")
 OPTIONAL = ("time_s", "temp_c")
@@ -103,8 +114,23 @@ def read_csv_rows(path, what: str) -> list:
         raise ValueError(f"{path}: not a UTF-8 text CSV") from None
 
 
-def read_export(path) -> TrackerExport:
-    """Read a tracker export CSV; every error names the file, line and column."""
+def read_export(path, quaternion_order: str = "wxyz", position_units: str = "mm") -> TrackerExport:
+    """Read a tracker export CSV; every error names the file, line and column.
+
+    Parameters
+    ----------
+    path : str or Path
+    quaternion_order : {"wxyz", "xyzw"}
+        What the columns ``qw, qx, qy, qz`` hold, in that column order: ``"xyzw"`` reads a
+        scalar-last export written under the scalar-first header.
+    position_units : {"mm", "m", "in"}
+        Unit of ``x, y, z``; converted to mm.
+    """
+    if quaternion_order not in QUATERNION_ORDERS:
+        raise ValueError(f"quaternion order {quaternion_order!r}: expected one of {', '.join(QUATERNION_ORDERS)}")
+    if position_units not in POSITION_UNITS:
+        raise ValueError(f"position units {position_units!r}: expected one of {', '.join(POSITION_UNITS)}")
+    qidx, scale = QUATERNION_ORDERS[quaternion_order], POSITION_UNITS[position_units]
     rows = [r for r in read_csv_rows(path, "export") if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{path}: empty file, expected a header line {','.join(REQUIRED)},d_<sensor>,...")
@@ -128,8 +154,8 @@ def read_export(path) -> TrackerExport:
         pose_id.append(row[col["pose_id"]].strip())
         t.append(_float(path, k, "time_s", row[col["time_s"]], True) if "time_s" in col else math.nan)
         temp.append(_float(path, k, "temp_c", row[col["temp_c"]], True) if "temp_c" in col else math.nan)
-        trans.append([_float(path, k, c, row[col[c]]) for c in ("x", "y", "z")])
-        q = np.array([_float(path, k, c, row[col[c]]) for c in ("qw", "qx", "qy", "qz")])
+        trans.append([scale * _float(path, k, c, row[col[c]]) for c in ("x", "y", "z")])
+        q = np.array([_float(path, k, c, row[col[c]]) for c in ("qw", "qx", "qy", "qz")])[qidx]
         qn = np.linalg.norm(q)
         if abs(qn - 1.0) > QUATERNION_NORM:
             raise ValueError(f"{path}: line {k}: quaternion norm {qn:.6f}, expected 1 within {QUATERNION_NORM}")

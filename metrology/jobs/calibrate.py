@@ -6,18 +6,37 @@ from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, c
 from metrology.calibration.validation import ValidationReport, validate
 
 
+def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
+                 warn=None):
+    """:func:`~metrology.calibration.dataset.load_dataset`, then refuse a gross mismatch naming the
+    likely mistake (:func:`metrology.calibration.sanity.check_dataset`). ``warn(line)`` is called
+    with the count of dropped "no reading" codes, if any."""
+    from metrology.calibration.dataset import load_dataset
+    from metrology.calibration.sanity import check_dataset
+
+    dataset = load_dataset(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading)
+    check_dataset(dataset, str(export_path), quaternion_order, position_units)
+    if warn is not None and dataset.dropped:
+        warn(f"{export_path}: {dataset.no_reading_summary()}")
+    return dataset
+
+
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,
-                    plot_dir=None, **kwargs) -> CalibrationReport:
+                    plot_dir=None, quaternion_order="wxyz", position_units="mm", no_reading=None,
+                    warn=None, **kwargs) -> CalibrationReport:
     """Load and cross-check the three files, calibrate, and write the requested outputs.
+
+    ``quaternion_order``, ``position_units`` and ``no_reading`` say how to read the export
+    (:func:`~metrology.calibration.dataset.load_dataset`); data that do not fit the model by
+    orders of magnitude are refused, naming the likely mistake, before anything is written.
 
     Nothing is written unless the calibration succeeds; each file is written atomically
     (the figures first, then the calibrated layout ``out``, in the schema of the nominal
     with ``zero_stderr_mm`` and ``direction_stderr_deg`` added).
     """
-    from metrology.calibration.dataset import load_dataset
     from metrology.io.layout import save_layout
 
-    dataset = load_dataset(export_path, plane_path, layout_path)
+    dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
     if plot_dir is not None:
@@ -35,16 +54,16 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     return report
 
 
-def validate_files(export_path, plane_path, layout_path, layout_before_path=None, plot=None) -> ValidationReport:
+def validate_files(export_path, plane_path, layout_path, layout_before_path=None, plot=None, quaternion_order="wxyz",
+                   position_units="mm", no_reading=None, warn=None) -> ValidationReport:
     """Validate ``layout_path`` (and ``layout_before_path``, first, if given) on an export.
 
     The layouts are reported under the labels ``layout_before`` and ``layout``; ``plot``
     writes the deviation per pose as a PNG (atomically).
     """
-    from metrology.calibration.dataset import load_dataset
     from metrology.io.layout import load_layout
 
-    dataset = load_dataset(export_path, plane_path, layout_path)
+    dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     layouts = {}
     sources = {"export": str(export_path), "plane": str(plane_path)}
     if layout_before_path is not None:

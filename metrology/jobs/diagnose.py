@@ -7,10 +7,12 @@ from metrology.diagnosis.decide import Diagnosis, diagnose
 __all__ = ["diagnose_files"]
 
 
-def diagnose_files(export_path, plane_path, layout_path, **kw) -> Diagnosis:
-    """:func:`diagnose` on the three files of a run (see :func:`metrology.calibration.dataset.load_dataset`)."""
-    from metrology.calibration.dataset import load_dataset
+def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
+                   warn=None, **kw) -> Diagnosis:
+    """:func:`diagnose` on the three files of a run, read and screened as for ``metro calibrate``
+    (:func:`metrology.jobs.calibrate.load_checked`: a gross mismatch is refused, naming the mistake)."""
+    from metrology.jobs.calibrate import load_checked
 
-    ds = load_dataset(export_path, plane_path, layout_path)
+    ds = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     return diagnose(ds, **kw)
 
