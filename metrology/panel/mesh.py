@@ -47,6 +47,17 @@ class Panel:
     source: str = "<mesh>"
     warnings: list = field(default_factory=list)
     surface: ParametricSurface | None = None
+    _corners: tuple | None = field(default=None, init=False, repr=False, compare=False)
+
+    def _vertex_corners(self):
+        """Corners (face * 3 + k) sorted by vertex, and each vertex's start and count (cached)."""
+        if self._corners is None:
+            flat = np.asarray(self.mesh.faces).ravel()
+            order = np.argsort(flat, kind="stable")
+            count = np.bincount(flat, minlength=len(self.mesh.vertices))
+            start = np.concatenate([[0], np.cumsum(count)[:-1]])
+            self._corners = (order, start, count)
+        return self._corners
 
     def vertex_normal_at(self, tri, bary):
         """Interpolated vertex normals.
@@ -95,16 +106,23 @@ class Panel:
         F = np.asarray(mesh.faces)
         N = np.asarray(mesh.face_normals)
         V = F[tri]  # (m, 3)
-        G = np.asarray(mesh.vertex_faces)[V]  # (m, 3, K), -1 padded
-        valid = G >= 0
-        Gs = np.where(valid, G, 0)
+        # the faces around each corner's vertex, and which of their corners it is
+        order, start, count = self._vertex_corners()
+        K = int(count[V].max())
+        slot = start[V][..., None] + np.arange(K)  # (m, 3, K)
+        valid = np.arange(K) < count[V][..., None]
+        cid = order[np.where(valid, slot, 0)]
+        Gs, corner = cid // 3, cid % 3
         Ng = N[Gs]  # (m, 3, K, 3)
         cosang = np.einsum("mkgj,mj->mkg", Ng, N[tri])
         use = valid & (cosang >= math.cos(math.radians(crease_deg)))
         use |= Gs == tri[:, None, None]
         # the angle of each neighbouring face at the shared vertex
-        corner = np.argmax(F[Gs] == V[:, :, None, None], axis=3)  # (m, 3, K)
-        w = np.asarray(mesh.face_angles)[Gs, corner] * use
+        P = np.asarray(mesh.vertices)[F[Gs]]  # (m, 3, K, 3 corners, 3)
+        at = np.take_along_axis(P, corner[..., None, None], axis=3)[..., 0, :]
+        e1 = np.take_along_axis(P, ((corner + 1) % 3)[..., None, None], axis=3)[..., 0, :] - at
+        e2 = np.take_along_axis(P, ((corner + 2) % 3)[..., None, None], axis=3)[..., 0, :] - at
+        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * use
         cn = np.einsum("mkg,mkgj->mkj", w, Ng)
         cn /= np.linalg.norm(cn, axis=2, keepdims=True)
         n = np.einsum("mk,mkj->mj", bary, cn)
