@@ -14,9 +14,10 @@ from metrology.core.normals import micro_plane_normal, projection_points
 SPHERE_PRIOR_RADIUS_MM = 100.0
 
 
-#: noise floor of the spots used by that prior when the reading noise is 0 (mm): mesh
-#: tessellation and float rounding
-SPHERE_NOISE_FLOOR_MM = 1e-4
+#: tie-break weight of the prior row when the noise is 0 (scaled units): it only decides
+#: between the members of a pencil the spots cannot tell apart (concyclic spots: the plane)
+#: and moves a determined sphere by ~1e-12 relative, far below 1e-6 deg
+SPHERE_TIE_BREAK = 1e-12
 
 
 #: a root of the axis/sphere quadratic is taken as the plane root when |A| is below this
@@ -42,8 +43,8 @@ def fit_algebraic_sphere(S, noise_mm=0.0, prior_radius_mm=SPHERE_PRIOR_RADIUS_MM
     Parameters
     ----------
     S : (p, n, 3) float, mm, any frame, n >= 4, all finite
-    noise_mm : float, mm, 1 sigma of a spot along the normal (floored at
-        :data:`SPHERE_NOISE_FLOOR_MM`)
+    noise_mm : float, mm, 1 sigma of a spot along the normal; 0: the data are exact and
+        the prior vanishes (only the :data:`SPHERE_TIE_BREAK` remains)
     prior_radius_mm : float, mm; inf: no prior (the exact interpolating sphere)
 
     Returns
@@ -61,13 +62,15 @@ def fit_algebraic_sphere(S, noise_mm=0.0, prior_radius_mm=SPHERE_PRIOR_RADIUS_MM
     scale = np.where(scale > 0, scale, 1.0)
     X = X / scale[:, None, None]
     M = np.concatenate([np.sum(X * X, axis=2, keepdims=True), X, np.ones(X.shape[:2] + (1,))], axis=2)
-    sigma = max(float(noise_mm), SPHERE_NOISE_FLOOR_MM)
+    sigma = float(noise_mm)
+    if not (sigma >= 0 and np.isfinite(sigma)):
+        raise ValueError(f"the spots' noise must be a finite number >= 0 mm, got {noise_mm}")
     kappa0 = 1.0 / float(prior_radius_mm)
     lam = 4.0 * sigma**2 / (kappa0**2 * scale**4) if kappa0 > 0 else np.zeros_like(scale)
     # the prior as one more row (SVD of the stacked matrix: no squared condition number);
     # a tiny floor breaks the tie of an exactly concyclic pencil towards the plane
     prior = np.zeros((len(S), 1, 5))
-    prior[:, 0, 0] = np.sqrt(lam + 1e-24)
+    prior[:, 0, 0] = np.sqrt(lam + SPHERE_TIE_BREAK**2)
     _, _, vt = np.linalg.svd(np.concatenate([M, prior], axis=1), full_matrices=True)
     return vt[:, -1, :], centre, scale
 
@@ -96,9 +99,18 @@ def micro_sphere_normal(zero, direction, d, axis=(0.0, 0.0, 1.0), origin=(0.0, 0
 
     Notes
     -----
-    With 3 sensors a sphere through the spots is underdetermined: the micro-plane is
-    returned (radius inf). With more than 4 sensors the sphere is the algebraic
-    least-squares one.
+    **Four sensors** determine the sphere: with exact readings (``noise_mm = 0``) the
+    normal is that of the sphere through the four spots, exact to rounding wherever the
+    spots land, for any beam layout. **More than four**: the algebraic least-squares sphere
+    (exact too when the spots are). **Three sensors**: a sphere through 3 points is not
+    unique: a one-parameter pencil passes through them (centres on the line through the
+    spots' circumcentre, normal to their plane), from the plane to the smallest sphere, and
+    the spots say nothing about which. Under the zero-mean curvature prior the most likely
+    member is the plane, so the micro-plane is returned (radius inf). It is exact on a
+    sphere only where the tool axis meets the sphere on the line from its centre through the
+    spots' circumcentre (a symmetric head square to the surface); otherwise its error is
+    the micro-plane's. Other choices (the sphere of the prior's radius, or with its centre
+    on the tool axis) would need the curvature, or its sign, from elsewhere: not done.
     """
     zero = np.asarray(zero, float)
     direction = np.asarray(direction, float)

@@ -107,7 +107,7 @@ def _axis_surface(caster, panel, P_axis, f):
     pts = np.where(hit[:, None], P_axis - 50.0 * f + np.nan_to_num(t)[:, None] * f, P_axis)
     nrm = np.full_like(pts, np.nan)
     if np.any(hit):
-        nrm[hit] = panel.vertex_normal_at(tri[hit], bary[hit])
+        nrm[hit] = panel.reference_normal_at(tri[hit], bary[hit])[0]
     if panel.surface is not None:
         nrm = np.where(hit[:, None], panel.surface.normal(pts), nrm)
     return pts, nrm, hit

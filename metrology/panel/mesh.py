@@ -25,6 +25,12 @@ STEP_TOL_LINEAR_MM = 1e-3
 STEP_TOL_ANGULAR_RAD = 5e-3
 
 
+#: the reference normal of a mesh is smoothed only over faces whose normals make less than
+#: this angle with the face hit (deg); as CAD tools' smoothing groups / auto-smooth: an
+#: edge sharper than this is a designed crease, one gentler is tessellation of a curve
+CREASE_ANGLE_DEG = 30.0
+
+
 @dataclass
 class Panel:
     """A loaded, validated panel mesh.
@@ -41,6 +47,17 @@ class Panel:
     source: str = "<mesh>"
     warnings: list = field(default_factory=list)
     surface: ParametricSurface | None = None
+    _corners: tuple | None = field(default=None, init=False, repr=False, compare=False)
+
+    def _vertex_corners(self):
+        """Corners (face * 3 + k) sorted by vertex, and each vertex's start and count (cached)."""
+        if self._corners is None:
+            flat = np.asarray(self.mesh.faces).ravel()
+            order = np.argsort(flat, kind="stable")
+            count = np.bincount(flat, minlength=len(self.mesh.vertices))
+            start = np.concatenate([[0], np.cumsum(count)[:-1]])
+            self._corners = (order, start, count)
+        return self._corners
 
     def vertex_normal_at(self, tri, bary):
         """Interpolated vertex normals.
@@ -57,6 +74,64 @@ class Panel:
         vn = np.asarray(self.mesh.vertex_normals)[np.asarray(self.mesh.faces)[tri]]  # (m, 3, 3)
         n = np.einsum("mk,mkj->mj", bary, vn)
         return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    def reference_normal_at(self, tri, bary, crease_deg=CREASE_ANGLE_DEG):
+        """The mesh's reference normal: the face hit, smoothed only within a crease angle.
+
+        At each corner of the face hit, the normal is the angle-weighted mean of the normals
+        of the faces around that vertex that make less than ``crease_deg`` with the face hit
+        (the face itself always counts); the three corner normals are then interpolated with
+        ``bary``. Across an edge sharper than the crease nothing is averaged, so on a box or a
+        coarsely faceted cylinder the reference is the face's own normal; on a fine mesh of a
+        smooth surface it is the usual smooth-shaded normal.
+
+        Parameters
+        ----------
+        tri : (m,) int, face indices (no misses)
+        bary : (m, 3) float, barycentric coordinates in those faces
+        crease_deg : float, deg
+
+        Returns
+        -------
+        n : (m, 3) float, unit, panel frame
+        faceting : (m,) float, rad, the reference's own uncertainty: half the largest angle
+            between the face hit and the faces it is smoothed with (the normal turns by about
+            that much across one face of the tessellated curve)
+        chord_mm : (m,) float, mm, the chord error of that faceting: ``L theta / 8`` for the
+            face's longest edge ``L`` and that angle ``theta`` (``L^2 kappa / 8``)
+        """
+        mesh = self.mesh
+        tri = np.asarray(tri, int)
+        bary = np.asarray(bary, float)
+        F = np.asarray(mesh.faces)
+        N = np.asarray(mesh.face_normals)
+        V = F[tri]  # (m, 3)
+        # the faces around each corner's vertex, and which of their corners it is
+        order, start, count = self._vertex_corners()
+        K = int(count[V].max())
+        slot = start[V][..., None] + np.arange(K)  # (m, 3, K)
+        valid = np.arange(K) < count[V][..., None]
+        cid = order[np.where(valid, slot, 0)]
+        Gs, corner = cid // 3, cid % 3
+        Ng = N[Gs]  # (m, 3, K, 3)
+        cosang = np.einsum("mkgj,mj->mkg", Ng, N[tri])
+        use = valid & (cosang >= math.cos(math.radians(crease_deg)))
+        use |= Gs == tri[:, None, None]
+        # the angle of each neighbouring face at the shared vertex
+        P = np.asarray(mesh.vertices)[F[Gs]]  # (m, 3, K, 3 corners, 3)
+        at = np.take_along_axis(P, corner[..., None, None], axis=3)[..., 0, :]
+        e1 = np.take_along_axis(P, ((corner + 1) % 3)[..., None, None], axis=3)[..., 0, :] - at
+        e2 = np.take_along_axis(P, ((corner + 2) % 3)[..., None, None], axis=3)[..., 0, :] - at
+        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * use
+        cn = np.einsum("mkg,mkgj->mkj", w, Ng)
+        cn /= np.linalg.norm(cn, axis=2, keepdims=True)
+        n = np.einsum("mk,mkj->mj", bary, cn)
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        sinang = np.linalg.norm(np.cross(Ng, N[tri][:, None, None, :]), axis=3)
+        theta = np.max(np.where(use, np.arctan2(sinang, cosang), 0.0), axis=(1, 2))
+        tri_v = np.asarray(mesh.vertices)[V]
+        L = np.max(np.linalg.norm(tri_v - np.roll(tri_v, 1, axis=1), axis=2), axis=1)
+        return n, theta / 2.0, L * theta / 8.0
 
 
 def _surface_from_header(text: str):

@@ -126,7 +126,10 @@ def snap_points(panel: Panel, caster: RayCaster, points):
     -------
     snapped : (m, 3) float, mm, panel frame, the closest points on the mesh
     distance : (m,) float, mm, how far each point was from the mesh
-    normal : (m, 3) float, unit, panel frame, interpolated vertex normal, out of the panel
+    normal : (m, 3) float, unit, panel frame, the mesh's reference normal
+        (:meth:`Panel.reference_normal_at`: the face, smoothed within the crease angle), out
+    faceting : (m,) float, rad, that normal's own uncertainty (see there)
+    chord_mm : (m,) float, mm, the faceting's chord error there
     """
     import trimesh
 
@@ -134,4 +137,5 @@ def snap_points(panel: Panel, caster: RayCaster, points):
     bary = trimesh.triangles.points_to_barycentric(np.asarray(panel.mesh.triangles)[tri], snapped)
     bary = np.clip(bary, 0.0, 1.0)
     bary /= bary.sum(1, keepdims=True)
-    return snapped, np.linalg.norm(snapped - points, axis=1), panel.vertex_normal_at(tri, bary)
+    n, faceting, chord = panel.reference_normal_at(tri, bary)
+    return snapped, np.linalg.norm(snapped - points, axis=1), n, faceting, chord

@@ -10,7 +10,7 @@ from metrology.core.normals import angle_between
 from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
 from metrology.panel.attitude import MotionError, _beam_detail, _normal_from, _readings, attitude_loop
 from metrology.panel.head import MAX_TILT, default_standoff, orientation_from_feed, place_head, tilted_feed, tool_axis_tcs
-from metrology.panel.mesh import ON_PANEL_MM, Panel
+from metrology.panel.mesh import CREASE_ANGLE_DEG, ON_PANEL_MM, Panel
 from metrology.panel.points import DrillPoints, snap_points
 from metrology.panel.rays import RayCaster
 
@@ -25,7 +25,8 @@ class NormalsRun:
     points : (m, 3) float, mm, panel frame, drilling points on the panel
     status : (m,) str, a key of :data:`STATUS`
     off_mm : (m,) float, mm, distance of the given point from the panel
-    n_true : (m, 3) float, unit, panel frame, interpolated vertex normal, out
+    n_true : (m, 3) float, unit, panel frame, the mesh's reference normal (the face hit,
+        smoothed within :data:`CREASE_ANGLE_DEG`), out
     n_analytic : (m, 3) float or None, unit, panel frame, for generated panels
     n_plane, n_sphere : (m, 3) float, unit, panel frame, out; NaN unless status ok
     err_plane, err_sphere : (m,) float, rad, angle to the reference normal (:attr:`n_ref`)
@@ -57,7 +58,7 @@ class NormalsRun:
 
     @property
     def n_ref(self):
-        """The reference normal: analytic where known, else the interpolated vertex normal."""
+        """The reference normal: analytic where known, else the mesh's (crease-limited) one."""
         return self.n_analytic if self.n_analytic is not None else self.n_true
 
 
@@ -116,7 +117,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
         raise ValueError(f"reading noise must be finite and >= 0 mm, got {noise.tolist()}")
     caster = RayCaster(panel.mesh, engine) if caster is None else caster
     m = len(drill.points)
-    pts, off, n_true = snap_points(panel, caster, drill.points)
+    pts, off, n_true, faceting, chord = snap_points(panel, caster, drill.points)
     status = np.full(m, "ok", dtype=object)
     status[off > ON_PANEL_MM] = "off_panel"
     has_app = np.all(np.isfinite(drill.approach), axis=1)
@@ -164,7 +165,23 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     info = {"engine": caster.engine, "standoff_mm": standoff, "tilt_deg": math.degrees(tilt),
             "noise_mm": noise.tolist(), "tolerance_deg": math.degrees(tolerance),
             "motion": {"repeat_deg": math.degrees(motion.repeat), "scale": motion.scale, "position_mm": motion.position_mm},
-            "tool_axis_tcs": a_tcs.tolist(), "reference_normal": "analytic" if n_an is not None else "interpolated vertex normals",
+            "tool_axis_tcs": a_tcs.tolist(), "reference_normal": "analytic" if n_an is not None else
+            f"mesh: face hit, smoothed within {CREASE_ANGLE_DEG:g} deg",
+            "reference_faceting": _faceting_info(faceting, chord, status == "ok", n_an is not None),
             "sensors": layout.n, "sphere_prior_radius_mm": prior_radius_mm}
     return NormalsRun(drill.labels, pts, status.astype(str), off, n_true, n_an, n_plane, n_sphere, err_p, err_s,
                       rad, d, init_tilt, loops, caster.engine, info, detail.astype(str))
+
+
+def _faceting_info(faceting, chord, good, analytic):
+    """The mesh reference's own uncertainty over the measured points (for ``info``)."""
+    if analytic:
+        return {"used": False, "note": "the analytic surface is the reference; the mesh only carries the beams"}
+    f = np.degrees(faceting[good]) if np.any(good) else np.array([np.nan])
+    c = chord[good] if np.any(good) else np.array([np.nan])
+    return {"used": True, "crease_angle_deg": CREASE_ANGLE_DEG,
+            "angle_median_deg": float(np.median(f)), "angle_max_deg": float(np.max(f)),
+            "chord_median_mm": float(np.median(c)), "chord_max_mm": float(np.max(c)),
+            "note": "half the largest angle between the face hit and the faces smoothed with it, and its chord "
+                    "error (longest edge x angle / 8, an upper bound); 0 on a facet bounded by creases, exact "
+                    "only if the design is flat there"}

@@ -21,7 +21,7 @@ def summarize(run: NormalsRun) -> dict:
     ``p95_deg``, ``within_tolerance``, and the loop's ``iterations_mean``,
     ``iterations_max``, ``converged``, ``final_max_deg``, ``final_mean_deg``),
     ``status`` (counts), ``recommendation`` (``method`` and ``text``), ``info``, and for
-    generated panels ``mesh_vs_analytic_max_deg`` (interpolated vertex normals against the
+    generated panels ``mesh_vs_analytic_max_deg`` (the mesh reference normal against the
     analytic normal: the tessellation error).
     """
     tol = math.radians(run.info["tolerance_deg"])

@@ -59,7 +59,7 @@ def test_step_panel_loads_in_mm():
     # within the 1 um chord tolerance of the tessellation
     assert np.max(np.abs(p.mesh.vertices[:, 2] - surf.height(p.mesh.vertices[:, 0], p.mesh.vertices[:, 1]))) < 1e-3
     c = RayCaster(p.mesh)
-    pts, _, n = snap_points(p, c, np.array([[0.0, 0.0, 0.0], [50.0, 20.0, -1.5]]))
+    pts, _, n, _, _ = snap_points(p, c, np.array([[0.0, 0.0, 0.0], [50.0, 20.0, -1.5]]))
     assert np.max(angle_between(n, surf.normal(pts), oriented=True)) < math.radians(0.01)
 
 
