@@ -1,0 +1,254 @@
+"""Blind study of ``metro diagnose`` on the independent forward simulator (issues 12 and 15).
+
+Cases are drawn by :mod:`metrology.sim.forward` (3- and 4-sensor heads, 3-10 um noise, 40-150
+poses, random shapes within each family), written through the public file contract
+(``export.csv``, ``layout.toml``, the datum scan ``cloud.ply`` passed as the plane) and diagnosed
+by :func:`metrology.jobs.diagnose.diagnose_files` (what ``metro diagnose`` calls). Only the JSON
+fields ``cause``, ``sensors``, ``confidence`` and, when present, ``causes`` are read.
+
+Reports: confusion matrix (true family x named cause); right cause AND sensor per family, over
+all draws and inside the stated detectable range (``DETECTABLE``: by default the upper two thirds
+of each family's drawn size range, until the study states measured ranges); null false-cause rate
+with a 95 % Clopper-Pearson interval; the rate of catalogued causes named for out-of-catalogue
+effects; precision of ``confidence: high``; coverage of the true size by the reported size +/- 2
+stderr (only where the JSON reports a ``size`` in the family's unit; otherwise "n/a"); for pairs,
+both-right and wrong-cause-added rates.
+
+    python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from collections import Counter
+
+import numpy as np
+
+# catalogued families and their pairs, out-of-catalogue effects (metrology.sim.forward.families)
+FAMILY_ORDER = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers")
+OOC = ("periodic", "crosstalk")
+PAIRS = (("drift", "outliers"), ("scale", "drift"), ("pose_error", "drift"), ("nonlinearity", "outliers"),
+         ("plane_form", "drift"), ("scale", "incidence"), ("drift", "drift"), ("pose_error", "outliers"))
+#: families acting on every sensor (the sensor list is not scored)
+ALL_SENSORS = ("pose_error", "plane_form")
+
+
+def detectable_ranges() -> dict:
+    """Stated detectable range per family: upper two thirds of the drawn size range (see module doc)."""
+    from metrology.sim.forward import FAMILIES
+
+    out = {}
+    for f in FAMILY_ORDER + OOC:
+        lo, hi = FAMILIES[f].size_range
+        out[f] = (lo + (hi - lo) / 3.0, hi)
+    return out
+
+
+def clopper_pearson(k: int, n: int, alpha: float = 0.05) -> tuple:
+    """Exact two-sided (1 - alpha) interval of a binomial rate ``k / n``."""
+    from scipy.stats import beta
+
+    if n == 0:
+        return (float("nan"), float("nan"))
+    lo = 0.0 if k == 0 else float(beta.ppf(alpha / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - alpha / 2, k + 1, n - k))
+    return lo, hi
+
+
+def jobs_for(draws: int, nulls: int, pairs: int, seed: int) -> list:
+    """The study's cases as (kind, families, seed entropy) tuples, in a fixed order."""
+    jobs = [("null", ("none",), (seed, 0, 0, i)) for i in range(nulls)]
+    for k, f in enumerate(FAMILY_ORDER):
+        jobs += [("single", (f,), (seed, 1, k, i)) for i in range(draws)]
+    for k, f in enumerate(OOC):
+        jobs += [("ooc", (f,), (seed, 2, k, i)) for i in range(draws)]
+    for i in range(pairs):
+        jobs.append(("pair", PAIRS[i % len(PAIRS)], (seed, 3, i % len(PAIRS), i)))
+    return jobs
+
+
+def _named(result: dict) -> list:
+    """[(cause, sensors)] named by the JSON: ``causes`` if given, else the single ``cause``."""
+    causes = result.get("causes")
+    if causes:
+        return [(c["cause"], tuple(c.get("sensors") or ())) for c in causes]
+    if result["cause"] in ("none", "unexplained"):
+        return []
+    return [(result["cause"], tuple(result.get("sensors") or ()))]
+
+
+def _size(result: dict, family: str):
+    """(value, stderr) of the size in the family's unit if the JSON reports one, else None."""
+    for c in result.get("causes") or [result.get("extended") or {}]:
+        if c and (c.get("cause") or c.get("component")) == family and isinstance(c.get("size"), dict):
+            s = c["size"]
+            if s.get("value") is not None and s.get("stderr") is not None:
+                return float(s["value"]), float(s["stderr"])
+    return None
+
+
+def run_case(job) -> dict:
+    """Draw one case, write its files, diagnose them; the record of truth and verdict."""
+    from metrology.jobs.diagnose import diagnose_files
+    from metrology.sim.forward import draw_case, draw_pair, write_case
+
+    kind, fams, entropy = job
+    rng = np.random.default_rng(list(entropy))
+    case = draw_pair(rng, *fams) if kind == "pair" else draw_case(rng, fams[0])
+    with tempfile.TemporaryDirectory() as d:
+        paths = write_case(case, d)
+        res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    named = _named(res)
+    return {
+        "kind": kind, "family": case.family, "seed": list(entropy), "n_sensors": case.nominal.n,
+        "n_poses": case.export.n_poses, "noise_mm": case.noise_mm,
+        "truth": [{"family": e.family, "sensors": list(e.sensors), "size": e.size} for e in case.effects],
+        "cause": res["cause"], "sensors": list(res.get("sensors") or []), "confidence": res["confidence"],
+        "named": [[c, list(s)] for c, s in named],
+        "sizes": {e.family: _size(res, e.family) for e in case.effects},
+    }
+
+
+def _right(effect: dict, named: list) -> bool:
+    """The effect's family named with its sensors (sensors not scored for all-sensor families)."""
+    for cause, sensors in named:
+        if cause != effect["family"]:
+            continue
+        if effect["family"] in ALL_SENSORS or set(sensors) == set(effect["sensors"]):
+            return True
+    return False
+
+
+def summarize(records: list, det: dict) -> dict:
+    """Every rate of the study from the records (see module doc)."""
+    out = {"detectable": {f: list(r) for f, r in det.items()}}
+    singles = [r for r in records if r["kind"] in ("null", "single", "ooc")]
+    rows = sorted({r["family"] for r in singles}, key=lambda f: (("none",) + FAMILY_ORDER + OOC).index(f))
+    conf = {f: Counter(r["cause"] for r in singles if r["family"] == f) for f in rows}
+    out["confusion"] = {f: dict(c) for f, c in conf.items()}
+    fam = {}
+    for f in FAMILY_ORDER:
+        rs = [r for r in records if r["kind"] == "single" and r["family"] == f]
+        inside = [r for r in rs if det[f][0] <= r["truth"][0]["size"] <= det[f][1]]
+        right = [_right(r["truth"][0], [(r["cause"], r["sensors"])]) for r in rs]
+        right_in = [_right(r["truth"][0], [(r["cause"], r["sensors"])]) for r in inside]
+        cov = [r["sizes"].get(f) for r in rs if r["sizes"].get(f) is not None]
+        covered = [abs(v - r["truth"][0]["size"]) <= 2 * s for r in rs for v, s in [r["sizes"].get(f) or (None, None)]
+                   if v is not None]
+        fam[f] = {"n": len(rs), "right": int(sum(right)), "n_inside": len(inside), "right_inside": int(sum(right_in)),
+                  "n_size": len(cov), "covered_2sigma": int(sum(covered))}
+    out["families"] = fam
+    nulls = [r for r in records if r["kind"] == "null"]
+    k = sum(r["cause"] != "none" for r in nulls)
+    out["null"] = {"n": len(nulls), "false_cause": int(k),
+                   "named_catalogued": int(sum(bool(r["named"]) for r in nulls)), "ci95": clopper_pearson(k, len(nulls))}
+    ooc = [r for r in records if r["kind"] == "ooc"]
+    kc = sum(bool(r["named"]) for r in ooc)
+    out["ooc"] = {"n": len(ooc), "catalogued_named": int(kc), "ci95": clopper_pearson(kc, len(ooc)),
+                  "by_family": {f: dict(Counter(r["cause"] for r in ooc if r["family"] == f)) for f in OOC}}
+    high = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "high"]
+    hr = [(r["cause"] == "none") if r["kind"] == "null" else _right(r["truth"][0], [(r["cause"], r["sensors"])])
+          for r in high]
+    out["high_precision"] = {"n": len(high), "right": int(sum(hr))}
+    pairs = [r for r in records if r["kind"] == "pair"]
+    both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
+    added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
+    out["pairs"] = {"n": len(pairs), "both_right": int(sum(both)), "wrong_added": int(sum(added)),
+                    "by_pair": {p: dict(Counter(r["cause"] for r in pairs if r["family"] == p))
+                                for p in sorted({r["family"] for r in pairs})}}
+    return out
+
+
+def _pct(k, n):
+    return f"{k}/{n} ({100.0 * k / n:.0f} %)" if n else "-"
+
+
+def report(s: dict) -> str:
+    """The study's tables as text."""
+    lines = ["confusion matrix (rows: true family; columns: named cause)"]
+    cols = sorted({c for row in s["confusion"].values() for c in row})
+    lines.append(f"{'':14s}" + "".join(f"{c[:11]:>12s}" for c in cols))
+    for f, row in s["confusion"].items():
+        lines.append(f"{f:14s}" + "".join(f"{row.get(c, 0):12d}" for c in cols))
+    lines += ["", "right cause and sensor per family (sensors not scored for pose_error, plane_form)",
+              f"{'family':14s}{'all draws':>16s}{'inside range':>16s}  {'range':>16s}{'size 2-sigma':>16s}"]
+    for f, r in s["families"].items():
+        lo, hi = s["detectable"][f]
+        cov = _pct(r["covered_2sigma"], r["n_size"]) if r["n_size"] else "n/a"
+        lines.append(f"{f:14s}{_pct(r['right'], r['n']):>16s}{_pct(r['right_inside'], r['n_inside']):>16s}  "
+                     f"{f'{lo:.3g}-{hi:.3g}':>16s}{cov:>16s}")
+    n = s["null"]
+    lines += ["", f"null false-cause rate: {_pct(n['false_cause'], n['n'])}, 95 % CP "
+                  f"[{100 * n['ci95'][0]:.2f}, {100 * n['ci95'][1]:.2f}] % (catalogued named {n['named_catalogued']})"]
+    o = s["ooc"]
+    lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])}, 95 % CP "
+                 f"[{100 * o['ci95'][0]:.1f}, {100 * o['ci95'][1]:.1f}] %; {o['by_family']}")
+    h = s["high_precision"]
+    lines.append(f"confidence high precision (nulls and singles): {_pct(h['right'], h['n'])}")
+    p = s["pairs"]
+    lines.append(f"pairs: both right {_pct(p['both_right'], p['n'])}, wrong cause added {_pct(p['wrong_added'], p['n'])}")
+    for k, v in p["by_pair"].items():
+        lines.append(f"  {k:24s} {v}")
+    return "\n".join(lines)
+
+
+def run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=True) -> tuple:
+    """Run every case; (records, summary)."""
+    todo = jobs_for(draws, nulls, pairs, seed)
+    try:
+        from rich.progress import track
+    except ImportError:
+        track = None
+
+    def _iter(it):
+        if not progress:
+            return it
+        if track is not None:
+            return track(it, total=len(todo), description="blind study")
+        return _plain(it, len(todo))
+
+    if jobs > 1:
+        from multiprocessing import Pool
+
+        with Pool(jobs) as pool:
+            records = list(_iter(pool.imap(run_case, todo)))
+    else:
+        records = list(_iter(map(run_case, todo)))
+    return records, summarize(records, detectable_ranges())
+
+
+def _plain(it, total):
+    t0 = time.time()
+    for i, x in enumerate(it, 1):
+        if i % 10 == 0 or i == total:
+            print(f"  {i}/{total} cases, {time.time() - t0:.0f} s", file=sys.stderr, flush=True)
+        yield x
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=20, help="draws per family (catalogued and out-of-catalogue)")
+    ap.add_argument("--nulls", type=int, default=200)
+    ap.add_argument("--pairs", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--json", default=None, help="save records and summary here")
+    a = ap.parse_args(argv)
+    t0 = time.time()
+    records, summary = run_study(a.draws, a.nulls, a.pairs, a.seed, a.jobs)
+    wall = time.time() - t0
+    print(report(summary))
+    print(f"\nwall time {wall:.0f} s for {len(records)} cases ({a.jobs} job(s))")
+    if a.json:
+        from metrology.io.atomic import write_text
+
+        write_text(a.json, json.dumps({"args": vars(a), "wall_s": wall, "summary": summary, "records": records},
+                                      indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

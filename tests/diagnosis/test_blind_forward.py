@@ -1,0 +1,91 @@
+"""Blind diagnosis of cases drawn by the independent forward simulator (issues 12 and 15).
+
+The fast subset draws a few nulls and one clear case per main family (size at 90 % of the
+family's drawn range, 80 poses) and runs them through the public file contract
+(``write_case`` -> ``diagnose_files``, what ``metro diagnose`` calls). ``nonlinearity`` is not in
+the fast subset: on the current code it is not named right even at 90 % of its range (see
+``benchmarks/study_blind.py``). The full study is ``-m slow``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from metrology.jobs.diagnose import diagnose_files
+from metrology.sim.forward import FAMILIES, draw_case, write_case
+
+ROOT = Path(__file__).resolve().parents[2]
+CLEAR = ("pose_error", "scale", "drift", "incidence", "plane_form", "outliers")
+ALL_SENSORS = ("pose_error", "plane_form")
+
+
+def _diagnose(case, tmp_path):
+    paths = write_case(case, tmp_path)
+    return diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+
+
+def _clear(family, seed=11):
+    lo, hi = FAMILIES[family].size_range
+    size = 5 if family == "outliers" else lo + 0.9 * (hi - lo)
+    return draw_case(np.random.default_rng([seed]), family, size=size, n_poses=80)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_null_names_no_cause(seed, tmp_path):
+    case = draw_case(np.random.default_rng([seed]), "none", n_poses=80)
+    res = _diagnose(case, tmp_path)
+    assert res["cause"] == "none", res["summary"]
+    assert not res.get("causes")
+
+
+@pytest.mark.parametrize("family", CLEAR)
+def test_clear_case_names_cause_and_sensor(family, tmp_path):
+    case = _clear(family)
+    assert case.family == family and len(case.effects) == 1
+    res = _diagnose(case, tmp_path)
+    assert res["cause"] == family, res["summary"]
+    if family not in ALL_SENSORS:
+        assert set(res["sensors"]) == set(case.sensors)
+
+
+def _study():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import study_blind
+    finally:
+        sys.path.pop(0)
+    return study_blind
+
+
+@pytest.fixture(scope="module")
+def study():
+    mod = _study()
+    _, summary = mod.run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=False)
+    return summary
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 12: baseline right-inside-range is below 95 % for several families")
+def test_study_right_inside_detectable_range(study):
+    for fam, r in study["families"].items():
+        assert r["n"] >= 20
+        assert r["right_inside"] >= 0.95 * r["n_inside"], (fam, r)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 12: null false-cause rate not yet shown <= 1 %")
+def test_study_null_false_cause_rate(study):
+    n = study["null"]
+    assert n["n"] >= 200
+    assert n["false_cause"] <= 0.01 * n["n"], n
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 12: crosstalk is named as a catalogued cause on the current code")
+def test_study_out_of_catalogue_never_catalogued(study):
+    assert study["ooc"]["n"] >= 40
+    assert study["ooc"]["catalogued_named"] == 0, study["ooc"]
