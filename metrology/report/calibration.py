@@ -28,22 +28,12 @@ from metrology.calibration.calibrate import CalibrationReport
 from metrology.calibration.convergence import batch_convergence, residual_table
 from metrology.calibration.identifiability import sigma_words
 from metrology.calibration.validation import ValidationReport
-from metrology.io.atomic import atomic_path
-from metrology.report.plots import pyplot
+from metrology.report.plots import pyplot, save_figure
 
 __all__ = ["calibration_text", "validation_text",
            "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
 
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
-
-
-def _save(fig, path):
-    plt = pyplot()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
 
 
 def _vec(v, digits):
@@ -200,7 +190,7 @@ def plot_convergence(report: CalibrationReport, path, convergence=None) -> Path:
     axes[-1, 1].set_xlabel("measurements" if cal.history else "poses used")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
 
 
@@ -229,7 +219,7 @@ def plot_residuals(report: CalibrationReport, path) -> Path:
     axes[0].legend(fontsize=8)
     fig.suptitle(f"{report.calibration.method}: reading residuals of the calibrated layout", fontsize=10)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
 
 
@@ -254,7 +244,7 @@ def plot_validation(vreport: ValidationReport, path) -> Path:
     ax.legend(fontsize=8)
     ax.set_title("measured normal vs datum normal (TCS)", fontsize=10)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)
 
 

@@ -6,7 +6,6 @@ import numpy as np
 
 from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
-from metrology.io.atomic import atomic_path
 
 __all__ = ["report_text", "plot_report", "p_text", "simulate_text"]
 
@@ -83,7 +82,7 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
     the files written."""
     from pathlib import Path
 
-    from metrology.report.plots import pyplot
+    from metrology.report.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -114,9 +113,7 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
     fig.suptitle("base model: residuals against each variable")
     fig.tight_layout()
     f1 = out / "residuals_base.png"
-    with atomic_path(f1) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    save_figure(fig, f1, dpi=90)
     files.append(str(f1))
     best = P.best
     if best is not None:
@@ -144,9 +141,7 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
             a0.legend(fontsize=7)
         fig.tight_layout()
         f2 = out / "residuals_named.png"
-        with atomic_path(f2) as tmp:
-            fig.savefig(tmp, dpi=90)
-        plt.close(fig)
+        save_figure(fig, f2, dpi=90)
         files.append(str(f2))
     return files
 

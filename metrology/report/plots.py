@@ -6,7 +6,7 @@ import numpy as np
 
 from metrology.io.atomic import atomic_path
 
-__all__ = ["figure7", "figure8", "pyplot"]
+__all__ = ["figure7", "figure8", "pyplot", "save_figure"]
 
 RAW_LABELS = ("dx [mm]", "dy [mm]", "dz [mm]", "dm", "dn", "dq")
 
@@ -19,6 +19,17 @@ def pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig, path, dpi=110) -> None:
+    """Write ``fig`` to ``path`` atomically (the format from the suffix) and close it, even
+    when the write fails: the one way every report writes a figure."""
+    plt = pyplot()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
 
 
 def figure7(history, true_errors, names, path, title="Paper's EKF: estimated parameter errors"):
@@ -46,9 +57,7 @@ def figure7(history, true_errors, names, path, title="Paper's EKF: estimated par
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(f"{title} (dashed: truth)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def figure8(deviation_deg, path, title="Angular deviation of the measured normal"):
@@ -71,6 +80,4 @@ def figure8(deviation_deg, path, title="Angular deviation of the measured normal
     ax.legend(fontsize=8, ncol=4)
     ax.set_title(title)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
