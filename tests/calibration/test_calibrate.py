@@ -1,6 +1,5 @@
 """metro calibrate / validate on fixtures/measured: truth recovery, identifiability, bad input."""
 
-import csv
 import json
 from pathlib import Path
 
@@ -9,6 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.calibration.helpers import export_rows, write_rows
 from metrology.io.data import DATA_DIR
 from metrology.calibration.calibrate import DEFAULT_METHOD, calibrate_dataset
 from metrology.calibration.identifiability import describe_combination, identifiability
@@ -190,15 +190,6 @@ def test_validate_cli_json(tmp_path):
     assert png.stat().st_size > 10_000
 
 
-def _rows():
-    with open(CAL, newline="") as fh:
-        return list(csv.reader(fh))
-
-
-def _write(path, rows):
-    with open(path, "w", newline="") as fh:
-        csv.writer(fh, lineterminator="\n").writerows(rows)
-    return path
 
 
 def _drop_column(rows, name):
@@ -213,14 +204,14 @@ def _set(rows, line, column, value):
 
 
 def _bad_export(case, tmp_path):
-    rows = _rows()
+    rows = export_rows()
     if case == "missing column":
-        return _write(tmp_path / "x.csv", _drop_column(rows, "qz")), NOMINAL, "missing column"
+        return write_rows(tmp_path / "x.csv", _drop_column(rows, "qz")), NOMINAL, "missing column"
     if case == "sensor not in layout":
         rows = [r + ([("d_L5")] if i == 0 else ["50.0"]) for i, r in enumerate(rows)]
-        return _write(tmp_path / "x.csv", rows), NOMINAL, "L5 not in the layout"
+        return write_rows(tmp_path / "x.csv", rows), NOMINAL, "L5 not in the layout"
     if case == "layout sensor not in export":
-        return _write(tmp_path / "x.csv", _drop_column(rows, "d_L4")), NOMINAL, "no reading column .*L4"
+        return write_rows(tmp_path / "x.csv", _drop_column(rows, "d_L4")), NOMINAL, "no reading column .*L4"
     if case == "layout lacks a sensor":
         text = NOMINAL.read_text()
         cut = text.index('[[sensors]]\nname = "L4"')
@@ -229,15 +220,15 @@ def _bad_export(case, tmp_path):
         return CAL, three, "L4 not in the layout"
     if case == "non-unit quaternion":
         qw = float(rows[3][rows[0].index("qw")])
-        return _write(tmp_path / "x.csv", _set(rows, 4, "qw", f"{qw + 0.05:.12f}")), NOMINAL, "line 4: quaternion norm"
+        return write_rows(tmp_path / "x.csv", _set(rows, 4, "qw", f"{qw + 0.05:.12f}")), NOMINAL, "line 4: quaternion norm"
     if case == "reading out of range":
-        return _write(tmp_path / "x.csv", _set(rows, 6, "d_L2", "75.0")), NOMINAL, r"d_L2 = 75 mm outside"
+        return write_rows(tmp_path / "x.csv", _set(rows, 6, "d_L2", "75.0")), NOMINAL, r"d_L2 = 75 mm outside"
     if case == "too few poses":
-        return _write(tmp_path / "x.csv", rows[:5]), NOMINAL, "has [0-9] readings, need at least 6"
+        return write_rows(tmp_path / "x.csv", rows[:5]), NOMINAL, "has [0-9] readings, need at least 6"
     if case == "NaN":
-        return _write(tmp_path / "x.csv", _set(rows, 7, "d_L3", "nan")), NOMINAL, "line 7: column 'd_L3' = 'nan'"
+        return write_rows(tmp_path / "x.csv", _set(rows, 7, "d_L3", "nan")), NOMINAL, "line 7: column 'd_L3' = 'nan'"
     if case == "not a number":
-        return _write(tmp_path / "x.csv", _set(rows, 9, "x", "12,5")), NOMINAL, "line 9"
+        return write_rows(tmp_path / "x.csv", _set(rows, 9, "x", "12,5")), NOMINAL, "line 9"
     raise AssertionError(case)
 
 

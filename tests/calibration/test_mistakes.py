@@ -6,7 +6,6 @@ commands must exit 2 with one line naming the mistake and write nothing, and the
 accepts the mistake must give back the calibration of the correct file.
 """
 
-import csv
 import json
 import re
 
@@ -15,6 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.calibration.helpers import export_rows, write_rows
 from metrology.calibration.dataset import drop_no_reading, load_dataset
 from metrology.calibration.sanity import GROSS_NOISE_FACTOR, GROSS_P, explain, screen
 from metrology.io.data import DATA_DIR
@@ -26,15 +26,6 @@ CAL, PLANE, NOMINAL = FIX / "calibration.csv", FIX / "plane.json", FIX / "nomina
 runner = CliRunner()
 
 
-def _rows():
-    with open(CAL, newline="") as fh:
-        return list(csv.reader(fh))
-
-
-def _write(path, rows):
-    with open(path, "w", newline="") as fh:
-        csv.writer(fh, lineterminator="\n").writerows(rows)
-    return path
 
 
 def _map_columns(rows, columns, fn):
@@ -107,7 +98,7 @@ def _invoke(command, export, layout, tmp_path, *extra):
 @pytest.mark.parametrize("command", ["calibrate", "validate", "diagnose"])
 def test_mistake_is_named_exit_2_nothing_written(mistake, command, tmp_path):
     make, words, fix = MISTAKES[mistake]
-    export = _write(tmp_path / "export.csv", make(_rows()))
+    export = write_rows(tmp_path / "export.csv", make(export_rows()))
     before = sorted(p.name for p in tmp_path.iterdir())
     r = _invoke(command, export, NOMINAL, tmp_path)
     assert r.exit_code == 2, r.output
@@ -122,7 +113,7 @@ def test_mistake_is_named_exit_2_nothing_written(mistake, command, tmp_path):
 def test_mistake_is_named_without_a_stated_range(mistake, tmp_path):
     """Without range_mm the reading units are caught by the fit, not the range check."""
     make, words, fix = MISTAKES[mistake]
-    export = _write(tmp_path / "export.csv", make(_rows()))
+    export = write_rows(tmp_path / "export.csv", make(export_rows()))
     r = _invoke("calibrate", export, _no_range_layout(tmp_path), tmp_path)
     assert r.exit_code == 2 and re.search(words, r.stderr) and fix in r.stderr, r.stderr
     assert not (tmp_path / "cal.toml").exists()
@@ -145,7 +136,7 @@ def correct(tmp_path_factory):
                                              ("positions in metres", ["--position-units", "m"]),
                                              ("positions in inches", ["--position-units", "in"])])
 def test_the_named_option_reads_the_mistaken_file_as_the_correct_one(mistake, option, correct, tmp_path):
-    export = _write(tmp_path / "export.csv", MISTAKES[mistake][0](_rows()))
+    export = write_rows(tmp_path / "export.csv", MISTAKES[mistake][0](export_rows()))
     _, theta, _ = _calibrate_json(export, tmp_path, *option)
     # the same data up to the 15 significant digits the rescaled file was written with
     np.testing.assert_allclose(theta, correct[1], rtol=0, atol=1e-6)
@@ -163,7 +154,7 @@ def test_a_correct_file_passes_the_screen():
 
 def test_the_gross_rule_is_the_stated_chi_square_rule(tmp_path):
     """Scalar-last quaternions: residuals thousands of times the noise, p far below GROSS_P."""
-    ds = load_dataset(_write(tmp_path / "x.csv", _scalar_last(_rows())), PLANE, NOMINAL)
+    ds = load_dataset(write_rows(tmp_path / "x.csv", _scalar_last(export_rows())), PLANE, NOMINAL)
     s = screen(ds)
     assert s.gross and np.all(s.noise_fails)
     assert np.all(s.residual_rms > 1000 * s.noise_mm) and np.all(s.p_value < GROSS_P)
@@ -179,10 +170,10 @@ ZERO_CELLS = [(3, "d_L1"), (10, "d_L3"), (11, "d_L3"), (40, "d_L4")]
 
 
 def test_zero_readings_are_dropped_with_a_count_never_used(correct, tmp_path):
-    rows = _rows()
+    rows = export_rows()
     assert all(rows[line - 1][rows[0].index(c)] for line, c in ZERO_CELLS)  # real readings there
-    zeros = _write(tmp_path / "zeros.csv", _set_cells(rows, ZERO_CELLS, "0"))
-    blanks = _write(tmp_path / "blanks.csv", _set_cells(rows, ZERO_CELLS, ""))
+    zeros = write_rows(tmp_path / "zeros.csv", _set_cells(rows, ZERO_CELLS, "0"))
+    blanks = write_rows(tmp_path / "blanks.csv", _set_cells(rows, ZERO_CELLS, ""))
     d0, theta0, err0 = _calibrate_json(zeros, tmp_path)
     db, thetab, errb = _calibrate_json(blanks, tmp_path)
     np.testing.assert_array_equal(theta0, thetab)  # a 0 is exactly a blank: no reading
@@ -198,7 +189,7 @@ def test_zero_readings_are_dropped_with_a_count_never_used(correct, tmp_path):
 
 @pytest.mark.parametrize("command", ["calibrate", "validate"])
 def test_an_unknown_code_is_refused_naming_the_pose_then_accepted_with_no_reading(command, tmp_path):
-    export = _write(tmp_path / "x.csv", _set_cells(_rows(), ZERO_CELLS[:3], "-999"))
+    export = write_rows(tmp_path / "x.csv", _set_cells(export_rows(), ZERO_CELLS[:3], "-999"))
     r = _invoke(command, export, NOMINAL, tmp_path)
     assert r.exit_code == 2
     assert re.search(r"pose C002: d_L1 = -999 mm outside the sensor's range \[40, 60\] mm .*"
@@ -209,7 +200,7 @@ def test_an_unknown_code_is_refused_naming_the_pose_then_accepted_with_no_readin
 
 
 def test_an_unknown_code_without_a_range_is_refused_by_the_fit(tmp_path):
-    export = _write(tmp_path / "x.csv", _set_cells(_rows(), ZERO_CELLS, "9999"))
+    export = write_rows(tmp_path / "x.csv", _set_cells(export_rows(), ZERO_CELLS, "9999"))
     r = _invoke("calibrate", export, _no_range_layout(tmp_path), tmp_path)
     assert r.exit_code == 2
     assert re.search(r"do not fit the poses and the datum: .* furthest from the fit is pose C0[0-9]+ "
