@@ -139,27 +139,34 @@ class CandidateResult:
 
 
 def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: HeldOut, flags, p_out, folds,
-                    theta0, n_cand) -> CandidateResult:
+                    theta0, n_cand, given=(), k_ref=0) -> CandidateResult:
     """Score the candidate ``c``: in-sample F-test of the nested models against ``base`` (for
     ``outliers`` the largest residual's own test ``p_out``) and the k-fold held-out gain
-    against ``ho_base``; significant when both pass (``n_cand``: the Bonferroni family)."""
+    against ``ho_base``; significant when both pass (``n_cand``: the Bonferroni family).
+
+    ``given``: components already in the model (fitted jointly with ``c``; ``base`` and
+    ``ho_base`` are then their fit and held-out figures); ``k_ref``: parameters of ``c`` that
+    the reference ``base`` already has (the datum's tilt when form is tested beyond it).
+    """
     from scipy import stats
 
     names = nominal.names
-    f = fit_any(nominal, obs, cov, sigma, (c,), theta0)
-    k = c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))
-    S = list(f.sensors)
+    f = fit_any(nominal, obs, cov, sigma, tuple(given) + (c,), theta0)
+    k = c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0])) - k_ref
+    S = list(c.sensors) if c.sensors else list(range(nominal.n))
+    k_given = sum(g.n_params * len(set(g.sensors) & set(S)) / max(len(g.sensors), 1) for g in given
+                  if g.sensors and not g.per_pose)
     chi2_b = float(np.nansum((base.residual[:, S] / sigma[S]) ** 2))
     chi2_e = float(np.nansum((f.residual[:, S] / sigma[S]) ** 2))
     m_S = int(np.isfinite(obs.d[:, S]).sum())
-    dof_e = m_S - 5 * len(S) - k
+    dof_e = int(m_S - 5 * len(S) - k - k_given)
     if isinstance(c, Outliers):
         p_in = p_out  # selection by the largest residual: its own test
     else:
         F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
         p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
-    ho = kfold(nominal, obs, cov, sigma, (c,), folds, theta0)
-    excl = flags if isinstance(c, Outliers) else None
+    ho = kfold(nominal, obs, cov, sigma, tuple(given) + (c,), folds, theta0)
+    excl = flags if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given) else None
     cb = ho_base.chi2_pose(sigma, exclude=excl)
     ce = ho.chi2_pose(sigma, exclude=excl)
     diff = cb - ce  # all sensors: comparable between candidates (ranking)

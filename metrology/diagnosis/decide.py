@@ -1,8 +1,9 @@
 """The diagnosis: the base model's discrepancy, the candidates, the decision, the gain.
 
 :func:`diagnose` is a sequence of named steps (see :mod:`metrology.diagnosis` for the
-procedure): :func:`base_analysis`, :func:`score_candidates`, :func:`choose`, :func:`verdict`,
-:func:`side_by_side`, :func:`check_datum`.
+procedure): :func:`base_analysis`, the forward selection of causes
+(:func:`metrology.diagnosis.select.forward_select`), :func:`verdict`, :func:`side_by_side`,
+:func:`check_datum`.
 """
 
 from __future__ import annotations
@@ -11,21 +12,21 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import VERDICTS, ExtendedModel, PlaneForm
+from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
-from metrology.diagnosis.candidates import (CandidateResult, candidates_for, covariates_for, flag_outliers,
-                                            score_candidate)
+from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
-from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures
+from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.select import drop_one_gains, family_of, forward_select, joint_fit, p_better
 from metrology.diagnosis.stats import NoiseTests, battery_on, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
-__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "diagnose", "base_analysis", "score_candidates",
-           "choose", "verdict", "side_by_side", "check_datum"]
+__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "diagnose", "base_analysis", "verdict",
+           "side_by_side", "check_datum"]
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,11 @@ class PlotData:
 class Diagnosis:
     """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
 
-    ``candidates`` are the scored candidates, largest held-out gain first; ``tests_base`` and
+    ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
+    with its parameters and standard errors, its size in the family's unit where one is
+    defined, and its held-out gain given the others, largest first (``cause`` is the first);
+    ``steps`` the residuals after each step of the selection;
+    ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
     ``tests_extended`` the noise-model battery before and after the extension;
     ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw.
     """
@@ -73,10 +78,13 @@ class Diagnosis:
     thresholds: dict
     datum_form: DatumFormCheck | None = None
     plot_data: PlotData | None = None
+    causes: tuple = ()
+    steps: tuple = ()
 
     def to_dict(self):
         return {
             "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
+            "causes": list(self.causes), "steps": list(self.steps),
             "extended": self.named, "heldout": self.heldout, "discrepancy": self.discrepancy,
             "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
             "tests": {"base": self.tests_base.to_dict(),
@@ -113,9 +121,11 @@ class BaseAnalysis:
 
 @dataclass(frozen=True)
 class Verdict:
-    """Steps 3-4: the cause, its sensors and confidence, the named candidate (refitted by
-    ``lsq``, or None), the noise tests after the extension, the confounding notes and the
-    named component's description."""
+    """Steps 3-4: the first cause, its sensors and confidence, the first named candidate (its
+    ``fit`` the joint model of every cause, refitted by ``lsq``; or None), the noise tests after
+    the extension, the confounding notes, the first cause's description, every named cause's
+    description (largest held-out gain given the others first) and the lead (a candidate
+    significant in sample only, when the selection stopped)."""
 
     cause: str
     sensors: list
@@ -124,6 +134,8 @@ class Verdict:
     tests_extended: NoiseTests | None
     confounding: list
     named: dict | None
+    causes: tuple = ()
+    lead: CandidateResult | None = None
 
 
 def base_analysis(ds, folds) -> BaseAnalysis:
@@ -151,57 +163,14 @@ def base_analysis(ds, folds) -> BaseAnalysis:
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
-def score_candidates(ds, b: BaseAnalysis, folds):
-    """Step 2: flag gross readings, build every catalogued candidate and score it.
-    Returns (list of CandidateResult in candidate order, flags (p, n) bool)."""
-    nominal, obs = ds.layout, ds.obs
-    flags, p_out = flag_outliers(nominal, obs, b.cov, b.sigma, b.theta0)
-    cands = candidates_for(nominal, b.cov, flags)
-    scored = [score_candidate(c, nominal, obs, b.cov, b.sigma, b.fit, b.heldout, flags, p_out, folds, b.theta0,
-                              len(cands)) for c in cands]
-    return scored, flags
-
-
-def _p_separation(other: CandidateResult, best: CandidateResult) -> float:
-    """One-sided paired test that ``best``'s per-pose held-out chi-square is below ``other``'s."""
-    from scipy import stats
-
-    d = other.chi2_pose - best.chi2_pose
-    return float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
-
-
-def choose(scored):
-    """The significant candidates, largest held-out gain first (a time drift yields to the
-    temperature drift of the same sensors when the data cannot tell them apart), and the
-    lead: the strongest candidate significant in sample only. Returns (sig_list, lead)."""
-    n_cand = len(scored)
-    sig_list = sorted([s for s in scored if s.significant], key=lambda s: -s.heldout_chi2_reduction)
-    # the strongest candidate significant in sample only: a lead, never a name
-    in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
-                     key=lambda s: s.p_insample)
-    lead = in_only[0] if in_only else None
-    best = sig_list[0] if sig_list else None
-    if best is not None and best.cause == "drift" and best.component.variable == "time":
-        # tie-break: temperature is the physical cause, time its proxy; prefer it when the
-        # data cannot tell the two apart
-        for other in sig_list[1:]:
-            oc = other.component
-            if oc.name == "drift" and oc.variable == "temp" and oc.sensors == best.component.sensors:
-                if _p_separation(other, best) >= THRESHOLDS["alpha_confound"]:
-                    sig_list.remove(other)
-                    sig_list.insert(0, other)
-                break
-    return sig_list, lead
-
-
 def _confounding(best: CandidateResult, sig_list) -> list:
     """Runner-ups that explain as much (a different cause or sensor), and parameters of the
     named component too correlated with the base geometry."""
     out = []
-    for other in sig_list[1:]:
-        if other.cause == best.cause and other.sensors == best.sensors:
+    for other in sig_list:
+        if other is best or family_of(other.component) == family_of(best.component):
             continue
-        p_sep = _p_separation(other, best)
+        p_sep = p_better(best, other)
         if p_sep >= THRESHOLDS["alpha_confound"]:
             out.append({
                 "between": [best.label, other.label], "p_separation": p_sep,
@@ -209,46 +178,67 @@ def _confounding(best: CandidateResult, sig_list) -> list:
                            f"indistinguishable, p = {p_sep:.2g}); to separate them: "
                            f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
             })
-    f = best.fit
-    fc = f.components[0]
-    for q, (cb_, w) in enumerate(zip(f.corr_base, f.corr_with)):
-        if cb_ > THRESHOLDS["corr_confound"]:
-            out.append({
-                "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
-                "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
-                           f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
-            })
+    f, fc = best.fit, best.component
+    if not fc.per_pose:  # its parameters are the last of the fit's (the candidate is fitted last)
+        q0 = len(f.corr_base) - fc.n_params
+        for q in range(fc.n_params):
+            cb_, w = f.corr_base[q0 + q], f.corr_with[q0 + q]
+            if cb_ > THRESHOLDS["corr_confound"]:
+                out.append({
+                    "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
+                    "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
+                               f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
+                })
     return out
 
 
-def verdict(ds, b: BaseAnalysis, sig_list, lead, rng) -> Verdict:
-    """Steps 3-4: name the best significant candidate if its sensors' residuals become
-    consistent with noise, re-identify it (``lsq``) and describe it with its confounding."""
+def _sensors_of(comp, n):
+    return list(comp.sensors) if comp.sensors else list(range(n))
+
+
+def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
+    """Steps 3-4: refit the selected causes jointly, keep those whose sensors' residuals are
+    then consistent with noise, and describe each with its size, its held-out gain given the
+    others and what the data cannot separate."""
     nominal, obs = ds.layout, ds.obs
     n = obs.d.shape[1]
-    best = sig_list[0] if sig_list else None
-    if best is None:
+    chosen = [s.chosen for s in steps if s.chosen is not None]
+    lead = steps[-1].lead
+    if not chosen:
         cause = "none" if b.tests.consistent else "unexplained"
-        confidence = "high" if b.tests.consistent and lead is None else "low"
-        return Verdict(cause, [], confidence, None, None, [], None)
-    f = fit_any(nominal, obs, b.cov, b.sigma, (best.component,), b.theta0, "lsq")
-    best = replace(best, fit=f)
-    # a per-pose component makes the sensors of a pose correlated by construction
+        # "none" says no effect above the detectable sizes; smaller ones are not ruled out
+        confidence = "moderate" if b.tests.consistent and lead is None else "low"
+        return Verdict(cause, [], confidence, None, None, [], None, (), lead)
+    f = joint_fit(ds, b, chosen)
     tests_ext = noise_tests(f.residual, b.sigma, dof_per_sensor(f, obs, n), nominal.names,
                             pairs=not any(c.per_pose for c in f.components))
-    p_concerned = battery_on(tests_ext, list(f.sensors))
+    kept = [j for j, s in enumerate(chosen) if battery_on(tests_ext, _sensors_of(s.component, n))
+            >= THRESHOLDS["alpha_battery"]]
+    gains = drop_one_gains(ds, b, chosen, folds)
+    causes = []
+    for j in kept:
+        s = chosen[j]
+        d = describe_named(f, nominal, obs, b.cov, b.sigma, rng, which=j)
+        d.update({"cause": s.cause, "sensors": s.sensors, "size": size_of(f, j, b.cov, b.d0),
+                  "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
+                  "p_insample": s.p_insample, "step": j + 1})
+        causes.append(d)
+    causes.sort(key=lambda d: -d["heldout_gain_chi2"])
+    best = chosen[kept[0]] if kept else chosen[0]
+    p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in _sensors_of(chosen[j].component, n)}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
-    if p_concerned >= THRESHOLDS["alpha_battery"]:
-        cause, sensors = best.cause, best.sensors
-        # its own sensors are explained; others that still fail are a separate matter
-        confidence = "high" if tests_ext.consistent else "partial"
-    else:
-        cause, confidence, sensors = "unexplained", "low", []
-    confounding = _confounding(best, sig_list)
+    if not kept:
+        return Verdict("unexplained", [], "low", replace(best, fit=f), tests_ext, [], None, (), lead)
+    first = next(s for s in chosen if s.label == causes[0]["label"])
+    confidence = "high" if tests_ext.consistent else "partial"
+    confounding = []
+    for st in steps:
+        if st.chosen is not None:
+            confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
     if confounding and confidence == "high":
         confidence = "ambiguous"
-    named = describe_named(f, nominal, obs, b.cov, b.sigma, rng)
-    return Verdict(cause, sensors, confidence, best, tests_ext, confounding, named)
+    return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
+                   causes[0], tuple(causes), lead)
 
 
 def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
@@ -280,7 +270,7 @@ def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds
     discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
     discrepancy["extended_model"] = best.label
     ho_e = best.heldout
-    excl = flags if best.cause == "outliers" else None
+    excl = flags if "outliers" in best.label.split("+") else None
     S = list(best.fit.sensors)
     heldout.update({
         "model": best.label,
@@ -295,18 +285,20 @@ def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds
     return discrepancy, heldout
 
 
-def check_datum(ds, b: BaseAnalysis, v: Verdict, scored, confidence, summary):
+def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, summary):
     """The readings' own form against the datum cloud's. Returns (datum check with
     ``against_readings``, confidence, summary), lowered and extended when they disagree."""
-    # plane_form fitted together with the named cause (a pose error, say, correlates the
+    # plane_form fitted together with the named causes (a pose error, say, correlates the
     # sensors of a pose; a form fitted without it would carry standard errors too small for
     # the comparison)
-    if v.cause == "plane_form":
+    named = [c["cause"] for c in v.causes]
+    if "plane_form" in named:
         pf = v.best.fit
-    elif v.cause in VERDICTS:  # nothing named: the plane_form candidate's own fit
-        pf = next(s.fit for s in scored if s.cause == "plane_form")
+    elif not chosen:  # nothing named: the plane_form candidate's own fit
+        pf = next(s.fit for s in scored if s.label == "plane_form")
     else:
-        comps = [PlaneForm((), names=ds.layout.names), replace(v.best.component, values=None, stderr=None)]
+        comps = [PlaneForm((), names=ds.layout.names)] + [replace(s.component, values=None, stderr=None)
+                                                          for s in chosen if s.cause != "plane_form"]
         pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
     ag = form_agreement(b.datum, pf)
     ag["fitted_with"] = [c.label for c in pf.components]
@@ -315,6 +307,22 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, scored, confidence, summary):
             confidence = "low"  # the inputs contradict each other on the datum
         summary += DATUM_DISAGREES.format(p=ag["p"])
     return replace(b.datum, against_readings=ag), confidence, summary
+
+
+def _steps_table(b: BaseAnalysis, steps) -> list:
+    """The residuals after each step: per sensor in-sample RMS and held-out RMS (mm)."""
+    out = [{"added": None, "model": "base", "residual_rms_mm": np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(),
+            "heldout_rms_mm": b.heldout.rms()}]
+    labels = []
+    for st in steps:
+        if st.chosen is None:
+            break
+        labels.append(st.chosen.label)
+        out.append({"added": st.chosen.label, "model": "base + " + " + ".join(labels),
+                    "residual_rms_mm": np.sqrt(np.nanmean(st.chosen.fit.residual**2, axis=0)).tolist(),
+                    "heldout_rms_mm": st.chosen.heldout.rms(), "p_heldout": st.chosen.p_heldout,
+                    "heldout_gain_chi2": st.chosen.heldout_chi2_reduction})
+    return out
 
 
 def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
@@ -330,18 +338,21 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
         raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
     rng = np.random.default_rng(seed)
     b = base_analysis(ds, folds)
-    scored, flags = score_candidates(ds, b, folds)
-    sig_list, lead = choose(scored)
-    v = verdict(ds, b, sig_list, lead, rng)
-    if v.best is not None:  # the named candidate carries its lsq refit from here on
-        scored = [v.best if s is sig_list[0] else s for s in scored]
-    discrepancy, heldout = side_by_side(ds, b, v.best, flags, folds, sim_reps, rng)
+    flags, p_out = flag_outliers(ds.layout, ds.obs, b.cov, b.sigma, b.theta0)
+    steps = forward_select(ds, b, flags, p_out, folds)
+    chosen = [st.chosen for st in steps if st.chosen is not None]
+    v = verdict(ds, b, steps, folds, rng)
+    joint = None
+    if chosen:  # the joint model of every cause selected, with the last step's held-out figures
+        joint = replace(chosen[-1], fit=v.best.fit, label="+".join(s.label for s in chosen))
+    discrepancy, heldout = side_by_side(ds, b, joint, flags, folds, sim_reps, rng)
     confidence = v.confidence
-    summary = verdict_summary(v.cause, confidence, v.best, b.tests, v.tests_extended, lead)
+    summary = verdict_summary(v, b.tests)
+    scored = steps[0].scored
     datum = b.datum
     if datum is not None:
-        datum, confidence, summary = check_datum(ds, b, v, scored, confidence, summary)
-    ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
+        datum, confidence, summary = check_datum(ds, b, v, chosen, scored, confidence, summary)
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags, b.structure)
-    return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, ranked, b.tests, v.tests_extended, b.structure,
-                     discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr, dict(THRESHOLDS), datum, plot)
+    return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
+                     b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
+                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)))

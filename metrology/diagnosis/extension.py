@@ -12,24 +12,73 @@ from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import kfold
 
-__all__ = ["describe_named", "simulated_figures", "dof_per_sensor", "POSE_FLOOR_REPS"]
+__all__ = ["describe_named", "size_of", "simulated_figures", "dof_per_sensor", "POSE_FLOOR_REPS"]
 
 
 #: simulated noise-only copies used to measure the noise floor of the per-pose estimates
 POSE_FLOOR_REPS = 8
 
 
-def describe_named(f: Fit, nominal, obs, cov, sigma, rng):
-    """The public description of the named component of ``f`` (its first): parameters with
-    standard errors and their largest correlations with the base parameters; for a pose error
-    the noise-corrected sigma (parametric bootstrap, ``rng``), for outliers the flagged readings."""
-    comp = f.components[0]
+def _free_offset(f: Fit, which: int) -> int:
+    """Index of component ``which``'s first parameter in ``f.extra_cov`` / ``f.corr_base``."""
+    return sum(c.n_params for c in f.components[:which] if not c.per_pose)
+
+
+def size_of(f: Fit, which: int, cov, d0) -> dict | None:
+    """The size of component ``which`` of ``f`` in its family's unit, with a standard error
+    (delta method on the fit's covariance), or None where the family has none:
+
+    - ``scale``, ``nonlinearity``: peak-to-valley of the fitted characteristic over the sensor's
+      range (mm), the gain included;
+    - ``drift``: peak-to-valley of the fitted drift over the run's poses (mm);
+    - ``incidence``: the bias at the largest incidence angle the sensor saw (mm, signed).
+
+    cov : Covariates; d0 : (p, n) float, mm, the base readings.
+    """
+    comp = f.components[which]
+    if comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
+        return None
+    i = comp.sensors[0]
+    k0 = _free_offset(f, which)
+    C = f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params]
+    v = comp.values
+    if comp.name in ("scale", "nonlinearity"):
+        lo, hi = cov.range_mm[i]
+        grid = np.linspace(lo, hi, 201)
+        d_grid = np.zeros((len(grid), len(cov.range_mm)))
+        d_grid[:, i] = grid
+        B = comp.basis(d_grid, cov)[:, i, :]  # (g, k): the term along the range
+        meaning = "peak-to-valley of the characteristic over the sensor range"
+    elif comp.name == "drift":
+        B = comp.basis(d0, cov)[:, i, :]
+        meaning = "peak-to-valley of the drift over the run"
+    else:
+        j = int(np.argmin(cov.cos_inc[:, i]))
+        B = comp.basis(d0, cov)[j:j + 1, i, :]
+        meaning = "bias at the largest incidence angle seen"
+    e = B @ v
+    if len(e) == 1:
+        val, g = abs(float(e[0])), B[0]
+    else:
+        hi_, lo_ = int(np.argmax(e)), int(np.argmin(e))
+        val, g = float(e[hi_] - e[lo_]), B[hi_] - B[lo_]
+    se = float(np.sqrt(max(g @ C @ g, 0.0))) if C.shape == (len(g), len(g)) else None
+    return {"value": val, "stderr": se, "unit": "mm", "meaning": meaning}
+
+
+def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0):
+    """The public description of component ``which`` of ``f`` (default its first): parameters
+    with standard errors and their largest correlations with the base parameters; for a pose
+    error the noise-corrected sigma (parametric bootstrap, ``rng``), for outliers the flagged
+    readings."""
+    comp = f.components[which]
     d = comp.describe()
     if isinstance(comp, PoseError):
         # sigma of the pose error along the normal: the spread of the per-pose estimates less
         # the spread that reading noise alone puts in them (through the per-pose fit and the
         # base parameters it trades with), measured on noise-only simulations of these poses
-        e = comp.values
+        m = comp.per_pose_columns
+        e = np.asarray(comp.values).reshape(-1, m)[:, 0]
         model = replace(f.model(nominal), components=())
         d_model = model.predict(obs.normal, obs.offset, cov)
 
@@ -43,7 +92,7 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng):
                 dn = np.where(np.isfinite(obs.d), dn, np.nan)
                 fn = fit(nominal, Observations(obs.normal, obs.offset, dn), cov, sigma, [replace(comp, values=None)],
                          theta0=f.theta, solver="gn")
-                vals.append(np.var(fn.components[0].values, ddof=1))
+                vals.append(np.var(np.asarray(fn.components[0].values).reshape(-1, m)[:, 0], ddof=1))
             return np.array(vals)
 
         v_floor = float(np.mean(estimate(None)))
@@ -56,12 +105,18 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng):
         d["params"] = {"sigma_mm": {"value": sig_e, "unit": "mm", "stderr": float(np.std(boot, ddof=1))},
                        "noise_floor_mm": {"value": float(np.sqrt(v_floor)), "unit": "mm", "stderr": None}}
         d["per_pose_mm"] = e.tolist()
+        if comp.tilts:  # the two tilts a pose (mm at RADIUS_MM), raw spread: what a rigid error adds
+            t = np.asarray(comp.values).reshape(-1, m)[:, 1:]
+            d["params"]["tilt_sigma_rad"] = {"value": float(np.std(t, ddof=1) / comp.RADIUS_MM), "unit": "rad",
+                                             "stderr": None}
     if isinstance(comp, Outliers):
         d["flagged"] = [{"pose": int(pp), "sensor": comp.names[i], "gross_mm": float(v), "stderr": float(s)}
                         for (pp, i), v, s in zip(comp.cells, comp.values, comp.stderr)]
         d["params"] = {"count": {"value": len(comp.cells), "unit": "1", "stderr": None}}
-    d["base_correlation"] = [{"param": comp.param_names[q], "max_abs_corr": float(c), "with": w}
-                             for q, (c, w) in enumerate(zip(f.corr_base, f.corr_with))]
+    q0 = _free_offset(f, which)
+    d["base_correlation"] = [] if comp.per_pose else [
+        {"param": comp.param_names[q], "max_abs_corr": float(f.corr_base[q0 + q]), "with": f.corr_with[q0 + q]}
+        for q in range(comp.n_params)]
     return d
 
 
@@ -89,6 +144,6 @@ def dof_per_sensor(f: Fit, obs, n):
             for i in c.sensors:
                 dof[i] -= c.n_params / len(c.sensors)
         else:
-            dof -= (c.n_params - (3 if c.per_pose else len(c.constraint(c.values)[0]))) / n
+            dof -= (c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0]))) / n
     return dof
 

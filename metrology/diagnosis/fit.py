@@ -84,6 +84,22 @@ def _project_per_pose(Bw, X, A):
     return (out[..., 0], e[:, 0]) if squeeze else (out, e)
 
 
+def _project_per_pose_multi(Bw, X, Bpinv=None):
+    """Remove each pose's own columns: ``X - Bw e`` with ``e = Bw_p^+ X_p`` per pose.
+
+    Bw : (p, s, m) float, each pose's columns (zero where no reading); X : (p, s) or (p, s, k);
+    Bpinv : (p, m, s) float, ``pinv(Bw)`` if already computed. The directions these share with
+    the base geometry (a rigid motion of the whole head) are left to the solver's
+    rank-revealing step. Returns (projected X, e (p, m) or (p, m, k)).
+    """
+    squeeze = X.ndim == 2
+    Xk = X[..., None] if squeeze else X
+    Bpinv = np.linalg.pinv(Bw, rcond=1e-10) if Bpinv is None else Bpinv
+    e = Bpinv @ Xk  # (p, m, k)
+    out = Xk - Bw @ e
+    return (out[..., 0], e[..., 0]) if squeeze else (out, e)
+
+
 def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
         theta0=None, loss="linear", solver="lsq") -> Fit:
     """Least squares of the base model plus ``components`` (analytic Jacobian).
@@ -140,7 +156,13 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     u0S = nominal.direction[S]
     Bw = None
     if prof:
-        Bw = np.where(ok, prof[0].basis(d_full0, cov)[np.arange(len(D)), :, np.arange(len(D))][:, S] / sig, 0.0)
+        Bw = np.where(ok[..., None], prof[0].pose_columns(cov)[:, S, :] / sig[None, :, None], 0.0)  # (p, s, m)
+        Bpinv = np.linalg.pinv(Bw, rcond=1e-10) if Bw.shape[2] > 1 else None
+
+    def project(X):
+        if Bw.shape[2] == 1:  # an offset a pose: the gauge of the zero points, exactly
+            return _project_per_pose(Bw[..., 0], X, N)
+        return _project_per_pose_multi(Bw, X, Bpinv)
 
     def unpack(x):
         th = theta0.copy()
@@ -167,7 +189,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         R = np.where(ok, (dS - d0[:, S] - f[:, S]) / sig, 0.0)
         e = None
         if Bw is not None:
-            R, e = _project_per_pose(Bw, R, N)
+            R, e = project(R)
         return R, e, th, vals, d0
 
     def fun(x):
@@ -191,7 +213,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         Jr = -np.concatenate(blocks, axis=-1) / sig[None, :, None]
         Jr = np.where(ok[..., None], Jr, 0.0)
         if Bw is not None:
-            Jr, _ = _project_per_pose(Bw, Jr, N)
+            Jr, _ = project(Jr)
         rows = [Jr[ok]]
         off = nb
         for c, v, k in zip(free, vals, k_comp):
@@ -219,7 +241,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     res[:, others] = obs.d[:, others] - d_full0[:, others] - f[:, others]
     rS = R[ok]
     m = rS.size
-    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (len(e) - N.shape[1] if e is not None else 0)
+    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (e.size - prof[0].gauge_dof if e is not None else 0)
     dof = m - k
     chi2 = float(np.sum(rS**2))
     s2 = chi2 / max(dof, 1)
@@ -236,8 +258,9 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     it_free = iter(zip(free, vals))
     for c in comps:
         if c.per_pose:
-            bb = np.sqrt(np.maximum(np.sum(Bw * Bw, axis=1), 1e-300))
-            out.append(c.with_values(e, np.sqrt(s2) / bb))
+            BtB = np.einsum("psm,psq->pmq", Bw, Bw)
+            var = np.diagonal(np.linalg.pinv(BtB, rcond=1e-10, hermitian=True), axis1=1, axis2=2)  # (p, m)
+            out.append(c.with_values(e.ravel(), np.sqrt(s2 * np.maximum(var, 0.0)).ravel()))
             continue
         c2, v = next(it_free)
         kk = c2.n_params

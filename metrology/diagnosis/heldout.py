@@ -44,15 +44,19 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
         # a per-pose value is not known before the pose is measured: each reading is predicted
         # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
         # the held-out residual is a true prediction and nothing is charged as lost dof
-        B = comp.basis(d0, c)  # (h, n, h)
-        diag = B[np.arange(len(test)), :, np.arange(len(test))]  # (h, n)
-        w = np.where(np.isfinite(res), diag / sigma[None, :], 0.0)
-        r = np.where(np.isfinite(res), res / sigma[None, :], 0.0)
-        wr, ww = np.sum(w * r, axis=1, keepdims=True), np.sum(w * w, axis=1, keepdims=True)
-        e_loso = (wr - w * r) / np.maximum(ww - w * w, 1e-300)  # (h, n): without reading i
-        e_all = wr[:, 0] / np.maximum(ww[:, 0], 1e-300)  # (h,): for the normal, every reading
-        res = res - diag * e_loso
-        terms = terms + diag * e_all[:, None]
+        B = comp.pose_columns(c)  # (h, n, m)
+        fin = np.isfinite(res)
+        w = np.where(fin[..., None], B / sigma[None, :, None], 0.0)  # (h, n, m)
+        r = np.where(fin, res / sigma[None, :], 0.0)  # (h, n)
+        pred = np.zeros_like(res)
+        for i in range(res.shape[1]):
+            wi = w.copy()
+            wi[:, i, :] = 0.0  # without reading i
+            e_i = np.linalg.pinv(wi, rcond=1e-10) @ r[..., None]  # (h, m, 1)
+            pred[:, i] = np.einsum("hm,hm->h", B[:, i, :], e_i[..., 0])
+        e_all = np.linalg.pinv(w, rcond=1e-10) @ r[..., None]  # for the normal: every reading
+        res = res - pred
+        terms = terms + (B @ e_all)[..., 0]
     dc = o.d - terms
     nrm = micro_plane_normal(zero, u, dc)
     dev = angle_between(nrm, o.normal)

@@ -9,30 +9,41 @@ DATUM_DISAGREES = ("; the datum cloud's form disagrees with the readings' (p = {
                    "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
 
 
-def verdict_summary(cause, confidence, best, tb, te, in_only=None) -> str:
-    """One paragraph of the verdict; ``best`` the named (or partial) candidate, ``tb``/``te`` the
-    noise tests before/after the extension; ``in_only`` is the strongest candidate significant in
-    sample only (its held-out gain not), reported as a lead when nothing is named."""
+def _lead_text(in_only) -> str:
+    if in_only is None:
+        return ""
+    return (f"; {in_only.label} fits in sample (p = {in_only.p_insample:.2g}) but does not predict held-out "
+            f"poses significantly better (p = {in_only.p_heldout:.2g}, RMS ratio "
+            f"{in_only.heldout_rms_ratio:.3g}): too small, or too confounded, to name")
+
+
+def verdict_summary(v, tb) -> str:
+    """One paragraph of the verdict ``v`` (:class:`~metrology.diagnosis.decide.Verdict`);
+    ``tb`` the noise tests on the base residuals. Several causes are named together, and
+    structure that remains beside them is said."""
     worst = max(tb.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
-    lead = ""
-    if in_only is not None:
-        lead = (f"; {in_only.label} fits in sample (p = {in_only.p_insample:.2g}) but does not predict held-out "
-                f"poses significantly better (p = {in_only.p_heldout:.2g}, RMS ratio "
-                f"{in_only.heldout_rms_ratio:.3g}): too small, or too confounded, to name")
-    if cause == "none":
+    lead = _lead_text(v.lead)
+    te = v.tests_extended
+    if v.cause == "none":
         return (f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g}); "
-                "no candidate gives a significant held-out gain" + lead)
-    if best is None:
+                "no candidate gives a significant held-out gain: no effect above the detectable sizes "
+                "(smaller ones are not ruled out)" + lead)
+    if v.best is None:
         return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
                 f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm) and no catalogued effect gives a "
-                "significant held-out gain" + lead)
-    if cause == "unexplained":
-        return (f"{best.label} gives a significant held-out gain (RMS ratio {best.heldout_rms_ratio:.3g}) but "
+                "significant held-out gain: structure outside the catalogue" + lead)
+    if v.cause == "unexplained":
+        return (f"{v.best.label} gives a significant held-out gain (RMS ratio {v.best.heldout_rms_ratio:.3g}) but "
                 f"leaves the residuals of its sensors inconsistent with the noise model (battery p = "
-                f"{te.p_concerned:.2g}): a partial explanation at best")
-    text = (f"{best.label}: held-out RMS ratio {best.heldout_rms_ratio:.3g} on its sensors (p = "
-            f"{best.p_heldout:.2g}), its sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})")
+                f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains")
+    parts = []
+    for c in v.causes:
+        where = f" on {', '.join(c['sensors'])}" if c["sensors"] and c["cause"] not in ("pose_error", "plane_form") else ""
+        parts.append(f"{c['cause']}{where} ({c['label']}: held-out chi-square gain {c['heldout_gain_chi2']:.3g} "
+                     f"given the others, p = {c['p_heldout_given_others']:.2g})")
+    text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
-        text += (f"; other residuals remain inconsistent (battery p = {te.p_bonferroni:.2g}): another effect, "
+        worst_e = max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]
+        text += (f"; structure remains (battery p = {te.p_bonferroni:.2g}, worst {worst_e}): another effect, "
                  "or a false alarm of the tests")
-    return text + f"; confidence {confidence}"
+    return text + f"; confidence {v.confidence}"

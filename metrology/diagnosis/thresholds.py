@@ -15,6 +15,7 @@ THRESHOLDS = {
     "alpha_outlier": 0.01,  # family-wise level of the largest standardised residual
     "alpha_confound": 0.05,  # runner-up's gain not distinguishable from the winner's at this level
     "corr_confound": 0.95,  # |correlation| of a component parameter with a base parameter
+    "alpha_order": 0.05,  # a richer member of a family must predict held-out poses better at this level
     "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
 }
 

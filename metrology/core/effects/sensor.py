@@ -66,10 +66,18 @@ class Drift(Component):
     the run's mean, which the diagnosis uses). Default :data:`REFERENCE_TEMP_C` (20 deg C,
     the reference temperature of dimensional metrology, ISO 1) for temperature, 0 h (the
     run's first pose) for time.
+
+    ``order=3`` makes the drift a smooth curve rather than a line: ``p1 P1(x) + p2 P2(x) +
+    p3 P3(x)`` with ``x = (v - ref) / half`` the variable normalised over the run (``half`` its
+    half-span, fixed per data set like ``ref``), ``p1..p3`` mm at the run's end. A warm-up
+    that levels off, a lagged temperature or a warm-cool cycle is not linear in either
+    variable; the diagnosis scores both orders and names ``drift`` for either.
     """
 
     variable: str = "temp"
     ref: float | None = None
+    order: int = 1
+    half: float = 1.0
 
     name = "drift"
     advice = "poses repeated cold and warm, interleaved rather than in one sweep"
@@ -86,7 +94,11 @@ class Drift(Component):
         out = []
         if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
             out.append(cls((i,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
-        out.append(cls((i,), names=names, variable="time", ref=float(np.mean(cov.time_h))))
+        t = cov.time_h
+        out.append(cls((i,), names=names, variable="time", ref=float(np.mean(t))))
+        if np.ptp(t) > 0:
+            mid, half = 0.5 * float(np.max(t) + np.min(t)), 0.5 * float(np.ptp(t))
+            out.append(cls((i,), names=names, variable="time", ref=mid, order=3, half=half))
         return out
 
     @classmethod
@@ -95,22 +107,28 @@ class Drift(Component):
 
     @property
     def param_names(self):
+        if self.order == 3:
+            return ("p1_mm", "p2_mm", "p3_mm")
         return ("rate_mm_per_K",) if self.variable == "temp" else ("rate_mm_per_h",)
 
     @property
     def param_units(self):
+        if self.order == 3:
+            return ("mm",) * 3
         return ("mm/K",) if self.variable == "temp" else ("mm/h",)
 
     def __post_init__(self):
         if self.variable not in ("temp", "time"):
             raise ValueError(f"drift variable must be 'temp' or 'time', got {self.variable!r}")
+        if self.order not in (1, 3) or not self.half > 0:
+            raise ValueError(f"drift order must be 1 or 3 with a positive half-span, got {self.order}, {self.half}")
         if self.ref is None:
             object.__setattr__(self, "ref", REFERENCE_TEMP_C if self.variable == "temp" else 0.0)
         super().__post_init__()
 
     @property
     def label(self):
-        return super().label + ("@temp" if self.variable == "temp" else "@time")
+        return super().label + ("@temp" if self.variable == "temp" else "@time") + ("3" if self.order == 3 else "")
 
     def covariate(self, cov):
         """``(p,)``: ``T - ref`` (K) or ``t - ref`` (h) of the poses of ``cov``."""
@@ -125,8 +143,14 @@ class Drift(Component):
         return out
 
     def basis(self, d0, cov):
-        x = np.broadcast_to(self.covariate(cov)[:, None], d0.shape)
-        return _sensor_basis(x[..., None], d0.shape[1], self.sensors)
+        v = self.covariate(cov)
+        if self.order == 3:
+            x = v / self.half
+            cols = np.stack([x, *_legendre23(x)], axis=-1)  # (p, 3)
+        else:
+            cols = v[:, None]
+        x = np.broadcast_to(cols[:, None, :], d0.shape + (cols.shape[1],))
+        return _sensor_basis(np.array(x), d0.shape[1], self.sensors)
 
 
 def _legendre23(x):
@@ -141,11 +165,17 @@ class Nonlinearity(Component):
     full range, so its constant and linear parts are zero by definition: the first two
     Legendre polynomials orthogonal to them are the bow (``P2``) and the S-shape (``P3``);
     ``c2``, ``c3`` are their values at the end of the range (mm).
+
+    ``with_gain=True`` adds the gain ``k d0`` (the linear part, as :class:`Scale`): the sensor's
+    whole characteristic to third order. The diagnosis scores this family member beside
+    ``scale`` and names ``nonlinearity`` only when the curve predicts held-out poses
+    significantly better than the gain alone (a real characteristic, e.g. an S-curve that
+    flattens at one end, has both parts).
     """
 
+    with_gain: bool = False
+
     name = "nonlinearity"
-    param_names = ("c2_mm", "c3_mm")
-    param_units = ("mm", "mm")
     uses_d0 = True
     advice = "readings over the whole measuring range (a wider spread of stand-off)"
     size_meaning = "c3 mm at the range end (c2 = c3/2)"
@@ -155,6 +185,18 @@ class Nonlinearity(Component):
     def hidden(cls, i, size):
         return cls((i,), [0.5 * size, size])
 
+    @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return [cls((i,), names=names, with_gain=True)]
+
+    @property
+    def param_names(self):
+        return (("k",) if self.with_gain else ()) + ("c2_mm", "c3_mm")
+
+    @property
+    def param_units(self):
+        return (("1",) if self.with_gain else ()) + ("mm", "mm")
+
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
         return (2 * d0 - lo - hi) / (hi - lo), 2.0 / (hi - lo)
@@ -162,10 +204,13 @@ class Nonlinearity(Component):
     def basis(self, d0, cov):
         x, _ = self._x(d0, cov)
         p2, p3 = _legendre23(x)
-        return _sensor_basis(np.stack([p2, p3], axis=-1), d0.shape[1], self.sensors)
+        cols = ([d0] if self.with_gain else []) + [p2, p3]
+        return _sensor_basis(np.stack(cols, axis=-1), d0.shape[1], self.sensors)
 
     def d_dd0(self, values, d0, cov):
         x, dx = self._x(d0, cov)
-        deriv = (values[0] * 3 * x + values[1] * 0.5 * (15 * x**2 - 3)) * dx[None, :]
+        g = values[0] if self.with_gain else 0.0
+        c2, c3 = values[-2], values[-1]
+        deriv = g + (c2 * 3 * x + c3 * 0.5 * (15 * x**2 - 3)) * dx[None, :]
         return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)
 

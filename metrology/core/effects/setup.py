@@ -21,13 +21,17 @@ class PlaneForm(Component):
     saddle and twist; the linear part a tilt of the datum under the spots against the plane
     fitted to the cloud (which the cloud's own extent and the centre's choice leave). A
     constant part is the plane's offset, absorbed by the zero points.
+
+    ``order`` sets the polynomial: 1 is the tilt alone (``b_s, b_t``: the datum plane's own
+    uncertainty, a nuisance, never form), 2 adds bow, saddle and twist, 3 adds the four cubic
+    terms (``b_sss, b_sst, b_stt, b_ttt``). The diagnosis tests form *beyond* the plane: order 2
+    or 3 against order 1 (the tilt carried as a nuisance parameter in both).
     """
 
     radius_mm: float = 100.0
+    order: int = 2
 
     name = "plane_form"
-    param_names = ("b_s_mm", "b_t_mm", "b_ss_mm", "b_st_mm", "b_tt_mm")
-    param_units = ("mm",) * 5
     advice = "spots over the whole datum, each region seen at several tilts"
     size_meaning = "bow b_ss mm at 100 mm (b_st = 0.3, b_tt = -0.5 of it)"
     plot_key = "spot_s_mm"
@@ -37,16 +41,41 @@ class PlaneForm(Component):
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
-        return [cls((), names=names)]
+        return [cls((), names=names), cls((), names=names, order=3)]
 
     @classmethod
     def hidden(cls, i, size):
         return cls((), [0.0, 0.0, size, 0.3 * size, -0.5 * size])
 
+    _NAMES = ("b_s_mm", "b_t_mm", "b_ss_mm", "b_st_mm", "b_tt_mm", "b_sss_mm", "b_sst_mm", "b_stt_mm", "b_ttt_mm")
+
+    def __post_init__(self):
+        if self.order not in (1, 2, 3):
+            raise ValueError(f"plane_form order must be 1, 2 or 3, got {self.order}")
+        super().__post_init__()
+
+    @property
+    def param_names(self):
+        return self._NAMES[:{1: 2, 2: 5, 3: 9}[self.order]]
+
+    @property
+    def param_units(self):
+        return ("mm",) * len(self.param_names)
+
+    @property
+    def label(self):
+        return self.name + {1: "@tilt", 2: "", 3: "@cubic"}[self.order]
+
+    def nuisance(self) -> "PlaneForm":
+        """The datum's tilt alone (order 1): what form is tested against."""
+        return replace(self, order=1, values=None, stderr=None)
+
     def monomials(self, st_mm):
-        """``(..., 5)``: ``s, t, s^2, s t, t^2`` at in-plane positions ``st_mm (..., 2)`` mm."""
+        """``(..., k)``: ``s, t, s^2, s t, t^2`` (and ``s^3, s^2 t, s t^2, t^3`` at order 3; ``s, t``
+        at order 1) at in-plane positions ``st_mm (..., 2)`` mm."""
         s, t = st_mm[..., 0] / self.radius_mm, st_mm[..., 1] / self.radius_mm
-        return np.stack([s, t, s * s, s * t, t * t], axis=-1)
+        cols = [s, t, s * s, s * t, t * t, s**3, s * s * t, s * t * t, t**3]
+        return np.stack(cols[:self.n_params], axis=-1)
 
     def height(self, st_mm):
         """``w (...)`` mm: the datum's deviation along its normal at ``st_mm (..., 2)`` mm."""
@@ -107,6 +136,7 @@ class PoseError(Component):
     that gauge); the row of :meth:`constraint` (``sum e_p = 0``) serves a direct joint fit."""
 
     n_poses: int = 0
+    tilts: bool = False
 
     name = "pose_error"
     per_pose = True
@@ -117,34 +147,70 @@ class PoseError(Component):
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
-        return [cls((), names=names, n_poses=cov.n_poses)]
+        out = [cls((), names=names, n_poses=cov.n_poses)]
+        if cov.inv_nu.shape[1] >= 4:  # 3 readings a pose are all taken by an offset and two tilts
+            out.append(cls((), names=names, n_poses=cov.n_poses, tilts=True))
+        return out
     #: weight of the gauge row (per mm of sum), large against 1/sigma
     GAUGE_WEIGHT = 1e4
+    #: lever (mm) of the tilt columns: a tilt is given as the displacement at this distance
+    RADIUS_MM = 100.0
+
+    @property
+    def per_pose_columns(self) -> int:
+        """Parameters per pose: the offset along the datum normal, and with ``tilts`` the two
+        tilts of the datum seen from the TCS (mm at :attr:`RADIUS_MM` from the datum centre)."""
+        return 3 if self.tilts else 1
+
+    @property
+    def gauge_dof(self) -> int:
+        """Directions shared with the base geometry: a translation of every zero point (3), and
+        with ``tilts`` a rotation of the whole head (3 more)."""
+        return 6 if self.tilts else 3
+
+    @property
+    def label(self):
+        return self.name + ("@rigid" if self.tilts else "")
 
     @property
     def param_names(self):
-        return tuple(f"e{j}_mm" for j in range(self.n_poses))
+        if not self.tilts:
+            return tuple(f"e{j}_mm" for j in range(self.n_poses))
+        return tuple(f"{q}{j}_mm" for j in range(self.n_poses) for q in ("e", "ts", "tt"))
 
     @property
     def param_units(self):
-        return ("mm",) * self.n_poses
+        return ("mm",) * self.n_params
 
     def select(self, idx):
         k = len(np.arange(self.n_poses)[idx])
-        return replace(self, n_poses=k, values=np.asarray(self.values)[idx], stderr=None)
+        m = self.per_pose_columns
+        v = np.asarray(self.values).reshape(self.n_poses, m)[idx].ravel()
+        return replace(self, n_poses=k, values=v, stderr=None)
+
+    def pose_columns(self, cov):
+        """``(p, n, m)``: each pose's own columns (``m`` = :attr:`per_pose_columns`)."""
+        if not self.tilts:
+            return cov.inv_nu[..., None]
+        st = cov.spot_st / self.RADIUS_MM
+        return np.stack([cov.inv_nu, st[..., 0] * cov.inv_nu, st[..., 1] * cov.inv_nu], axis=-1)
 
     def basis(self, d0, cov):
         p, n = d0.shape
-        B = np.zeros((p, n, p))
-        B[np.arange(p), :, np.arange(p)] = cov.inv_nu
-        return B
+        m = self.per_pose_columns
+        B = np.zeros((p, n, p, m))
+        B[np.arange(p), :, np.arange(p), :] = self.pose_columns(cov)
+        return B.reshape(p, n, p * m)
 
     def constraint(self, values):
-        return np.array([self.GAUGE_WEIGHT * np.sum(values)]), np.full((1, self.n_poses), self.GAUGE_WEIGHT)
+        m = self.per_pose_columns
+        row = np.zeros((1, self.n_params))
+        row[0, ::m] = self.GAUGE_WEIGHT
+        return row @ np.asarray(values, float), row
 
     def describe(self):
         out = super().describe()
-        v = self.values
+        v = np.asarray(self.values).reshape(self.n_poses, self.per_pose_columns)[:, 0]
         out["params"] = {"sigma_mm": {"value": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0, "unit": "mm",
                                       "stderr": None}}
         return out

@@ -1,0 +1,180 @@
+"""Several causes at once: forward selection of catalogued families with held-out validation.
+
+Each step scores every remaining candidate *given the causes already chosen* (the base model
+plus them, refitted jointly), keeps the significant ones (the same two tests as a single
+cause: the in-sample F-test at ``alpha_candidates`` Bonferroni-split over the candidates, and
+the one-sided held-out gain test at ``alpha_heldout``), takes the one with the largest held-out
+gain, and picks the member of its family by held-out error (:func:`refine_order`). It stops
+when no candidate is significant, or at ``max_causes``. The chance that a null data set gets a
+cause is the chance of a false first step, which the Bonferroni split bounds; later steps are
+only taken after a real cause (measured in ``benchmarks/study_blind.py``).
+
+Families and their members (what is chosen by held-out error, never by the in-sample fit):
+- the sensor characteristic: ``scale`` (the gain alone) and ``nonlinearity`` (gain, bow and
+  S-shape): named ``scale`` unless the curve predicts held-out poses significantly better;
+- ``drift``: linear in temperature, linear in time, a cubic in time (a warm-up that levels off,
+  a lag, a warm-cool cycle); temperature wins a tie (the physical cause, time its proxy);
+- ``plane_form``: quadratic or cubic form, both tested *beyond the plane*: against the datum's
+  tilt fitted as a nuisance parameter (a linear "form" is the plane fit's own uncertainty);
+- ``pose_error``: an offset a pose along the datum normal, or (4 or more sensors) an offset and
+  two tilts a pose, the visible part of a rigid 6-DOF tracker error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from metrology.core.effects import Drift, PlaneForm
+from metrology.diagnosis.candidates import CandidateResult, candidates_for, score_candidate
+from metrology.diagnosis.fit import Fit, fit_any
+from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.thresholds import THRESHOLDS
+
+__all__ = ["Step", "family_of", "refine_order", "forward_select", "p_better", "MAX_CAUSES"]
+
+#: at most this many causes are named in one data set
+MAX_CAUSES = 3
+_GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
+
+
+def family_of(c) -> tuple:
+    """(family group, sensors) of a candidate: members of one family on the same sensors
+    compete for one place (``scale`` and ``nonlinearity`` are one family, the characteristic)."""
+    return _GROUP.get(c.name, c.name), tuple(c.sensors)
+
+
+def p_better(better: CandidateResult, worse: CandidateResult) -> float:
+    """One-sided paired test that ``better``'s per-pose held-out chi-square is below ``worse``'s
+    on ``better``'s sensors."""
+    from scipy import stats
+
+    d = worse.chi2_pose - better.chi2_pose
+    return float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
+
+
+def _simplicity(s: CandidateResult):
+    c = s.component
+    temp_first = 0 if isinstance(c, Drift) and c.variable == "temp" else 1
+    return (s.n_params, temp_first)
+
+
+def refine_order(best: CandidateResult, scored) -> CandidateResult:
+    """The member of ``best``'s family (same sensors) chosen by held-out error: start from the
+    simplest significant member and move to a richer one only when it predicts held-out poses
+    significantly better (``alpha_order``) than the one held."""
+    mates = sorted([s for s in scored if s.significant and family_of(s.component) == family_of(best.component)],
+                   key=_simplicity)
+    if not mates:
+        return best
+    held = mates[0]
+    for other in mates[1:]:
+        if other.n_params > held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
+            held = other
+    return held
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the forward selection.
+
+    chosen : CandidateResult, the cause added (its fit is the joint model so far)
+    scored : tuple of CandidateResult, every candidate scored at this step (given the causes
+        before it), largest held-out gain first
+    lead : CandidateResult or None, the strongest candidate significant in sample only
+    """
+
+    chosen: CandidateResult | None
+    scored: tuple
+    lead: CandidateResult | None
+
+
+def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds, n_cand):
+    """Score every candidate of ``pool`` given the components ``given`` (their joint fit
+    ``ref_fit`` and its held-out figures ``ref_ho``). Form is scored against the datum's tilt."""
+    nominal, obs = ds.layout, ds.obs
+    tilt = None
+    out = []
+    for c in pool:
+        ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
+        if isinstance(c, PlaneForm) and c.order >= 2:
+            if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
+                comps = tuple(given) + (c.nuisance(),)
+                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, b.theta0),
+                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, b.theta0))
+            ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
+        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, b.theta0,
+                                   n_cand, given=given, k_ref=k_ref))
+    return out
+
+
+def _lead(scored, n_cand):
+    in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
+                     key=lambda s: s.p_insample)
+    return in_only[0] if in_only else None
+
+
+def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
+    """Add causes while one gives a significant held-out gain given the others (see the module).
+
+    ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the list of
+    :class:`Step` (the last one has ``chosen`` None unless ``max_causes`` was reached).
+    """
+    pool = candidates_for(ds.layout, b.cov, flags)
+    n_cand = len(pool)
+    given, steps = (), []
+    ref_fit, ref_ho = b.fit, b.heldout
+    while True:
+        scored = _score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
+        ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
+        sig = [s for s in ranked if s.significant]
+        if not sig:
+            steps.append(Step(None, ranked, _lead(scored, n_cand)))
+            return steps
+        chosen = refine_order(sig[0], scored)
+        steps.append(Step(chosen, ranked, None))
+        given = given + (chosen.component,)
+        ref_fit, ref_ho = chosen.fit, chosen.heldout
+        fam = family_of(chosen.component)
+        pool = [c for c in pool if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
+        if len(given) >= max_causes or not pool:
+            return steps
+
+
+def drop_one_gains(ds, b, chosen, folds):
+    """Held-out chi-square gain of each chosen cause given the others: the joint model without
+    it against the joint model (per-pose chi-square difference over all sensors, and its
+    one-sided p-value on the cause's sensors). Returns a list of (gain, p)."""
+    from scipy import stats
+
+    nominal, obs = ds.layout, ds.obs
+    comps = tuple(s.component for s in chosen)
+    full = chosen[-1].heldout
+    excl = flags_of(chosen)
+    out = []
+    for j, s in enumerate(chosen):
+        rest = comps[:j] + comps[j + 1:]
+        ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, b.theta0) if rest else b.heldout
+        S = list(s.component.sensors) or list(range(nominal.n))
+        d_all = ho.chi2_pose(b.sigma, exclude=excl) - full.chi2_pose(b.sigma, exclude=excl)
+        d_S = ho.chi2_pose(b.sigma, S, excl) - full.chi2_pose(b.sigma, S, excl)
+        p = 1.0 if np.allclose(d_S, 0) else float(stats.ttest_1samp(d_S, 0.0, alternative="greater").pvalue)
+        out.append((float(np.sum(d_all)), p))
+    return out
+
+
+def flags_of(chosen):
+    """The flagged readings of a chosen ``outliers`` cause ((p, n) bool), or None."""
+    from metrology.core.effects import Outliers
+
+    for s in chosen:
+        if isinstance(s.component, Outliers):
+            return s.component.flags
+    return None
+
+
+def joint_fit(ds, b, chosen) -> Fit:
+    """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``)."""
+    comps = tuple(replace(s.component, values=None, stderr=None) for s in chosen)
+    return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")
