@@ -91,6 +91,36 @@ def _size(result: dict, family: str):
     return None
 
 
+def _seen_size(case, effect):
+    """The true size in the definition ``metro diagnose`` reports (what the data can show), or None:
+
+    - scale, nonlinearity: peak-to-valley of the true characteristic over the true distances the
+      sensor saw (the drawn size is over the whole range, which the poses may not cover);
+    - plane_form: peak-to-valley, over the scanned points, of the true datum height less its
+      best-fit plane there (a tilt is the plane's own business, and the scan covers what it covers);
+    - drift, incidence: the drawn size (already defined on what the run saw).
+    """
+    from metrology.sim.forward.characteristic import Characteristic
+
+    if effect.family in ("drift", "incidence"):
+        return float(effect.size)
+    if effect.family in ("scale", "nonlinearity"):
+        sh = dict(effect.shape)
+        shape, lo, hi = sh.pop("shape"), sh.pop("lo_mm"), sh.pop("hi_mm")
+        curve = Characteristic(shape, lo, hi, sh)
+        i = list(case.nominal.names).index(effect.sensors[0])
+        d = case.d_true[:, i]
+        e = curve(np.linspace(np.nanmin(d), np.nanmax(d), 401))
+        return float(e.max() - e.min())
+    if effect.family == "plane_form":
+        s, t, _ = case.surface.plane_coords(case.cloud)
+        h = case.surface.height(s, t)
+        A = np.stack([np.ones_like(s), s, t], axis=1)
+        r = h - A @ np.linalg.lstsq(A, h, rcond=None)[0]
+        return float(r.max() - r.min())
+    return None
+
+
 def run_case(job) -> dict:
     """Draw one case, write its files, diagnose them; the record of truth and verdict."""
     from metrology.jobs.diagnose import diagnose_files
@@ -103,10 +133,12 @@ def run_case(job) -> dict:
         paths = write_case(case, d)
         res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
     named = _named(res)
+    seen = [_seen_size(case, e) for e in case.effects]
     return {
         "kind": kind, "family": case.family, "seed": list(entropy), "n_sensors": case.nominal.n,
         "n_poses": case.export.n_poses, "noise_mm": case.noise_mm,
-        "truth": [{"family": e.family, "sensors": list(e.sensors), "size": e.size} for e in case.effects],
+        "truth": [{"family": e.family, "sensors": list(e.sensors), "size": e.size, "seen_size": z}
+                  for e, z in zip(case.effects, seen)],
         "cause": res["cause"], "sensors": list(res.get("sensors") or []), "confidence": res["confidence"],
         "named": [[c, list(s)] for c, s in named],
         "sizes": {e.family: _size(res, e.family) for e in case.effects},
@@ -123,6 +155,10 @@ def _right(effect: dict, named: list) -> bool:
     return False
 
 
+def _truth_size(t: dict) -> float:
+    return t["seen_size"] if t.get("seen_size") is not None else t["size"]
+
+
 def summarize(records: list, det: dict) -> dict:
     """Every rate of the study from the records (see module doc)."""
     out = {"detectable": {f: list(r) for f, r in det.items()}}
@@ -137,8 +173,8 @@ def summarize(records: list, det: dict) -> dict:
         right = [_right(r["truth"][0], [(r["cause"], r["sensors"])]) for r in rs]
         right_in = [_right(r["truth"][0], [(r["cause"], r["sensors"])]) for r in inside]
         cov = [r["sizes"].get(f) for r in rs if r["sizes"].get(f) is not None]
-        covered = [abs(v - r["truth"][0]["size"]) <= 2 * s for r in rs for v, s in [r["sizes"].get(f) or (None, None)]
-                   if v is not None]
+        covered = [abs(v - _truth_size(r["truth"][0])) <= 2 * s for r in rs
+                   for v, s in [r["sizes"].get(f) or (None, None)] if v is not None]
         fam[f] = {"n": len(rs), "right": int(sum(right)), "n_inside": len(inside), "right_inside": int(sum(right_in)),
                   "n_size": len(cov), "covered_2sigma": int(sum(covered))}
     out["families"] = fam

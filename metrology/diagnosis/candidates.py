@@ -14,7 +14,7 @@ from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["covariates_for", "candidates_for", "flag_outliers", "CandidateResult", "score_candidate"]
+__all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
 
 
 def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -42,9 +42,25 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
     centre = centre - ds.plane.distance(centre) * ds.plane.normal
     has_t = np.all(np.isfinite(ex.time_s))
     has_T = np.all(np.isfinite(ex.temp_c))
-    return Covariates.from_geometry(layout_fit.zero, layout_fit.direction, obs.normal, obs.offset, R, t,
-                                    ds.plane.normal, centre, rng_mm, ex.time_s if has_t else None,
-                                    ex.temp_c if has_T else None)
+    cov = Covariates.from_geometry(layout_fit.zero, layout_fit.direction, obs.normal, obs.offset, R, t,
+                                   ds.plane.normal, centre, rng_mm, ex.time_s if has_t else None,
+                                   ex.temp_c if has_T else None)
+    span = np.stack([np.nanmin(ex.d, axis=0), np.nanmax(ex.d, axis=0)], axis=1)
+    from dataclasses import replace
+
+    cov = replace(cov, d_span=span)
+    if ds.datum_points is None:
+        return cov
+    # the datum as the tracker scanned it, at the spots and over the cloud
+    from metrology.core.effects import PlaneForm
+
+    height, (lo, hi) = PlaneForm.scan_surface(ds.datum_points, ds.plane.normal, ds.plane.offset, centre)
+    from metrology.core.plane import plane_basis
+
+    w_grid = height((ds.datum_points - centre) @ plane_basis(ds.plane.normal).T)  # where the tracker scanned
+    w = height(cov.spot_st)
+    ptp = float(np.nanmax(w_grid) - np.nanmin(w_grid))
+    return replace(cov, scan_w=w, scan_ptp_mm=ptp)
 
 
 
@@ -75,11 +91,23 @@ def flag_outliers(nominal, obs, cov, sigma, theta0):
     from scipy import stats
 
     p, n = obs.d.shape
-    m = int(np.isfinite(obs.d).sum())
-    z = np.full((p, n), np.nan)
+    res = np.full((p, n), np.nan)
     for i in range(n):
         f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, loss="soft_l1", solver="gn")
-        r = f.residual[:, i]
+        res[:, i] = f.residual[:, i]
+    return flag_residuals(res, sigma)
+
+
+def flag_residuals(residual, sigma):
+    """Flag |r| / s > t in residuals ``(p, n)`` mm (``s`` per sensor the larger of the stated
+    noise ``sigma (n,)`` mm and the residuals' MAD scale; ``t`` at ``alpha_outlier``
+    family-wise over the readings). Returns (flags (p, n) bool, p-value of the largest)."""
+    from scipy import stats
+
+    m = int(np.isfinite(residual).sum())
+    z = np.full(residual.shape, np.nan)
+    for i in range(residual.shape[1]):
+        r = residual[:, i]
         mad = 1.4826 * np.nanmedian(np.abs(r - np.nanmedian(r)))
         z[:, i] = r / max(sigma[i], mad)
     zmax = float(np.nanmax(np.abs(z)))
@@ -87,7 +115,6 @@ def flag_outliers(nominal, obs, cov, sigma, theta0):
     t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
     flags = np.isfinite(z) & (np.abs(z) > t)
     return flags, p_max
-
 
 
 @dataclass(frozen=True)

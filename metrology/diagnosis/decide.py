@@ -20,7 +20,7 @@ from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.select import drop_one_gains, family_of, forward_select, joint_fit, p_better
+from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, p_better
 from metrology.diagnosis.stats import NoiseTests, battery_on, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
@@ -228,7 +228,9 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in _sensors_of(chosen[j].component, n)}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
-        return Verdict("unexplained", [], "low", replace(best, fit=f), tests_ext, [], None, (), lead)
+        p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
+        return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
+                       None, (), lead)
     first = next(s for s in chosen if s.label == causes[0]["label"])
     confidence = "high" if tests_ext.consistent else "partial"
     confounding = []
@@ -270,7 +272,7 @@ def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds
     discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
     discrepancy["extended_model"] = best.label
     ho_e = best.heldout
-    excl = flags if "outliers" in best.label.split("+") else None
+    excl = flags  # the readings flagged gross by a named outliers cause (None if none is named)
     S = list(best.fit.sensors)
     heldout.update({
         "model": best.label,
@@ -291,17 +293,28 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
     # plane_form fitted together with the named causes (a pose error, say, correlates the
     # sensors of a pose; a form fitted without it would carry standard errors too small for
     # the comparison)
-    named = [c["cause"] for c in v.causes]
-    if "plane_form" in named:
+    named_forms = [c for c in v.best.fit.components if isinstance(c, PlaneForm)] if v.causes else []
+    if named_forms and named_forms[0].order >= 2 and any(c["cause"] == "plane_form" for c in v.causes):
         pf = v.best.fit
     elif not chosen:  # nothing named: the plane_form candidate's own fit
         pf = next(s.fit for s in scored if s.label == "plane_form")
     else:
+        # the quadratic form fitted with the other causes (a form named as scanned has no
+        # quadratic coefficients of its own to compare)
         comps = [PlaneForm((), names=ds.layout.names)] + [replace(s.component, values=None, stderr=None)
                                                           for s in chosen if s.cause != "plane_form"]
         pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
     ag = form_agreement(b.datum, pf)
     ag["fitted_with"] = [c.label for c in pf.components]
+    if named_forms and named_forms[0].order == 0 and any(c["cause"] == "plane_form" for c in v.causes):
+        # the form named is the scan itself: the readings agree with the cloud when they see it
+        # at gain 1 (a two-sided z-test of the gain's standard error)
+        from scipy import stats
+
+        g, se = float(named_forms[0].values[2]), float(named_forms[0].stderr[2])
+        p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
+        ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": bool(p_g >= THRESHOLDS["alpha_form"]),
+                   "fitted_with": [c.label for c in v.best.fit.components]})
     if not ag["agree"]:
         if v.cause in ("none", "plane_form"):
             confidence = "low"  # the inputs contradict each other on the datum
@@ -345,14 +358,16 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
     joint = None
     if chosen:  # the joint model of every cause selected, with the last step's held-out figures
         joint = replace(chosen[-1], fit=v.best.fit, label="+".join(s.label for s in chosen))
-    discrepancy, heldout = side_by_side(ds, b, joint, flags, folds, sim_reps, rng)
+    named_flags = flags_of(chosen)
+    discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)
     confidence = v.confidence
     summary = verdict_summary(v, b.tests)
     scored = steps[0].scored
     datum = b.datum
     if datum is not None:
         datum, confidence, summary = check_datum(ds, b, v, chosen, scored, confidence, summary)
-    plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags, b.structure)
+    plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
+                    b.structure)
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
                      dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)))

@@ -28,27 +28,32 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
     """The size of component ``which`` of ``f`` in its family's unit, with a standard error
     (delta method on the fit's covariance), or None where the family has none:
 
-    - ``scale``, ``nonlinearity``: peak-to-valley of the fitted characteristic over the sensor's
-      range (mm), the gain included;
+    - ``scale``, ``nonlinearity``: peak-to-valley of the fitted characteristic over the span of
+      the sensor's readings (mm), the gain included (beyond it the data say nothing);
     - ``drift``: peak-to-valley of the fitted drift over the run's poses (mm);
     - ``incidence``: the bias at the largest incidence angle the sensor saw (mm, signed).
 
     cov : Covariates; d0 : (p, n) float, mm, the base readings.
     """
     comp = f.components[which]
-    if comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
-        return None
-    i = comp.sensors[0]
     k0 = _free_offset(f, which)
     C = f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params]
     v = comp.values
+    if comp.name == "plane_form" and getattr(comp, "order", None) == 0 and np.isfinite(cov.scan_ptp_mm):
+        return {"value": abs(float(v[2])) * cov.scan_ptp_mm, "stderr": float(np.sqrt(max(C[2, 2], 0.0))) * cov.scan_ptp_mm,
+                "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud, times the gain the "
+                                        "readings see"}
+    if comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
+        return None
+    i = comp.sensors[0]
     if comp.name in ("scale", "nonlinearity"):
-        lo, hi = cov.range_mm[i]
+        # over the readings the sensor gave: beyond them the data say nothing of the curve
+        lo, hi = cov.d_span[i] if cov.d_span is not None else cov.range_mm[i]
         grid = np.linspace(lo, hi, 201)
         d_grid = np.zeros((len(grid), len(cov.range_mm)))
         d_grid[:, i] = grid
         B = comp.basis(d_grid, cov)[:, i, :]  # (g, k): the term along the range
-        meaning = "peak-to-valley of the characteristic over the sensor range"
+        meaning = "peak-to-valley of the characteristic over the readings' span"
     elif comp.name == "drift":
         B = comp.basis(d0, cov)[:, i, :]
         meaning = "peak-to-valley of the drift over the run"

@@ -26,8 +26,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import Drift, PlaneForm
-from metrology.diagnosis.candidates import CandidateResult, candidates_for, score_candidate
+from metrology.core.effects import Drift, Outliers, PlaneForm
+from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
@@ -98,7 +98,7 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
     out = []
     for c in pool:
         ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
-        if isinstance(c, PlaneForm) and c.order >= 2:
+        if isinstance(c, PlaneForm) and c.order != 1:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
                 comps = tuple(given) + (c.nuisance(),)
                 tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, b.theta0),
@@ -138,6 +138,12 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
         ref_fit, ref_ho = chosen.fit, chosen.heldout
         fam = family_of(chosen.component)
         pool = [c for c in pool if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
+        if not any(isinstance(g, Outliers) for g in given):
+            # gross readings flagged anew against the causes found: a large effect makes its
+            # extremes look gross to a fit without it
+            flags, p_out = flag_residuals(ref_fit.residual, b.sigma)
+            pool = [c for c in pool if not isinstance(c, Outliers)]
+            pool += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
         if len(given) >= max_causes or not pool:
             return steps
 

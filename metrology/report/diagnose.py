@@ -50,16 +50,29 @@ def report_text(d: Diagnosis) -> str:
                      f"{c['heldout_chi2_reduction']:11.1f}{c['heldout_rms_ratio']:11.3f}  {'*' if c['significant'] else ''}")
     if len(D["candidates"]) > 10:
         lines.append(f"  ... {len(D['candidates']) - 10} more in --json")
-    if D["extended"]:
+    if D["causes"]:
         lines.append("")
-        lines.append(f"extended model: {D['extended']['label']}")
-        for k, v in D["extended"]["params"].items():
-            se = "" if v["stderr"] is None else f" +- {v['stderr']:.3g}"
-            lines.append(f"  {k} = {v['value']:.4g}{se} {v['unit']}")
+        lines.append("residuals after each step of the selection (in-sample RMS um per sensor; held-out RMS um)")
+        for st in D["steps"]:
+            lines.append(f"  {st['model'][:40]:40s}" + "".join(f"{1e3 * v:9.2f}" for v in st["residual_rms_mm"])
+                         + f"{1e3 * st['heldout_rms_mm']:11.3f}")
+        for c in D["causes"]:
+            where = f" on {', '.join(c['sensors'])}" if c["sensors"] else ""
+            lines.append("")
+            lines.append(f"cause {c['cause']}{where}: {c['label']} (held-out chi-square gain {c['heldout_gain_chi2']:.1f} "
+                         f"given the others, p = {c['p_heldout_given_others']:.3g})")
+            if c.get("size"):
+                sz = c["size"]
+                se = "" if sz["stderr"] is None else f" +- {1e3 * sz['stderr']:.2f}"
+                lines.append(f"  size {1e3 * sz['value']:.2f}{se} um ({sz['meaning']})")
+            for k, v in c["params"].items():
+                se = "" if v["stderr"] is None else f" +- {v['stderr']:.3g}"
+                lines.append(f"  {k} = {v['value']:.4g}{se} {v['unit']}")
         h = D["heldout"]
-        lines.append(f"held-out ({h['folds']}-fold): RMS {1e3 * h['base_rms_mm']:.3f} -> {1e3 * h['extended_rms_mm']:.3f} um "
-                     f"(ratio {h['rms_ratio']:.3f}; its sensors {h['rms_ratio_concerned']:.3f}), normal "
-                     f"{h['base_normal_deg']:.5f} -> {h['extended_normal_deg']:.5f} deg (ratio {h['normal_ratio']:.3f})")
+        lines.append(f"held-out ({h['folds']}-fold), base -> {h['model']}: RMS {1e3 * h['base_rms_mm']:.3f} -> "
+                     f"{1e3 * h['extended_rms_mm']:.3f} um (ratio {h['rms_ratio']:.3f}; its sensors "
+                     f"{h['rms_ratio_concerned']:.3f}), normal {h['base_normal_deg']:.5f} -> {h['extended_normal_deg']:.5f} "
+                     f"deg (ratio {h['normal_ratio']:.3f})")
     for c in D["confounding"]:
         lines.append(f"confounding: {c['message']}")
     df = D["datum_form"]

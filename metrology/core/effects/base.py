@@ -33,6 +33,10 @@ class Covariates:
     spot_st : (p, n, 2) float, mm, spot position on the datum in the plane's own axes
         (tracker frame), relative to the datum centre
     range_mm : (n, 2) float, mm, the readings' normalisation interval ``[lo, hi]``
+    scan_w : (p, n) float, mm, or None: the datum's deviation from its plane at each spot as
+        the tracker scanned it (a local fit to the datum cloud; None without a cloud)
+    scan_ptp_mm : float, mm, the scanned deviation's peak-to-valley over the cloud (NaN without)
+    d_span : (n, 2) float, mm, or None: the span of the readings each sensor gave (min, max)
     """
 
     time_h: np.ndarray
@@ -41,6 +45,9 @@ class Covariates:
     inv_nu: np.ndarray
     spot_st: np.ndarray
     range_mm: np.ndarray
+    scan_w: np.ndarray | None = None
+    scan_ptp_mm: float = float("nan")
+    d_span: np.ndarray | None = None
 
     @property
     def n_poses(self) -> int:
@@ -49,7 +56,8 @@ class Covariates:
     def select(self, idx) -> "Covariates":
         """The poses ``idx``."""
         return replace(self, time_h=self.time_h[idx], temp_c=self.temp_c[idx], cos_inc=self.cos_inc[idx],
-                       inv_nu=self.inv_nu[idx], spot_st=self.spot_st[idx])
+                       inv_nu=self.inv_nu[idx], spot_st=self.spot_st[idx],
+                       scan_w=None if self.scan_w is None else self.scan_w[idx])
 
     @classmethod
     def from_geometry(cls, zero, direction, normal_tcs, offset_tcs, tcs2tracker_rot, tcs2tracker_trans,

@@ -171,9 +171,21 @@ class Nonlinearity(Component):
     ``scale`` and names ``nonlinearity`` only when the curve predicts held-out poses
     significantly better than the gain alone (a real characteristic, e.g. an S-curve that
     flattens at one end, has both parts).
+
+    ``order`` (3 or 5) is the highest Legendre polynomial: ``order=5`` adds ``c4 P4 + c5 P5``
+    for a characteristic with more turns (a calibration table with several knots). ``order=0``
+    is a cubic regression spline instead (:data:`SPLINE_KNOTS` interior knots, evenly over
+    ``span`` (the readings the sensor gave; default the range), its constant and linear parts
+    removed there): any smooth curve with a few turns, ``s1..s6`` mm. The diagnosis takes a richer member only when it predicts held-out
+    poses significantly better.
     """
 
+    #: interior knots of the spline member (``order=0``), evenly spaced over the range
+    SPLINE_KNOTS = 4
+
     with_gain: bool = False
+    order: int = 3
+    span: tuple | None = None
 
     name = "nonlinearity"
     uses_d0 = True
@@ -187,30 +199,95 @@ class Nonlinearity(Component):
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov):
-        return [cls((i,), names=names, with_gain=True)]
+        return [cls((i,), names=names, with_gain=True), cls((i,), names=names, with_gain=True, order=5),
+                cls((i,), names=names, with_gain=True, order=0,
+                    span=None if cov.d_span is None else tuple(float(v) for v in cov.d_span[i]))]
+
+    def __post_init__(self):
+        if self.order not in (0, 3, 5):
+            raise ValueError(f"nonlinearity order must be 3, 5 or 0 (spline), got {self.order}")
+        super().__post_init__()
+
+    @property
+    def _n_shape(self):
+        return self.SPLINE_KNOTS + 2 if self.order == 0 else self.order - 1
 
     @property
     def param_names(self):
-        return (("k",) if self.with_gain else ()) + ("c2_mm", "c3_mm")
+        shape = (tuple(f"s{j}_mm" for j in range(1, self._n_shape + 1)) if self.order == 0
+                 else tuple(f"c{j}_mm" for j in range(2, self.order + 1)))
+        return (("k",) if self.with_gain else ()) + shape
 
     @property
     def param_units(self):
-        return (("1",) if self.with_gain else ()) + ("mm", "mm")
+        return (("1",) if self.with_gain else ()) + ("mm",) * self._n_shape
+
+    @property
+    def label(self):
+        return super().label + {0: "@spline", 3: "", 5: "@5"}[self.order]
+
+    def _spline(self, x, a=-1.0, b=1.0):
+        """``(..., SPLINE_KNOTS + 2)``: cubic B-splines on ``[a, b]`` (normalised units) less
+        their least-squares line there, and their derivatives in ``x``."""
+        from scipy.interpolate import BSpline
+
+        k = 3
+        inner = np.linspace(a, b, self.SPLINE_KNOTS + 2)[1:-1]
+        t = np.concatenate([[a] * (k + 1), inner, [b] * (k + 1)])
+        nb = len(t) - k - 1
+        g = np.linspace(a, b, 201)
+        A = np.stack([np.ones_like(g), g], axis=1)
+        cols, ders = [], []
+        for j in range(nb):
+            c = np.zeros(nb)
+            c[j] = 1.0
+            bs = BSpline(t, c, k, extrapolate=True)
+            a0, a1 = np.linalg.lstsq(A, bs(g), rcond=None)[0]
+            cols.append(bs(x) - a0 - a1 * x)
+            ders.append(bs.derivative()(x) - a1)
+        # nb - 2 independent columns remain after removing the line: drop the first and last
+        return np.stack(cols[1:-1], axis=-1), np.stack(ders[1:-1], axis=-1)
+
+    def _legendre(self, x):
+        """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
+        spline's columns for ``order=0``)."""
+        from numpy.polynomial import legendre
+
+        if self.order == 0:
+            return self._spline(x, *self._span_x)
+        cols, ders = [], []
+        for j in range(2, self.order + 1):
+            c = np.zeros(j + 1)
+            c[j] = 1.0
+            cols.append(legendre.legval(x, c))
+            ders.append(legendre.legval(x, legendre.legder(c)))
+        return np.stack(cols, axis=-1), np.stack(ders, axis=-1)
 
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
+        if self.order == 0 and self.sensors:
+            i = self.sensors[0]
+            a, b = self.span if self.span is not None else (lo[i], hi[i])
+            self._set_span_x(((2 * a - lo[i] - hi[i]) / (hi[i] - lo[i]), (2 * b - lo[i] - hi[i]) / (hi[i] - lo[i])))
         return (2 * d0 - lo - hi) / (hi - lo), 2.0 / (hi - lo)
+
+    def _set_span_x(self, ab):
+        object.__setattr__(self, "_span_x_cache", ab)
+
+    @property
+    def _span_x(self):
+        return getattr(self, "_span_x_cache", (-1.0, 1.0))
 
     def basis(self, d0, cov):
         x, _ = self._x(d0, cov)
-        p2, p3 = _legendre23(x)
-        cols = ([d0] if self.with_gain else []) + [p2, p3]
-        return _sensor_basis(np.stack(cols, axis=-1), d0.shape[1], self.sensors)
+        P, _ = self._legendre(x)
+        cols = np.concatenate([d0[..., None], P], axis=-1) if self.with_gain else P
+        return _sensor_basis(cols, d0.shape[1], self.sensors)
 
     def d_dd0(self, values, d0, cov):
         x, dx = self._x(d0, cov)
         g = values[0] if self.with_gain else 0.0
-        c2, c3 = values[-2], values[-1]
-        deriv = g + (c2 * 3 * x + c3 * 0.5 * (15 * x**2 - 3)) * dx[None, :]
+        _, dP = self._legendre(x)
+        deriv = g + (dP @ np.asarray(values[-self._n_shape:], float)) * dx[None, :]
         return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)
 

@@ -26,6 +26,11 @@ class PlaneForm(Component):
     uncertainty, a nuisance, never form), 2 adds bow, saddle and twist, 3 adds the four cubic
     terms (``b_sss, b_sst, b_stt, b_ttt``). The diagnosis tests form *beyond* the plane: order 2
     or 3 against order 1 (the tilt carried as a nuisance parameter in both).
+
+    ``order=0`` is the datum *as scanned*: the deviation ``w_scan`` of the tracker's datum cloud
+    from its plane at each spot (:attr:`Covariates.scan_w`), times a gain ``scan_gain`` (1 when the
+    readings see the surface the tracker scanned), with the tilt as nuisance: any form, however
+    high its order, with one parameter. Offered only when the datum cloud covers every spot.
     """
 
     radius_mm: float = 100.0
@@ -41,7 +46,10 @@ class PlaneForm(Component):
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
-        return [cls((), names=names), cls((), names=names, order=3)]
+        out = [cls((), names=names), cls((), names=names, order=3)]
+        if cov.scan_w is not None and np.all(np.isfinite(cov.scan_w)):
+            out.append(cls((), names=names, order=0))
+        return out
 
     @classmethod
     def hidden(cls, i, size):
@@ -50,25 +58,87 @@ class PlaneForm(Component):
     _NAMES = ("b_s_mm", "b_t_mm", "b_ss_mm", "b_st_mm", "b_tt_mm", "b_sss_mm", "b_sst_mm", "b_stt_mm", "b_ttt_mm")
 
     def __post_init__(self):
-        if self.order not in (1, 2, 3):
-            raise ValueError(f"plane_form order must be 1, 2 or 3, got {self.order}")
+        if self.order not in (0, 1, 2, 3):
+            raise ValueError(f"plane_form order must be 0 (as scanned), 1, 2 or 3, got {self.order}")
         super().__post_init__()
 
     @property
     def param_names(self):
+        if self.order == 0:
+            return ("b_s_mm", "b_t_mm", "scan_gain")
         return self._NAMES[:{1: 2, 2: 5, 3: 9}[self.order]]
 
     @property
     def param_units(self):
-        return ("mm",) * len(self.param_names)
+        return ("mm", "mm", "1") if self.order == 0 else ("mm",) * len(self.param_names)
 
     @property
     def label(self):
-        return self.name + {1: "@tilt", 2: "", 3: "@cubic"}[self.order]
+        return self.name + {0: "@scan", 1: "@tilt", 2: "", 3: "@cubic"}[self.order]
 
     def nuisance(self) -> "PlaneForm":
         """The datum's tilt alone (order 1): what form is tested against."""
         return replace(self, order=1, values=None, stderr=None)
+
+    #: total degrees tried for the smooth surface fitted to the datum cloud (:meth:`scan_surface`)
+    SCAN_DEGREES = (2, 3, 4, 5, 6, 7, 8)
+
+    @staticmethod
+    def scan_surface(points, plane_normal, plane_offset, centre, folds=5):
+        """The datum's deviation from its plane as the tracker scanned it: a smooth surface.
+
+        One least-squares surface over the whole cloud, 2-D Legendre polynomials over the
+        cloud's bounding box, of the total degree in :data:`SCAN_DEGREES` with the smallest
+        ``folds``-fold cross-validated error (at least 10 points per coefficient). It follows
+        form up to that order and averages the tracker noise over the whole scan (a local fit
+        of a few tens of points leaves several um of the tracker's noise in the surface).
+
+        points : (m, 3) float, mm, tracker frame; plane_normal : (3,) unit; plane_offset : mm;
+        centre : (3,) mm, tracker frame. Returns ``(w, box)``: ``w(st)`` a function of in-plane
+        positions ``(..., 2)`` mm from ``centre`` giving mm (NaN outside the box), and ``box``
+        ``(lo (2,), hi (2,))`` mm.
+        """
+        from numpy.polynomial import legendre
+
+        from metrology.core.plane import plane_basis
+
+        P = np.asarray(points, float)
+        n = np.asarray(plane_normal, float)
+        st = (P - np.asarray(centre, float)) @ plane_basis(n).T
+        w = P @ n + float(plane_offset)
+        lo, hi = st.min(axis=0), st.max(axis=0)
+        mid, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+
+        def design(xy, deg):
+            x = (xy - mid) / half
+            V = legendre.legvander2d(x[:, 0], x[:, 1], [deg, deg])
+            return V[:, [i * (deg + 1) + j for i in range(deg + 1) for j in range(deg + 1) if i + j <= deg]]
+
+        fold = np.arange(len(P)) % folds
+        best = None
+        for deg in PlaneForm.SCAN_DEGREES:
+            if (deg + 1) * (deg + 2) // 2 * 10 > len(P):
+                break
+            err = 0.0
+            for k in range(folds):
+                tr, te = fold != k, fold == k
+                c = np.linalg.lstsq(design(st[tr], deg), w[tr], rcond=None)[0]
+                err += float(np.sum((design(st[te], deg) @ c - w[te]) ** 2))
+            if best is None or err < best[0]:
+                best = (err, deg)
+        deg = 1 if best is None else best[1]
+        coef = np.linalg.lstsq(design(st, deg), w, rcond=None)[0]
+
+        def height(st_query):
+            q = np.asarray(st_query, float)
+            flat = q.reshape(-1, 2)
+            ok = np.all(np.isfinite(flat), axis=1) & np.all((flat >= lo) & (flat <= hi), axis=1)
+            out = np.full(len(flat), np.nan)
+            if np.any(ok):
+                out[ok] = design(flat[ok], deg) @ coef
+            return out.reshape(q.shape[:-1])
+
+        return height, (lo, hi)
 
     def monomials(self, st_mm):
         """``(..., k)``: ``s, t, s^2, s t, t^2`` (and ``s^3, s^2 t, s t^2, t^3`` at order 3; ``s, t``
@@ -82,6 +152,9 @@ class PlaneForm(Component):
         return self.monomials(st_mm) @ self.values
 
     def basis(self, d0, cov):
+        if self.order == 0:
+            st = cov.spot_st / self.radius_mm
+            return np.stack([st[..., 0], st[..., 1], cov.scan_w], axis=-1) * cov.inv_nu[..., None]
         return self.monomials(cov.spot_st) * cov.inv_nu[..., None]
 
     @classmethod

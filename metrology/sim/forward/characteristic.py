@@ -80,7 +80,7 @@ class Characteristic:
 def draw_curve(rng: np.random.Generator, shape: str, lo: float, hi: float, size_mm: float) -> Characteristic:
     """A random curve of ``shape`` on ``[lo, hi]`` mm with peak-to-valley ``size_mm``.
 
-    ``gain`` gets a random sign; ``table`` 4-7 knots at jittered positions with random values;
+    ``gain`` gets a random sign; ``table`` 4-7 knots jittered about an even spacing (never closer than half of it) with random values;
     ``s_curve`` a knee ``x0`` in [0.35, 0.75], width 0.04-0.15 and a random end to flatten;
     ``tanh`` a centre in [0.3, 0.7] and width 0.1-0.4.
     """
@@ -89,8 +89,11 @@ def draw_curve(rng: np.random.Generator, shape: str, lo: float, hi: float, size_
         return Characteristic("gain", lo, hi, {"gain": float(sign * size_mm / (hi - lo))})
     if shape == "table":
         k = int(rng.integers(4, 8))
-        inner = np.sort(rng.uniform(0.1, 0.9, k - 2))
-        x = np.concatenate([[0.0], inner, [1.0]])
+        # knots jittered about an even spacing, never closer than half of it: two knots a few
+        # um apart with different values make a step, which no smooth characteristic has
+        step = 1.0 / (k - 1)
+        x = np.linspace(0.0, 1.0, k)
+        x[1:-1] += rng.uniform(-0.25, 0.25, k - 2) * step
         v = rng.normal(size=k)
         while np.ptp(v) == 0:
             v = rng.normal(size=k)
