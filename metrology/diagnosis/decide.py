@@ -210,7 +210,18 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
         confidence = "moderate" if b.tests.consistent and lead is None else "low"
         return Verdict(cause, [], confidence, None, None, [], None, (), lead)
     f = joint_fit(ds, b, chosen)
-    tests_ext = noise_tests(f.residual, b.sigma, dof_per_sensor(f, obs, n), nominal.names,
+    r_test, dof_test = f.residual, dof_per_sensor(f, obs, n)
+    rigid = [c for c in f.components if c.per_pose and c.per_pose_columns > 1]
+    if rigid:
+        # several values a pose take most of each pose's readings, unevenly over the sensors:
+        # each residual is scaled by its own leverage, so every sensor's is N(0, sigma^2) again
+        B = rigid[0].pose_columns(b.cov) / b.sigma[None, :, None]
+        B = np.where(np.isfinite(obs.d)[..., None], B, 0.0)
+        h = np.einsum("pnm,pmn->pn", B, np.linalg.pinv(B, rcond=1e-10))
+        r_test = f.residual / np.sqrt(np.clip(1.0 - h, 1e-6, None))
+        r_test = np.where(1.0 - h > 1e-3, r_test, np.nan)
+        dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
+    tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
                             pairs=not any(c.per_pose for c in f.components))
     kept = [j for j, s in enumerate(chosen) if battery_on(tests_ext, _sensors_of(s.component, n))
             >= THRESHOLDS["alpha_battery"]]

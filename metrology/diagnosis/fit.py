@@ -100,6 +100,26 @@ def _project_per_pose_multi(Bw, X, Bpinv=None):
     return (out[..., 0], e[..., 0]) if squeeze else (out, e)
 
 
+#: weight of the rigid-head gauge rows (whitened residual units per unit of the normalised mode)
+RIGID_GAUGE_WEIGHT = 1e3
+
+
+def _rigid_head_modes(zero, u, basis):
+    """``(6, 5 s)``: the chart directions of a rigid motion of the whole head (3 translations,
+    3 rotations about the TCS axes) for sensors at ``zero (s, 3)`` mm with directions ``u (s, 3)``
+    and tangent bases ``basis (s, 2, 3)``; each row normalised. Per-pose offsets and tilts absorb
+    such a motion exactly, so the fit holds the base parameters off it (the gauge)."""
+    s = len(zero)
+    M = np.zeros((6, 5 * s))
+    for k in range(3):
+        e = np.eye(3)[k]
+        for a in range(s):
+            M[k, 5 * a + k] = 1.0
+            M[3 + k, 5 * a:5 * a + 3] = np.cross(e, zero[a])
+            M[3 + k, 5 * a + 3:5 * a + 5] = basis[a] @ np.cross(e, u[a])
+    return M / np.linalg.norm(M, axis=1, keepdims=True)
+
+
 def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
         theta0=None, loss="linear", solver="lsq") -> Fit:
     """Least squares of the base model plus ``components`` (analytic Jacobian).
@@ -148,8 +168,11 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     if len(prof) > 1:
         raise ValueError("at most one per-pose component per fit")
     k_comp = [c.n_params for c in free]
-    nb = 5 * len(S)
-    x0 = np.concatenate([theta0[S].ravel()] + [c.values for c in free])
+    # a per-pose rigid error (offset and two tilts a pose) leaves one reading in four to the
+    # geometry; scored, it holds the base parameters at ``theta0`` (the base calibration)
+    hold = any(getattr(c, "holds_base", False) for c in comps)
+    nb = 0 if hold else 5 * len(S)
+    x0 = np.concatenate([np.zeros(0) if hold else theta0[S].ravel()] + [c.values for c in free])
     zero_all, u_all = geometry(nominal, theta0)
     d_full0 = readings(zero_all, u_all, N, D)[0]
     basis0 = direction_basis(nominal.direction[S])
@@ -159,6 +182,10 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         Bw = np.where(ok[..., None], prof[0].pose_columns(cov)[:, S, :] / sig[None, :, None], 0.0)  # (p, s, m)
         Bpinv = np.linalg.pinv(Bw, rcond=1e-10) if Bw.shape[2] > 1 else None
 
+    G = None  # gauge rows: a rigid motion of the whole head, which per-pose tilts absorb exactly
+    if prof and prof[0].per_pose_columns > 1 and not hold:
+        G = _rigid_head_modes(nominal.zero[S] + theta0[S, :3], u0S, basis0) * RIGID_GAUGE_WEIGHT  # (6, nb)
+
     def project(X):
         if Bw.shape[2] == 1:  # an offset a pose: the gauge of the zero points, exactly
             return _project_per_pose(Bw[..., 0], X, N)
@@ -166,7 +193,8 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
 
     def unpack(x):
         th = theta0.copy()
-        th[S] = x[:nb].reshape(-1, 5)
+        if not hold:
+            th[S] = x[:nb].reshape(-1, 5)
         vals, j = [], nb
         for k in k_comp:
             vals.append(x[j:j + k])
@@ -195,6 +223,8 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     def fun(x):
         R, _, th, vals, _ = residual_matrix(x)
         extra = [c.constraint(v)[0] for c, v in zip(free, vals)]
+        if G is not None:
+            extra.append(G @ (x[:nb] - x0[:nb]))
         return np.concatenate([R[ok]] + extra)
 
     def jac(x):
@@ -207,7 +237,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         J0 = J0 * g[:, S, None]
         p, s = ok.shape
         Jb = np.zeros((p, s, nb))
-        for a in range(s):
+        for a in range(s if nb else 0):
             Jb[:, a, 5 * a:5 * a + 5] = J0[:, a]
         blocks = [Jb] + [c.jacobian(v, d0, cov)[:, S] for c, v in zip(free, vals)]
         Jr = -np.concatenate(blocks, axis=-1) / sig[None, :, None]
@@ -223,9 +253,15 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
                 Rr[:, off:off + k] = Jc
                 rows.append(Rr)
             off += k
+        if G is not None:
+            Rr = np.zeros((len(G), rows[0].shape[1]))
+            Rr[:, :nb] = G
+            rows.append(Rr)
         return np.concatenate(rows, axis=0)
 
-    if solver == "lsq":
+    if x0.size == 0:
+        x = x0
+    elif solver == "lsq":
         kw = {} if loss == "linear" else {"loss": loss, "f_scale": 1.0}
         x = least_squares(fun, x0, jac=jac, method="trf", x_scale="jac", **kw).x
     elif solver == "gn":
@@ -241,7 +277,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     res[:, others] = obs.d[:, others] - d_full0[:, others] - f[:, others]
     rS = R[ok]
     m = rS.size
-    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (e.size - prof[0].gauge_dof if e is not None else 0)
+    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (e.size - (0 if hold else prof[0].gauge_dof) if e is not None else 0)
     dof = m - k
     chi2 = float(np.sum(rS**2))
     s2 = chi2 / max(dof, 1)
@@ -251,7 +287,8 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     C = np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True) / np.outer(scale, scale) * s2
     se = np.sqrt(np.maximum(np.diag(C), 0.0))
     theta_se = np.zeros((n, 5))
-    theta_se[S] = se[:nb].reshape(-1, 5)
+    if not hold:
+        theta_se[S] = se[:nb].reshape(-1, 5)
     out, j = [], nb
     corr_b, corr_w = [], []
     base_names = [f"{nominal.names[i]}.{q}" for i in S for q in ("x", "y", "z", "a", "b")]
@@ -266,6 +303,10 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         kk = c2.n_params
         out.append(c2.with_values(v, se[j:j + kk]))
         for q in range(kk):
+            if hold:  # the base parameters are held: no correlation with them
+                corr_b.append(0.0)
+                corr_w.append("held")
+                continue
             cc = C[j + q, :nb] / np.maximum(se[j + q] * se[:nb], 1e-300)
             a = int(np.argmax(np.abs(cc)))
             corr_b.append(float(np.abs(cc[a])))

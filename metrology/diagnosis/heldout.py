@@ -34,33 +34,64 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
     per_pose = []
     for comp in f.components:
         if comp.per_pose:
-            per_pose.append(replace(comp, n_poses=len(test), values=None, stderr=None))
+            per_pose.append((replace(comp, n_poses=len(test), values=None, stderr=None), comp))
         elif isinstance(comp, Outliers):
             continue  # flagged held-out readings are left out of the figures
         else:
             terms += comp.evaluate(comp.values, d0, c)
     res = o.d - d0 - terms
-    for comp in per_pose:
+    for comp, fitted in per_pose:
         # a per-pose value is not known before the pose is measured: each reading is predicted
         # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
         # the held-out residual is a true prediction and nothing is charged as lost dof
         B = comp.pose_columns(c)  # (h, n, m)
+        m = B.shape[2]
         fin = np.isfinite(res)
         w = np.where(fin[..., None], B / sigma[None, :, None], 0.0)  # (h, n, m)
         r = np.where(fin, res / sigma[None, :], 0.0)  # (h, n)
+        # with several values a pose (offset and tilts), the other sensors of a pose determine
+        # them exactly or nearly so, and the prediction of the left-out reading extrapolates
+        # their noise: the values are shrunk towards zero by their spread over the training
+        # poses (the best linear unbiased predictor of a random per-pose error)
+        prior = None if m == 1 else _per_pose_precision(fitted, nominal, cov, sigma, test)
         pred = np.zeros_like(res)
         for i in range(res.shape[1]):
             wi = w.copy()
             wi[:, i, :] = 0.0  # without reading i
-            e_i = np.linalg.pinv(wi, rcond=1e-10) @ r[..., None]  # (h, m, 1)
-            pred[:, i] = np.einsum("hm,hm->h", B[:, i, :], e_i[..., 0])
-        e_all = np.linalg.pinv(w, rcond=1e-10) @ r[..., None]  # for the normal: every reading
+            e_i = _solve_per_pose(wi, r, prior)  # (h, m)
+            pred[:, i] = np.einsum("hm,hm->h", B[:, i, :], e_i)
+        e_all = _solve_per_pose(w, r, prior)  # for the normal: every reading
         res = res - pred
-        terms = terms + (B @ e_all)[..., 0]
+        terms = terms + np.einsum("hnm,hm->hn", B, e_all)
     dc = o.d - terms
     nrm = micro_plane_normal(zero, u, dc)
     dev = angle_between(nrm, o.normal)
     return res, dev
+
+
+def _solve_per_pose(w, r, prior=None):
+    """Per pose, the values ``e (h, m)`` minimising ``|r - w e|^2 + e^T P e`` (``P`` the prior
+    precision (m, m), or none: the minimum-norm least squares)."""
+    if prior is None:
+        return (np.linalg.pinv(w, rcond=1e-10) @ r[..., None])[..., 0]
+    A = np.einsum("hnm,hnq->hmq", w, w) + prior[None]
+    b = np.einsum("hnm,hn->hm", w, r)
+    return np.linalg.solve(A, b[..., None])[..., 0]
+
+
+def _per_pose_precision(fitted, nominal, cov, sigma, test):
+    """Inverse of the spread of the per-pose values over the training poses, less what reading
+    noise puts in them (``(m, m)``; a large number where they show none)."""
+    p = cov.n_poses
+    train = np.setdiff1d(np.arange(p), test)
+    m = fitted.per_pose_columns
+    e = np.asarray(fitted.values, float).reshape(-1, m)
+    B = fitted.pose_columns(cov.select(train)) / sigma[None, :, None]
+    noise = np.mean(np.linalg.pinv(np.einsum("hnm,hnq->hmq", B, B), hermitian=True), axis=0)
+    S = np.cov(e, rowvar=False) - noise
+    vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
+    vals = np.maximum(vals, 1e-12 * max(float(np.max(np.abs(vals))), 1e-300))
+    return (vecs / vals) @ vecs.T
 
 
 @dataclass(frozen=True)

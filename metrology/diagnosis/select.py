@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import Drift, Outliers, PlaneForm
+from metrology.core.effects import Drift, Outliers, PlaneForm, PoseError
 from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
@@ -181,6 +181,9 @@ def flags_of(chosen):
 
 
 def joint_fit(ds, b, chosen) -> Fit:
-    """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``)."""
-    comps = tuple(replace(s.component, values=None, stderr=None) for s in chosen)
+    """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``),
+    the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
+    it free and the rigid-head gauge fixed)."""
+    comps = tuple(replace(s.component, values=None, stderr=None, **({"hold": False} if isinstance(s.component, PoseError)
+                                                                     else {})) for s in chosen)
     return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")

@@ -52,6 +52,15 @@ def all_components(ds, cov):
         Nonlinearity((2,), [0.01, -0.02], names=names), PlaneForm((), rng.normal(0, 0.01, 5), names=names),
         PoseError((), rng.normal(0, 0.01, cov.n_poses), names=names, n_poses=cov.n_poses),
         Outliers((1, 3), [0.1, -0.2], names=names, flags=flags),
+        # the richer members of each family
+        Nonlinearity((1,), [1e-3, 0.01, -0.02], names=names, with_gain=True),
+        Nonlinearity((3,), [1e-3, 0.01, -0.02, 0.005, 0.003], names=names, with_gain=True, order=5),
+        Nonlinearity((0,), [1e-3, 0.01, -0.02, 0.005, 0.003, -0.01, 0.02], names=names, with_gain=True, order=0,
+                     span=(float(np.nanmin(ds.export.d[:, 0])), float(np.nanmax(ds.export.d[:, 0])))),
+        Drift((2,), [0.01, -0.004, 0.003], names=names, variable="time", ref=float(np.mean(cov.time_h)), order=3,
+              half=0.5 * float(np.ptp(cov.time_h))),
+        PlaneForm((), rng.normal(0, 0.01, 9), names=names, order=3),
+        PoseError((), rng.normal(0, 0.01, 3 * cov.n_poses), names=names, n_poses=cov.n_poses, tilts=True),
     ]
 
 

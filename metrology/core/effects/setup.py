@@ -210,6 +210,7 @@ class PoseError(Component):
 
     n_poses: int = 0
     tilts: bool = False
+    hold: bool = True
 
     name = "pose_error"
     per_pose = True
@@ -238,8 +239,18 @@ class PoseError(Component):
     @property
     def gauge_dof(self) -> int:
         """Directions shared with the base geometry: a translation of every zero point (3), and
-        with ``tilts`` a rotation of the whole head (3 more)."""
+        with ``tilts`` a rotation of the whole head (3 more; the fit holds the base parameters
+        off these six, :func:`metrology.diagnosis.fit.fit`)."""
         return 6 if self.tilts else 3
+
+    @property
+    def holds_base(self) -> bool:
+        """The fit holds the base geometry at the base calibration (``tilts`` and ``hold``): an
+        offset and two tilts a pose leave one reading in four to the geometry, which then drifts
+        along every combination those poses leave weak (millimetres of zero point, measured) and
+        predicts held-out poses badly. The diagnosis scores the candidate so, and refits the
+        named cause with the geometry free (``hold=False``, the rigid-head gauge fixed)."""
+        return self.tilts and self.hold
 
     @property
     def label(self):
