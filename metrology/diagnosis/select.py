@@ -36,6 +36,8 @@ __all__ = ["Step", "family_of", "refine_order", "forward_select", "p_better", "M
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
+#: after the first step, a candidate on other sensors is rescored only if its first in-sample p was below this
+PRUNE_P = 0.2
 _GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
 
 
@@ -138,6 +140,15 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
         ref_fit, ref_ho = chosen.fit, chosen.heldout
         fam = family_of(chosen.component)
         pool = [c for c in pool if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
+        if len(steps) == 1:
+            # later steps rescore only what the first step saw at all (in-sample p < PRUNE_P), what
+            # shares a sensor with a cause found (that cause inflated its F-test's scatter), and
+            # the set-up's candidates: a cause on another sensor that showed nothing before stays
+            # hidden after (and the steps cost a full scoring each)
+            p1 = {s.label: s.p_insample for s in scored}
+            near = {i for g in given for i in g.sensors}
+            pool = [c for c in pool if not c.sensors or p1.get(c.label, 0.0) < PRUNE_P or set(c.sensors) & near
+                    or isinstance(c, Outliers)]
         if not any(isinstance(g, Outliers) for g in given):
             # gross readings flagged anew against the causes found: a large effect makes its
             # extremes look gross to a fit without it

@@ -1,4 +1,9 @@
-"""The decision: hidden effects named blind, null data, out-of-catalogue effects, the fixture."""
+"""The decision: hidden effects named blind, null data, out-of-catalogue effects, the fixture.
+
+The blind sets here draw their data with :mod:`metrology.sim.synth`, which shares the fit's
+own formulas; they run with ``-m slow`` only. The default run's blind checks draw from the
+independent forward simulator (``test_blind_forward.py``, ``test_families.py``).
+"""
 
 from __future__ import annotations
 
@@ -41,6 +46,7 @@ def _check_named(d, effect, sensor, truth_rec):
             assert abs(abs(f["gross_mm"]) - truth_rec["size"]) < K_SIGMA * f["stderr"] + K_SIGMA * 0.003
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", sorted(DETECTABLE))
 def test_hidden_effect_named_blind(effect):
     he = draw(effect, 0)
@@ -93,10 +99,12 @@ def test_extended_simulation_predicts_measured_rms():
     assert abs(sim_e[1] / meas[1] - 1) < 4 * 0.08
 
 
+@pytest.mark.slow
 def test_null_gives_none():
-    """8 seeded null runs. The claim is a false-alarm rate <= 5 % (measured: 1 %); at 5 %, two or
-    more alarms in 8 trials happen with probability 5.7 %, at the measured 1 % with 0.3 %."""
-    causes = [diagnose(run([], 500 + s)[0], folds=FOLDS, sim_reps=1).cause for s in range(8)]
+    """5 seeded null runs (the forward simulator's nulls are in test_blind_forward, 200 in the
+    study). The claim is a false-alarm rate <= 5 % (measured: 2 % with unexplained counted, 0.5 %
+    catalogued); at 5 %, two or more alarms in 5 trials happen with probability 2.3 %."""
+    causes = [diagnose(run([], 500 + s)[0], folds=FOLDS, sim_reps=1).cause for s in range(5)]
     assert sum(c != "none" for c in causes) <= 1, causes
 
 
@@ -106,7 +114,7 @@ def test_null_false_alarm_rate_below_5_percent():
     assert sum(c != "none" for c in causes) <= 5, causes
 
 
-@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("seed", range(1))
 def test_out_of_catalogue_not_named_with_confidence(seed):
     ds, _ = run([HiddenEffect("periodic", "L3", 0.01)], 700 + seed)
     d = diagnose(ds, folds=FOLDS, sim_reps=1)

@@ -153,6 +153,26 @@ class Drift(Component):
         return _sensor_basis(np.array(x), d0.shape[1], self.sensors)
 
 
+_SPLINES = {}
+
+
+def _spline_setup(a, b, n_inner):
+    """Knots of the cubic spline on ``[a, b]`` with ``n_inner`` even interior knots, and each basis
+    function's least-squares line there: ``(t, (a0 (nb,), a1 (nb,)), a1)`` (cached)."""
+    key = (a, b, n_inner)
+    if key not in _SPLINES:
+        from scipy.interpolate import BSpline
+
+        inner = np.linspace(a, b, n_inner + 2)[1:-1]
+        t = np.concatenate([[a] * 4, inner, [b] * 4])
+        g = np.linspace(a, b, 201)
+        G = BSpline.design_matrix(g, t, 3).toarray()
+        A = np.stack([np.ones_like(g), g], axis=1)
+        coef = np.linalg.lstsq(A, G, rcond=None)[0]  # (2, nb)
+        _SPLINES[key] = (t, (coef[0], coef[1]), coef[1])
+    return _SPLINES[key]
+
+
 def _legendre23(x):
     return 0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)
 
@@ -231,22 +251,20 @@ class Nonlinearity(Component):
         their least-squares line there, and their derivatives in ``x``."""
         from scipy.interpolate import BSpline
 
-        k = 3
-        inner = np.linspace(a, b, self.SPLINE_KNOTS + 2)[1:-1]
-        t = np.concatenate([[a] * (k + 1), inner, [b] * (k + 1)])
-        nb = len(t) - k - 1
-        g = np.linspace(a, b, 201)
-        A = np.stack([np.ones_like(g), g], axis=1)
-        cols, ders = [], []
-        for j in range(nb):
+        t, line, dline = _spline_setup(float(a), float(b), self.SPLINE_KNOTS)
+        xf = np.asarray(x, float).ravel()
+        B = BSpline.design_matrix(xf, t, 3, extrapolate=True).toarray()  # (m, nb)
+        nb = B.shape[1]
+        dB = np.zeros_like(B)
+        for j in range(nb):  # derivative of each basis function (nb small)
             c = np.zeros(nb)
             c[j] = 1.0
-            bs = BSpline(t, c, k, extrapolate=True)
-            a0, a1 = np.linalg.lstsq(A, bs(g), rcond=None)[0]
-            cols.append(bs(x) - a0 - a1 * x)
-            ders.append(bs.derivative()(x) - a1)
+            dB[:, j] = BSpline(t, c, 3, extrapolate=True).derivative()(xf)
+        P = B - line[0][None, :] - xf[:, None] * line[1][None, :]
+        dP = dB - dline[None, :]
+        shape = np.shape(x) + (nb - 2,)
         # nb - 2 independent columns remain after removing the line: drop the first and last
-        return np.stack(cols[1:-1], axis=-1), np.stack(ders[1:-1], axis=-1)
+        return P[:, 1:-1].reshape(shape), dP[:, 1:-1].reshape(shape)
 
     def _legendre(self, x):
         """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
@@ -255,13 +273,14 @@ class Nonlinearity(Component):
 
         if self.order == 0:
             return self._spline(x, *self._span_x)
-        cols, ders = [], []
-        for j in range(2, self.order + 1):
+        V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
+        D = np.zeros((self.order, self.order + 1))  # column j: coefficients of P_j' in P0 .. P_order-1
+        for j in range(1, self.order + 1):
             c = np.zeros(j + 1)
             c[j] = 1.0
-            cols.append(legendre.legval(x, c))
-            ders.append(legendre.legval(x, legendre.legder(c)))
-        return np.stack(cols, axis=-1), np.stack(ders, axis=-1)
+            D[:j, j] = legendre.legder(c)
+        dV = legendre.legvander(x, self.order - 1) @ D
+        return V[..., 2:], dV[..., 2:]
 
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
