@@ -16,6 +16,7 @@ from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
+from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of
 from metrology.diagnosis.fit import Fit, fit_any, geometry
@@ -225,6 +226,14 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
                             pairs=not any(c.per_pose for c in f.components))
     kept = [j for j, s in enumerate(chosen) if battery_on(tests_ext, _sensors_of(s.component, n))
             >= THRESHOLDS["alpha_battery"]]
+    # a characteristic that follows another sensor's distance better is crosstalk, not the
+    # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
+    xtalk = {}
+    for j in list(kept):
+        if chosen[j].cause in ("scale", "nonlinearity"):
+            xtalk[j] = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
+            if xtalk[j]["better"] is not None:
+                kept.remove(j)
     gains = drop_one_gains(ds, b, chosen, folds)
     causes = []
     for j in kept:
@@ -239,6 +248,10 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in _sensors_of(chosen[j].component, n)}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
+        xt = next((x for x in xtalk.values() if x["better"]), None)
+        if xt is not None:  # the characteristic follows another sensor: crosstalk, outside the catalogue
+            lead = replace(chosen[0], label=f"{xt['better']} (crosstalk: predicts held-out poses better than "
+                                            f"{chosen[0].label}, p = {xt['p']:.2g})")
         p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead)
@@ -248,6 +261,12 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     for st in steps:
         if st.chosen is not None:
             confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
+    for j, xc in xtalk.items():
+        for lab in xc["indistinguishable"]:
+            confounding.append({"between": [chosen[j].label, lab], "p_separation": None,
+                                "message": f"the data cannot tell {chosen[j].label} from {lab} (a shift in proportion "
+                                           f"to another sensor's distance, crosstalk, outside the catalogue); "
+                                           f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt"})
     if confounding and confidence == "high":
         confidence = "ambiguous"
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,

@@ -32,6 +32,9 @@ def verdict_summary(v, tb) -> str:
         return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
                 f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm) and no catalogued effect gives a "
                 "significant held-out gain: structure outside the catalogue" + lead)
+    if v.cause == "unexplained" and v.lead is not None and "(crosstalk:" in v.lead.label:
+        return (f"{v.best.label} gives a significant held-out gain, but {v.lead.label}: the effect follows another "
+                "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)")
     if v.cause == "unexplained":
         return (f"{v.best.label} gives a significant held-out gain (RMS ratio {v.best.heldout_rms_ratio:.3g}) but "
                 f"leaves the residuals of its sensors inconsistent with the noise model (battery p = "
