@@ -1,10 +1,8 @@
 """Blind diagnosis of cases drawn by the independent forward simulator (issues 12 and 15).
 
-The fast subset draws a few nulls and one clear case per main family (size at 90 % of the
-family's drawn range, 80 poses) and runs them through the public file contract
-(``write_case`` -> ``diagnose_files``, what ``metro diagnose`` calls). ``nonlinearity`` is not in
-the fast subset: on the current code it is not named right even at 90 % of its range (see
-``benchmarks/study_blind.py``). The full study is ``-m slow``.
+The fast subset draws a few nulls and one clear case per family (size at 90 % of the family's
+drawn range, 80 poses) and runs them through the public file contract (``write_case`` ->
+``diagnose_files``, what ``metro diagnose`` calls). The full study is ``-m slow``.
 """
 
 from __future__ import annotations
@@ -19,7 +17,7 @@ from metrology.jobs.diagnose import diagnose_files
 from metrology.sim.forward import FAMILIES, draw_case, write_case
 
 ROOT = Path(__file__).resolve().parents[2]
-CLEAR = ("pose_error", "scale", "drift", "incidence", "plane_form", "outliers")
+CLEAR = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers")
 ALL_SENSORS = ("pose_error", "plane_form")
 
 

@@ -253,13 +253,16 @@ class Nonlinearity(Component):
 
         t, line, dline = _spline_setup(float(a), float(b), self.SPLINE_KNOTS)
         xf = np.asarray(x, float).ravel()
-        B = BSpline.design_matrix(xf, t, 3, extrapolate=True).toarray()  # (m, nb)
-        nb = B.shape[1]
-        dB = np.zeros_like(B)
+        ok = np.isfinite(xf)  # a reading the model cannot place (NaN) has no basis value
+        nb = len(t) - 4
+        B = np.full((len(xf), nb), np.nan)
+        dB = np.full((len(xf), nb), np.nan)
+        if np.any(ok):
+            B[ok] = BSpline.design_matrix(xf[ok], t, 3, extrapolate=True).toarray()
         for j in range(nb):  # derivative of each basis function (nb small)
             c = np.zeros(nb)
             c[j] = 1.0
-            dB[:, j] = BSpline(t, c, 3, extrapolate=True).derivative()(xf)
+            dB[ok, j] = BSpline(t, c, 3, extrapolate=True).derivative()(xf[ok])
         P = B - line[0][None, :] - xf[:, None] * line[1][None, :]
         dP = dB - dline[None, :]
         shape = np.shape(x) + (nb - 2,)
