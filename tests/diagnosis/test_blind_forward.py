@@ -67,7 +67,8 @@ def study():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: baseline right-inside-range is below 95 % for several families")
+@pytest.mark.xfail(strict=False, reason="issue 12: right-inside-range is below 95 % for pose_error (3 sensors), "
+                                        "incidence and drift (docs/diagnose.md, measured)")
 def test_study_right_inside_detectable_range(study):
     for fam, r in study["families"].items():
         assert r["n"] >= 20
@@ -75,7 +76,7 @@ def test_study_right_inside_detectable_range(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: null false-cause rate not yet shown <= 1 %")
+@pytest.mark.xfail(strict=False, reason="issue 12: 200 nulls not yet run on the final code (docs/diagnose.md)")
 def test_study_null_false_cause_rate(study):
     n = study["null"]
     assert n["n"] >= 200
@@ -83,7 +84,16 @@ def test_study_null_false_cause_rate(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: crosstalk is named as a catalogued cause on the current code")
+@pytest.mark.xfail(strict=False, reason="issue 12: crosstalk that cannot be told from a gain error is still named "
+                                        "scale, with confidence ambiguous (docs/diagnose.md)")
 def test_study_out_of_catalogue_never_catalogued(study):
     assert study["ooc"]["n"] >= 40
     assert study["ooc"]["catalogued_named"] == 0, study["ooc"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of pairs (docs/diagnose.md)")
+def test_study_pairs_both_named(study):
+    p = study["pairs"]
+    assert p["both_right"] >= 0.9 * p["n"], p
+    assert p["wrong_added"] <= 0.02 * p["n"], p
