@@ -28,7 +28,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-PAPER_EXPERIMENT_DEG = 0.1048
+from study_paper_gap import PAPER_EXPERIMENT_DEG, crossing  # same directory: run as a script
+
 SIZES = {
     "none": [0.0],
     "scale": [0.02, 0.1, 0.5],
@@ -54,19 +55,6 @@ def trial(args):
     named = [c["cause"] for c in res["causes"]] or [res["cause"]]
     return {"family": family, "size": size, "seed": seed,
             "normal_deg": float(res["discrepancy"]["measured_heldout_normal_deg"]), "named": named}
-
-
-def crossing(sizes, values, target):
-    """Size at which ``values`` (rising with size) reach ``target``: log-log interpolation, or None."""
-    sizes, values = np.asarray(sizes, float), np.asarray(values, float)
-    above = np.nonzero(values >= target)[0]
-    if len(above) == 0:
-        return None
-    k = int(above[0])
-    if k == 0:
-        return float(sizes[0])
-    x0, x1, y0, y1 = np.log(sizes[k - 1]), np.log(sizes[k]), np.log(values[k - 1]), np.log(values[k])
-    return float(np.exp(x0 + (np.log(target) - y0) * (x1 - x0) / (y1 - y0)))
 
 
 def main(argv=None):
