@@ -269,13 +269,13 @@ class Nonlinearity(Component):
         # nb - 2 independent columns remain after removing the line: drop the first and last
         return P[:, 1:-1].reshape(shape), dP[:, 1:-1].reshape(shape)
 
-    def _legendre(self, x):
+    def _legendre(self, x, cov):
         """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
         spline's columns for ``order=0``)."""
         from numpy.polynomial import legendre
 
         if self.order == 0:
-            return self._spline(x, *self._span_x)
+            return self._spline(x, *self._span_x(cov))
         V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
         D = np.zeros((self.order, self.order + 1))  # column j: coefficients of P_j' in P0 .. P_order-1
         for j in range(1, self.order + 1):
@@ -287,29 +287,27 @@ class Nonlinearity(Component):
 
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
-        if self.order == 0 and self.sensors:
-            i = self.sensors[0]
-            a, b = self.span if self.span is not None else (lo[i], hi[i])
-            self._set_span_x(((2 * a - lo[i] - hi[i]) / (hi[i] - lo[i]), (2 * b - lo[i] - hi[i]) / (hi[i] - lo[i])))
         return (2 * d0 - lo - hi) / (hi - lo), 2.0 / (hi - lo)
 
-    def _set_span_x(self, ab):
-        object.__setattr__(self, "_span_x_cache", ab)
-
-    @property
-    def _span_x(self):
-        return getattr(self, "_span_x_cache", (-1.0, 1.0))
+    def _span_x(self, cov):
+        """The spline's interval ``(a, b)`` in normalised units: ``span`` (default the range)."""
+        if not self.sensors:
+            return -1.0, 1.0
+        i = self.sensors[0]
+        lo, hi = cov.range_mm[i]
+        a, b = self.span if self.span is not None else (lo, hi)
+        return (2 * a - lo - hi) / (hi - lo), (2 * b - lo - hi) / (hi - lo)
 
     def basis(self, d0, cov):
         x, _ = self._x(d0, cov)
-        P, _ = self._legendre(x)
+        P, _ = self._legendre(x, cov)
         cols = np.concatenate([d0[..., None], P], axis=-1) if self.with_gain else P
         return _sensor_basis(cols, d0.shape[1], self.sensors)
 
     def d_dd0(self, values, d0, cov):
         x, dx = self._x(d0, cov)
         g = values[0] if self.with_gain else 0.0
-        _, dP = self._legendre(x)
+        _, dP = self._legendre(x, cov)
         deriv = g + (dP @ np.asarray(values[-self._n_shape:], float)) * dx[None, :]
         return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)
 
