@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import typer
 
+from ._help import MetroGroup, use_metro_command
+
 app = typer.Typer(
     name="metro",
     help="Metrology for robotic drilling: datum planes, normal-sensor calibration, normals.",
+    cls=MetroGroup,
     add_completion=True,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -43,6 +46,7 @@ from . import cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_normals 
 
 for _module in (cmd_fit_plane, cmd_calibrate, cmd_normals, cmd_diagnose, cmd_core):
     _module.register(app)
+use_metro_command(app)
 
 
 def main() -> None:
