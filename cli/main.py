@@ -36,8 +36,22 @@ def _version(value: bool) -> None:
 def _root(
     ctx: typer.Context,
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print metro's version and exit."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No warnings, no progress bars (errors still print)."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Note on stderr what each step did and its time."),
 ) -> None:
     """Metrology for robotic drilling: datum planes, normal-sensor calibration, normals."""
+    import warnings
+
+    from ._common import note, set_verbosity, show_warning
+
+    set_verbosity(quiet, verbose)
+    ctx.with_resource(warnings.catch_warnings())  # restored when the run ends
+    warnings.showwarning = show_warning  # a library warning: one "warning:" line on stderr
+    if quiet:
+        warnings.simplefilter("ignore")
+    if ctx.invoked_subcommand is not None:
+        note(f"metro {ctx.invoked_subcommand}")
+        ctx.call_on_close(lambda: note(f"metro {ctx.invoked_subcommand}: done"))
     if ctx.invoked_subcommand is None:  # `metro` alone: the help, and success
         typer.echo(ctx.get_help())
         raise typer.Exit(0)

@@ -2,7 +2,8 @@
 
 A long function takes ``progress: ProgressFn | None = None`` and calls
 ``progress(done, total, what)`` as it goes: ``done`` steps of ``total`` finished, ``what``
-the step starting now (or ``"done"``). The command line turns the calls into a bar on
+the step starting now (or ``"done"``), as ``"stage"`` or ``"stage: detail"`` (``metro -v``
+notes the time of each stage). The command line turns the calls into a bar on
 stderr (``cli/_common.py``); the library never imports a display library.
 """
 
