@@ -16,11 +16,12 @@ from metrology.report.normals import per_point_text, plot_error_map, summarize
 def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt_deg=1.0, standoff_mm=None,
                 noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
                 true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True) -> dict:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, progress=None) -> dict:
     """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
 
     Degrees appear only here, at the edge. Output files are written only after every
     point has been computed (each atomically); a fatal error writes nothing.
+    ``progress(done, total, what)``: see :func:`~metrology.panel.run.run_normals`.
 
     Returns
     -------
@@ -50,7 +51,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
-                      caster=caster, prior_radius_mm=prior_radius_mm)
+                      caster=caster, prior_radius_mm=prior_radius_mm, progress=progress)
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
         where = points_path if points_path is not None else f"grid {grid_mm} mm"
