@@ -168,7 +168,7 @@ def progress_bar(label: str):
             stack.enter_context(bar)
             _LIVE.append(bar)
             stack.callback(_LIVE.pop)
-        task = bar.add_task(label, total=None, what="")
+        task = bar.add_task(label, total=1, what="")
         stack.callback(bar.remove_task, task)
 
         def update(done, total, what):
