@@ -22,16 +22,30 @@ class _State:
     verbose = False
     t0 = time.perf_counter()
     aliases: dict = {}
+    depth = 0  # runs in progress: the demo runs its steps inside its own run
 
 
 STATE = _State()
 
 
 def set_verbosity(quiet: bool, verbose: bool) -> None:
-    """Called by the root callback at the start of each run."""
+    """Start a run: ``-q``/``-v`` as given, the clock of the ``-v`` notes at zero."""
     STATE.quiet, STATE.verbose = bool(quiet), bool(verbose) and not quiet
     STATE.t0 = time.perf_counter()
     STATE.aliases = {}
+
+
+def begin_run(quiet: bool, verbose: bool):
+    """Called by the root callback; returns the function that ends the run. A run inside
+    another (a demo step) keeps the outer run's ``-q``/``-v``, clock and names."""
+    if STATE.depth == 0:
+        set_verbosity(quiet, verbose)
+    STATE.depth += 1
+
+    def end():
+        STATE.depth -= 1
+
+    return end
 
 
 def shown(text: str) -> str:

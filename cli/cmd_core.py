@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, STATE, echo_json, fail, guarded, progress_bar
+from ._common import JSON_HELP, echo_json, fail, guarded, progress_bar
 
 
 def register(app: typer.Typer) -> None:
@@ -32,8 +32,6 @@ def register(app: typer.Typer) -> None:
         fixtures = DATA_DIR if fixtures is None else fixtures
         out = new_output_dir() if out is None else out
         command = get_command(app)
-        # the steps run under the same -q/-v as the demo
-        root = (["-q"] if STATE.quiet else []) + (["-v"] if STATE.verbose else [])
         steps = []
 
         def announce(title, args):
@@ -43,10 +41,10 @@ def register(app: typer.Typer) -> None:
 
         def run_step(args):
             if not json_out:
-                return command.main([*root, *args], prog_name="metro", standalone_mode=False)
+                return command.main(args, prog_name="metro", standalone_mode=False)
             buf = io.StringIO()
             with contextlib.redirect_stdout(buf):
-                rc = command.main([*root, *args, "--json"], prog_name="metro", standalone_mode=False)
+                rc = command.main([*args, "--json"], prog_name="metro", standalone_mode=False)
             steps[-1]["result"] = None if rc else json.loads(buf.getvalue())
             return rc
 

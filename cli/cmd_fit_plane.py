@@ -6,7 +6,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, fail, guarded, warn
+from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar, warn
 
 CLOUD_FORMATS = ("ply", "pcd", "e57", "xyz", "xyzn", "xyzrgb", "pts", "csv", "txt")
 
@@ -41,8 +41,9 @@ def register(app: typer.Typer) -> None:
             fail(f"--format {fmt}: " + ("only for a cloud on stdin (CLOUD '-'); a file's suffix names its format"
                                         if cloud != "-" else f"expected one of {', '.join(CLOUD_FORMATS)}"))
         suffix = format_suffix("CLOUD", fmt, {"." + f for f in CLOUD_FORMATS}, "cloud")
-        with stdin_files(("CLOUD", cloud, suffix)) as (path,):
-            fit = fit_plane_file(path, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, warn=warn)
+        with stdin_files(("CLOUD", cloud, suffix)) as (path,), progress_bar("fit-plane") as progress:
+            fit = fit_plane_file(path, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, warn=warn,
+                                 progress=progress)
         if as_json:
             echo_json(fit.to_dict(), "plane")
         else:

@@ -42,9 +42,9 @@ def _root(
     """Metrology for robotic drilling: datum planes, normal-sensor calibration, normals."""
     import warnings
 
-    from ._common import note, set_verbosity, show_warning
+    from ._common import begin_run, note, show_warning
 
-    set_verbosity(quiet, verbose)
+    ctx.call_on_close(begin_run(quiet, verbose))
     ctx.with_resource(warnings.catch_warnings())  # restored when the run ends
     warnings.showwarning = show_warning  # a library warning: one "warning:" line on stderr
     if quiet:
