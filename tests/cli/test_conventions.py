@@ -109,6 +109,8 @@ def test_h_and_version_and_bare_metro():
     assert r.exit_code == 0 and r.stdout.startswith("metro ")
     r = runner.invoke(app, [])
     assert r.exit_code == 0 and "Usage:" in r.stdout
+    r = runner.invoke(app, ["--show-completion"], prog_name="metro", env={"SHELL": "/bin/bash"})
+    assert r.exit_code == 0 and "_METRO_COMPLETE" in r.stdout  # the bash completion script
 
 
 def test_stdin_errors_name_stdin_and_the_line():
