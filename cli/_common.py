@@ -187,7 +187,7 @@ def progress_bar(label: str):
 
         def update(done, total, what):
             log(what)
-            bar.update(task, completed=done, total=total, what=shown(what))
+            bar.update(task, completed=done, total=total, what=shown(what), refresh=True)
 
         yield update
         log(None)

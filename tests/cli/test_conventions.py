@@ -59,10 +59,10 @@ def _cases(tmp, small_export):
 
 
 def _one_step_demo(monkeypatch):
-    """The demo cut to its first step (the walk-through itself is tested in test_core.py)."""
+    """The demo cut to one quick step (the walk-through itself is tested in test_core.py)."""
     import metrology.jobs.demo as demo
 
-    monkeypatch.setattr(demo, "DEMO_STEPS", demo.DEMO_STEPS[:1])
+    monkeypatch.setattr(demo, "DEMO_STEPS", (("1. Print the version", "version"),))
 
 
 def test_every_command_takes_json_and_tags_its_output(tmp_path, small_export, monkeypatch):
@@ -79,7 +79,7 @@ def test_every_command_takes_json_and_tags_its_output(tmp_path, small_export, mo
         assert SCHEMA_PATTERN.match(out["schema"]), f"{name}: schema {out['schema']!r}"
         assert list(out)[0] == "schema"
         if name == "demo":  # each step's own output is tagged too
-            assert [s["result"]["schema"] for s in out["steps"]] == ["metro.plane/1"]
+            assert [s["result"]["schema"] for s in out["steps"]] == ["metro.version/1"]
         if stdin is not None:  # the stdin input is named <stdin>, never its temporary file
             assert "metro-stdin-" not in r.stdout
 
@@ -183,7 +183,7 @@ def test_progress_bar_on_a_terminal_only(tmp_path, monkeypatch):
     monkeypatch.setattr(common, "_stderr_is_tty", lambda: True)
     r = runner.invoke(app, ["demo", "--out", str(tmp_path / "b"), "--json"])
     assert r.exit_code == 0, r.output
-    assert "demo" in r.stderr and "0/1" in r.stderr and "step 1. metro fit-plane" in r.stderr and "━" in r.stderr
+    assert "demo" in r.stderr and "0/1" in r.stderr and "step 1. metro version" in r.stderr and "━" in r.stderr
     assert json.loads(r.stdout)["schema"] == "metro.demo/1"  # stdout holds the JSON only
     r = runner.invoke(app, ["-q", "demo", "--out", str(tmp_path / "c"), "--json"])
     assert r.exit_code == 0 and r.stderr == ""
