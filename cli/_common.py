@@ -1,19 +1,63 @@
-"""Shared CLI plumbing: one-line errors with exit code 2, JSON output."""
+"""Shared CLI plumbing: one-line errors with exit code 2, warnings and ``-v`` notes on
+stderr, ``-q``, progress bars, JSON output with its schema tag."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
+import time
 
 import typer
 
 EXIT_BAD_INPUT = 2
 
 
+class _State:
+    """What the root options (``metro -q``/``-v``) set for the run, and the names shown
+    for temporary files (stdin spooled to a file is shown as ``<stdin>``)."""
+
+    quiet = False
+    verbose = False
+    t0 = time.perf_counter()
+    aliases: dict = {}
+    depth = 0  # runs in progress: the demo runs its steps inside its own run
+
+
+STATE = _State()
+
+
+def set_verbosity(quiet: bool, verbose: bool) -> None:
+    """Start a run: ``-q``/``-v`` as given, the clock of the ``-v`` notes at zero."""
+    STATE.quiet, STATE.verbose = bool(quiet), bool(verbose) and not quiet
+    STATE.t0 = time.perf_counter()
+    STATE.aliases = {}
+
+
+def begin_run(quiet: bool, verbose: bool):
+    """Called by the root callback; returns the function that ends the run. A run inside
+    another (a demo step) keeps the outer run's ``-q``/``-v``, clock and names."""
+    if STATE.depth == 0:
+        set_verbosity(quiet, verbose)
+    STATE.depth += 1
+
+    def end():
+        STATE.depth -= 1
+
+    return end
+
+
+def shown(text: str) -> str:
+    """``text`` with every temporary path that stands for stdin replaced by ``<stdin>``."""
+    for real, name in STATE.aliases.items():
+        text = text.replace(real, name)
+    return text
+
+
 def fail(message: str) -> None:
-    """Print ``error: message`` on one line to stderr and exit with code 2."""
-    typer.echo(f"error: {' '.join(str(message).split())}", err=True)
+    """Print ``error: message`` on one line to stderr and exit with code 2 (even under ``-q``)."""
+    typer.echo(f"error: {' '.join(shown(str(message)).split())}", err=True)
     raise typer.Exit(EXIT_BAD_INPUT)
 
 
@@ -35,11 +79,29 @@ QUATERNION_HELP = ("What the columns qw,qx,qy,qz hold: wxyz (scalar first, the f
 POSITION_HELP = "Unit of the export's x,y,z columns: mm, m or in (converted to mm)."
 NO_READING_HELP = ("The PLC's 'no reading' code in the d_ columns (default 0 where the sensor's range excludes it): "
                    "dropped and counted, never used as a distance.")
+JSON_HELP = "Print the result as JSON on stdout (with its \"schema\" tag)."
 
 
 def warn(line: str) -> None:
-    """Print ``warning: line`` to stderr."""
-    typer.echo(f"warning: {line}", err=True)
+    """Print ``warning: line`` to stderr, unless ``-q``."""
+    if not STATE.quiet:
+        typer.echo(f"warning: {shown(str(line))}", err=True)
+
+
+def note(line: str) -> None:
+    """Under ``-v``: print ``[  1.23 s] line`` to stderr (seconds since the command started)."""
+    if STATE.verbose:
+        typer.echo(f"[{time.perf_counter() - STATE.t0:7.2f} s] {shown(str(line))}", err=True)
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """:func:`warnings.showwarning` for the run: a library's warning as one ``warning:`` line."""
+    warn(str(message))
+
+
+def echo(text: str) -> None:
+    """Print ``text`` on stdout (stdin's temporary file named ``<stdin>``)."""
+    typer.echo(shown(str(text)))
 
 
 def to_jsonable(obj):
@@ -62,9 +124,70 @@ def to_jsonable(obj):
     return obj
 
 
-def dumps(obj) -> str:
-    return json.dumps(to_jsonable(obj), indent=2, sort_keys=False)
+def dumps(obj, kind: str) -> str:
+    """JSON text of ``obj`` tagged ``"schema": "metro.<kind>/1"`` (:func:`metrology.core.schema.tagged`)."""
+    from metrology.core.schema import tagged
+
+    return shown(json.dumps(to_jsonable(tagged(kind, obj)), indent=2, sort_keys=False))
 
 
-def echo_json(obj) -> None:
-    sys.stdout.write(dumps(obj) + "\n")
+def echo_json(obj, kind: str) -> None:
+    """Print ``obj`` as JSON with its schema tag on stdout."""
+    sys.stdout.write(dumps(obj, kind) + "\n")
+
+
+def _stderr_is_tty() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+_LIVE = []  # the one rich Progress on screen (nested bars add a line to it)
+
+
+@contextlib.contextmanager
+def progress_bar(label: str):
+    """Yield a :data:`metrology.core.progress.ProgressFn` drawn as a rich bar on stderr.
+
+    Silent when stderr is not a terminal and under ``-q``; under ``-v`` each step is also
+    noted with its duration. A bar opened inside another (the demo's steps) is a second
+    line of the same display.
+    """
+    last = {"what": None, "t": time.perf_counter()}
+
+    def log(what):  # one note per stage: "selection step 1: candidate 3/36" is stage "selection step 1"
+        stage = None if what is None else what.split(":")[0]
+        if stage != last["what"]:
+            now = time.perf_counter()
+            if last["what"] not in (None, "done"):
+                note(f"{label}: {last['what']} ({now - last['t']:.2f} s)")
+            last.update(what=stage, t=now)
+
+    if STATE.quiet or not _stderr_is_tty():
+        yield lambda done, total, what: log(what)
+        log(None)
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with contextlib.ExitStack() as stack:
+        if _LIVE:
+            bar = _LIVE[-1]
+        else:
+            bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                           TimeElapsedColumn(), TextColumn("{task.fields[what]}"),
+                           console=Console(file=sys.stderr, force_terminal=True), transient=True,
+                           redirect_stdout=sys.stdout.isatty(), redirect_stderr=True)
+            stack.enter_context(bar)
+            _LIVE.append(bar)
+            stack.callback(_LIVE.pop)
+        task = bar.add_task(label, total=1, what="")
+        stack.callback(bar.remove_task, task)
+
+        def update(done, total, what):
+            log(what)
+            bar.update(task, completed=done, total=total, what=shown(what), refresh=True)
+
+        yield update
+        log(None)

@@ -7,7 +7,10 @@ from typing import Optional
 
 import typer
 
-from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, warn
+from ._common import JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, echo, echo_json, fail, guarded, progress_bar, warn
+from ._stdin import plane_suffix, stdin_files
+
+STDIN = " ('-' for stdin)"
 
 METHODS = ("lsq", "iekf", "ekf", "ekf_paper", "method1")
 
@@ -22,11 +25,11 @@ def register(app: typer.Typer) -> None:
     @app.command("calibrate")
     @guarded
     def calibrate_cmd(
-        export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)."),
-        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
-        layout: Path = typer.Option(..., "--layout", help="Nominal sensor layout TOML."),
+        export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)" + STDIN),
+        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum" + STDIN),
+        layout: Path = typer.Option(..., "--layout", help="Nominal sensor layout TOML" + STDIN),
         method: str = typer.Option("lsq", "--method", help=f"Estimator: {', '.join(METHODS)}."),
-        json_out: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the calibrated layout TOML here."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write convergence and residual PNGs into DIR."),
         target_mm: float = typer.Option(0.05, "--target-mm", help="Wanted 1-sigma of the zero points, mm."),
@@ -46,24 +49,26 @@ def register(app: typer.Typer) -> None:
         from metrology.jobs.calibrate import calibrate_files
         from metrology.report.calibration import calibration_text, calibration_warnings
 
-        report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
-                                 out=out, plot_dir=plot, quaternion_order=quaternion_order,
-                                 position_units=position_units, no_reading=no_reading, warn=warn)
+        with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
+                         ("--layout", layout, ".toml")) as (export, plane, layout), progress_bar("calibrate") as progress:
+            report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
+                                     out=out, plot_dir=plot, quaternion_order=quaternion_order,
+                                     position_units=position_units, no_reading=no_reading, warn=warn, progress=progress)
         for w in calibration_warnings(report):
-            typer.echo(f"warning: {w}", err=True)
+            warn(w)
         if json_out:
-            echo_json(report.to_dict())
+            echo_json(report.to_dict(), "calibration")
         else:
-            typer.echo(calibration_text(report))
+            echo(calibration_text(report))
 
     @app.command("validate")
     @guarded
     def validate_cmd(
-        export: Path = typer.Argument(..., help="Tracker export CSV of the validation poses."),
-        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
-        layout: Path = typer.Option(..., "--layout", help="Layout TOML to validate (usually the calibrated one)."),
-        layout_before: Optional[Path] = typer.Option(None, "--layout-before", help="Layout to compare with (nominal)."),
-        json_out: bool = typer.Option(False, "--json", help="Print max_deg, mean_deg, std_deg per layout as JSON."),
+        export: Path = typer.Argument(..., help="Tracker export CSV of the validation poses" + STDIN),
+        plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum" + STDIN),
+        layout: Path = typer.Option(..., "--layout", help="Layout TOML to validate (usually the calibrated one)" + STDIN),
+        layout_before: Optional[Path] = typer.Option(None, "--layout-before", help="Layout to compare with (nominal)" + STDIN),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " Max, mean and std per layout, deg."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write the deviation per pose as a PNG here."),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
@@ -74,9 +79,11 @@ def register(app: typer.Typer) -> None:
         from metrology.jobs.calibrate import validate_files
         from metrology.report.calibration import validation_text
 
-        report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
-                                position_units=position_units, no_reading=no_reading, warn=warn)
+        with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix), ("--layout", layout, ".toml"),
+                         ("--layout-before", layout_before, ".toml")) as (export, plane, layout, layout_before):
+            report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
+                                    position_units=position_units, no_reading=no_reading, warn=warn)
         if json_out:
-            echo_json(report.to_dict())
+            echo_json(report.to_dict(), "validation")
         else:
-            typer.echo(validation_text(report))
+            echo(validation_text(report))

@@ -7,17 +7,21 @@ from pathlib import Path
 
 import typer
 
-from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo_json, fail, guarded, warn
+from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo, echo_json, fail, guarded,
+                      progress_bar, warn)
+from ._stdin import plane_suffix, stdin_files
+
+STDIN = " ('-' for stdin)"
 
 
 def register(app: typer.Typer) -> None:
     @app.command("diagnose")
     @guarded
     def diagnose(
-        export: Path = typer.Argument(..., help="tracker export CSV"),
-        plane: Path = typer.Option(..., "--plane", help="datum plane JSON or datum cloud"),
-        layout: Path = typer.Option(..., "--layout", help="sensor layout TOML (with noise_mm)"),
-        json_out: bool = typer.Option(False, "--json", help="print the full result as JSON"),
+        export: Path = typer.Argument(..., help="tracker export CSV" + STDIN),
+        plane: Path = typer.Option(..., "--plane", help="datum plane JSON or datum cloud" + STDIN),
+        layout: Path = typer.Option(..., "--layout", help="sensor layout TOML (with noise_mm)" + STDIN),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP),
         report: Path = typer.Option(None, "--report", help="directory for the residual plots"),
         folds: int = typer.Option(5, "--folds", help="k of the k-fold-by-pose held-out figures"),
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
@@ -31,27 +35,31 @@ def register(app: typer.Typer) -> None:
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
-        d = diagnose_files(export, plane, layout, quaternion_order, position_units, no_reading, warn=warn, folds=folds,
-                           seed=seed)
-        text = dumps(d.to_dict()) if json_out else report_text(d)
+        with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
+                         ("--layout", layout, ".toml")) as (export, plane, layout), progress_bar("diagnose") as progress:
+            d = diagnose_files(export, plane, layout, quaternion_order, position_units, no_reading, warn=warn, folds=folds,
+                               seed=seed, progress=progress)
+        text = dumps(d.to_dict(), "diagnosis") if json_out else report_text(d)
         if report is not None:
-            files = plot_report(d, report)
+            with progress_bar("diagnose") as progress:
+                progress(0, 1, "drawing the residual plots")
+                files = plot_report(d, report)
             if not json_out:
                 text += "\n\nplots: " + ", ".join(files)
-        typer.echo(text)
+        echo(text)
 
     @app.command("simulate")
     @guarded
     def simulate(
-        layout: Path = typer.Option(..., "--layout", help="true sensor layout TOML (noise_mm required)"),
-        plane: Path = typer.Option(..., "--plane", help="datum plane JSON (tracker frame)"),
+        layout: Path = typer.Option(..., "--layout", help="true sensor layout TOML (noise_mm required)" + STDIN),
+        plane: Path = typer.Option(..., "--plane", help="datum plane JSON (tracker frame)" + STDIN),
         out: Path = typer.Option(..., "--out", help="export CSV to write"),
         effect: str = typer.Option(None, "--effect", help="effect to hide (catalogue name, or 'periodic')"),
         sensor: str = typer.Option(None, "--sensor", help="sensor it acts on (not for plane_form, pose_error)"),
         size: float = typer.Option(None, "--size", help="effect size (see docs: its unit depends on the effect)"),
         poses: int = typer.Option(80, "--poses", help="number of poses"),
         seed: int = typer.Option(0, "--seed", help="random seed"),
-        json_out: bool = typer.Option(False, "--json", help="print what was hidden as JSON"),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " What was hidden."),
         cloud: Path = typer.Option(None, "--cloud", help="also write a tracker scan of the datum (PLY), with the "
                                    "plane_form effect if hidden"),
     ) -> None:
@@ -59,8 +67,9 @@ def register(app: typer.Typer) -> None:
         from metrology.jobs.simulate import simulate_files
         from metrology.report.diagnose import simulate_text
 
-        truth, n_points = simulate_files(layout, plane, out, effect, sensor, size, poses, seed, cloud)
+        with stdin_files(("--layout", layout, ".toml"), ("--plane", plane, ".json")) as (layout, plane):
+            truth, n_points = simulate_files(layout, plane, out, effect, sensor, size, poses, seed, cloud)
         if json_out:
-            echo_json(truth)
+            echo_json(truth, "simulation")
         else:
-            typer.echo(simulate_text(out, poses, effect, sensor, size, cloud, n_points))
+            echo(simulate_text(out, poses, effect, sensor, size, cloud, n_points))

@@ -6,33 +6,45 @@ from typing import Optional
 
 import typer
 
-from ._common import echo_json, guarded
+from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar, warn
+
+CLOUD_FORMATS = ("ply", "pcd", "e57", "xyz", "xyzn", "xyzrgb", "pts", "csv", "txt")
 
 
 def register(app: typer.Typer) -> None:
     @app.command("fit-plane")
     @guarded
     def fit_plane(
-        cloud: str = typer.Argument(..., help="Point cloud: .ply .pcd .e57 .xyz .xyzn .xyzrgb .pts .csv .txt (mm)."),
+        cloud: str = typer.Argument(..., help="Point cloud: .ply .pcd .e57 .xyz .xyzn .xyzrgb .pts .csv .txt (mm); "
+                                    "'-' for stdin."),
         threshold_mm: Optional[float] = typer.Option(
             None, "--threshold-mm", help="Inlier threshold on the distance to the plane, mm (default: 3 x robust sigma of the residuals)."
         ),
         seed: int = typer.Option(0, "--seed", help="Seed of the subsample and RANSAC (same seed, same bytes)."),
-        as_json: bool = typer.Option(False, "--json", help="Print the result as JSON instead of a table."),
+        as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
         out: Optional[str] = typer.Option(None, "--out", help="Write the plane JSON (other commands' --plane)."),
         plot: Optional[str] = typer.Option(None, "--plot", help="Write a residual map over the plate (.png/.pdf/.svg)."),
         units: Optional[str] = typer.Option(None, "--units", help="Unit of the cloud's numbers: mm (default), m or in."),
+        fmt: Optional[str] = typer.Option(None, "--format", help="Format of a cloud on stdin (CLOUD '-'): "
+                                          f"{', '.join(CLOUD_FORMATS)}; PLY and PCD are also known by their header."),
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
         from metrology.jobs.fit_plane import fit_plane_file
         from metrology.report.datum import format_plane_fit
 
+        from ._stdin import format_suffix, stdin_files
+
         if units is not None and units not in ("mm", "m", "in"):
             raise ValueError(f"--units {units!r}: expected mm, m or in")
-        fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units,
-                             warn=lambda message: typer.echo(f"warning: {message}", err=True))
+        if fmt is not None and (cloud != "-" or fmt.lower() not in CLOUD_FORMATS):
+            fail(f"--format {fmt}: " + ("only for a cloud on stdin (CLOUD '-'); a file's suffix names its format"
+                                        if cloud != "-" else f"expected one of {', '.join(CLOUD_FORMATS)}"))
+        suffix = format_suffix("CLOUD", fmt, {"." + f for f in CLOUD_FORMATS}, "cloud")
+        with stdin_files(("CLOUD", cloud, suffix)) as (path,), progress_bar("fit-plane") as progress:
+            fit = fit_plane_file(path, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, warn=warn,
+                                 progress=progress)
         if as_json:
-            echo_json(fit.to_dict())
+            echo_json(fit.to_dict(), "plane")
         else:
-            typer.echo(format_plane_fit(fit))
+            echo(format_plane_fit(fit))

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import typer
 
+from ._help import MetroGroup, use_metro_command
+
 app = typer.Typer(
     name="metro",
     help="Metrology for robotic drilling: datum planes, normal-sensor calibration, normals.",
+    cls=MetroGroup,
     add_completion=True,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -33,8 +36,22 @@ def _version(value: bool) -> None:
 def _root(
     ctx: typer.Context,
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print metro's version and exit."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No warnings, no progress bars (errors still print)."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Note on stderr what each step did and its time."),
 ) -> None:
     """Metrology for robotic drilling: datum planes, normal-sensor calibration, normals."""
+    import warnings
+
+    from ._common import begin_run, note, show_warning
+
+    ctx.call_on_close(begin_run(quiet, verbose))
+    ctx.with_resource(warnings.catch_warnings())  # restored when the run ends
+    warnings.showwarning = show_warning  # a library warning: one "warning:" line on stderr
+    if quiet:
+        warnings.simplefilter("ignore")
+    if ctx.invoked_subcommand is not None:
+        note(f"metro {ctx.invoked_subcommand}")
+        ctx.call_on_close(lambda: note(f"metro {ctx.invoked_subcommand}: done"))
     if ctx.invoked_subcommand is None:  # `metro` alone: the help, and success
         typer.echo(ctx.get_help())
         raise typer.Exit(0)
@@ -43,6 +60,7 @@ from . import cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_normals 
 
 for _module in (cmd_fit_plane, cmd_calibrate, cmd_normals, cmd_diagnose, cmd_core):
     _module.register(app)
+use_metro_command(app)
 
 
 def main() -> None:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrology.core.plane import Plane
+from metrology.core.schema import schema_tag
 from metrology.datum.form import DatumForm
 from metrology.datum.scale import INLIER_K_SIGMA, truncated_normal_std
 
@@ -124,7 +125,7 @@ class PlaneFit:
             return x if math.isfinite(x) else None
 
         out = {
-            "schema": "metro.plane/1",
+            "schema": schema_tag("plane"),
             "source": self.source,
             "format": self.format,
             "frame": "cloud",

@@ -14,6 +14,7 @@ import numpy as np
 
 from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
+from metrology.core.progress import ProgressFn, notify
 from metrology.core.model import readings
 from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
 from metrology.diagnosis.crosstalk import crosstalk_check
@@ -368,34 +369,41 @@ def _steps_table(b: BaseAnalysis, steps) -> list:
     return out
 
 
-def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0) -> Diagnosis:
+def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: ProgressFn | None = None) -> Diagnosis:
     """Run the full diagnosis on a :class:`~metrology.calibration.dataset.Dataset` (see
     :mod:`metrology.diagnosis`).
 
     ``folds``: k of the k-fold by pose; ``sim_reps``: simulated copies of the data set per
     side-by-side figure; ``seed``: of the simulation's noise (the diagnosis itself is
-    deterministic).
+    deterministic); ``progress(done, total, what)``: called at each of the 5 stages and
+    before each candidate is scored.
     """
     p = ds.obs.d.shape[0]
     if p < 2 * folds:
         raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
     rng = np.random.default_rng(seed)
+    notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)
     flags, p_out = flag_outliers(ds.layout, ds.obs, b.cov, b.sigma, b.theta0)
-    steps = forward_select(ds, b, flags, p_out, folds)
+    steps = forward_select(ds, b, flags, p_out, folds, on_candidate=lambda k, i, n, label: notify(
+        progress, 1, 5, f"selection step {k}: candidate {i + 1}/{n} ({label})"))
     chosen = [st.chosen for st in steps if st.chosen is not None]
+    notify(progress, 2, 5, "verdict and the causes' gains")
     v = verdict(ds, b, steps, folds, rng)
     joint = None
     if chosen:  # the joint model of every cause selected, with the last step's held-out figures
         joint = replace(chosen[-1], fit=v.best.fit, label="+".join(s.label for s in chosen))
     named_flags = flags_of(chosen)
+    notify(progress, 3, 5, "side-by-side simulation")
     discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)
     confidence = v.confidence
     summary = verdict_summary(v, b.tests)
     scored = steps[0].scored
     datum = b.datum
     if datum is not None:
+        notify(progress, 4, 5, "datum check")
         datum, confidence, summary = check_datum(ds, b, v, chosen, scored, confidence, summary)
+    notify(progress, 5, 5, "done")
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure)
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,

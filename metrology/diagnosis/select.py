@@ -22,6 +22,7 @@ Families and their members (what is chosen by held-out error, never by the in-sa
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -92,13 +93,16 @@ class Step:
     lead: CandidateResult | None
 
 
-def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds, n_cand):
+def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds, n_cand, on_candidate=None):
     """Score every candidate of ``pool`` given the components ``given`` (their joint fit
-    ``ref_fit`` and its held-out figures ``ref_ho``). Form is scored against the datum's tilt."""
+    ``ref_fit`` and its held-out figures ``ref_ho``). Form is scored against the datum's tilt.
+    ``on_candidate(i, n, label)``, if given, is called before scoring each."""
     nominal, obs = ds.layout, ds.obs
     tilt = None
     out = []
-    for c in pool:
+    for i, c in enumerate(pool):
+        if on_candidate is not None:
+            on_candidate(i, len(pool), c.label)
         ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
         if isinstance(c, PlaneForm) and c.order != 1:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
@@ -117,18 +121,20 @@ def _lead(scored, n_cand):
     return in_only[0] if in_only else None
 
 
-def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
+def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None):
     """Add causes while one gives a significant held-out gain given the others (see the module).
 
     ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the list of
     :class:`Step` (the last one has ``chosen`` None unless ``max_causes`` was reached).
+    ``on_candidate(step, i, n, label)``, if given, is called before each candidate is scored.
     """
     pool = candidates_for(ds.layout, b.cov, flags)
     n_cand = len(pool)
     given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
     while True:
-        scored = _score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
+        tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
+        scored = _score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand, tick)
         ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
         sig = [s for s in ranked if s.significant]
         if not sig:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, calibrate_dataset
 from metrology.calibration.validation import ValidationReport, validate
+from metrology.core.progress import ProgressFn, notify
 
 
 def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -23,7 +24,7 @@ def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", 
 
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,
                     plot_dir=None, quaternion_order="wxyz", position_units="mm", no_reading=None,
-                    warn=None, **kwargs) -> CalibrationReport:
+                    warn=None, progress: ProgressFn | None = None, **kwargs) -> CalibrationReport:
     """Load and cross-check the three files, calibrate, and write the requested outputs.
 
     ``quaternion_order``, ``position_units`` and ``no_reading`` say how to read the export
@@ -33,17 +34,26 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     Nothing is written unless the calibration succeeds; each file is written atomically
     (the figures first, then the calibrated layout ``out``, in the schema of the nominal
     with ``zero_stderr_mm`` and ``direction_stderr_deg`` added).
+
+    ``progress(done, total, what)`` is called before each step (read, calibrate, figures, write).
     """
     from metrology.io.layout import save_layout
 
+    total = 2 + (plot_dir is not None) + (out is not None)
+    notify(progress, 0, total, "reading the export, datum and layout")
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
+    notify(progress, 1, total, f"calibrating ({method}, {dataset.export.n_poses} poses)")
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
+    done = 2
     if plot_dir is not None:
         from metrology.report.calibration import write_calibration_plots
 
+        notify(progress, done, total, "drawing the figures")
         write_calibration_plots(report, plot_dir)
+        done += 1
     if out is not None:
+        notify(progress, done, total, "writing the calibrated layout")
         rms = ", ".join(f"{n} {r * 1e3:.1f} um" for n, r in zip(report.layout.names, report.calibration.residual_rms))
         save_layout(report.layout, out,
                     f"Calibrated by metro calibrate --method {method}\n"
@@ -51,6 +61,7 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
                     f"{dataset.export.n_poses} poses; residual RMS {rms}\n"
                     "zero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
                     "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
+    notify(progress, total, total, "done")
     return report
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
+from metrology.core.progress import notify
+
 __all__ = ["DEMO_STEPS", "run_demo"]
 
 #: the demo's steps: (title, command line with {fx} = fixtures dir and {out} = output dir)
@@ -38,7 +40,7 @@ def new_output_dir(base="metro-demo") -> Path:
     return cand
 
 
-def run_demo(fixtures, out, run_step, announce=print) -> int:
+def run_demo(fixtures, out, run_step, announce=print, progress=None) -> int:
     """Run :data:`DEMO_STEPS` on the fixtures, writing into ``out``.
 
     Parameters
@@ -52,6 +54,8 @@ def run_demo(fixtures, out, run_step, announce=print) -> int:
         its exit code (0 or None on success).
     announce : callable
         ``announce(title, args)``, called before each step.
+    progress : callable or None
+        ``progress(done, total, what)`` before each step (:mod:`metrology.core.progress`).
 
     Returns
     -------
@@ -68,10 +72,12 @@ def run_demo(fixtures, out, run_step, announce=print) -> int:
         raise ValueError(f"{fixtures}: bundled fixtures not found (expected measured/, hidden/ and the layouts; "
                          "omit --fixtures to use the data shipped with metro)")
     out.mkdir(parents=True, exist_ok=True)
-    for title, line in DEMO_STEPS:
+    for k, (title, line) in enumerate(DEMO_STEPS):
         args = shlex.split(line.format(fx=fixtures, out=out))
+        notify(progress, k, len(DEMO_STEPS), f"step {title.split(' ', 1)[0]} metro {args[0]}")
         announce(title, args)
         rc = run_step(args)
         if rc:  # a failing step has printed its one-line error
             return rc
+    notify(progress, len(DEMO_STEPS), len(DEMO_STEPS), "done")
     return 0

@@ -7,6 +7,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from metrology.core.progress import notify
 from metrology.datum import PlaneFit, fit_plane_robust
 
 __all__ = ["fit_plane_file"]
@@ -24,7 +25,8 @@ def _check_output(path, what, suffixes=None):
         raise ValueError(f"{path}: the {what} must be one of {', '.join(sorted(suffixes))}")
 
 
-def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None) -> PlaneFit:
+def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None,
+                   progress=None) -> PlaneFit:
     """Read a cloud, fit its datum plane, and write the JSON and the residual map.
 
     Parameters
@@ -43,6 +45,9 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         ``warn(message)`` for what the caller should know but is not an error: points with
         NaN coordinates dropped (organized scans), a cloud whose size suggests metres. None:
         :func:`warnings.warn`.
+    progress : callable or None
+        ``progress(done, total, what)`` at each of 3 stages: read, fit, write
+        (:mod:`metrology.core.progress`).
 
     Both outputs are written atomically and together: on any error neither exists.
     Errors are ValueError naming the file.
@@ -61,6 +66,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         def warn(message):
             warnings.warn(message, stacklevel=2)
 
+    notify(progress, 0, 3, "reading the cloud")
     read = read_cloud_checked(cloud, units=units, nonfinite="drop", hint=units is None)
     if read.n_dropped_nonfinite:
         warn(f"{cloud}: {read.n_dropped_nonfinite} of {read.n_in_file} points have NaN coordinates "
@@ -68,11 +74,13 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
     if units is None and read.units_hint is not None and read.units_hint.likely != "mm":
         warn(f"{cloud}: {read.units_hint.sentence}")
     points = read.points
+    notify(progress, 1, 3, f"fitting the plane to {len(points)} points")
     try:
         fit = fit_plane_robust(points, threshold_mm=threshold_mm, seed=seed)
     except ValueError as exc:
         raise ValueError(f"{cloud}: {exc}") from None
     fit = replace(fit, source=str(cloud), format=fmt, read=read.to_dict())
+    notify(progress, 2, 3, "writing the plane and the residual map")
     with contextlib.ExitStack() as stack:
         if out is not None:
             tmp = stack.enter_context(atomic_path(out))
@@ -82,4 +90,5 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
             from metrology.report.datum import plot_residuals
 
             plot_residuals(points, fit, tmp)
+    notify(progress, 3, 3, "done")
     return fit

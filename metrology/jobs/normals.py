@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import numpy as np
+from metrology.core.progress import notify
 from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
 from metrology.panel.attitude import MotionError, STATUS
 from metrology.panel.mesh import load_panel
@@ -16,11 +17,13 @@ from metrology.report.normals import per_point_text, plot_error_map, summarize
 def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt_deg=1.0, standoff_mm=None,
                 noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
                 true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True) -> dict:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, progress=None) -> dict:
     """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
 
     Degrees appear only here, at the edge. Output files are written only after every
     point has been computed (each atomically); a fatal error writes nothing.
+    ``progress(done, total, what)``: at each of 6 stages (load, the 4 of
+    :func:`~metrology.panel.run.run_normals`, write).
 
     Returns
     -------
@@ -41,6 +44,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
             raise ValueError(f"{out_path}: the per-point output must end in .csv or .json")
     if plot_path is not None and not str(plot_path).lower().endswith(".png"):
         raise ValueError(f"{plot_path}: the plot must be a .png file")
+    notify(progress, 0, 6, "loading the panel and building its ray scene")
     layout = load_layout(layout_path)
     layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
     panel = load_panel(panel_path)
@@ -50,11 +54,13 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
-                      caster=caster, prior_radius_mm=prior_radius_mm)
+                      caster=caster, prior_radius_mm=prior_radius_mm,
+                      progress=None if progress is None else lambda d, n, what: progress(1 + d, 6, what))
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
         where = points_path if points_path is not None else f"grid {grid_mm} mm"
         raise ValueError(f"{where}: no drilling point could be measured ({counts})")
+    notify(progress, 5, 6, "summary, table and map")
     summary = summarize(run)
     summary["warnings"] = list(panel.warnings)
     summary["points"] = len(run.labels)
@@ -67,4 +73,5 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     if png is not None:
         with atomic_path(plot_path) as tmp:
             tmp.write_bytes(png)
+    notify(progress, 6, 6, "done")
     return summary

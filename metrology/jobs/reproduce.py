@@ -17,7 +17,7 @@ def reproduce(cfg, seed: int, trials: int, figures=None, progress=None) -> dict:
     figures : str or os.PathLike or None
         Directory for Figures 7 and 8 (PNG, of the first trial); None for none.
     progress : callable or None
-        Called with no argument after each trial.
+        ``progress(done, total, what)`` before each trial (:mod:`metrology.core.progress`).
 
     Returns
     -------

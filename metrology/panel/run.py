@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.normals import angle_between
+from metrology.core.progress import ProgressFn, notify
 from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
 from metrology.panel.attitude import MotionError, _beam_detail, _normal_from, _readings, attitude_loop
 from metrology.panel.head import MAX_TILT, default_standoff, orientation_from_feed, place_head, tilted_feed, tool_axis_tcs
@@ -66,7 +67,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
                 standoff=None, noise=None, tolerance=math.radians(0.5), engine="auto",
                 motion: MotionError = MotionError(), layout_true: SensorLayout | None = None,
                 loop=True, caster: RayCaster | None = None,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM) -> NormalsRun:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, progress: ProgressFn | None = None) -> NormalsRun:
     """Measure the normal at each drilling point by both methods, and run the attitude loop.
 
     Parameters
@@ -87,6 +88,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     caster : RayCaster, to reuse a built scene (its mesh must be ``panel.mesh``)
     prior_radius_mm : float, mm, the micro-sphere's curvature prior (see
         :func:`fit_algebraic_sphere`); inf for the exact interpolating sphere
+    progress : callable or None, ``progress(done, total, what)`` at each of the 4 stages
+        (:mod:`metrology.core.progress`)
 
     Returns
     -------
@@ -117,6 +120,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
         raise ValueError(f"reading noise must be finite and >= 0 mm, got {noise.tolist()}")
     caster = RayCaster(panel.mesh, engine) if caster is None else caster
     m = len(drill.points)
+    notify(progress, 0, 4, f"snapping {m} points to the panel")
     pts, off, n_true, faceting, chord = snap_points(panel, caster, drill.points)
     status = np.full(m, "ok", dtype=object)
     status[off > ON_PANEL_MM] = "off_panel"
@@ -131,6 +135,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     R0 = orientation_from_feed(feed, a_tcs)
     T0 = place_head(pts, R0, a_tcs, layout, standoff)
     rng_read, rng_loop_p, rng_loop_s = rng.spawn(3)
+    notify(progress, 1, 4, f"readings and both normals at {m} points")
     # both methods see the same noisy readings at the first pose
     d, miss_b, beh_b, oor_b = _readings(caster, layout_true, R0, T0, noise, rng_read)
     miss, beh, oor = np.any(miss_b, axis=1), np.any(beh_b, axis=1), np.any(oor_b, axis=1)
@@ -151,7 +156,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     init_tilt = angle_between(R0 @ a_tcs, -n_ref, oriented=True)
     loops = {}
     if loop and np.any(good):
-        for method, r in (("plane", rng_loop_p), ("sphere", rng_loop_s)):
+        for k, (method, r) in enumerate((("plane", rng_loop_p), ("sphere", rng_loop_s))):
+            notify(progress, 2 + k, 4, f"attitude loop, micro-{method}, {int(np.sum(good))} points")
             res = attitude_loop(caster, panel, layout_true, layout, pts[good], R0[good], standoff, noise, r,
                                 method, tolerance, motion, prior_radius_mm=prior_radius_mm)
             full = {}
@@ -169,6 +175,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
             f"mesh: face hit, smoothed within {CREASE_ANGLE_DEG:g} deg",
             "reference_faceting": _faceting_info(faceting, chord, status == "ok", n_an is not None),
             "sensors": layout.n, "sphere_prior_radius_mm": prior_radius_mm}
+    notify(progress, 4, 4, "done")
     return NormalsRun(drill.labels, pts, status.astype(str), off, n_true, n_an, n_plane, n_sphere, err_p, err_s,
                       rad, d, init_tilt, loops, caster.engine, info, detail.astype(str))
 

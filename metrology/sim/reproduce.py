@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from metrology.core.progress import notify
 from metrology.core import paper
 from metrology.calibration.estimators import calibrate
 from metrology.core.observations import Observations
@@ -148,16 +149,17 @@ def run_trial(cfg: ReproduceConfig, rng: np.random.Generator) -> Trial:
 def run_trials(cfg: ReproduceConfig, seed: int, trials: int, progress=None) -> list:
     """``trials`` independent trials from ``numpy.random.default_rng(seed)``'s spawned streams.
 
-    ``progress``, if given, is called with no argument after each trial.
+    ``progress(done, total, what)``, if given, is called before each trial and at the end
+    (:mod:`metrology.core.progress`).
     """
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
     streams = np.random.default_rng(seed).spawn(trials)
     out = []
-    for rng in streams:
+    for k, rng in enumerate(streams):
+        notify(progress, k, trials, f"trial {k + 1} of {trials}")
         out.append(run_trial(cfg, rng))
-        if progress is not None:
-            progress()
+    notify(progress, trials, trials, "done")
     return out
 
 

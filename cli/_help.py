@@ -1,0 +1,55 @@
+"""How ``metro <command> --help`` shows parameters, the same under every typer we support.
+
+Typer 0.2x prints a flag as ``--json <bool>`` and a required argument as ``{cloud}`` in the
+usage line; typer 0.16 prints ``[default: None]`` under every optional value. The command
+class below shows a flag as a bare flag, an argument as ``CLOUD`` (``[CLOUD]`` when
+optional) and no default where there is none.
+"""
+
+from __future__ import annotations
+
+import typer.core
+
+
+def _fix(params) -> None:
+    for p in params:
+        if isinstance(p, typer.core.TyperArgument):
+            p.metavar = p.metavar or p.name.upper()
+        elif getattr(p, "is_flag", False):
+            p.metavar = ""  # a flag takes no value: show none
+        if p.default is None:
+            p.show_default = False
+
+
+class _Fixed:
+    """The metavar fix, shared by the command and the group (the root) classes."""
+
+    def get_params(self, ctx):
+        params = super().get_params(ctx)  # with --help and the completion options added by typer
+        _fix(params)
+        return params
+
+
+class MetroGroup(_Fixed, typer.core.TyperGroup):
+    """The root ``metro`` group, its options shown as in :class:`MetroCommand`."""
+
+
+class MetroCommand(_Fixed, typer.core.TyperCommand):
+    """A typer command with the metavars fixed (see the module)."""
+
+    def collect_usage_pieces(self, ctx):
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for p in self.get_params(ctx):
+            if isinstance(p, typer.core.TyperArgument):
+                name = p.metavar + ("..." if p.nargs != 1 else "")
+                pieces.append(name if p.required else f"[{name}]")
+            else:
+                pieces.extend(p.get_usage_pieces(ctx))
+        return pieces
+
+
+def use_metro_command(app: typer.Typer) -> None:
+    """Give every command registered on ``app`` (without a class of its own) :class:`MetroCommand`."""
+    for info in app.registered_commands:
+        if info.cls in (None, typer.core.TyperCommand):
+            info.cls = MetroCommand

@@ -1,0 +1,189 @@
+"""The command-line conventions (docs/cli.md): --json with a schema tag on every command,
+'-' for stdin, help without value placeholders on flags, -q/-v, warnings on stderr,
+progress bars on a terminal only.
+
+Runs under the newest typer and typer 0.16 (click 8.2): ``result.stderr`` is separate in both.
+"""
+
+import json
+import re
+
+import pytest
+from typer.main import get_command
+from typer.testing import CliRunner
+
+import cli._common as common
+from cli.main import app
+from metrology.core.schema import SCHEMA_PATTERN, schema_tag, tagged
+from metrology.io.data import DATA_DIR
+
+runner = CliRunner()
+M = DATA_DIR / "measured"
+H = DATA_DIR / "hidden"
+COMMANDS = sorted(get_command(app).commands)
+TINY_XYZ = "0 0 0\n100 0 0.01\n0 100 -0.01\n100 100 0\n50 50 0.02\n20 70 -0.02\n"
+
+
+def _read(path):
+    return path.read_bytes()
+
+
+@pytest.fixture(scope="module")
+def small_export(tmp_path_factory):
+    """A 20-pose export from the forward simulator (``metro simulate``), for a quick diagnose."""
+    out = tmp_path_factory.mktemp("sim") / "export.csv"
+    r = runner.invoke(app, ["simulate", "--layout", str(H / "layout.toml"), "--plane", str(H / "plane.json"),
+                            "--out", str(out), "--poses", "20"])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+def _cases(tmp, small_export):
+    """One cheap --json run of each command: (args, stdin). Several read an input from '-'."""
+    return {
+        "fit-plane": (["fit-plane", "-", "--format", "xyz"], TINY_XYZ),
+        "calibrate": (["calibrate", "-", "--plane", str(M / "plane.json"), "--layout", str(M / "nominal.toml")],
+                      _read(M / "calibration.csv")),
+        "validate": (["validate", str(M / "validation.csv"), "--plane", str(M / "plane.json"), "--layout", "-"],
+                     _read(M / "nominal.toml")),
+        "diagnose": (["diagnose", str(small_export), "--plane", "-", "--layout", str(H / "layout.toml"), "--folds", "2"],
+                     _read(H / "plane.json")),
+        "simulate": (["simulate", "--layout", "-", "--plane", str(H / "plane.json"), "--out", str(tmp / "s.csv"),
+                      "--poses", "12"], _read(H / "layout.toml")),
+        "normals": (["normals", str(DATA_DIR / "panel_cyl800.stl"), "--layout", "-", "--grid", "60", "--no-loop"],
+                    _read(DATA_DIR / "layout_table6.toml")),
+        "reproduce": (["reproduce", "--poses", "20", "--figures", "-"], None),
+        "demo": (["demo", "--out", str(tmp / "demo")], None),
+        "version": (["version"], None),
+    }
+
+
+def _one_step_demo(monkeypatch):
+    """The demo cut to one quick step (the walk-through itself is tested in test_core.py)."""
+    import metrology.jobs.demo as demo
+
+    monkeypatch.setattr(demo, "DEMO_STEPS", (("1. Print the version", "version"),))
+
+
+def test_every_command_takes_json_and_tags_its_output(tmp_path, small_export, monkeypatch):
+    _one_step_demo(monkeypatch)
+    cases = _cases(tmp_path, small_export)
+    assert sorted(cases) == COMMANDS, "a command without a --json case here"
+    for name in COMMANDS:
+        cmd = get_command(app).commands[name]
+        assert any("--json" in p.opts and p.is_flag for p in cmd.params), f"{name}: no --json flag"
+        args, stdin = cases[name]
+        r = runner.invoke(app, [*args, "--json"], input=stdin)
+        assert r.exit_code == 0, f"{name}: {r.output}"
+        out = json.loads(r.stdout)
+        assert SCHEMA_PATTERN.match(out["schema"]), f"{name}: schema {out['schema']!r}"
+        assert list(out)[0] == "schema"
+        if name == "demo":  # each step's own output is tagged too
+            assert [s["result"]["schema"] for s in out["steps"]] == ["metro.version/1"]
+        if stdin is not None:  # the stdin input is named <stdin>, never its temporary file
+            assert "metro-stdin-" not in r.stdout
+
+
+def test_schema_helper():
+    assert schema_tag("plane") == "metro.plane/1" and schema_tag("demo", 3) == "metro.demo/3"
+    assert list(tagged("x", {"a": 1, "schema": "old"})) == ["schema", "a"]
+    with pytest.raises(ValueError, match="schema kind 'Bad Kind'"):
+        schema_tag("Bad Kind")
+
+
+@pytest.mark.parametrize("name", ["", *COMMANDS])
+def test_help_shows_flags_as_flags_and_arguments_in_capitals(name):
+    r = runner.invoke(app, [name, "--help"] if name else ["--help"], env={"COLUMNS": "160"})
+    assert r.exit_code == 0, r.output
+    assert "<bool>" not in r.output and "[default: None]" not in r.output
+    usage = next(line for line in r.output.splitlines() if "Usage:" in line)
+    assert "{" not in usage
+    for p in get_command(app).commands[name].params if name else []:
+        if p.param_type_name == "argument":
+            assert f" {p.name.upper()}" in usage
+
+
+def test_h_and_version_and_bare_metro():
+    assert runner.invoke(app, ["-h"]).exit_code == 0
+    r = runner.invoke(app, ["--version"])
+    assert r.exit_code == 0 and r.stdout.startswith("metro ")
+    r = runner.invoke(app, [])
+    assert r.exit_code == 0 and "Usage:" in r.stdout
+    r = runner.invoke(app, ["--show-completion"], prog_name="metro", env={"SHELL": "/bin/bash"})
+    assert r.exit_code == 0 and "_METRO_COMPLETE" in r.stdout  # the bash completion script
+
+
+def test_stdin_errors_name_stdin_and_the_line():
+    text = _read(M / "calibration.csv").decode().splitlines()
+    text[2] = re.sub(r",[^,]*$", ",abc", text[2])
+    r = runner.invoke(app, ["calibrate", "-", "--plane", str(M / "plane.json"), "--layout", str(M / "nominal.toml")],
+                      input="\n".join(text) + "\n")
+    assert r.exit_code == 2 and r.stdout == ""
+    assert r.stderr.startswith("error: <stdin>: line 3:") and "'abc'" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_two_stdin_inputs_is_an_error_naming_both():
+    r = runner.invoke(app, ["calibrate", "-", "--plane", "-", "--layout", str(M / "nominal.toml")], input="x")
+    assert r.exit_code == 2
+    assert "EXPORT" in r.stderr and "--plane" in r.stderr and "only one input" in r.stderr
+
+
+def test_stdin_cloud_needs_a_format_unless_its_header_names_it():
+    r = runner.invoke(app, ["fit-plane", "-"], input=TINY_XYZ)
+    assert r.exit_code == 2 and "--format" in r.stderr
+    r = runner.invoke(app, ["fit-plane", "-", "--json"], input=_read(M / "datum.ply"))  # PLY: its header
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["source"] == "<stdin>"
+    r = runner.invoke(app, ["fit-plane", str(M / "datum.ply"), "--format", "ply"])
+    assert r.exit_code == 2 and "only for a cloud on stdin" in r.stderr
+    r = runner.invoke(app, ["fit-plane", "-"], input="")
+    assert r.exit_code == 2 and "nothing on stdin" in r.stderr
+
+
+def _zero_reading_export():
+    """The measured export with one reading set to the no-reading code 0: a warning, not an error."""
+    lines = _read(M / "calibration.csv").decode().splitlines()
+    lines[1] = lines[1] + "0" if lines[1].endswith(",") else re.sub(r",[^,]*$", ",0", lines[1])
+    return "\n".join(lines) + "\n"
+
+
+def test_warnings_on_stderr_silenced_by_q_and_v_notes_the_steps():
+    args = ["validate", "-", "--plane", str(M / "plane.json"), "--layout", str(M / "nominal.toml")]
+    r = runner.invoke(app, args, input=_zero_reading_export())
+    assert r.exit_code == 0, r.output
+    assert "warning: <stdin>: 1 reading(s) equal to the no-reading code 0" in r.stderr
+    assert "warning" not in r.stdout
+    quiet = runner.invoke(app, ["-q", *args], input=_zero_reading_export())
+    assert quiet.exit_code == 0 and quiet.stderr == "" and quiet.stdout == r.stdout
+    loud = runner.invoke(app, ["-v", *args], input=_zero_reading_export())
+    assert loud.exit_code == 0 and loud.stdout == r.stdout
+    assert re.search(r"^\[ *[0-9.]+ s\] metro validate$", loud.stderr, re.M)
+    assert "--layout" not in loud.stderr and "EXPORT: read" in loud.stderr and "metro validate: done" in loud.stderr
+    err = runner.invoke(app, ["-q", "validate", "-", "--plane", "-", "--layout", "x"], input="x")
+    assert err.exit_code == 2 and err.stderr.startswith("error:")  # errors print under -q
+
+
+def test_library_warnings_become_one_warning_line(capsys):
+    common.set_verbosity(False, False)
+    common.show_warning(UserWarning("a cloud in metres?"), UserWarning, "f.py", 1)
+    assert capsys.readouterr().err == "warning: a cloud in metres?\n"
+    common.set_verbosity(True, False)
+    common.show_warning(UserWarning("x"), UserWarning, "f.py", 1)
+    assert capsys.readouterr().err == ""
+    common.set_verbosity(False, False)
+
+
+def test_progress_bar_on_a_terminal_only(tmp_path, monkeypatch):
+    """The demo's bar (with a nested line for its step) is drawn on stderr when it is a
+    terminal, never on stdout, and not under -q or when stderr is a file or pipe."""
+    _one_step_demo(monkeypatch)
+    r = runner.invoke(app, ["demo", "--out", str(tmp_path / "a"), "--json"])
+    assert r.exit_code == 0 and r.stderr == ""  # not a terminal: silent
+    monkeypatch.setattr(common, "_stderr_is_tty", lambda: True)
+    r = runner.invoke(app, ["demo", "--out", str(tmp_path / "b"), "--json"])
+    assert r.exit_code == 0, r.output
+    assert "demo" in r.stderr and "0/1" in r.stderr and "step 1. metro version" in r.stderr and "━" in r.stderr
+    assert json.loads(r.stdout)["schema"] == "metro.demo/1"  # stdout holds the JSON only
+    r = runner.invoke(app, ["-q", "demo", "--out", str(tmp_path / "c"), "--json"])
+    assert r.exit_code == 0 and r.stderr == ""
