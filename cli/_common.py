@@ -33,6 +33,8 @@ def guarded(fn):
 QUATERNION_HELP = ("What the columns qw,qx,qy,qz hold: wxyz (scalar first, the format) or xyzw (a scalar-last "
                    "export under the same header).")
 POSITION_HELP = "Unit of the export's x,y,z columns: mm, m or in (converted to mm)."
+REPORT_HELP = ("One self-contained HTML report (.html): the verdict, the figures, the numbers with their "
+               "uncertainties, what to do next; inputs with SHA-256, versions, the command line.")
 NO_READING_HELP = ("The PLC's 'no reading' code in the d_ columns (default 0 where the sensor's range excludes it): "
                    "dropped and counted, never used as a distance.")
 

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, warn
+from ._common import NO_READING_HELP, REPORT_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, warn
 
 METHODS = ("lsq", "iekf", "ekf", "ekf_paper", "method1")
 
@@ -28,7 +28,9 @@ def register(app: typer.Typer) -> None:
         method: str = typer.Option("lsq", "--method", help=f"Estimator: {', '.join(METHODS)}."),
         json_out: bool = typer.Option(False, "--json", help="Print the report as JSON."),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the calibrated layout TOML here."),
-        plot: Optional[Path] = typer.Option(None, "--plot", help="Write convergence and residual PNGs into DIR."),
+        plot: Optional[Path] = typer.Option(None, "--plot", help="Convergence and residual figures: a .pdf file (a "
+                                            "page each) or a directory (PNGs)."),
+        report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
         target_mm: float = typer.Option(0.05, "--target-mm", help="Wanted 1-sigma of the zero points, mm."),
         target_deg: float = typer.Option(0.05, "--target-deg", help="Wanted 1-sigma of the beam tilts, deg."),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
@@ -48,7 +50,8 @@ def register(app: typer.Typer) -> None:
 
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
                                  out=out, plot_dir=plot, quaternion_order=quaternion_order,
-                                 position_units=position_units, no_reading=no_reading, warn=warn)
+                                 position_units=position_units, no_reading=no_reading, warn=warn,
+                                 report_html=report_html)
         for w in calibration_warnings(report):
             typer.echo(f"warning: {w}", err=True)
         if json_out:
@@ -64,7 +67,10 @@ def register(app: typer.Typer) -> None:
         layout: Path = typer.Option(..., "--layout", help="Layout TOML to validate (usually the calibrated one)."),
         layout_before: Optional[Path] = typer.Option(None, "--layout-before", help="Layout to compare with (nominal)."),
         json_out: bool = typer.Option(False, "--json", help="Print max_deg, mean_deg, std_deg per layout as JSON."),
-        plot: Optional[Path] = typer.Option(None, "--plot", help="Write the deviation per pose as a PNG here."),
+        plot: Optional[Path] = typer.Option(None, "--plot", help="Write the deviation per pose here (.png/.pdf/.svg)."),
+        tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Drilling tolerance on the normal, deg: "
+                                            "the verdict, and the line on the plot."),
+        report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
@@ -72,11 +78,15 @@ def register(app: typer.Typer) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
         from metrology.jobs.calibrate import validate_files
-        from metrology.report.calibration import validation_text
+        from metrology.report.validation import validation_text
+
+        if not tolerance_deg > 0:
+            fail(f"--tolerance-deg must be positive, got {tolerance_deg:g}")
 
         report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
-                                position_units=position_units, no_reading=no_reading, warn=warn)
+                                position_units=position_units, no_reading=no_reading, warn=warn,
+                                tolerance_deg=tolerance_deg, report_html=report_html)
         if json_out:
             echo_json(report.to_dict())
         else:
-            typer.echo(validation_text(report))
+            typer.echo(validation_text(report, tolerance_deg))

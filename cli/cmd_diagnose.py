@@ -18,7 +18,8 @@ def register(app: typer.Typer) -> None:
         plane: Path = typer.Option(..., "--plane", help="datum plane JSON or datum cloud"),
         layout: Path = typer.Option(..., "--layout", help="sensor layout TOML (with noise_mm)"),
         json_out: bool = typer.Option(False, "--json", help="print the full result as JSON"),
-        report: Path = typer.Option(None, "--report", help="directory for the residual plots"),
+        report: Path = typer.Option(None, "--report", help="an .html file: one self-contained report; any other "
+                                    "path: a directory for the residual plots (PNG)"),
         folds: int = typer.Option(5, "--folds", help="k of the k-fold-by-pose held-out figures"),
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
@@ -26,16 +27,19 @@ def register(app: typer.Typer) -> None:
         no_reading: float = typer.Option(None, "--no-reading", help=NO_READING_HELP),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
-        from metrology.jobs.diagnose import diagnose_files
-        from metrology.report.diagnose import plot_report, report_text
+        from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report
+        from metrology.report.diagnose import report_text
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
+        if report is not None:
+            check_report_target(report)
         d = diagnose_files(export, plane, layout, quaternion_order, position_units, no_reading, warn=warn, folds=folds,
                            seed=seed)
         text = dumps(d.to_dict()) if json_out else report_text(d)
         if report is not None:
-            files = plot_report(d, report)
+            sources = {"export": str(export), "plane": str(plane), "layout": str(layout)}
+            files = diagnose_report(d, report, sources, seed=seed)
             if not json_out:
                 text += "\n\nplots: " + ", ".join(files)
         typer.echo(text)

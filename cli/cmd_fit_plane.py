@@ -6,7 +6,7 @@ from typing import Optional
 
 import typer
 
-from ._common import echo_json, guarded
+from ._common import REPORT_HELP, echo_json, guarded
 
 
 def register(app: typer.Typer) -> None:
@@ -22,6 +22,7 @@ def register(app: typer.Typer) -> None:
         out: Optional[str] = typer.Option(None, "--out", help="Write the plane JSON (other commands' --plane)."),
         plot: Optional[str] = typer.Option(None, "--plot", help="Write a residual map over the plate (.png/.pdf/.svg)."),
         units: Optional[str] = typer.Option(None, "--units", help="Unit of the cloud's numbers: mm (default), m or in."),
+        report: Optional[str] = typer.Option(None, "--report", help=REPORT_HELP),
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
@@ -30,7 +31,7 @@ def register(app: typer.Typer) -> None:
 
         if units is not None and units not in ("mm", "m", "in"):
             raise ValueError(f"--units {units!r}: expected mm, m or in")
-        fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units,
+        fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, report=report,
                              warn=lambda message: typer.echo(f"warning: {message}", err=True))
         if as_json:
             echo_json(fit.to_dict())

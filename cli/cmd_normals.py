@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import echo_json, guarded
+from ._common import REPORT_HELP, echo_json, guarded
 
 
 def register(app: typer.Typer) -> None:
@@ -26,6 +26,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(None, "--out", help="Per-point results, .csv or .json."),
         as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
         plot: Path = typer.Option(None, "--plot", help="PNG map of the errors over the panel."),
+        report: Path = typer.Option(None, "--report", help=REPORT_HELP),
         true_layout: Path = typer.Option(None, "--true-layout", help="Simulate the head as this layout (default: --layout)."),
         motion_repeat_deg: float = typer.Option(0.02, "--motion-repeat-deg", help="Robot: random rotation error per adjustment, 1 sigma per axis."),
         motion_scale: float = typer.Option(0.03, "--motion-scale", help="Robot: relative error of a commanded rotation, 1 sigma."),
@@ -42,6 +43,7 @@ def register(app: typer.Typer) -> None:
             noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
             true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
             motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
+            report=report,
         )
         for w in summary["warnings"]:
             typer.echo(f"warning: {w}", err=True)

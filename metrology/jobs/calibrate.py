@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, calibrate_dataset
 from metrology.calibration.validation import ValidationReport, validate
+from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
 
 
 def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -23,7 +24,7 @@ def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", 
 
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,
                     plot_dir=None, quaternion_order="wxyz", position_units="mm", no_reading=None,
-                    warn=None, **kwargs) -> CalibrationReport:
+                    warn=None, report_html=None, command=None, **kwargs) -> CalibrationReport:
     """Load and cross-check the three files, calibrate, and write the requested outputs.
 
     ``quaternion_order``, ``position_units`` and ``no_reading`` say how to read the export
@@ -32,10 +33,12 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
 
     Nothing is written unless the calibration succeeds; each file is written atomically
     (the figures first, then the calibrated layout ``out``, in the schema of the nominal
-    with ``zero_stderr_mm`` and ``direction_stderr_deg`` added).
+    with ``zero_stderr_mm`` and ``direction_stderr_deg`` added, then the HTML report
+    ``report_html`` naming ``command``, None: this process's command line).
     """
     from metrology.io.layout import save_layout
 
+    _check_report(report_html)
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
@@ -51,18 +54,34 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
                     f"{dataset.export.n_poses} poses; residual RMS {rms}\n"
                     "zero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
                     "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
+    if report_html is not None:
+        from metrology.report.html import run_info, write_report
+        from metrology.report.pages import calibration_section
+
+        write_report(report_html, "Sensor calibration", run_info(sources, command), [calibration_section(report)])
     return report
 
 
+def _check_report(path):
+    if path is not None:
+        from metrology.report.html import check_report_path
+
+        check_report_path(path)
+
+
 def validate_files(export_path, plane_path, layout_path, layout_before_path=None, plot=None, quaternion_order="wxyz",
-                   position_units="mm", no_reading=None, warn=None) -> ValidationReport:
+                   position_units="mm", no_reading=None, warn=None, tolerance_deg=DRILLING_TOLERANCE_DEG,
+                   report_html=None, command=None) -> ValidationReport:
     """Validate ``layout_path`` (and ``layout_before_path``, first, if given) on an export.
 
     The layouts are reported under the labels ``layout_before`` and ``layout``; ``plot``
-    writes the deviation per pose as a PNG (atomically).
+    writes the deviation per pose (atomically; the format from the suffix) with the
+    tolerance ``tolerance_deg`` drawn; ``report_html`` the HTML report judging the
+    validated layout against it.
     """
     from metrology.io.layout import load_layout
 
+    _check_report(report_html)
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     layouts = {}
     sources = {"export": str(export_path), "plane": str(plane_path)}
@@ -73,7 +92,12 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
     sources["layout"] = str(layout_path)
     report = validate(dataset, layouts, sources)
     if plot is not None:
-        from metrology.report.calibration import plot_validation
+        from metrology.report.validation import plot_validation
 
-        plot_validation(report, plot)
+        plot_validation(report, plot, tolerance_deg)
+    if report_html is not None:
+        from metrology.report.html import run_info, write_report
+        from metrology.report.pages import validation_section
+
+        write_report(report_html, "Validation", run_info(sources, command), [validation_section(report, tolerance_deg)])
     return report
