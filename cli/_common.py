@@ -39,6 +39,30 @@ NO_READING_HELP = ("The PLC's 'no reading' code in the d_ columns (default 0 whe
                    "dropped and counted, never used as a distance.")
 
 
+def invocation(ctx) -> str:
+    """The command line a report names, rebuilt from what was parsed (``ctx``, a
+    ``typer.Context``): the command, its arguments, and each option not left at its default.
+    Independent of ``sys.argv``, so the same under ``metro demo`` and in tests."""
+    import shlex
+
+    parts = ctx.command_path.split()
+    for p in ctx.command.params:
+        v = ctx.params.get(p.name)
+        if p.param_type_name == "argument":
+            parts.append(str(v))
+            continue
+        if v is None or v is False or v == p.default or not p.opts:
+            continue
+        opt = max(p.opts, key=len)
+        if v is True:
+            parts.append(opt)
+        elif isinstance(v, (tuple, list)):
+            parts += [opt, *map(str, v)]
+        else:
+            parts += [opt, str(v)]
+    return shlex.join(parts)
+
+
 def warn(line: str) -> None:
     """Print ``warning: line`` to stderr."""
     typer.echo(f"warning: {line}", err=True)

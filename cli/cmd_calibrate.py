@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import NO_READING_HELP, REPORT_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, warn
+from ._common import NO_READING_HELP, REPORT_HELP, POSITION_HELP, QUATERNION_HELP, echo_json, fail, guarded, invocation, warn
 
 METHODS = ("lsq", "iekf", "ekf", "ekf_paper", "method1")
 
@@ -22,6 +22,7 @@ def register(app: typer.Typer) -> None:
     @app.command("calibrate")
     @guarded
     def calibrate_cmd(
+        ctx: typer.Context,
         export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)."),
         plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
         layout: Path = typer.Option(..., "--layout", help="Nominal sensor layout TOML."),
@@ -51,7 +52,7 @@ def register(app: typer.Typer) -> None:
         report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
                                  out=out, plot_dir=plot, quaternion_order=quaternion_order,
                                  position_units=position_units, no_reading=no_reading, warn=warn,
-                                 report_html=report_html)
+                                 report_html=report_html, command=invocation(ctx))
         for w in calibration_warnings(report):
             typer.echo(f"warning: {w}", err=True)
         if json_out:
@@ -62,6 +63,7 @@ def register(app: typer.Typer) -> None:
     @app.command("validate")
     @guarded
     def validate_cmd(
+        ctx: typer.Context,
         export: Path = typer.Argument(..., help="Tracker export CSV of the validation poses."),
         plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum."),
         layout: Path = typer.Option(..., "--layout", help="Layout TOML to validate (usually the calibrated one)."),
@@ -85,7 +87,7 @@ def register(app: typer.Typer) -> None:
 
         report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
                                 position_units=position_units, no_reading=no_reading, warn=warn,
-                                tolerance_deg=tolerance_deg, report_html=report_html)
+                                tolerance_deg=tolerance_deg, report_html=report_html, command=invocation(ctx))
         if json_out:
             echo_json(report.to_dict())
         else:

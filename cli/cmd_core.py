@@ -8,15 +8,18 @@ from typing import Optional
 
 import typer
 
-from ._common import dumps, fail, guarded
+from ._common import dumps, fail, guarded, invocation
 
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
+        ctx: typer.Context,
         fixtures: Optional[Path] = typer.Option(None, help="Data to run on (default: the data shipped with metro)."),
         out: Optional[Path] = typer.Option(None, help="Folder for the outputs (default: a new folder metro-demo "
                                            "in the current directory; metro-demo-2, ... if that one is taken)."),
+        report: Optional[Path] = typer.Option(None, "--report", help="One HTML report of every step (.html); each "
+                                              "step's own report is written into the output folder too."),
     ) -> None:
         """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals."""
         from typer.main import get_command
@@ -33,7 +36,8 @@ def register(app: typer.Typer) -> None:
             typer.secho(f"\n== {title}\n$ metro {' '.join(args)}", bold=True)
 
         try:
-            rc = run_demo(fixtures, out, lambda args: command.main(args, prog_name="metro", standalone_mode=False), announce)
+            rc = run_demo(fixtures, out, lambda args: command.main(args, prog_name="metro", standalone_mode=False),
+                          announce, report=report, command=invocation(ctx))
         except ValueError as exc:
             fail(str(exc))
         if rc:  # a failing step has printed its one-line error

@@ -7,13 +7,14 @@ from pathlib import Path
 
 import typer
 
-from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo_json, fail, guarded, warn
+from ._common import NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo_json, fail, guarded, invocation, warn
 
 
 def register(app: typer.Typer) -> None:
     @app.command("diagnose")
     @guarded
     def diagnose(
+        ctx: typer.Context,
         export: Path = typer.Argument(..., help="tracker export CSV"),
         plane: Path = typer.Option(..., "--plane", help="datum plane JSON or datum cloud"),
         layout: Path = typer.Option(..., "--layout", help="sensor layout TOML (with noise_mm)"),
@@ -39,7 +40,7 @@ def register(app: typer.Typer) -> None:
         text = dumps(d.to_dict()) if json_out else report_text(d)
         if report is not None:
             sources = {"export": str(export), "plane": str(plane), "layout": str(layout)}
-            files = diagnose_report(d, report, sources, seed=seed)
+            files = diagnose_report(d, report, sources, command=invocation(ctx), seed=seed)
             if not json_out:
                 text += "\n\nplots: " + ", ".join(files)
         typer.echo(text)

@@ -6,13 +6,14 @@ from typing import Optional
 
 import typer
 
-from ._common import REPORT_HELP, echo_json, guarded
+from ._common import REPORT_HELP, echo_json, guarded, invocation
 
 
 def register(app: typer.Typer) -> None:
     @app.command("fit-plane")
     @guarded
     def fit_plane(
+        ctx: typer.Context,
         cloud: str = typer.Argument(..., help="Point cloud: .ply .pcd .e57 .xyz .xyzn .xyzrgb .pts .csv .txt (mm)."),
         threshold_mm: Optional[float] = typer.Option(
             None, "--threshold-mm", help="Inlier threshold on the distance to the plane, mm (default: 3 x robust sigma of the residuals)."
@@ -32,6 +33,7 @@ def register(app: typer.Typer) -> None:
         if units is not None and units not in ("mm", "m", "in"):
             raise ValueError(f"--units {units!r}: expected mm, m or in")
         fit = fit_plane_file(cloud, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, report=report,
+                             command=invocation(ctx),
                              warn=lambda message: typer.echo(f"warning: {message}", err=True))
         if as_json:
             echo_json(fit.to_dict())

@@ -6,13 +6,14 @@ from pathlib import Path
 
 import typer
 
-from ._common import REPORT_HELP, echo_json, guarded
+from ._common import REPORT_HELP, echo_json, guarded, invocation
 
 
 def register(app: typer.Typer) -> None:
     @app.command("normals")
     @guarded
     def normals(
+        ctx: typer.Context,
         panel: Path = typer.Argument(..., help="Panel mesh in mm (STL, OBJ, PLY, GLB/GLTF; STEP with cascadio)."),
         layout: Path = typer.Option(..., "--layout", help="Sensor layout TOML (nominal or calibrated)."),
         points: Path = typer.Option(None, "--points", help="CSV of drilling points x,y,z[,i,j,k] (mm; approach = feed)."),
@@ -43,7 +44,7 @@ def register(app: typer.Typer) -> None:
             noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
             true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
             motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
-            report=report,
+            report=report, command=invocation(ctx),
         )
         for w in summary["warnings"]:
             typer.echo(f"warning: {w}", err=True)

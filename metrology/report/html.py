@@ -17,12 +17,14 @@ import base64
 import hashlib
 import os
 import platform
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
 __all__ = ["Figure", "Table", "Verdict", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
+           "collect",
            "REPORT_SUFFIXES"]
 
 #: suffixes ``--report`` accepts for an HTML file
@@ -198,10 +200,30 @@ def check_report_path(path) -> None:
         raise ValueError(f"--report {path}: directory {p.parent} does not exist")
 
 
+#: the pages rendered inside :func:`collect` (title, run, sections), else None
+_COLLECTED: list | None = None
+
+
+@contextmanager
+def collect():
+    """Keep every page rendered inside the block: yields a list that receives (title, RunInfo,
+    sections) per :func:`render_html` call (``metro demo --report`` gathers its steps' pages
+    this way into one report)."""
+    global _COLLECTED
+    saved, _COLLECTED = _COLLECTED, []
+    try:
+        yield _COLLECTED
+    finally:
+        _COLLECTED = saved
+
+
 def render_html(title: str, run: RunInfo, sections) -> str:
     """The page (str) of ``sections`` under ``run``, rendered from ``templates/report.html.j2``."""
     import jinja2
 
+    sections = list(sections)
+    if _COLLECTED is not None:
+        _COLLECTED.append((title, run, sections))
     env = jinja2.Environment(loader=jinja2.PackageLoader("metrology.report", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)

@@ -164,7 +164,7 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
         if np.any(~ok):
             ax.scatter(uv[~ok, 0], uv[~ok, 1], marker="x", c="0.35", s=22, linewidths=1.0,
                        label=f"not measured: {int((~ok).sum())}")
-        ax.legend(loc="upper right", fontsize=7)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=7, frameon=False)
         fin = e[ok]
         stats = f"max {fin.max():.3f}, mean {fin.mean():.3f} deg" if len(fin) else "no point"
         ax.set_title(f"{name}: {stats}")
@@ -172,7 +172,7 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
         ax.set_ylabel("v [mm]")
         ax.set_aspect("equal")
         ax.grid(False)
-    fig.colorbar(sc, ax=axes, label="normal error [deg] (colour scale from 0 to the tolerance or the largest error)")
+    fig.colorbar(sc, ax=axes, label="normal error [deg]", shrink=0.9)
     buf = io.BytesIO()
     try:
         fig.savefig(buf, format="png", dpi=110)

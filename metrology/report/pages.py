@@ -170,16 +170,19 @@ _UNEXPLAINED_NEXT = (
 )
 
 
-def diagnosis_section(diag) -> Section:
-    """``metro diagnose``: the cause named first, with the extension's fit report."""
+def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Section:
+    """``metro diagnose``: the held-out normal deviation against the drilling tolerance, the
+    cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
     from metrology.report.diagnose import diagnosis_figures, report_text
 
     D = diag.to_dict()
     cause = D["cause"]
-    ok = True if cause == "none" else (None if cause in ("plane_form",) else False)
+    held = D["discrepancy"]["measured_heldout_normal_deg"]
+    ok = bool(held <= tolerance_deg)
     who = f" on {', '.join(D['sensors'])}" if D["sensors"] else ""
-    head = f"cause: {cause}{who} (confidence {D['confidence']})"
+    head = (f"cause: {cause}{who} (confidence {D['confidence']}); held-out normal deviation {held:.5f} deg "
+            f"against a tolerance of {tolerance_deg:g} deg")
     nxt, limits = [], []
     for c in D["causes"]:
         adv = ADVICE.get(c["cause"])
