@@ -112,7 +112,7 @@ def test_diagnose_report_html_and_directory(tmp_path):
     (tmp_path / "plane.json").write_text(json.dumps({"normal": DPLANE.normal.tolist(), "offset": DPLANE.offset}))
     _ok(runner.invoke(app, ["simulate", "--layout", str(tmp_path / "layout.toml"), "--plane", str(tmp_path / "plane.json"),
                             "--out", str(tmp_path / "x.csv"), "--effect", "outliers", "--sensor", "L4", "--size", "0.1",
-                            "--poses", "40", "--seed", "3"]))
+                            "--poses", "30", "--seed", "3"]))
     out = tmp_path / "d.html"
     r = _ok(runner.invoke(app, ["diagnose", str(tmp_path / "x.csv"), "--plane", str(tmp_path / "plane.json"), "--layout",
                                 str(tmp_path / "layout.toml"), "--folds", "2", "--report", str(out)]))
