@@ -13,6 +13,12 @@ __all__ = ["figure7", "figure8", "pyplot", "save_figure"]
 RAW_LABELS = ("dx [mm]", "dy [mm]", "dz [mm]", "dm [1]", "dn [1]", "dq [1]")
 
 
+#: legend words of Figure 8's series (the estimators' names otherwise)
+METHOD_WORDS = {"before": "nominal layout (before)", "true": "true parameters (noise floor)",
+                "ekf_paper": "paper's EKF", "method1": "paper's method 1", "lsq": "least squares (lsq)",
+                "iekf": "iterated EKF (iekf)", "ekf": "EKF (ekf)"}
+
+
 def pyplot():
     """``matplotlib.pyplot`` on the headless Agg backend, in metro's one style
     (:mod:`metrology.report.style`)."""
@@ -72,10 +78,12 @@ def figure8(deviation_deg, path, title="Angular deviation of the measured normal
     fig, ax = plt.subplots(figsize=(9, 4.8))
     markers = "osv^D*xP"
     for k, (name, dev) in enumerate(deviation_deg.items()):
-        ax.plot(np.arange(1, len(dev) + 1), dev, marker=markers[k % len(markers)], ms=4, lw=1, label=name)
-    from matplotlib.ticker import MaxNLocator
+        ax.plot(np.arange(1, len(dev) + 1), dev, marker=markers[k % len(markers)], ms=4, lw=1,
+                label=METHOD_WORDS.get(name, name))
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
 
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("workpiece pose [index]")
     ax.set_ylabel("angular deviation [deg]")
