@@ -102,6 +102,27 @@ def test_validate_report_judges_the_tolerance_and_names_the_poses_left_out(tmp_p
     check_page(out, [VAL], 1, ("NOT within tolerance",))
 
 
+def test_same_inputs_same_bytes(tmp_path, monkeypatch):
+    """With ``SOURCE_DATE_EPOCH`` set (the time written), a report is byte-identical run to run."""
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    pages = []
+    out = tmp_path / "v.html"
+    for _ in range(2):
+        _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out)]))
+        pages.append(out.read_bytes())
+    assert pages[0] == pages[1] and b"2023-11-14 22:13:20 UTC" in pages[0]
+
+
+@pytest.mark.slow
+def test_demo_report_end_to_end(tmp_path):
+    """The real demo with ``--report``: one page of the five steps, each step's own report beside it."""
+    out = tmp_path / "demo.html"
+    _ok(runner.invoke(app, ["demo", "--out", str(tmp_path / "o"), "--report", str(out)]))
+    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 7, ("NOT within tolerance",))
+    for name in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
+        assert f"(metro {name})" in text and (tmp_path / "o" / f"{name}.html").exists()
+
+
 def test_diagnose_report_html_and_directory(tmp_path):
     from metrology.io.layout import save_layout
     from metrology.sim.synth import typical_layouts
