@@ -42,7 +42,7 @@ def register(app: typer.Typer) -> None:
             sources = {"export": str(export), "plane": str(plane), "layout": str(layout)}
             files = diagnose_report(d, report, sources, command=invocation(ctx), seed=seed)
             if not json_out:
-                text += "\n\nplots: " + ", ".join(files)
+                text += ("\n\nreport: " if str(report).lower().endswith((".html", ".htm")) else "\n\nplots: ") + ", ".join(files)
         typer.echo(text)
 
     @app.command("simulate")

@@ -39,6 +39,10 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     from metrology.io.layout import save_layout
 
     _check_report(report_html)
+    if plot_dir is not None:
+        from metrology.report.calibration import check_plot_target
+
+        check_plot_target(plot_dir)
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)

@@ -31,7 +31,8 @@ from metrology.report.plots import pyplot, save_figure
 from metrology.report.validation import plot_validation, validation_text  # noqa: F401 (their home before)
 
 __all__ = ["calibration_text", "validation_text",
-           "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
+           "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots", "convergence_figure",
+           "residuals_figure", "fit_summaries", "check_plot_target"]
 
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
@@ -230,6 +231,22 @@ def residuals_figure(report: CalibrationReport):
     return fig
 
 
+def check_plot_target(target) -> Path:
+    """Refuse a ``--plot`` target before any work (ValueError naming it): a one-figure format
+    (.png, .svg), a PDF in a directory that does not exist, a file where a directory is meant."""
+    target = Path(target)
+    suffix = target.suffix.lower()
+    if suffix in (".png", ".svg", ".jpg", ".jpeg"):
+        raise ValueError(f"--plot {target}: a {target.suffix} file holds one figure; give a .pdf file "
+                         "(one page per figure) or a directory")
+    if suffix == ".pdf":
+        if target.is_dir() or not target.resolve().parent.is_dir():
+            raise ValueError(f"--plot {target}: a directory, or in a directory that does not exist")
+    elif target.exists() and not target.is_dir():
+        raise ValueError(f"{target}: not a directory")
+    return target
+
+
 def write_calibration_plots(report: CalibrationReport, target) -> list:
     """Write the convergence and residual figures.
 
@@ -238,7 +255,7 @@ def write_calibration_plots(report: CalibrationReport, target) -> list:
     ``convergence.png`` and ``residuals.png``. Each file is written atomically; returns
     the paths written.
     """
-    target = Path(target)
+    target = check_plot_target(target)
     if target.suffix.lower() == ".pdf":
         from matplotlib.backends.backend_pdf import PdfPages
 
@@ -254,10 +271,5 @@ def write_calibration_plots(report: CalibrationReport, target) -> list:
             for fig in figs:
                 close(fig)
         return [target]
-    if target.suffix.lower() in (".png", ".svg", ".jpg", ".jpeg"):
-        raise ValueError(f"--plot {target}: a {target.suffix} file holds one figure; give a .pdf file "
-                         "(one page per figure) or a directory")
-    if target.exists() and not target.is_dir():
-        raise ValueError(f"{target}: not a directory")
     target.mkdir(parents=True, exist_ok=True)
     return [plot_convergence(report, target / "convergence.png"), plot_residuals(report, target / "residuals.png")]

@@ -177,6 +177,17 @@ def test_a_bad_report_path_is_one_line_exit_2_before_any_work(tmp_path, name):
     assert sorted(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("args", [
+    ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL), "--plot", "{tmp}/c.png"],
+    ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL), "--plot", "{tmp}/no/c.pdf"],
+    ["demo", "--out", "{tmp}/o", "--report", "{tmp}/demo.txt"],
+])
+def test_a_bad_output_is_refused_before_any_work(tmp_path, args):
+    r = runner.invoke(app, [a.format(tmp=tmp_path) for a in args])
+    assert r.exit_code == 2 and r.output.startswith("error: ") and len(r.output.splitlines()) == 1
+    assert sorted(tmp_path.iterdir()) == []
+
+
 def test_escaping_and_backticks():
     from metrology.report.html import Section, Verdict, render_html, run_info
 
