@@ -7,7 +7,16 @@ import numpy as np
 from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
 
-__all__ = ["report_text", "plot_report", "p_text", "simulate_text"]
+__all__ = ["report_text", "plot_report", "p_text", "simulate_text", "diagnosis_figures", "UNEXPLAINED_NEXT"]
+
+#: what to do when the residuals are not noise and no catalogued effect explains them
+UNEXPLAINED_NEXT = (
+    "check the export: a sensor's column swapped or mislabelled, a pose recorded twice, the units and quaternion "
+    "order (--position-units, --quaternion-order)",
+    "give the datum as its tracker cloud (--plane datum.ply): its form is then checked against the readings",
+    "add poses that vary one thing at a time (stand-off, tilt, time, temperature), interleaved, so that a cause "
+    "can be told apart from the others",
+)
 
 
 def p_text(p: float) -> str:
@@ -19,7 +28,10 @@ def report_text(d: Diagnosis) -> str:
     """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
     D = d.to_dict()
     lines = [f"cause: {D['cause']}" + (f" ({', '.join(D['sensors'])})" if D["sensors"] else "")
-             + f"   confidence: {D['confidence']}", f"  {D['summary']}", ""]
+             + f"   confidence: {D['confidence']}", f"  {D['summary']}"]
+    if D["cause"] == "unexplained":
+        lines += ["  next: " + UNEXPLAINED_NEXT[0]] + ["        " + x for x in UNEXPLAINED_NEXT[1:]]
+    lines.append("")
     disc = D["discrepancy"]
     lines.append("discrepancy (residual RMS um per sensor; held-out normal deviation deg)")
     head = f"  {'':28s}" + "".join(f"{n:>9s}" for n in disc["sensors"]) + f"{'normal':>11s}"

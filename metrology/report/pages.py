@@ -163,18 +163,11 @@ def validation_section(report, tolerance_deg: float = DRILLING_TOLERANCE_DEG) ->
                    limits=tuple(limits), next_steps=tuple(nxt))
 
 
-_UNEXPLAINED_NEXT = (
-    "Check the export's columns and units (a swapped sensor column, a pose recorded twice).",
-    "Re-scan the datum with `--cloud`-style coverage and compare its form with `metro fit-plane`.",
-    "Add poses that vary one covariate at a time (stand-off, tilt, time, temperature) so a cause can be told apart.",
-)
-
-
 def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Section:
     """``metro diagnose``: the held-out normal deviation against the drilling tolerance, the
     cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
-    from metrology.report.diagnose import diagnosis_figures, report_text
+    from metrology.report.diagnose import UNEXPLAINED_NEXT, diagnosis_figures, report_text
 
     D = diag.to_dict()
     cause = D["cause"]
@@ -189,7 +182,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
         if adv:
             nxt.append(f"{c['cause']}: {adv}")
     if cause == "unexplained":
-        nxt += list(_UNEXPLAINED_NEXT)
+        nxt += list(UNEXPLAINED_NEXT)
         limits.append("the residuals are not consistent with the stated noise, and no catalogued effect explains them")
     if cause == "none":
         limits.append("no effect above the detectable sizes; smaller ones are not ruled out")
