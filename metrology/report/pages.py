@@ -118,8 +118,10 @@ def calibration_section(report) -> Section:
               Table(f"Correlations with |r| > {CORRELATION_REPORT:g}", ("sensor", "pair", "r"), correl,
                     "The pairs of x, y, tilt_e1, tilt_e2 move together when the beam pivots about a point along it "
                     "(see what the data could not determine)."))
-    figs = (figure_from_matplotlib(convergence_figure(report), "Estimate from the first k poses (±1 σ bands): "
-                                   "flat means the poses determine the parameter."),
+    conv = ("The filter's estimate after each measurement (dotted: its stopping rule met); dm, dn, dq are "
+            "changes of the unit beam direction's components." if report.calibration.history else
+            "Estimate from the first k poses (±1 σ bands): flat means the poses determine the parameter.")
+    figs = (figure_from_matplotlib(convergence_figure(report), conv),
             figure_from_matplotlib(residuals_figure(report), "Reading residuals of the calibrated layout against the "
                                    "reading, the incidence angle and the pose: a trend is a missing effect."))
     return Section("Sensor calibration (metro calibrate)", Verdict(ok, head, "; ".join(causes)), figures=figs,
