@@ -20,6 +20,10 @@ def _pm(v, se, unit, digits=4):
     return f"{v:.{digits}f} ± {se:.{digits}f} {unit}" if se is not None and np.isfinite(se) else f"{v:.{digits}f} {unit}"
 
 
+def _num(v, missing="—", digits=4):
+    return f"{v:.{digits}f}" if v is not None and np.isfinite(v) else missing
+
+
 def plane_section(fit, points) -> Section:
     """``metro fit-plane``: the datum plane, judged by its form (a significant quadratic form:
     the datum is not flat) and its inlier share."""
@@ -252,7 +256,7 @@ def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> S
         t = summary[name]
         rows.append((f"micro-{name}", str(t["n"]), f"{t['max_deg']:.4f}", f"{t['mean_deg']:.4f} ± {t['std_deg']:.4f}",
                      f"{t['p95_deg']:.4f}", f"{100 * t['within_tolerance']:.1f} %",
-                     f"{t.get('final_max_deg', float('nan')):.4f}"))
+                     _num(t.get("final_max_deg"), "— (no loop)")))
     bad = {k: v for k, v in summary["status"].items() if k != "ok" and v}
     limits = [f"{v} point(s) not measured: {STATUS[k]}" for k, v in bad.items()]
     nxt = []
