@@ -74,20 +74,22 @@ def figure8(deviation_deg, path, title="Angular deviation of the measured normal
     deviation_deg : dict method -> (m,) float, deg
     path : output PNG path (written atomically)
     """
+    from metrology.report.style import plain_log_ticks
+
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.8))
     markers = "osv^D*xP"
     for k, (name, dev) in enumerate(deviation_deg.items()):
         ax.plot(np.arange(1, len(dev) + 1), dev, marker=markers[k % len(markers)], ms=4, lw=1,
                 label=METHOD_WORDS.get(name, name))
-    from matplotlib.ticker import FuncFormatter, MaxNLocator
+    from matplotlib.ticker import MaxNLocator
 
     ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("workpiece pose [index]")
     ax.set_ylabel("angular deviation [deg]")
     ax.legend(fontsize=8, ncol=4)
     ax.set_title(title)
+    plain_log_ticks(ax)
     fig.tight_layout()
     save_figure(fig, path)

@@ -8,7 +8,7 @@ component of a unit vector.
 
 from __future__ import annotations
 
-__all__ = ["RC", "apply_style", "pyplot", "close"]
+__all__ = ["RC", "apply_style", "pyplot", "close", "plain_log_ticks"]
 
 #: the rcParams every figure is drawn with
 RC = {
@@ -56,3 +56,14 @@ def close(fig) -> None:
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+
+
+def plain_log_ticks(ax) -> None:
+    """A log y axis labelled in plain numbers (0.01, 0.1, 1, not 10^-2): the minor ticks too
+    when the axis spans less than a decade (otherwise too many)."""
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    lo, hi = ax.get_ylim()
+    ax.yaxis.set_minor_formatter(plain if lo > 0 and hi / lo < 10 else NullFormatter())

@@ -82,7 +82,7 @@ def validation_figure(report: ValidationReport, tolerance_deg: float | None = DR
     returns the matplotlib figure."""
     from matplotlib.ticker import MaxNLocator
 
-    from metrology.report.style import pyplot
+    from metrology.report.style import plain_log_ticks, pyplot
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -101,10 +101,7 @@ def validation_figure(report: ValidationReport, tolerance_deg: float | None = DR
         for j in gone:
             ax.axvline(j + 1, color="0.6", ls=":", lw=0.8)
         ax.plot([], [], color="0.6", ls=":", label="pose left out (< 3 readings)")
-    from matplotlib.ticker import FuncFormatter
-
     ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     finite = np.rad2deg(report.deviation[np.isfinite(report.deviation)])
     top = max(float(finite.max()) if finite.size else 1.0, tolerance_deg or 0.0)
     ax.set_ylim(top=top * 2.0)
@@ -113,6 +110,7 @@ def validation_figure(report: ValidationReport, tolerance_deg: float | None = DR
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.legend(loc="best")
     ax.set_title("measured normal against the datum normal, per pose (log axis)")
+    plain_log_ticks(ax)
     fig.tight_layout()
     return fig
 
