@@ -46,6 +46,12 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
+    page = None
+    if report_html is not None:  # rendered before anything is written: all or nothing
+        from metrology.report.html import render_html, run_info
+        from metrology.report.pages import calibration_section
+
+        page = render_html("Sensor calibration", run_info(sources, command), [calibration_section(report)])
     if plot_dir is not None:
         from metrology.report.calibration import write_calibration_plots
 
@@ -58,11 +64,10 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
                     f"{dataset.export.n_poses} poses; residual RMS {rms}\n"
                     "zero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
                     "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
-    if report_html is not None:
-        from metrology.report.html import run_info, write_report
-        from metrology.report.pages import calibration_section
+    if page is not None:
+        from metrology.io.atomic import write_text
 
-        write_report(report_html, "Sensor calibration", run_info(sources, command), [calibration_section(report)])
+        write_text(report_html, page)
     return report
 
 
@@ -95,13 +100,18 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
     layouts["layout"] = dataset.layout
     sources["layout"] = str(layout_path)
     report = validate(dataset, layouts, sources)
+    page = None
+    if report_html is not None:  # rendered before anything is written: all or nothing
+        from metrology.report.html import render_html, run_info
+        from metrology.report.pages import validation_section
+
+        page = render_html("Validation", run_info(sources, command), [validation_section(report, tolerance_deg)])
     if plot is not None:
         from metrology.report.validation import plot_validation
 
         plot_validation(report, plot, tolerance_deg)
-    if report_html is not None:
-        from metrology.report.html import run_info, write_report
-        from metrology.report.pages import validation_section
+    if page is not None:
+        from metrology.io.atomic import write_text
 
-        write_report(report_html, "Validation", run_info(sources, command), [validation_section(report, tolerance_deg)])
+        write_text(report_html, page)
     return report
