@@ -16,8 +16,12 @@ from metrology.report.html import Section, Table, Verdict, figure_from_matplotli
 __all__ = ["plane_section", "calibration_section", "validation_section", "diagnosis_section", "normals_section"]
 
 
+#: "±" between non-breaking spaces: a value and its uncertainty stay on one line
+_PM = "\u00a0±\u00a0"
+
+
 def _pm(v, se, unit, digits=4):
-    return f"{v:.{digits}f} ± {se:.{digits}f} {unit}" if se is not None and np.isfinite(se) else f"{v:.{digits}f} {unit}"
+    return f"{v:.{digits}f}{_PM}{se:.{digits}f} {unit}".strip() if se is not None and np.isfinite(se) else f"{v:.{digits}f} {unit}"
 
 
 def _num(v, missing="—", digits=4):
@@ -254,7 +258,7 @@ def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> S
     rows = []
     for name in ("plane", "sphere"):
         t = summary[name]
-        rows.append((f"micro-{name}", str(t["n"]), f"{t['max_deg']:.4f}", f"{t['mean_deg']:.4f} ± {t['std_deg']:.4f}",
+        rows.append((f"micro-{name}", str(t["n"]), f"{t['max_deg']:.4f}", f"{t['mean_deg']:.4f}{_PM}{t['std_deg']:.4f}",
                      f"{t['p95_deg']:.4f}", f"{100 * t['within_tolerance']:.1f} %",
                      _num(t.get("final_max_deg"), "— (no loop)")))
     bad = {k: v for k, v in summary["status"].items() if k != "ok" and v}
