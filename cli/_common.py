@@ -77,9 +77,35 @@ def guarded(fn):
 QUATERNION_HELP = ("What the columns qw,qx,qy,qz hold: wxyz (scalar first, the format) or xyzw (a scalar-last "
                    "export under the same header).")
 POSITION_HELP = "Unit of the export's x,y,z columns: mm, m or in (converted to mm)."
+REPORT_HELP = ("One self-contained HTML report (.html): the verdict, the figures, the numbers with their "
+               "uncertainties, what to do next; inputs with SHA-256, versions, the command line.")
 NO_READING_HELP = ("The PLC's 'no reading' code in the d_ columns (default 0 where the sensor's range excludes it): "
                    "dropped and counted, never used as a distance.")
 JSON_HELP = "Print the result as JSON on stdout (with its \"schema\" tag)."
+
+
+def invocation(ctx) -> str:
+    """The command line a report names, rebuilt from what was parsed (``ctx``, a
+    ``typer.Context``): the command, its arguments, and each option not left at its default.
+    Independent of ``sys.argv``, so the same under ``metro demo`` and in tests."""
+    import shlex
+
+    parts = ctx.command_path.split()
+    for p in ctx.command.params:
+        v = ctx.params.get(p.name)
+        if p.param_type_name == "argument":
+            parts.append(str(v))
+            continue
+        if v is None or v is False or v == p.default or not p.opts:
+            continue
+        opt = max(p.opts, key=len)
+        if v is True:
+            parts.append(opt)
+        elif isinstance(v, (tuple, list)):
+            parts += [opt, *map(str, v)]
+        else:
+            parts += [opt, str(v)]
+    return shlex.join(parts)
 
 
 def warn(line: str) -> None:

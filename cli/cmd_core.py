@@ -7,16 +7,19 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo_json, fail, guarded, progress_bar
+from ._common import JSON_HELP, dumps, echo_json, fail, guarded, invocation, progress_bar
 
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
+        ctx: typer.Context,
         fixtures: Optional[Path] = typer.Option(None, help="Data to run on (default: the data shipped with metro)."),
         out: Optional[Path] = typer.Option(None, help="Folder for the outputs (default: a new folder metro-demo "
                                            "in the current directory; metro-demo-2, ... if that one is taken)."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " Each step's command and its own JSON."),
+        report: Optional[Path] = typer.Option(None, "--report", help="One HTML report of every step (.html); each "
+                                              "step's own report is written into the output folder too."),
     ) -> None:
         """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals."""
         import contextlib
@@ -50,7 +53,8 @@ def register(app: typer.Typer) -> None:
 
         try:
             with progress_bar("demo") as progress:
-                rc = run_demo(fixtures, out, run_step, announce, progress=progress)
+                rc = run_demo(fixtures, out, run_step, announce, report=report, command=invocation(ctx),
+                              progress=progress)
         except ValueError as exc:
             fail(str(exc))
         if rc:  # a failing step has printed its one-line error

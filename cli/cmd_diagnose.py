@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo, echo_json, fail, guarded,
-                      progress_bar, warn)
+                      invocation, progress_bar, warn)
 from ._stdin import plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
@@ -18,11 +18,13 @@ def register(app: typer.Typer) -> None:
     @app.command("diagnose")
     @guarded
     def diagnose(
+        ctx: typer.Context,
         export: Path = typer.Argument(..., help="tracker export CSV" + STDIN),
         plane: Path = typer.Option(..., "--plane", help="datum plane JSON or datum cloud" + STDIN),
         layout: Path = typer.Option(..., "--layout", help="sensor layout TOML (with noise_mm)" + STDIN),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP),
-        report: Path = typer.Option(None, "--report", help="directory for the residual plots"),
+        report: Path = typer.Option(None, "--report", help="an .html file: one self-contained report; any other "
+                                    "path: a directory for the residual plots (PNG)"),
         folds: int = typer.Option(5, "--folds", help="k of the k-fold-by-pose held-out figures"),
         seed: int = typer.Option(0, "--seed", help="seed of the side-by-side simulation's noise"),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
@@ -30,22 +32,25 @@ def register(app: typer.Typer) -> None:
         no_reading: float = typer.Option(None, "--no-reading", help=NO_READING_HELP),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
-        from metrology.jobs.diagnose import diagnose_files
-        from metrology.report.diagnose import plot_report, report_text
+        from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report
+        from metrology.report.diagnose import report_text
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
-        with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
-                         ("--layout", layout, ".toml")) as (export, plane, layout), progress_bar("diagnose") as progress:
-            d = diagnose_files(export, plane, layout, quaternion_order, position_units, no_reading, warn=warn, folds=folds,
-                               seed=seed, progress=progress)
-        text = dumps(d.to_dict(), "diagnosis") if json_out else report_text(d)
         if report is not None:
-            with progress_bar("diagnose") as progress:
-                progress(0, 1, "drawing the residual plots")
-                files = plot_report(d, report)
-            if not json_out:
-                text += "\n\nplots: " + ", ".join(files)
+            check_report_target(report)
+        with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
+                         ("--layout", layout, ".toml")) as (export_p, plane_p, layout_p), progress_bar("diagnose") as progress:
+            d = diagnose_files(export_p, plane_p, layout_p, quaternion_order, position_units, no_reading, warn=warn,
+                               folds=folds, seed=seed, progress=progress)
+            text = dumps(d.to_dict(), "diagnosis") if json_out else report_text(d)
+            if report is not None:  # inside: a report reads the inputs' checksums
+                progress(0, 1, "writing the report")
+                sources = {"export": str(export_p), "plane": str(plane_p), "layout": str(layout_p)}
+                files = diagnose_report(d, report, sources, command=invocation(ctx), seed=seed)
+                if not json_out:
+                    html = str(report).lower().endswith((".html", ".htm"))
+                    text += ("\n\nreport: " if html else "\n\nplots: ") + ", ".join(files)
         echo(text)
 
     @app.command("simulate")

@@ -6,7 +6,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar, warn
+from ._common import JSON_HELP, REPORT_HELP, echo, echo_json, fail, guarded, invocation, progress_bar, warn
 
 CLOUD_FORMATS = ("ply", "pcd", "e57", "xyz", "xyzn", "xyzrgb", "pts", "csv", "txt")
 
@@ -15,6 +15,7 @@ def register(app: typer.Typer) -> None:
     @app.command("fit-plane")
     @guarded
     def fit_plane(
+        ctx: typer.Context,
         cloud: str = typer.Argument(..., help="Point cloud: .ply .pcd .e57 .xyz .xyzn .xyzrgb .pts .csv .txt (mm); "
                                     "'-' for stdin."),
         threshold_mm: Optional[float] = typer.Option(
@@ -27,6 +28,7 @@ def register(app: typer.Typer) -> None:
         units: Optional[str] = typer.Option(None, "--units", help="Unit of the cloud's numbers: mm (default), m or in."),
         fmt: Optional[str] = typer.Option(None, "--format", help="Format of a cloud on stdin (CLOUD '-'): "
                                           f"{', '.join(CLOUD_FORMATS)}; PLY and PCD are also known by their header."),
+        report: Optional[str] = typer.Option(None, "--report", help=REPORT_HELP),
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
@@ -43,6 +45,7 @@ def register(app: typer.Typer) -> None:
         suffix = format_suffix("CLOUD", fmt, {"." + f for f in CLOUD_FORMATS}, "cloud")
         with stdin_files(("CLOUD", cloud, suffix)) as (path,), progress_bar("fit-plane") as progress:
             fit = fit_plane_file(path, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, warn=warn,
+                                 report=report, command=invocation(ctx),
                                  progress=progress)
         if as_json:
             echo_json(fit.to_dict(), "plane")

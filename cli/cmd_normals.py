@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar, warn
+from ._common import JSON_HELP, REPORT_HELP, echo, echo_json, fail, guarded, invocation, progress_bar, warn
 
 STDIN = " ('-' for stdin)"
 MESH_FORMATS = ("stl", "obj", "ply", "off", "glb", "gltf", "step", "stp")
@@ -16,6 +16,7 @@ def register(app: typer.Typer) -> None:
     @app.command("normals")
     @guarded
     def normals(
+        ctx: typer.Context,
         panel: Path = typer.Argument(..., help="Panel mesh in mm (STL, OBJ, PLY, GLB/GLTF; STEP with cascadio)" + STDIN),
         layout: Path = typer.Option(..., "--layout", help="Sensor layout TOML (nominal or calibrated)" + STDIN),
         points: Path = typer.Option(None, "--points", help="CSV of drilling points x,y,z,i,j,k or x,y,z (mm; approach = "
@@ -30,6 +31,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(None, "--out", help="Per-point results, .csv or .json."),
         as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
         plot: Path = typer.Option(None, "--plot", help="PNG map of the errors over the panel."),
+        report: Path = typer.Option(None, "--report", help=REPORT_HELP),
         true_layout: Path = typer.Option(None, "--true-layout", help="Simulate the head as this layout (default: --layout)"
                                          + STDIN),
         motion_repeat_deg: float = typer.Option(0.02, "--motion-repeat-deg", help="Robot: random rotation error per adjustment, 1 sigma per axis."),
@@ -58,7 +60,7 @@ def register(app: typer.Typer) -> None:
                 noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
                 true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
                 motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
-                progress=progress,
+                progress=progress, report=report, command=invocation(ctx),
             )
         for w in summary["warnings"]:
             warn(w)

@@ -22,8 +22,13 @@ WEAK_RTOL = 1e-3
 #: collinear (unitless)
 COLLINEAR_RTOL = 1e-9
 
-#: correlations of a sensor's parameters are reported above this |r| (unitless)
-CORRELATION_REPORT = 0.9
+#: correlations between two fitted parameters are reported above this |r| (unitless): in
+#: ``metro calibrate``'s JSON and in the fit reports of ``calibrate`` and ``diagnose``
+#: (text and HTML). lmfit's default (0.1) lists every pair of these fits; above 0.5 one
+#: parameter can trade for the other. On a small tilt range the beam's pivot (zero point
+#: across the beam against its tilt) puts all pairs of x, y, tilt_e1, tilt_e2 above 0.95:
+#: the identifiability line names that one combination
+CORRELATION_REPORT = 0.5
 
 #: variance inflation factors above this are reported as poorly separated parameters
 #: (unitless; the standard error is more than sqrt(10) = 3.2 times what it would be if the
@@ -37,3 +42,9 @@ VIF_WARN = 10.0
 #: between opposite spots, a tenth of the 0.5 deg drilling requirement of the paper
 TARGET_ZERO_MM = 0.05
 TARGET_TILT_DEG = 0.05
+
+#: the drilling requirement on the normal: the angle between the measured normal and the
+#: true one (deg; the paper's 0.5 deg). ``metro validate`` and ``metro normals`` judge
+#: against it by default (``--tolerance-deg``)
+DRILLING_TOLERANCE_DEG = 0.5
+

@@ -5,6 +5,7 @@ from __future__ import annotations
 from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, calibrate_dataset
 from metrology.calibration.validation import ValidationReport, validate
 from metrology.core.progress import ProgressFn, notify
+from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
 
 
 def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -24,7 +25,8 @@ def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", 
 
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,
                     plot_dir=None, quaternion_order="wxyz", position_units="mm", no_reading=None,
-                    warn=None, progress: ProgressFn | None = None, **kwargs) -> CalibrationReport:
+                    warn=None, report_html=None, command=None, progress: ProgressFn | None = None,
+                    **kwargs) -> CalibrationReport:
     """Load and cross-check the three files, calibrate, and write the requested outputs.
 
     ``quaternion_order``, ``position_units`` and ``no_reading`` say how to read the export
@@ -33,12 +35,18 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
 
     Nothing is written unless the calibration succeeds; each file is written atomically
     (the figures first, then the calibrated layout ``out``, in the schema of the nominal
-    with ``zero_stderr_mm`` and ``direction_stderr_deg`` added).
+    with ``zero_stderr_mm`` and ``direction_stderr_deg`` added, then the HTML report
+    ``report_html`` naming ``command``, None: this process's command line).
 
     ``progress(done, total, what)`` is called before each step (read, calibrate, figures, write).
     """
     from metrology.io.layout import save_layout
 
+    _check_report(report_html)
+    if plot_dir is not None:
+        from metrology.report.calibration import check_plot_target
+
+        check_plot_target(plot_dir)
     total = 2 + (plot_dir is not None) + (out is not None)
     notify(progress, 0, total, "reading the export, datum and layout")
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
@@ -46,6 +54,12 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     notify(progress, 1, total, f"calibrating ({method}, {dataset.export.n_poses} poses)")
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
     done = 2
+    page = None
+    if report_html is not None:  # rendered before anything is written: all or nothing
+        from metrology.report.html import render_html, run_info
+        from metrology.report.pages import calibration_section
+
+        page = render_html("Sensor calibration", run_info(sources, command), [calibration_section(report)])
     if plot_dir is not None:
         from metrology.report.calibration import write_calibration_plots
 
@@ -61,19 +75,34 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
                     f"{dataset.export.n_poses} poses; residual RMS {rms}\n"
                     "zero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
                     "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
+    if page is not None:
+        from metrology.io.atomic import write_text
+
+        write_text(report_html, page)
     notify(progress, total, total, "done")
     return report
 
 
+def _check_report(path):
+    if path is not None:
+        from metrology.report.html import check_report_path
+
+        check_report_path(path)
+
+
 def validate_files(export_path, plane_path, layout_path, layout_before_path=None, plot=None, quaternion_order="wxyz",
-                   position_units="mm", no_reading=None, warn=None) -> ValidationReport:
+                   position_units="mm", no_reading=None, warn=None, tolerance_deg=DRILLING_TOLERANCE_DEG,
+                   report_html=None, command=None) -> ValidationReport:
     """Validate ``layout_path`` (and ``layout_before_path``, first, if given) on an export.
 
     The layouts are reported under the labels ``layout_before`` and ``layout``; ``plot``
-    writes the deviation per pose as a PNG (atomically).
+    writes the deviation per pose (atomically; the format from the suffix) with the
+    tolerance ``tolerance_deg`` drawn; ``report_html`` the HTML report judging the
+    validated layout against it.
     """
     from metrology.io.layout import load_layout
 
+    _check_report(report_html)
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     layouts = {}
     sources = {"export": str(export_path), "plane": str(plane_path)}
@@ -83,8 +112,18 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
     layouts["layout"] = dataset.layout
     sources["layout"] = str(layout_path)
     report = validate(dataset, layouts, sources)
-    if plot is not None:
-        from metrology.report.calibration import plot_validation
+    page = None
+    if report_html is not None:  # rendered before anything is written: all or nothing
+        from metrology.report.html import render_html, run_info
+        from metrology.report.pages import validation_section
 
-        plot_validation(report, plot)
+        page = render_html("Validation", run_info(sources, command), [validation_section(report, tolerance_deg)])
+    if plot is not None:
+        from metrology.report.validation import plot_validation
+
+        plot_validation(report, plot, tolerance_deg)
+    if page is not None:
+        from metrology.io.atomic import write_text
+
+        write_text(report_html, page)
     return report

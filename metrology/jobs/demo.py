@@ -40,7 +40,21 @@ def new_output_dir(base="metro-demo") -> Path:
     return cand
 
 
-def run_demo(fixtures, out, run_step, announce=print, progress=None) -> int:
+#: with ``--report``: each step's own HTML report, in ``out``
+STEP_REPORTS = ("fit-plane.html", "calibrate.html", "validate.html", "diagnose.html", "normals.html")
+
+
+def _with_report(args, path):
+    """``args`` with ``--report path`` (replacing a ``--report`` already there)."""
+    args = list(args)
+    if "--report" in args:
+        args[args.index("--report") + 1] = str(path)
+    else:
+        args += ["--report", str(path)]
+    return args
+
+
+def run_demo(fixtures, out, run_step, announce=print, report=None, command=None, progress=None) -> int:
     """Run :data:`DEMO_STEPS` on the fixtures, writing into ``out``.
 
     Parameters
@@ -56,6 +70,10 @@ def run_demo(fixtures, out, run_step, announce=print, progress=None) -> int:
         ``announce(title, args)``, called before each step.
     progress : callable or None
         ``progress(done, total, what)`` before each step (:mod:`metrology.core.progress`).
+    report : str or os.PathLike or None
+        One HTML report of every step (each step also writes its own, :data:`STEP_REPORTS`
+        in ``out``, linked from it); ``command`` is the command line it names (None: this
+        process's).
 
     Returns
     -------
@@ -67,17 +85,47 @@ def run_demo(fixtures, out, run_step, announce=print, progress=None) -> int:
     ValueError
         ``fixtures`` does not hold the bundled fixtures.
     """
+    from metrology.report.html import check_report_path, collect
+
     fixtures, out = Path(fixtures), Path(out)
     if not (fixtures / "measured").is_dir():
         raise ValueError(f"{fixtures}: bundled fixtures not found (expected measured/, hidden/ and the layouts; "
                          "omit --fixtures to use the data shipped with metro)")
+    if report is not None:
+        check_report_path(report)
     out.mkdir(parents=True, exist_ok=True)
-    for k, (title, line) in enumerate(DEMO_STEPS):
-        args = shlex.split(line.format(fx=fixtures, out=out))
-        notify(progress, k, len(DEMO_STEPS), f"step {title.split(' ', 1)[0]} metro {args[0]}")
-        announce(title, args)
-        rc = run_step(args)
-        if rc:  # a failing step has printed its one-line error
-            return rc
+    with collect() as pages:
+        for k, ((title, line), name) in enumerate(zip(DEMO_STEPS, STEP_REPORTS)):
+            args = shlex.split(line.format(fx=fixtures, out=out))
+            if report is not None:
+                args = _with_report(args, out / name)
+            notify(progress, k, len(DEMO_STEPS), f"step {title.split(' ', 1)[0]} metro {args[0]}")
+            announce(title, args)
+            rc = run_step(args)
+            if rc:  # a failing step has printed its one-line error
+                return rc
     notify(progress, len(DEMO_STEPS), len(DEMO_STEPS), "done")
+    if report is not None:
+        _write_demo_report(report, pages, [out / name for name in STEP_REPORTS], command)
     return 0
+
+
+def _write_demo_report(report, pages, step_files, command):
+    """One report of the steps' pages, each section linked to its step's own report."""
+    import os
+    from dataclasses import replace
+
+    from metrology.report.html import RunInfo, run_info, write_report
+
+    sections, inputs, seen = [], [], set()
+    base = Path(report).resolve().parent
+    for (_, run, secs), f in zip(pages, step_files):
+        link = os.path.relpath(Path(f).resolve(), base)
+        sections += [replace(s, link=link) for s in secs]
+        for row in run.inputs:
+            if row[1] not in seen:
+                seen.add(row[1])
+                inputs.append((f"{row[0]} ({run.command.split()[1]})",) + tuple(row[1:]))
+    run = run_info({}, command)
+    write_report(report, "metro demo: fit-plane, calibrate, validate, diagnose, normals",
+                 RunInfo(run.command, tuple(inputs), run.versions, None, run.written), sections)

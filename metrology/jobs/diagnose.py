@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from metrology.diagnosis.decide import Diagnosis, diagnose
 
-__all__ = ["diagnose_files"]
+__all__ = ["diagnose_files", "diagnose_report", "check_report_target"]
 
 
 def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -16,3 +16,33 @@ def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz"
     ds = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     return diagnose(ds, **kw)
 
+
+
+def check_report_target(report) -> None:
+    """Refuse an HTML report path that cannot be written, before the diagnosis runs."""
+    from pathlib import Path
+
+    from metrology.report.html import REPORT_SUFFIXES, check_report_path
+
+    if Path(report).suffix.lower() in REPORT_SUFFIXES:
+        check_report_path(report)
+
+
+def diagnose_report(diag: Diagnosis, report, sources: dict, command=None, seed=None) -> list:
+    """Write ``diag``'s report: ``report`` ending in ``.html``/``.htm`` is one self-contained HTML
+    file (:mod:`metrology.report.html`); any other path a directory of residual PNGs (created if
+    missing), as before. Returns the files written."""
+    from pathlib import Path
+
+    from metrology.report.html import REPORT_SUFFIXES
+
+    if Path(report).suffix.lower() in REPORT_SUFFIXES:
+        from metrology.report.html import check_report_path, run_info, write_report
+        from metrology.report.pages import diagnosis_section
+
+        check_report_path(report)
+        write_report(report, "Diagnosis", run_info(sources, command, seed), [diagnosis_section(diag)])
+        return [str(report)]
+    from metrology.report.diagnose import plot_report
+
+    return plot_report(diag, report)

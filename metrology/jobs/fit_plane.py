@@ -25,8 +25,8 @@ def _check_output(path, what, suffixes=None):
         raise ValueError(f"{path}: the {what} must be one of {', '.join(sorted(suffixes))}")
 
 
-def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None,
-                   progress=None) -> PlaneFit:
+def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None, report=None,
+                   command=None, progress=None) -> PlaneFit:
     """Read a cloud, fit its datum plane, and write the JSON and the residual map.
 
     Parameters
@@ -41,6 +41,10 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         Residual map (``.png``, ``.pdf``, ``.svg``).
     units : {None, "mm", "m", "in"}
         The unit of the file's numbers (None: mm); the fit is in mm.
+    report : str or os.PathLike or None
+        One self-contained HTML report (:mod:`metrology.report.html`).
+    command : str or None
+        The command line the report names (None: this process's).
     warn : callable or None
         ``warn(message)`` for what the caller should know but is not an error: points with
         NaN coordinates dropped (organized scans), a cloud whose size suggests metres. None:
@@ -49,7 +53,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         ``progress(done, total, what)`` at each of 3 stages: read, fit, write
         (:mod:`metrology.core.progress`).
 
-    Both outputs are written atomically and together: on any error neither exists.
+    The outputs are written atomically and together: on any error none exists.
     Errors are ValueError naming the file.
     """
     from metrology.io.atomic import atomic_path
@@ -60,6 +64,10 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         _check_output(out, "plane JSON")
     if plot is not None:
         _check_output(plot, "residual plot", _PLOT_SUFFIXES)
+    if report is not None:
+        from metrology.report.html import check_report_path
+
+        check_report_path(report)
     if warn is None:
         import warnings
 
@@ -90,5 +98,12 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
             from metrology.report.datum import plot_residuals
 
             plot_residuals(points, fit, tmp)
+        if report is not None:
+            from metrology.report.html import render_html, run_info
+            from metrology.report.pages import plane_section
+
+            page = render_html("Datum plane fit", run_info({"cloud": cloud}, command, seed), [plane_section(fit, points)])
+            tmp = stack.enter_context(atomic_path(report))
+            tmp.write_text(page, encoding="utf-8")
     notify(progress, 3, 3, "done")
     return fit

@@ -17,11 +17,12 @@ from metrology.report.normals import per_point_text, plot_error_map, summarize
 def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt_deg=1.0, standoff_mm=None,
                 noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
                 true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, progress=None) -> dict:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, report=None, command=None, progress=None) -> dict:
     """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
 
     Degrees appear only here, at the edge. Output files are written only after every
-    point has been computed (each atomically); a fatal error writes nothing.
+    point has been computed (each atomically); a fatal error writes nothing. ``report``: one
+    self-contained HTML report naming ``command`` (None: this process's command line).
     ``progress(done, total, what)``: at each of 6 stages (load, the 4 of
     :func:`~metrology.panel.run.run_normals`, write).
 
@@ -44,6 +45,10 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
             raise ValueError(f"{out_path}: the per-point output must end in .csv or .json")
     if plot_path is not None and not str(plot_path).lower().endswith(".png"):
         raise ValueError(f"{plot_path}: the plot must be a .png file")
+    if report is not None:
+        from metrology.report.html import check_report_path
+
+        check_report_path(report)
     notify(progress, 0, 6, "loading the panel and building its ray scene")
     layout = load_layout(layout_path)
     layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
@@ -65,13 +70,23 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     summary["warnings"] = list(panel.warnings)
     summary["points"] = len(run.labels)
     text = per_point_text(run, out_fmt) if out_fmt else None
-    png = plot_error_map(run, tolerance_deg) if plot_path is not None else None
+    png = plot_error_map(run, tolerance_deg) if plot_path is not None or report is not None else None
+    page = None
+    if report is not None:
+        from metrology.report.html import render_html, run_info
+        from metrology.report.pages import normals_section
+
+        inputs = {"panel": panel_path, "layout": layout_path, "points": points_path, "true layout": true_layout_path}
+        page = render_html("Normals on a panel", run_info(inputs, command, seed),
+                           [normals_section(summary, png, tolerance_deg)])
     from metrology.io.atomic import atomic_path, write_text
 
     if text is not None:
         write_text(out_path, text)
-    if png is not None:
+    if png is not None and plot_path is not None:
         with atomic_path(plot_path) as tmp:
             tmp.write_bytes(png)
+    if page is not None:
+        write_text(report, page)
     notify(progress, 6, 6, "done")
     return summary

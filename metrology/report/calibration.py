@@ -22,16 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
-from metrology.core.tolerances import CORRELATION_REPORT
 
 from metrology.calibration.calibrate import CalibrationReport
 from metrology.calibration.convergence import batch_convergence, residual_table
-from metrology.calibration.identifiability import sigma_words
-from metrology.calibration.validation import ValidationReport
+from metrology.calibration.identifiability import CHART_NAMES, sigma_words
+from metrology.report.fit_report import FitSummary, correlations_from_cov, fit_report
 from metrology.report.plots import pyplot, save_figure
+from metrology.report.validation import plot_validation, validation_text  # noqa: F401 (their home before)
 
 __all__ = ["calibration_text", "validation_text",
-           "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots"]
+           "plot_convergence", "plot_residuals", "plot_validation", "write_calibration_plots", "convergence_figure",
+           "residuals_figure", "fit_summaries", "check_plot_target"]
 
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
@@ -45,20 +46,13 @@ def calibration_text(report: CalibrationReport) -> str:
     d = report.to_dict()
     lines = [f"method {d['method']}: {d['n_poses']} poses, datum normal {np.round(d['datum']['normal'], 6).tolist()} "
              f"offset {d['datum']['offset_mm']:.4f} mm (tracker frame)"]
-    for s in d["sensors"]:
-        e, c = s["error"], s["corrected"]
+    for s, fit in zip(d["sensors"], fit_summaries(report)):
+        c = s["corrected"]
         conv = "" if s["n_converged"] is None else f", converged after {s['n_converged']} measurements"
         lines.append(f"{s['name']}: {s['n_readings']} readings, residual RMS {s['residual_rms_mm']:.4f} mm "
-                     f"(stated noise {s['noise_mm']:.4g} mm){conv}")
-        lines.append("  zero error   " + "  ".join(f"{p} {v:+.4f} +- {u:.4f}" for p, v, u in
-                                                  zip("xyz", e["zero_mm"], e["zero_stderr_mm"])) + " mm")
-        lines.append("  beam tilt    " + "  ".join(f"{p} {v:+.4f} +- {u:.4f}" for p, v, u in
-                                                  zip(("e1", "e2"), e["tilt_deg"], e["tilt_stderr_deg"]))
-                     + f" deg (total {e['tilt_total_deg']:.4f} deg)")
+                     f"(stated noise {s['noise_mm']:.4g} mm){conv}; beam tilt total {s['error']['tilt_total_deg']:.4f} deg")
         lines.append("  corrected    zero " + _vec(c["zero_mm"], 4) + " mm, direction " + _vec(c["direction"], 6))
-        if s["correlations"]:
-            lines.append(f"  correlations above {CORRELATION_REPORT:g}: "
-                         + ", ".join(f"{r['a']}-{r['b']} {r['r']:+.2f}" for r in s["correlations"]))
+        lines += ["  " + x for x in fit_report(fit).splitlines()]
     lines.append(f"unidentified: {d['unidentified']}")
     for ident in report.identifiability:
         sv = " ".join(f"{v:.2g}" for v in ident.chart_singular)
@@ -67,6 +61,25 @@ def calibration_text(report: CalibrationReport) -> str:
                      f"moves the measured normal by {np.rad2deg(ident.normal_effect[-1]):.2g} deg RMS)")
     lines += precision_advice(report) + noise_advice(report)
     return "\n".join(lines)
+
+
+def fit_summaries(report: CalibrationReport) -> list:
+    """One :class:`~metrology.report.fit_report.FitSummary` per sensor: its five chart errors
+    (zero x, y, z mm; beam tilt e1, e2 deg) fitted to its readings; chi-square against the
+    stated noise (``noise_mm``; NaN where none is stated)."""
+    cal = report.calibration
+    out = []
+    for i, name in enumerate(cal.nominal.names):
+        th, cov = cal.theta[i], cal.cov[i]
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        n, noise = int(cal.n_used[i]), float(cal.nominal.noise_mm[i])
+        chi2 = n * (cal.residual_rms[i] / noise) ** 2 if noise > 0 else float("nan")
+        params = tuple((p, float(v), float(e), "mm") for p, v, e in zip(("x", "y", "z"), th[:3], se[:3]))
+        params += tuple((p, float(np.rad2deg(np.arctan(v))), float(np.rad2deg(e)), "deg")
+                        for p, v, e in zip(("tilt_e1", "tilt_e2"), th[3:], se[3:]))
+        out.append(FitSummary(f"{name} (zero error, beam tilt)", cal.method, n, 5, float(chi2), params,
+                              correlations_from_cov(cov, CHART_NAMES)))
+    return out
 
 
 def noise_advice(report: CalibrationReport, alpha: float = 1e-3) -> list:
@@ -121,30 +134,18 @@ def calibration_warnings(report: CalibrationReport) -> list:
             if "not determined" in w or "weakly determined" in w]
 
 
-def validation_text(report: ValidationReport) -> str:
-    """The validation table (what ``metro validate`` prints): max / mean / std per layout."""
-    w = max(14, *(len(lab) for lab in report.labels))
-    lines = [f"{'layout':<{w}} {'max [deg]':>10} {'mean [deg]':>10} {'std [deg]':>10} {'poses':>6}  file"]
-    for k, lab in enumerate(report.labels):
-        s = report.stats_deg(k)
-        lines.append(f"{lab:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
-                     f"{report.sources.get(lab, '')}")
-    partial = int(np.sum((report.n_readings < report.n_sensors) & (report.n_readings >= 3)))
-    none = int(np.sum(report.n_readings < 3))
-    if none:
-        lines.append(f"{none} pose(s) with fewer than 3 readings: no normal, left out")
-    if partial:
-        lines.append(f"{partial} pose(s) with a missing reading: normal from the least-squares plane of the rest")
-    return "\n".join(lines)
-
-
 def plot_convergence(report: CalibrationReport, path, convergence=None) -> Path:
-    """Convergence of each parameter of each sensor (Figures 7 and 11).
+    """Write :func:`convergence_figure` to ``path`` atomically (format from the suffix)."""
+    save_figure(convergence_figure(report, convergence), path)
+    return Path(path)
+
+
+def convergence_figure(report: CalibrationReport, convergence=None):
+    """Convergence of each parameter of each sensor (Figures 7 and 11); returns the figure.
 
     Parameters
     ----------
     report : CalibrationReport
-    path : str or Path, PNG
     convergence : list, optional
         :func:`metrology.calibration.convergence.batch_convergence` output for a batch method
         (computed here when needed).
@@ -166,7 +167,7 @@ def plot_convergence(report: CalibrationReport, path, convergence=None) -> Path:
                 for ax in axes[i]:
                     ax.axvline(cal.n_converged[i], color="0.5", ls=":", lw=1)
             axes[i, 0].set_ylabel(f"{names[i]}\nzero error [mm]")
-            axes[i, 1].set_ylabel("direction error [-]")
+            axes[i, 1].set_ylabel("direction-vector error [1]")
         title = f"{cal.method}: filter estimate after each measurement (dotted: stopping rule met)"
     else:
         conv = batch_convergence(cal.nominal, report.dataset.obs, cal.method) if convergence is None else convergence
@@ -186,16 +187,21 @@ def plot_convergence(report: CalibrationReport, path, convergence=None) -> Path:
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(loc="upper right", fontsize=8, ncol=3)
     axes[0, 1].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[-1, 0].set_xlabel("measurements" if cal.history else "poses used")
-    axes[-1, 1].set_xlabel("measurements" if cal.history else "poses used")
+    axes[-1, 0].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
+    axes[-1, 1].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    save_figure(fig, path)
-    return Path(path)
+    return fig
 
 
 def plot_residuals(report: CalibrationReport, path) -> Path:
-    """Residuals of the calibrated layout vs reading, incidence angle and pose index."""
+    """Write :func:`residuals_figure` to ``path`` atomically (format from the suffix)."""
+    save_figure(residuals_figure(report), path)
+    return Path(path)
+
+
+def residuals_figure(report: CalibrationReport):
+    """Residuals of the calibrated layout vs reading, incidence angle and pose index; returns the figure."""
     res, inc = residual_table(report.layout, report.dataset.obs)
     d = report.dataset.obs.d
     names = report.layout.names
@@ -206,53 +212,64 @@ def plot_residuals(report: CalibrationReport, path) -> Path:
         c = _COLOURS[i % len(_COLOURS)]
         ok = np.isfinite(res[:, i])
         rms = np.sqrt(np.mean(res[ok, i] ** 2))
-        axes[0].plot(d[ok, i], res[ok, i] * 1e3, ".", color=c, label=f"{name} (RMS {rms * 1e3:.1f} um)")
+        axes[0].plot(d[ok, i], res[ok, i] * 1e3, ".", color=c, label=f"{name} (RMS {rms * 1e3:.1f} µm, stated noise {report.dataset.layout.noise_mm[i] * 1e3:.1f} µm)")
         axes[1].plot(inc[ok, i], res[ok, i] * 1e3, ".", color=c)
         axes[2].plot(idx[ok], res[ok, i] * 1e3, ".-", color=c, lw=0.5)
     axes[0].set_xlabel("reading [mm]")
     axes[1].set_xlabel("incidence angle of the beam on the datum [deg]")
-    axes[2].set_xlabel("pose index")
-    axes[0].set_ylabel("residual, measured - predicted [um]")
+    axes[2].set_xlabel("pose [index]")
+    axes[0].set_ylabel("residual, measured - predicted [µm]")
     for ax in axes:
         ax.axhline(0, color="0.3", lw=0.8)
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.suptitle(f"{report.calibration.method}: reading residuals of the calibrated layout", fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path)
-    return Path(path)
-
-
-def plot_validation(vreport: ValidationReport, path) -> Path:
-    """Angular deviation per pose, one series per layout (Figure 12)."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(8, 4))
-    x = np.arange(1, len(vreport.pose_id) + 1)
-    markers = ("o", "s", "^", "D", "v")
-    for k, label in enumerate(vreport.labels):
-        s = vreport.stats_deg(k)
-        ax.plot(x, np.rad2deg(vreport.deviation[k]), marker=markers[k % len(markers)], ms=4,
-                color=_COLOURS[k % len(_COLOURS)],
-                label=f"{label}: max {s['max_deg']:.4f}, mean {s['mean_deg']:.4f}, std {s['std_deg']:.4f} deg")
-    ax.set_xlabel("pose")
-    ax.set_ylabel("angular deviation of the normal [deg]")
     from matplotlib.ticker import MaxNLocator
 
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_ylim(bottom=0)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("measured normal vs datum normal (TCS)", fontsize=10)
+    axes[2].xaxis.set_major_locator(MaxNLocator(integer=True))
+    fig.suptitle(f"{report.calibration.method}: reading residuals of the calibrated layout", fontsize=10)
     fig.tight_layout()
-    save_figure(fig, path)
-    return Path(path)
+    return fig
 
 
-def write_calibration_plots(report: CalibrationReport, directory) -> list:
-    """Write ``convergence.png`` and ``residuals.png`` into ``directory`` (created if
-    missing); return their paths."""
-    directory = Path(directory)
-    if directory.exists() and not directory.is_dir():
-        raise ValueError(f"{directory}: not a directory")
-    directory.mkdir(parents=True, exist_ok=True)
-    return [plot_convergence(report, directory / "convergence.png"), plot_residuals(report, directory / "residuals.png")]
+def check_plot_target(target) -> Path:
+    """Refuse a ``--plot`` target before any work (ValueError naming it): a one-figure format
+    (.png, .svg), a PDF in a directory that does not exist, a file where a directory is meant."""
+    target = Path(target)
+    suffix = target.suffix.lower()
+    if suffix in (".png", ".svg", ".jpg", ".jpeg"):
+        raise ValueError(f"--plot {target}: a {target.suffix} file holds one figure; give a .pdf file "
+                         "(one page per figure) or a directory")
+    if suffix == ".pdf":
+        if target.is_dir() or not target.resolve().parent.is_dir():
+            raise ValueError(f"--plot {target}: a directory, or in a directory that does not exist")
+    elif target.exists() and not target.is_dir():
+        raise ValueError(f"{target}: not a directory")
+    return target
+
+
+def write_calibration_plots(report: CalibrationReport, target) -> list:
+    """Write the convergence and residual figures.
+
+    ``target`` ending in ``.pdf``: one PDF file, a page per figure (as ``fit-plane --plot``
+    writes one file). Otherwise a directory (created if missing) receiving
+    ``convergence.png`` and ``residuals.png``. Each file is written atomically; returns
+    the paths written.
+    """
+    target = check_plot_target(target)
+    if target.suffix.lower() == ".pdf":
+        from matplotlib.backends.backend_pdf import PdfPages
+
+        from metrology.io.atomic import atomic_path
+        from metrology.report.style import close
+
+        figs = [convergence_figure(report), residuals_figure(report)]
+        try:
+            with atomic_path(target) as tmp, PdfPages(tmp, metadata={"Creator": "metro calibrate"}) as pdf:
+                for fig in figs:
+                    pdf.savefig(fig)
+        finally:
+            for fig in figs:
+                close(fig)
+        return [target]
+    target.mkdir(parents=True, exist_ok=True)
+    return [plot_convergence(report, target / "convergence.png"), plot_residuals(report, target / "residuals.png")]

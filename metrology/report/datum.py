@@ -11,7 +11,7 @@ import numpy as np
 if TYPE_CHECKING:
     from metrology.datum import PlaneFit
 
-__all__ = ["format_plane_fit", "plot_residuals"]
+__all__ = ["format_plane_fit", "plot_residuals", "residual_map_figure"]
 
 
 def format_plane_fit(fit: PlaneFit) -> str:
@@ -61,18 +61,27 @@ _PLOT_MAX_POINTS = 200_000
 
 
 def plot_residuals(points, fit: PlaneFit, path) -> None:
-    """Write a residual map over the plate (inliers coloured by residual, outliers grey).
+    """Write :func:`residual_map_figure` to ``path`` (``.png``, ``.pdf``, ``.svg``; written as
+    is, callers make it atomic)."""
+    residual_map_figure(points, fit).savefig(path, dpi=130)
+
+
+def residual_map_figure(points, fit: PlaneFit):
+    """A residual map over the plate (inliers coloured by residual, outliers grey); returns
+    a bare matplotlib ``Figure`` in metro's style.
 
     Parameters
     ----------
     points : (m, 3) float, mm, cloud frame
         The cloud ``fit`` was fitted to.
     fit : PlaneFit
-    path : str or os.PathLike
-        ``.png``, ``.pdf`` or ``.svg``; written as is (callers make it atomic).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from metrology.report.style import apply_style
+
+    apply_style()
 
     pts = np.asarray(points, dtype=float)
     if len(pts) > _PLOT_MAX_POINTS:  # a deterministic thinning, for the figure only
@@ -87,7 +96,7 @@ def plot_residuals(points, fit: PlaneFit, path) -> None:
     ax.scatter(uv[~inl, 0], uv[~inl, 1], s=8, c="0.6", marker="x", linewidths=0.6, label=f"outliers ({fit.n_points - fit.n_inliers})")
     size = 4 if inl.sum() > 20000 else 12
     sc = ax.scatter(uv[inl, 0], uv[inl, 1], s=size, c=r[inl], cmap="RdBu_r", vmin=-lim, vmax=lim, linewidths=0)
-    fig.colorbar(sc, ax=ax, label="residual to the plane (mm, + along the normal)")
+    fig.colorbar(sc, ax=ax, label="residual to the plane [mm] (+ along the normal)")
     if fit.form is not None and inl.sum() >= 7:
         gu = np.linspace(uv[inl, 0].min(), uv[inl, 0].max(), 60)
         gv = np.linspace(uv[inl, 1].min(), uv[inl, 1].max(), 60)
@@ -95,8 +104,8 @@ def plot_residuals(points, fit: PlaneFit, path) -> None:
         cs = ax.contour(U, V, fit.form.evaluate(U, V), levels=8, colors="k", linewidths=0.6, alpha=0.6)
         ax.clabel(cs, fmt="%.4f", fontsize=6)
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("u (mm, in-plane, from the centroid)")
-    ax.set_ylabel("v (mm, in-plane)")
+    ax.set_xlabel("u [mm] (in-plane, from the centroid)")
+    ax.set_ylabel("v [mm] (in-plane)")
     form = ""
     if fit.form is not None:
         form = f", quadratic form P-V {fit.form.pv:.4f} mm (p = {fit.form.p_value:.2g})"
@@ -107,4 +116,4 @@ def plot_residuals(points, fit: PlaneFit, path) -> None:
     )
     if (~inl).any():
         ax.legend(loc="upper right", fontsize=7)
-    fig.savefig(path, dpi=130)
+    return fig

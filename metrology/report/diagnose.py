@@ -7,7 +7,16 @@ import numpy as np
 from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
 
-__all__ = ["report_text", "plot_report", "p_text", "simulate_text"]
+__all__ = ["report_text", "plot_report", "p_text", "simulate_text", "diagnosis_figures", "UNEXPLAINED_NEXT"]
+
+#: what to do when the residuals are not noise and no catalogued effect explains them
+UNEXPLAINED_NEXT = (
+    "check the export: a sensor's column swapped or mislabelled, a pose recorded twice, the units and quaternion "
+    "order (--position-units, --quaternion-order)",
+    "give the datum as its tracker cloud (--plane datum.ply): its form is then checked against the readings",
+    "add poses that vary one thing at a time (stand-off, tilt, time, temperature), interleaved, so that a cause "
+    "can be told apart from the others",
+)
 
 
 def p_text(p: float) -> str:
@@ -19,7 +28,10 @@ def report_text(d: Diagnosis) -> str:
     """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
     D = d.to_dict()
     lines = [f"cause: {D['cause']}" + (f" ({', '.join(D['sensors'])})" if D["sensors"] else "")
-             + f"   confidence: {D['confidence']}", f"  {D['summary']}", ""]
+             + f"   confidence: {D['confidence']}", f"  {D['summary']}"]
+    if D["cause"] == "unexplained":
+        lines += ["  next: " + UNEXPLAINED_NEXT[0]] + ["        " + x for x in UNEXPLAINED_NEXT[1:]]
+    lines.append("")
     disc = D["discrepancy"]
     lines.append("discrepancy (residual RMS um per sensor; held-out normal deviation deg)")
     head = f"  {'':28s}" + "".join(f"{n:>9s}" for n in disc["sensors"]) + f"{'normal':>11s}"
@@ -91,16 +103,33 @@ def report_text(d: Diagnosis) -> str:
 
 
 def plot_report(diag: Diagnosis, out_dir) -> list:
-    """Residual plots that made the case, before and after, each written atomically; returns
-    the files written."""
+    """Residual plots that made the case, before and after, each written atomically as PNG
+    into ``out_dir`` (created if missing); returns the files written."""
     from pathlib import Path
 
-    from metrology.report.plots import pyplot, save_figure
-
-    plt = pyplot()
+    from metrology.report.plots import save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    files = []
+    for name, fig, _ in diagnosis_figures(diag):
+        save_figure(fig, out / name, dpi=90)
+        files.append(str(out / name))
+    return files
+
+
+#: the words of each covariate the residuals are plotted against (axis labels with units)
+AXIS_WORDS = {"d_mm": "reading [mm]", "incidence_deg": "incidence [deg]", "time_h": "time [h]",
+              "temp_c": "temperature [°C]", "spot_s_mm": "spot s [mm]", "spot_t_mm": "spot t [mm]",
+              "pose_index": "pose [index]"}
+
+
+def diagnosis_figures(diag: Diagnosis) -> list:
+    """The residual figures that made the case: (file name, matplotlib figure, caption) for
+    the base residuals against every covariate, and, when a cause is named, before/after."""
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
     P = diag.plot_data
     base, cov, names, d0 = P.base, P.cov, P.names, P.d0
     files = []
@@ -120,14 +149,13 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
             ax.plot(X[:, i], base.residual[:, i] * 1e3, ".", ms=3)
             ax.axhline(0, color="k", lw=0.5)
             if i == n - 1:
-                ax.set_xlabel(key)
+                ax.set_xlabel(AXIS_WORDS.get(key, key))
             if j == 0:
-                ax.set_ylabel(f"{names[i]} residual um")
+                ax.set_ylabel(f"{names[i]} residual [µm]")
     fig.suptitle("base model: residuals against each variable")
     fig.tight_layout()
-    f1 = out / "residuals_base.png"
-    save_figure(fig, f1, dpi=90)
-    files.append(str(f1))
+    files.append(("residuals_base.png", fig, "Residuals of the base model (calibrated geometry only) against each "
+                  "recorded variable, one row per sensor: a trend is what the base model misses."))
     best = P.best
     if best is not None:
         f = best.fit
@@ -147,15 +175,14 @@ def plot_report(diag: Diagnosis, out_dir) -> list:
             a1.plot(X[:, i], f.residual[:, i] * 1e3, ".", ms=3, color="C2")
             for a in (a0, a1):
                 a.axhline(0, color="k", lw=0.5)
-                a.set_xlabel(key)
-            a0.set_ylabel(f"{names[i]} um")
+                a.set_xlabel(AXIS_WORDS.get(key, key))
+            a0.set_ylabel(f"{names[i]} residual [µm]")
             a0.set_title("before (base)" if r == 0 else "")
             a1.set_title(f"after ({comp.label})" if r == 0 else "")
             a0.legend(fontsize=7)
         fig.tight_layout()
-        f2 = out / "residuals_named.png"
-        save_figure(fig, f2, dpi=90)
-        files.append(str(f2))
+        files.append(("residuals_named.png", fig, f"Before (base model) and after the named cause ({comp.label}): "
+                      "the residuals of the sensors it acts on."))
     return files
 
 

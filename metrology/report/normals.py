@@ -158,21 +158,26 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
     for ax, e, name in ((axes[0], ep, "micro-plane"), (axes[1], es, "micro-sphere")):
         ok = np.isfinite(e)
         sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=e[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
-        if np.any(~ok):
-            ax.scatter(uv[~ok, 0], uv[~ok, 1], marker="x", c="red", s=18, label="not measured")
-            ax.legend(loc="upper right", fontsize=8)
         big = ok & (e > tolerance_deg)
-        ax.scatter(uv[big, 0], uv[big, 1], facecolors="none", edgecolors="red", s=40)
+        ax.scatter(uv[big, 0], uv[big, 1], facecolors="none", edgecolors="tab:red", s=60, linewidths=1.2,
+                   label=f"over tolerance (> {tolerance_deg:g} deg): {int(big.sum())}")
+        if np.any(~ok):
+            ax.scatter(uv[~ok, 0], uv[~ok, 1], marker="x", c="0.35", s=22, linewidths=1.0,
+                       label=f"not measured: {int((~ok).sum())}")
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=7, frameon=False)
         fin = e[ok]
         stats = f"max {fin.max():.3f}, mean {fin.mean():.3f} deg" if len(fin) else "no point"
         ax.set_title(f"{name}: {stats}")
-        ax.set_xlabel("u (mm, panel best-fit plane)")
-        ax.set_ylabel("v (mm)")
+        ax.set_xlabel("u [mm] (panel best-fit plane)")
+        ax.set_ylabel("v [mm]")
         ax.set_aspect("equal")
-    fig.colorbar(sc, ax=axes, label=f"normal error (deg); red circles > {tolerance_deg:g} deg")
+        ax.grid(False)
+    fig.colorbar(sc, ax=axes, label="normal error [deg]", shrink=0.9)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
+    try:
+        fig.savefig(buf, format="png", dpi=110)
+    finally:
+        plt.close(fig)
     return buf.getvalue()
 
 

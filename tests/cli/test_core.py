@@ -69,7 +69,8 @@ def test_demo_runs_from_an_empty_folder_on_the_shipped_data(tmp_path, monkeypatc
     for step in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
         assert f"$ metro {step}" in r.output
     assert "cause:" in r.output and "recommendation:" in r.output
-    for name in ("plane.json", "calibrated.toml", "validation.png", "panel_errors.png"):
+    for name in ("plane.json", "calibrated.toml", "validation.png", "panel_errors.png", "diagnose/residuals_base.png",
+                 "diagnose/residuals_named.png", "calibration/convergence.png"):
         assert (tmp_path / "metro-demo" / name).stat().st_size > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["metro-demo"]
 

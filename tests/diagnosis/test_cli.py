@@ -23,14 +23,19 @@ def test_cli_simulate_then_diagnose(tmp_path):
                             "--sensor", "L4", "--size", "0.1", "--poses", "60", "--seed", "3"])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["diagnose", str(tmp_path / "x.csv"), "--plane", str(tmp_path / "plane.json"), "--layout",
-                            str(tmp_path / "layout.toml"), "--json", "--folds", "3", "--report", str(tmp_path / "rep")])
+                            str(tmp_path / "layout.toml"), "--json", "--folds", "3", "--report", str(tmp_path / "d.html")])
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
     assert out["cause"] == "outliers" and out["sensors"] == ["L4"]
     assert out["datum_form"] is None
     assert {"heldout", "candidates", "extended", "discrepancy"} <= set(out)
     assert all("p_heldout" in c and "p_insample" in c for c in out["candidates"])
-    assert (tmp_path / "rep" / "residuals_named.png").exists()
+    # --report FILE.html: one self-contained page, the cause first, both residual figures
+    # embedded (--report DIR, the PNGs, runs in the demo's test)
+    from tests.report.test_html import check_page
+
+    text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"], 2, ("within tolerance",))
+    assert "cause: outliers on L4" in text and "[[Fit Statistics]]" in text
 
 
 def test_cli_errors_are_one_line_exit_2(tmp_path):

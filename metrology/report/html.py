@@ -1,0 +1,250 @@
+"""One self-contained HTML report per run: what was run, the verdict first, the figures that
+made the case, the numbers with their uncertainties and units, what the data could not
+determine and what to do next.
+
+The page is rendered with Jinja2 (imported lazily) from ``templates/report.html.j2``,
+shipped as package data. It holds everything it shows: CSS inline, figures embedded as
+base64 PNG, no script, no external URL; it reads on a phone (viewport meta, fluid layout)
+and prints to PDF from a browser (print CSS). It is written atomically.
+
+A report is a list of :class:`Section` (one per command; the demo's report has one per
+step) under one :class:`RunInfo`.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import os
+import platform
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+__all__ = ["Figure", "Table", "Verdict", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+           "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
+           "collect",
+           "REPORT_SUFFIXES"]
+
+#: suffixes ``--report`` accepts for an HTML file
+REPORT_SUFFIXES = (".html", ".htm")
+
+#: the packages whose versions a report names (distribution names; the first installed of
+#: each group is shown)
+_VERSIONED = (("metro",), ("numpy",), ("scipy",), ("open3d-cpu", "open3d"), ("trimesh",), ("matplotlib",))
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption."""
+
+    caption: str
+    data_uri: str
+    alt: str = ""
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table of numbers: ``header`` (tuple of str, units in the header) and ``rows`` (tuple of
+    tuples of str, already formatted); ``note`` under it."""
+
+    caption: str
+    header: tuple
+    rows: tuple
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The first thing a report says.
+
+    ok : True (within tolerance), False (not), None (no tolerance applies: information)
+    headline : str, one sentence (the numbers against the tolerance)
+    cause : str, the cause named (or why it passed); empty when there is nothing to add
+    """
+
+    ok: bool | None
+    headline: str
+    cause: str = ""
+
+    @property
+    def word(self) -> str:
+        return {True: "within tolerance", False: "NOT within tolerance", None: "information"}[self.ok]
+
+
+@dataclass(frozen=True)
+class Section:
+    """What one command found.
+
+    title : str; verdict : Verdict; figures : tuple of Figure; tables : tuple of Table;
+    text : tuple of str, preformatted blocks (the command's text output, a fit report);
+    limits : tuple of str, what the data could not determine; next_steps : tuple of str,
+    what to do next (poses to add, a command to run, a datum to re-measure);
+    link : str, a relative link to this section's own report (the demo's index)
+    """
+
+    title: str
+    verdict: Verdict
+    figures: tuple = ()
+    tables: tuple = ()
+    text: tuple = ()
+    limits: tuple = ()
+    next_steps: tuple = ()
+    link: str = ""
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What was run: the command line, each input with its SHA-256, the versions, the seed.
+
+    inputs : tuple of (role, path, sha256 hex, size in bytes); versions : tuple of (name,
+    version); seed : int or None; written : str, UTC time (``SOURCE_DATE_EPOCH`` when set,
+    for byte-identical reports)
+    """
+
+    command: str
+    inputs: tuple = ()
+    versions: tuple = ()
+    seed: int | None = None
+    written: str = ""
+    python: str = field(default_factory=platform.python_version)
+
+
+def sha256_file(path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def versions() -> tuple:
+    """(name, version) of metro and the libraries its numbers depend on, from the installed
+    distributions' metadata (no import of the libraries themselves)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = []
+    for group in _VERSIONED:
+        for dist in group:
+            try:
+                out.append((dist, version(dist)))
+                break
+            except PackageNotFoundError:
+                continue
+        else:
+            out.append((group[-1], "not installed"))
+    return tuple(out)
+
+
+def _written() -> str:
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    t = datetime.fromtimestamp(int(epoch), timezone.utc) if epoch else datetime.now(timezone.utc)
+    return t.strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def command_line() -> str:
+    """This process's command line, as a shell would take it back (``metro ...``)."""
+    import shlex
+    import sys
+
+    return shlex.join(["metro", *sys.argv[1:]])
+
+
+def run_info(inputs: dict, command: str | None = None, seed: int | None = None) -> RunInfo:
+    """A :class:`RunInfo` for ``inputs`` (role -> path; None values are skipped; a path that is
+    not a file, such as a generated grid, is listed without checksum). ``command`` None: this
+    process's :func:`command_line`."""
+    command = command_line() if command is None else command
+    rows = []
+    for role, path in inputs.items():
+        if path is None:
+            continue
+        p = Path(path)
+        if p.is_file():
+            rows.append((role, str(path), sha256_file(p), p.stat().st_size))
+        else:
+            rows.append((role, str(path), "", 0))
+    return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
+
+
+def figure_from_png(png: bytes, caption: str, alt: str = "") -> Figure:
+    """Embed PNG bytes as a :class:`Figure`."""
+    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption)
+
+
+def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> Figure:
+    """Embed a matplotlib figure as PNG (and close it)."""
+    import io
+
+    from metrology.report.style import close
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        close(fig)
+    return figure_from_png(buf.getvalue(), caption, alt)
+
+
+def check_report_path(path) -> None:
+    """Refuse a ``--report`` path before any work: not ``.html``/``.htm``, a directory, or in a
+    directory that does not exist (ValueError naming the path)."""
+    p = Path(path)
+    if p.suffix.lower() not in REPORT_SUFFIXES:
+        raise ValueError(f"--report {path}: the report must be an .html file")
+    if p.is_dir():
+        raise ValueError(f"--report {path}: is a directory")
+    if not p.resolve().parent.is_dir():
+        raise ValueError(f"--report {path}: directory {p.parent} does not exist")
+
+
+#: the pages rendered inside :func:`collect` (title, run, sections), else None
+_COLLECTED: list | None = None
+
+
+@contextmanager
+def collect():
+    """Keep every page rendered inside the block: yields a list that receives (title, RunInfo,
+    sections) per :func:`render_html` call (``metro demo --report`` gathers its steps' pages
+    this way into one report)."""
+    global _COLLECTED
+    saved, _COLLECTED = _COLLECTED, []
+    try:
+        yield _COLLECTED
+    finally:
+        _COLLECTED = saved
+
+
+def render_html(title: str, run: RunInfo, sections) -> str:
+    """The page (str) of ``sections`` under ``run``, rendered from ``templates/report.html.j2``."""
+    import jinja2
+
+    sections = list(sections)
+    if _COLLECTED is not None:
+        _COLLECTED.append((title, run, sections))
+    env = jinja2.Environment(loader=jinja2.PackageLoader("metrology.report", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True,
+                             undefined=jinja2.StrictUndefined)
+    env.filters["ticks"] = _ticks
+    overall = [s.verdict.ok for s in sections]
+    ok = False if False in overall else (True if True in overall else None)
+    return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok)
+
+
+def _ticks(text):
+    """Escape ``text`` and show its `backticked` spans as code."""
+    import re
+
+    import markupsafe
+
+    return markupsafe.Markup(re.sub(r"`([^`]+)`", r"<code>\1</code>", str(markupsafe.escape(text))))
+
+
+def write_report(path, title: str, run: RunInfo, sections) -> Path:
+    """Render and write the report to ``path`` atomically; return the path."""
+    from metrology.io.atomic import write_text
+
+    write_text(path, render_html(title, run, sections))
+    return Path(path)

@@ -1,0 +1,191 @@
+"""Each command's ``--report FILE.html``: one self-contained page that parses, embeds its
+figures, names no external URL, says the verdict first and lists each input's SHA-256."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from cli.main import app
+from metrology.io.data import DATA_DIR
+from tests.calibration.helpers import CAL, NOMINAL, PLANE, TRUTH, VAL, export_rows, write_rows
+
+runner = CliRunner()
+
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.urls, self.imgs, self.tags, self.text = [], [], [], []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append(tag)
+        self.urls += [v for k, v in attrs if k in ("src", "href") and v]
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def _sha(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def check_page(path, inputs, n_figures, verdict_words):
+    """The page parses, holds ``n_figures`` embedded PNGs and no external URL, says one of
+    ``verdict_words`` before its first figure, and lists each input's SHA-256."""
+    html = Path(path).read_text(encoding="utf-8")
+    p = _Page()
+    p.feed(html)
+    p.close()
+    assert p.tags[0] == "html" and "script" not in p.tags and "link" not in p.tags
+    assert '<meta name="viewport"' in html and "@media print" in html
+    assert len(p.imgs) == n_figures and all(s.startswith("data:image/png;base64,") for s in p.imgs)
+    assert not [u for u in p.urls if u.lower().startswith(("http:", "https:", "//"))]
+    text = " ".join(p.text)
+    first_fig = html.index("<img") if n_figures else len(html)
+    assert any(w in html[:first_fig] for w in verdict_words), verdict_words
+    for f in inputs:
+        assert _sha(f) in text
+    return text
+
+
+def _ok(r):
+    assert r.exit_code == 0, r.output
+    return r
+
+
+def test_fit_plane_report(tmp_path):
+    cloud = DATA_DIR / "measured" / "datum.ply"
+    out = tmp_path / "fit.html"
+    _ok(runner.invoke(app, ["fit-plane", str(cloud), "--report", str(out), "--seed", "3"]))
+    text = check_page(out, [cloud], 1, ("within tolerance", "NOT within tolerance"))
+    assert "seed" in text and "3" in text and "numpy" in text and "fit-plane" in text
+
+
+def test_calibrate_report_names_the_cause_and_the_next_command(tmp_path):
+    """And ``--plot c.pdf`` is one PDF file, a page per figure (as fit-plane writes one file)."""
+    export = write_rows(tmp_path / "cal.csv", export_rows(CAL)[:17])  # 16 poses: a fast fit
+    out = tmp_path / "cal.html"
+    r = _ok(runner.invoke(app, ["calibrate", str(export), "--plane", str(PLANE), "--layout", str(NOMINAL),
+                                "--report", str(out), "--plot", str(tmp_path / "c.pdf")]))
+    pdf = (tmp_path / "c.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and b"/Count 2" in pdf
+    text = check_page(out, [export, PLANE, NOMINAL], 2, ("NOT within tolerance",))
+    # the measured run's residuals exceed the stated noise (its truth has effects the base model lacks)
+    assert "metro diagnose" in text and "reduced χ²" in text
+    assert "[[Fit Statistics]]" in r.output and "reduced chi-square" in r.output and "[[Correlations]]" in r.output
+
+
+def test_validate_report_judges_the_tolerance_and_names_the_poses_left_out(tmp_path):
+    out = tmp_path / "val.html"
+    r = _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--layout-before",
+                                str(NOMINAL), "--report", str(out), "--tolerance-deg", "0.1"]))
+    text = check_page(out, [VAL, PLANE, TRUTH, NOMINAL], 1, ("within tolerance",))
+    d = json.loads(_ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH),
+                                           "--json"])).output)
+    gone = [p for p, n in zip(d["pose_id"], d["n_readings"]) if n < 3]
+    assert gone and all(p in text for p in gone) and all(p in r.output for p in gone)
+    assert "truth.toml (validated)" in text and "nominal.toml (before)" in text
+    # a tolerance below the largest deviation turns the verdict
+    tight = d["layouts"]["layout"]["max_deg"] / 2
+    _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out),
+                            "--tolerance-deg", f"{tight:.6f}"]))
+    check_page(out, [VAL], 1, ("NOT within tolerance",))
+
+
+def test_same_inputs_same_bytes(tmp_path, monkeypatch):
+    """With ``SOURCE_DATE_EPOCH`` set (the time written), a report is byte-identical run to run."""
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    pages = []
+    out = tmp_path / "v.html"
+    for _ in range(2):
+        _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out)]))
+        pages.append(out.read_bytes())
+    assert pages[0] == pages[1] and b"2023-11-14 22:13:20 UTC" in pages[0]
+
+
+@pytest.mark.slow
+def test_demo_report_end_to_end(tmp_path):
+    """The real demo with ``--report``: one page of the five steps, each step's own report beside it."""
+    out = tmp_path / "demo.html"
+    _ok(runner.invoke(app, ["demo", "--out", str(tmp_path / "o"), "--report", str(out)]))
+    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 7, ("NOT within tolerance",))
+    for name in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
+        assert f"(metro {name})" in text and (tmp_path / "o" / f"{name}.html").exists()
+
+
+def test_normals_report(tmp_path):
+    out = tmp_path / "n.html"
+    panel, layout = DATA_DIR / "panel_cyl800.stl", DATA_DIR / "layout_table6.toml"
+    _ok(runner.invoke(app, ["normals", str(panel), "--layout", str(layout), "--grid", "80", "--report", str(out),
+                            "--engine", "trimesh"]))
+    check_page(out, [panel, layout], 1, ("within tolerance",))
+
+
+def test_demo_report_gathers_each_step_and_links_its_own(tmp_path):
+    """``run_demo(report=...)`` with steps that each write a report: one page of every step's
+    section, each linked to the step's own report (the steps themselves are tested above)."""
+    from metrology.jobs.demo import DEMO_STEPS, STEP_REPORTS, run_demo
+    from metrology.report.html import Section, Verdict, run_info, write_report
+
+    def step(args):
+        path = args[args.index("--report") + 1]
+        write_report(path, args[0], run_info({"export": CAL}, "metro " + " ".join(args)),
+                     [Section(f"step {args[0]}", Verdict(args[0] != "validate", f"{args[0]} headline"))])
+        return 0
+
+    out = tmp_path / "demo.html"
+    assert run_demo(DATA_DIR, tmp_path / "o", step, lambda *a: None, report=out) == 0
+    text = check_page(out, [CAL], 0, ("NOT within tolerance",))  # one step failed: the overall verdict
+    for (cmd, _), name in zip((line.split(maxsplit=1) for _, line in DEMO_STEPS), STEP_REPORTS):
+        assert f"{cmd} headline" in text and (tmp_path / "o" / name).exists()
+        assert f'href="o/{name}"' in out.read_text()
+
+
+@pytest.mark.parametrize("name", ["r.txt", "nodir/r.html"])
+def test_a_bad_report_path_is_one_line_exit_2_before_any_work(tmp_path, name):
+    r = runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report",
+                            str(tmp_path / name)])
+    assert r.exit_code == 2 and r.output.startswith("error: --report") and len(r.output.splitlines()) == 1
+    assert sorted(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args", [
+    ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL), "--plot", "{tmp}/c.png"],
+    ["calibrate", str(CAL), "--plane", str(PLANE), "--layout", str(NOMINAL), "--plot", "{tmp}/no/c.pdf"],
+    ["demo", "--out", "{tmp}/o", "--report", "{tmp}/demo.txt"],
+])
+def test_a_bad_output_is_refused_before_any_work(tmp_path, args):
+    r = runner.invoke(app, [a.format(tmp=tmp_path) for a in args])
+    assert r.exit_code == 2 and r.output.startswith("error: ") and len(r.output.splitlines()) == 1
+    assert sorted(tmp_path.iterdir()) == []
+
+
+def test_escaping_and_backticks():
+    from metrology.report.html import Section, Verdict, render_html, run_info
+
+    html = render_html("t <x>", run_info({}, "metro x"), [Section("s", Verdict(None, "a < b & c", "run `metro diagnose`"))])
+    assert "a &lt; b &amp; c" in html and "<code>metro diagnose</code>" in html and "t &lt;x&gt;" in html
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="needs a chromium binary (a developer's check)")
+def test_reports_open_in_chromium_without_console_error_or_request(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "check_reports_browser", Path(__file__).parents[2] / "benchmarks" / "check_reports_browser.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "val.html"
+    _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out)]))
+    assert mod.main([str(out), "--width", "412", "--height", "900"]) == 0
+    assert out.with_suffix(".png").stat().st_size > 0
