@@ -42,7 +42,7 @@ def register(app: typer.Typer) -> None:
         robot_error_mm: float = typer.Option(1.0, "--robot-error-mm", help="How far the robot may land from a planned position, mm."),
         robot_error_deg: float = typer.Option(0.1, "--robot-error-deg", help="How far it may turn from a planned attitude, deg (also the tilt margin)."),
         tool_side: str = typer.Option("normal", "--tool-side", help="The tool is on the side the plane's normal points to ('normal') or the other ('against')."),
-        candidates: int = typer.Option(2000, "--candidates", help="Random poses drawn to choose from."),
+        candidates: int = typer.Option(5000, "--candidates", help="Random poses drawn to choose from."),
         seed: int = typer.Option(0, "--seed", help="Seed of the candidates and the robot-error trials."),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),

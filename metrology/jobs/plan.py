@@ -55,7 +55,7 @@ def plan_export(plan: PosePlan):
 def plan_files(layout_path, plane_path, n_poses: int, tilt_max_deg: float = 10.0, standoff_mm=None,
                working_standoff_mm=None, noise_mm=None, range_mm=None, extent_path=None, extent_radius_mm=None,
                reading_margin_mm: float = 2.0, spot_margin_mm: float = 5.0, robot_error_mm: float = 1.0,
-               robot_error_deg: float = 0.1, tool_side: str = "normal", candidates: int = 2000, seed: int = 0,
+               robot_error_deg: float = 0.1, tool_side: str = "normal", candidates: int = 5000, seed: int = 0,
                out=None, plot=None) -> PosePlan:
     """Plan ``n_poses`` calibration poses and write them (CSV, atomically) and the curve figure.
 

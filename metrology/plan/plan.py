@@ -160,7 +160,7 @@ def _robustness(rng, design: Design, layout, plane, extent, limits, sigma, G, pr
 
 
 def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses: int, limits: Limits, sigma_mm,
-               rng: np.random.Generator, working_standoff_mm=None, n_candidates: int = 2000,
+               rng: np.random.Generator, working_standoff_mm=None, n_candidates: int = 5000,
                robot_error_mm: float = 1.0, robot_error_rad: float = float(np.deg2rad(0.1)),
                robustness_trials: int = 20, seed=None) -> PosePlan:
     """Choose ``n_poses`` calibration poses (D-optimal, greedy order, Fedorov exchanges).
@@ -197,7 +197,8 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     if len(pool) < n_poses:
         raise ValueError(f"only {len(pool)} of {n_candidates} candidate poses keep every limit (extent, range with "
                          f"{limits.reading_margin_mm:g} mm margin, tilt, stand-off {limits.standoff_mm}); need "
-                         f"{n_poses}: widen the stand-off or tilt limits, or draw more candidates")
+                         f"{n_poses}: widen the stand-off or tilt limits, or draw more candidates"
+                         + ("; none at all: is the tool on the other side of the datum (--tool-side)?" if not len(pool) else ""))
     X = pose_information(layout, *cands.plane_in_tcs(plane), sigma)
     prior = prior_information(layout.n)
     chosen = exchange(X, greedy_order(X, n_poses, prior, pool), prior, pool)

@@ -65,7 +65,7 @@ def test_the_exchange_never_loses_to_greedy_alone(setup, plan20):
     layout, plane, _, extent, limits = setup
     from metrology.plan import draw_candidates, pose_information, prior_information
 
-    cands = draw_candidates(np.random.default_rng(0), layout, plane, extent, 2000, limits)
+    cands = draw_candidates(np.random.default_rng(0), layout, plane, extent, 5000, limits)
     pool = np.flatnonzero(feasible(layout, plane, extent, cands, limits))
     X = pose_information(layout, *cands.plane_in_tcs(plane), layout.noise_mm)
     prior = prior_information(layout.n)
