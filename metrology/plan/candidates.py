@@ -70,8 +70,8 @@ class PoseSet:
     ----------
     rot : (p, 3, 3) float, tcs2tracker rotations
     trans : (p, 3) float, mm, tracker frame, tcs2tracker translations
-    tilt : (p,) float, rad, angle between the tool axis and the datum normal
-    standoff : (p,) float, mm, the stand-off the pose was built for
+    tilt : (p,) float, rad, angle between the tool axis and the datum normal, as drawn
+    standoff : (p,) float, mm, the stand-off the pose was built for (both kept by :func:`perturb`)
     """
 
     rot: np.ndarray

@@ -9,7 +9,7 @@ feasible candidates, drawn before any choice), and says how both fare when the r
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -207,6 +207,6 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     planned = design_for("planned", layout, plane, X, order, cands, G, prior)
     random = design_for("random", layout, plane, X, pool[:n_poses], cands, G, prior)
     args = (layout, plane, extent, limits, sigma, G, prior, robot_error_mm, robot_error_rad, robustness_trials)
-    planned = Design(**{**planned.__dict__, "robustness": _robustness(rng, planned, *args)})
-    random = Design(**{**random.__dict__, "robustness": _robustness(rng, random, *args)})
+    planned = replace(planned, robustness=_robustness(rng, planned, *args))
+    random = replace(random, robustness=_robustness(rng, random, *args))
     return PosePlan(layout, plane, extent, limits, sigma, work, n_candidates, len(pool), seed, planned, random)
