@@ -7,7 +7,7 @@ size ``--size-mm`` at the largest incidence either pose set reaches) on one sens
 function for both sets; noise 5 um. ``diagnose`` runs on each; reported: how often it names
 incidence on the right sensor, and what else it names.
 
-    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--size-mm 0.08]
+    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--size-mm 0.08] [--separate incidence]
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def _named(res):
     return [] if res["cause"] in ("none", "unexplained") else [(res["cause"], tuple(res.get("sensors") or ()))]
 
 
-def trial(seed, n_poses, noise, size, kind):
+def trial(seed, n_poses, noise, size, kind, separate=()):
     rng = np.random.default_rng([seed, 7])
     nominal = _nominal(kind, rng, noise)
     true = perturb_layout(rng, nominal)
@@ -47,7 +47,8 @@ def trial(seed, n_poses, noise, size, kind):
     lo, hi = nominal.range_mm[:, 0].max() + 2.0, nominal.range_mm[:, 1].min() - 2.0
     limits = Limits(np.deg2rad(10.0), (lo, hi), nominal.range_mm,
                     tool_side=1.0 if plane.normal @ surface.normal > 0 else -1.0)
-    planned = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, robustness_trials=0).planned.poses
+    planned = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, robustness_trials=0,
+                         separate=separate).planned.poses
     cands = draw_candidates(rng, nominal, plane, extent, 3000, limits)
     rand = cands.select(np.flatnonzero(feasible(nominal, plane, extent, cands, limits))[:n_poses])
     hits = {lab: cast_beams(surface, true.zero, true.direction, p.rot, p.trans)
@@ -76,14 +77,16 @@ def main() -> None:
     ap.add_argument("--size-mm", type=float, default=0.08)
     ap.add_argument("--noise-mm", type=float, default=0.005)
     ap.add_argument("--kind", default="table6")
+    ap.add_argument("--separate", default="", help="passed to the plan: 'incidence' adds it to the criterion")
     args = ap.parse_args()
     t0 = time.process_time()
-    res = [trial(s, args.poses, args.noise_mm, args.size_mm, args.kind) for s in range(args.seeds)]
+    sep = tuple(filter(None, args.separate.split(",")))
+    res = [trial(s, args.poses, args.noise_mm, args.size_mm, args.kind, sep) for s in range(args.seeds)]
     for lab in ("planned", "random"):
         right = sum(r[lab][0] for r in res)
         other = Counter(c for r in res for c, _ in r[lab][1] if c != "incidence")
         print(f"{lab:8}: incidence named on the right sensor {right}/{len(res)}; other causes named: {dict(other) or 'none'}")
-    print(f"{args.kind}, {args.poses} poses, incidence {args.size_mm} mm, noise {args.noise_mm} mm, tilt <= 10 deg; "
+    print(f"plan --separate {args.separate or '(none)'}; {args.kind}, {args.poses} poses, incidence {args.size_mm} mm, noise {args.noise_mm} mm, tilt <= 10 deg; "
           f"CPU {time.process_time() - t0:.0f} s")
 
 

@@ -46,6 +46,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="Seed of the candidates and the robot-error trials."),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),
+        separate: Optional[str] = typer.Option(None, "--separate", help="Also tell these causes from the sensor parameters (comma-separated): incidence."),
         json_out: bool = typer.Option(False, "--json", help="Print the plan and its predictions as JSON."),
     ) -> None:
         """Plan the calibration poses: D-optimal for the identifiable parameters, feasible, ordered."""
@@ -60,7 +61,8 @@ def register(app: typer.Typer) -> None:
 
         result = plan_files(layout, plane, poses, tilt_max_deg, _pair(standoff_mm, "--standoff-mm"), working_standoff_mm,
                             noise_mm, _pair(range_mm, "--range-mm"), extent, extent_radius_mm, margin_mm,
-                            spot_margin_mm, robot_error_mm, robot_error_deg, tool_side, candidates, seed, out, plot)
+                            spot_margin_mm, robot_error_mm, robot_error_deg, tool_side, candidates, seed, out, plot,
+                            tuple(c.strip() for c in separate.split(",")) if separate else ())
         if json_out:
             echo_json({**result.to_dict(), "out": None if out is None else str(out)})
         else:

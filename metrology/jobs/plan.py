@@ -56,11 +56,12 @@ def plan_files(layout_path, plane_path, n_poses: int, tilt_max_deg: float = 10.0
                working_standoff_mm=None, noise_mm=None, range_mm=None, extent_path=None, extent_radius_mm=None,
                reading_margin_mm: float = 2.0, spot_margin_mm: float = 5.0, robot_error_mm: float = 1.0,
                robot_error_deg: float = 0.1, tool_side: str = "normal", candidates: int = 5000, seed: int = 0,
-               out=None, plot=None) -> PosePlan:
+               out=None, plot=None, separate=()) -> PosePlan:
     """Plan ``n_poses`` calibration poses and write them (CSV, atomically) and the curve figure.
 
     ``noise_mm`` and ``range_mm`` (mm, min and max) replace the layout's; ``standoff_mm`` (min,
-    max) defaults to the sensors' common range less the reading margin. Errors are ValueError
+    max) defaults to the sensors' common range less the reading margin; ``separate`` names causes
+    the design must also tell from the sensor parameters (:data:`metrology.plan.plan.SEPARABLE`). Errors are ValueError
     naming the file or value; nothing is written unless the plan succeeds.
     """
     from metrology.calibration.dataset import load_plane
@@ -98,7 +99,7 @@ def plan_files(layout_path, plane_path, n_poses: int, tilt_max_deg: float = 10.0
                     TOOL_SIDES[tool_side])
     plan = plan_poses(layout, plane, extent, int(n_poses), limits, layout.noise_mm, np.random.default_rng(seed),
                       working_standoff_mm, int(candidates), float(robot_error_mm), float(np.deg2rad(robot_error_deg)),
-                      seed=seed)
+                      seed=seed, separate=tuple(separate))
     if plot is not None:
         from metrology.report.plan import plot_plan_curve
 

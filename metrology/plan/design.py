@@ -29,20 +29,28 @@ from metrology.calibration.estimators import DEFAULT_P0_SIGMA
 from metrology.core.layout import SensorLayout
 from metrology.core.model import jacobian_tangent
 
-__all__ = ["pose_information", "prior_information", "greedy_order", "exchange", "log_det",
+__all__ = ["pose_information", "prior_information", "INCIDENCE_PRIOR_MM", "greedy_order", "exchange", "log_det",
            "covariance", "MAX_EXCHANGES"]
 
 #: most Fedorov exchanges tried after the greedy pass (each one raises det)
 MAX_EXCHANGES = 200
 
 
-def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA) -> np.ndarray:
-    """``(n, 5, 5)`` float: the inverse of the filters' prior covariance, per sensor (1/mm^2, 1/rad^2)."""
+#: prior 1-sigma (mm) of an incidence coefficient ``c`` (bias ``c tan^2`` of the incidence angle,
+#: ``c`` the bias at 45 deg: :class:`metrology.core.effects.sensor.Incidence`) when the design
+#: also separates incidence from the beam direction; wide against the catalogue's 0.02-0.15 mm
+INCIDENCE_PRIOR_MM = 1.0
+
+
+def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence: bool = False) -> np.ndarray:
+    """``(n, m, m)`` float, m = 5 (6 with ``incidence``): the inverse of the filters' prior
+    covariance per sensor (1/mm^2, 1/rad^2; and 1/mm^2 for the incidence coefficient)."""
     s_pos, s_dir = P0_sigma
-    return np.broadcast_to(np.diag([s_pos**-2] * 3 + [s_dir**-2] * 2), (n, 5, 5)).copy()
+    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + ([INCIDENCE_PRIOR_MM**-2] if incidence else [])
+    return np.broadcast_to(np.diag(diag), (n, len(diag), len(diag))).copy()
 
 
-def pose_information(layout: SensorLayout, normal, offset, sigma_mm) -> np.ndarray:
+def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence: bool = False) -> np.ndarray:
     """Whitened Jacobian rows of every reading at every pose.
 
     Parameters
@@ -51,12 +59,21 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm) -> np.ndarr
     normal : (p, 3) float, unit, TCS; offset : (p,) float, mm: the datum at each pose
     sigma_mm : (n,) float, mm, reading noise
 
+    incidence : bool
+        Add a sixth column per sensor, the incidence term ``tan^2(gamma)`` (``gamma`` the angle
+        between the beam and the datum normal): the design then also tells an incidence bias
+        from the beam direction, which it otherwise confounds.
+
     Returns
     -------
-    X : (p, n, 5) float, 1/sigma times ``dd/d(x, y, z)`` (1/mm * mm/mm) and ``dd/d(a, b)``;
-        zero where the beam misses the plane (no reading, no information)
+    X : (p, n, 5 or 6) float, 1/sigma times ``dd/d(x, y, z)`` (1/mm * mm/mm), ``dd/d(a, b)``
+        and ``dd/dc``; zero where the beam misses the plane (no reading, no information)
     """
     J = jacobian_tangent(layout.zero, layout.direction, np.zeros((layout.n, 2)), normal, offset)
+    if incidence:
+        cos = np.abs(np.asarray(normal, float) @ layout.direction.T)
+        with np.errstate(divide="ignore"):
+            J = np.concatenate([J, (1.0 / cos**2 - 1.0)[..., None]], axis=-1)
     X = J / np.asarray(sigma_mm, float)[None, :, None]
     return np.where(np.isfinite(X), X, 0.0)
 
@@ -69,7 +86,7 @@ def log_det(X, prior) -> float:
 
 
 def covariance(X) -> np.ndarray:
-    """``(n, 5, 5)`` float, mm and rad: the data-only covariance ``(X_i^T X_i)^-1``; inf where the
+    """``(n, m, m)`` float, mm and rad: the data-only covariance ``(X_i^T X_i)^-1``; inf where the
     poses do not determine every parameter (fewer than five, or a rank-deficient set)."""
     M = np.einsum("pni,pnj->nij", X, X)
     out = np.full(M.shape, np.inf)

@@ -21,7 +21,10 @@ from metrology.plan.candidates import Limits, PoseSet, draw_candidates, feasible
 from metrology.plan.design import covariance, exchange, greedy_order, log_det, pose_information, prior_information
 from metrology.plan.extent import DatumExtent
 
-__all__ = ["Design", "PosePlan", "plan_poses", "design_for", "CRITERION"]
+__all__ = ["Design", "PosePlan", "plan_poses", "design_for", "CRITERION", "SEPARABLE"]
+
+#: causes a plan can be asked to separate from the sensor parameters (``--separate``)
+SEPARABLE = ("incidence",)
 
 #: the design criterion, in words (for reports)
 CRITERION = ("Bayesian D-optimality: maximise sum over sensors of log det of the information on the five "
@@ -37,7 +40,8 @@ class Design:
     ----------
     label : str, "planned" or "random"
     poses : PoseSet, in the order to take them
-    stderr : (n, 5) float, mm (x, y, z) and rad (tilt_e1, tilt_e2), data only
+    stderr : (n, 5 or 6) float, mm (x, y, z), rad (tilt_e1, tilt_e2) and mm (the incidence
+        coefficient, when the plan separates it), data only
     normal_sigma_rad : float, rad, predicted 1-sigma of the measured normal at the working stand-off
     log_det : float, the criterion (:func:`metrology.plan.design.log_det`)
     curve : dict of (k,) arrays: ``k``, ``normal_sigma_rad``, ``zero_sigma_max_mm``,
@@ -64,7 +68,8 @@ class Design:
             "standoff_span_mm": [float(self.poses.standoff.min()), float(self.poses.standoff.max())],
             "sensors": [{"name": nm, "reading_span_mm": self.reading_span_mm[i].tolist(),
                          "stderr": {"zero_mm": self.stderr[i, :3].tolist(),
-                                    "tilt_deg": np.rad2deg(self.stderr[i, 3:]).tolist()},
+                                    "tilt_deg": np.rad2deg(self.stderr[i, 3:5]).tolist(),
+                                    **({"incidence_c_mm": float(self.stderr[i, 5])} if self.stderr.shape[1] > 5 else {})},
                          "parameters": list(CHART_NAMES)} for i, nm in enumerate(names)],
             "curve": {"k": self.curve["k"].tolist(),
                       "normal_sigma_deg": inf_none(np.rad2deg(self.curve["normal_sigma_rad"])),
@@ -98,12 +103,14 @@ class PosePlan:
     seed: int | None
     planned: Design
     random: Design
+    separate: tuple = ()
 
     @property
     def d_efficiency_random(self) -> float:
-        """``(det M_random / det M_planned)^(1 / 5n)``: the fraction of the plan's information per
+        """``(det M_random / det M_planned)^(1 / mn)`` (m parameters per sensor): the fraction of the plan's information per
         parameter that the random poses give (1 = as good)."""
-        return float(np.exp((self.random.log_det - self.planned.log_det) / (5 * self.layout.n)))
+        m = self.planned.stderr.shape[1]
+        return float(np.exp((self.random.log_det - self.planned.log_det) / (m * self.layout.n)))
 
     def to_dict(self) -> dict:
         names = self.layout.names
@@ -111,7 +118,8 @@ class PosePlan:
             "criterion": CRITERION, "sensors": list(names), "noise_mm": self.sigma_mm.tolist(),
             "working_standoff_mm": self.working_standoff_mm, "limits": self.limits.to_dict(),
             "extent": self.extent.to_dict(), "candidates": self.n_candidates, "feasible_candidates": self.n_feasible,
-            "seed": self.seed, "planned": self.planned.to_dict(names), "random": self.random.to_dict(names),
+            "separate": list(self.separate), "seed": self.seed,
+            "planned": self.planned.to_dict(names), "random": self.random.to_dict(names),
             "d_efficiency_random": self.d_efficiency_random,
         }
 
@@ -127,16 +135,16 @@ def design_for(label, layout, plane, X, idx, poses: PoseSet, G, prior) -> Design
         cov = covariance(X[idx[:k]])
         se = _stderr(cov)
         ks.append(k)
-        ns.append(normal_sigma(G, cov))
+        ns.append(normal_sigma(G, cov[:, :5, :5]))
         zs.append(float(se[:, :3].max()))
-        ts.append(float(se[:, 3:].max()))
+        ts.append(float(se[:, 3:5].max()))
         lds.append(log_det(X[idx[:k]], prior))
     cov = covariance(X[idx])
     sel = poses.select(idx)
     d, _ = pose_readings(layout, plane, sel)
     curve = {"k": np.array(ks), "normal_sigma_rad": np.array(ns), "zero_sigma_max_mm": np.array(zs),
              "tilt_sigma_max_rad": np.array(ts), "log_det": np.array(lds)}
-    return Design(label, sel, _stderr(cov), normal_sigma(G, cov), log_det(X[idx], prior), curve,
+    return Design(label, sel, _stderr(cov), normal_sigma(G, cov[:, :5, :5]), log_det(X[idx], prior), curve,
                   np.stack([np.nanmin(d, axis=0), np.nanmax(d, axis=0)], axis=1))
 
 
@@ -149,9 +157,9 @@ def _robustness(rng, design: Design, layout, plane, extent, limits, sigma, G, pr
     for _ in range(trials):
         moved = perturb(rng, design.poses, error_mm, error_rad)
         ok.append(feasible(layout, plane, extent, moved, limits, margins=False))
-        Xm = pose_information(layout, *moved.plane_in_tcs(plane), sigma)
-        eff.append(np.exp((log_det(Xm, prior) - design.log_det) / (5 * n)))
-        ns.append(normal_sigma(G, covariance(Xm)))
+        Xm = pose_information(layout, *moved.plane_in_tcs(plane), sigma, prior.shape[-1] > 5)
+        eff.append(np.exp((log_det(Xm, prior) - design.log_det) / (prior.shape[-1] * n)))
+        ns.append(normal_sigma(G, covariance(Xm)[:, :5, :5]))
     ok = np.array(ok)
     return {"robot_error_mm": float(error_mm), "robot_error_deg": float(np.rad2deg(error_rad)), "trials": int(trials),
             "feasible_fraction": float(ok.mean()), "poses_ever_infeasible": int(np.sum(~ok.all(axis=0))),
@@ -162,7 +170,7 @@ def _robustness(rng, design: Design, layout, plane, extent, limits, sigma, G, pr
 def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses: int, limits: Limits, sigma_mm,
                rng: np.random.Generator, working_standoff_mm=None, n_candidates: int = 5000,
                robot_error_mm: float = 1.0, robot_error_rad: float = float(np.deg2rad(0.1)),
-               robustness_trials: int = 20, seed=None) -> PosePlan:
+               robustness_trials: int = 20, seed=None, separate=()) -> PosePlan:
     """Choose ``n_poses`` calibration poses (D-optimal, greedy order, Fedorov exchanges).
 
     Parameters
@@ -179,11 +187,17 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     robot_error_mm, robot_error_rad : how far from a planned pose the robot may land (mm, rad);
         the designs are re-evaluated ``robustness_trials`` times with every pose moved that much
     seed : int, optional, recorded in the result
+    separate : tuple of str, causes the design must also tell from the sensor parameters:
+        ``("incidence",)`` adds each sensor's incidence coefficient to the D-criterion
 
     Returns
     -------
     PosePlan
     """
+    unknown = [c for c in separate if c not in SEPARABLE]
+    if unknown:
+        raise ValueError(f"--separate {', '.join(unknown)}: expected one of {', '.join(SEPARABLE)}")
+    inc = "incidence" in separate
     if n_poses < 5:
         raise ValueError(f"--poses {n_poses}: need at least 5 (5 parameters per sensor)")
     sigma = np.broadcast_to(np.asarray(sigma_mm, float), (layout.n,)).copy()
@@ -199,8 +213,8 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
                          f"{limits.reading_margin_mm:g} mm margin, tilt, stand-off {limits.standoff_mm}); need "
                          f"{n_poses}: widen the stand-off or tilt limits, or draw more candidates"
                          + ("; none at all: is the tool on the other side of the datum (--tool-side)?" if not len(pool) else ""))
-    X = pose_information(layout, *cands.plane_in_tcs(plane), sigma)
-    prior = prior_information(layout.n)
+    X = pose_information(layout, *cands.plane_in_tcs(plane), sigma, inc)
+    prior = prior_information(layout.n, incidence=inc)
     chosen = exchange(X, greedy_order(X, n_poses, prior, pool), prior, pool)
     order = chosen[greedy_order(X[chosen], n_poses, prior)]
     G = normal_sensitivity(layout, work)
@@ -209,4 +223,5 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     args = (layout, plane, extent, limits, sigma, G, prior, robot_error_mm, robot_error_rad, robustness_trials)
     planned = replace(planned, robustness=_robustness(rng, planned, *args))
     random = replace(random, robustness=_robustness(rng, random, *args))
-    return PosePlan(layout, plane, extent, limits, sigma, work, n_candidates, len(pool), seed, planned, random)
+    return PosePlan(layout, plane, extent, limits, sigma, work, n_candidates, len(pool), seed, planned, random,
+                    tuple(separate))

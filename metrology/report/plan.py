@@ -30,14 +30,16 @@ def plan_text(plan: PosePlan, out=None) -> str:
     lines.append(f"{'':8} {'poses':>5} {'max zero sigma mm':>17} {'max tilt sigma deg':>18} {'normal sigma deg':>16}")
     for d in (p, r):
         lines.append(f"{d.label:8} {len(d.poses):5d} {d.stderr[:, :3].max():17.4f} "
-                     f"{np.rad2deg(d.stderr[:, 3:].max()):18.4f} {np.rad2deg(d.normal_sigma_rad):16.5f}")
+                     f"{np.rad2deg(d.stderr[:, 3:5].max()):18.4f} {np.rad2deg(d.normal_sigma_rad):16.5f}")
     lines.append(f"D-efficiency of the random poses against the plan: {plan.d_efficiency_random:.2f} "
                  "(information per parameter, geometric mean)")
     lines += ["", "planned, per sensor (1 sigma): zero x, y, z mm; tilt e1, e2 deg"]
     for i, name in enumerate(plan.layout.names):
         se = p.stderr[i]
         lines.append(f"  {name}: {se[0]:.4f} {se[1]:.4f} {se[2]:.4f} mm; {np.rad2deg(se[3]):.4f} "
-                     f"{np.rad2deg(se[4]):.4f} deg; readings {p.reading_span_mm[i, 0]:.1f}-{p.reading_span_mm[i, 1]:.1f} mm")
+                     f"{np.rad2deg(se[4]):.4f} deg"
+                     + (f"; incidence c {se[5]:.4f} mm" if len(se) > 5 else "")
+                     + f"; readings {p.reading_span_mm[i, 0]:.1f}-{p.reading_span_mm[i, 1]:.1f} mm")
     lines += ["", "stopping early: the first k planned poses (random in brackets)",
               f"  {'k':>4} {'max zero mm':>16} {'max tilt deg':>16} {'normal deg':>18}"]
     n = len(p.poses)

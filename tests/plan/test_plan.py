@@ -106,3 +106,14 @@ def test_too_few_feasible_candidates_is_a_one_line_error(setup):
         plan_poses(layout, plane, extent, 20, tight, layout.noise_mm, np.random.default_rng(0), n_candidates=200)
     with pytest.raises(ValueError, match="need at least 5"):
         plan_poses(layout, plane, extent, 4, limits, layout.noise_mm, np.random.default_rng(0))
+
+
+def test_separating_incidence_adds_its_coefficient_and_shrinks_it(setup):
+    layout, plane, _, extent, limits = setup
+    plan = plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=1000,
+                      robustness_trials=0, separate=("incidence",))
+    p, r = plan.planned, plan.random
+    assert p.stderr.shape == (layout.n, 6) and p.log_det >= r.log_det
+    assert p.stderr[:, 5].max() < r.stderr[:, 5].max()
+    with pytest.raises(ValueError, match="--separate scale"):
+        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("scale",))
