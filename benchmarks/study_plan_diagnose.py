@@ -7,7 +7,7 @@ size ``--size-mm`` at the largest incidence either pose set reaches) on one sens
 function for both sets; noise 5 um. ``diagnose`` runs on each; reported: how often it names
 incidence on the right sensor, and what else it names.
 
-    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--size-mm 0.08] [--separate incidence]
+    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--size-mm 0.08] [--separate incidence] [--tilt-max-deg 10]
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def _named(res):
     return [] if res["cause"] in ("none", "unexplained") else [(res["cause"], tuple(res.get("sensors") or ()))]
 
 
-def trial(seed, n_poses, noise, size, kind, separate=()):
+def trial(seed, n_poses, noise, size, kind, separate=(), tilt_deg=10.0):
     rng = np.random.default_rng([seed, 7])
     nominal = _nominal(kind, rng, noise)
     true = perturb_layout(rng, nominal)
@@ -45,7 +45,7 @@ def trial(seed, n_poses, noise, size, kind, separate=()):
     plane = fit_plane_tls(cloud)[0]
     extent = DatumExtent.from_points(plane, cloud)
     lo, hi = nominal.range_mm[:, 0].max() + 2.0, nominal.range_mm[:, 1].min() - 2.0
-    limits = Limits(np.deg2rad(10.0), (lo, hi), nominal.range_mm,
+    limits = Limits(np.deg2rad(tilt_deg), (lo, hi), nominal.range_mm,
                     tool_side=1.0 if plane.normal @ surface.normal > 0 else -1.0)
     planned = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, robustness_trials=0,
                          separate=separate).planned.poses
@@ -77,16 +77,19 @@ def main() -> None:
     ap.add_argument("--size-mm", type=float, default=0.08)
     ap.add_argument("--noise-mm", type=float, default=0.005)
     ap.add_argument("--kind", default="table6")
+    ap.add_argument("--tilt-max-deg", type=float, default=10.0)
     ap.add_argument("--separate", default="", help="passed to the plan: 'incidence' adds it to the criterion")
     args = ap.parse_args()
     t0 = time.process_time()
     sep = tuple(filter(None, args.separate.split(",")))
-    res = [trial(s, args.poses, args.noise_mm, args.size_mm, args.kind, sep) for s in range(args.seeds)]
+    res = [trial(s, args.poses, args.noise_mm, args.size_mm, args.kind, sep, args.tilt_max_deg)
+           for s in range(args.seeds)]
     for lab in ("planned", "random"):
         right = sum(r[lab][0] for r in res)
         other = Counter(c for r in res for c, _ in r[lab][1] if c != "incidence")
         print(f"{lab:8}: incidence named on the right sensor {right}/{len(res)}; other causes named: {dict(other) or 'none'}")
-    print(f"plan --separate {args.separate or '(none)'}; {args.kind}, {args.poses} poses, incidence {args.size_mm} mm, noise {args.noise_mm} mm, tilt <= 10 deg; "
+    print(f"plan --separate {args.separate or '(none)'}; {args.kind}, {args.poses} poses, incidence {args.size_mm} mm, "
+          f"noise {args.noise_mm} mm, tilt <= {args.tilt_max_deg:g} deg; "
           f"CPU {time.process_time() - t0:.0f} s")
 
 
