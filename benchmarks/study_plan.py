@@ -27,7 +27,7 @@ from metrology.core.frames import plane_in_tcs
 from metrology.core.model import tangent_from_direction
 from metrology.core.observations import Observations
 from metrology.core.paper import table2_layouts, table6_layouts
-from metrology.core.plane import Plane, fit_plane_tls
+from metrology.core.plane import fit_plane_tls
 from metrology.plan import (DatumExtent, Limits, covariance, draw_candidates, feasible, plan_poses,
                             pose_information)
 from metrology.sim.forward import cast_beams, draw_head, draw_surface, perturb_layout, sample_cloud
@@ -45,6 +45,21 @@ def _nominal(kind, rng, noise):
     return replace(lay, noise_mm=np.full(lay.n, noise), range_mm=np.tile([40.0, 60.0], (lay.n, 1)))
 
 
+def scene(kind, rng, noise, tilt_deg=10.0):
+    """Nominal and true layouts, the plate, its scan, the fitted plane, its extent and the limits
+    (stand-off: the range less 2 mm; the tool on the plate's side its normal points to)."""
+    nominal = _nominal(kind, rng, noise)
+    true = perturb_layout(rng, nominal)
+    surface, _ = draw_surface(rng)
+    cloud = sample_cloud(surface, rng, 2000)
+    plane = fit_plane_tls(cloud)[0]
+    extent = DatumExtent.from_points(plane, cloud)
+    lo, hi = nominal.range_mm[:, 0].max() + 2.0, nominal.range_mm[:, 1].min() - 2.0
+    limits = Limits(np.deg2rad(tilt_deg), (lo, hi), nominal.range_mm,
+                    tool_side=1.0 if plane.normal @ surface.normal > 0 else -1.0)
+    return nominal, true, surface, cloud, plane, extent, limits
+
+
 def _errors(nominal, true, rot, trans, d, plane, k):
     """Largest zero error (mm), largest beam error (deg) and chart error (n, 5) of lsq on the first k poses."""
     N, D = plane_in_tcs(plane.normal, plane.offset, rot[:k], trans[:k])
@@ -59,15 +74,7 @@ def _errors(nominal, true, rot, trans, d, plane, k):
 
 def trial(kind, seed, n_poses, noise, n_candidates=5000):
     rng = np.random.default_rng([seed, ("table2", "table6", "ring3").index(kind)])
-    nominal = _nominal(kind, rng, noise)
-    true = perturb_layout(rng, nominal)
-    surface, _ = draw_surface(rng)
-    cloud = sample_cloud(surface, rng, 2000)
-    plane = fit_plane_tls(cloud)[0]
-    side = 1.0 if plane.normal @ surface.normal > 0 else -1.0
-    extent = DatumExtent.from_points(plane, cloud)
-    lo, hi = nominal.range_mm[:, 0].max() + 2.0, nominal.range_mm[:, 1].min() - 2.0
-    limits = Limits(np.deg2rad(10.0), (lo, hi), nominal.range_mm, tool_side=side)
+    nominal, true, surface, cloud, plane, extent, limits = scene(kind, rng, noise)
     plan = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, n_candidates=n_candidates,
                       robustness_trials=0)
     cands = draw_candidates(rng, nominal, plane, extent, 3000, limits)
@@ -106,15 +113,8 @@ def follow_demo(seed, n_poses, noise, target_mm=0.1, target_deg=0.1):
     from metrology.jobs.follow import follow_export
 
     rng = np.random.default_rng([seed, 1])
-    nominal = _nominal("table6", rng, noise)
-    true = perturb_layout(rng, nominal)
-    surface, _ = draw_surface(rng)
-    cloud = sample_cloud(surface, rng, 2000)
-    plane = fit_plane_tls(cloud)[0]
-    limits = Limits(np.deg2rad(10.0), (42.0, 58.0), nominal.range_mm,
-                    tool_side=1.0 if plane.normal @ surface.normal > 0 else -1.0)
-    poses = plan_poses(nominal, plane, DatumExtent.from_points(plane, cloud), n_poses, limits, nominal.noise_mm, rng,
-                       robustness_trials=0).planned.poses
+    nominal, true, surface, _, plane, extent, limits = scene("table6", rng, noise)
+    poses = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, robustness_trials=0).planned.poses
     hits = cast_beams(surface, true.zero, true.direction, poses.rot, poses.trans)
     d = hits.d + rng.normal(scale=noise, size=hits.d.shape)
     ids = tuple(f"P{k + 1:03d}" for k in range(len(poses)))

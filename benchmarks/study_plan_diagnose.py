@@ -20,13 +20,12 @@ import numpy as np
 
 from metrology.calibration.dataset import Dataset
 from metrology.core.frames import quaternion_from_matrix
-from metrology.core.plane import fit_plane_tls
 from metrology.diagnosis.decide import diagnose
 from metrology.io.export import TrackerExport
-from metrology.plan import DatumExtent, Limits, draw_candidates, feasible, plan_poses
-from metrology.sim.forward import cast_beams, draw_incidence, draw_surface, perturb_layout, sample_cloud
+from metrology.plan import draw_candidates, feasible, plan_poses
+from metrology.sim.forward import cast_beams, draw_incidence
 
-from study_plan import _nominal
+from study_plan import scene
 
 
 def _named(res):
@@ -38,15 +37,7 @@ def _named(res):
 
 def trial(seed, n_poses, noise, size, kind, separate=(), tilt_deg=10.0):
     rng = np.random.default_rng([seed, 7])
-    nominal = _nominal(kind, rng, noise)
-    true = perturb_layout(rng, nominal)
-    surface, _ = draw_surface(rng)
-    cloud = sample_cloud(surface, rng, 2000)
-    plane = fit_plane_tls(cloud)[0]
-    extent = DatumExtent.from_points(plane, cloud)
-    lo, hi = nominal.range_mm[:, 0].max() + 2.0, nominal.range_mm[:, 1].min() - 2.0
-    limits = Limits(np.deg2rad(tilt_deg), (lo, hi), nominal.range_mm,
-                    tool_side=1.0 if plane.normal @ surface.normal > 0 else -1.0)
+    nominal, true, surface, cloud, plane, extent, limits = scene(kind, rng, noise, tilt_deg)
     planned = plan_poses(nominal, plane, extent, n_poses, limits, nominal.noise_mm, rng, robustness_trials=0,
                          separate=separate).planned.poses
     cands = draw_candidates(rng, nominal, plane, extent, 3000, limits)
@@ -73,6 +64,7 @@ def trial(seed, n_poses, noise, size, kind, separate=(), tilt_deg=10.0):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--poses", type=int, default=40)
     ap.add_argument("--size-mm", type=float, default=0.08)
     ap.add_argument("--noise-mm", type=float, default=0.005)
@@ -83,7 +75,7 @@ def main() -> None:
     t0 = time.process_time()
     sep = tuple(filter(None, args.separate.split(",")))
     res = [trial(s, args.poses, args.noise_mm, args.size_mm, args.kind, sep, args.tilt_max_deg)
-           for s in range(args.seeds)]
+           for s in range(args.first_seed, args.first_seed + args.seeds)]
     for lab in ("planned", "random"):
         right = sum(r[lab][0] for r in res)
         other = Counter(c for r in res for c, _ in r[lab][1] if c != "incidence")
