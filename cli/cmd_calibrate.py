@@ -22,12 +22,54 @@ def _check_out_dir(path: Optional[Path], what: str) -> None:
         fail(f"{what} {path}: directory {Path(path).parent} does not exist")
 
 
+def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg, idle_s,
+            stop_when_met, quaternion_order, position_units, no_reading) -> None:
+    """``calibrate --follow``: one line per pose (stderr with --json), then the final report."""
+    import math
+
+    if method not in ("lsq", "iekf"):
+        fail(f"--follow runs the iterated EKF; --method {method} cannot follow")
+    if not idle_s >= 0:
+        fail(f"--idle-s {idle_s:g}: expected a number >= 0")
+    if target_normal_deg is not None and not target_normal_deg > 0:
+        fail(f"--target-normal-deg {target_normal_deg:g}: expected a positive number")
+    from metrology.calibration.follow import Targets
+    from metrology.io.layout import save_layout
+    from metrology.jobs.follow import follow_export
+    from metrology.report.calibration import calibration_text, calibration_warnings
+    from metrology.report.plan import follow_line
+
+    targets = Targets(target_mm, math.radians(target_deg),
+                      None if target_normal_deg is None else math.radians(target_normal_deg))
+    said = []
+
+    def on_step(step):
+        typer.echo(follow_line(step), err=json_out)
+        if step.met and not said:
+            said.append(step.k)
+            typer.echo(f"targets met after {step.k} poses (pose {step.pose_id}): the robot can stop", err=json_out)
+
+    result = follow_export(str(export), plane, layout, targets, on_step, idle_s=idle_s, stop_when_met=stop_when_met,
+                           quaternion_order=quaternion_order, position_units=position_units, no_reading=no_reading)
+    if out is not None:
+        save_layout(result.report.layout, out, f"Calibrated by metro calibrate --follow (iterated EKF), {export}, "
+                    f"{len(result.steps)} poses")
+    for w in calibration_warnings(result.report):
+        warn(w)
+    if json_out:
+        echo_json(result.to_dict(), "follow")
+    else:
+        typer.echo(f"stopped: {result.stopped} after {len(result.steps)} poses; final: batch iterated EKF on them")
+        typer.echo(calibration_text(result.report))
+
+
 def register(app: typer.Typer) -> None:
     @app.command("calibrate")
     @guarded
     def calibrate_cmd(
         ctx: typer.Context,
-        export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)" + STDIN),
+        export: Path = typer.Argument(..., help="Tracker export CSV (pose_id,x,y,z,qw,qx,qy,qz,d_<sensor>,...)" + STDIN
+                             + "; with --follow, a file that grows or stdin"),
         plane: Path = typer.Option(..., "--plane", help="Datum: fit-plane JSON, or a tracker cloud of the datum" + STDIN),
         layout: Path = typer.Option(..., "--layout", help="Nominal sensor layout TOML" + STDIN),
         method: str = typer.Option("lsq", "--method", help=f"Estimator: {', '.join(METHODS)}."),
@@ -36,8 +78,12 @@ def register(app: typer.Typer) -> None:
         plot: Optional[Path] = typer.Option(None, "--plot", help="Convergence and residual figures: a .pdf file (a "
                                             "page each) or a directory (PNGs)."),
         report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
-        target_mm: float = typer.Option(0.05, "--target-mm", help="Wanted 1-sigma of the zero points, mm."),
-        target_deg: float = typer.Option(0.05, "--target-deg", help="Wanted 1-sigma of the beam tilts, deg."),
+        target_mm: float = typer.Option(0.05, "--target-mm", "--target-zero-mm", help="Wanted 1-sigma of the zero points, mm."),
+        target_deg: float = typer.Option(0.05, "--target-deg", "--target-beam-deg", help="Wanted 1-sigma of the beam tilts, deg."),
+        target_normal_deg: Optional[float] = typer.Option(None, "--target-normal-deg", help="--follow: wanted 1-sigma of the normal at the working stand-off, deg."),
+        follow: bool = typer.Option(False, "--follow", help="Read poses as they are appended (EXPORT may be '-' for stdin); iterated EKF pose by pose."),
+        idle_s: float = typer.Option(5.0, "--idle-s", help="--follow: stop after this many seconds with no new line."),
+        stop_when_met: bool = typer.Option(False, "--stop-when-met", help="--follow: stop reading when every target is met."),
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
@@ -49,6 +95,12 @@ def register(app: typer.Typer) -> None:
             fail(f"--target-mm and --target-deg must be positive, got {target_mm:g} and {target_deg:g}")
         _check_out_dir(out, "--out")
         import math
+
+        if follow:
+            if plot is not None or report_html is not None:
+                fail("--follow writes no figures or report: run calibrate on the finished file for --plot/--report")
+            return _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg,
+                           idle_s, stop_when_met, quaternion_order, position_units, no_reading)
 
         from metrology.jobs.calibrate import calibrate_files
         from metrology.report.calibration import calibration_text, calibration_warnings

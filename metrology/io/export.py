@@ -23,7 +23,7 @@ import numpy as np
 from metrology.io.atomic import write_text
 from metrology.core.tolerances import QUATERNION_NORM
 
-__all__ = ["TrackerExport", "read_export", "write_export", "export_to_csv", "read_csv_rows",
+__all__ = ["TrackerExport", "read_export", "export_from_rows", "write_export", "export_to_csv", "read_csv_rows",
            "QUATERNION_ORDERS", "POSITION_UNITS"]
 
 #: what the four columns ``qw, qx, qy, qz`` hold -> the column indices of (w, x, y, z)
@@ -126,12 +126,24 @@ def read_export(path, quaternion_order: str = "wxyz", position_units: str = "mm"
     position_units : {"mm", "m", "in"}
         Unit of ``x, y, z``; converted to mm.
     """
+    if quaternion_order not in QUATERNION_ORDERS or position_units not in POSITION_UNITS:
+        return export_from_rows([], path, quaternion_order, position_units)  # the one-line error
+    return export_from_rows(read_csv_rows(path, "export"), path, quaternion_order, position_units)
+
+
+def export_from_rows(rows, path, quaternion_order: str = "wxyz", position_units: str = "mm",
+                     first_line: int = 2) -> TrackerExport:
+    """An export from CSV rows (header first, then pose rows), as :func:`read_export` reads it.
+
+    ``path`` names the source in errors and ``first_line`` is the line number of ``rows[1]``
+    there (a stream read row by row, ``metro calibrate --follow``, passes its own count).
+    """
     if quaternion_order not in QUATERNION_ORDERS:
         raise ValueError(f"quaternion order {quaternion_order!r}: expected one of {', '.join(QUATERNION_ORDERS)}")
     if position_units not in POSITION_UNITS:
         raise ValueError(f"position units {position_units!r}: expected one of {', '.join(POSITION_UNITS)}")
     qidx, scale = QUATERNION_ORDERS[quaternion_order], POSITION_UNITS[position_units]
-    rows = [r for r in read_csv_rows(path, "export") if any(c.strip() for c in r)]
+    rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{path}: empty file, expected a header line {','.join(REQUIRED)},d_<sensor>,...")
     header = [h.strip() for h in rows[0]]
@@ -148,7 +160,7 @@ def read_export(path, quaternion_order: str = "wxyz", position_units: str = "mm"
         raise ValueError(f"{path}: line 1: unknown column(s) {', '.join(unknown)}")
     col = {h: i for i, h in enumerate(header)}
     pose_id, t, temp, quat, trans, d = [], [], [], [], [], []
-    for k, row in enumerate(rows[1:], start=2):
+    for k, row in enumerate(rows[1:], start=first_line):
         if len(row) != len(header):
             raise ValueError(f"{path}: line {k}: {len(row)} fields, header has {len(header)}")
         pose_id.append(row[col["pose_id"]].strip())

@@ -1,0 +1,97 @@
+"""``metro calibrate --follow``: pose by pose, the live filter ends where batch calibration ends,
+a growing file is followed until it goes idle, and the stopping rule stops at the first pose
+that meets the targets."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import threading
+import time
+
+import numpy as np
+from typer.testing import CliRunner
+
+from cli.main import app
+from metrology.calibration.follow import Targets
+from metrology.jobs.calibrate import calibrate_files
+from metrology.jobs.follow import follow_export
+
+from .helpers import CAL, NOMINAL, PLANE, export_rows, write_rows
+
+LOOSE = Targets(0.5, math.radians(0.5))
+
+
+def _batch(path, method="lsq"):
+    return calibrate_files(path, PLANE, NOMINAL, method).calibration
+
+
+def test_follow_ends_at_the_batch_result_on_the_same_poses():
+    result = follow_export(str(CAL), PLANE, NOMINAL, Targets(0.05, math.radians(0.05)), idle_s=0)
+    assert len(result.steps) == 100 and result.stopped == "idle"
+    live = result.report.calibration
+    batch = _batch(CAL)
+    # against least squares (another algorithm, no prior): within a small fraction of sigma
+    assert np.all(np.abs(live.theta - batch.theta) <= 0.05 * batch.stderr)
+    # the live filter's last estimate is the final one
+    assert np.max(np.abs(result.live_minus_final_sigma)) < 1e-3
+
+
+def test_stop_when_met_stops_at_the_first_pose_meeting_the_targets(tmp_path):
+    result = follow_export("-", PLANE, NOMINAL, LOOSE, stop_when_met=True,
+                           stream=io.StringIO(CAL.read_text()))
+    k = len(result.steps)
+    assert result.stopped == "targets met" and result.met_at[0] == k < 100
+    assert result.steps[-1].met and not any(s.met for s in result.steps[:-1])
+    se = result.steps[-1].stderr
+    assert se[:, :3].max() <= 0.5 and np.degrees(se[:, 3:].max()) <= 0.5
+    # the final result is the batch calibration of the poses read
+    first = write_rows(tmp_path / "first.csv", export_rows()[: k + 1])
+    batch = _batch(first, "iekf")
+    assert np.allclose(result.report.calibration.theta, batch.theta, atol=1e-9)
+
+
+def test_a_growing_file_is_followed_until_idle(tmp_path):
+    rows = export_rows()[:31]
+    path = tmp_path / "growing.csv"
+    write_rows(path, rows[:6])
+    seen = []
+
+    def append():
+        for row in rows[6:]:
+            time.sleep(0.01)
+            with open(path, "a", newline="") as fh:
+                fh.write(",".join(row) + "\n")
+
+    writer = threading.Thread(target=append)
+    writer.start()
+    result = follow_export(str(path), PLANE, NOMINAL, LOOSE, on_step=seen.append, idle_s=1.0, poll_s=0.02)
+    writer.join()
+    assert result.stopped == "idle" and [s.k for s in seen] == list(range(1, 31))
+    assert [s.pose_id for s in seen] == [r[0] for r in rows[1:]]
+
+
+def test_cli_follow_prints_every_pose_and_when_to_stop(tmp_path):
+    r = CliRunner().invoke(app, ["calibrate", "-", "--plane", str(PLANE), "--layout", str(NOMINAL), "--follow",
+                                 "--target-zero-mm", "0.5", "--target-beam-deg", "0.5", "--stop-when-met", "--json"],
+                           input=CAL.read_text())
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)["follow"]
+    k = out["met_after_poses"]
+    assert out["stopped"] == "targets met" and out["poses_read"] == k
+    assert f"targets met after {k} poses" in r.stderr
+    assert len([ln for ln in r.stderr.splitlines() if "normal" in ln and "deg" in ln]) == k
+
+
+def test_cli_follow_bad_input_is_one_line_exit_2(tmp_path):
+    bad = tmp_path / "bad.csv"
+    rows = export_rows()[:10]
+    rows[0] = [c.replace("d_L4", "d_L9") for c in rows[0]]
+    write_rows(bad, rows)
+    for args in (["--method", "ekf"], []):
+        r = CliRunner().invoke(app, ["calibrate", str(bad), "--plane", str(PLANE), "--layout", str(NOMINAL),
+                                     "--follow", "--idle-s", "0", *args])
+        assert r.exit_code == 2, r.output
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr

@@ -1,0 +1,119 @@
+"""``metrology.plan``: every planned pose feasible (checked with the independent forward
+simulator's beams), the plan at least as D-good as random poses, its prefixes good designs,
+and the CSV readable by the export reader."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from metrology.calibration.dataset import load_plane
+from metrology.io.data import DATA_DIR
+from metrology.io.layout import load_layout
+from metrology.plan import DatumExtent, Limits, feasible, greedy_order, log_det, plan_poses
+from metrology.sim.forward import cast_beams, flat_surface
+
+M = DATA_DIR / "measured"
+
+
+@pytest.fixture(scope="module")
+def setup():
+    layout = load_layout(M / "nominal.toml")
+    plane, points = load_plane(M / "datum.ply")
+    extent = DatumExtent.from_points(plane, points)
+    limits = Limits(np.deg2rad(10.0), (42.0, 58.0), layout.range_mm)
+    return layout, plane, points, extent, limits
+
+
+@pytest.fixture(scope="module")
+def plan20(setup):
+    layout, plane, _, extent, limits = setup
+    return plan_poses(layout, plane, extent, 20, limits, layout.noise_mm, np.random.default_rng(0), seed=0)
+
+
+def test_every_planned_pose_is_feasible_by_the_forward_simulators_beams(setup, plan20):
+    """Readings, spots and tilts recomputed by casting the nominal beams at a flat datum
+    (metrology.sim.forward, not the model's formulas) and the hull by Delaunay, not half-planes."""
+    from scipy.spatial import Delaunay
+
+    layout, plane, points, extent, limits = setup
+    poses = plan20.planned.poses
+    surface = flat_surface(-plane.offset * plane.normal, -plane.normal, (1e4, 1e4))
+    hits = cast_beams(surface, layout.zero, layout.direction, poses.rot, poses.trans)
+    assert hits.valid.all()
+    lo, hi = layout.range_mm[:, 0] + limits.reading_margin_mm, layout.range_mm[:, 1] - limits.reading_margin_mm
+    assert np.all((hits.d >= lo) & (hits.d <= hi)), hits.d
+    st = (points - extent.origin) @ extent.basis.T
+    spots = (hits.spot.reshape(-1, 3) - extent.origin) @ extent.basis.T
+    assert np.all(Delaunay(st).find_simplex(spots) >= 0)
+    axis = np.array([0.0, 0.0, 1.0])  # this layout's beams point +z
+    tilt = np.degrees(np.arccos(np.clip(-(poses.rot @ axis) @ plane.normal, -1, 1)))
+    assert tilt.max() <= 10.0 - 0.1 + 1e-9
+    assert np.all(feasible(layout, plane, extent, poses, limits))
+
+
+def test_planned_beats_random_in_the_criterion_and_the_sigmas(plan20):
+    p, r = plan20.planned, plan20.random
+    assert p.log_det >= r.log_det
+    assert plan20.d_efficiency_random < 1.0
+    assert p.stderr[:, :3].max() < r.stderr[:, :3].max()
+    assert p.stderr[:, 3:].max() < r.stderr[:, 3:].max()
+    assert p.normal_sigma_rad <= r.normal_sigma_rad
+
+
+def test_the_exchange_never_loses_to_greedy_alone(setup, plan20):
+    layout, plane, _, extent, limits = setup
+    from metrology.plan import draw_candidates, pose_information, prior_information
+
+    cands = draw_candidates(np.random.default_rng(0), layout, plane, extent, 5000, limits)
+    pool = np.flatnonzero(feasible(layout, plane, extent, cands, limits))
+    X = pose_information(layout, *cands.plane_in_tcs(plane), layout.noise_mm)
+    prior = prior_information(layout.n)
+    greedy = log_det(X[greedy_order(X, 20, prior, pool)], prior)
+    assert plan20.planned.log_det >= greedy - 1e-9
+
+
+def test_first_k_of_the_plan_are_a_good_k_design(setup, plan20):
+    """Each prefix keeps at least 90 % of the D-efficiency of a plan made for k poses, and beats
+    the first k random poses; the sigma curve only falls."""
+    layout, plane, _, extent, limits = setup
+    n = 5 * layout.n
+    for k in (8, 12):
+        own = plan_poses(layout, plane, extent, k, limits, layout.noise_mm, np.random.default_rng(0),
+                         robustness_trials=0)
+        prefix = plan20.planned.curve["log_det"][k - 1]
+        assert np.exp((prefix - own.planned.log_det) / n) >= 0.9
+        assert prefix > plan20.random.curve["log_det"][k - 1]
+    ns = plan20.planned.curve["normal_sigma_rad"][4:]
+    assert np.all(np.diff(ns) <= 1e-15)
+
+
+def test_the_plan_stays_feasible_under_robot_error(plan20):
+    rb = plan20.planned.robustness
+    assert rb["feasible_fraction"] == 1.0 and rb["d_efficiency_min"] > 0.8
+
+
+def test_same_seed_same_plan(setup, plan20):
+    layout, plane, _, extent, limits = setup
+    again = plan_poses(layout, plane, extent, 20, limits, layout.noise_mm, np.random.default_rng(0), seed=0)
+    assert np.array_equal(again.planned.poses.trans, plan20.planned.poses.trans)
+
+
+def test_too_few_feasible_candidates_is_a_one_line_error(setup):
+    layout, plane, _, extent, limits = setup
+    tight = Limits(np.deg2rad(10.0), (42.0, 58.0), layout.range_mm, reading_margin_mm=9.9)
+    with pytest.raises(ValueError, match="candidate poses keep every limit"):
+        plan_poses(layout, plane, extent, 20, tight, layout.noise_mm, np.random.default_rng(0), n_candidates=200)
+    with pytest.raises(ValueError, match="need at least 5"):
+        plan_poses(layout, plane, extent, 4, limits, layout.noise_mm, np.random.default_rng(0))
+
+
+def test_separating_incidence_adds_its_coefficient_and_shrinks_it(setup):
+    layout, plane, _, extent, limits = setup
+    plan = plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=1000,
+                      robustness_trials=0, separate=("incidence",))
+    p, r = plan.planned, plan.random
+    assert p.stderr.shape == (layout.n, 6) and p.log_det >= r.log_det
+    assert p.stderr[:, 5].max() < r.stderr[:, 5].max()
+    with pytest.raises(ValueError, match="--separate scale"):
+        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("scale",))
