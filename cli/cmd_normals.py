@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import echo_json, guarded
+from ._common import echo_json, guarded, warn
 
 
 def register(app: typer.Typer) -> None:
@@ -32,6 +32,8 @@ def register(app: typer.Typer) -> None:
         motion_position_mm: float = typer.Option(0.05, "--motion-position-mm", help="Robot: TCP position error per adjustment, 1 sigma per axis."),
         sphere_prior_radius_mm: float = typer.Option(100.0, "--sphere-prior-radius-mm", help="Micro-sphere curvature prior (1 sigma = 1/this); inf = exact sphere."),
         no_loop: bool = typer.Option(False, "--no-loop", help="Measure once; skip the attitude loop."),
+        units: str = typer.Option(None, "--units", help="Unit of the panel file's coordinates: mm, cm, m or in (overrides what the file declares; STL/OBJ/PLY declare none: mm)."),
+        footprint_mm: float = typer.Option(None, "--footprint-mm", help="Radius of the head's footprint (pressure foot); default the spots' radius."),
     ) -> None:
         """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
         from metrology.jobs.normals import normals_job
@@ -42,9 +44,8 @@ def register(app: typer.Typer) -> None:
             noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
             true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
             motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
+            units=units, footprint_mm=footprint_mm, on_warning=warn,
         )
-        for w in summary["warnings"]:
-            typer.echo(f"warning: {w}", err=True)
         if as_json:
             echo_json(summary)
         else:

@@ -38,7 +38,9 @@ def test_inconsistent_winding_is_repaired(tmp_path):
 def test_load_panel_formats(tmp_path, ext):
     mesh = panel_mesh(ParametricSurface("sphere", 300.0), 40, 40, 4)
     path = tmp_path / f"p.{ext}"
-    mesh.export(path)
+    # glTF is in metres by specification (trimesh reads its units as such): written in m,
+    # read back in mm; STL, OBJ and PLY carry no unit and are taken as mm
+    mesh.copy().apply_scale(1e-3 if ext == "glb" else 1.0).export(path)
     p = load_panel(path)
     assert len(p.mesh.faces) == len(mesh.faces)
     assert np.allclose(np.sort(p.mesh.vertices, axis=0), np.sort(mesh.vertices, axis=0), atol=1e-5)
