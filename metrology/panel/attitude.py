@@ -20,6 +20,7 @@ STATUS = {
     "off_panel": "drilling point is farther than the tolerance from the panel",
     "approach_behind": "approach direction points out of the panel (head behind the panel)",
     "spot_crease": "a spot lies on the other side of a crease",
+    "spot_bend": "a spot lies where the surface has turned more than the crease angle (a bend tighter than the head)",
     "footprint_crease": "the head's footprint crosses a crease",
     "footprint_hole": "the head's footprint crosses a hole",
     "footprint_boundary": "the head's footprint crosses the panel boundary",
@@ -62,6 +63,7 @@ def _readings(caster, layout_true, R, T, noise, rng):
     -------
     d : (m, n) float, mm, with noise; NaN for every sensor of a pose with a bad beam
     miss, behind, out_of_range : (m, n) bool, per beam (a beam is counted in one only)
+    tri : (m, n) int, the face each beam hit, -1 on a miss
     """
     d, tri, behind = cast_beams(caster, layout_true, R, T)
     miss = tri < 0
@@ -70,7 +72,7 @@ def _readings(caster, layout_true, R, T, noise, rng):
     lo, hi = layout_true.range_mm[:, 0], layout_true.range_mm[:, 1]
     oor = ((d < lo) | (d > hi)) & ~miss & ~beh
     bad = np.any(miss | beh | oor, axis=1)
-    return np.where(bad[:, None], np.nan, d), miss, beh, oor
+    return np.where(bad[:, None], np.nan, d), miss, beh, oor, tri
 
 
 def _beam_detail(names, miss, beh, oor):
@@ -166,7 +168,7 @@ def attitude_loop(caster, panel, layout_true, layout_est, points, R0, standoff, 
             break
         Ra, Pa = R[act], P[act]
         T = place_head(Pa, Ra, a_tcs, layout_est, standoff)
-        d, _, _, _ = _readings(caster, layout_true, Ra, T, noise, rng)
+        d = _readings(caster, layout_true, Ra, T, noise, rng)[0]
         n_meas, _ = _normal_from(layout_est, a_tcs, Ra, d, method, float(np.mean(noise)), prior_radius_mm)
         bad = ~np.all(np.isfinite(n_meas), axis=1)
         f = Ra @ a_tcs

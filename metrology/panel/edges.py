@@ -169,7 +169,7 @@ def straddle(edges: PanelEdges, points, radius, normal, spots=None, spot_normals
     radius : float, mm, footprint radius (:func:`footprint_radius` or the pressure foot's)
     normal : (m, 3) float, unit, panel frame, the normal of the face at each point
     spots : (m, n, 3) float, mm, panel frame, where the beams hit (NaN for a miss), or None;
-        the footprint then also reaches to the farthest spot
+        a crease out to the farthest spot counts when a spot lies beyond it
     spot_normals : (m, n, 3) float, unit, panel frame, normals of the faces the beams hit
         (NaN for a miss), or None
     names : sequence of n str, the sensors' names
@@ -186,26 +186,26 @@ def straddle(edges: PanelEdges, points, radius, normal, spots=None, spot_normals
     if spots is not None:
         reach = np.linalg.norm(np.asarray(spots, float) - points[:, None, :], axis=2)
         r = np.fmax(r, np.max(np.where(np.isfinite(reach), reach, -np.inf), axis=1))
-    pt, ei, _ = edges.near(points, r)
+    pt, ei, dist = edges.near(points, r)
     status = np.full(m, "", dtype=object)
     detail = np.full(m, "", dtype=object)
     kind = edges.kind[ei]
     for i in np.unique(pt):
         sel = pt == i
-        k = kind[sel]
-        if np.any(k == CREASE):
+        k, inside = kind[sel], dist[sel] <= radius
+        across = []
+        if spot_normals is not None and np.any(k == CREASE):
+            c = np.asarray(spot_normals[i], float) @ np.asarray(normal[i], float)
+            across = np.flatnonzero(np.isfinite(c) & (c < math.cos(edges.crease))).tolist()
+        if across:
             deg = math.degrees(float(np.max(edges.angle[ei[sel]][k == CREASE])))
-            across = []
-            if spot_normals is not None:
-                c = np.asarray(spot_normals[i], float) @ np.asarray(normal[i], float)
-                across = np.flatnonzero(np.isfinite(c) & (c < math.cos(edges.crease))).tolist()
-            if across:
-                who = ", ".join(str(names[j]) if names is not None else str(j) for j in across)
-                status[i], detail[i] = "spot_crease", f"spot of {who} on the other side of a {deg:.0f} deg crease"
-            else:
-                status[i], detail[i] = "footprint_crease", f"footprint crosses a {deg:.0f} deg crease"
-        elif np.any(k == HOLE):
+            who = ", ".join(str(names[j]) if names is not None else str(j) for j in across)
+            status[i], detail[i] = "spot_crease", f"spot of {who} on the other side of a {deg:.0f} deg crease"
+        elif np.any(inside & (k == CREASE)):
+            deg = math.degrees(float(np.max(edges.angle[ei[sel]][inside & (k == CREASE)])))
+            status[i], detail[i] = "footprint_crease", f"footprint crosses a {deg:.0f} deg crease"
+        elif np.any(inside & (k == HOLE)):
             status[i], detail[i] = "footprint_hole", "footprint crosses a hole"
-        else:
+        elif np.any(inside):
             status[i], detail[i] = "footprint_boundary", "footprint crosses the panel boundary"
     return status, detail

@@ -140,11 +140,11 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     T0 = place_head(pts, R0, a_tcs, layout, standoff)
     rng_read, rng_loop_p, rng_loop_s = rng.spawn(3)
     # both methods see the same noisy readings at the first pose
-    d, miss_b, beh_b, oor_b = _readings(caster, layout_true, R0, T0, noise, rng_read)
+    d, miss_b, beh_b, oor_b, tri_b = _readings(caster, layout_true, R0, T0, noise, rng_read)
     miss, beh, oor = np.any(miss_b, axis=1), np.any(beh_b, axis=1), np.any(oor_b, axis=1)
     n_plane, _ = _normal_from(layout, a_tcs, R0, d, "plane")
     n_sphere, rad = _normal_from(layout, a_tcs, R0, d, "sphere", float(np.mean(noise)), prior_radius_mm)
-    edge_status, edge_detail = _edge_check(panel, caster, layout_true, R0, T0, pts, n_true, foot, status == "ok")
+    edge_status, edge_detail = _edge_check(panel, caster, layout_true, R0, T0, pts, n_true, foot, status == "ok", tri_b)
     status[edge_status != ""] = edge_status[edge_status != ""]
     for flag, name in ((oor, "out_of_range"), (beh, "beam_behind"), (miss, "beam_miss")):
         status[(status == "ok") & flag] = name
@@ -186,11 +186,13 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
                       rad, d, init_tilt, loops, caster.engine, info, detail.astype(str))
 
 
-def _edge_check(panel, caster, layout_true, R0, T0, pts, normal, foot, todo):
+def _edge_check(panel, caster, layout_true, R0, T0, pts, normal, foot, todo, tri_b):
     """Status and detail of the points whose footprint straddles a crease, a hole or the
-    outline (:func:`metrology.panel.edges.straddle`); '' elsewhere. Beams are cast again
-    only at points with an edge within twice the footprint (their spots can reach farther
-    than the footprint when the head is tilted)."""
+    outline (:func:`metrology.panel.edges.straddle`), or one of whose spots lies where the
+    surface has turned by more than the crease angle from the drilling point's normal (a
+    bend tighter than the head: a leading edge); '' elsewhere. Beams are cast again only at
+    points with an edge within twice the footprint (their spots can reach farther than the
+    footprint when the head is tilted)."""
     m = len(pts)
     status = np.full(m, "", dtype=object)
     detail = np.full(m, "", dtype=object)
@@ -198,16 +200,25 @@ def _edge_check(panel, caster, layout_true, R0, T0, pts, normal, foot, todo):
     idx = np.flatnonzero(todo)
     near, _, _ = edges.near(pts[idx], 2.0 * foot + 1.0)
     idx = idx[np.unique(near)]
-    if not len(idx):
-        return status, detail
-    d, tri, _ = cast_beams(caster, layout_true, R0[idx], T0[idx])
-    o = np.einsum("mij,nj->mni", R0[idx], layout_true.zero) + T0[idx][:, None, :]
-    u = np.einsum("mij,nj->mni", R0[idx], layout_true.direction)
-    spots = o + d[..., None] * u
-    fn = np.full(spots.shape, np.nan)
-    hit = tri >= 0
-    fn[hit] = np.asarray(panel.mesh.face_normals)[tri[hit]]
-    status[idx], detail[idx] = straddle(edges, pts[idx], foot, normal[idx], spots, fn, layout_true.names)
+    if len(idx):
+        d, tri, _ = cast_beams(caster, layout_true, R0[idx], T0[idx])
+        o = np.einsum("mij,nj->mni", R0[idx], layout_true.zero) + T0[idx][:, None, :]
+        u = np.einsum("mij,nj->mni", R0[idx], layout_true.direction)
+        spots = o + d[..., None] * u
+        fn = np.full(spots.shape, np.nan)
+        hit = tri >= 0
+        fn[hit] = np.asarray(panel.mesh.face_normals)[tri[hit]]
+        status[idx], detail[idx] = straddle(edges, pts[idx], foot, normal[idx], spots, fn, layout_true.names)
+    # a spot on a surface turned past the crease angle, no crease edge needed (a tight bend)
+    hit = tri_b >= 0
+    cos = np.full(tri_b.shape, np.nan)
+    cos[hit] = np.einsum("qj,qj->q", np.asarray(panel.mesh.face_normals)[tri_b[hit]], normal[np.nonzero(hit)[0]])
+    turned = np.isfinite(cos) & (cos < math.cos(math.radians(CREASE_ANGLE_DEG)))
+    for i in np.flatnonzero(todo & (status == "") & np.any(turned, axis=1)):
+        who = ", ".join(str(n) for n, t in zip(layout_true.names, turned[i]) if t)
+        deg = math.degrees(math.acos(float(np.nanmin(np.clip(cos[i], -1, 1)))))
+        status[i] = "spot_bend"
+        detail[i] = f"spot of {who} where the surface has turned {deg:.0f} deg (more than the {CREASE_ANGLE_DEG:g} deg crease angle)"
     return status, detail
 
 
