@@ -17,6 +17,10 @@ import numpy as np
 CREASE, BOUNDARY, HOLE = 0, 1, 2
 
 
+#: two faces meeting at less than this are coplanar (rad): exporters' rounding, not design
+FLAT_RAD = 1e-4
+
+
 @dataclass(frozen=True)
 class PanelEdges:
     """The edges of a mesh that a footprint must not straddle.
@@ -29,12 +33,17 @@ class PanelEdges:
     angle : (k,) float, rad, dihedral of a crease (angle between the two face normals;
         pi for a non-manifold edge), NaN for free edges
     crease : float, rad, the crease angle used
+    curved : (f,) bool, per face of the mesh: it meets a neighbour across an edge at an angle
+        between :data:`FLAT_RAD` and the crease angle (it is a facet of a tessellated curve);
+        False for a face inside a planar region (bounded only by coplanar faces, creases and
+        free edges), whose own normal is the designed one
     """
 
     segments: np.ndarray
     kind: np.ndarray
     angle: np.ndarray
     crease: float
+    curved: np.ndarray
 
     def near(self, points, radius):
         """The edges within ``radius`` of each point.
@@ -109,6 +118,10 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     sharp = cosang < math.cos(math.radians(crease_deg))
     ang = np.arccos(cosang[sharp])
     crease_he = order[two[sharp]]
+    bend = ~sharp & (cosang < math.cos(FLAT_RAD))
+    curved = np.zeros(len(F), bool)
+    curved[fa[bend]] = True
+    curved[fb[bend]] = True
     multi = order[first[cnt > 2]]  # non-manifold: never smooth
     he = np.concatenate([crease_he, multi, free])
     angle = np.concatenate([ang, np.full(len(multi), math.pi), np.full(len(free), np.nan)])
@@ -117,7 +130,7 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     if len(free):
         kind[len(he) - len(free):] = _loop_kinds(a[free], b[free], V)
     seg = np.stack([V[ea], V[eb]], axis=1)
-    return PanelEdges(seg, kind.astype(int), angle, math.radians(crease_deg))
+    return PanelEdges(seg, kind.astype(int), angle, math.radians(crease_deg), curved)
 
 
 def _loop_kinds(a, b, V):

@@ -101,7 +101,9 @@ class Panel:
         At each corner of the face hit, the normal is the angle-weighted mean of the normals
         of the faces around that vertex that make less than ``crease_deg`` with the face hit
         (the face itself always counts); the three corner normals are then interpolated with
-        ``bary``. Across an edge sharper than the crease nothing is averaged, so on a box or a
+        ``bary``. A face that meets no neighbour across an edge at more than
+        :data:`metrology.panel.edges.FLAT_RAD` short of a crease lies in a planar region: its
+        own normal is the reference. Across an edge sharper than the crease nothing is averaged, so on a box or a
         coarsely faceted cylinder the reference is the face's own normal; on a fine mesh of a
         smooth surface it is the usual smooth-shaded normal.
 
@@ -158,6 +160,11 @@ class Panel:
         bend /= np.maximum(np.linalg.norm(bend, axis=1, keepdims=True), 1e-300)
         tri_v = np.asarray(mesh.vertices)[V]
         width = np.ptp(np.einsum("mkj,mj->mk", tri_v, bend), axis=1)
+        # a face inside a planar region is its own exact reference (a long triangle of a flat
+        # face that touches a tangent fillet at one corner must not lean towards it)
+        flat = ~self.edges(crease_deg).curved[tri]
+        n[flat] = N[tri[flat]]
+        theta[flat] = 0.0
         return n, theta / 2.0, width * theta / 8.0
 
 
