@@ -115,7 +115,10 @@ def _axis_surface(caster, panel, P_axis, f):
     if np.any(hit):
         nrm[hit] = panel.reference_normal_at(tri[hit], bary[hit])[0]
     if panel.surface is not None:
-        nrm = np.where(hit[:, None], panel.surface.normal(pts), nrm)
+        exact = panel.surface.normal(pts)
+        # a B-rep face's orientation is its own: the outside is the mesh's
+        exact *= np.where(np.sum(exact * np.nan_to_num(nrm), axis=1) < 0, -1.0, 1.0)[:, None]
+        nrm = np.where(hit[:, None], exact, nrm)
     return pts, nrm, hit
 
 

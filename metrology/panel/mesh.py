@@ -50,7 +50,8 @@ class Panel:
     source : str, where it came from (for messages)
     warnings : list of str, things repaired or suspicious (printed by the CLI)
     units : str, where the unit came from (``"mm (assumed: STL carries no units)"``)
-    surface : ParametricSurface or None, the analytic surface when the file says so
+    surface : ParametricSurface or BRepSurface or None, the exact surface: analytic when the
+        file's header says so, the B-rep of a STEP file when OCP is installed
     """
 
     mesh: object
@@ -290,7 +291,13 @@ def load_panel(path, units=None) -> Panel:
                         f"(expected {lo:g}..{hi:g} mm); is it in m or inch? give --units"
                         + (f" ({guess})" if guess else ""))
     header = mesh.metadata.get("header", "") if isinstance(mesh.metadata, dict) else ""
-    return Panel(mesh, path, warnings, _surface_from_header(header), unit_note)
+    surface = _surface_from_header(header)
+    if is_step:
+        from metrology.panel.brep import BRepSurface, ocp_available
+
+        if ocp_available():  # the exact reference: the B-rep itself (OCC reads STEP into mm)
+            surface = BRepSurface(path, scale=to_mm / 1000.0)
+    return Panel(mesh, path, warnings, surface, unit_note)
 
 
 def panel_plane(mesh):

@@ -28,7 +28,8 @@ class NormalsRun:
     off_mm : (m,) float, mm, distance of the given point from the panel
     n_true : (m, 3) float, unit, panel frame, the mesh's reference normal (the face hit,
         smoothed within :data:`CREASE_ANGLE_DEG`), out
-    n_analytic : (m, 3) float or None, unit, panel frame, for generated panels
+    n_analytic : (m, 3) float or None, unit, panel frame, for generated panels (analytic) and
+        STEP panels when OCP is installed (the B-rep's face normal)
     n_plane, n_sphere : (m, 3) float, unit, panel frame, out; NaN unless status ok
     err_plane, err_sphere : (m,) float, rad, angle to the reference normal (:attr:`n_ref`)
     sphere_radius : (m,) float, mm, inf where the sphere degraded to the plane
@@ -132,6 +133,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     behind_app = has_app & (np.sum(drill.approach * n_true, axis=1) >= 0)
     status[(status == "ok") & behind_app] = "approach_behind"
     n_an = panel.surface.normal(pts) if panel.surface is not None else None
+    if n_an is not None:  # a B-rep face's orientation is its own: the outside is the mesh's
+        n_an *= np.where(np.sum(n_an * n_true, axis=1) < 0, -1.0, 1.0)[:, None]
     n_ref = n_an if n_an is not None else n_true
     # initial feed: the approach direction where given, else the inward normal; tilted
     base = np.where(has_app[:, None], -drill.approach, n_ref)
@@ -177,7 +180,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     info = {"engine": caster.engine, "standoff_mm": standoff, "tilt_deg": math.degrees(tilt),
             "noise_mm": noise.tolist(), "tolerance_deg": math.degrees(tolerance),
             "motion": {"repeat_deg": math.degrees(motion.repeat), "scale": motion.scale, "position_mm": motion.position_mm},
-            "tool_axis_tcs": a_tcs.tolist(), "reference_normal": "analytic" if n_an is not None else
+            "tool_axis_tcs": a_tcs.tolist(), "reference_normal": getattr(panel.surface, "reference_name", "analytic") if n_an is not None else
             f"mesh: face hit, smoothed within {CREASE_ANGLE_DEG:g} deg",
             "reference_faceting": _faceting_info(faceting, chord, status == "ok", n_an is not None),
             "sensors": layout.n, "sphere_prior_radius_mm": prior_radius_mm,
