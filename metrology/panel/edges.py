@@ -106,19 +106,29 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     a = F.ravel()
     b = F[:, [1, 2, 0]].ravel()
     key = np.minimum(a, b) * nv + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
+    nbits = int(len(a) - 1).bit_length()
+    if int(nv) ** 2 < 2 ** (62 - nbits):  # pack the half-edge id into the key: one plain sort
+        packed = np.sort((key << nbits) | np.arange(len(a), dtype=np.int64))
+        order = packed & ((1 << nbits) - 1)
+        ks = packed >> nbits
+    else:
+        order = np.argsort(key, kind="stable")
+        ks = key[order]
     first = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
     cnt = np.diff(np.r_[first, len(ks)])
     free = order[first[cnt == 1]]  # half-edge ids (face * 3 + k)
     two = first[cnt == 2]
-    N = np.asarray(mesh.face_normals, float)
+    # the angle between the two faces' normals from their chord |n_a - n_b| = 2 sin(angle / 2),
+    # in float32 (half the memory traffic; 6e-8 resolves FLAT_RAD, unlike a cosine would)
+    N32 = np.asarray(mesh.face_normals, np.float32)
     fa, fb = order[two] // 3, order[two + 1] // 3
-    cosang = np.clip(np.sum(N[fa] * N[fb], axis=1), -1.0, 1.0)
-    sharp = cosang < math.cos(math.radians(crease_deg))
-    ang = np.arccos(cosang[sharp])
+    diff = N32[fa] - N32[fb]
+    chord = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    sharp = chord > 2.0 * math.sin(math.radians(crease_deg) / 2.0)
+    N = np.asarray(mesh.face_normals, float)
+    ang = np.arccos(np.clip(np.sum(N[fa[sharp]] * N[fb[sharp]], axis=1), -1.0, 1.0))
     crease_he = order[two[sharp]]
-    bend = ~sharp & (cosang < math.cos(FLAT_RAD))
+    bend = ~sharp & (chord > 2.0 * math.sin(FLAT_RAD / 2.0))
     curved = np.zeros(len(F), bool)
     curved[fa[bend]] = True
     curved[fb[bend]] = True
