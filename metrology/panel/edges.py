@@ -108,7 +108,7 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     key = np.minimum(a, b) * nv + np.maximum(a, b)
     nbits = int(len(a) - 1).bit_length()
     if int(nv) ** 2 < 2 ** (62 - nbits):  # pack the half-edge id into the key: one plain sort
-        packed = np.sort((key << nbits) | np.arange(len(a), dtype=np.int64))
+        packed = np.sort((key << nbits) | np.arange(len(a), dtype=np.int64), kind="stable")
         order = packed & ((1 << nbits) - 1)
         ks = packed >> nbits
     else:
