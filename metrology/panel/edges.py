@@ -37,6 +37,8 @@ class PanelEdges:
         between :data:`FLAT_RAD` and the crease angle (it is a facet of a tessellated curve);
         False for a face inside a planar region (bounded only by coplanar faces, creases and
         free edges), whose own normal is the designed one
+    region_area : (f,) float, mm^2, per face, the area of the planar region it belongs to
+        (faces joined across edges where they meet at less than :data:`FLAT_RAD`)
     """
 
     segments: np.ndarray
@@ -44,6 +46,7 @@ class PanelEdges:
     angle: np.ndarray
     crease: float
     curved: np.ndarray
+    region_area: np.ndarray
 
     def near(self, points, radius):
         """The edges within ``radius`` of each point.
@@ -132,6 +135,7 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     curved = np.zeros(len(F), bool)
     curved[fa[bend]] = True
     curved[fb[bend]] = True
+    region_area = _region_area(mesh, fa[~sharp & ~bend], fb[~sharp & ~bend])
     multi = order[first[cnt > 2]]  # non-manifold: never smooth
     he = np.concatenate([crease_he, multi, free])
     angle = np.concatenate([ang, np.full(len(multi), math.pi), np.full(len(free), np.nan)])
@@ -140,7 +144,21 @@ def panel_edges(mesh, crease_deg) -> PanelEdges:
     if len(free):
         kind[len(he) - len(free):] = _loop_kinds(a[free], b[free], V)
     seg = np.stack([V[ea], V[eb]], axis=1)
-    return PanelEdges(seg, kind.astype(int), angle, math.radians(crease_deg), curved)
+    return PanelEdges(seg, kind.astype(int), angle, math.radians(crease_deg), curved, region_area)
+
+
+def _region_area(mesh, fa, fb):
+    """Per face, the area (mm^2) of the planar region it belongs to: faces joined across the
+    coplanar edges ``fa``-``fb``."""
+    area = np.asarray(mesh.area_faces, float)
+    if not len(fa):
+        return area.copy()
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nf = len(area)
+    _, lab = connected_components(coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(nf, nf)), directed=False)
+    return np.bincount(lab, weights=area)[lab]
 
 
 def _loop_kinds(a, b, V):

@@ -40,6 +40,13 @@ STEP_TOL_ANGULAR_RAD = 5e-3
 CREASE_ANGLE_DEG = 30.0
 
 
+#: a face is not smoothed with a neighbour whose planar region (faces joined where they meet
+#: at less than :data:`metrology.panel.edges.FLAT_RAD`) is this many times smaller in area:
+#: a machined plane that meets a tangent fillet keeps its own normal up to the fillet; the
+#: facets of a tessellated curve are alike and are smoothed together
+TANGENT_AREA_RATIO = 16.0
+
+
 @dataclass
 class Panel:
     """A loaded, validated panel mesh.
@@ -101,7 +108,9 @@ class Panel:
 
         At each corner of the face hit, the normal is the angle-weighted mean of the normals
         of the faces around that vertex that make less than ``crease_deg`` with the face hit
-        (the face itself always counts); the three corner normals are then interpolated with
+        (the face itself always counts), leaving out faces whose planar region is more than
+        :data:`TANGENT_AREA_RATIO` times smaller than the face hit's (a fillet's facets next
+        to the wide plane it is tangent to); the three corner normals are then interpolated with
         ``bary``. A face that meets no neighbour across an edge at more than
         :data:`metrology.panel.edges.FLAT_RAD` short of a crease lies in a planar region: its
         own normal is the reference. Across an edge sharper than the crease nothing is averaged, so on a box or a
@@ -146,7 +155,11 @@ class Panel:
         at = np.take_along_axis(P, corner[..., None, None], axis=3)[..., 0, :]
         e1 = np.take_along_axis(P, ((corner + 1) % 3)[..., None, None], axis=3)[..., 0, :] - at
         e2 = np.take_along_axis(P, ((corner + 2) % 3)[..., None, None], axis=3)[..., 0, :] - at
-        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * use
+        # a neighbour from a planar region far narrower than the face hit's (a fillet's facet
+        # next to the wide plane it is tangent to) says nothing of the plane's normal
+        region = self.edges(crease_deg).region_area
+        narrow = region[Gs] * TANGENT_AREA_RATIO < region[tri][:, None, None]
+        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * (use & ~narrow)
         cn = np.einsum("mkg,mkgj->mkj", w, Ng)
         cn /= np.linalg.norm(cn, axis=2, keepdims=True)
         n = np.einsum("mk,mkj->mj", bary, cn)

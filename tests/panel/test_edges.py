@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from metrology.core.normals import angle_between
 from metrology.panel.edges import BOUNDARY, CREASE, HOLE, footprint_radius, panel_edges
 from metrology.panel.mesh import Panel, load_panel
 from metrology.panel.points import DrillPoints, grid_points
@@ -155,3 +156,19 @@ def test_bad_footprint_is_refused(bad):
     with pytest.raises(ValueError, match="footprint radius must be"):
         run_normals(panel, LAYOUTS["table6"], DrillPoints(pts, np.full_like(pts, np.nan), ("a",)),
                     np.random.default_rng(0), footprint_mm=bad, loop=False)
+
+
+def test_plate_reference_is_the_plane_next_to_its_fillets():
+    """On plate_holes.STL the flat faces' long triangles reach the outline's tangent fillets:
+    their reference is the plane's normal everywhere on them, not leaning to the fillet."""
+    panel = load_panel(DATA / "trimesh_plate_holes.stl")
+    m = panel.mesh
+    flat = np.flatnonzero(np.abs(m.face_normals[:, 2]) > 1 - 1e-12)
+    rng = np.random.default_rng(0)
+    bary = rng.dirichlet(np.ones(3), len(flat))
+    n, _, _ = panel.reference_normal_at(flat, bary)
+    assert np.max(angle_between(n, m.face_normals[flat], oriented=True)) < 1e-9
+    # while the fillets are smoothed: their reference is not their facets' own normals
+    fil = np.flatnonzero((np.abs(m.face_normals[:, 2]) > 0.05) & (np.abs(m.face_normals[:, 2]) < 0.95))
+    nf, fac, _ = panel.reference_normal_at(fil, np.full((len(fil), 3), 1 / 3))
+    assert np.all(fac > 0)
