@@ -147,7 +147,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     miss, beh, oor = np.any(miss_b, axis=1), np.any(beh_b, axis=1), np.any(oor_b, axis=1)
     n_plane, _ = _normal_from(layout, a_tcs, R0, d, "plane")
     n_sphere, rad = _normal_from(layout, a_tcs, R0, d, "sphere", float(np.mean(noise)), prior_radius_mm)
-    edge_status, edge_detail = _edge_check(panel, caster, layout_true, R0, T0, pts, n_true, foot, status == "ok", tri_b)
+    edge_status, edge_detail = _edge_check(panel, caster, layout_true, R0, T0, pts, n_true, foot, status == "ok",
+                                           np.where(beh_b, -1, tri_b))
     status[edge_status != ""] = edge_status[edge_status != ""]
     for flag, name in ((oor, "out_of_range"), (beh, "beam_behind"), (miss, "beam_miss")):
         status[(status == "ok") & flag] = name
@@ -195,7 +196,8 @@ def _edge_check(panel, caster, layout_true, R0, T0, pts, normal, foot, todo, tri
     surface has turned by more than the crease angle from the drilling point's normal (a
     bend tighter than the head: a leading edge); '' elsewhere. Beams are cast again only at
     points with an edge within twice the footprint (their spots can reach farther than the
-    footprint when the head is tilted)."""
+    footprint when the head is tilted). ``tri_b (m, n)``: the face each beam hit, -1 for a
+    miss or a hit from behind (those keep their own status)."""
     m = len(pts)
     status = np.full(m, "", dtype=object)
     detail = np.full(m, "", dtype=object)
