@@ -2,8 +2,8 @@
 
     python benchmarks/study_sphere_noise.py [--draws 2000] [--seed 0]
 
-The spots are computed by the analytic ray-surface intersection (sphere, or cylinder with
-its axis across the tool axis), not on a mesh, so the only errors are the methods' and the
+The spots are computed by the analytic ray-surface intersection (sphere, cylinder with
+its axis across the tool axis, or saddle with principal radii +-R), not on a mesh, so the only errors are the methods' and the
 noise's. One pose per row: the tool axis meets the surface at the layout's stand-off,
 tilted 3 deg off the normal (fixed azimuth 30 deg); ``--draws`` noise draws per noise level
 (Gaussian, 1 sigma per reading). Bias: angle between the mean measured normal and the
@@ -29,7 +29,7 @@ from metrology.core.paper import table2_layouts, table6_layouts  # noqa: E402
 from metrology.core.sphere import micro_sphere_normal  # noqa: E402
 from metrology.panel.head import default_standoff, tool_axis_tcs  # noqa: E402
 
-SURFACES = [("sphere", 300.0), ("sphere", 800.0), ("cylinder", 300.0), ("cylinder", 800.0)]
+SURFACES = [("sphere", 300.0), ("sphere", 800.0), ("cylinder", 300.0), ("cylinder", 800.0), ("saddle", 800.0)]
 NOISE_UM = [0.0, 1.0, 5.0, 20.0]
 
 
@@ -42,6 +42,16 @@ def exact_readings(layout, kind, R, tilt, az):
     n_out = rot.apply(-a)
     C = P - R * n_out
     E, u = layout.zero, layout.direction
+    if kind == "saddle":  # h = (s1^2 - s2^2) / 2R over the tangent plane at P (principal radii +-R)
+        e1, e2 = rot.apply([1.0, 0.0, 0.0]), rot.apply([0.0, 1.0, 0.0])
+        rel = E - P
+        a1, a2, a3 = rel @ e1, rel @ e2, rel @ n_out
+        b1, b2, b3 = u @ e1, u @ e2, u @ n_out
+        qa, qb, qc = b1 * b1 - b2 * b2, 2 * (a1 * b1 - a2 * b2) - 2 * R * b3, a1 * a1 - a2 * a2 - 2 * R * a3
+        disc = np.sqrt(qb * qb - 4 * qa * qc)
+        roots = np.stack([(-qb - disc) / (2 * qa), (-qb + disc) / (2 * qa)])
+        roots = np.where(roots > 0, roots, np.inf)
+        return np.min(roots, axis=0), n_out
     if kind == "cylinder":  # axis: the tilted image of x, across the tool axis
         ax = rot.apply([1.0, 0.0, 0.0])
         E = E - np.outer((E - C) @ ax, ax) - C

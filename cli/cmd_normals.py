@@ -41,6 +41,8 @@ def register(app: typer.Typer) -> None:
         no_loop: bool = typer.Option(False, "--no-loop", help="Measure once; skip the attitude loop."),
         fmt: str = typer.Option(None, "--format", help=f"Format of a panel on stdin (PANEL '-'): {', '.join(MESH_FORMATS)}; "
                                 "ASCII STL, PLY and GLB are also known by their header."),
+        units: str = typer.Option(None, "--units", help="Unit of the panel file's coordinates: mm, cm, m or in (overrides what the file declares; STL/OBJ/PLY declare none: mm)."),
+        footprint_mm: float = typer.Option(None, "--footprint-mm", help="Radius of the head's footprint (pressure foot); default the spots' radius."),
     ) -> None:
         """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
         from metrology.jobs.normals import normals_job
@@ -60,10 +62,9 @@ def register(app: typer.Typer) -> None:
                 noise_mm=noise_mm, seed=seed, tolerance_deg=tolerance_deg, engine=engine, out_path=out, plot_path=plot,
                 true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
                 motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
-                progress=progress, report=report, command=invocation(ctx),
+                progress=progress, report=report, command=invocation(ctx), units=units,
+                footprint_mm=footprint_mm, on_warning=warn,
             )
-        for w in summary["warnings"]:
-            warn(w)
         if as_json:
             echo_json(summary, "normals")
         else:

@@ -7,6 +7,8 @@ import numpy as np
 from metrology.core.progress import notify
 from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM
 from metrology.panel.attitude import MotionError, STATUS
+from metrology.panel.edges import footprint_radius
+from metrology.panel.head import default_standoff
 from metrology.panel.mesh import load_panel
 from metrology.panel.points import grid_points, read_points
 from metrology.panel.rays import RayCaster
@@ -17,7 +19,8 @@ from metrology.report.normals import per_point_text, plot_error_map, summarize
 def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt_deg=1.0, standoff_mm=None,
                 noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
                 true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, report=None, command=None, progress=None) -> dict:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, units=None, footprint_mm=None,
+                on_warning=None, report=None, command=None, progress=None) -> dict:
     """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
 
     Degrees appear only here, at the edge. Output files are written only after every
@@ -26,10 +29,15 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     ``progress(done, total, what)``: at each of 6 stages (load, the 4 of
     :func:`~metrology.panel.run.run_normals`, write).
 
+    ``units`` (``mm``, ``cm``, ``m``, ``in``) overrides the panel file's unit
+    (:func:`load_panel`). ``on_warning(line)`` is called with each warning about the panel
+    (units, repairs) as soon as it is loaded, before anything can fail; a run in which no
+    point can be measured repeats the unit warning in its error.
+
     Returns
     -------
-    dict: the :func:`summarize` summary plus ``warnings`` (list of str) and ``points``
-    (how many given)
+    dict: the :func:`summarize` summary plus ``warnings`` (list of str), ``points`` (how
+    many given) and ``grid_dropped`` (grid nodes whose footprint would straddle an edge)
     """
     from metrology.io.layout import load_layout
 
@@ -52,23 +60,40 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     notify(progress, 0, 6, "loading the panel and building its ray scene")
     layout = load_layout(layout_path)
     layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
-    panel = load_panel(panel_path)
+    panel = load_panel(panel_path, units)
+    for w in panel.warnings:
+        if on_warning is not None:
+            on_warning(w)
     caster = RayCaster(panel.mesh, engine)
-    drill = read_points(points_path) if points_path is not None else grid_points(panel, float(grid_mm), caster)
+    if footprint_mm is not None and not (math.isfinite(footprint_mm) and footprint_mm >= 0):
+        raise ValueError(f"footprint must be a finite number of mm >= 0, got {footprint_mm}")
+    foot = footprint_mm
+    if foot is None and grid_mm is not None:
+        standoff = default_standoff(layout) if standoff_mm is None else float(standoff_mm)
+        foot = footprint_radius(layout, standoff)
+    unit_hint = ["see the unit warning: is the panel in m or inch? give --units"] if any(
+        "is it in m or inch" in w for w in panel.warnings) else []
+    try:
+        drill, dropped = (read_points(points_path), 0) if points_path is not None else \
+            grid_points(panel, float(grid_mm), caster, footprint_mm=foot, with_dropped=True)
+    except ValueError as exc:
+        raise ValueError(str(exc) + "".join(f" ({w})" for w in unit_hint)) from None
     rng = np.random.default_rng(seed)
     motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
-                      caster=caster, prior_radius_mm=prior_radius_mm,
+                      caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=footprint_mm,
                       progress=None if progress is None else lambda d, n, what: progress(1 + d, 6, what))
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
         where = points_path if points_path is not None else f"grid {grid_mm} mm"
-        raise ValueError(f"{where}: no drilling point could be measured ({counts})")
+        raise ValueError(f"{where}: no drilling point could be measured ({counts})"
+                         + "".join(f" ({w})" for w in unit_hint))
     notify(progress, 5, 6, "summary, table and map")
     summary = summarize(run)
     summary["warnings"] = list(panel.warnings)
     summary["points"] = len(run.labels)
+    summary["grid_dropped"] = dropped
     text = per_point_text(run, out_fmt) if out_fmt else None
     png = plot_error_map(run, tolerance_deg) if plot_path is not None or report is not None else None
     page = None

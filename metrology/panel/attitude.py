@@ -19,6 +19,11 @@ STATUS = {
     "ok": "measured",
     "off_panel": "drilling point is farther than the tolerance from the panel",
     "approach_behind": "approach direction points out of the panel (head behind the panel)",
+    "spot_crease": "a spot lies on the other side of a crease",
+    "spot_bend": "a spot lies where the surface has turned more than the crease angle (a bend tighter than the head)",
+    "footprint_crease": "the head's footprint crosses a crease",
+    "footprint_hole": "the head's footprint crosses a hole",
+    "footprint_boundary": "the head's footprint crosses the panel boundary",
     "beam_miss": "a beam missed the panel",
     "beam_behind": "a beam hit the panel from behind",
     "out_of_range": "a reading is outside the sensor's range",
@@ -58,6 +63,7 @@ def _readings(caster, layout_true, R, T, noise, rng):
     -------
     d : (m, n) float, mm, with noise; NaN for every sensor of a pose with a bad beam
     miss, behind, out_of_range : (m, n) bool, per beam (a beam is counted in one only)
+    tri : (m, n) int, the face each beam hit, -1 on a miss
     """
     d, tri, behind = cast_beams(caster, layout_true, R, T)
     miss = tri < 0
@@ -66,7 +72,7 @@ def _readings(caster, layout_true, R, T, noise, rng):
     lo, hi = layout_true.range_mm[:, 0], layout_true.range_mm[:, 1]
     oor = ((d < lo) | (d > hi)) & ~miss & ~beh
     bad = np.any(miss | beh | oor, axis=1)
-    return np.where(bad[:, None], np.nan, d), miss, beh, oor
+    return np.where(bad[:, None], np.nan, d), miss, beh, oor, tri
 
 
 def _beam_detail(names, miss, beh, oor):
@@ -109,7 +115,10 @@ def _axis_surface(caster, panel, P_axis, f):
     if np.any(hit):
         nrm[hit] = panel.reference_normal_at(tri[hit], bary[hit])[0]
     if panel.surface is not None:
-        nrm = np.where(hit[:, None], panel.surface.normal(pts), nrm)
+        exact = panel.surface.normal(pts)
+        # a B-rep face's orientation is its own: the outside is the mesh's
+        exact *= np.where(np.sum(exact * np.nan_to_num(nrm), axis=1) < 0, -1.0, 1.0)[:, None]
+        nrm = np.where(hit[:, None], exact, nrm)
     return pts, nrm, hit
 
 
@@ -162,7 +171,7 @@ def attitude_loop(caster, panel, layout_true, layout_est, points, R0, standoff, 
             break
         Ra, Pa = R[act], P[act]
         T = place_head(Pa, Ra, a_tcs, layout_est, standoff)
-        d, _, _, _ = _readings(caster, layout_true, Ra, T, noise, rng)
+        d = _readings(caster, layout_true, Ra, T, noise, rng)[0]
         n_meas, _ = _normal_from(layout_est, a_tcs, Ra, d, method, float(np.mean(noise)), prior_radius_mm)
         bad = ~np.all(np.isfinite(n_meas), axis=1)
         f = Ra @ a_tcs

@@ -17,6 +17,15 @@ ON_PANEL_MM = 1.0
 PLAUSIBLE_DIAGONAL_MM = (20.0, 50_000.0)
 
 
+#: length units a panel file may be in: mm per unit (``--units``)
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+
+#: trimesh's unit names (``mesh.units``, set by loaders that read units) to ours
+_TRIMESH_UNITS = {"millimeters": "mm", "millimeter": "mm", "mm": "mm", "centimeters": "cm", "cm": "cm",
+                  "meters": "m", "meter": "m", "m": "m", "inches": "in", "inch": "in", "in": "in"}
+
+
 #: STEP tessellation (OpenCASCADE through cascadio): chord tolerance (mm) and angular
 #: deflection (rad); 1 um chords keep the tessellation error far under reading noise
 STEP_TOL_LINEAR_MM = 1e-3
@@ -31,6 +40,13 @@ STEP_TOL_ANGULAR_RAD = 5e-3
 CREASE_ANGLE_DEG = 30.0
 
 
+#: a face is not smoothed with a neighbour whose planar region (faces joined where they meet
+#: at less than :data:`metrology.panel.edges.FLAT_RAD`) is this many times smaller in area:
+#: a machined plane that meets a tangent fillet keeps its own normal up to the fillet; the
+#: facets of a tessellated curve are alike and are smoothed together
+TANGENT_AREA_RATIO = 16.0
+
+
 @dataclass
 class Panel:
     """A loaded, validated panel mesh.
@@ -40,14 +56,26 @@ class Panel:
     mesh : trimesh.Trimesh, mm, panel frame; faces consistently wound, normals out
     source : str, where it came from (for messages)
     warnings : list of str, things repaired or suspicious (printed by the CLI)
-    surface : ParametricSurface or None, the analytic surface when the file says so
+    units : str, where the unit came from (``"mm (assumed: STL carries no units)"``)
+    surface : ParametricSurface or BRepSurface or None, the exact surface: analytic when the
+        file's header says so, the B-rep of a STEP file when OCP is installed
     """
 
     mesh: object
     source: str = "<mesh>"
     warnings: list = field(default_factory=list)
     surface: ParametricSurface | None = None
+    units: str = "mm"
     _corners: tuple | None = field(default=None, init=False, repr=False, compare=False)
+    _edges: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def edges(self, crease_deg=CREASE_ANGLE_DEG):
+        """The mesh's creases, outline and holes (:func:`metrology.panel.edges.panel_edges`), cached."""
+        if crease_deg not in self._edges:
+            from metrology.panel.edges import panel_edges
+
+            self._edges[crease_deg] = panel_edges(self.mesh, crease_deg)
+        return self._edges[crease_deg]
 
     def _vertex_corners(self):
         """Corners (face * 3 + k) sorted by vertex, and each vertex's start and count (cached)."""
@@ -80,8 +108,12 @@ class Panel:
 
         At each corner of the face hit, the normal is the angle-weighted mean of the normals
         of the faces around that vertex that make less than ``crease_deg`` with the face hit
-        (the face itself always counts); the three corner normals are then interpolated with
-        ``bary``. Across an edge sharper than the crease nothing is averaged, so on a box or a
+        (the face itself always counts), leaving out faces whose planar region is more than
+        :data:`TANGENT_AREA_RATIO` times smaller than the face hit's (a fillet's facets next
+        to the wide plane it is tangent to); the three corner normals are then interpolated with
+        ``bary``. A face that meets no neighbour across an edge at more than
+        :data:`metrology.panel.edges.FLAT_RAD` short of a crease lies in a planar region: its
+        own normal is the reference. Across an edge sharper than the crease nothing is averaged, so on a box or a
         coarsely faceted cylinder the reference is the face's own normal; on a fine mesh of a
         smooth surface it is the usual smooth-shaded normal.
 
@@ -97,8 +129,9 @@ class Panel:
         faceting : (m,) float, rad, the reference's own uncertainty: half the largest angle
             between the face hit and the faces it is smoothed with (the normal turns by about
             that much across one face of the tessellated curve)
-        chord_mm : (m,) float, mm, the chord error of that faceting: ``L theta / 8`` for the
-            face's longest edge ``L`` and that angle ``theta`` (``L^2 kappa / 8``)
+        chord_mm : (m,) float, mm, the chord error of that faceting: ``w theta / 8`` for the
+            face's width ``w`` across the direction the surface bends to and that angle
+            ``theta`` (``w^2 kappa / 8``)
         """
         mesh = self.mesh
         tri = np.asarray(tri, int)
@@ -122,16 +155,31 @@ class Panel:
         at = np.take_along_axis(P, corner[..., None, None], axis=3)[..., 0, :]
         e1 = np.take_along_axis(P, ((corner + 1) % 3)[..., None, None], axis=3)[..., 0, :] - at
         e2 = np.take_along_axis(P, ((corner + 2) % 3)[..., None, None], axis=3)[..., 0, :] - at
-        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * use
+        # a neighbour from a planar region far narrower than the face hit's (a fillet's facet
+        # next to the wide plane it is tangent to) says nothing of the plane's normal
+        region = self.edges(crease_deg).region_area
+        narrow = region[Gs] * TANGENT_AREA_RATIO < region[tri][:, None, None]
+        w = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1), np.sum(e1 * e2, axis=-1)) * (use & ~narrow)
         cn = np.einsum("mkg,mkgj->mkj", w, Ng)
         cn /= np.linalg.norm(cn, axis=2, keepdims=True)
         n = np.einsum("mk,mkj->mj", bary, cn)
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         sinang = np.linalg.norm(np.cross(Ng, N[tri][:, None, None, :]), axis=3)
-        theta = np.max(np.where(use, np.arctan2(sinang, cosang), 0.0), axis=(1, 2))
+        ang = np.where(use, np.arctan2(sinang, cosang), 0.0).reshape(len(tri), -1)
+        j = np.argmax(ang, axis=1)
+        theta = ang[np.arange(len(tri)), j]
+        # the sag of the face across the direction its neighbour bends to: width * theta / 8
+        bend = Ng.reshape(len(tri), -1, 3)[np.arange(len(tri)), j]
+        bend = bend - np.sum(bend * N[tri], axis=1, keepdims=True) * N[tri]
+        bend /= np.maximum(np.linalg.norm(bend, axis=1, keepdims=True), 1e-300)
         tri_v = np.asarray(mesh.vertices)[V]
-        L = np.max(np.linalg.norm(tri_v - np.roll(tri_v, 1, axis=1), axis=2), axis=1)
-        return n, theta / 2.0, L * theta / 8.0
+        width = np.ptp(np.einsum("mkj,mj->mk", tri_v, bend), axis=1)
+        # a face inside a planar region is its own exact reference (a long triangle of a flat
+        # face that touches a tangent fillet at one corner must not lean towards it)
+        flat = ~self.edges(crease_deg).curved[tri]
+        n[flat] = N[tri[flat]]
+        theta[flat] = 0.0
+        return n, theta / 2.0, width * theta / 8.0
 
 
 def _surface_from_header(text: str):
@@ -144,11 +192,43 @@ def _surface_from_header(text: str):
         return None
 
 
-def load_panel(path) -> Panel:
-    """Load and validate a panel mesh (units mm).
+def _step_unit(path):
+    """The length unit a STEP file declares (``"mm"``, ``"m"``, ``"in"``, ...) or None."""
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(2_000_000).decode("latin-1").upper()
+    except OSError:
+        return None
+    if re.search(r"CONVERSION_BASED_UNIT\s*\(\s*'INCH'", text):
+        return "in"
+    m = re.search(r"SI_UNIT\s*\(\s*(\.\w+\.|\$)\s*,\s*\.METRE\.\s*\)", text)
+    if m:
+        return {".MILLI.": "mm", ".CENTI.": "cm", "$": "m"}.get(m.group(1))
+    return None
+
+
+def _declared_units(mesh, path):
+    """The unit a mesh file declares: trimesh's ``units`` (glTF: metres by specification;
+    3MF, ...), or a ``units<name>`` tag in the file name (trimesh's convention,
+    ``counter.unitsmm.STL``); None when it declares none (STL, OBJ, PLY)."""
+    u = _TRIMESH_UNITS.get(str(getattr(mesh, "units", None) or "").lower())
+    if u:
+        return u, "declared by the file"
+    m = re.search(r"units[_-]?(mm|cm|m|in|inch|inches|millimeters|meters)(?=[._-]|$)", path.rsplit("/", 1)[-1].lower())
+    if m:
+        return _TRIMESH_UNITS.get(m.group(1), m.group(1)), f"from the file name ({m.group(0)})"
+    return None, None
+
+
+def load_panel(path, units=None) -> Panel:
+    """Load and validate a panel mesh, in mm.
 
     STEP files are tessellated by OpenCASCADE (the ``cascadio`` wheel) with 1 um chords
-    (:data:`STEP_TOL_LINEAR_MM`) and converted from the intermediate glTF's metres to mm.
+    (:data:`STEP_TOL_LINEAR_MM`); OpenCASCADE converts the file's own unit (STEP declares
+    it) into the intermediate glTF's metres, brought back to mm here. Other meshes are in
+    the unit they declare (trimesh's ``units``: glTF is in metres; or a ``units<name>`` tag
+    in the file name); STL, OBJ and PLY declare none and are taken as mm. ``units``
+    (``mm``, ``cm``, ``m``, ``in``) overrides: the file's coordinates are in that unit.
 
     A panel is an open surface, not a solid: it is refused only when it is empty, when its
     faces are all degenerate, or when its winding is inconsistent and cannot be repaired.
@@ -163,6 +243,8 @@ def load_panel(path) -> Panel:
     import trimesh
 
     path = str(path)
+    if units is not None and units not in UNITS_MM:
+        raise ValueError(f"units must be one of {', '.join(UNITS_MM)}, got {units!r}")
     is_step = path.lower().endswith((".step", ".stp"))
     kw = {"tol_linear": STEP_TOL_LINEAR_MM, "tol_angular": STEP_TOL_ANGULAR_RAD} if is_step else {}
     try:
@@ -180,9 +262,20 @@ def load_panel(path) -> Panel:
     mesh = loaded
     warnings = []
     if is_step:
-        # cascadio tessellates in the file's unit (mm) and hands over a glTF, which is in
-        # metres by specification: back to mm
-        mesh.apply_scale(1000.0)
+        # OpenCASCADE converts the STEP's own unit into the glTF it hands over, in metres
+        declared, how = _step_unit(path), "declared by the STEP file"
+        to_mm = 1000.0 if units is None else 1000.0 / UNITS_MM.get(declared or "mm") * UNITS_MM[units]
+    else:
+        declared, how = _declared_units(mesh, path)
+        to_mm = UNITS_MM[units or declared or "mm"]
+    if units is not None:
+        unit_note = f"{units} (--units; the file declares {declared or 'none'})"
+    elif declared is not None:
+        unit_note = f"{declared} ({how})"
+    else:
+        unit_note = f"mm (assumed: a .{path.rsplit('.', 1)[-1].lower()} file carries no units)"
+    if to_mm != 1.0:
+        mesh.apply_scale(to_mm)
     if not np.all(np.isfinite(mesh.vertices)):
         raise ValueError(f"{path}: vertices contain NaN or infinite coordinates")
     n0 = len(mesh.faces)
@@ -205,9 +298,19 @@ def load_panel(path) -> Panel:
     diag = float(np.linalg.norm(mesh.extents))
     lo, hi = PLAUSIBLE_DIAGONAL_MM
     if not lo <= diag <= hi:
-        warnings.append(f"{path}: bounding-box diagonal {diag:.4g} is implausible for a panel in mm (expected {lo:g}..{hi:g} mm); is it in m or inch?")
+        raw = diag / to_mm
+        guess = ", ".join(f"as {u}: {raw * f:.4g} mm" for u, f in UNITS_MM.items() if u != "mm" and lo <= raw * f <= hi)
+        warnings.append(f"{path}: bounding-box diagonal {diag:.4g} mm, units {unit_note}, is implausible for a panel "
+                        f"(expected {lo:g}..{hi:g} mm); is it in m or inch? give --units"
+                        + (f" ({guess})" if guess else ""))
     header = mesh.metadata.get("header", "") if isinstance(mesh.metadata, dict) else ""
-    return Panel(mesh, path, warnings, _surface_from_header(header))
+    surface = _surface_from_header(header)
+    if is_step:
+        from metrology.panel.brep import BRepSurface, ocp_available
+
+        if ocp_available():  # the exact reference: the B-rep itself (OCC reads STEP into mm)
+            surface = BRepSurface(path, scale=to_mm / 1000.0)
+    return Panel(mesh, path, warnings, surface, unit_note)
 
 
 def panel_plane(mesh):

@@ -85,12 +85,18 @@ def _is_number(text) -> bool:
     return True
 
 
-def grid_points(panel: Panel, spacing: float, caster: RayCaster) -> DrillPoints:
+def grid_points(panel: Panel, spacing: float, caster: RayCaster, footprint_mm=None, with_dropped=False):
     """A regular grid of drilling points over the panel.
 
     The grid (step ``spacing`` mm) lies in the panel's best-fit plane; each node is
     projected onto the mesh along the plane normal; nodes whose projection misses the
-    panel are dropped.
+    panel are dropped. With ``footprint_mm`` (the head's footprint radius, mm), so are the
+    nodes whose footprint would hold a crease, a hole or the panel's outline
+    (:meth:`Panel.edges`): the head stays on one smooth region.
+
+    Returns
+    -------
+    DrillPoints, and with ``with_dropped`` also the number of nodes dropped for their footprint
     """
     if not (spacing > 0 and math.isfinite(spacing)):
         raise ValueError(f"grid spacing must be a positive number of mm, got {spacing}")
@@ -109,10 +115,21 @@ def grid_points(panel: Panel, spacing: float, caster: RayCaster) -> DrillPoints:
     tri, t, _ = caster.cast(origins, np.tile(-B[2], (len(u), 1)))
     hit = tri >= 0
     pts = origins[hit] - t[hit, None] * B[2]
-    labels = tuple(f"grid {a},{b}" for a, b in zip(iu.ravel()[hit], iv.ravel()[hit]))
+    labels = np.array([f"grid {a},{b}" for a, b in zip(iu.ravel()[hit], iv.ravel()[hit])], dtype=object)
     if not len(pts):
         raise ValueError(f"{panel.source}: no grid point of spacing {spacing} mm falls on the panel")
-    return DrillPoints(pts, np.full_like(pts, np.nan), labels)
+    dropped = 0
+    if footprint_mm is not None:
+        near, _, _ = panel.edges().near(pts, float(footprint_mm))
+        keep = np.ones(len(pts), bool)
+        keep[near] = False
+        dropped = int((~keep).sum())
+        pts, labels = pts[keep], labels[keep]
+        if not len(pts):
+            raise ValueError(f"{panel.source}: every grid point of spacing {spacing} mm has a crease, a hole or the "
+                             f"panel's edge within the head's footprint ({footprint_mm:.1f} mm)")
+    drill = DrillPoints(pts, np.full_like(pts, np.nan), tuple(labels))
+    return (drill, dropped) if with_dropped else drill
 
 
 def snap_points(panel: Panel, caster: RayCaster, points):

@@ -191,8 +191,15 @@ def summary_text(summary: dict) -> str:
     bad = {k: v for k, v in summary["status"].items() if k != "ok" and v}
     if bad:
         lines.append("not measured: " + ", ".join(f"{v} {STATUS[k]}" for k, v in bad.items()))
+    if summary.get("grid_dropped"):
+        lines.append(f"grid: {summary['grid_dropped']} nodes left out, the head's footprint would cross a crease, "
+                     f"a hole or the panel boundary")
     info = summary["info"]
     lines.append(f"engine {info['engine']}, stand-off {info['standoff_mm']:.3f} mm, tilt {info['tilt_deg']:g} deg, "
-                 f"reference normal: {info['reference_normal']}")
+                 f"footprint {info['footprint_mm']:.1f} mm, units {info['units']}, reference normal: {info['reference_normal']}")
+    fac = info.get("reference_faceting", {})
+    if fac.get("used"):
+        lines.append(f"reference faceting (its own uncertainty): max {fac['angle_max_deg']:.4f} deg, chord max "
+                     f"{fac['chord_max_mm']:.2g} mm")
     lines.append("recommendation: " + summary["recommendation"]["text"])
     return "\n".join(lines)

@@ -88,3 +88,31 @@ def test_cli_plot(files, tmp_path):
     r = _invoke(["normals", files / "cyl.stl", "--layout", files / "t6.toml", "--grid", "30", "--plot", png, "--no-loop"])
     assert r.exit_code == 0, r.output
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+REAL = __import__("pathlib").Path(__file__).resolve().parents[1] / "data" / "meshes"
+
+
+def test_cli_unitless_mesh_warns_before_it_fails_and_runs_with_units(files):
+    """trimesh's cylinder.stl is 2 x 2 x 8 units and says nothing of its unit: taken as mm it
+    is too small for the head; the unit warning comes first, then the error; --units m runs."""
+    r = _invoke(["normals", REAL / "trimesh_cylinder.stl", "--layout", files / "t6.toml", "--grid", "1", "--no-loop"])
+    assert r.exit_code == 2
+    lines = r.stderr.strip().splitlines()
+    assert lines[0].startswith("warning: ") and "is it in m or inch? give --units" in lines[0]
+    assert "assumed" in lines[0] and lines[-1].startswith("error: ") and "--units" in lines[-1]
+    r = _invoke(["normals", REAL / "trimesh_cylinder.stl", "--layout", files / "t6.toml", "--grid", "100",
+                 "--no-loop", "--units", "m", "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["info"]["units"].startswith("m (--units") and s["status"]["ok"] > 0 and s["grid_dropped"] > 0
+    assert "warning" not in r.stderr
+
+
+def test_cli_units_from_the_file_name_and_bad_units(files):
+    from metrology.panel.mesh import load_panel
+
+    p = load_panel(REAL / "trimesh_counter.unitsmm.ply")
+    assert p.units == "mm (from the file name (unitsmm))" and not p.warnings
+    r = _invoke(["normals", REAL / "trimesh_cylinder.stl", "--layout", files / "t6.toml", "--grid", "1", "--units", "km"])
+    assert r.exit_code == 2 and "units must be one of mm, cm, m, in, got 'km'" in r.stderr

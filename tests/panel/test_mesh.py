@@ -38,7 +38,9 @@ def test_inconsistent_winding_is_repaired(tmp_path):
 def test_load_panel_formats(tmp_path, ext):
     mesh = panel_mesh(ParametricSurface("sphere", 300.0), 40, 40, 4)
     path = tmp_path / f"p.{ext}"
-    mesh.export(path)
+    # glTF is in metres by specification (trimesh reads its units as such): written in m,
+    # read back in mm; STL, OBJ and PLY carry no unit and are taken as mm
+    mesh.copy().apply_scale(1e-3 if ext == "glb" else 1.0).export(path)
     p = load_panel(path)
     assert len(p.mesh.faces) == len(mesh.faces)
     assert np.allclose(np.sort(p.mesh.vertices, axis=0), np.sort(mesh.vertices, axis=0), atol=1e-5)
@@ -76,3 +78,28 @@ def test_panel_plane_of_a_tilted_flat_panel():
     assert angle_between(B[2], R[:, 2], oriented=True) < 1e-9
     assert np.allclose(B @ B.T, np.eye(3), atol=1e-12)
     assert np.allclose(np.vstack(plane_axes(B[2])), direction_basis(B[2][None])[0], atol=1e-12)
+
+
+def test_units_declared_assumed_and_overridden(tmp_path):
+    """STEP declares its unit (trimesh's AP203 file is in inches, panel_cyl800.step in mm);
+    an STL declares none (mm assumed); --units rescales; a unit tag in the name declares."""
+    from pathlib import Path
+
+    from metrology.panel.mesh import _step_unit
+
+    real = Path(__file__).resolve().parents[1] / "data" / "meshes"
+    assert _step_unit(real / "trimesh_base_interface_AP203.step") == "in"
+    assert _step_unit(DATA_DIR / "panel_cyl800.step") == "mm"
+    mesh = panel_mesh(ParametricSurface("flat"), 0.2, 0.2, 0.05)  # 0.4 m across, written in m
+    path = tmp_path / "skin.stl"
+    write_binary_stl(mesh, path)
+    p = load_panel(path)
+    assert p.units == "mm (assumed: a .stl file carries no units)" and any("as m: 565.7 mm" in w for w in p.warnings)
+    q = load_panel(path, units="m")
+    assert np.allclose(q.mesh.extents[:2], [400.0, 400.0]) and not q.warnings
+    assert q.units == "m (--units; the file declares none)"
+    tagged = tmp_path / "skin.unitsm.stl"
+    write_binary_stl(mesh, tagged)
+    assert np.allclose(load_panel(tagged).mesh.extents[:2], [400.0, 400.0])
+    with pytest.raises(ValueError, match="units must be one of mm, cm, m, in, got 'ft'"):
+        load_panel(path, units="ft")

@@ -52,8 +52,10 @@ def test_per_point_statuses_edge_and_approach():
     app[3] = -surf.normal(pts[3:4])[0]  # a proper approach direction
     drill = DrillPoints(pts, app, ("a", "b", "c", "d"))
     run = run_normals(panel, LAYOUTS["table6"], drill, np.random.default_rng(0), tilt=0.0, noise=0.0, loop=False)
-    assert run.status.tolist() == ["ok", "beam_miss", "approach_behind", "ok"]
-    # the point at x = 58 loses the beams on the +x side (L2, L3 of Table 6 land at x + 22)
+    assert run.status.tolist() == ["ok", "footprint_boundary", "approach_behind", "ok"]
+    # the point at x = 58 has the panel's edge inside its footprint, and loses the beams on
+    # the +x side (L2, L3 of Table 6 land at x + 22): both said
+    assert run.detail[1].startswith("footprint crosses the panel boundary; ")
     assert run.detail[1].endswith("missed") and "L2" in run.detail[1] and run.detail[0] == ""
     assert np.isnan(run.err_plane[1]) and np.isnan(run.err_sphere[2])
     # the calibrated Table 6 head is not symmetric: a small curvature bias remains at zero tilt
