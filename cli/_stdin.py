@@ -67,7 +67,10 @@ def stdin_files(*inputs):
         for form in {str(path), str(path.resolve())}:
             STATE.aliases[form] = STDIN_NAME
         note(f"{label}: read {len(data)} bytes from stdin (as {suffix[1:]})")
-        yield [path if value is not None and str(value) == "-" else value for _, value, _ in inputs]
+        from metrology.io.names import named_inputs
+
+        with named_inputs({path: STDIN_NAME}):  # what the files the library writes call it
+            yield [path if value is not None and str(value) == "-" else value for _, value, _ in inputs]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -6,6 +6,7 @@ from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, c
 from metrology.calibration.validation import ValidationReport, validate
 from metrology.core.progress import ProgressFn, notify
 from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
+from metrology.io.names import display_name
 
 
 def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -50,7 +51,8 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     total = 2 + (plot_dir is not None) + (out is not None)
     notify(progress, 0, total, "reading the export, datum and layout")
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
-    sources = {"export": str(export_path), "plane": str(plane_path), "layout": str(layout_path)}
+    paths = {"export": export_path, "plane": plane_path, "layout": layout_path}
+    sources = {k: display_name(v) for k, v in paths.items()}
     notify(progress, 1, total, f"calibrating ({method}, {dataset.export.n_poses} poses)")
     report = calibrate_dataset(dataset, method, sources=sources, target=target, **kwargs)
     done = 2
@@ -59,7 +61,7 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
         from metrology.report.html import render_html, run_info
         from metrology.report.pages import calibration_section
 
-        page = render_html("Sensor calibration", run_info(sources, command), [calibration_section(report)])
+        page = render_html("Sensor calibration", run_info(paths, command), [calibration_section(report)])
     if plot_dir is not None:
         from metrology.report.calibration import write_calibration_plots
 
@@ -71,7 +73,7 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
         rms = ", ".join(f"{n} {r * 1e3:.1f} um" for n, r in zip(report.layout.names, report.calibration.residual_rms))
         save_layout(report.layout, out,
                     f"Calibrated by metro calibrate --method {method}\n"
-                    f"export {export_path}, datum {plane_path}, nominal {layout_path}\n"
+                    f"export {sources['export']}, datum {sources['plane']}, nominal {sources['layout']}\n"
                     f"{dataset.export.n_poses} poses; residual RMS {rms}\n"
                     "zero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
                     "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
@@ -105,19 +107,19 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
     _check_report(report_html)
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     layouts = {}
-    sources = {"export": str(export_path), "plane": str(plane_path)}
+    paths = {"export": export_path, "plane": plane_path}
     if layout_before_path is not None:
         layouts["layout_before"] = load_layout(layout_before_path)
-        sources["layout_before"] = str(layout_before_path)
+        paths["layout_before"] = layout_before_path
     layouts["layout"] = dataset.layout
-    sources["layout"] = str(layout_path)
-    report = validate(dataset, layouts, sources)
+    paths["layout"] = layout_path
+    report = validate(dataset, layouts, {k: display_name(v) for k, v in paths.items()})
     page = None
     if report_html is not None:  # rendered before anything is written: all or nothing
         from metrology.report.html import render_html, run_info
         from metrology.report.pages import validation_section
 
-        page = render_html("Validation", run_info(sources, command), [validation_section(report, tolerance_deg)])
+        page = render_html("Validation", run_info(paths, command), [validation_section(report, tolerance_deg)])
     if plot is not None:
         from metrology.report.validation import plot_validation
 

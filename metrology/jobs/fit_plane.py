@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from metrology.core.progress import notify
+from metrology.io.names import display_name
 from metrology.datum import PlaneFit, fit_plane_robust
 
 __all__ = ["fit_plane_file"]
@@ -87,7 +88,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         fit = fit_plane_robust(points, threshold_mm=threshold_mm, seed=seed)
     except ValueError as exc:
         raise ValueError(f"{cloud}: {exc}") from None
-    fit = replace(fit, source=str(cloud), format=fmt, read=read.to_dict())
+    fit = replace(fit, source=display_name(cloud), format=fmt, read=read.to_dict())
     notify(progress, 2, 3, "writing the plane and the residual map")
     with contextlib.ExitStack() as stack:
         if out is not None:

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
+from metrology.io.names import display_name
+
 __all__ = ["Figure", "Table", "Verdict", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
@@ -163,9 +165,9 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
             continue
         p = Path(path)
         if p.is_file():
-            rows.append((role, str(path), sha256_file(p), p.stat().st_size))
+            rows.append((role, display_name(path), sha256_file(p), p.stat().st_size))
         else:
-            rows.append((role, str(path), "", 0))
+            rows.append((role, display_name(path), "", 0))
     return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
 
 

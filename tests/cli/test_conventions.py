@@ -189,3 +189,23 @@ def test_progress_bar_on_a_terminal_only(tmp_path, monkeypatch):
     assert json.loads(r.stdout)["schema"] == "metro.demo/1"  # stdout holds the JSON only
     r = runner.invoke(app, ["-q", "demo", "--out", str(tmp_path / "c"), "--json"])
     assert r.exit_code == 0 and r.stderr == ""
+
+
+def test_files_written_from_stdin_name_it_stdin_never_its_temporary_copy(tmp_path):
+    """The temporary copy of stdin is gone when the command ends: no written file may name it."""
+    r = runner.invoke(app, ["fit-plane", "-", "--out", str(tmp_path / "plane.json"), "--report", str(tmp_path / "f.html")],
+                      input=_read(M / "datum.ply"))
+    assert r.exit_code == 0, r.output
+    assert json.loads((tmp_path / "plane.json").read_text())["source"] == "<stdin>"
+    r = runner.invoke(app, ["calibrate", "-", "--plane", str(M / "plane.json"), "--layout", str(M / "nominal.toml"),
+                            "--out", str(tmp_path / "c.toml"), "--report", str(tmp_path / "c.html")],
+                      input=_read(M / "calibration.csv"))
+    assert r.exit_code == 0, r.output
+    assert "# export <stdin>, datum " in (tmp_path / "c.toml").read_text()
+    html = (tmp_path / "c.html").read_text()
+    assert "&lt;stdin&gt;" in html  # the inputs table (escaped), with the stream's checksum
+    import hashlib
+
+    assert hashlib.sha256(_read(M / "calibration.csv")).hexdigest() in html
+    for f in ("plane.json", "f.html", "c.toml", "c.html"):
+        assert "metro-stdin-" not in (tmp_path / f).read_text(), f
