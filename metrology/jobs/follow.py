@@ -3,7 +3,9 @@
 The source is a file that grows (read to its end, then polled until ``idle_s`` seconds pass
 with no new line) or ``-`` (standard input, read to its end). Each complete line is one pose;
 the header line comes first. The result at the end is the batch iterated EKF on every pose
-read (``metro calibrate --method iekf`` on the same file).
+read (``metro calibrate --method iekf`` on the same file), with the standard errors ``calibrate``
+reports (scaled by the residuals' scatter, :func:`metrology.calibration.uncertainty.residual_scaled_cov`),
+the same ones the live stopping rule uses.
 """
 
 from __future__ import annotations
@@ -152,7 +154,7 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
     check_dataset(dataset, str(source), quaternion_order, position_units)
     report = calibrate_dataset(dataset, "iekf", sources={"export": str(source), "plane": str(plane_path),
                                                          "layout": str(layout_path)},
-                                target=(targets.zero_mm, targets.tilt_rad), sigma_mm=sigma)
+                                target=(targets.zero_mm, targets.tilt_rad), sigma_mm=sigma, stderr="residual")
     cal = report.calibration
     diff = (follower.x - cal.theta) / np.where(cal.stderr > 0, cal.stderr, np.inf)
     return FollowResult(report, steps, follower.met_at, stopped, targets, diff)
