@@ -121,3 +121,18 @@ def test_follow_sigma_is_calibrates_sigma_and_so_is_its_verdict(tmp_path):
         part = calibrate_files(write_rows(tmp_path / f"first{n}.csv", export_rows()[: n + 1]), PLANE, NOMINAL,
                                "lsq", target=loose)
         assert (not any(ident.fix for ident in part.identifiability)) == met, n
+
+
+def test_cli_follow_names_stdin_like_the_rest_of_the_cli(tmp_path):
+    rows = export_rows()[:21]
+    text = "\n".join(",".join(r) for r in rows) + "\n"
+    out = tmp_path / "cal.toml"
+    r = CliRunner().invoke(app, ["calibrate", "-", "--plane", str(PLANE), "--layout", str(NOMINAL), "--follow",
+                                 "--out", str(out)], input=text)
+    assert r.exit_code == 0, r.output
+    assert out.read_text().splitlines()[0].endswith("<stdin>, 20 poses")
+    bad = rows[:2]
+    bad[1] = [bad[1][0], "abc", *bad[1][2:]]
+    r = CliRunner().invoke(app, ["calibrate", "-", "--plane", str(PLANE), "--layout", str(NOMINAL), "--follow"],
+                           input="\n".join(",".join(row) for row in bad) + "\n")
+    assert r.exit_code == 2 and r.stderr.strip().startswith("error: <stdin>: line 2: "), r.stderr
