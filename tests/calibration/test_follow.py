@@ -136,3 +136,15 @@ def test_cli_follow_names_stdin_like_the_rest_of_the_cli(tmp_path):
     r = CliRunner().invoke(app, ["calibrate", "-", "--plane", str(PLANE), "--layout", str(NOMINAL), "--follow"],
                            input="\n".join(",".join(row) for row in bad) + "\n")
     assert r.exit_code == 2 and r.stderr.strip().startswith("error: <stdin>: line 2: "), r.stderr
+
+
+def test_the_live_filter_solves_and_keeps_covariances_symmetric():
+    """STYLE: solve, don't invert; the reported covariances are symmetric."""
+    import inspect
+
+    import metrology.calibration.follow as follow
+
+    assert "linalg.inv" not in inspect.getsource(follow)
+    result = follow_export(str(CAL), PLANE, NOMINAL, LOOSE, stop_when_met=True, idle_s=0)
+    cov = result.report.calibration.cov
+    assert result.steps and np.array_equal(cov, cov.transpose(0, 2, 1))
