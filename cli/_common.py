@@ -9,6 +9,8 @@ import json
 import sys
 import time
 
+from pathlib import Path
+
 import typer
 
 EXIT_BAD_INPUT = 2
@@ -59,6 +61,25 @@ def fail(message: str) -> None:
     """Print ``error: message`` on one line to stderr and exit with code 2 (even under ``-q``)."""
     typer.echo(f"error: {' '.join(shown(str(message)).split())}", err=True)
     raise typer.Exit(EXIT_BAD_INPUT)
+
+
+def output_path(value, option: str):
+    """The path of an output file option, or None; fails (one line, exit 2) on a value that names a
+    folder: one ending in a separator (typer's ``Path`` would drop it and write a file of that
+    name), an existing folder, or one whose parent folder does not exist."""
+    if value is None:
+        return None
+    import os
+
+    text = str(value)
+    if text.endswith(("/", os.sep) + ((os.altsep,) if os.altsep else ())):
+        fail(f"{option} {text}: ends in a separator, expected a file name (not a folder)")
+    path = Path(text)
+    if path.is_dir():
+        fail(f"{option} {text}: is a folder, expected a file name")
+    if not path.resolve().parent.is_dir():
+        fail(f"{option} {text}: folder {path.parent} does not exist")
+    return path
 
 
 def guarded(fn):

@@ -9,7 +9,7 @@ import typer
 
 from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, REPORT_HELP, echo, echo_json, fail,
                       guarded, invocation, progress_bar, warn)
-from ._stdin import plane_suffix, stdin_files
+from ._stdin import STDIN_NAME, plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
 
@@ -49,10 +49,12 @@ def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg,
             said.append(step.k)
             typer.echo(f"targets met after {step.k} poses (pose {step.pose_id}): the robot can stop", err=json_out)
 
+    name = STDIN_NAME if str(export) == "-" else str(export)
     result = follow_export(str(export), plane, layout, targets, on_step, idle_s=idle_s, stop_when_met=stop_when_met,
-                           quaternion_order=quaternion_order, position_units=position_units, no_reading=no_reading)
+                           quaternion_order=quaternion_order, position_units=position_units, no_reading=no_reading,
+                           name=name)
     if out is not None:
-        save_layout(result.report.layout, out, f"Calibrated by metro calibrate --follow (iterated EKF), {export}, "
+        save_layout(result.report.layout, out, f"Calibrated by metro calibrate --follow (iterated EKF), {name}, "
                     f"{len(result.steps)} poses")
     for w in calibration_warnings(result.report):
         warn(w)

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar
+from ._common import JSON_HELP, echo, echo_json, fail, guarded, output_path, progress_bar
 from ._stdin import plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
@@ -47,8 +47,8 @@ def register(app: typer.Typer) -> None:
         tool_side: str = typer.Option("normal", "--tool-side", help="The tool is on the side the plane's normal points to ('normal') or the other ('against')."),
         candidates: int = typer.Option(5000, "--candidates", help="Random poses drawn to choose from."),
         seed: int = typer.Option(0, "--seed", help="Seed of the candidates and the robot-error trials."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
-        plot: Optional[Path] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),
+        out: Optional[str] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
+        plot: Optional[str] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),
         separate: Optional[str] = typer.Option(None, "--separate", help="Also tell these causes from the sensor parameters (comma-separated): incidence."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The plan and its predictions."),
     ) -> None:
@@ -59,6 +59,7 @@ def register(app: typer.Typer) -> None:
                 fail(f"{name} {value:g}: expected a number >= 0")
         if noise_mm is not None and not noise_mm > 0:
             fail(f"--noise-mm {noise_mm:g}: expected a positive number")
+        out, plot = output_path(out, "--out"), output_path(plot, "--plot")
         from metrology.jobs.plan import plan_files
         from metrology.report.plan import plan_text
 

@@ -121,3 +121,19 @@ def test_readme_front_page_is_short_and_has_the_two_commands():
     assert len(text.splitlines()) <= 200
     assert 'pip install . && metro demo' in text
     assert 'pip install ".[test]" && pytest' in text
+
+
+def test_every_json_schema_and_every_stdin_command_is_listed_in_cli_md():
+    """The schema table of docs/cli.md names every ``metro.<kind>/1`` the CLI prints, and its
+    ``-`` section every command whose inputs go through ``stdin_files``."""
+    import re
+
+    text = (ROOT / "docs" / "cli.md").read_text()
+    schemas, stdin_section = text.split("## `-` for stdin")[0], text.split("## `-` for stdin")[1]
+    for source in sorted((ROOT / "cli").glob("cmd_*.py")):
+        code = source.read_text()
+        for kind in re.findall(r"echo_json\([^\n]*?,\s*\"([a-z_]+)\"\)", code):
+            assert f"`metro.{kind}/1`" in schemas, (source.name, kind)
+        if "stdin_files(" in code:
+            for command in re.findall(r"@app\.command\(\"([a-z-]+)\"", code) or [source.stem[4:].replace("_", "-")]:
+                assert re.search(f"`{command}[` ]", stdin_section), (source.name, command)

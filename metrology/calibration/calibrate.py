@@ -131,6 +131,11 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     cal = calibrate(dataset.layout, obs, method, **opts)
     if not (np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov))):
         raise ValueError(f"method {method}: the estimate is not finite (the data do not determine the parameters)")
-    sigma = np.where(np.isfinite(cal.residual_rms) & (cal.residual_rms > 0), cal.residual_rms, cal.sigma_mm)
+    # the precision verdict uses the sigma the report shows: the residuals' scatter over m - 5
+    # degrees of freedom (metrology.calibration.uncertainty.residual_scaled_cov), else the stated noise
+    m = cal.n_used.astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scatter = cal.residual_rms * np.sqrt(m / (m - 5))
+    sigma = np.where(np.isfinite(scatter) & (scatter > 0) & (m > 5), scatter, cal.sigma_mm)
     ident = identifiability(dataset.layout, cal.layout, cal.theta, obs, sigma, target)
     return CalibrationReport(cal, dataset, ident, dict(sources or {}))

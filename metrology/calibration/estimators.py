@@ -273,7 +273,21 @@ def _ekf_pass(nominal, i, obs, R, P0, Q, x_ref=None):
     return kf.x[:, 0].copy(), (kf.P + kf.P.T) / 2, np.array(hist).reshape(-1, 5)
 
 
-def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol):
+def _residual_cov(nominal, i, obs, x):
+    """Sensor ``i``'s scatter (mm) and residual-scaled covariance (5, 5) at the chart estimate ``x``."""
+    from metrology.calibration.uncertainty import residual_scaled_cov
+
+    rows = _pose_order(obs, i)
+    N, D = obs.normal[rows], obs.offset[rows]
+    u0 = nominal.direction[i][None]
+    E = nominal.zero[i][None] + x[:3]
+    h = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)[0][:, 0]
+    H = jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
+    ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)
+    return residual_scaled_cov(H[ok], (obs.d[rows, i] - h)[ok])
+
+
+def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol, stderr="stated"):
     sigma = _sigma(nominal, sigma_mm)
     if not np.all(np.isfinite(sigma)):
         raise ValueError(f"{name} needs the reading noise: give sigma_mm or noise_mm in the layout")
@@ -291,6 +305,8 @@ def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol):
             if np.all(step[:3] < tol[0]) and np.all(step[3:] < tol[1]):
                 break
         theta[i], cov[i] = x, P
+        if stderr == "residual":
+            sigma[i], cov[i] = _residual_cov(nominal, i, obs, x)
         history.append(_raw_history(nominal, i, np.concatenate(hists)))
     return _finish(name, nominal, obs, theta, cov, sigma, history=history)
 
@@ -311,15 +327,22 @@ def ekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAUL
 
 
 def iekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, passes=10,
-         tol=(1e-6, 1e-8)) -> Calibration:
+         tol=(1e-6, 1e-8), stderr="stated") -> Calibration:
     """Iterated EKF: passes of the filter, each linearised at the previous pass's estimate.
 
     Pass 1 is :func:`ekf`. Every later pass restarts from the prior ``N(0, P0)`` and
     linearises all measurements at the previous estimate, which with ``Q = 0`` is one
     Gauss-Newton step on the MAP cost; passes stop when the estimate moves less than
     ``tol`` (mm, rad). The result is the batch MAP estimate with the prior, in filter form.
+
+    ``stderr``: ``"stated"`` (default) reports the filter's ``P`` (the stated noise and the
+    prior); ``"residual"`` reports what :func:`lsq` reports, ``s^2 (J^T J)^-1`` at the estimate
+    with ``s`` the residuals' scatter (:func:`metrology.calibration.uncertainty.residual_scaled_cov`),
+    and ``sigma_mm`` then holds ``s`` (``calibrate --follow``).
     """
-    return _sequential("iekf", nominal, obs, sigma_mm, P0_sigma, 0.0, passes, tol)
+    if stderr not in ("stated", "residual"):
+        raise ValueError(f"stderr {stderr!r}: expected 'stated' or 'residual'")
+    return _sequential("iekf", nominal, obs, sigma_mm, P0_sigma, 0.0, passes, tol, stderr)
 
 
 def _raw_history(nominal, i, hist5):

@@ -5,15 +5,22 @@ measurement update in information form: with the prior ``N(0, P0)`` of the filte
 readings so far, each iteration relinearises every reading's model ``h(x) = d(x)``
 (:mod:`metrology.core.model`) at the current estimate ``x_j`` and solves
 
-    M = P0^-1 + sum H^T H / R,   x_{j+1} = M^-1 sum H^T (z - h(x_j) + H x_j) / R,   P = M^-1,
+    M = P0^-1 + sum H^T H / R,   M x_{j+1} = sum H^T (z - h(x_j) + H x_j) / R   (a Cholesky solve),
 
 until the step is below ``tol`` (a Gauss-Newton step on the MAP cost: the passes of
 :func:`~metrology.calibration.estimators.iekf`, warm-started from the previous pose's estimate).
 A one-pass recursive EKF would keep the Jacobians of its first, wrong estimates: on the bundled
 measured run its last estimate is 11 standard errors from the batch optimum; this one is the
-batch optimum on the poses so far after every pose. The standard errors are
-``sqrt(diag P)`` and the normal's predicted 1-sigma at the working stand-off is
-:func:`metrology.calibration.uncertainty.normal_sigma` of ``P``.
+batch optimum on the poses so far after every pose.
+
+The standard errors are the ones ``calibrate`` reports
+(:func:`metrology.calibration.uncertainty.residual_scaled_cov` of the readings so far:
+``s^2 (J^T J)^-1`` with ``s`` the residuals' scatter over ``m - 5`` degrees of freedom, no
+prior), not ``M^-1`` of the stated noise: when the residuals exceed the stated noise the model
+misses something and the stated noise would claim a precision the data do not show. With five
+readings or fewer a sensor's sigma is inf (no redundancy to measure the scatter). The normal's
+predicted 1-sigma at the working stand-off is :func:`metrology.calibration.uncertainty.normal_sigma`
+of that covariance.
 
 The targets are met when every sensor's largest zero-point sigma, largest tilt sigma and (if
 given) the normal's sigma are at or below them: the paper's "convergence measurement points"
@@ -27,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.calibration.estimators import DEFAULT_P0_SIGMA
-from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma
+from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma, residual_scaled_cov
 from metrology.core.frames import plane_in_tcs
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_from_tangent, jacobian_tangent, readings
@@ -81,7 +88,8 @@ class Follower:
     ----------
     nominal : SensorLayout, the chart centres
     plane_normal : (3,) float, unit, tracker frame; plane_offset : float, mm
-    sigma_mm : (n,) float, mm, reading noise (R = sigma^2)
+    sigma_mm : (n,) float, mm, stated reading noise (R = sigma^2 of the filter's update; the
+        reported standard errors are scaled by the residuals, module docstring)
     targets : Targets
     standoff_mm : float, mm, the working stand-off of the normal's sigma
     P0_sigma : (float, float), the prior's 1-sigma, mm and rad
@@ -96,33 +104,39 @@ class Follower:
         self.targets = targets
         self.G = normal_sensitivity(nominal, standoff_mm)
         s_pos, s_dir = P0_sigma
+        self.P0inv = np.diag([s_pos**-2.0] * 3 + [s_dir**-2.0] * 2)  # the prior N(0, P0) in information form
         self.x = np.zeros((nominal.n, 5))
-        self.P = np.broadcast_to(np.diag([s_pos**2] * 3 + [s_dir**2] * 2), (nominal.n, 5, 5)).copy()
-        self.P0inv = np.linalg.inv(self.P[0])
+        self.P = np.full((nominal.n, 5, 5), np.inf)  # the reported covariance; no reading yet: nothing determined
+        self.scale = np.full(nominal.n, np.inf)  # mm, the residuals' scatter per sensor
         self.data = [[] for _ in range(nominal.n)]
         self.iterations, self.tol = iterations, tol
         self.k = 0
         self.met_at = None
 
-    def _update(self, i):
-        N, D, z = (np.array(v) for v in zip(*self.data[i]))
+    def _linearise(self, i, x, N, D, z):
+        """Readings' Jacobian (m, 5) and residuals (m,) of sensor ``i`` at ``x``, beams that miss the datum dropped."""
         u0 = self.nominal.direction[i][None]
+        E = self.nominal.zero[i][None] + x[:3]
+        h = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)[0][:, 0]
+        H = jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
+        ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)  # a beam that misses the datum tells nothing
+        return H[ok], (z - h)[ok]
+
+    def _update(self, i):
+        from scipy.linalg import cho_factor, cho_solve
+
+        N, D, z = (np.array(v) for v in zip(*self.data[i]))
         x = self.x[i].copy()
         for _ in range(self.iterations):
-            E = self.nominal.zero[i][None] + x[:3]
-            h = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)[0][:, 0]
-            H = jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
-            ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)  # a beam that misses the datum tells nothing
-            H, r = H[ok], (z - h + H @ x)[ok]
-            M = self.P0inv + H.T @ H / self.R[i]
-            x_new = np.linalg.solve(M, H.T @ r / self.R[i])
+            H, r = self._linearise(i, x, N, D, z)
+            M = self.P0inv + H.T @ H / self.R[i]  # symmetric positive definite (the prior)
+            x_new = cho_solve(cho_factor(M), H.T @ (r + H @ x) / self.R[i])
             step = np.abs(x_new - x)
             x = x_new
             if np.all(step[:3] < self.tol[0]) and np.all(step[3:] < self.tol[1]):
                 break
         self.x[i] = x
-        P = np.linalg.inv(M)
-        self.P[i] = (P + P.T) / 2
+        self.scale[i], self.P[i] = residual_scaled_cov(*self._linearise(i, x, N, D, z))
 
     def add(self, pose_id: str, rot, trans, d) -> FollowStep:
         """Update with one pose: ``rot (3, 3)`` and ``trans (3,)`` mm, tcs2tracker; ``d (n,)`` mm, NaN = no reading."""

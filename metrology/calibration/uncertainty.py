@@ -18,7 +18,7 @@ from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent, readings
 from metrology.core.normals import micro_plane_normal
 
-__all__ = ["tool_axis", "working_plane", "normal_sensitivity", "normal_sigma"]
+__all__ = ["tool_axis", "working_plane", "normal_sensitivity", "normal_sigma", "residual_scaled_cov"]
 
 #: step of the central differences of the normal w.r.t. the chart parameters (mm and rad)
 _STEP = 1e-6
@@ -105,3 +105,36 @@ def normal_sigma(G, cov) -> float:
         return float("inf")
     C = np.einsum("ain,nij,bjn->ab", G.transpose(0, 2, 1), cov, G.transpose(0, 2, 1))
     return float(np.sqrt(max(np.trace(C), 0.0)))
+
+
+def residual_scaled_cov(J, residuals):
+    """The standard errors metro reports: the chart covariance scaled by the readings' own scatter.
+
+    ``s^2 = sum r^2 / (m - 5)`` (the stated noise times the root of the reduced chi-square) and
+    ``C = s^2 (J^T J)^-1``, no prior: what ``calibrate`` (least squares) reports, the precision
+    verdict and the stopping rule of ``calibrate --follow`` use. Residuals above the stated
+    noise (a model that misses something) widen the sigma; below it, they narrow it.
+
+    Parameters
+    ----------
+    J : (m, 5) float, mm per mm and mm per rad, the Jacobian of the readings at the estimate
+    residuals : (m,) float, mm, measured minus predicted readings at the estimate
+
+    Returns
+    -------
+    s : float, mm, the scatter (inf when m <= 5: no redundancy to measure it)
+    cov : (5, 5) float, mm and rad, symmetric; all inf when ``s`` or ``J^T J`` is not usable
+    """
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    J, r = np.asarray(J, float), np.asarray(residuals, float)
+    m, p = J.shape
+    bad = np.full((p, p), np.inf)
+    if m <= p:
+        return float("inf"), bad
+    s2 = float(r @ r) / (m - p)
+    try:
+        cov = cho_solve(cho_factor(J.T @ J), np.eye(p)) * s2
+    except LinAlgError:
+        return float(np.sqrt(s2)), bad
+    return float(np.sqrt(s2)), (cov + cov.T) / 2

@@ -3,7 +3,9 @@
 The source is a file that grows (read to its end, then polled until ``idle_s`` seconds pass
 with no new line) or ``-`` (standard input, read to its end). Each complete line is one pose;
 the header line comes first. The result at the end is the batch iterated EKF on every pose
-read (``metro calibrate --method iekf`` on the same file).
+read (``metro calibrate --method iekf`` on the same file), with the standard errors ``calibrate``
+reports (scaled by the residuals' scatter, :func:`metrology.calibration.uncertainty.residual_scaled_cov`),
+the same ones the live stopping rule uses.
 """
 
 from __future__ import annotations
@@ -94,17 +96,20 @@ def _working_standoff(layout, first_d):
 
 def follow_export(source, plane_path, layout_path, targets: Targets, on_step=None, idle_s: float = 5.0,
                   poll_s: float = 0.2, stop_when_met: bool = False, sigma_mm=None, quaternion_order="wxyz",
-                  position_units="mm", no_reading=None, stream=None) -> FollowResult:
+                  position_units="mm", no_reading=None, stream=None, name=None) -> FollowResult:
     """Follow a growing export (or ``-``): one filter update per pose, ``on_step(step)`` after each.
 
     Errors are ValueError naming the source and line (the header is checked against the layout
-    before any pose is read). ``sigma_mm`` (mm) replaces the layout's ``noise_mm``.
+    before any pose is read). ``sigma_mm`` (mm) replaces the layout's ``noise_mm``. ``name`` is
+    the source as messages and the report name it (default ``source``; the CLI gives ``<stdin>``
+    for ``-``).
     """
     from metrology.calibration.dataset import Dataset, check, drop_no_reading, load_plane
     from metrology.calibration.sanity import check_dataset
     from metrology.io.export import export_from_rows
     from metrology.io.layout import load_layout
 
+    label = str(source) if name is None else str(name)
     layout = load_layout(layout_path)
     plane, points = load_plane(plane_path)
     sigma = layout.noise_mm if sigma_mm is None else np.full(layout.n, float(sigma_mm))
@@ -122,16 +127,16 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
             header = [h.strip() for h in row]
             names = sorted(h[2:] for h in header if h.startswith("d_"))
             if names != sorted(layout.names):
-                raise ValueError(f"{source}: line {k}: reading columns {', '.join('d_' + n for n in names) or 'none'} "
+                raise ValueError(f"{label}: line {k}: reading columns {', '.join('d_' + n for n in names) or 'none'} "
                                  f"do not match the layout's sensors {', '.join(layout.names)}")
             continue
-        one = export_from_rows([header, row], source, quaternion_order, position_units, first_line=k)
+        one = export_from_rows([header, row], label, quaternion_order, position_units, first_line=k)
         one, _ = drop_no_reading(one.reordered(layout.names), layout, no_reading)
         lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
         bad = np.isfinite(one.d[0]) & ((one.d[0] < lo) | (one.d[0] > hi))
         if np.any(bad):
             i = int(np.argmax(bad))
-            raise ValueError(f"{source}: line {k}: d_{layout.names[i]} = {one.d[0, i]:g} mm outside the sensor's range "
+            raise ValueError(f"{label}: line {k}: d_{layout.names[i]} = {one.d[0, i]:g} mm outside the sensor's range "
                              f"[{lo[i]:g}, {hi[i]:g}] mm")
         rows.append(row)
         if follower is None:
@@ -144,15 +149,15 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
             stopped = "targets met"
             break
     if header is None or not rows:
-        raise ValueError(f"{source}: no pose rows (a header line, then one line per pose)")
-    export = export_from_rows([header, *rows], source, quaternion_order, position_units)
+        raise ValueError(f"{label}: no pose rows (a header line, then one line per pose)")
+    export = export_from_rows([header, *rows], label, quaternion_order, position_units)
     export, dropped = drop_no_reading(export.reordered(layout.names), layout, no_reading)
-    export = check(export, layout, str(source))
+    export = check(export, layout, label)
     dataset = Dataset(export, layout, plane, points, dropped)
-    check_dataset(dataset, str(source), quaternion_order, position_units)
-    report = calibrate_dataset(dataset, "iekf", sources={"export": str(source), "plane": str(plane_path),
+    check_dataset(dataset, label, quaternion_order, position_units)
+    report = calibrate_dataset(dataset, "iekf", sources={"export": label, "plane": str(plane_path),
                                                          "layout": str(layout_path)},
-                                target=(targets.zero_mm, targets.tilt_rad), sigma_mm=sigma)
+                                target=(targets.zero_mm, targets.tilt_rad), sigma_mm=sigma, stderr="residual")
     cal = report.calibration
     diff = (follower.x - cal.theta) / np.where(cal.stderr > 0, cal.stderr, np.inf)
     return FollowResult(report, steps, follower.met_at, stopped, targets, diff)

@@ -64,3 +64,14 @@ def test_a_plane_json_needs_an_extent_and_a_layout_needs_a_range(tmp_path):
     r = runner.invoke(app, ["plan", "--layout", str(DATA_DIR / "layout_table6.toml"), "--plane", str(M / "datum.ply"),
                             "--poses", "10", "--noise-mm", "0.003"])
     assert r.exit_code == 2 and "--range-mm" in r.stderr
+
+
+@pytest.mark.parametrize("option", ["--out", "--plot"])
+def test_an_output_that_names_a_folder_is_refused(tmp_path, option):
+    for value, words in ((f"{tmp_path}/new.d/", "ends in a separator"), (str(tmp_path), "is a folder"),
+                         (f"{tmp_path}/missing/p.csv", "does not exist")):
+        r = runner.invoke(app, [*BASE, option, value])
+        assert r.exit_code == 2, r.output
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {option} ") and words in lines[0], r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
