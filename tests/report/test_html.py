@@ -214,15 +214,45 @@ def test_escaping_and_backticks():
     assert "a &lt; b &amp; c" in html and "<code>metro diagnose</code>" in html and "t &lt;x&gt;" in html
 
 
+def _report_of(command, tmp_path) -> Path:
+    """``command``'s HTML report on a small input (seconds each; the real demo takes half a minute)."""
+    out = tmp_path / f"{command}.html"
+    if command == "fit-plane":
+        args = ["fit-plane", str(DATA_DIR / "measured" / "datum.ply")]
+    elif command == "calibrate":
+        args = ["calibrate", str(write_rows(tmp_path / "cal.csv", export_rows(CAL)[:17])), "--plane", str(PLANE),
+                "--layout", str(NOMINAL)]
+    elif command == "validate":
+        args = ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--layout-before", str(NOMINAL)]
+    elif command == "normals":
+        args = ["normals", str(DATA_DIR / "panel_cyl800.stl"), "--layout", str(DATA_DIR / "layout_table6.toml"),
+                "--grid", "80", "--engine", "trimesh"]
+    elif command == "diagnose":
+        layout = DATA_DIR / "hidden" / "layout.toml"
+        plane = DATA_DIR / "hidden" / "plane.json"
+        _ok(runner.invoke(app, ["simulate", "--layout", str(layout), "--plane", str(plane), "--out",
+                                str(tmp_path / "x.csv"), "--effect", "drift", "--sensor", "L3", "--size", "0.01",
+                                "--poses", "40", "--seed", "2"]))
+        args = ["diagnose", str(tmp_path / "x.csv"), "--plane", str(plane), "--layout", str(layout), "--folds", "3"]
+    else:
+        args = ["demo", "--out", str(tmp_path / "o")]
+    _ok(runner.invoke(app, args + ["--report", str(out)]))
+    return out
+
+
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs a chromium binary (a developer's check)")
-def test_reports_open_in_chromium_without_console_error_or_request(tmp_path):
+@pytest.mark.parametrize("command", ["fit-plane", "calibrate", "validate", "normals",
+                                     pytest.param("diagnose", marks=pytest.mark.slow),
+                                     pytest.param("demo", marks=pytest.mark.slow)])
+def test_reports_open_in_chromium_without_console_error_or_request(tmp_path, command):
+    """Every command's report in headless Chromium at a phone's width: no console message, no
+    request, a screenshot (diagnose and the real demo are slow: marked so)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
         "check_reports_browser", Path(__file__).parents[2] / "benchmarks" / "check_reports_browser.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    out = tmp_path / "val.html"
-    _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out)]))
+    out = _report_of(command, tmp_path)
     assert mod.main([str(out), "--width", "412", "--height", "900"]) == 0
     assert out.with_suffix(".png").stat().st_size > 0
