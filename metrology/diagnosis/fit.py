@@ -361,8 +361,8 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
         th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
         S = list(f.sensors)
         th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
-        return Fit(th, se, f.components, res, f.chi2 + _chi2_other(base, sigma, S), f.dof, f.sensors,
-                   f.corr_base, f.corr_with, f.extra_cov)
+        # chi2 and dof both of the fitted sensors (as ``fit`` defines them), not the others' chi2 over these' dof
+        return Fit(th, se, f.components, res, f.chi2, f.dof, f.sensors, f.corr_base, f.corr_with, f.extra_cov)
     th = np.zeros((nominal.n, 5))
     se = np.zeros((nominal.n, 5))
     res = np.full(obs.d.shape, np.nan)
@@ -373,9 +373,3 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
         chi2 += f.chi2
         dof += f.dof
     return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
-
-
-def _chi2_other(base, sigma, S):
-    other = [i for i in range(base.residual.shape[1]) if i not in S]
-    r = base.residual[:, other] / sigma[other]
-    return float(np.nansum(r**2))

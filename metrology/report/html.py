@@ -64,15 +64,19 @@ class Verdict:
     ok : True (within tolerance), False (not), None (no tolerance applies: information)
     headline : str, one sentence (the numbers against the tolerance)
     cause : str, the cause named (or why it passed); empty when there is nothing to add
+    label : str, the verdict's words when the default ones (from ``ok``) would say less or
+        something else: what was found where no tolerance was stated ("flat within the
+        noise"), or the cause named before the tolerance ("cause: drift on L3; ...")
     """
 
     ok: bool | None
     headline: str
     cause: str = ""
+    label: str = ""
 
     @property
     def word(self) -> str:
-        return {True: "within tolerance", False: "NOT within tolerance", None: "information"}[self.ok]
+        return self.label or {True: "within tolerance", False: "NOT within tolerance", None: "information"}[self.ok]
 
 
 @dataclass(frozen=True)

@@ -29,15 +29,23 @@ def _num(v, missing="—", digits=4):
 
 
 def plane_section(fit, points) -> Section:
-    """``metro fit-plane``: the datum plane, judged by its form (a significant quadratic form:
-    the datum is not flat) and its inlier share."""
+    """``metro fit-plane``: the datum plane, described by what was found (no flatness
+    tolerance is stated, so none is judged): flat within the noise, a form detected (a
+    significant quadratic form, its P-V in µm), or a scan that holds more than the datum."""
     from metrology.report.datum import format_plane_fit, residual_map_figure
 
     d = fit.to_dict()
     form = d["form"]
     ratio = d["inlier_ratio"]
     bowed = form is not None and form["significant"]
-    ok = (not bowed) and ratio >= 0.9
+    if bowed:
+        label = f"form detected: {1e3 * form['pv_mm']:.1f} µm P-V"
+    elif ratio < 0.9:
+        label = f"scan not only the datum: {100 * ratio:.1f} % inliers"
+    elif form is None:
+        label = "form not tested: too few inliers"
+    else:
+        label = "flat within the noise"
     head = (f"datum plane of {Path(d['source']).name}: RMS {d['rms_mm']:.4f} mm, flatness (P-V) "
             f"{d['flatness_mm']:.4f} mm over {d['n_inliers']} of {d['n_points']} points")
     if bowed:
@@ -69,7 +77,7 @@ def plane_section(fit, points) -> Section:
                       f"{form['pv_mm']:.4f} mm) is not ruled out")
     limits.append("the plane is in the tracker frame: its link to the robot (the poses) is not checked here")
     fig = residual_map_figure(points, fit)
-    return Section("Datum plane (metro fit-plane)", Verdict(ok, head, cause),
+    return Section("Datum plane (metro fit-plane)", Verdict(None, head, cause, label),
                    figures=(figure_from_matplotlib(fig, "Residual to the fitted plane over the plate (inliers coloured, "
                                                    "outliers grey ×; contours: the fitted quadratic form)."),),
                    tables=(Table("Plane and its uncertainty (1 σ)", ("quantity", "value", "1 σ", "unit"), tuple(rows)),),
@@ -186,6 +194,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     who = f" on {', '.join(D['sensors'])}" if D["sensors"] else ""
     head = (f"cause: {cause}{who} (confidence {D['confidence']}); held-out normal deviation {held:.5f} deg "
             f"against a tolerance of {tolerance_deg:g} deg")
+    label = f"cause: {cause}{who}; normal {'within' if ok else 'NOT within'} tolerance ({held:.4f} vs {tolerance_deg:g} deg)"
     nxt, limits = [], []
     for c in D["causes"]:
         adv = ADVICE.get(c["cause"])
@@ -218,7 +227,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
         text.append(fit_report(fit))
     text.append(report_text(diag))
     figs = tuple(figure_from_matplotlib(f, cap) for _, f, cap in diagnosis_figures(diag))
-    return Section("Diagnosis: what the base model misses (metro diagnose)", Verdict(ok, head, D["summary"]),
+    return Section("Diagnosis: what the base model misses (metro diagnose)", Verdict(ok, head, D["summary"], label),
                    figures=figs, tables=tuple(tables), text=tuple(text), limits=tuple(limits), next_steps=tuple(nxt))
 
 
@@ -236,12 +245,15 @@ def extension_fit_summary(diag):
         for k, v in c["params"].items():
             params.append((k, float(v["value"]), None if v["stderr"] is None else float(v["stderr"]), v["unit"]))
             names.append(k)
-    nvarys = int(5 * len(f.sensors) + len(params))
+    # the readings of the fitted sensors, and what the fit's dof leaves of them (held base
+    # parameters and per-pose values counted as the fit counted them)
+    ndata = int(np.isfinite(f.residual[:, list(f.sensors)]).sum())
+    nvarys = ndata - int(f.dof)
     corr = ()
     if f.extra_cov.shape == (len(names), len(names)):
         corr = correlations_from_cov(f.extra_cov, names)
     corr += tuple((n, w, float(r)) for n, w, r in zip(names, f.corr_with, f.corr_base) if w)
-    return FitSummary(f"base + {' + '.join(c['label'] for c in diag.causes)}", "lsq", int(f.dof + nvarys), nvarys,
+    return FitSummary(f"base + {' + '.join(c['label'] for c in diag.causes)}", "lsq", ndata, nvarys,
                       float(f.chi2), tuple(params), corr)
 
 

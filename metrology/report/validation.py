@@ -58,11 +58,12 @@ def validation_verdict(report: ValidationReport, tolerance_deg: float = DRILLING
 def validation_text(report: ValidationReport, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> str:
     """What ``metro validate`` prints: max / mean / std per layout, the poses left out, and the
     verdict of the validated layout against the tolerance."""
-    w = max(14, *(len(lab) for lab in report.labels))
+    words = [layout_words(report, lab) for lab in report.labels]  # the user's words, as the HTML and figure
+    w = max(14, *(len(x) for x in words))
     lines = [f"{'layout':<{w}} {'max [deg]':>10} {'mean [deg]':>10} {'std [deg]':>10} {'poses':>6}  file"]
     for k, lab in enumerate(report.labels):
         s = report.stats_deg(k)
-        lines.append(f"{lab:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
+        lines.append(f"{words[k]:<{w}} {s['max_deg']:10.4f} {s['mean_deg']:10.4f} {s['std_deg']:10.4f} {s['n_poses']:6d}  "
                      f"{report.sources.get(lab, '')}")
     partial = int(np.sum((report.n_readings < report.n_sensors) & (report.n_readings >= 3)))
     gone = left_out(report)

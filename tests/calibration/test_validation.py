@@ -41,9 +41,11 @@ def test_validation_text_has_one_row_per_layout_and_notes_missing_readings(rng):
     rep = _report(rng)
     lines = validation_text(rep).splitlines()
     assert lines[0].split()[:2] == ["layout", "max"]
-    for k, lab in enumerate(rep.labels):
-        row = lines[1 + k].split()
-        assert row[0] == lab and abs(float(row[1]) - rep.stats_deg(k)["max_deg"]) <= 5e-5 and row[4] == "38"
+    # the layouts in the user's words (the file given, its role), as the HTML report and figure
+    for k, words in enumerate(("before", "cal.toml (validated)")):
+        assert lines[1 + k].startswith(words + "  ")
+        row = lines[1 + k][len(words):].split()
+        assert abs(float(row[0]) - rep.stats_deg(k)["max_deg"]) <= 5e-5 and row[3] == "38"
     assert lines[2].endswith("cal.toml")
     assert lines[3].startswith("2 pose(s) with fewer than 3 readings")
     assert lines[4].startswith("3 pose(s) with a missing reading")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import re
 
+from scipy import stats
 from metrology.sim.synth import typical_layouts
 
 from .helpers import PLANE
@@ -34,8 +36,16 @@ def test_cli_simulate_then_diagnose(tmp_path):
     # embedded (--report DIR, the PNGs, runs in the demo's test)
     from tests.report.test_html import check_page
 
-    text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"], 2, ("within tolerance",))
-    assert "cause: outliers on L4" in text and "[[Fit Statistics]]" in text
+    held = out["discrepancy"]["measured_heldout_normal_deg"]
+    assert held < 0.5  # the cause first, then the held-out normal against the tolerance
+    text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"], 2,
+                      f"cause: outliers on L4; normal within tolerance ({held:.4f} vs 0.5 deg)")
+    # the fit report's chi-square and dof are of the same readings (L4's): with the simulated
+    # noise at the stated level, chi-square over dof lies in the chi-square distribution's band
+    stat = dict(re.findall(r"^ +(# data points|# variables|chi-square) += ([0-9.e+-]+)$", text, re.M))
+    ndata, nvarys, chi2 = int(stat["# data points"]), int(stat["# variables"]), float(stat["chi-square"])
+    assert ndata == 60 and 6 <= nvarys < 60
+    assert stats.chi2.ppf(0.0005, ndata - nvarys) < chi2 < stats.chi2.ppf(0.9995, ndata - nvarys), stat
 
 
 def test_cli_errors_are_one_line_exit_2(tmp_path):
