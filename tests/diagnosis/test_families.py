@@ -110,6 +110,7 @@ def _curve_beyond_line_mm(case):
     return float(np.ptp(r))
 
 
+@pytest.mark.slow  # 65 s; the default run names both members blind (test_blind_forward's clear cases)
 @pytest.mark.parametrize("shape", ["gain", "curve"])
 def test_characteristic_named_scale_or_nonlinearity_by_held_out_error(shape, tmp_path):
     fam = "scale" if shape == "gain" else "nonlinearity"
