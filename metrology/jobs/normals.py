@@ -71,8 +71,8 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     if foot is None and grid_mm is not None:
         standoff = default_standoff(layout) if standoff_mm is None else float(standoff_mm)
         foot = footprint_radius(layout, standoff)
-    unit_hint = ["see the unit warning: is the panel in m or inch? give --units"] if any(
-        "is it in m or inch" in w for w in panel.warnings) else []
+    # an error repeats the unit doubt in full: under -q the warning itself is not printed
+    unit_hint = [panel.unit_warning] if panel.unit_warning is not None else []
     try:
         drill, dropped = (read_points(points_path), 0) if points_path is not None else \
             grid_points(panel, float(grid_mm), caster, footprint_mm=foot, with_dropped=True)

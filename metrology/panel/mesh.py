@@ -57,6 +57,8 @@ class Panel:
     source : str, where it came from (for messages)
     warnings : list of str, things repaired or suspicious (printed by the CLI)
     units : str, where the unit came from (``"mm (assumed: STL carries no units)"``)
+    unit_warning : str or None, the one of ``warnings`` that doubts the unit (an implausible
+        size), repeated by an error that may follow it
     surface : ParametricSurface or BRepSurface or None, the exact surface: analytic when the
         file's header says so, the B-rep of a STEP file when OCP is installed
     """
@@ -66,6 +68,7 @@ class Panel:
     warnings: list = field(default_factory=list)
     surface: ParametricSurface | None = None
     units: str = "mm"
+    unit_warning: str | None = None
     _corners: tuple | None = field(default=None, init=False, repr=False, compare=False)
     _edges: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -165,7 +168,7 @@ class Panel:
         n = np.einsum("mk,mkj->mj", bary, cn)
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         sinang = np.linalg.norm(np.cross(Ng, N[tri][:, None, None, :]), axis=3)
-        ang = np.where(use, np.arctan2(sinang, cosang), 0.0).reshape(len(tri), -1)
+        ang = np.where(use & ~narrow, np.arctan2(sinang, cosang), 0.0).reshape(len(tri), -1)
         j = np.argmax(ang, axis=1)
         theta = ang[np.arange(len(tri)), j]
         # the sag of the face across the direction its neighbour bends to: width * theta / 8
@@ -297,12 +300,14 @@ def load_panel(path, units=None) -> Panel:
         warnings.append(f"{path}: face winding was inconsistent and has been repaired")
     diag = float(np.linalg.norm(mesh.extents))
     lo, hi = PLAUSIBLE_DIAGONAL_MM
+    unit_warning = None
     if not lo <= diag <= hi:
         raw = diag / to_mm
         guess = ", ".join(f"as {u}: {raw * f:.4g} mm" for u, f in UNITS_MM.items() if u != "mm" and lo <= raw * f <= hi)
-        warnings.append(f"{path}: bounding-box diagonal {diag:.4g} mm, units {unit_note}, is implausible for a panel "
+        unit_warning = (f"{path}: bounding-box diagonal {diag:.4g} mm, units {unit_note}, is implausible for a panel "
                         f"(expected {lo:g}..{hi:g} mm); is it in m or inch? give --units"
                         + (f" ({guess})" if guess else ""))
+        warnings.append(unit_warning)
     header = mesh.metadata.get("header", "") if isinstance(mesh.metadata, dict) else ""
     surface = _surface_from_header(header)
     if is_step:
@@ -310,7 +315,7 @@ def load_panel(path, units=None) -> Panel:
 
         if ocp_available():  # the exact reference: the B-rep itself (OCC reads STEP into mm)
             surface = BRepSurface(path, scale=to_mm / 1000.0)
-    return Panel(mesh, path, warnings, surface, unit_note)
+    return Panel(mesh, path, warnings, surface, unit_note, unit_warning)
 
 
 def panel_plane(mesh):
