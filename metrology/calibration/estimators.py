@@ -273,18 +273,35 @@ def _ekf_pass(nominal, i, obs, R, P0, Q, x_ref=None):
     return kf.x[:, 0].copy(), (kf.P + kf.P.T) / 2, np.array(hist).reshape(-1, 5)
 
 
-def _residual_cov(nominal, i, obs, x):
-    """Sensor ``i``'s scatter (mm) and residual-scaled covariance (5, 5) at the chart estimate ``x``."""
-    from metrology.calibration.uncertainty import residual_scaled_cov
+def linearise_sensor(nominal, i, x, N, D, z):
+    """Sensor ``i``'s readings linearised at the chart estimate ``x``.
 
-    rows = _pose_order(obs, i)
-    N, D = obs.normal[rows], obs.offset[rows]
+    Parameters
+    ----------
+    nominal : SensorLayout, the layout the chart ``x`` is relative to
+    x : (5,) float, mm and rad, zero-point offset (TCS) and beam tilt about the chart axes
+    N : (m, 3) float, datum normal in the TCS; D : (m,) float, mm, datum offset in the TCS
+    z : (m,) float, mm, the measured readings
+
+    Returns
+    -------
+    H : (k, 5) float, the readings' Jacobian; r : (k,) float, mm, measured minus predicted;
+    beams that miss the datum dropped (they tell nothing)
+    """
     u0 = nominal.direction[i][None]
     E = nominal.zero[i][None] + x[:3]
     h = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)[0][:, 0]
     H = jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
     ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)
-    return residual_scaled_cov(H[ok], (obs.d[rows, i] - h)[ok])
+    return H[ok], (z - h)[ok]
+
+
+def _residual_cov(nominal, i, obs, x):
+    """Sensor ``i``'s scatter (mm) and residual-scaled covariance (5, 5) at the chart estimate ``x``."""
+    from metrology.calibration.uncertainty import residual_scaled_cov
+
+    rows = _pose_order(obs, i)
+    return residual_scaled_cov(*linearise_sensor(nominal, i, x, obs.normal[rows], obs.offset[rows], obs.d[rows, i]))
 
 
 def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol, stderr="stated"):

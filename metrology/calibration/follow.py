@@ -33,11 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.calibration.estimators import DEFAULT_P0_SIGMA
+from metrology.calibration.estimators import DEFAULT_P0_SIGMA, linearise_sensor
 from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma, residual_scaled_cov
 from metrology.core.frames import plane_in_tcs
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_from_tangent, jacobian_tangent, readings
 
 __all__ = ["FollowStep", "Follower", "Targets"]
 
@@ -113,22 +112,13 @@ class Follower:
         self.k = 0
         self.met_at = None
 
-    def _linearise(self, i, x, N, D, z):
-        """Readings' Jacobian (m, 5) and residuals (m,) of sensor ``i`` at ``x``, beams that miss the datum dropped."""
-        u0 = self.nominal.direction[i][None]
-        E = self.nominal.zero[i][None] + x[:3]
-        h = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)[0][:, 0]
-        H = jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
-        ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)  # a beam that misses the datum tells nothing
-        return H[ok], (z - h)[ok]
-
     def _update(self, i):
         from scipy.linalg import cho_factor, cho_solve
 
         N, D, z = (np.array(v) for v in zip(*self.data[i]))
         x = self.x[i].copy()
         for _ in range(self.iterations):
-            H, r = self._linearise(i, x, N, D, z)
+            H, r = linearise_sensor(self.nominal, i, x, N, D, z)
             M = self.P0inv + H.T @ H / self.R[i]  # symmetric positive definite (the prior)
             x_new = cho_solve(cho_factor(M), H.T @ (r + H @ x) / self.R[i])
             step = np.abs(x_new - x)
@@ -136,7 +126,7 @@ class Follower:
             if np.all(step[:3] < self.tol[0]) and np.all(step[3:] < self.tol[1]):
                 break
         self.x[i] = x
-        self.scale[i], self.P[i] = residual_scaled_cov(*self._linearise(i, x, N, D, z))
+        self.scale[i], self.P[i] = residual_scaled_cov(*linearise_sensor(self.nominal, i, x, N, D, z))
 
     def add(self, pose_id: str, rot, trans, d) -> FollowStep:
         """Update with one pose: ``rot (3, 3)`` and ``trans (3,)`` mm, tcs2tracker; ``d (n,)`` mm, NaN = no reading."""
