@@ -10,12 +10,25 @@ from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 
-__all__ = ["folds", "heldout_eval", "HeldOut", "kfold"]
+__all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
 
 
 def folds(p, k):
     """Interleaved folds by pose (pose j in fold j mod k): each fold spans the whole run."""
     return [np.arange(j, p, k) for j in range(k)]
+
+
+def beyond_span(d, k):
+    """``(p, n)`` bool: the readings ``d (p, n)`` mm that, held out in their fold, lie outside
+    the span of their sensor's readings in the other folds (a prediction there extrapolates a
+    characteristic beyond what its fit saw)."""
+    out = np.zeros(d.shape, bool)
+    for test in folds(d.shape[0], k):
+        train = np.setdiff1d(np.arange(d.shape[0]), test)
+        lo, hi = np.nanmin(d[train], axis=0), np.nanmax(d[train], axis=0)
+        with np.errstate(invalid="ignore"):
+            out[test] = (d[test] < lo) | (d[test] > hi)
+    return out
 
 
 def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
