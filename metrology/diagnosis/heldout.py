@@ -31,12 +31,14 @@ def beyond_span(d, k):
     return out
 
 
-def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
+def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
     """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
 
     A per-pose component's value of a held-out pose is fitted, for each reading, to the other
-    sensors of that pose (leave one sensor out), so every residual is a prediction. Returns
-    (residual (h, n) mm, normal deviation (h,) rad).
+    sensors of that pose (leave one sensor out), so every residual is a prediction. A reading
+    flagged as gross (``exclude (h, n)`` bool, the held-out poses' flags) predicts nothing: it
+    is left out of that solve, and its own residual is NaN. Returns (residual (h, n) mm, normal
+    deviation (h,) rad).
     """
     from metrology.core.normals import angle_between, micro_plane_normal
 
@@ -53,6 +55,8 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
         else:
             terms += comp.evaluate(comp.values, d0, c)
     res = o.d - d0 - terms
+    if exclude is not None:
+        res = np.where(exclude, np.nan, res)
     for comp, fitted in per_pose:
         # a per-pose value is not known before the pose is measured: each reading is predicted
         # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
@@ -140,10 +144,11 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
+    gross = [c.flags for c in components if isinstance(c, Outliers)]
     for test in folds(p, k):
         train = np.setdiff1d(np.arange(p), test)
         comps = [c.select(train) for c in components]
         f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
-        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test)
+        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
 

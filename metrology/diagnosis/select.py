@@ -99,15 +99,19 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
     nominal, obs = ds.layout, ds.obs
     tilt = None
     out = []
+    # every fit starts from the joint model so far, and one that holds the geometry (a rigid
+    # pose error, given or candidate) holds it there: the base calibration is biased by the
+    # causes already found (gross readings, the pose error itself)
+    th0 = ref_fit.theta if given else b.theta0
     for c in pool:
         ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
         if isinstance(c, PlaneForm) and c.order != 1:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
                 comps = tuple(given) + (c.nuisance(),)
-                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, b.theta0),
-                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, b.theta0))
+                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
+                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
-        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, b.theta0,
+        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th0,
                                    n_cand, given=given, k_ref=k_ref))
     return out
 
@@ -150,7 +154,10 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
             near = {i for g in given for i in g.sensors}
             pool = [c for c in pool if not c.sensors or p1.get(c.label, 0.0) < PRUNE_P or set(c.sensors) & near
                     or isinstance(c, Outliers)]
-        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers):
+        rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
+        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers) and not rigid:
+            # (after a rigid pose error a gross reading shows on every sensor of its pose: which
+            # one it was is lost, so no reading is flagged anew)
             # gross readings the new cause reveals (it hid them in its own scatter) join the
             # flagged ones, and the joint model so far is refitted with them
             new, _ = flag_residuals(ref_fit.residual, b.sigma)
@@ -163,7 +170,8 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES):
                 ref_fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, given, b.theta0)
                 ref_ho = kfold(ds.layout, ds.obs, b.cov, b.sigma, given, folds, b.theta0)
                 j = [i for i, st in enumerate(steps) if st.chosen is not None and isinstance(st.chosen.component, Outliers)][0]
-                steps[j] = Step(replace(steps[j].chosen, component=out, sensors=[ds.layout.names[i] for i in out.sensors]),
+                steps[j] = Step(replace(steps[j].chosen, component=out, label=out.label,
+                                        sensors=[ds.layout.names[i] for i in out.sensors]),
                                 steps[j].scored, steps[j].lead)
                 steps[-1] = Step(replace(steps[-1].chosen, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
         elif not any(isinstance(g, Outliers) for g in given):
