@@ -62,7 +62,7 @@ def _study():
 @pytest.fixture(scope="module")
 def study():
     mod = _study()
-    _, summary = mod.run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=False)
+    _, summary = mod.run_study(draws=20, nulls=200, pairs=32, seed=0, jobs=1, progress=False)
     return summary
 
 
@@ -92,8 +92,10 @@ def test_study_out_of_catalogue_never_catalogued(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of pairs (docs/diagnose.md)")
+@pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of the pairs whose sizes are "
+                                        "both inside their ranges (docs/diagnose.md, measured)")
 def test_study_pairs_both_named(study):
-    p = study["pairs"]
-    assert p["both_right"] >= 0.9 * p["n"], p
+    p = study["pairs"]  # issue 15: pairs at sizes inside each family's stated detectable range
+    assert p["n_inside"] >= 10, p
+    assert p["both_right_inside"] >= 0.9 * p["n_inside"], p
     assert p["wrong_added"] <= 0.02 * p["n"], p
