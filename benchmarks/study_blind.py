@@ -12,7 +12,8 @@ of each family's drawn size range, until the study states measured ranges); null
 with a 95 % Clopper-Pearson interval; the rate of catalogued causes named for out-of-catalogue
 effects; precision of ``confidence: high``; coverage of the true size by the reported size +/- 2
 stderr (only where the JSON reports a ``size`` in the family's unit; otherwise "n/a"); for pairs,
-both-right and wrong-cause-added rates.
+both-right (over all pairs, and over the pairs whose two sizes are both inside their ranges, as issue 15
+asks) and wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
 """
@@ -193,7 +194,9 @@ def summarize(records: list, det: dict) -> dict:
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
+    inside = [all(det[e["family"]][0] <= e["size"] <= det[e["family"]][1] for e in r["truth"]) for r in pairs]
     out["pairs"] = {"n": len(pairs), "both_right": int(sum(both)), "wrong_added": int(sum(added)),
+                    "n_inside": int(sum(inside)), "both_right_inside": int(sum(b for b, i in zip(both, inside) if i)),
                     "by_pair": {p: dict(Counter(r["cause"] for r in pairs if r["family"] == p))
                                 for p in sorted({r["family"] for r in pairs})}}
     return out
@@ -226,7 +229,8 @@ def report(s: dict) -> str:
     h = s["high_precision"]
     lines.append(f"confidence high precision (nulls and singles): {_pct(h['right'], h['n'])}")
     p = s["pairs"]
-    lines.append(f"pairs: both right {_pct(p['both_right'], p['n'])}, wrong cause added {_pct(p['wrong_added'], p['n'])}")
+    lines.append(f"pairs: both right {_pct(p['both_right'], p['n'])} (both sizes inside range: "
+                 f"{_pct(p.get('both_right_inside', 0), p.get('n_inside', 0))}), wrong cause added {_pct(p['wrong_added'], p['n'])}")
     for k, v in p["by_pair"].items():
         lines.append(f"  {k:24s} {v}")
     return "\n".join(lines)

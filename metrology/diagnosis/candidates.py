@@ -11,7 +11,7 @@ from metrology.core.effects import REGISTRY, Component, Covariates, Outliers
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit, fit_any
-from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
@@ -193,7 +193,18 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
         F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
         p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
     ho = kfold(nominal, obs, cov, sigma, tuple(given) + (c,), folds, theta0)
-    excl = flags if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given) else None
+    excl = None
+    if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given):
+        # gross readings are left out of the held-out comparison: those flagged, and those that
+        # only this candidate's fit reveals (an effect can hide a gross reading in the scatter
+        # it makes; one such reading, predicted by both models, swamps the paired test)
+        excl = flags | flag_residuals(f.residual, sigma)[0]
+    if c.uses_d0:
+        # a characteristic is judged where its fit saw readings: a held-out reading beyond
+        # every training reading of its sensor tests extrapolation (a curve with turns
+        # diverges there), not whether the curve exists; left out of both sides of the test
+        out_span = beyond_span(obs.d, folds)
+        excl = out_span if excl is None else (excl | out_span)
     cb = ho_base.chi2_pose(sigma, exclude=excl)
     ce = ho.chi2_pose(sigma, exclude=excl)
     diff = cb - ce  # all sensors: comparable between candidates (ranking)

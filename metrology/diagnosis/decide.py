@@ -180,7 +180,8 @@ def _confounding(best: CandidateResult, sig_list) -> list:
                            f"indistinguishable, p = {p_sep:.2g}); to separate them: "
                            f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
             })
-    f, fc = best.fit, best.component
+    f = best.fit
+    fc = f.components[-1] if f.components else best.component  # as fitted (outliers re-flagged since)
     if not fc.per_pose:  # its parameters are the last of the fit's (the candidate is fitted last)
         q0 = len(f.corr_base) - fc.n_params
         for q in range(fc.n_params):

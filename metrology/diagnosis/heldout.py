@@ -10,7 +10,7 @@ from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 
-__all__ = ["folds", "heldout_eval", "HeldOut", "kfold"]
+__all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
 
 
 def folds(p, k):
@@ -18,12 +18,27 @@ def folds(p, k):
     return [np.arange(j, p, k) for j in range(k)]
 
 
-def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
+def beyond_span(d, k):
+    """``(p, n)`` bool: the readings ``d (p, n)`` mm that, held out in their fold, lie outside
+    the span of their sensor's readings in the other folds (a prediction there extrapolates a
+    characteristic beyond what its fit saw)."""
+    out = np.zeros(d.shape, bool)
+    for test in folds(d.shape[0], k):
+        train = np.setdiff1d(np.arange(d.shape[0]), test)
+        lo, hi = np.nanmin(d[train], axis=0), np.nanmax(d[train], axis=0)
+        with np.errstate(invalid="ignore"):
+            out[test] = (d[test] < lo) | (d[test] > hi)
+    return out
+
+
+def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
     """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
 
     A per-pose component's value of a held-out pose is fitted, for each reading, to the other
-    sensors of that pose (leave one sensor out), so every residual is a prediction. Returns
-    (residual (h, n) mm, normal deviation (h,) rad).
+    sensors of that pose (leave one sensor out), so every residual is a prediction. A reading
+    flagged as gross (``exclude (h, n)`` bool, the held-out poses' flags) predicts nothing: it
+    is left out of that solve, and its own residual is NaN. Returns (residual (h, n) mm, normal
+    deviation (h,) rad).
     """
     from metrology.core.normals import angle_between, micro_plane_normal
 
@@ -40,6 +55,8 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test):
         else:
             terms += comp.evaluate(comp.values, d0, c)
     res = o.d - d0 - terms
+    if exclude is not None:
+        res = np.where(exclude, np.nan, res)
     for comp, fitted in per_pose:
         # a per-pose value is not known before the pose is measured: each reading is predicted
         # with the value fitted to the *other* sensors of its pose (leave one sensor out), so
@@ -127,10 +144,11 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
+    gross = [c.flags for c in components if isinstance(c, Outliers)]
     for test in folds(p, k):
         train = np.setdiff1d(np.arange(p), test)
         comps = [c.select(train) for c in components]
         f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
-        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test)
+        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
 

@@ -12,8 +12,9 @@ only taken after a real cause (measured in ``benchmarks/study_blind.py``).
 Families and their members (what is chosen by held-out error, never by the in-sample fit):
 - the sensor characteristic: ``scale`` (the gain alone) and ``nonlinearity`` (gain, bow and
   S-shape): named ``scale`` unless the curve predicts held-out poses significantly better;
-- ``drift``: linear in temperature, linear in time, a cubic in time (a warm-up that levels off,
-  a lag, a warm-cool cycle); temperature wins a tie (the physical cause, time its proxy);
+- ``drift``: linear in temperature, linear in time, the temperature with two lagged copies
+  (a head that follows the air with a lag of minutes), a cubic in time (a warm-up that levels
+  off, a warm-cool cycle); temperature wins a tie (the physical cause, time its proxy);
 - ``plane_form``: quadratic or cubic form, both tested *beyond the plane*: against the datum's
   tilt fitted as a nuisance parameter (a linear "form" is the plane fit's own uncertainty);
 - ``pose_error``: an offset a pose along the datum normal, or (4 or more sensors) an offset and
@@ -59,21 +60,21 @@ def p_better(better: CandidateResult, worse: CandidateResult) -> float:
 
 def _simplicity(s: CandidateResult):
     c = s.component
-    temp_first = 0 if isinstance(c, Drift) and c.variable == "temp" else 1
+    temp_first = 0 if isinstance(c, Drift) and c.variable in ("temp", "lag") else 1
     return (s.n_params, temp_first)
 
 
 def refine_order(best: CandidateResult, scored) -> CandidateResult:
     """The member of ``best``'s family (same sensors) chosen by held-out error: start from the
-    simplest significant member and move to a richer one only when it predicts held-out poses
-    significantly better (``alpha_order``) than the one held."""
+    simplest significant member and move to a richer one (or another as rich) only when it
+    predicts held-out poses significantly better (``alpha_order``) than the one held."""
     mates = sorted([s for s in scored if s.significant and family_of(s.component) == family_of(best.component)],
                    key=_simplicity)
     if not mates:
         return best
     held = mates[0]
     for other in mates[1:]:
-        if other.n_params > held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
+        if other.n_params >= held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
             held = other
     return held
 
@@ -100,6 +101,10 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
     nominal, obs = ds.layout, ds.obs
     tilt = None
     out = []
+    # every fit starts from the joint model so far, and one that holds the geometry (a rigid
+    # pose error, given or candidate) holds it there: the base calibration is biased by the
+    # causes already found (gross readings, the pose error itself)
+    th0 = ref_fit.theta if given else b.theta0
     for i, c in enumerate(pool):
         if on_candidate is not None:
             on_candidate(i, len(pool), c.label)
@@ -107,10 +112,10 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
         if isinstance(c, PlaneForm) and c.order != 1:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
                 comps = tuple(given) + (c.nuisance(),)
-                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, b.theta0),
-                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, b.theta0))
+                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
+                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
-        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, b.theta0,
+        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th0,
                                    n_cand, given=given, k_ref=k_ref))
     return out
 
@@ -155,7 +160,27 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
             near = {i for g in given for i in g.sensors}
             pool = [c for c in pool if not c.sensors or p1.get(c.label, 0.0) < PRUNE_P or set(c.sensors) & near
                     or isinstance(c, Outliers)]
-        if not any(isinstance(g, Outliers) for g in given):
+        rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
+        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers) and not rigid:
+            # (after a rigid pose error a gross reading shows on every sensor of its pose: which
+            # one it was is lost, so no reading is flagged anew)
+            # gross readings the new cause reveals (it hid them in its own scatter) join the
+            # flagged ones, and the joint model so far is refitted with them
+            new, _ = flag_residuals(ref_fit.residual, b.sigma)
+            if np.any(new & ~flags):
+                flags = flags | new
+                k = next(j for j, g in enumerate(given) if isinstance(g, Outliers))
+                out = replace(given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
+                              values=None, stderr=None)
+                given = given[:k] + (out,) + given[k + 1:]
+                ref_fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, given, b.theta0)
+                ref_ho = kfold(ds.layout, ds.obs, b.cov, b.sigma, given, folds, b.theta0)
+                j = [i for i, st in enumerate(steps) if st.chosen is not None and isinstance(st.chosen.component, Outliers)][0]
+                steps[j] = Step(replace(steps[j].chosen, component=out, label=out.label,
+                                        sensors=[ds.layout.names[i] for i in out.sensors]),
+                                steps[j].scored, steps[j].lead)
+                steps[-1] = Step(replace(steps[-1].chosen, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
+        elif not any(isinstance(g, Outliers) for g in given):
             # gross readings flagged anew against the causes found: a large effect makes its
             # extremes look gross to a fit without it
             flags, p_out = flag_residuals(ref_fit.residual, b.sigma)

@@ -59,6 +59,7 @@ def all_components(ds, cov):
                      span=(float(np.nanmin(ds.export.d[:, 0])), float(np.nanmax(ds.export.d[:, 0])))),
         Drift((2,), [0.01, -0.004, 0.003], names=names, variable="time", ref=float(np.mean(cov.time_h)), order=3,
               half=0.5 * float(np.ptp(cov.time_h))),
+        Drift((1,), [0.004, -0.002, 0.003], names=names, variable="lag", ref=float(np.mean(cov.temp_c))),
         PlaneForm((), rng.normal(0, 0.01, 9), names=names, order=3),
         PoseError((), rng.normal(0, 0.01, 3 * cov.n_poses), names=names, n_poses=cov.n_poses, tilts=True),
     ]

@@ -62,7 +62,7 @@ def _study():
 @pytest.fixture(scope="module")
 def study():
     mod = _study()
-    _, summary = mod.run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=False)
+    _, summary = mod.run_study(draws=20, nulls=200, pairs=32, seed=0, jobs=1, progress=False)
     return summary
 
 
@@ -76,7 +76,8 @@ def test_study_right_inside_detectable_range(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: 200 nulls not yet run on the final code (docs/diagnose.md)")
+@pytest.mark.xfail(strict=False, reason="issue 12: on 200 nulls (seed 2) no catalogued cause, but 7 unexplained "
+                                        "(the base battery's false alarms, 3.5 %; docs/diagnose.md)")
 def test_study_null_false_cause_rate(study):
     n = study["null"]
     assert n["n"] >= 200
@@ -92,8 +93,10 @@ def test_study_out_of_catalogue_never_catalogued(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of pairs (docs/diagnose.md)")
+@pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of the pairs whose sizes are "
+                                        "both inside their ranges (docs/diagnose.md, measured)")
 def test_study_pairs_both_named(study):
-    p = study["pairs"]
-    assert p["both_right"] >= 0.9 * p["n"], p
+    p = study["pairs"]  # issue 15: pairs at sizes inside each family's stated detectable range
+    assert p["n_inside"] >= 10, p
+    assert p["both_right_inside"] >= 0.9 * p["n_inside"], p
     assert p["wrong_added"] <= 0.02 * p["n"], p

@@ -62,6 +62,33 @@ def test_drift_without_temperature_raises():
         Drift((0,), [1.0], variable="temp").evaluate([1.0], ds.export.d, cov2)
 
 
+def test_lagged_temperature_is_the_first_order_lag_of_a_ramp():
+    """Analytic truth: a ramp ``T = r t`` through ``tau dy/dt = T - y``, ``y(0) = 0``, is
+    ``r (t - tau (1 - exp(-t / tau)))``, whatever the sampling."""
+    from metrology.core.effects.base import lagged_temperature
+
+    t = np.sort(np.random.default_rng(3).uniform(0.0, 2.0, 40))
+    t[0] = 0.0
+    T = 0.7 * t
+    y = lagged_temperature(t, T, fractions=(0.1, 0.3))
+    for j, f in enumerate((0.1, 0.3)):
+        tau = f * (t[-1] - t[0])  # the fractions are of the run's duration
+        np.testing.assert_allclose(y[:, j], 0.7 * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12)
+    assert lagged_temperature(t, np.full(40, 20.0)) is None  # no temperature change: no lag member
+
+
+def test_beyond_span_marks_only_readings_outside_their_training_folds():
+    from metrology.diagnosis.heldout import beyond_span, folds
+
+    d = np.random.default_rng(4).uniform(30.0, 70.0, (23, 3))
+    m = beyond_span(d, 5)
+    for test in folds(23, 5):
+        train = np.setdiff1d(np.arange(23), test)
+        lo, hi = d[train].min(axis=0), d[train].max(axis=0)
+        np.testing.assert_array_equal(m[test], (d[test] < lo) | (d[test] > hi))
+    assert m[np.argmax(d[:, 0]), 0] and m[np.argmin(d[:, 0]), 0]  # the extremes are always beyond
+
+
 # ---------------------------------------------------------------------------------------
 # the extended fit
 

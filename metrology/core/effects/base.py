@@ -11,13 +11,49 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Covariates", "Component", "VERDICTS", "SECONDS_PER_HOUR", "REFERENCE_TEMP_C"]
+__all__ = ["Covariates", "Component", "VERDICTS", "SECONDS_PER_HOUR", "REFERENCE_TEMP_C", "LAG_FRACTIONS",
+           "lagged_temperature"]
 
 #: the two verdicts of a diagnosis that name no catalogued effect
 VERDICTS = ("none", "unexplained")
 SECONDS_PER_HOUR = 3600.0
 #: reference temperature of dimensional metrology (ISO 1), deg C
 REFERENCE_TEMP_C = 20.0
+#: time constants of the thermal lags of ``drift@lag``, as fractions of the run's duration
+LAG_FRACTIONS = (0.05, 0.15)
+
+
+def lagged_temperature(time_h, temp_c, fractions=LAG_FRACTIONS):
+    """The temperature ``temp_c (p,)`` deg C at times ``time_h (p,)`` h (in pose order) seen
+    through first-order lags ``tau dy/dt = T - y``, ``y(0) = T(0)``, of time constants
+    ``fractions`` of the run's duration; ``T`` linear between samples (exact recursion).
+    Returns ``(p, len(fractions))`` deg C, or None without temperature or duration.
+
+    A sensor head and its mount reach the air's temperature through their heat capacity: the
+    zero follows the temperature with a lag of minutes, which neither the temperature itself
+    nor a smooth function of time describes (a lagged air-conditioning cycle, a warm-up then a
+    cool-down). Two time constants span the lags in between by their combination.
+    """
+    t = np.asarray(time_h, float)
+    T = np.asarray(temp_c, float)
+    span = float(np.ptp(t)) if len(t) else 0.0
+    if not np.all(np.isfinite(T)) or not np.all(np.isfinite(t)) or span <= 0 or np.ptp(T) <= 0 \
+            or np.any(np.diff(t) < 0):
+        return None
+    out = np.empty((len(t), len(fractions)))
+    for j, f in enumerate(fractions):
+        tau = f * span
+        y = np.empty_like(T)
+        y[0] = T[0]
+        for k in range(1, len(t)):
+            h = t[k] - t[k - 1]
+            if h <= 0:
+                y[k] = y[k - 1] + (T[k] - T[k - 1])
+                continue
+            a, r = np.exp(-h / tau), (T[k] - T[k - 1]) / h
+            y[k] = T[k] - r * tau + (y[k - 1] - T[k - 1] + r * tau) * a
+        out[:, j] = y
+    return out
 
 
 @dataclass(frozen=True)
@@ -37,6 +73,9 @@ class Covariates:
         the tracker scanned it (a local fit to the datum cloud; None without a cloud)
     scan_ptp_mm : float, mm, the scanned deviation's peak-to-valley over the cloud (NaN without)
     d_span : (n, 2) float, mm, or None: the span of the readings each sensor gave (min, max)
+    temp_lag : (p, m) float, deg C, or None: the temperature history seen through first-order
+        lags of time constants :data:`LAG_FRACTIONS` of the run (:func:`lagged_temperature`;
+        computed once over the whole run, so a subset of poses keeps its own history)
     """
 
     time_h: np.ndarray
@@ -48,6 +87,7 @@ class Covariates:
     scan_w: np.ndarray | None = None
     scan_ptp_mm: float = float("nan")
     d_span: np.ndarray | None = None
+    temp_lag: np.ndarray | None = None
 
     @property
     def n_poses(self) -> int:
@@ -57,7 +97,8 @@ class Covariates:
         """The poses ``idx``."""
         return replace(self, time_h=self.time_h[idx], temp_c=self.temp_c[idx], cos_inc=self.cos_inc[idx],
                        inv_nu=self.inv_nu[idx], spot_st=self.spot_st[idx],
-                       scan_w=None if self.scan_w is None else self.scan_w[idx])
+                       scan_w=None if self.scan_w is None else self.scan_w[idx],
+                       temp_lag=None if self.temp_lag is None else self.temp_lag[idx])
 
     @classmethod
     def from_geometry(cls, zero, direction, normal_tcs, offset_tcs, tcs2tracker_rot, tcs2tracker_trans,
@@ -92,7 +133,8 @@ class Covariates:
         else:
             time_h = (np.asarray(time_s, float) - float(np.min(time_s))) / SECONDS_PER_HOUR
         temp = np.full(p, np.nan) if temp_c is None else np.asarray(temp_c, float)
-        return cls(time_h, temp, np.abs(nu), 1.0 / nu, spot_st, np.asarray(range_mm, float))
+        return cls(time_h, temp, np.abs(nu), 1.0 / nu, spot_st, np.asarray(range_mm, float),
+                   temp_lag=lagged_temperature(time_h, temp))
 
 
 @dataclass(frozen=True)

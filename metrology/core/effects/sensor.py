@@ -72,6 +72,11 @@ class Drift(Component):
     half-span, fixed per data set like ``ref``), ``p1..p3`` mm at the run's end. A warm-up
     that levels off, a lagged temperature or a warm-cool cycle is not linear in either
     variable; the diagnosis scores both orders and names ``drift`` for either.
+
+    ``variable="lag"`` is the thermal member: ``r0 (T - ref) + r1 (T_1 - ref) + r2 (T_2 - ref)``
+    with ``T_1``, ``T_2`` the temperature seen through first-order lags
+    (:attr:`Covariates.temp_lag`, time constants ``LAG_FRACTIONS`` of the run), mm/K each: a
+    head whose zero follows the air with a lag of minutes.
     """
 
     variable: str = "temp"
@@ -85,7 +90,7 @@ class Drift(Component):
 
     @property
     def plot_key(self):
-        return "temp_c" if self.variable == "temp" else "time_h"
+        return "time_h" if self.variable == "time" else "temp_c"
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov):
@@ -94,6 +99,8 @@ class Drift(Component):
         out = []
         if np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
             out.append(cls((i,), names=names, variable="temp", ref=float(np.mean(cov.temp_c))))
+        if cov.temp_lag is not None and np.all(np.isfinite(cov.temp_c)) and np.ptp(cov.temp_c) > 0:
+            out.append(cls((i,), names=names, variable="lag", ref=float(np.mean(cov.temp_c))))
         t = cov.time_h
         out.append(cls((i,), names=names, variable="time", ref=float(np.mean(t))))
         if np.ptp(t) > 0:
@@ -109,37 +116,45 @@ class Drift(Component):
     def param_names(self):
         if self.order == 3:
             return ("p1_mm", "p2_mm", "p3_mm")
+        if self.variable == "lag":
+            return ("rate_mm_per_K", "rate_lag1_mm_per_K", "rate_lag2_mm_per_K")
         return ("rate_mm_per_K",) if self.variable == "temp" else ("rate_mm_per_h",)
 
     @property
     def param_units(self):
         if self.order == 3:
             return ("mm",) * 3
+        if self.variable == "lag":
+            return ("mm/K",) * 3
         return ("mm/K",) if self.variable == "temp" else ("mm/h",)
 
     def __post_init__(self):
-        if self.variable not in ("temp", "time"):
-            raise ValueError(f"drift variable must be 'temp' or 'time', got {self.variable!r}")
-        if self.order not in (1, 3) or not self.half > 0:
+        if self.variable not in ("temp", "time", "lag"):
+            raise ValueError(f"drift variable must be 'temp', 'time' or 'lag', got {self.variable!r}")
+        if self.order not in (1, 3) or not self.half > 0 or (self.variable == "lag" and self.order != 1):
             raise ValueError(f"drift order must be 1 or 3 with a positive half-span, got {self.order}, {self.half}")
         if self.ref is None:
-            object.__setattr__(self, "ref", REFERENCE_TEMP_C if self.variable == "temp" else 0.0)
+            object.__setattr__(self, "ref", 0.0 if self.variable == "time" else REFERENCE_TEMP_C)
         super().__post_init__()
 
     @property
     def label(self):
-        return super().label + ("@temp" if self.variable == "temp" else "@time") + ("3" if self.order == 3 else "")
+        return super().label + "@" + self.variable + ("3" if self.order == 3 else "")
 
     def covariate(self, cov):
         """``(p,)``: ``T - ref`` (K) or ``t - ref`` (h) of the poses of ``cov``."""
-        x = cov.temp_c if self.variable == "temp" else cov.time_h
+        x = cov.time_h if self.variable == "time" else cov.temp_c
         if not np.all(np.isfinite(x)):
             raise ValueError(f"drift with {self.variable}: the export has no {self.variable} column")
+        if self.variable == "lag":
+            if cov.temp_lag is None:
+                raise ValueError("drift with lag: the covariates have no lagged temperature (no time or temperature)")
+            return np.column_stack([x, cov.temp_lag]) - self.ref
         return x - self.ref
 
     def describe(self):
         out = super().describe()
-        out["reference"] = {"value": float(self.ref), "unit": "deg C" if self.variable == "temp" else "h"}
+        out["reference"] = {"value": float(self.ref), "unit": "h" if self.variable == "time" else "deg C"}
         return out
 
     def basis(self, d0, cov):
@@ -147,6 +162,8 @@ class Drift(Component):
         if self.order == 3:
             x = v / self.half
             cols = np.stack([x, *_legendre23(x)], axis=-1)  # (p, 3)
+        elif v.ndim == 2:  # the temperature and its lagged copies (p, 3)
+            cols = v
         else:
             cols = v[:, None]
         x = np.broadcast_to(cols[:, None, :], d0.shape + (cols.shape[1],))
