@@ -82,7 +82,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
-                      caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=footprint_mm,
+                      caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=foot,
                       progress=None if progress is None else lambda d, n, what: progress(1 + d, 6, what))
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
