@@ -70,15 +70,22 @@ class PanelEdges:
         from scipy.spatial import cKDTree
 
         a, b = self.segments[:, 0], self.segments[:, 1]
-        mid = 0.5 * (a + b)
-        half = 0.5 * float(np.max(np.linalg.norm(b - a, axis=1)))
+        # the index holds pieces no longer than the median edge, so that one long outline
+        # segment does not widen every point's search (pieces map back to their edge)
+        length = np.linalg.norm(b - a, axis=1)
+        k = np.maximum(np.ceil(length / max(float(np.median(length)), 1e-9)).astype(int), 1)
+        owner = np.repeat(np.arange(len(k)), k)
+        t = (np.arange(len(owner)) - np.repeat(np.cumsum(k) - k, k) + 0.5) / k[owner]
+        mid = a[owner] + t[:, None] * (b - a)[owner]
+        half = 0.5 * float(np.max(length / k))
         cand = cKDTree(mid).query_ball_point(points, radius + half)
         cnt = np.array([len(c) for c in cand], int)
         if cnt.sum() == 0:
             z = np.zeros(0, int)
             return z, z, np.zeros(0)
-        pt = np.repeat(np.arange(len(points)), cnt)
-        edge = np.concatenate([np.asarray(c, int) for c in cand if len(c)])
+        pair = np.unique(np.repeat(np.arange(len(points)), cnt) * len(k)
+                         + owner[np.concatenate([np.asarray(c, int) for c in cand if len(c)])])
+        pt, edge = pair // len(k), pair % len(k)
         ab = b[edge] - a[edge]
         s = np.clip(np.sum((points[pt] - a[edge]) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
         dist = np.linalg.norm(a[edge] + s[:, None] * ab - points[pt], axis=1)

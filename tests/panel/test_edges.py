@@ -174,3 +174,24 @@ def test_plate_reference_is_the_plane_next_to_its_fillets():
     fil = np.flatnonzero((np.abs(m.face_normals[:, 2]) > 0.05) & (np.abs(m.face_normals[:, 2]) < 0.95))
     nf, fac, _ = panel.reference_normal_at(fil, np.full((len(fil), 3), 1 / 3))
     assert np.all(fac > 0)
+
+
+def test_near_finds_exactly_the_edges_within_the_radius_long_segments_included():
+    """plate_holes.STL: outline segments up to 178 mm beside bores of 1.7 mm edges. The
+    edges ``near`` returns are those a brute-force distance to every segment finds."""
+    panel = load_panel(DATA / "trimesh_plate_holes.stl")
+    edges = panel.edges()
+    a, b = edges.segments[:, 0], edges.segments[:, 1]
+    assert np.max(np.linalg.norm(b - a, axis=1)) > 50 * np.median(np.linalg.norm(b - a, axis=1))
+    rng = np.random.default_rng(3)
+    lo, hi = panel.mesh.bounds
+    pts = rng.uniform(lo, hi, (300, 3))
+    radius = rng.uniform(1.0, 40.0, len(pts))
+    pt, edge, dist = edges.near(pts, radius)
+    ab = b - a
+    s = np.clip(np.einsum("mkj,kj->mk", pts[:, None, :] - a[None], ab) / np.sum(ab * ab, axis=1), 0, 1)
+    d_all = np.linalg.norm(a[None] + s[..., None] * ab[None] - pts[:, None, :], axis=2)
+    want = set(zip(*np.nonzero(d_all <= radius[:, None])))
+    assert len(want) > 100
+    assert set(zip(pt.tolist(), edge.tolist())) == {(int(i), int(j)) for i, j in want}
+    np.testing.assert_allclose(dist, d_all[pt, edge], rtol=0, atol=1e-9)
