@@ -79,6 +79,8 @@ def panels(step=False):
     yield "trimesh counter.unitsmm (decimated)", p, 10.0, None, "mesh"
     p = load_panel(DATA / "trimesh_plate_holes.stl")
     yield "trimesh plate_holes.STL", p, 10.0, _plate, "mesh"
+    p = load_panel(DATA / "tcad_wing.stl", units="cm")
+    yield "TCAD wing.stl (closed wing, --units cm)", p, 50.0, None, "mesh"
     if step:
         t0 = time.perf_counter()
         p = load_panel(DATA / "trimesh_base_interface_AP203.step")

@@ -120,3 +120,22 @@ def test_cli_units_from_the_file_name_and_bad_units(files):
     assert p.units == "mm (from the file name (unitsmm))" and not p.warnings
     r = _invoke(["normals", REAL / "trimesh_cylinder.stl", "--layout", files / "t6.toml", "--grid", "1", "--units", "km"])
     assert r.exit_code == 2 and "units must be one of mm, cm, m, in, got 'km'" in r.stderr
+
+
+def test_cli_a_public_closed_wing(files):
+    """TCAD's wing.stl (940 triangles, 177 x 100 units, no unit): as mm every grid point's
+    footprint touches a crease (one line naming the footprint, exit 2); as cm a 1.8 m wing
+    section: points measured, the nodes by the trailing edge and tip left out, no loop lost."""
+    wing = REAL / "tcad_wing.stl"
+    r = _invoke(["normals", wing, "--layout", files / "t6.toml", "--grid", "5", "--no-loop"])
+    assert r.exit_code == 2 and r.stderr.startswith("error: ") and "footprint" in r.stderr
+    r = _invoke(["normals", wing, "--layout", files / "t6.toml", "--grid", "50", "--tilt-deg", "2", "--seed", "1",
+                 "--units", "cm", "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    from metrology.panel.edges import BOUNDARY
+    from metrology.panel.mesh import load_panel
+
+    assert not (load_panel(wing, "cm").edges().kind == BOUNDARY).any()  # closed: creases only
+    assert s["status"]["ok"] > 300 and s["grid_dropped"] > 100
+    assert s["plane"]["final_max_deg"] < 2.0  # every attitude loop ends near the normal (none lost)
