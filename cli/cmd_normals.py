@@ -42,6 +42,8 @@ def register(app: typer.Typer) -> None:
         fmt: str = typer.Option(None, "--format", help=f"Format of a panel on stdin (PANEL '-'): {', '.join(MESH_FORMATS)}; "
                                 "ASCII STL, PLY and GLB are also known by their header."),
         units: str = typer.Option(None, "--units", help="Unit of the panel file's coordinates: mm, cm, m or in (overrides what the file declares; STL/OBJ/PLY declare none: mm)."),
+        beams: str = typer.Option("facets", "--beams", help="What the simulated beams hit: facets (the mesh as it is) or "
+                                  "smooth (the surface the mesh tessellates: Phong on the crease-aware normals)."),
         footprint_mm: float = typer.Option(None, "--footprint-mm", help="Radius of the head's footprint (pressure foot); default the spots' radius."),
     ) -> None:
         """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
@@ -63,7 +65,7 @@ def register(app: typer.Typer) -> None:
                 true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
                 motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
                 progress=progress, report=report, command=invocation(ctx), units=units,
-                footprint_mm=footprint_mm, on_warning=warn,
+                footprint_mm=footprint_mm, on_warning=warn, beams=beams,
             )
         if as_json:
             echo_json(summary, "normals")

@@ -20,7 +20,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
                 noise_mm=None, seed=0, tolerance_deg=0.5, engine="auto", out_path=None, plot_path=None,
                 true_layout_path=None, motion_repeat_deg=0.02, motion_scale=0.03, motion_position_mm=0.05,
                 prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, loop=True, units=None, footprint_mm=None,
-                on_warning=None, report=None, command=None, progress=None) -> dict:
+                on_warning=None, report=None, command=None, progress=None, beams="facets") -> dict:
     """Everything ``metro normals`` does: load, measure, summarise, write (all or nothing).
 
     Degrees appear only here, at the edge. Output files are written only after every
@@ -82,7 +82,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     motion = MotionError(math.radians(motion_repeat_deg), motion_scale, motion_position_mm)
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
-                      caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=foot,
+                      caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=foot, beams=beams,
                       progress=None if progress is None else lambda d, n, what: progress(1 + d, 6, what))
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))

@@ -106,6 +106,18 @@ class Panel:
         n = np.einsum("mk,mkj->mj", bary, vn)
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
+    def corner_normals(self, tri, crease_deg=CREASE_ANGLE_DEG):
+        """The reference normal (:meth:`reference_normal_at`) at each corner of faces ``tri``.
+
+        Returns
+        -------
+        (m, 3 corners, 3) float, unit, panel frame
+        """
+        tri = np.asarray(tri, int)
+        eye = np.eye(3)
+        return np.stack([self.reference_normal_at(tri, np.broadcast_to(eye[k], (len(tri), 3)), crease_deg)[0]
+                         for k in range(3)], axis=1)
+
     def reference_normal_at(self, tri, bary, crease_deg=CREASE_ANGLE_DEG):
         """The mesh's reference normal: the face hit, smoothed only within a crease angle.
 

@@ -69,7 +69,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
                 standoff=None, noise=None, tolerance=math.radians(0.5), engine="auto",
                 motion: MotionError = MotionError(), layout_true: SensorLayout | None = None,
                 loop=True, caster: RayCaster | None = None,
-                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, footprint_mm=None, progress: ProgressFn | None = None) -> NormalsRun:
+                prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, footprint_mm=None, progress: ProgressFn | None = None,
+                beams: str = "facets") -> NormalsRun:
     """Measure the normal at each drilling point by both methods, and run the attitude loop.
 
     Parameters
@@ -96,6 +97,8 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
         not measured (:func:`metrology.panel.edges.straddle`)
     progress : callable or None, ``progress(done, total, what)`` at each of the 4 stages
         (:mod:`metrology.core.progress`)
+    beams : str, what the simulated beams hit: ``"facets"``, the mesh as it is, or
+        ``"smooth"``, the smooth surface it tessellates (:class:`metrology.panel.smooth.SmoothCaster`)
 
     Returns
     -------
@@ -128,6 +131,12 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     if not (math.isfinite(foot) and foot >= 0):
         raise ValueError(f"footprint radius must be a finite number of mm >= 0, got {footprint_mm}")
     caster = RayCaster(panel.mesh, engine) if caster is None else caster
+    if beams not in ("facets", "smooth"):
+        raise ValueError(f"beams must be facets or smooth, got {beams!r}")
+    if beams == "smooth":
+        from metrology.panel.smooth import SmoothCaster
+
+        caster = SmoothCaster(caster, panel)
     m = len(drill.points)
     notify(progress, 0, 4, f"snapping {m} points to the panel")
     pts, off, n_true, faceting, chord = snap_points(panel, caster, drill.points)
@@ -184,7 +193,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
                 arr[good] = v
                 full[k] = arr
             loops[method] = full
-    info = {"engine": caster.engine, "standoff_mm": standoff, "tilt_deg": math.degrees(tilt),
+    info = {"engine": caster.engine, "beams": getattr(caster, "beams", "facets: the mesh as it is"), "standoff_mm": standoff, "tilt_deg": math.degrees(tilt),
             "noise_mm": noise.tolist(), "tolerance_deg": math.degrees(tolerance),
             "motion": {"repeat_deg": math.degrees(motion.repeat), "scale": motion.scale, "position_mm": motion.position_mm},
             "tool_axis_tcs": a_tcs.tolist(), "reference_normal": getattr(panel.surface, "reference_name", "analytic") if n_an is not None else

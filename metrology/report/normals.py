@@ -195,6 +195,8 @@ def summary_text(summary: dict) -> str:
         lines.append(f"grid: {summary['grid_dropped']} nodes left out, the head's footprint would cross a crease, "
                      f"a hole or the panel boundary")
     info = summary["info"]
+    if str(info.get("beams", "facets")).startswith("smooth"):
+        lines.append(f"beams hit the smooth surface the mesh tessellates ({info['beams']})")
     lines.append(f"engine {info['engine']}, stand-off {info['standoff_mm']:.3f} mm, tilt {info['tilt_deg']:g} deg, "
                  f"footprint {info['footprint_mm']:.1f} mm, units {info['units']}, reference normal: {info['reference_normal']}")
     fac = info.get("reference_faceting", {})

@@ -139,3 +139,14 @@ def test_cli_a_public_closed_wing(files):
     assert not (load_panel(wing, "cm").edges().kind == BOUNDARY).any()  # closed: creases only
     assert s["status"]["ok"] > 300 and s["grid_dropped"] > 100
     assert s["plane"]["final_max_deg"] < 2.0  # every attitude loop ends near the normal (none lost)
+
+
+def test_cli_beams_smooth_is_said_and_a_bad_value_is_one_line(files):
+    args = ["normals", files / "cyl.stl", "--layout", files / "t6.toml", "--points", files / "pts.csv", "--no-loop"]
+    r = _invoke([*args, "--beams", "smooth", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["info"]["beams"].startswith("smooth: Phong")
+    r = _invoke([*args, "--beams", "smooth"])
+    assert "beams hit the smooth surface the mesh tessellates" in r.stdout
+    r = _invoke([*args, "--beams", "phong"])
+    assert r.exit_code == 2 and r.stderr.strip() == "error: beams must be facets or smooth, got 'phong'"
