@@ -9,7 +9,6 @@ import json
 import sys
 import time
 
-from pathlib import Path
 
 import typer
 
@@ -65,21 +64,15 @@ def fail(message: str) -> None:
 
 def output_path(value, option: str):
     """The path of an output file option, or None; fails (one line, exit 2) on a value that names a
-    folder: one ending in a separator (typer's ``Path`` would drop it and write a file of that
-    name), an existing folder, or one whose parent folder does not exist."""
+    folder or lies in one that does not exist (:func:`metrology.io.atomic.check_output_file`)."""
     if value is None:
         return None
-    import os
+    from metrology.io.atomic import check_output_file
 
-    text = str(value)
-    if text.endswith(("/", os.sep) + ((os.altsep,) if os.altsep else ())):
-        fail(f"{option} {text}: ends in a separator, expected a file name (not a folder)")
-    path = Path(text)
-    if path.is_dir():
-        fail(f"{option} {text}: is a folder, expected a file name")
-    if not path.resolve().parent.is_dir():
-        fail(f"{option} {text}: folder {path.parent} does not exist")
-    return path
+    try:
+        return check_output_file(value, option)
+    except ValueError as exc:
+        fail(str(exc))
 
 
 def guarded(fn):

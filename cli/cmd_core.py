@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, dumps, echo_json, fail, guarded, invocation, progress_bar
+from ._common import JSON_HELP, echo_json, fail, guarded, invocation, progress_bar
 
 
 def register(app: typer.Typer) -> None:

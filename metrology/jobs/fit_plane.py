@@ -5,25 +5,15 @@ from __future__ import annotations
 import contextlib
 import json
 from dataclasses import replace
-from pathlib import Path
 
 from metrology.core.progress import notify
+from metrology.io.atomic import check_output_file
 from metrology.io.names import display_name
 from metrology.datum import PlaneFit, fit_plane_robust
 
 __all__ = ["fit_plane_file"]
 
 _PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
-
-
-def _check_output(path, what, suffixes=None):
-    p = Path(path)
-    if not p.parent.exists():
-        raise ValueError(f"{path}: directory {p.parent} does not exist (for the {what})")
-    if p.is_dir():
-        raise ValueError(f"{path}: is a directory (for the {what})")
-    if suffixes is not None and p.suffix.lower() not in suffixes:
-        raise ValueError(f"{path}: the {what} must be one of {', '.join(sorted(suffixes))}")
 
 
 def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None, report=None,
@@ -62,9 +52,9 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
 
     fmt = cloud_format(cloud)
     if out is not None:
-        _check_output(out, "plane JSON")
+        check_output_file(out, "--out")
     if plot is not None:
-        _check_output(plot, "residual plot", _PLOT_SUFFIXES)
+        check_output_file(plot, "--plot", _PLOT_SUFFIXES)
     if report is not None:
         from metrology.report.html import check_report_path
 

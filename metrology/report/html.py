@@ -195,15 +195,11 @@ def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> F
 
 
 def check_report_path(path) -> None:
-    """Refuse a ``--report`` path before any work: not ``.html``/``.htm``, a directory, or in a
-    directory that does not exist (ValueError naming the path)."""
-    p = Path(path)
-    if p.suffix.lower() not in REPORT_SUFFIXES:
-        raise ValueError(f"--report {path}: the report must be an .html file")
-    if p.is_dir():
-        raise ValueError(f"--report {path}: is a directory")
-    if not p.resolve().parent.is_dir():
-        raise ValueError(f"--report {path}: directory {p.parent} does not exist")
+    """Refuse a ``--report`` path before any work: not ``.html``/``.htm``, a folder, or in a
+    folder that does not exist (ValueError naming the path)."""
+    from metrology.io.atomic import check_output_file
+
+    check_output_file(path, "--report", REPORT_SUFFIXES)
 
 
 #: the pages rendered inside :func:`collect` (title, run, sections), else None
