@@ -140,6 +140,12 @@ class Verdict:
     lead: CandidateResult | None = None
 
 
+def battery_rng() -> np.random.Generator:
+    """The generator of the battery's permutation tests: fixed, so the verdict is a function of
+    the data alone (``diagnose``'s ``seed`` drives only the side-by-side simulation)."""
+    return np.random.default_rng(20261123)
+
+
 def base_analysis(ds, folds) -> BaseAnalysis:
     """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
     calibrated one) and test its residuals."""
@@ -158,7 +164,7 @@ def base_analysis(ds, folds) -> BaseAnalysis:
     base = fit_any(nominal, obs, cov, sigma, (), theta0, "lsq")
     d0 = readings(zero, u, obs.normal, obs.offset)[0]
     dof_base = np.isfinite(obs.d).sum(axis=0) - 5
-    tests = noise_tests(base.residual, sigma, dof_base, names)
+    tests = noise_tests(base.residual, sigma, dof_base, names, rng=battery_rng())
     struct = structure(base.residual, d0, cov, names)
     ho_base = kfold(nominal, obs, cov, sigma, (), folds, theta0)
     datum = None if ds.datum_points is None else datum_form(ds, zero, u, obs, cov, d0, sigma)
@@ -225,7 +231,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
         r_test = np.where(1.0 - h > 1e-3, r_test, np.nan)
         dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
     tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
-                            pairs=not any(c.per_pose for c in f.components))
+                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng())
     kept = [j for j, s in enumerate(chosen) if battery_on(tests_ext, _sensors_of(s.component, n))
             >= THRESHOLDS["alpha_battery"]]
     # a characteristic that follows another sensor's distance better is crosstalk, not the
