@@ -93,7 +93,9 @@ def _solve_per_pose(w, r, prior=None):
         return (np.linalg.pinv(w, rcond=1e-10) @ r[..., None])[..., 0]
     A = np.einsum("hnm,hnq->hmq", w, w) + prior[None]
     b = np.einsum("hnm,hn->hm", w, r)
-    return np.linalg.solve(A, b[..., None])[..., 0]
+    # minimum norm where a pose's other readings and a weak prior leave a value undetermined
+    # (a blank reading beside the left-out one; per-pose values of no spread-limited size)
+    return (np.linalg.pinv(A, rcond=1e-12, hermitian=True) @ b[..., None])[..., 0]
 
 
 def _per_pose_precision(fitted, nominal, cov, sigma, test):
