@@ -8,7 +8,7 @@ procedure): :func:`base_analysis`, the forward selection of causes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from metrology.core.model import readings
 from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
 from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
+from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
@@ -60,7 +61,9 @@ class Diagnosis:
     ``steps`` the residuals after each step of the selection;
     ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
     ``tests_extended`` the noise-model battery before and after the extension;
-    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw.
+    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
+    ``detectable`` the size of each family these poses detect at 95 % power
+    (:mod:`metrology.diagnosis.detectable`).
     """
 
     cause: str
@@ -82,6 +85,7 @@ class Diagnosis:
     plot_data: PlotData | None = None
     causes: tuple = ()
     steps: tuple = ()
+    detectable: dict = field(default_factory=dict)
 
     def to_dict(self):
         return {
@@ -96,6 +100,7 @@ class Diagnosis:
                      "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
             "thresholds": self.thresholds,
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
+            "detectable": self.detectable,
         }
 
 
@@ -415,4 +420,5 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
                     b.structure)
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
-                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)))
+                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)),
+                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0)))

@@ -1,0 +1,144 @@
+"""The detectable size of each family on the poses of a data set (the 95 % power of its test).
+
+A ``none`` verdict says that no cause is above what the data can show; this module says how
+large that is, per family and sensor, in the family's own size unit (the ``size`` that
+``causes`` reports). For each family's simplest member scored at the first step, the size at
+which its in-sample F-test, at the level it is run (``alpha_candidates`` split over the
+candidates), is passed with probability 95 % (the noncentral F distribution), from the
+member's covariance at the stated noise. This is the limit of detection in the ISO 11843 sense
+(false negatives 5 %, false positives at the test's level), for a shape that is the member's
+own; an effect of another shape in the family is detected at about this size when the member
+follows it, later when it does not. The held-out test must also pass, so this is a lower bound.
+
+- ``scale``: peak-to-valley of the gain error over the readings' span (mm);
+- ``nonlinearity``: peak-to-valley of a bow (the P2 term alone) over the readings' span (mm);
+- ``drift``: peak-to-valley over the run of a drift linear in time, or in temperature where
+  that member is the more sensitive (mm);
+- ``incidence``: the bias at the largest incidence angle seen (mm);
+- ``plane_form``: peak-to-valley of the scanned form seen by the spots (mm; with a datum cloud);
+- ``pose_error``: RMS per reading of independent per-pose offsets along the datum normal (mm);
+- ``outliers``: one gross reading (mm; the flagging threshold plus 1.645 sigma).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from metrology.diagnosis.extension import _free_offset, size_of
+from metrology.diagnosis.thresholds import THRESHOLDS
+
+__all__ = ["detectable_sizes", "noncentrality_95"]
+
+#: the power at which a size is called detectable
+POWER = 0.95
+
+
+def noncentrality_95(k: int, dof: int, alpha: float) -> float:
+    """The noncentrality ``lambda`` at which an F(k, dof) test at level ``alpha`` has 95 % power."""
+    from scipy import optimize, stats
+
+    dof = max(int(dof), 1)
+    crit = float(stats.f.isf(alpha, k, dof))
+
+    def power(lam):
+        return float(stats.ncf.sf(crit, k, dof, lam)) - POWER
+
+    hi = 10.0
+    while power(hi) < 0:
+        hi *= 2.0
+    return float(optimize.brentq(power, 0.0, hi))
+
+
+def _known_noise_cov(f, which):
+    """The component's parameter covariance at the stated noise (the fit scales by chi2/dof)."""
+    k0 = _free_offset(f, which)
+    n = f.components[which].n_params
+    s2 = f.chi2 / max(f.dof, 1)
+    return f.extra_cov[k0:k0 + n, k0:k0 + n] / max(s2, 1e-300)
+
+
+def _size_along(c, v, cov, d0):
+    """(size of the member's shape ``v`` (its parameters), v^T C^-1 v) for a scored candidate."""
+    f = c.fit
+    which = len(f.components) - 1  # the candidate is last (given causes first)
+    comp = f.components[which]
+    C = _known_noise_cov(f, which)
+    v = np.asarray(v, float)
+    f_v = replace(f, components=f.components[:which] + (replace(comp, values=v),))
+    s = size_of(f_v, which, cov, d0)
+    if s is None or not np.isfinite(s["value"]) or s["value"] <= 0:
+        return None
+    info = float(v @ np.linalg.pinv(C, rcond=1e-12, hermitian=True) @ v)
+    return abs(s["value"]), info
+
+
+def _direction(c):
+    """The member's unit shape whose size is reported, or None where this module has none."""
+    comp = c.component
+    names = list(comp.param_names)
+    if c.cause in ("scale", "incidence") and comp.n_params == 1:
+        return np.ones(1)
+    if c.cause == "drift" and comp.n_params == 1:
+        return np.ones(1)
+    if c.cause == "nonlinearity" and "c2_mm" in names and comp.n_params == 3:
+        return np.eye(comp.n_params)[names.index("c2_mm")]
+    if c.cause == "plane_form" and "scan_gain" in names:
+        return np.eye(comp.n_params)[names.index("scan_gain")]
+    return None
+
+
+def detectable_sizes(scored, b, n_obs) -> dict:
+    """Per family and sensor, the size detectable at 95 % power on these poses (see the module).
+
+    scored : the first step's CandidateResults; b : the BaseAnalysis; n_obs : (n,) int, finite
+    readings per sensor. Returns ``{family: {"sensors": {name: mm}, "member": label, "meaning":
+    str}}`` (for set-up families the one value under ``"all"``).
+    """
+    from scipy import stats
+
+    n_cand = max(len(scored), 1)
+    alpha = THRESHOLDS["alpha_candidates"] / n_cand
+    out: dict = {}
+    meaning = {
+        "scale": "peak-to-valley of a gain error over the readings' span",
+        "nonlinearity": "peak-to-valley of a bow (P2) over the readings' span",
+        "drift": "peak-to-valley over the run of a linear drift",
+        "incidence": "bias at the largest incidence angle seen",
+        "plane_form": "peak-to-valley of the scanned datum form",
+        "pose_error": "RMS per reading of independent per-pose offsets along the normal",
+        "outliers": "one gross reading",
+    }
+    for c in scored:
+        v = _direction(c)
+        if v is not None:
+            got = _size_along(c, v, b.cov, b.d0)
+            if got is None:
+                continue
+            size_v, info = got
+            if info <= 0:
+                continue
+            k = max(int(c.n_params), 1)
+            lam = noncentrality_95(k, c.fit.dof, alpha)
+            det = size_v * float(np.sqrt(lam / info))
+        elif c.cause == "pose_error" and c.component.per_pose_columns == 1:
+            # lambda = (readings - base parameters) s^2 / sigma^2 for independent offsets of RMS s
+            S = list(range(len(b.sigma)))
+            m = int(np.sum(n_obs))
+            lam = noncentrality_95(max(int(c.n_params), 1), c.fit.dof, alpha)
+            det = float(np.sqrt(np.mean(b.sigma[S] ** 2)) * np.sqrt(lam / max(m - 5 * len(S), 1)))
+        else:
+            continue
+        fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning.get(c.cause, "")})
+        key = ", ".join(c.sensors) if c.sensors and c.cause not in ("plane_form", "pose_error") else "all"
+        if key not in fam["sensors"] or det < fam["sensors"][key]:
+            fam["sensors"][key] = det
+            fam["member"][key] = c.label
+    # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
+    m = int(np.sum(n_obs))
+    t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * max(m, 1))))
+    out["outliers"] = {"sensors": {name: float((t + stats.norm.isf(1 - POWER)) * s)
+                                   for name, s in zip(b.calibrated.names, b.sigma)},
+                       "member": {}, "meaning": meaning["outliers"]}
+    return out
