@@ -24,6 +24,20 @@ def p_text(p: float) -> str:
     return "< 1e-300" if p < 1e-300 else f"= {p:.3g}"
 
 
+def detectable_words(D: dict) -> str:
+    """``detectable`` of :meth:`Diagnosis.to_dict` in words: each family's smallest size over its
+    sensors (and the largest, where they differ), in um."""
+    out = []
+    for fam, v in (D.get("detectable") or {}).items():
+        vals = [1e3 * x for x in v["sensors"].values()]
+        if not vals:
+            continue
+        lo, hi = min(vals), max(vals)
+        rng = f"{lo:.3g}" if hi < 1.05 * lo else f"{lo:.3g}-{hi:.3g}"
+        out.append(f"{fam} {rng} um ({v['meaning']})")
+    return "; ".join(out)
+
+
 def report_text(d: Diagnosis) -> str:
     """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
     D = d.to_dict()
@@ -62,6 +76,9 @@ def report_text(d: Diagnosis) -> str:
                      f"{c['heldout_chi2_reduction']:11.1f}{c['heldout_rms_ratio']:11.3f}  {'*' if c['significant'] else ''}")
     if len(D["candidates"]) > 10:
         lines.append(f"  ... {len(D['candidates']) - 10} more in --json")
+    if D.get("detectable"):
+        lines.append("detectable at 95 % power on these poses (metrology.diagnosis.detectable):")
+        lines += [f"  {x}" for x in detectable_words(D).split("; ")]
     if D["causes"]:
         lines.append("")
         lines.append("residuals after each step of the selection (in-sample RMS um per sensor; held-out RMS um)")

@@ -185,7 +185,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     """``metro diagnose``: the held-out normal deviation against the drilling tolerance, the
     cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
-    from metrology.report.diagnose import UNEXPLAINED_NEXT, diagnosis_figures, report_text
+    from metrology.report.diagnose import UNEXPLAINED_NEXT, detectable_words, diagnosis_figures, report_text
 
     D = diag.to_dict()
     cause = D["cause"]
@@ -205,6 +205,8 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
         limits.append("the residuals are not consistent with the stated noise, and no catalogued effect explains them")
     if cause == "none":
         limits.append("no effect above the detectable sizes; smaller ones are not ruled out")
+    if D.get("detectable"):
+        limits.append("detectable at 95 % power on these poses: " + detectable_words(D))
     limits += [c["message"] for c in D["confounding"]]
     tables = []
     disc = D["discrepancy"]
