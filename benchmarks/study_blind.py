@@ -128,8 +128,9 @@ def _seen_size(case, effect):
 def _detect_size(case, effect):
     """The truth in the definition of ``metro diagnose``'s ``detectable`` (what its test sees):
 
-    - pose_error: RMS over the readings of what the pose error changes (the beams cast from the
-      reported poses against the true ones, the true head);
+    - pose_error: RMS over the poses of the offset part of what the pose error changes (the mean
+      over a pose's sensors of the beams cast from the reported pose less those from the true one,
+      the true head); the tilt part is extra, seen only with 4 sensors;
     - nonlinearity: peak-to-valley of the true characteristic less its best straight line over
       the true distances the sensor saw (the gain is the scale's business);
     - outliers: the smallest gross reading (mm);
@@ -141,8 +142,8 @@ def _detect_size(case, effect):
     if effect.family == "pose_error":
         ex = case.export
         hit = cast_beams(case.surface, case.true.zero, case.true.direction, ex.tcs2tracker_rot, ex.tcs2tracker_trans)
-        diff = hit.d - case.d_true
-        return float(np.sqrt(np.nanmean(diff**2)))
+        common = np.nanmean(hit.d - case.d_true, axis=1)  # the offset part a pose (tilts are extra)
+        return float(np.sqrt(np.mean(common**2)))
     if effect.family == "nonlinearity":
         sh = dict(effect.shape)
         shape, lo, hi = sh.pop("shape"), sh.pop("lo_mm"), sh.pop("hi_mm")
