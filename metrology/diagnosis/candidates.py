@@ -57,10 +57,18 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
     height, (lo, hi) = PlaneForm.scan_surface(ds.datum_points, ds.plane.normal, ds.plane.offset, centre)
     from metrology.core.plane import plane_basis
 
-    w_grid = height((ds.datum_points - centre) @ plane_basis(ds.plane.normal).T)  # where the tracker scanned
+    st_grid = (ds.datum_points - centre) @ plane_basis(ds.plane.normal).T
+    w_grid = height(st_grid)  # where the tracker scanned
     w = height(cov.spot_st)
-    ptp = float(np.nanmax(w_grid) - np.nanmin(w_grid))
-    return replace(cov, scan_w=w, scan_ptp_mm=ptp)
+    # the form's size is beyond the plane: the scan's own best plane removed (the fitted plane's
+    # tilt against it is the plane's business, carried as a nuisance in the fit)
+    ok = np.isfinite(w_grid)
+    A = np.column_stack([np.ones(int(ok.sum())), st_grid[ok]])
+    beyond = w_grid[ok] - A @ np.linalg.lstsq(A, w_grid[ok], rcond=None)[0]
+    hi_, lo_ = int(np.argmax(beyond)), int(np.argmin(beyond))
+    ptp = float(beyond[hi_] - beyond[lo_])
+    se = height.stderr(st_grid[ok][[hi_, lo_]])
+    return replace(cov, scan_w=w, scan_ptp_mm=ptp, scan_ptp_se_mm=float(np.hypot(*se)))
 
 
 

@@ -20,7 +20,7 @@ from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag
 from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.detectable import detectable_sizes
-from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of
+from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, p_better
@@ -251,8 +251,9 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     causes = []
     for j in kept:
         s = chosen[j]
-        d = describe_named(f, nominal, obs, b.cov, b.sigma, rng, which=j)
-        d.update({"cause": s.cause, "sensors": s.sensors, "size": size_of(f, j, b.cov, b.d0),
+        d = describe_named(f, nominal, obs, b.cov, b.sigma, rng, which=j, theta_ref=b.theta0)
+        size = with_model_spread(size_of(f, j, b.cov, b.d0), s, steps[j].scored, b.cov, b.d0)
+        d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                   "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                   "p_insample": s.p_insample, "step": j + 1})
         causes.append(d)

@@ -40,9 +40,11 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
     C = f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params]
     v = comp.values
     if comp.name == "plane_form" and getattr(comp, "order", None) == 0 and np.isfinite(cov.scan_ptp_mm):
-        return {"value": abs(float(v[2])) * cov.scan_ptp_mm, "stderr": float(np.sqrt(max(C[2, 2], 0.0))) * cov.scan_ptp_mm,
-                "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud, times the gain the "
-                                        "readings see"}
+        g, se_g = abs(float(v[2])), float(np.sqrt(max(C[2, 2], 0.0)))
+        se_ptp = float(getattr(cov, "scan_ptp_se_mm", 0.0) or 0.0)
+        return {"value": g * cov.scan_ptp_mm, "stderr": float(np.hypot(se_g * cov.scan_ptp_mm, g * se_ptp)),
+                "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud (beyond its best "
+                                        "plane), times the gain the readings see"}
     if comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
         return None
     i = comp.sensors[0]
@@ -71,11 +73,11 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
     return {"value": val, "stderr": se, "unit": "mm", "meaning": meaning}
 
 
-def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0):
+def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_ref=None):
     """The public description of component ``which`` of ``f`` (default its first): parameters
     with standard errors and their largest correlations with the base parameters; for a pose
-    error the noise-corrected sigma (parametric bootstrap, ``rng``), for outliers the flagged
-    readings."""
+    error the noise-corrected sigma (parametric bootstrap, ``rng``; for a rigid one, of the fit
+    that holds the geometry at ``theta_ref``), for outliers the flagged readings."""
     comp = f.components[which]
     d = comp.describe()
     if isinstance(comp, PoseError):
@@ -83,8 +85,18 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0):
         # the spread that reading noise alone puts in them (through the per-pose fit and the
         # base parameters it trades with), measured on noise-only simulations of these poses
         m = comp.per_pose_columns
-        e = np.asarray(comp.values).reshape(-1, m)[:, 0]
-        model = replace(f.model(nominal), components=())
+        fv, held = f, comp
+        if comp.tilts and theta_ref is not None:
+            # the per-pose values of the fit that holds the geometry at ``theta_ref`` (the base
+            # calibration), as the member was scored: freed, the geometry moves along what one
+            # reading a pose leaves weak, and the values take it up (0.5 mm on the bundled set
+            # for a 5 um tracker noise)
+            comps = tuple(replace(c, values=None, stderr=None, **({"hold": True} if k == which else {}))
+                          for k, c in enumerate(f.components))
+            fv = fit_any(nominal, obs, cov, sigma, comps, theta_ref, "lsq")
+            held = fv.components[which]
+        e = np.asarray(held.values).reshape(-1, m)[:, 0]
+        model = replace(fv.model(nominal), components=())
         d_model = model.predict(obs.normal, obs.offset, cov)
 
         def estimate(e_sim):
@@ -95,8 +107,8 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0):
                 if e_sim is not None:
                     dn = dn + rng.normal(0.0, e_sim, len(dn))[:, None] * cov.inv_nu
                 dn = np.where(np.isfinite(obs.d), dn, np.nan)
-                fn = fit(nominal, Observations(obs.normal, obs.offset, dn), cov, sigma, [replace(comp, values=None)],
-                         theta0=f.theta, solver="gn")
+                fn = fit(nominal, Observations(obs.normal, obs.offset, dn), cov, sigma, [replace(held, values=None)],
+                         theta0=fv.theta, solver="gn")
                 vals.append(np.var(np.asarray(fn.components[0].values).reshape(-1, m)[:, 0], ddof=1))
             return np.array(vals)
 
@@ -111,7 +123,7 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0):
                        "noise_floor_mm": {"value": float(np.sqrt(v_floor)), "unit": "mm", "stderr": None}}
         d["per_pose_mm"] = e.tolist()
         if comp.tilts:  # the two tilts a pose (mm at RADIUS_MM), raw spread: what a rigid error adds
-            t = np.asarray(comp.values).reshape(-1, m)[:, 1:]
+            t = np.asarray(held.values).reshape(-1, m)[:, 1:]
             d["params"]["tilt_sigma_rad"] = {"value": float(np.std(t, ddof=1) / comp.RADIUS_MM), "unit": "rad",
                                              "stderr": None}
     if isinstance(comp, Outliers):
@@ -152,3 +164,33 @@ def dof_per_sensor(f: Fit, obs, n):
             dof -= (c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0]))) / n
     return dof
 
+
+
+def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None:
+    """``size`` (of :func:`size_of`) with the spread of the family's other members added to its
+    standard error: the members significant at the step where ``chosen`` was selected, on its
+    sensors, that it does not predict held-out poses significantly better than (``alpha_order``).
+
+    The data cannot choose between those members, and each gives its own size of the effect (a
+    warm-cool drift as linear in temperature or as lagged, an S-curve as a gain or a spline):
+    their largest difference from the size named is the model's share of the uncertainty,
+    added in quadrature (``stderr``; the fit's own is ``stderr_fit``, the spread ``model_spread``).
+    """
+    from metrology.diagnosis.select import family_of, p_better
+    from metrology.diagnosis.thresholds import THRESHOLDS
+
+    if size is None or size.get("stderr") is None:
+        return size
+    spread = 0.0
+    for m in scored:
+        if m is chosen or m.label == chosen.label or not m.significant:
+            continue
+        if family_of(m.component) != family_of(chosen.component):
+            continue
+        if p_better(chosen, m) < THRESHOLDS["alpha_order"]:
+            continue  # the named member predicts held-out poses better: not a rival
+        s = size_of(m.fit, len(m.fit.components) - 1, cov, d0)
+        if s is not None and s.get("meaning") == size.get("meaning") and np.isfinite(s["value"]):
+            spread = max(spread, abs(abs(s["value"]) - abs(size["value"])))
+    return {**size, "stderr": float(np.hypot(size["stderr"], spread)), "stderr_fit": size["stderr"],
+            "model_spread": spread}

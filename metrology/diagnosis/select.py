@@ -224,22 +224,9 @@ def flags_of(chosen):
 
 def joint_fit(ds, b, chosen) -> Fit:
     """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``),
-    the geometry free; with a rigid pose error the geometry is held where the other causes put
-    it, as when it was scored.
-
-    A per-pose offset and two tilts absorb much more of the geometry than a rigid motion of the
-    head: on the bundled 100-pose set (4 sensors, 14 poses with a blank) the base Jacobian with
-    each pose's offset and tilts projected out has 8 zero singular values and 4 more below 1e-4
-    of the largest, and the rest are weak. Left free, the geometry wandered (0.66 deg on a beam
-    direction) and the per-pose values took it up: a pose error of 7.7 mm was reported for a
-    tracker noise of 5 um. One reading in four per pose cannot carry the geometry; the poses
-    without the per-pose error can.
-    """
-    comps = tuple(replace(s.component, values=None, stderr=None) for s in chosen)
-    rigid = [c for c in comps if isinstance(c, PoseError) and c.holds_base]
-    theta = b.theta0
-    if rigid:
-        others = tuple(c for c in comps if c not in rigid)
-        if others:
-            theta = fit_any(ds.layout, ds.obs, b.cov, b.sigma, others, b.theta0, "lsq").theta
-    return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, theta, "lsq")
+    the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
+    it free and the directions of the geometry its per-pose values absorb held: see
+    :func:`metrology.diagnosis.fit._absorbed_modes`)."""
+    comps = tuple(replace(s.component, values=None, stderr=None, **({"hold": False} if isinstance(s.component, PoseError)
+                                                                     else {})) for s in chosen)
+    return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")

@@ -71,7 +71,9 @@ class Covariates:
     range_mm : (n, 2) float, mm, the readings' normalisation interval ``[lo, hi]``
     scan_w : (p, n) float, mm, or None: the datum's deviation from its plane at each spot as
         the tracker scanned it (a local fit to the datum cloud; None without a cloud)
-    scan_ptp_mm : float, mm, the scanned deviation's peak-to-valley over the cloud (NaN without)
+    scan_ptp_mm : float, mm, the scanned deviation's peak-to-valley over the cloud beyond its own
+        best plane (NaN without)
+    scan_ptp_se_mm : float, mm, its standard error (the scan surface's at its two extremes)
     d_span : (n, 2) float, mm, or None: the span of the readings each sensor gave (min, max)
     temp_lag : (p, m) float, deg C, or None: the temperature history seen through first-order
         lags of time constants :data:`LAG_FRACTIONS` of the run (:func:`lagged_temperature`;
@@ -86,6 +88,7 @@ class Covariates:
     range_mm: np.ndarray
     scan_w: np.ndarray | None = None
     scan_ptp_mm: float = float("nan")
+    scan_ptp_se_mm: float = 0.0
     d_span: np.ndarray | None = None
     temp_lag: np.ndarray | None = None
 

@@ -95,8 +95,8 @@ class PlaneForm(Component):
 
         points : (m, 3) float, mm, tracker frame; plane_normal : (3,) unit; plane_offset : mm;
         centre : (3,) mm, tracker frame. Returns ``(w, box)``: ``w(st)`` a function of in-plane
-        positions ``(..., 2)`` mm from ``centre`` giving mm (NaN outside the box), and ``box``
-        ``(lo (2,), hi (2,))`` mm.
+        positions ``(..., 2)`` mm from ``centre`` giving mm (NaN outside the box), with
+        ``w.stderr(st)`` its standard error (mm), and ``box`` ``(lo (2,), hi (2,))`` mm.
         """
         from numpy.polynomial import legendre
 
@@ -127,7 +127,10 @@ class PlaneForm(Component):
             if best is None or err < best[0]:
                 best = (err, deg)
         deg = 1 if best is None else best[1]
-        coef = np.linalg.lstsq(design(st, deg), w, rcond=None)[0]
+        V = design(st, deg)
+        coef = np.linalg.lstsq(V, w, rcond=None)[0]
+        s2 = float(np.sum((V @ coef - w) ** 2)) / max(len(w) - V.shape[1], 1)
+        cov_coef = np.linalg.pinv(V.T @ V, rcond=1e-12, hermitian=True) * s2
 
         def height(st_query):
             q = np.asarray(st_query, float)
@@ -138,6 +141,19 @@ class PlaneForm(Component):
                 out[ok] = design(flat[ok], deg) @ coef
             return out.reshape(q.shape[:-1])
 
+        def stderr(st_query):
+            """Standard error (mm) of ``height`` at ``st_query (..., 2)`` (the tracker's noise
+            through the fit; NaN outside the box)."""
+            q = np.asarray(st_query, float)
+            flat = q.reshape(-1, 2)
+            ok = np.all(np.isfinite(flat), axis=1) & np.all((flat >= lo) & (flat <= hi), axis=1)
+            out = np.full(len(flat), np.nan)
+            if np.any(ok):
+                D = design(flat[ok], deg)
+                out[ok] = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", D, cov_coef, D), 0.0))
+            return out.reshape(q.shape[:-1])
+
+        height.stderr = stderr
         return height, (lo, hi)
 
     def monomials(self, st_mm):
