@@ -230,6 +230,8 @@ def summarize(records: list, det: dict) -> dict:
                    for v, s in [r["sizes"].get(f) or (None, None)] if v is not None]
         fam[f] = {"n": len(rs), "right": int(sum(right)), "n_inside": len(inside), "right_inside": int(sum(right_in)),
                   "n_detectable": len(above), "right_detectable": int(sum(right_above)),
+                  "detectable_median": float(np.median([r["truth"][0]["detectable"] for r in rs
+                                                        if r["truth"][0].get("detectable") is not None] or [np.nan])),
                   "wrong_named": int(sum(bool(r["named"]) and not ok for r, ok in zip(rs, right))),
                   "n_size": len(cov), "covered_2sigma": int(sum(covered))}
     out["families"] = fam
@@ -271,13 +273,13 @@ def report(s: dict) -> str:
         lines.append(f"{f:14s}" + "".join(f"{row.get(c, 0):12d}" for c in cols))
     lines += ["", "right cause and sensor per family (sensors not scored for pose_error, plane_form)",
               f"{'family':14s}{'all draws':>16s}{'detectable':>16s}{'wrong cause':>13s}{'upper 2/3':>16s}  "
-              f"{'range':>12s}{'size 2-sigma':>16s}"]
+              f"{'range':>12s}{'size 2-sigma':>16s}{'median det.':>13s}"]
     for f, r in s["families"].items():
         lo, hi = s["detectable"][f]
         cov = _pct(r["covered_2sigma"], r["n_size"]) if r["n_size"] else "n/a"
         lines.append(f"{f:14s}{_pct(r['right'], r['n']):>16s}{_pct(r['right_detectable'], r['n_detectable']):>16s}"
                      f"{r['wrong_named']:>13d}{_pct(r['right_inside'], r['n_inside']):>16s}  "
-                     f"{f'{lo:.3g}-{hi:.3g}':>12s}{cov:>16s}")
+                     f"{f'{lo:.3g}-{hi:.3g}':>12s}{cov:>16s}{r.get('detectable_median', float('nan')):13.3g}")
     n = s["null"]
     lines += ["", f"null false-cause rate: {_pct(n['false_cause'], n['n'])}, 95 % CP "
                   f"[{100 * n['ci95'][0]:.2f}, {100 * n['ci95'][1]:.2f}] % (catalogued named {n['named_catalogued']})"]
