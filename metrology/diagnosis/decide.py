@@ -245,7 +245,9 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     for j in list(kept):
         if chosen[j].cause in ("scale", "nonlinearity"):
             xtalk[j] = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
-            if xtalk[j]["better"] is not None:
+            if xtalk[j]["better"] is not None or xtalk[j]["indistinguishable"]:
+                # crosstalk is outside the catalogue: a characteristic is named only where it
+                # predicts held-out poses better than a shift with every other sensor's distance
                 kept.remove(j)
     gains = drop_one_gains(ds, b, chosen, folds)
     causes = []
@@ -263,9 +265,13 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
         xt = next((x for x in xtalk.values() if x["better"]), None)
+        amb = next(((j, x) for j, x in xtalk.items() if x["indistinguishable"]), None)
         if xt is not None:  # the characteristic follows another sensor: crosstalk, outside the catalogue
             lead = replace(chosen[0], label=f"{xt['better']} (crosstalk: predicts held-out poses better than "
                                             f"{chosen[0].label}, p = {xt['p']:.2g})")
+        elif amb is not None:  # a gain error or crosstalk: these poses cannot tell
+            lead = replace(chosen[amb[0]], label=f"{', '.join(amb[1]['indistinguishable'])} (crosstalk: predicts "
+                                                 f"held-out poses as well as {chosen[amb[0]].label})")
         p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead)
@@ -422,4 +428,4 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
                      dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)),
-                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0)))
+                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))

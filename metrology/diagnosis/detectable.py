@@ -10,7 +10,8 @@ member's covariance at the stated noise. This is the limit of detection in the I
 own; an effect of another shape in the family is detected at about this size when the member
 follows it, later when it does not. The held-out test must also pass, so this is a lower bound.
 
-- ``scale``: peak-to-valley of the gain error over the readings' span (mm);
+- ``scale``: peak-to-valley of the gain error over the readings' span (mm), large enough to be
+  told from crosstalk too (a shift with another sensor's distance, which it must beat to be named);
 - ``nonlinearity``: peak-to-valley of a bow (the P2 term alone) over the readings' span (mm);
 - ``drift``: peak-to-valley over the run of a drift linear in time, or in temperature where
   that member is the more sensitive (mm);
@@ -89,11 +90,32 @@ def _direction(c):
     return None
 
 
-def detectable_sizes(scored, b, n_obs) -> dict:
+def _scale_against_crosstalk(b, ds, i) -> float:
+    """``|d0_i|`` left once the sensor's five base columns and the most collinear other sensor's
+    distance ``d0_j`` (crosstalk, which ``scale`` must beat to be named) are projected out (mm)."""
+    from metrology.core.model import jacobian_tangent
+
+    nominal, obs = ds.layout, ds.obs
+    th = b.theta0
+    J = jacobian_tangent(nominal.zero + th[:, :3], nominal.direction, th[:, 3:], obs.normal, obs.offset)
+    rows = np.isfinite(obs.d[:, i])
+    x = b.d0[rows, i]
+    worst = np.inf
+    for j in range(nominal.n):
+        if j == i:
+            continue
+        A = np.column_stack([J[rows, i, :], b.d0[rows, j]])
+        r = x - A @ np.linalg.lstsq(A, x, rcond=None)[0]
+        worst = min(worst, float(np.linalg.norm(r)))
+    return worst
+
+
+def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
     """Per family and sensor, the size detectable at 95 % power on these poses (see the module).
 
     scored : the first step's CandidateResults; b : the BaseAnalysis; n_obs : (n,) int, finite
-    readings per sensor. Returns ``{family: {"sensors": {name: mm}, "member": label, "meaning":
+    readings per sensor; ds : the Dataset (for the scale against crosstalk; without it, the
+    scale's size is against the base geometry alone). Returns ``{family: {"sensors": {name: mm}, "member": label, "meaning":
     str}}`` (for set-up families the one value under ``"all"``).
     """
     from scipy import stats
@@ -102,7 +124,7 @@ def detectable_sizes(scored, b, n_obs) -> dict:
     alpha = THRESHOLDS["alpha_candidates"] / n_cand
     out: dict = {}
     meaning = {
-        "scale": "peak-to-valley of a gain error over the readings' span",
+        "scale": "peak-to-valley of a gain error over the readings' span, told from crosstalk",
         "nonlinearity": "peak-to-valley of a bow (P2) over the readings' span",
         "drift": "peak-to-valley over the run of a linear drift",
         "incidence": "bias at the largest incidence angle seen",
@@ -122,6 +144,13 @@ def detectable_sizes(scored, b, n_obs) -> dict:
             k = max(int(c.n_params), 1)
             lam = noncentrality_95(k, c.fit.dof, alpha)
             det = size_v * float(np.sqrt(lam / info))
+            if c.cause == "scale" and ds is not None and ds.layout.n > 1:
+                # named only where it beats crosstalk (metrology.diagnosis.crosstalk): the gain's
+                # part that no other sensor's distance carries
+                i = c.component.sensors[0]
+                lo, hi = b.cov.d_span[i] if b.cov.d_span is not None else b.cov.range_mm[i]
+                r = _scale_against_crosstalk(b, ds, i)
+                det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
         elif c.cause == "pose_error" and c.component.per_pose_columns == 1:
             # lambda = (readings - base parameters) s^2 / sigma^2 for independent offsets of RMS s
             S = list(range(len(b.sigma)))

@@ -32,6 +32,11 @@ def verdict_summary(v, tb) -> str:
         return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
                 f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm) and no catalogued effect gives a "
                 "significant held-out gain: structure outside the catalogue" + lead)
+    if v.cause == "unexplained" and v.lead is not None and "(crosstalk: predicts held-out poses as well" in v.lead.label:
+        return (f"{v.best.label} gives a significant held-out gain, but so does a shift in proportion to another "
+                f"sensor's distance ({v.lead.label.split(' (')[0]}: crosstalk between sensors, outside the catalogue): "
+                "these poses cannot tell a characteristic of the sensor from crosstalk, so neither is named; to "
+                "separate them, spread the tilts so that the sensors' distances do not move together")
     if v.cause == "unexplained" and v.lead is not None and "(crosstalk:" in v.lead.label:
         return (f"{v.best.label} gives a significant held-out gain, but {v.lead.label}: the effect follows another "
                 "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)")

@@ -29,7 +29,10 @@ def _diagnose(case, tmp_path):
 def _clear(family, seed=11):
     lo, hi = FAMILIES[family].size_range
     size = 5 if family == "outliers" else lo + 0.9 * (hi - lo)
-    return draw_case(np.random.default_rng([seed]), family, size=size, n_poses=80)
+    # a gain error is named only where it is told from crosstalk, and at 14 deg tilts the
+    # sensors' distances move together too much for 0.18 mm (detectable there: 0.24 mm)
+    tilt = 25.0 if family == "scale" else 14.0
+    return draw_case(np.random.default_rng([seed]), family, size=size, n_poses=80, tilt_max_deg=tilt)
 
 
 @pytest.mark.parametrize("seed", [11, 12])
@@ -48,6 +51,15 @@ def test_clear_case_names_cause_and_sensor(family, tmp_path):
     assert res["cause"] == family, res["summary"]
     if family not in ALL_SENSORS:
         assert set(res["sensors"]) == set(case.sensors)
+    if family in ("scale", "drift", "incidence"):  # above what these poses detect, as reported
+        assert case.effects[0].size > res["detectable"][family]["sensors"][case.sensors[0]]
+
+
+def test_crosstalk_is_not_named_a_gain_error(tmp_path):
+    # crosstalk (outside the catalogue) at 14 deg tilts: the gain error that mimics it is not named
+    case = draw_case(np.random.default_rng([11]), "crosstalk", size=0.09, n_poses=80)
+    res = _diagnose(case, tmp_path)
+    assert res["cause"] in ("none", "unexplained") and not res["causes"], res["summary"]
 
 
 def _study():
@@ -67,17 +79,15 @@ def study():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: right-inside-range is below 95 % for pose_error (3 sensors), "
-                                        "incidence and drift (docs/diagnose.md, measured)")
+@pytest.mark.xfail(strict=False, reason="issue 12: right above the case's detectable size is below 95 % for some "
+                                        "families (docs/diagnose.md, measured)")
 def test_study_right_inside_detectable_range(study):
     for fam, r in study["families"].items():
         assert r["n"] >= 20
-        assert r["right_inside"] >= 0.95 * r["n_inside"], (fam, r)
+        assert r["right_detectable"] >= 0.95 * r["n_detectable"], (fam, r)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: on 200 nulls (seed 2) no catalogued cause, but 7 unexplained "
-                                        "(the base battery's false alarms, 3.5 %; docs/diagnose.md)")
 def test_study_null_false_cause_rate(study):
     n = study["null"]
     assert n["n"] >= 200
@@ -85,8 +95,6 @@ def test_study_null_false_cause_rate(study):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: crosstalk that cannot be told from a gain error is still named "
-                                        "scale, with confidence ambiguous (docs/diagnose.md)")
 def test_study_out_of_catalogue_never_catalogued(study):
     assert study["ooc"]["n"] >= 40
     assert study["ooc"]["catalogued_named"] == 0, study["ooc"]
@@ -96,7 +104,7 @@ def test_study_out_of_catalogue_never_catalogued(study):
 @pytest.mark.xfail(strict=False, reason="issue 15: both causes named in fewer than 90 % of the pairs whose sizes are "
                                         "both inside their ranges (docs/diagnose.md, measured)")
 def test_study_pairs_both_named(study):
-    p = study["pairs"]  # issue 15: pairs at sizes inside each family's stated detectable range
-    assert p["n_inside"] >= 10, p
-    assert p["both_right_inside"] >= 0.9 * p["n_inside"], p
+    p = study["pairs"]  # issue 15: pairs at sizes above each family's detectable size
+    assert p["n_detectable"] >= 10, p
+    assert p["both_right_detectable"] >= 0.9 * p["n_detectable"], p
     assert p["wrong_added"] <= 0.02 * p["n"], p
