@@ -108,12 +108,45 @@ def test_too_few_feasible_candidates_is_a_one_line_error(setup):
         plan_poses(layout, plane, extent, 4, limits, layout.noise_mm, np.random.default_rng(0))
 
 
-def test_separating_incidence_adds_its_coefficient_and_shrinks_it(setup):
+def test_separating_incidence_adds_its_coefficient_and_the_gain_and_shrinks_them(setup):
     layout, plane, _, extent, limits = setup
     plan = plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=1000,
                       robustness_trials=0, separate=("incidence",))
     p, r = plan.planned, plan.random
-    assert p.stderr.shape == (layout.n, 6) and p.log_det >= r.log_det
+    assert p.columns == ("incidence", "scale") and p.stderr.shape == (layout.n, 7) and p.log_det >= r.log_det
     assert p.stderr[:, 5].max() < r.stderr[:, 5].max()
-    with pytest.raises(ValueError, match="--separate scale"):
-        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("scale",))
+    assert set(plan.to_dict()["planned"]["sensors"][0]["stderr"]) >= {"incidence_c_mm", "scale_k"}
+    with pytest.raises(ValueError, match="--separate form"):
+        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("form",))
+
+
+def test_the_gain_column_is_the_nominal_reading_and_decorrelates_it_from_incidence(setup):
+    """The scale column is ``d0 / sigma``; a design that has it predicts a smaller standard error
+    of the gain, and a weaker correlation of the gain with the incidence coefficient, on the
+    extended model (five chart parameters, ``c``, ``k``) than the same search on the incidence
+    column alone."""
+    from metrology.core.model import readings
+    from metrology.plan import draw_candidates
+    from metrology.plan.design import covariance, exchange, pose_information, prior_information
+
+    layout, plane, _, extent, limits = setup
+    cands = draw_candidates(np.random.default_rng(2), layout, plane, extent, 1500, limits)
+    pool = np.flatnonzero(feasible(layout, plane, extent, cands, limits))
+    N, D = cands.plane_in_tcs(plane)
+    X = pose_information(layout, N, D, layout.noise_mm, ("incidence", "scale"))
+    d0 = readings(layout.zero, layout.direction, N, D)[0]
+    ok = np.isfinite(d0)
+    np.testing.assert_allclose(X[..., 6][ok], (d0 / layout.noise_mm[None, :])[ok])
+    assert pose_information(layout, N, D, layout.noise_mm, ("scale",)).shape[-1] == 6
+
+    def se_corr(idx):
+        C = covariance(X[idx])
+        return np.sqrt(C[:, 6, 6]).max(), np.max(np.abs(C[:, 5, 6]) / np.sqrt(C[:, 5, 5] * C[:, 6, 6]))
+
+    chosen = {}
+    for cols in (("incidence",), ("incidence", "scale")):
+        Xc = X[..., :5 + len(cols)]
+        prior = prior_information(layout.n, incidence=cols)
+        chosen[cols] = exchange(Xc, greedy_order(Xc, 20, prior, pool), prior, pool)
+    (se_both, r_both), (se_inc, r_inc) = se_corr(chosen[("incidence", "scale")]), se_corr(chosen[("incidence",)])
+    assert se_both < se_inc and r_both < r_inc
