@@ -46,9 +46,14 @@ INCIDENCE_PRIOR_MM = 1.0
 #: against real gain errors (10^-4 to 10^-2)
 SCALE_PRIOR = 0.1
 
+#: prior 1-sigma (mm) of the bow and S-shape ``c2 P2(x) + c3 P3(x)`` of the characteristic
+#: (:class:`metrology.core.effects.sensor.Nonlinearity`); wide against datasheet linearity
+NONLINEARITY_PRIOR_MM = 1.0
+
 #: the extra columns a design may carry per sensor, in this order after the five of the chart,
-#: and their prior 1-sigma
-EXTRA_COLUMNS = {"incidence": INCIDENCE_PRIOR_MM, "scale": SCALE_PRIOR}
+#: and the prior 1-sigma of each of their parameters
+EXTRA_COLUMNS = {"incidence": (INCIDENCE_PRIOR_MM,), "scale": (SCALE_PRIOR,),
+                 "nonlinearity": (NONLINEARITY_PRIOR_MM, NONLINEARITY_PRIOR_MM)}
 
 
 def _extra(extra) -> tuple:
@@ -67,7 +72,7 @@ def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence=()) -> np.nda
     prior covariance per sensor (1/mm^2, 1/rad^2; 1/mm^2 for the incidence coefficient, 1 for
     the gain)."""
     s_pos, s_dir = P0_sigma
-    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [EXTRA_COLUMNS[c] ** -2 for c in _extra(incidence)]
+    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [s**-2 for c in _extra(incidence) for s in EXTRA_COLUMNS[c]]
     return np.broadcast_to(np.diag(diag), (n, len(diag), len(diag))).copy()
 
 
@@ -83,7 +88,9 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=(
     incidence : tuple of str, names of :data:`EXTRA_COLUMNS` (True means ``("incidence",)``)
         Extra columns per sensor, in :data:`EXTRA_COLUMNS` order: ``"incidence"`` the term
         ``tan^2(gamma)`` (``gamma`` the angle between the beam and the datum normal), ``"scale"``
-        the gain term ``d0`` (the nominal reading, mm): the design then also tells those
+        the gain term ``d0`` (the nominal reading, mm), ``"nonlinearity"`` the bow and S-shape
+        ``P2(x), P3(x)`` of the reading normalised over the sensor's range (two columns, as
+        :class:`~metrology.core.effects.sensor.Nonlinearity`): the design then also tells those
         causes from the beam geometry and from each other. On a canted beam both follow the
         tilt (tilting toward the beam shortens the reading and lowers ``gamma``), so a plan
         that spreads tilts alone leaves ``k d0`` and ``c tan^2`` nearly collinear.
@@ -91,7 +98,7 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=(
     Returns
     -------
     X : (p, n, 5 + extra) float, 1/sigma times ``dd/d(x, y, z)`` (1/mm * mm/mm), ``dd/d(a, b)``,
-        ``dd/dc`` and ``dd/dk`` (mm); zero where the beam misses the plane (no reading, no
+        ``dd/dc``, ``dd/dk`` (mm) and ``dd/d(c2, c3)``; zero where the beam misses the plane (no reading, no
         information)
     """
     extra = _extra(incidence)
@@ -101,8 +108,14 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=(
         cos = np.abs(np.asarray(normal, float) @ layout.direction.T)
         with np.errstate(divide="ignore"):
             cols.append(1.0 / cos**2 - 1.0)
+    if "scale" in extra or "nonlinearity" in extra:
+        d0 = readings(layout.zero, layout.direction, normal, offset)[0]
     if "scale" in extra:
-        cols.append(readings(layout.zero, layout.direction, normal, offset)[0])
+        cols.append(d0)
+    if "nonlinearity" in extra:
+        lo, hi = np.asarray(layout.range_mm, float).T
+        x = (2 * d0 - lo - hi) / (hi - lo)
+        cols += [0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)]
     if cols:
         J = np.concatenate([J, np.stack(cols, axis=-1)], axis=-1)
     X = J / np.asarray(sigma_mm, float)[None, :, None]

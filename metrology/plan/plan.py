@@ -25,19 +25,25 @@ from metrology.plan.extent import DatumExtent
 __all__ = ["Design", "PosePlan", "plan_poses", "design_for", "design_columns", "CRITERION", "SEPARABLE"]
 
 #: causes a plan can be asked to separate from the sensor parameters (``--separate``)
-SEPARABLE = ("incidence", "scale")
+SEPARABLE = ("incidence", "scale", "nonlinearity")
 
 
 def design_columns(separate) -> tuple:
     """The extra design columns per sensor (:data:`metrology.plan.design.EXTRA_COLUMNS`) that
-    separating the causes ``separate`` takes: each cause its own, and ``incidence`` the gain
-    ``scale`` as well. On a canted beam the reading and the incidence angle both follow the
-    tilt (tilting toward the beam shortens the reading and lowers the angle), so a plan that
-    spreads incidence angles alone leaves ``c tan^2(gamma)`` nearly collinear with ``k d0``
-    (correlation about -0.7 over the poses on the paper's Table 6 head) and ``diagnose`` then
-    cannot tell the incidence bias from a gain error."""
-    want = set(separate) | ({"scale"} if "incidence" in separate else set())
+    separating the causes ``separate`` takes: ``scale`` the gain, ``nonlinearity`` the gain and
+    the curve, ``incidence`` its own and the whole characteristic (gain and curve).
+
+    On a canted beam the reading and the incidence angle both follow the tilt (tilting toward
+    the beam moves its zero point by the lever ``r sin(tilt)`` and turns the angle), so a plan
+    that spreads incidence angles alone leaves ``c tan^2(gamma)`` nearly collinear with a
+    smooth function of the reading (on the paper's Table 6 head, 100 poses at 20 deg: the
+    standard error of ``c`` given the gain and curve is twice what it is given the gain
+    alone), and ``diagnose`` then names the characteristic for an incidence bias."""
+    want = set(separate)
+    if "incidence" in want or "nonlinearity" in want:
+        want |= {"scale", "nonlinearity"} if "incidence" in want else {"scale"}
     return tuple(c for c in EXTRA_COLUMNS if c in want)
+
 
 #: the design criterion, in words (for reports)
 CRITERION = ("Bayesian D-optimality: maximise sum over sensors of log det of the information on the five "
@@ -54,7 +60,8 @@ class Design:
     label : str, "planned" or "random"
     poses : PoseSet, in the order to take them
     stderr : (n, 5 + e) float, mm (x, y, z), rad (tilt_e1, tilt_e2), then the extra columns
-        (:func:`design_columns`): the incidence coefficient (mm) and the gain (unitless), data only
+        (:func:`design_columns`): the incidence coefficient (mm), the gain (unitless), the
+        curve's c2, c3 (mm), data only
     normal_sigma_rad : float, rad, predicted 1-sigma of the measured normal at the working stand-off
     log_det : float, the criterion (:func:`metrology.plan.design.log_det`)
     curve : dict of (k,) arrays: ``k``, ``normal_sigma_rad``, ``zero_sigma_max_mm``,
@@ -74,8 +81,10 @@ class Design:
     columns: tuple = ()
 
     def _extra_stderr(self, i) -> dict:
-        keys = {"incidence": "incidence_c_mm", "scale": "scale_k"}
-        return {keys[c]: float(self.stderr[i, 5 + j]) for j, c in enumerate(self.columns)}
+        keys = {"incidence": ("incidence_c_mm",), "scale": ("scale_k",),
+                "nonlinearity": ("nonlinearity_c2_mm", "nonlinearity_c3_mm")}
+        names = [k for c in self.columns for k in keys[c]]
+        return {k: float(self.stderr[i, 5 + j]) for j, k in enumerate(names)}
 
     def to_dict(self, names) -> dict:
         inf_none = lambda a: [None if not np.isfinite(v) else float(v) for v in np.asarray(a, float)]  # noqa: E731
@@ -207,8 +216,8 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
         the designs are re-evaluated ``robustness_trials`` times with every pose moved that much
     seed : int, optional, recorded in the result
     separate : tuple of str, causes the design must also tell from the sensor parameters:
-        ``("incidence",)`` adds each sensor's incidence coefficient and gain to the D-criterion,
-        ``("scale",)`` the gain alone (:func:`design_columns`)
+        ``("incidence",)`` adds each sensor's incidence coefficient, gain and curve to the
+        D-criterion, ``("scale",)`` the gain alone (:func:`design_columns`)
 
     Returns
     -------
