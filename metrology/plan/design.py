@@ -29,8 +29,8 @@ from metrology.calibration.estimators import DEFAULT_P0_SIGMA
 from metrology.core.layout import SensorLayout
 from metrology.core.model import jacobian_tangent, readings
 
-__all__ = ["pose_information", "prior_information", "INCIDENCE_PRIOR_MM", "SCALE_PRIOR", "EXTRA_COLUMNS",
-           "greedy_order", "exchange", "log_det", "covariance", "MAX_EXCHANGES"]
+__all__ = ["pose_information", "prior_information", "INCIDENCE_PRIOR_MM", "SCALE_PRIOR", "NONLINEARITY_PRIOR_MM",
+           "EXTRA_COLUMNS", "greedy_order", "exchange", "log_det", "covariance", "MAX_EXCHANGES"]
 
 #: most Fedorov exchanges tried after the greedy pass (each one raises det)
 MAX_EXCHANGES = 200
@@ -69,8 +69,8 @@ def _extra(extra) -> tuple:
 def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence=()) -> np.ndarray:
     """``(n, m, m)`` float, m = 5 plus one per extra column (``incidence``: a tuple of
     :data:`EXTRA_COLUMNS` names, or True for ``("incidence",)``): the inverse of the filters'
-    prior covariance per sensor (1/mm^2, 1/rad^2; 1/mm^2 for the incidence coefficient, 1 for
-    the gain)."""
+    prior covariance per sensor (1/mm^2, 1/rad^2; then 1/mm^2 for the incidence coefficient,
+    unitless for the gain, 1/mm^2 for the curve's c2, c3)."""
     s_pos, s_dir = P0_sigma
     diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [s**-2 for c in _extra(incidence) for s in EXTRA_COLUMNS[c]]
     return np.broadcast_to(np.diag(diag), (n, len(diag), len(diag))).copy()
