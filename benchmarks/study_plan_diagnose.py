@@ -7,7 +7,11 @@ size ``--size-mm`` at the largest incidence either pose set reaches) on one sens
 function for both sets; noise 5 um. ``diagnose`` runs on each; reported: how often it names
 incidence on the right sensor, and what else it names.
 
-    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--size-mm 0.08] [--separate incidence] [--tilt-max-deg 10]
+    nice -n 10 python benchmarks/study_plan_diagnose.py [--seeds 8] [--first-seed 0] [--poses 40] [--size-mm 0.08]
+        [--separate incidence] [--tilt-max-deg 10]
+
+``--separate incidence`` plans with the incidence coefficient and the sensor's characteristic
+(gain, bow, S-shape) in the D-criterion (:func:`metrology.plan.plan.design_columns`).
 """
 
 from __future__ import annotations
@@ -70,7 +74,7 @@ def main() -> None:
     ap.add_argument("--noise-mm", type=float, default=0.005)
     ap.add_argument("--kind", default="table6")
     ap.add_argument("--tilt-max-deg", type=float, default=10.0)
-    ap.add_argument("--separate", default="", help="passed to the plan: 'incidence' adds it to the criterion")
+    ap.add_argument("--separate", default="", help="passed to the plan (comma-separated): incidence, scale, nonlinearity")
     args = ap.parse_args()
     t0 = time.process_time()
     sep = tuple(filter(None, args.separate.split(",")))

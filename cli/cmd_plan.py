@@ -49,7 +49,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="Seed of the candidates and the robot-error trials."),
         out: Optional[str] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
         plot: Optional[str] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),
-        separate: Optional[str] = typer.Option(None, "--separate", help="Also tell these causes from the sensor parameters (comma-separated): incidence."),
+        separate: Optional[str] = typer.Option(None, "--separate", help="Also tell these causes from the sensor parameters (comma-separated): incidence (with the gain and curve), scale, nonlinearity."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The plan and its predictions."),
     ) -> None:
         """Plan the calibration poses: D-optimal for the identifiable parameters, feasible, ordered."""

@@ -27,10 +27,10 @@ import numpy as np
 
 from metrology.calibration.estimators import DEFAULT_P0_SIGMA
 from metrology.core.layout import SensorLayout
-from metrology.core.model import jacobian_tangent
+from metrology.core.model import jacobian_tangent, readings
 
-__all__ = ["pose_information", "prior_information", "INCIDENCE_PRIOR_MM", "greedy_order", "exchange", "log_det",
-           "covariance", "MAX_EXCHANGES"]
+__all__ = ["pose_information", "prior_information", "INCIDENCE_PRIOR_MM", "SCALE_PRIOR", "NONLINEARITY_PRIOR_MM",
+           "EXTRA_COLUMNS", "greedy_order", "exchange", "log_det", "covariance", "MAX_EXCHANGES"]
 
 #: most Fedorov exchanges tried after the greedy pass (each one raises det)
 MAX_EXCHANGES = 200
@@ -41,16 +41,42 @@ MAX_EXCHANGES = 200
 #: also separates incidence from the beam direction; wide against the catalogue's 0.02-0.15 mm
 INCIDENCE_PRIOR_MM = 1.0
 
+#: prior 1-sigma (unitless) of a gain error ``k`` (bias ``k d0``:
+#: :class:`metrology.core.effects.sensor.Scale`) when the design also separates it; wide
+#: against real gain errors (10^-4 to 10^-2)
+SCALE_PRIOR = 0.1
 
-def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence: bool = False) -> np.ndarray:
-    """``(n, m, m)`` float, m = 5 (6 with ``incidence``): the inverse of the filters' prior
-    covariance per sensor (1/mm^2, 1/rad^2; and 1/mm^2 for the incidence coefficient)."""
+#: prior 1-sigma (mm) of the bow and S-shape ``c2 P2(x) + c3 P3(x)`` of the characteristic
+#: (:class:`metrology.core.effects.sensor.Nonlinearity`); wide against datasheet linearity
+NONLINEARITY_PRIOR_MM = 1.0
+
+#: the extra columns a design may carry per sensor, in this order after the five of the chart,
+#: and the prior 1-sigma of each of their parameters
+EXTRA_COLUMNS = {"incidence": (INCIDENCE_PRIOR_MM,), "scale": (SCALE_PRIOR,),
+                 "nonlinearity": (NONLINEARITY_PRIOR_MM, NONLINEARITY_PRIOR_MM)}
+
+
+def _extra(extra) -> tuple:
+    """The extra columns asked for, in :data:`EXTRA_COLUMNS` order (a bool is ``("incidence",)``)."""
+    if isinstance(extra, bool):
+        extra = ("incidence",) if extra else ()
+    unknown = [c for c in extra if c not in EXTRA_COLUMNS]
+    if unknown:
+        raise ValueError(f"extra design columns {unknown}: expected some of {list(EXTRA_COLUMNS)}")
+    return tuple(c for c in EXTRA_COLUMNS if c in extra)
+
+
+def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence=()) -> np.ndarray:
+    """``(n, m, m)`` float, m = 5 plus one per extra column (``incidence``: a tuple of
+    :data:`EXTRA_COLUMNS` names, or True for ``("incidence",)``): the inverse of the filters'
+    prior covariance per sensor (1/mm^2, 1/rad^2; then 1/mm^2 for the incidence coefficient,
+    unitless for the gain, 1/mm^2 for the curve's c2, c3)."""
     s_pos, s_dir = P0_sigma
-    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + ([INCIDENCE_PRIOR_MM**-2] if incidence else [])
+    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [s**-2 for c in _extra(incidence) for s in EXTRA_COLUMNS[c]]
     return np.broadcast_to(np.diag(diag), (n, len(diag), len(diag))).copy()
 
 
-def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence: bool = False) -> np.ndarray:
+def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=()) -> np.ndarray:
     """Whitened Jacobian rows of every reading at every pose.
 
     Parameters
@@ -59,21 +85,39 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence: 
     normal : (p, 3) float, unit, TCS; offset : (p,) float, mm: the datum at each pose
     sigma_mm : (n,) float, mm, reading noise
 
-    incidence : bool
-        Add a sixth column per sensor, the incidence term ``tan^2(gamma)`` (``gamma`` the angle
-        between the beam and the datum normal): the design then also tells an incidence bias
-        from the beam direction, which it otherwise confounds.
+    incidence : tuple of str, names of :data:`EXTRA_COLUMNS` (True means ``("incidence",)``)
+        Extra columns per sensor, in :data:`EXTRA_COLUMNS` order: ``"incidence"`` the term
+        ``tan^2(gamma)`` (``gamma`` the angle between the beam and the datum normal), ``"scale"``
+        the gain term ``d0`` (the nominal reading, mm), ``"nonlinearity"`` the bow and S-shape
+        ``P2(x), P3(x)`` of the reading normalised over the sensor's range (two columns, as
+        :class:`~metrology.core.effects.sensor.Nonlinearity`): the design then also tells those
+        causes from the beam geometry and from each other. On a canted beam both follow the
+        tilt (tilting toward the beam shortens the reading and lowers ``gamma``), so a plan
+        that spreads tilts alone leaves ``k d0`` and ``c tan^2`` nearly collinear.
 
     Returns
     -------
-    X : (p, n, 5 or 6) float, 1/sigma times ``dd/d(x, y, z)`` (1/mm * mm/mm), ``dd/d(a, b)``
-        and ``dd/dc``; zero where the beam misses the plane (no reading, no information)
+    X : (p, n, 5 + extra) float, 1/sigma times ``dd/d(x, y, z)`` (1/mm * mm/mm), ``dd/d(a, b)``,
+        ``dd/dc``, ``dd/dk`` (mm) and ``dd/d(c2, c3)``; zero where the beam misses the plane (no reading, no
+        information)
     """
+    extra = _extra(incidence)
     J = jacobian_tangent(layout.zero, layout.direction, np.zeros((layout.n, 2)), normal, offset)
-    if incidence:
+    cols = []
+    if "incidence" in extra:
         cos = np.abs(np.asarray(normal, float) @ layout.direction.T)
         with np.errstate(divide="ignore"):
-            J = np.concatenate([J, (1.0 / cos**2 - 1.0)[..., None]], axis=-1)
+            cols.append(1.0 / cos**2 - 1.0)
+    if "scale" in extra or "nonlinearity" in extra:
+        d0 = readings(layout.zero, layout.direction, normal, offset)[0]
+    if "scale" in extra:
+        cols.append(d0)
+    if "nonlinearity" in extra:
+        lo, hi = np.asarray(layout.range_mm, float).T
+        x = (2 * d0 - lo - hi) / (hi - lo)
+        cols += [0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)]
+    if cols:
+        J = np.concatenate([J, np.stack(cols, axis=-1)], axis=-1)
     X = J / np.asarray(sigma_mm, float)[None, :, None]
     return np.where(np.isfinite(X), X, 0.0)
 

@@ -18,13 +18,32 @@ from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma
 from metrology.core.layout import SensorLayout
 from metrology.core.plane import Plane
 from metrology.plan.candidates import Limits, PoseSet, draw_candidates, feasible, perturb, pose_readings
-from metrology.plan.design import covariance, exchange, greedy_order, log_det, pose_information, prior_information
+from metrology.plan.design import (EXTRA_COLUMNS, covariance, exchange, greedy_order, log_det, pose_information,
+                                   prior_information)
 from metrology.plan.extent import DatumExtent
 
-__all__ = ["Design", "PosePlan", "plan_poses", "design_for", "CRITERION", "SEPARABLE"]
+__all__ = ["Design", "PosePlan", "plan_poses", "design_for", "design_columns", "CRITERION", "SEPARABLE"]
 
 #: causes a plan can be asked to separate from the sensor parameters (``--separate``)
-SEPARABLE = ("incidence",)
+SEPARABLE = ("incidence", "scale", "nonlinearity")
+
+
+def design_columns(separate) -> tuple:
+    """The extra design columns per sensor (:data:`metrology.plan.design.EXTRA_COLUMNS`) that
+    separating the causes ``separate`` takes: ``scale`` the gain, ``nonlinearity`` the gain and
+    the curve, ``incidence`` its own and the whole characteristic (gain and curve).
+
+    On a canted beam the reading and the incidence angle both follow the tilt (tilting toward
+    the beam moves its zero point by the lever ``r sin(tilt)`` and turns the angle), so a plan
+    that spreads incidence angles alone leaves ``c tan^2(gamma)`` nearly collinear with a
+    smooth function of the reading (on the paper's Table 6 head, 100 poses at 20 deg: the
+    standard error of ``c`` given the gain and curve is twice what it is given the gain
+    alone), and ``diagnose`` then names the characteristic for an incidence bias."""
+    want = set(separate)
+    if "incidence" in want or "nonlinearity" in want:
+        want |= {"scale", "nonlinearity"} if "incidence" in want else {"scale"}
+    return tuple(c for c in EXTRA_COLUMNS if c in want)
+
 
 #: the design criterion, in words (for reports)
 CRITERION = ("Bayesian D-optimality: maximise sum over sensors of log det of the information on the five "
@@ -40,8 +59,9 @@ class Design:
     ----------
     label : str, "planned" or "random"
     poses : PoseSet, in the order to take them
-    stderr : (n, 5 or 6) float, mm (x, y, z), rad (tilt_e1, tilt_e2) and mm (the incidence
-        coefficient, when the plan separates it), data only
+    stderr : (n, 5 + e) float, mm (x, y, z), rad (tilt_e1, tilt_e2), then the extra columns
+        (:func:`design_columns`): the incidence coefficient (mm), the gain (unitless), the
+        curve's c2, c3 (mm), data only
     normal_sigma_rad : float, rad, predicted 1-sigma of the measured normal at the working stand-off
     log_det : float, the criterion (:func:`metrology.plan.design.log_det`)
     curve : dict of (k,) arrays: ``k``, ``normal_sigma_rad``, ``zero_sigma_max_mm``,
@@ -58,6 +78,13 @@ class Design:
     curve: dict
     reading_span_mm: np.ndarray
     robustness: dict = field(default_factory=dict)
+    columns: tuple = ()
+
+    def _extra_stderr(self, i) -> dict:
+        keys = {"incidence": ("incidence_c_mm",), "scale": ("scale_k",),
+                "nonlinearity": ("nonlinearity_c2_mm", "nonlinearity_c3_mm")}
+        names = [k for c in self.columns for k in keys[c]]
+        return {k: float(self.stderr[i, 5 + j]) for j, k in enumerate(names)}
 
     def to_dict(self, names) -> dict:
         inf_none = lambda a: [None if not np.isfinite(v) else float(v) for v in np.asarray(a, float)]  # noqa: E731
@@ -69,7 +96,7 @@ class Design:
             "sensors": [{"name": nm, "reading_span_mm": self.reading_span_mm[i].tolist(),
                          "stderr": {"zero_mm": self.stderr[i, :3].tolist(),
                                     "tilt_deg": np.rad2deg(self.stderr[i, 3:5]).tolist(),
-                                    **({"incidence_c_mm": float(self.stderr[i, 5])} if self.stderr.shape[1] > 5 else {})},
+                                    **self._extra_stderr(i)},
                          "parameters": list(CHART_NAMES)} for i, nm in enumerate(names)],
             "curve": {"k": self.curve["k"].tolist(),
                       "normal_sigma_deg": inf_none(np.rad2deg(self.curve["normal_sigma_rad"])),
@@ -128,8 +155,9 @@ def _stderr(cov):
     return np.sqrt(np.maximum(np.einsum("nii->ni", cov), 0.0))
 
 
-def design_for(label, layout, plane, X, idx, poses: PoseSet, G, prior) -> Design:
-    """The predictions of the poses ``idx`` (in order) of the candidates ``poses`` with rows ``X``."""
+def design_for(label, layout, plane, X, idx, poses: PoseSet, G, prior, columns=()) -> Design:
+    """The predictions of the poses ``idx`` (in order) of the candidates ``poses`` with rows ``X``
+    (``columns``: its extra columns, :func:`design_columns`)."""
     ks, ns, zs, ts, lds = [], [], [], [], []
     for k in range(1, len(idx) + 1):
         cov = covariance(X[idx[:k]])
@@ -145,7 +173,7 @@ def design_for(label, layout, plane, X, idx, poses: PoseSet, G, prior) -> Design
     curve = {"k": np.array(ks), "normal_sigma_rad": np.array(ns), "zero_sigma_max_mm": np.array(zs),
              "tilt_sigma_max_rad": np.array(ts), "log_det": np.array(lds)}
     return Design(label, sel, _stderr(cov), normal_sigma(G, cov[:, :5, :5]), log_det(X[idx], prior), curve,
-                  np.stack([np.nanmin(d, axis=0), np.nanmax(d, axis=0)], axis=1))
+                  np.stack([np.nanmin(d, axis=0), np.nanmax(d, axis=0)], axis=1), columns=tuple(columns))
 
 
 def _robustness(rng, design: Design, layout, plane, extent, limits, sigma, G, prior, error_mm, error_rad, trials):
@@ -157,7 +185,7 @@ def _robustness(rng, design: Design, layout, plane, extent, limits, sigma, G, pr
     for _ in range(trials):
         moved = perturb(rng, design.poses, error_mm, error_rad)
         ok.append(feasible(layout, plane, extent, moved, limits, margins=False))
-        Xm = pose_information(layout, *moved.plane_in_tcs(plane), sigma, prior.shape[-1] > 5)
+        Xm = pose_information(layout, *moved.plane_in_tcs(plane), sigma, design.columns)
         eff.append(np.exp((log_det(Xm, prior) - design.log_det) / (prior.shape[-1] * n)))
         ns.append(normal_sigma(G, covariance(Xm)[:, :5, :5]))
     ok = np.array(ok)
@@ -188,7 +216,8 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
         the designs are re-evaluated ``robustness_trials`` times with every pose moved that much
     seed : int, optional, recorded in the result
     separate : tuple of str, causes the design must also tell from the sensor parameters:
-        ``("incidence",)`` adds each sensor's incidence coefficient to the D-criterion
+        ``("incidence",)`` adds each sensor's incidence coefficient, gain and curve to the
+        D-criterion, ``("scale",)`` the gain alone (:func:`design_columns`)
 
     Returns
     -------
@@ -197,7 +226,7 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     unknown = [c for c in separate if c not in SEPARABLE]
     if unknown:
         raise ValueError(f"--separate {', '.join(unknown)}: expected one of {', '.join(SEPARABLE)}")
-    inc = "incidence" in separate
+    inc = design_columns(separate)
     if n_poses < 5:
         raise ValueError(f"--poses {n_poses}: need at least 5 (5 parameters per sensor)")
     sigma = np.broadcast_to(np.asarray(sigma_mm, float), (layout.n,)).copy()
@@ -218,8 +247,8 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     chosen = exchange(X, greedy_order(X, n_poses, prior, pool), prior, pool)
     order = chosen[greedy_order(X[chosen], n_poses, prior)]
     G = normal_sensitivity(layout, work)
-    planned = design_for("planned", layout, plane, X, order, cands, G, prior)
-    random = design_for("random", layout, plane, X, pool[:n_poses], cands, G, prior)
+    planned = design_for("planned", layout, plane, X, order, cands, G, prior, inc)
+    random = design_for("random", layout, plane, X, pool[:n_poses], cands, G, prior, inc)
     args = (layout, plane, extent, limits, sigma, G, prior, robot_error_mm, robot_error_rad, robustness_trials)
     planned = replace(planned, robustness=_robustness(rng, planned, *args))
     random = replace(random, robustness=_robustness(rng, random, *args))

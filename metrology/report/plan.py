@@ -10,6 +10,18 @@ __all__ = ["plan_text", "plot_plan_curve", "follow_line", "CURVE_KS"]
 
 #: the pose counts shown in the text's curve (those up to N, and N)
 CURVE_KS = (5, 6, 8, 10, 12, 15, 20, 25, 30, 40, 50, 60, 80, 100, 150, 200)
+#: how the report prints the standard errors of each extra design column (``Design.columns``)
+_EXTRA_WORDS = {"incidence": "incidence c {:.4f} mm", "scale": "gain k {:.2e}", "nonlinearity": "curve c2, c3 {:.4f} {:.4f} mm"}
+
+
+def _extra_words(columns, se) -> str:
+    """``; incidence c ... mm; gain k ...``: the extra columns' standard errors ``se``."""
+    out, j = "", 0
+    for c in columns:
+        k = _EXTRA_WORDS[c].count("{")
+        out += "; " + _EXTRA_WORDS[c].format(*se[j:j + k])
+        j += k
+    return out
 
 
 def _num(v, fmt):
@@ -38,7 +50,7 @@ def plan_text(plan: PosePlan, out=None) -> str:
         se = p.stderr[i]
         lines.append(f"  {name}: {se[0]:.4f} {se[1]:.4f} {se[2]:.4f} mm; {np.rad2deg(se[3]):.4f} "
                      f"{np.rad2deg(se[4]):.4f} deg"
-                     + (f"; incidence c {se[5]:.4f} mm" if len(se) > 5 else "")
+                     + _extra_words(p.columns, se[5:])
                      + f"; readings {p.reading_span_mm[i, 0]:.1f}-{p.reading_span_mm[i, 1]:.1f} mm")
     lines += ["", "stopping early: the first k planned poses (random in brackets)",
               f"  {'k':>4} {'max zero mm':>16} {'max tilt deg':>16} {'normal deg':>18}"]

@@ -108,12 +108,50 @@ def test_too_few_feasible_candidates_is_a_one_line_error(setup):
         plan_poses(layout, plane, extent, 4, limits, layout.noise_mm, np.random.default_rng(0))
 
 
-def test_separating_incidence_adds_its_coefficient_and_shrinks_it(setup):
+def test_separating_incidence_adds_its_coefficient_and_the_characteristic_and_shrinks_them(setup):
     layout, plane, _, extent, limits = setup
     plan = plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=1000,
                       robustness_trials=0, separate=("incidence",))
     p, r = plan.planned, plan.random
-    assert p.stderr.shape == (layout.n, 6) and p.log_det >= r.log_det
+    assert p.columns == ("incidence", "scale", "nonlinearity") and p.stderr.shape == (layout.n, 9)
+    assert p.log_det >= r.log_det
     assert p.stderr[:, 5].max() < r.stderr[:, 5].max()
-    with pytest.raises(ValueError, match="--separate scale"):
-        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("scale",))
+    assert set(plan.to_dict()["planned"]["sensors"][0]["stderr"]) >= {"incidence_c_mm", "scale_k", "nonlinearity_c3_mm"}
+    assert plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=300,
+                      robustness_trials=0, separate=("scale",)).planned.columns == ("scale",)
+    with pytest.raises(ValueError, match="--separate form"):
+        plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), separate=("form",))
+
+
+def test_the_characteristic_columns_make_incidence_separable_from_it(setup):
+    """The gain column is ``d0 / sigma`` and the curve's are ``P2, P3`` of the normalised reading;
+    a design that has them predicts a smaller standard error of the incidence coefficient
+    *given the characteristic* (five chart parameters, ``c``, ``k``, ``c2``, ``c3``) than the
+    same search on the incidence column alone: the criterion uses the new columns."""
+    from metrology.core.model import readings
+    from metrology.plan import draw_candidates
+    from metrology.plan.design import covariance, exchange, pose_information, prior_information
+
+    layout, plane, _, extent, limits = setup
+    cands = draw_candidates(np.random.default_rng(2), layout, plane, extent, 1500, limits)
+    pool = np.flatnonzero(feasible(layout, plane, extent, cands, limits))
+    N, D = cands.plane_in_tcs(plane)
+    cols = ("incidence", "scale", "nonlinearity")
+    X = pose_information(layout, N, D, layout.noise_mm, cols)
+    d0 = readings(layout.zero, layout.direction, N, D)[0]
+    ok = np.isfinite(d0)
+    np.testing.assert_allclose(X[..., 6][ok], (d0 / layout.noise_mm[None, :])[ok])
+    lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
+    x = (2 * d0 - lo - hi) / (hi - lo)
+    np.testing.assert_allclose(X[..., 7][ok], (0.5 * (3 * x**2 - 1) / layout.noise_mm[None, :])[ok])
+    assert pose_information(layout, N, D, layout.noise_mm, ("scale",)).shape[-1] == 6
+
+    def se_c(idx):
+        return np.sqrt(covariance(X[idx])[:, 5, 5]).max()
+
+    chosen = {}
+    for use in (("incidence",), cols):
+        Xc = X[..., :5 + {1: 1, 3: 4}[len(use)]]
+        prior = prior_information(layout.n, incidence=use)
+        chosen[use] = exchange(Xc, greedy_order(Xc, 20, prior, pool), prior, pool)
+    assert se_c(chosen[cols]) < se_c(chosen[("incidence",)])

@@ -38,18 +38,46 @@ class Incidence(Component):
     centroid of its image shifts with the speckle and intensity gradient across it; the
     manufacturers' curves of error against tilt are even in the angle and grow faster than
     linearly: ``tan^2`` is the lowest-order even form that vanishes at normal incidence.
+
+    ``order=4`` is the family's richer member ``c2 tan^2(gamma) + c4 tan^4(gamma)`` (mm at
+    45 deg each): an even curve that steepens or flattens at large angles (a sensor whose
+    error stays small up to some angle and then grows quickly, or one that saturates), which
+    ``tan^2`` alone leaves as structure. The diagnosis takes it only when it predicts held-out
+    poses significantly better than ``tan^2``.
     """
 
+    order: int = 2
+
     name = "incidence"
-    param_names = ("c_mm",)
-    param_units = ("mm",)
     advice = "a wider spread of tilt against the datum (incidence angles)"
     size_meaning = "c mm (bias at 45 deg incidence)"
     plot_key = "incidence_deg"
 
+    @classmethod
+    def candidates_for_sensor(cls, i, names, cov):
+        return [cls((i,), names=names), cls((i,), names=names, order=4)]
+
+    def __post_init__(self):
+        if self.order not in (2, 4):
+            raise ValueError(f"incidence order must be 2 or 4, got {self.order}")
+        super().__post_init__()
+
+    @property
+    def param_names(self):
+        return ("c2_mm", "c4_mm") if self.order == 4 else ("c_mm",)
+
+    @property
+    def param_units(self):
+        return ("mm",) * len(self.param_names)
+
+    @property
+    def label(self):
+        return super().label + ("@4" if self.order == 4 else "")
+
     def basis(self, d0, cov):
         t2 = 1.0 / cov.cos_inc**2 - 1.0
-        return _sensor_basis(t2[..., None], d0.shape[1], self.sensors)
+        cols = np.stack([t2, t2**2], axis=-1) if self.order == 4 else t2[..., None]
+        return _sensor_basis(cols, d0.shape[1], self.sensors)
 
 
 @dataclass(frozen=True)
