@@ -19,6 +19,7 @@ both-right (over all pairs, over the pairs whose two sizes are both above their 
 and both in the upper two thirds, as issue 15 asks) and wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
+        [--families scale,...] [--tilt-max-deg 14]
 """
 
 from __future__ import annotations
@@ -178,9 +179,10 @@ def run_case(job) -> dict:
     from metrology.jobs.diagnose import diagnose_files
     from metrology.sim.forward import draw_case, draw_pair, write_case
 
-    kind, fams, entropy = job
+    kind, fams, entropy = job[:3]
+    tilt = {"tilt_max_deg": float(job[3])} if len(job) > 3 else {}
     rng = np.random.default_rng(list(entropy))
-    case = draw_pair(rng, *fams) if kind == "pair" else draw_case(rng, fams[0])
+    case = draw_pair(rng, *fams, **tilt) if kind == "pair" else draw_case(rng, fams[0], **tilt)
     with tempfile.TemporaryDirectory() as d:
         paths = write_case(case, d)
         res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
@@ -301,9 +303,12 @@ def report(s: dict) -> str:
     return "\n".join(lines)
 
 
-def run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=True, families=None) -> tuple:
-    """Run every case (``families``: only those single draws, :func:`jobs_for`); (records, summary)."""
+def run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=True, families=None, tilt_max_deg=None) -> tuple:
+    """Run every case (``families``: only those single draws, :func:`jobs_for`; ``tilt_max_deg``:
+    the poses' largest tilt, default the simulator's 14 deg); (records, summary)."""
     todo = jobs_for(draws, nulls, pairs, seed, families)
+    if tilt_max_deg is not None:
+        todo = [j + (float(tilt_max_deg),) for j in todo]
     try:
         from rich.progress import track
     except ImportError:
@@ -343,13 +348,15 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--json", default=None, help="save records and summary here")
     ap.add_argument("--families", default="", help="comma-separated: draw only these families (e.g. incidence)")
+    ap.add_argument("--tilt-max-deg", type=float, default=None, help="largest tilt of the poses (default 14)")
     a = ap.parse_args(argv)
     fams = tuple(filter(None, a.families.split(",")))
     unknown = [f for f in fams if f not in FAMILY_ORDER + OOC]
     if unknown:
         ap.error(f"--families {','.join(unknown)}: expected some of {','.join(FAMILY_ORDER + OOC)}")
     t0 = time.time()
-    records, summary = run_study(a.draws, a.nulls, a.pairs, a.seed, a.jobs, families=fams or None)
+    records, summary = run_study(a.draws, a.nulls, a.pairs, a.seed, a.jobs, families=fams or None,
+                                 tilt_max_deg=a.tilt_max_deg)
     wall = time.time() - t0
     print(report(summary))
     print(f"\nwall time {wall:.0f} s for {len(records)} cases ({a.jobs} job(s))")
