@@ -2,12 +2,13 @@
 
 One sensor's reading shifted in proportion to *another* sensor's distance (light of one spot
 seen by the next sensor, a shared supply) looks to the diagnosis like a gain error: the
-stand-off moves every sensor's distance together. It is not a catalogued cause, so it must not
-come out as ``scale`` or ``nonlinearity``. For a characteristic named on sensor ``i``, the term
+stand-off moves every sensor's distance together (and an incidence bias, which the tilts that
+move them apart also drive). It is not a catalogued cause, so it must not come out as ``scale``,
+``nonlinearity`` or ``incidence``. For such a cause named on sensor ``i``, the term
 ``c d0_j`` (``j`` another sensor) is fitted in its place, with the same held-out test. If one
-predicts held-out poses significantly better (Bonferroni over the other sensors), the
-characteristic is not named: the effect follows another sensor's distance. If the two cannot be
-told apart, the verdict says so (``confounding``).
+predicts held-out poses significantly better (Bonferroni over the other sensors), the cause is
+not named: the effect follows another sensor's distance. If the two cannot be told apart, it is
+not named either, and the verdict says why (:mod:`metrology.diagnosis.decide`).
 """
 
 from __future__ import annotations

@@ -145,6 +145,12 @@ class Verdict:
     lead: CandidateResult | None = None
 
 
+#: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
+#: where it predicts held-out poses better (the distances of all sensors follow the stand-off,
+#: and the incidence angles follow the tilts that move them apart)
+CROSSTALK_CHECKED = ("scale", "nonlinearity", "incidence")
+
+
 def battery_rng() -> np.random.Generator:
     """The generator of the battery's permutation tests: fixed, so the verdict is a function of
     the data alone (``diagnose``'s ``seed`` drives only the side-by-side simulation)."""
@@ -243,7 +249,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
     xtalk = {}
     for j in list(kept):
-        if chosen[j].cause in ("scale", "nonlinearity"):
+        if chosen[j].cause in CROSSTALK_CHECKED:
             xtalk[j] = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
             if xtalk[j]["better"] is not None or xtalk[j]["indistinguishable"]:
                 # crosstalk is outside the catalogue: a characteristic is named only where it

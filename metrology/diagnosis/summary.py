@@ -35,8 +35,9 @@ def verdict_summary(v, tb) -> str:
     if v.cause == "unexplained" and v.lead is not None and "(crosstalk: predicts held-out poses as well" in v.lead.label:
         return (f"{v.best.label} gives a significant held-out gain, but so does a shift in proportion to another "
                 f"sensor's distance ({v.lead.label.split(' (')[0]}: crosstalk between sensors, outside the catalogue): "
-                "these poses cannot tell a characteristic of the sensor from crosstalk, so neither is named; to "
-                "separate them, spread the tilts so that the sensors' distances do not move together")
+                f"these poses cannot tell {v.lead.label.split('(crosstalk: predicts held-out poses as well as ')[-1].rstrip(')')} "
+                "from crosstalk, so neither is named; to separate them, spread the tilts so that the sensors' "
+                "distances do not move together")
     if v.cause == "unexplained" and v.lead is not None and "(crosstalk:" in v.lead.label:
         return (f"{v.best.label} gives a significant held-out gain, but {v.lead.label}: the effect follows another "
                 "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)")
