@@ -34,7 +34,7 @@ from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["Step", "family_of", "refine_order", "forward_select", "p_better", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "forward_select", "rechoose_members", "p_better", "MAX_CAUSES"]
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
@@ -134,6 +134,7 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
     ``on_candidate(step, i, n, label)``, if given, is called before each candidate is scored.
     """
     pool = candidates_for(ds.layout, b.cov, flags)
+    members = [c for c in pool if not isinstance(c, Outliers)]  # every member of every family
     n_cand = len(pool)
     given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
@@ -186,8 +187,54 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
             flags, p_out = flag_residuals(ref_fit.residual, b.sigma)
             pool = [c for c in pool if not isinstance(c, Outliers)]
             pool += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
+        if len(given) > 1:
+            given, ref_fit, ref_ho = rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand)
         if len(given) >= max_causes or not pool:
             return steps
+
+
+def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
+    """Re-choose the member of each earlier cause's family given the causes chosen after it.
+
+    A member is chosen by held-out error given the causes known at its step: a rigid pose
+    error, say, is not significantly better than the offset alone while a drift is still
+    unmodelled, and its orientation part then stays on every sensor. Each earlier family's
+    members are scored again given every other chosen cause (the same tests, the same
+    ``alpha_order`` rule of :func:`refine_order`, from the member held). Where one changes,
+    its step and the joint model are refitted (``steps`` is updated in place). Returns
+    (given, joint fit, its held-out figures).
+    """
+    nominal, obs = ds.layout, ds.obs
+    changed = False
+    for j, g in enumerate(given[:-1]):
+        mates = [c for c in members if family_of(c) == family_of(g)]
+        if len(mates) < 2:
+            continue
+        others = given[:j] + given[j + 1:]
+        th0 = steps[-1].chosen.fit.theta
+        ref = (fit_any(nominal, obs, b.cov, b.sigma, others, th0), kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
+        scored = _score_step(ds, b, mates, others, ref[0], ref[1], flags, p_out, folds, n_cand)
+        held = next((s for s in scored if s.label == g.label), None)
+        if held is None or not held.significant:
+            continue
+        new = refine_order(held, scored)
+        if new.label == g.label:
+            continue
+        given = given[:j] + (new.component,) + given[j + 1:]
+        k = [i for i, st in enumerate(steps) if st.chosen is not None][j]
+        th_j = b.theta0 if j == 0 else steps[k - 1].chosen.fit.theta
+        f_j = fit_any(nominal, obs, b.cov, b.sigma, given[:j + 1], th_j)
+        ho_j = kfold(nominal, obs, b.cov, b.sigma, given[:j + 1], folds, th_j)
+        steps[k] = Step(replace(new, fit=f_j, heldout=ho_j), steps[k].scored, steps[k].lead)
+        changed = True
+    last = steps[-1].chosen
+    if not changed:
+        return given, last.fit, last.heldout
+    th0 = last.fit.theta
+    ref_fit = fit_any(nominal, obs, b.cov, b.sigma, given, th0)
+    ref_ho = kfold(nominal, obs, b.cov, b.sigma, given, folds, th0)
+    steps[-1] = Step(replace(last, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
+    return given, ref_fit, ref_ho
 
 
 def drop_one_gains(ds, b, chosen, folds):
