@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from metrology.core.effects import ExtendedModel, PlaneForm
+from metrology.core.effects import ExtendedModel, Outliers, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.progress import ProgressFn, notify
 from metrology.core.model import readings
@@ -216,6 +216,38 @@ def _sensors_of(comp, n):
     return list(comp.sensors) if comp.sensors else list(range(n))
 
 
+def _judged_sensors(chosen, tests_ext, gains, n) -> list:
+    """Per chosen cause, the sensors on which it is judged and found consistent with noise
+    (empty: not named).
+
+    A cause is named when the joint model leaves its sensors' residuals consistent with the
+    noise. A cause that acts on every sensor (``pose_error``, ``plane_form``) is also named
+    when it is needed (its held-out gain given the others significant at ``alpha_heldout``)
+    and the residuals are consistent on every sensor but those whose remaining structure
+    belongs elsewhere: the sensors of another cause chosen (a drift its member follows only in
+    part), or, where no other cause is chosen on any failing sensor, one single sensor
+    (structure outside the catalogue there). The structure left is said beside the causes.
+    """
+    alpha = THRESHOLDS["alpha_battery"]
+    fails = {i for i in range(n) if battery_on(tests_ext, [i]) < alpha}
+    out = []
+    for j, s in enumerate(chosen):
+        S = _sensors_of(s.component, n)
+        if battery_on(tests_ext, S) >= alpha:
+            out.append(S)
+            continue
+        if s.component.sensors or gains[j][1] >= THRESHOLDS["alpha_heldout"]:
+            out.append([])
+            continue
+        elsewhere = fails & {i for k, o in enumerate(chosen) if k != j for i in o.component.sensors}
+        if not elsewhere and len(fails) == 1:
+            elsewhere = fails
+        rest = [i for i in S if i not in elsewhere]
+        ok = len(rest) >= 2 and battery_on(tests_ext, rest) >= alpha
+        out.append(rest if ok else [])
+    return out
+
+
 def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     """Steps 3-4: refit the selected causes jointly, keep those whose sensors' residuals are
     then consistent with noise, and describe each with its size, its held-out gain given the
@@ -243,8 +275,14 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
         dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
     tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
                             pairs=not any(c.per_pose for c in f.components), rng=battery_rng())
-    kept = [j for j, s in enumerate(chosen) if battery_on(tests_ext, _sensors_of(s.component, n))
-            >= THRESHOLDS["alpha_battery"]]
+    gains = drop_one_gains(ds, b, chosen, folds)
+    judged = _judged_sensors(chosen, tests_ext, gains, n)
+    # every cause named must still be needed given the others, Bonferroni over the causes chosen
+    # (the selection's later steps test at alpha_heldout each; a member re-chosen or a cause
+    # added after can make an earlier one redundant); outliers predict nothing held out
+    alpha_each = THRESHOLDS["alpha_heldout"] / len(chosen)
+    kept = [j for j in range(len(chosen)) if judged[j]
+            and (len(chosen) == 1 or isinstance(chosen[j].component, Outliers) or gains[j][1] < alpha_each)]
     # a characteristic that follows another sensor's distance better is crosstalk, not the
     # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
     xtalk = {}
@@ -255,7 +293,6 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
                 # crosstalk is outside the catalogue: a characteristic is named only where it
                 # predicts held-out poses better than a shift with every other sensor's distance
                 kept.remove(j)
-    gains = drop_one_gains(ds, b, chosen, folds)
     causes = []
     for j in kept:
         s = chosen[j]
@@ -267,7 +304,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
         causes.append(d)
     causes.sort(key=lambda d: -d["heldout_gain_chi2"])
     best = chosen[kept[0]] if kept else chosen[0]
-    p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in _sensors_of(chosen[j].component, n)}))
+    p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
         xt = next((x for x in xtalk.values() if x["better"]), None)

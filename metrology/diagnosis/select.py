@@ -34,7 +34,7 @@ from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["Step", "family_of", "refine_order", "forward_select", "p_better", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "MAX_CAUSES"]
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
@@ -134,6 +134,7 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
     ``on_candidate(step, i, n, label)``, if given, is called before each candidate is scored.
     """
     pool = candidates_for(ds.layout, b.cov, flags)
+    members = [c for c in pool if not isinstance(c, Outliers)]  # every member of every family
     n_cand = len(pool)
     given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
@@ -161,20 +162,21 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
             pool = [c for c in pool if not c.sensors or p1.get(c.label, 0.0) < PRUNE_P or set(c.sensors) & near
                     or isinstance(c, Outliers)]
         rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
-        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers) and not rigid:
-            # (after a rigid pose error a gross reading shows on every sensor of its pose: which
-            # one it was is lost, so no reading is flagged anew)
+        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers):
             # gross readings the new cause reveals (it hid them in its own scatter) join the
-            # flagged ones, and the joint model so far is refitted with them
-            new, _ = flag_residuals(ref_fit.residual, b.sigma)
+            # flagged ones, and the joint model so far is refitted with them (after a rigid pose
+            # error a gross reading shows on every sensor of its pose: see flag_given_rigid)
+            new = (flag_given_rigid(ref_fit, b.cov, b.sigma, flags) if rigid else flag_residuals(ref_fit.residual,
+                                                                                                   b.sigma))[0]
             if np.any(new & ~flags):
                 flags = flags | new
                 k = next(j for j, g in enumerate(given) if isinstance(g, Outliers))
                 out = replace(given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
                               values=None, stderr=None)
                 given = given[:k] + (out,) + given[k + 1:]
-                ref_fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, given, b.theta0)
-                ref_ho = kfold(ds.layout, ds.obs, b.cov, b.sigma, given, folds, b.theta0)
+                th0 = ref_fit.theta if rigid else b.theta0  # a held geometry is held where the joint model is
+                ref_fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, given, th0)
+                ref_ho = kfold(ds.layout, ds.obs, b.cov, b.sigma, given, folds, th0)
                 j = [i for i, st in enumerate(steps) if st.chosen is not None and isinstance(st.chosen.component, Outliers)][0]
                 steps[j] = Step(replace(steps[j].chosen, component=out, label=out.label,
                                         sensors=[ds.layout.names[i] for i in out.sensors]),
@@ -183,11 +185,105 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
         elif not any(isinstance(g, Outliers) for g in given):
             # gross readings flagged anew against the causes found: a large effect makes its
             # extremes look gross to a fit without it
-            flags, p_out = flag_residuals(ref_fit.residual, b.sigma)
+            flags, p_out = (flag_given_rigid(ref_fit, b.cov, b.sigma, np.zeros_like(flags)) if rigid
+                            else flag_residuals(ref_fit.residual, b.sigma))
             pool = [c for c in pool if not isinstance(c, Outliers)]
             pool += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
+        if len(given) > 1:
+            given, ref_fit, ref_ho = rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand)
         if len(given) >= max_causes or not pool:
             return steps
+
+
+def flag_given_rigid(f: Fit, cov, sigma, flags):
+    """Gross readings under a rigid pose error: ``(flags (p, n) bool, p-value of the largest)``.
+
+    An offset and two tilts a pose spread a gross reading over every sensor of its pose (with
+    4 sensors a pose keeps one degree of freedom). A pose is flagged where its
+    leverage-standardised residual is gross (``alpha_outlier`` family-wise over the readings,
+    as :func:`~metrology.diagnosis.candidates.flag_residuals`). The reading is the one whose
+    removal leaves the most plausible pose: the per-pose values solved from the other
+    readings, shrunk by the spread of the fitted values over the other poses, with the least
+    misfit plus prior (a gross reading read as a pose error needs a tilt far outside it).
+    ``flags`` the readings already flagged (left out); those returned include them.
+    """
+    from scipy import stats
+
+    rig = next(c for c in f.components if c.per_pose and c.per_pose_columns > 1)
+    B = rig.pose_columns(cov)  # (p, n, m)
+    e = np.asarray(rig.values, float).reshape(len(B), -1)
+    ok = np.isfinite(f.residual) & ~flags
+    Bw = np.where(ok[..., None], B / sigma[None, :, None], 0.0)
+    h = np.einsum("pnm,pmn->pn", Bw, np.linalg.pinv(Bw, rcond=1e-10))
+    ok_z = ok & (1.0 - h > 1e-3)
+    z = np.where(ok_z, f.residual / sigma[None, :] / np.sqrt(np.clip(1.0 - h, 1e-6, None)), 0.0)
+    m = int(ok_z.sum())
+    if m == 0:
+        return flags, 1.0
+    z = z / max(1.0, 1.4826 * float(np.median(np.abs(z[ok_z]))))
+    zmax = float(np.max(np.abs(z)))
+    p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
+    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
+    if not len(bad):
+        return flags, p_max
+    good = np.setdiff1d(np.arange(len(B)), bad)
+    P = np.linalg.pinv(np.atleast_2d(np.cov(e[good], rowvar=False)), hermitian=True)
+    y = np.where(ok, f.residual + np.einsum("pnm,pm->pn", B, e), 0.0) / sigma[None, :]  # the pose before its error
+    out = flags.copy()
+    for q in bad:
+        score = {}
+        for i in np.flatnonzero(ok[q]):
+            keep = ok[q].copy()
+            keep[i] = False
+            A = B[q, keep] / sigma[keep, None]
+            e_i = np.linalg.solve(A.T @ A + P, A.T @ y[q, keep])
+            score[i] = float(np.sum((y[q, keep] - A @ e_i) ** 2) + e_i @ P @ e_i)
+        out[q, min(score, key=score.get)] = True
+    return out, p_max
+
+
+def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
+    """Re-choose the member of each earlier cause's family given the causes chosen after it.
+
+    A member is chosen by held-out error given the causes known at its step: a rigid pose
+    error, say, is not significantly better than the offset alone while a drift is still
+    unmodelled, and its orientation part then stays on every sensor. Each earlier family's
+    members are scored again given every other chosen cause (the same tests, the same
+    ``alpha_order`` rule of :func:`refine_order`, from the member held). Where one changes,
+    its step and the joint model are refitted (``steps`` is updated in place). Returns
+    (given, joint fit, its held-out figures).
+    """
+    nominal, obs = ds.layout, ds.obs
+    changed = False
+    for j, g in enumerate(given[:-1]):
+        mates = [c for c in members if family_of(c) == family_of(g)]
+        if len(mates) < 2:
+            continue
+        others = given[:j] + given[j + 1:]
+        th0 = steps[-1].chosen.fit.theta
+        ref = (fit_any(nominal, obs, b.cov, b.sigma, others, th0), kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
+        scored = _score_step(ds, b, mates, others, ref[0], ref[1], flags, p_out, folds, n_cand)
+        held = next((s for s in scored if s.label == g.label), None)
+        if held is None or not held.significant:
+            continue
+        new = refine_order(held, scored)
+        if new.label == g.label:
+            continue
+        given = given[:j] + (new.component,) + given[j + 1:]
+        k = [i for i, st in enumerate(steps) if st.chosen is not None][j]
+        th_j = b.theta0 if j == 0 else steps[k - 1].chosen.fit.theta
+        f_j = fit_any(nominal, obs, b.cov, b.sigma, given[:j + 1], th_j)
+        ho_j = kfold(nominal, obs, b.cov, b.sigma, given[:j + 1], folds, th_j)
+        steps[k] = Step(replace(new, fit=f_j, heldout=ho_j), steps[k].scored, steps[k].lead)
+        changed = True
+    last = steps[-1].chosen
+    if not changed:
+        return given, last.fit, last.heldout
+    th0 = last.fit.theta
+    ref_fit = fit_any(nominal, obs, b.cov, b.sigma, given, th0)
+    ref_ho = kfold(nominal, obs, b.cov, b.sigma, given, folds, th0)
+    steps[-1] = Step(replace(last, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
+    return given, ref_fit, ref_ho
 
 
 def drop_one_gains(ds, b, chosen, folds):

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from metrology.diagnosis.stats import battery_on
+from metrology.diagnosis.thresholds import THRESHOLDS
+
 __all__ = ["verdict_summary", "DATUM_DISAGREES"]
 
 #: appended to the summary when the datum cloud's form disagrees with the readings'
@@ -52,7 +55,9 @@ def verdict_summary(v, tb) -> str:
                      f"given the others, p = {c['p_heldout_given_others']:.2g})")
     text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
-        worst_e = max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]
-        text += (f"; structure remains (battery p = {te.p_bonferroni:.2g}, worst {worst_e}): another effect, "
+        names = list(te.sensors)
+        where = [k for i, k in enumerate(names) if battery_on(te, [i]) < THRESHOLDS["alpha_battery"]]
+        where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
+        text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
     return text + f"; confidence {v.confidence}"
