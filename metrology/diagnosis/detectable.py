@@ -79,9 +79,7 @@ def _direction(c):
     """The member's unit shape whose size is reported, or None where this module has none."""
     comp = c.component
     names = list(comp.param_names)
-    if c.cause in ("scale", "incidence") and comp.n_params == 1:
-        return np.ones(1)
-    if c.cause == "drift" and comp.n_params == 1:
+    if c.cause in ("scale", "incidence", "drift") and comp.n_params == 1:
         return np.ones(1)
     if c.cause == "nonlinearity" and "c2_mm" in names and comp.n_params == 3:
         return np.eye(comp.n_params)[names.index("c2_mm")]
@@ -90,14 +88,19 @@ def _direction(c):
     return None
 
 
-def _scale_against_crosstalk(b, ds, i) -> float:
-    """``|d0_i|`` left once the sensor's five base columns and the most collinear other sensor's
-    distance ``d0_j`` (crosstalk, which ``scale`` must beat to be named) are projected out (mm)."""
+def _base_jacobian(b, ds):
+    """``(p, n, 5)``: the readings' derivatives by the five chart parameters at the base calibration."""
     from metrology.core.model import jacobian_tangent
 
-    nominal, obs = ds.layout, ds.obs
     th = b.theta0
-    J = jacobian_tangent(nominal.zero + th[:, :3], nominal.direction, th[:, 3:], obs.normal, obs.offset)
+    return jacobian_tangent(ds.layout.zero + th[:, :3], ds.layout.direction, th[:, 3:], ds.obs.normal, ds.obs.offset)
+
+
+def _scale_against_crosstalk(b, ds, J, i) -> float:
+    """``|d0_i|`` left once the sensor's five base columns ``J[:, i]`` and the most collinear
+    other sensor's distance ``d0_j`` (crosstalk, which ``scale`` must beat to be named) are
+    projected out (mm)."""
+    nominal, obs = ds.layout, ds.obs
     rows = np.isfinite(obs.d[:, i])
     x = b.d0[rows, i]
     worst = np.inf
@@ -123,6 +126,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
     n_cand = max(len(scored), 1)
     alpha = THRESHOLDS["alpha_candidates"] / n_cand
     out: dict = {}
+    J = None  # the base Jacobian, computed once when the scale needs it
     meaning = {
         "scale": "peak-to-valley of a gain error over the readings' span, told from crosstalk",
         "nonlinearity": "peak-to-valley of a bow (P2) over the readings' span",
@@ -149,7 +153,9 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                 # part that no other sensor's distance carries
                 i = c.component.sensors[0]
                 lo, hi = b.cov.d_span[i] if b.cov.d_span is not None else b.cov.range_mm[i]
-                r = _scale_against_crosstalk(b, ds, i)
+                if J is None:
+                    J = _base_jacobian(b, ds)
+                r = _scale_against_crosstalk(b, ds, J, i)
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
         elif c.cause == "pose_error" and c.component.per_pose_columns == 1:
             # lambda = (readings - base parameters) s^2 / sigma^2 for independent offsets of RMS s
