@@ -236,7 +236,7 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
             keep = ok[q].copy()
             keep[i] = False
             A = B[q, keep] / sigma[keep, None]
-            e_i = np.linalg.solve(A.T @ A + P, A.T @ y[q, keep])
+            e_i = np.linalg.pinv(A.T @ A + P, hermitian=True) @ (A.T @ y[q, keep])  # a blank may leave 2
             score[i] = float(np.sum((y[q, keep] - A @ e_i) ** 2) + e_i @ P @ e_i)
         out[q, min(score, key=score.get)] = True
     return out, p_max
