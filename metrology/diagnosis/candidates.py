@@ -96,8 +96,6 @@ def flag_outliers(nominal, obs, cov, sigma, theta0):
     ``s`` is the larger of the stated noise and the residuals' robust (MAD) scale. Returns
     (flags (p, n) bool, p-value of the largest standardised residual).
     """
-    from scipy import stats
-
     p, n = obs.d.shape
     res = np.full((p, n), np.nan)
     for i in range(n):

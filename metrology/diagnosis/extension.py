@@ -165,7 +165,6 @@ def dof_per_sensor(f: Fit, obs, n):
     return dof
 
 
-
 def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None:
     """``size`` (of :func:`size_of`) with the spread of the family's other members added to its
     standard error: the members significant at the step where ``chosen`` was selected, on its
@@ -183,7 +182,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
         return size
     spread = 0.0
     for m in scored:
-        if m is chosen or m.label == chosen.label or not m.significant:
+        if m.label == chosen.label or not m.significant:
             continue
         if family_of(m.component) != family_of(chosen.component):
             continue
