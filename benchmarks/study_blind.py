@@ -99,6 +99,17 @@ def _size(result: dict, family: str):
     return None
 
 
+def _true_characteristic(case, effect):
+    """(the drawn characteristic curve of a ``scale``/``nonlinearity`` effect, the true distances
+    its sensor saw (p,) mm)."""
+    from metrology.sim.forward.characteristic import Characteristic
+
+    sh = dict(effect.shape)
+    shape, lo, hi = sh.pop("shape"), sh.pop("lo_mm"), sh.pop("hi_mm")
+    i = list(case.nominal.names).index(effect.sensors[0])
+    return Characteristic(shape, lo, hi, sh), case.d_true[:, i]
+
+
 def _seen_size(case, effect):
     """The true size in the definition ``metro diagnose`` reports (what the data can show), or None:
 
@@ -108,16 +119,10 @@ def _seen_size(case, effect):
       best-fit plane there (a tilt is the plane's own business, and the scan covers what it covers);
     - drift, incidence: the drawn size (already defined on what the run saw).
     """
-    from metrology.sim.forward.characteristic import Characteristic
-
     if effect.family in ("drift", "incidence"):
         return float(effect.size)
     if effect.family in ("scale", "nonlinearity"):
-        sh = dict(effect.shape)
-        shape, lo, hi = sh.pop("shape"), sh.pop("lo_mm"), sh.pop("hi_mm")
-        curve = Characteristic(shape, lo, hi, sh)
-        i = list(case.nominal.names).index(effect.sensors[0])
-        d = case.d_true[:, i]
+        curve, d = _true_characteristic(case, effect)
         e = curve(np.linspace(np.nanmin(d), np.nanmax(d), 401))
         return float(e.max() - e.min())
     if effect.family == "plane_form":
@@ -141,7 +146,6 @@ def _detect_size(case, effect):
     - the others: as :func:`_seen_size`.
     """
     from metrology.sim.forward import cast_beams
-    from metrology.sim.forward.characteristic import Characteristic
 
     if effect.family == "pose_error":
         ex = case.export
@@ -149,11 +153,8 @@ def _detect_size(case, effect):
         common = np.nanmean(hit.d - case.d_true, axis=1)  # the offset part a pose (tilts are extra)
         return float(np.sqrt(np.mean(common**2)))
     if effect.family == "nonlinearity":
-        sh = dict(effect.shape)
-        shape, lo, hi = sh.pop("shape"), sh.pop("lo_mm"), sh.pop("hi_mm")
-        curve = Characteristic(shape, lo, hi, sh)
-        i = list(case.nominal.names).index(effect.sensors[0])
-        x = np.linspace(np.nanmin(case.d_true[:, i]), np.nanmax(case.d_true[:, i]), 401)
+        curve, d = _true_characteristic(case, effect)
+        x = np.linspace(np.nanmin(d), np.nanmax(d), 401)
         e = curve(x)
         r = e - np.polyval(np.polyfit(x, e, 1), x)
         return float(r.max() - r.min())

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from metrology.calibration.estimators import DEFAULT_P0_SIGMA
+from metrology.core.effects.sensor import legendre23
 from metrology.core.layout import SensorLayout
 from metrology.core.model import jacobian_tangent, readings
 
@@ -115,7 +116,7 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=(
     if "nonlinearity" in extra:
         lo, hi = np.asarray(layout.range_mm, float).T
         x = (2 * d0 - lo - hi) / (hi - lo)
-        cols += [0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)]
+        cols += list(legendre23(x))
     if cols:
         J = np.concatenate([J, np.stack(cols, axis=-1)], axis=-1)
     X = J / np.asarray(sigma_mm, float)[None, :, None]

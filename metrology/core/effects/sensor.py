@@ -189,7 +189,7 @@ class Drift(Component):
         v = self.covariate(cov)
         if self.order == 3:
             x = v / self.half
-            cols = np.stack([x, *_legendre23(x)], axis=-1)  # (p, 3)
+            cols = np.stack([x, *legendre23(x)], axis=-1)  # (p, 3)
         elif v.ndim == 2:  # the temperature and its lagged copies (p, 3)
             cols = v
         else:
@@ -218,7 +218,8 @@ def _spline_setup(a, b, n_inner):
     return _SPLINES[key]
 
 
-def _legendre23(x):
+def legendre23(x):
+    """``(P2(x), P3(x))``: the bow and S-shape of a reading normalised to ``x`` in [-1, 1]."""
     return 0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)
 
 
