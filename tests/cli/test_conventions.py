@@ -105,13 +105,18 @@ def test_help_shows_flags_as_flags_and_arguments_in_capitals(name):
             assert f" {p.name.upper()}" in usage
 
 
-def test_h_and_version_and_bare_metro():
+def test_h_and_version_and_bare_metro(monkeypatch):
+    import shellingham
+
     assert runner.invoke(app, ["-h"]).exit_code == 0
     r = runner.invoke(app, ["--version"])
     assert r.exit_code == 0 and r.stdout.startswith("metro ")
     r = runner.invoke(app, [])
     assert r.exit_code == 0 and "Usage:" in r.stdout
-    r = runner.invoke(app, ["--show-completion"], prog_name="metro", env={"SHELL": "/bin/bash"})
+    # typer finds the shell from the process tree (shellingham), not from $SHELL: pytest started
+    # from `sh` would get "Shell sh not supported", so the user's shell is set to bash here
+    monkeypatch.setattr(shellingham, "detect_shell", lambda *a, **k: ("bash", "/bin/bash"))
+    r = runner.invoke(app, ["--show-completion"], prog_name="metro")
     assert r.exit_code == 0 and "_METRO_COMPLETE" in r.stdout  # the bash completion script
 
 
