@@ -31,6 +31,7 @@ import tempfile
 import time
 from collections import Counter
 
+import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same directory)
 import numpy as np
 
 # catalogued families and their pairs, out-of-catalogue effects (metrology.sim.forward.families)

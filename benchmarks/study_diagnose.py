@@ -27,6 +27,7 @@ import sys
 import time
 from multiprocessing import Pool
 
+import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same directory)
 import numpy as np
 
 SIZES = {

@@ -26,6 +26,7 @@ import tempfile
 import time
 from multiprocessing import Pool
 
+import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same directory)
 import numpy as np
 
 from study_paper_gap import PAPER_EXPERIMENT_DEG, crossing  # same directory: run as a script
