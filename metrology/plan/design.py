@@ -51,10 +51,11 @@ SCALE_PRIOR = 0.1
 #: (:class:`metrology.core.effects.sensor.Nonlinearity`); wide against datasheet linearity
 NONLINEARITY_PRIOR_MM = 1.0
 
-#: the extra columns a design may carry per sensor, in this order after the five of the chart,
-#: and the prior 1-sigma of each of their parameters
-EXTRA_COLUMNS = {"incidence": (INCIDENCE_PRIOR_MM,), "scale": (SCALE_PRIOR,),
-                 "nonlinearity": (NONLINEARITY_PRIOR_MM, NONLINEARITY_PRIOR_MM)}
+#: the extra columns a design may carry per sensor, in this order after the five of the chart:
+#: each parameter's name (as the plan reports its standard error) and prior 1-sigma
+EXTRA_COLUMNS = {"incidence": (("incidence_c_mm", INCIDENCE_PRIOR_MM),), "scale": (("scale_k", SCALE_PRIOR),),
+                 "nonlinearity": (("nonlinearity_c2_mm", NONLINEARITY_PRIOR_MM),
+                                  ("nonlinearity_c3_mm", NONLINEARITY_PRIOR_MM))}
 
 
 def _extra(extra) -> tuple:
@@ -73,7 +74,7 @@ def prior_information(n: int, P0_sigma=DEFAULT_P0_SIGMA, incidence=()) -> np.nda
     prior covariance per sensor (1/mm^2, 1/rad^2; then 1/mm^2 for the incidence coefficient,
     unitless for the gain, 1/mm^2 for the curve's c2, c3)."""
     s_pos, s_dir = P0_sigma
-    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [s**-2 for c in _extra(incidence) for s in EXTRA_COLUMNS[c]]
+    diag = [s_pos**-2] * 3 + [s_dir**-2] * 2 + [s**-2 for c in _extra(incidence) for _, s in EXTRA_COLUMNS[c]]
     return np.broadcast_to(np.diag(diag), (n, len(diag), len(diag))).copy()
 
 

@@ -81,9 +81,7 @@ class Design:
     columns: tuple = ()
 
     def _extra_stderr(self, i) -> dict:
-        keys = {"incidence": ("incidence_c_mm",), "scale": ("scale_k",),
-                "nonlinearity": ("nonlinearity_c2_mm", "nonlinearity_c3_mm")}
-        names = [k for c in self.columns for k in keys[c]]
+        names = [k for c in self.columns for k, _ in EXTRA_COLUMNS[c]]
         return {k: float(self.stderr[i, 5 + j]) for j, k in enumerate(names)}
 
     def to_dict(self, names) -> dict:
