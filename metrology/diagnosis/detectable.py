@@ -17,7 +17,10 @@ follows it, later when it does not. The held-out test must also pass, so this is
   that member is the more sensitive (mm);
 - ``incidence``: the bias at the largest incidence angle seen (mm);
 - ``plane_form``: peak-to-valley of the scanned form seen by the spots (mm; with a datum cloud);
-- ``pose_error``: RMS per reading of independent per-pose offsets along the datum normal (mm);
+- ``pose_error``: RMS change of a reading by a per-pose rigid error, its offset and tilts
+  together, at the least favourable split between them (mm): with 3 sensors the power of the
+  random-effect test (:mod:`metrology.diagnosis.posevar`), with more that of the offset and the
+  offset-and-tilts members' F-tests;
 - ``outliers``: one gross reading (mm; the flagging threshold plus 1.645 sigma).
 """
 
@@ -133,7 +136,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
         "drift": "peak-to-valley over the run of a linear drift",
         "incidence": "bias at the largest incidence angle seen",
         "plane_form": "peak-to-valley of the scanned datum form",
-        "pose_error": "RMS per reading of independent per-pose offsets along the normal",
+        "pose_error": "RMS change of a reading by a per-pose rigid error (offset and tilts), any split",
         "outliers": "one gross reading",
     }
     for c in scored:
@@ -157,12 +160,6 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                     J = _base_jacobian(b, ds)
                 r = _scale_against_crosstalk(b, ds, J, i)
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
-        elif c.cause == "pose_error" and c.component.per_pose_columns == 1:
-            # lambda = (readings - base parameters) s^2 / sigma^2 for independent offsets of RMS s
-            S = list(range(len(b.sigma)))
-            m = int(np.sum(n_obs))
-            lam = noncentrality_95(max(int(c.n_params), 1), c.fit.dof, alpha)
-            det = float(np.sqrt(np.mean(b.sigma[S] ** 2)) * np.sqrt(lam / max(m - 5 * len(S), 1)))
         else:
             continue
         fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning.get(c.cause, "")})
@@ -170,6 +167,20 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
         if key not in fam["sensors"] or det < fam["sensors"][key]:
             fam["sensors"][key] = det
             fam["member"][key] = c.label
+    pose = [c for c in scored if c.cause == "pose_error"]
+    if pose and ds is not None:
+        # the RMS change of a reading by a rigid pose error, whatever its split between offset and
+        # tilts: with 3 sensors by the random-effect test that names it (metrology.diagnosis.posevar),
+        # with more by the members' F-tests
+        from metrology.diagnosis.posevar import detectable_rms, detectable_rms_fixed
+
+        if any(c.component.per_pose_columns > 1 for c in pose):
+            det = detectable_rms_fixed(ds, b, [(int(c.component.per_pose_columns > 1), c.n_params, c.fit.dof)
+                                                for c in pose], alpha)
+        else:
+            det = detectable_rms(ds, b, THRESHOLDS["alpha_candidates"] / (n_cand + 1))
+        out["pose_error"] = {"sensors": {"all": det}, "member": {"all": "+".join(c.label for c in pose)},
+                             "meaning": meaning["pose_error"]}
     # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
     m = int(np.sum(n_obs))
     t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * max(m, 1))))

@@ -42,8 +42,8 @@ def wchisq_sf(q: float, lam) -> float:
     if not len(lam):
         return 1.0 if q >= 0 else 0.0
     mean, var = float(lam.sum()), float(2 * np.sum(lam**2))
-    if abs(q - mean) < 1e-3 * np.sqrt(var):
-        return float(stats.norm.sf((q - mean) / np.sqrt(var)))
+    if abs(q - mean) < 1e-3 * np.sqrt(var):  # the formula's limit at the mean (its skewness)
+        return float(0.5 - 8 * np.sum(lam**3) / (6 * np.sqrt(2 * np.pi) * var**1.5))
     if q <= 0:
         return 1.0
 
@@ -61,8 +61,8 @@ def wchisq_sf(q: float, lam) -> float:
     w = np.sign(s) * np.sqrt(max(2 * (s * q - K), 0.0))
     v = s * np.sqrt(K2)
     if abs(w) < 1e-8 or abs(v) < 1e-12:
-        return float(stats.norm.sf((q - mean) / np.sqrt(var)))
-    return float(min(max(stats.norm.sf(w) + stats.norm.pdf(w) * (1 / w - 1 / v), 0.0), 1.0))
+        return float(0.5 - 8 * np.sum(lam**3) / (6 * np.sqrt(2 * np.pi) * var**1.5))
+    return float(min(max(stats.norm.sf(w) + stats.norm.pdf(w) * (1 / v - 1 / w), 0.0), 1.0))
 
 
 def pose_columns(ds, b):
@@ -311,3 +311,33 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}
     return entry, replace(pe, fit=f, label="pose_error@random", p_insample=r.p)
+
+
+def detectable_rms_fixed(ds, b, members, alpha, power=0.95, splits=5) -> float:
+    """As :func:`detectable_rms` for the members fitted pose by pose (4 sensors or more):
+    ``members`` a list of ``(columns, k, dof)``, ``columns`` 0 for the offset alone or 1 for
+    the offset and two tilts, ``k``, ``dof`` its F-test's degrees of freedom. A pose error is
+    detected when one member's F-test passes; its noncentrality is the expected whitened energy
+    of the pose error that the base fit does not absorb, within the member's columns."""
+    from scipy import optimize
+
+    from metrology.diagnosis.detectable import noncentrality_95
+
+    ok = np.isfinite(ds.obs.d)
+    A_mm = pose_columns(ds, b)
+    A = np.where(ok[..., None], A_mm / b.sigma[None, :, None], 0.0)
+    D, Wa, Wb = _projections(ds, b, (), ok, A)
+    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
+    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+    lam_per = []  # per member: the noncentrality per unit offset and tilt variance
+    for cols, k, dof in members:
+        B = A[..., :1] if cols == 0 else A
+        Pm = np.einsum("pim,pmk,pjk->pij", B, np.linalg.pinv(np.einsum("pnm,pnk->pmk", B, B), hermitian=True), B)
+        lam_per.append((np.array([np.einsum("pij,pji->", Pm, Wa), np.einsum("pij,pji->", Pm, Wb)]),
+                        noncentrality_95(max(int(k), 1), dof, alpha)))
+    worst = 0.0
+    for share in np.linspace(0.0, 1.0, splits):
+        v = np.array([share / per[0], (1 - share) / per[1]])  # variances per unit mean-square
+        rms = min(np.sqrt(l95 / max(float(lam @ v), 1e-300)) for lam, l95 in lam_per)
+        worst = max(worst, float(rms))
+    return worst
