@@ -256,17 +256,14 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     from metrology.diagnosis.posevar import random_pose_stage
 
     v = _verdict(ds, b, steps, folds, rng)
-    if v.confidence in ("high", "ambiguous") or v.cause == "none":
-        return v
-    rpe = random_pose_stage(ds, b, steps)
+    rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps)
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe)
     return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
 
 
 def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdict:
-    """:func:`verdict` with the selected causes; with ``random_pose`` ((RandomPoseError, the joint
-    fit of the causes but a pose error) of :func:`~metrology.diagnosis.posevar.random_pose_stage`)
-    the pose error is the random effect: the residuals are judged whitened by it."""
+    """:func:`verdict`; with ``random_pose`` (of :func:`~metrology.diagnosis.posevar.random_pose_stage`)
+    the pose error is a random effect, and the residuals are judged whitened by it."""
     nominal, obs = ds.layout, ds.obs
     n = obs.d.shape[1]
     chosen = [s.chosen for s in steps if s.chosen is not None and (random_pose is None or s.chosen.cause != "pose_error")]

@@ -31,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from metrology.diagnosis.extension import _free_offset, size_of
+from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["detectable_sizes", "noncentrality_95"]
@@ -91,14 +92,6 @@ def _direction(c):
     return None
 
 
-def _base_jacobian(b, ds):
-    """``(p, n, 5)``: the readings' derivatives by the five chart parameters at the base calibration."""
-    from metrology.core.model import jacobian_tangent
-
-    th = b.theta0
-    return jacobian_tangent(ds.layout.zero + th[:, :3], ds.layout.direction, th[:, 3:], ds.obs.normal, ds.obs.offset)
-
-
 def _scale_against_crosstalk(b, ds, J, i) -> float:
     """``|d0_i|`` left once the sensor's five base columns ``J[:, i]`` and the most collinear
     other sensor's distance ``d0_j`` (crosstalk, which ``scale`` must beat to be named) are
@@ -157,7 +150,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                 i = c.component.sensors[0]
                 lo, hi = b.cov.d_span[i] if b.cov.d_span is not None else b.cov.range_mm[i]
                 if J is None:
-                    J = _base_jacobian(b, ds)
+                    J = base_jacobian(b, ds)
                 r = _scale_against_crosstalk(b, ds, J, i)
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
         else:
@@ -172,9 +165,9 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
         # the RMS change of a reading by a rigid pose error, whatever its split between offset and
         # tilts: with 3 sensors by the random-effect test that names it (metrology.diagnosis.posevar),
         # with more by the members' F-tests
-        from metrology.diagnosis.posevar import detectable_rms, detectable_rms_fixed
+        from metrology.diagnosis.posevar import detectable_rms
 
-        if any(c.component.per_pose_columns > 1 for c in pose):
+        if any(c.component.per_pose_columns > 1 for c in pose):  # (detectable_rms_fixed, below)
             det = detectable_rms_fixed(ds, b, [(int(c.component.per_pose_columns > 1), c.n_params, c.fit.dof)
                                                 for c in pose], alpha)
         else:
@@ -188,3 +181,31 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                                    for name, s in zip(b.calibrated.names, b.sigma)},
                        "member": {}, "meaning": meaning["outliers"]}
     return out
+
+
+def detectable_rms_fixed(ds, b, members, alpha, power=0.95, splits=5) -> float:
+    """As :func:`metrology.diagnosis.posevar.detectable_rms` for the members fitted pose by pose (4 sensors or more):
+    ``members`` a list of ``(columns, k, dof)``, ``columns`` 0 for the offset alone or 1 for
+    the offset and two tilts, ``k``, ``dof`` its F-test's degrees of freedom. A pose error is
+    detected when one member's F-test passes; its noncentrality is the expected whitened energy
+    of the pose error that the base fit does not absorb, within the member's columns."""
+    from metrology.diagnosis.posevar import _projections, pose_columns
+
+    ok = np.isfinite(ds.obs.d)
+    A_mm = pose_columns(ds, b)
+    A = np.where(ok[..., None], A_mm / b.sigma[None, :, None], 0.0)
+    D, Wa, Wb = _projections(ds, b, (), ok, A)
+    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
+    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+    lam_per = []  # per member: the noncentrality per unit offset and tilt variance
+    for cols, k, dof in members:
+        B = A[..., :1] if cols == 0 else A
+        Pm = np.einsum("pim,pmk,pjk->pij", B, np.linalg.pinv(np.einsum("pnm,pnk->pmk", B, B), hermitian=True), B)
+        lam_per.append((np.array([np.einsum("pij,pji->", Pm, Wa), np.einsum("pij,pji->", Pm, Wb)]),
+                        noncentrality_95(max(int(k), 1), dof, alpha)))
+    worst = 0.0
+    for share in np.linspace(0.0, 1.0, splits):
+        v = np.array([share / per[0], (1 - share) / per[1]])  # variances per unit mean-square
+        rms = min(np.sqrt(l95 / max(float(lam @ v), 1e-300)) for lam, l95 in lam_per)
+        worst = max(worst, float(rms))
+    return worst

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TILT_LEVER_MM", "RandomPoseError", "pose_columns", "random_pose_error", "detectable_rms", "wchisq_sf"]
+__all__ = ["TILT_LEVER_MM", "RandomPoseError", "pose_columns", "random_pose_error", "detectable_rms", "wchisq_sf",
+           "base_jacobian", "random_pose_stage", "random_pose_cause"]
 
 #: lever (mm) of the tilts: a tilt is given as the displacement of a spot this far from the TCS origin
 TILT_LEVER_MM = 50.0
@@ -121,6 +122,14 @@ class RandomPoseError:
         return out
 
 
+def base_jacobian(b, ds):
+    """``(p, n, 5)``: the readings' derivatives by the five chart parameters at the base calibration."""
+    from metrology.core.model import jacobian_tangent
+
+    th = b.theta0
+    return jacobian_tangent(ds.layout.zero + th[:, :3], ds.layout.direction, th[:, 3:], ds.obs.normal, ds.obs.offset)
+
+
 def _projections(ds, b, comps, ok, A):
     """The null blocks and the pose error's blocks through the fit: ``(D, Wa, Wb)``, each
     ``(p, n, n)``. ``D`` is each pose's block of ``I - H`` (``H`` the hat matrix of the whitened
@@ -128,10 +137,8 @@ def _projections(ds, b, comps, ok, A):
     the pose blocks of ``(I - H) K (I - H)``, ``K`` the block-diagonal covariance of a unit
     offset variance (``c c^T`` a pose) and of a unit tilt variance (``S S^T``): the fit takes up a
     share of the pose error too, which the moments must not charge to its size."""
-    from metrology.diagnosis.detectable import _base_jacobian
-
     p, n = ok.shape
-    J = _base_jacobian(b, ds) / b.sigma[None, :, None]
+    J = base_jacobian(b, ds) / b.sigma[None, :, None]
     cols = [np.zeros((p, n, 5 * n))]
     for i in range(n):
         cols[0][:, i, 5 * i:5 * i + 5] = J[:, i]
@@ -311,33 +318,3 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}
     return entry, replace(pe, fit=f, label="pose_error@random", p_insample=r.p)
-
-
-def detectable_rms_fixed(ds, b, members, alpha, power=0.95, splits=5) -> float:
-    """As :func:`detectable_rms` for the members fitted pose by pose (4 sensors or more):
-    ``members`` a list of ``(columns, k, dof)``, ``columns`` 0 for the offset alone or 1 for
-    the offset and two tilts, ``k``, ``dof`` its F-test's degrees of freedom. A pose error is
-    detected when one member's F-test passes; its noncentrality is the expected whitened energy
-    of the pose error that the base fit does not absorb, within the member's columns."""
-    from scipy import optimize
-
-    from metrology.diagnosis.detectable import noncentrality_95
-
-    ok = np.isfinite(ds.obs.d)
-    A_mm = pose_columns(ds, b)
-    A = np.where(ok[..., None], A_mm / b.sigma[None, :, None], 0.0)
-    D, Wa, Wb = _projections(ds, b, (), ok, A)
-    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
-    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
-    lam_per = []  # per member: the noncentrality per unit offset and tilt variance
-    for cols, k, dof in members:
-        B = A[..., :1] if cols == 0 else A
-        Pm = np.einsum("pim,pmk,pjk->pij", B, np.linalg.pinv(np.einsum("pnm,pnk->pmk", B, B), hermitian=True), B)
-        lam_per.append((np.array([np.einsum("pij,pji->", Pm, Wa), np.einsum("pij,pji->", Pm, Wb)]),
-                        noncentrality_95(max(int(k), 1), dof, alpha)))
-    worst = 0.0
-    for share in np.linspace(0.0, 1.0, splits):
-        v = np.array([share / per[0], (1 - share) / per[1]])  # variances per unit mean-square
-        rms = min(np.sqrt(l95 / max(float(lam @ v), 1e-300)) for lam, l95 in lam_per)
-        worst = max(worst, float(rms))
-    return worst
