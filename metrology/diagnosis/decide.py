@@ -475,9 +475,11 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     chosen = [st.chosen for st in steps if st.chosen is not None]
     notify(progress, 2, 5, "verdict and the causes' gains")
     v = verdict(ds, b, steps, folds, rng)
-    joint = None
-    if chosen:  # the joint model of every cause selected, with the last step's held-out figures
-        joint = replace(chosen[-1], fit=v.best.fit, label="+".join(s.label for s in chosen))
+    rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
+    fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]
+    # the joint model of every cause selected, with the last step's held-out figures
+    joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
+        replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)
     notify(progress, 3, 5, "side-by-side simulation")
     discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)

@@ -175,7 +175,7 @@ def diagnosis_figures(diag: Diagnosis) -> list:
     files.append(("residuals_base.png", fig, "Residuals of the base model (calibrated geometry only) against each "
                   "recorded variable, one row per sensor: a trend is what the base model misses."))
     best = P.best
-    if best is not None:
+    if best is not None and best.fit.components:  # (a random pose error alone fits no term to draw)
         f = best.fit
         comp = f.components[0]
         key = comp.plot_key  # from the effect registry
