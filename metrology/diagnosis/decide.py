@@ -322,9 +322,10 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdic
         from metrology.diagnosis.posevar import random_pose_cause
 
         rp = random_pose_cause(random_pose[0], tests_ext, len(chosen) + 1, steps[0].scored, f)
-        if rp is not None:  # (its entry, a CandidateResult for it)
-            causes.append(rp[0])
-            chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
+        if rp is None:  # not explained as a pose error: the verdict without it stands
+            return None
+        causes.append(rp[0])  # (its entry, a CandidateResult for it)
+        chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
     causes.sort(key=lambda d: -d["heldout_gain_chi2"])
     best = chosen[kept[0]] if kept else chosen[0]
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
@@ -476,8 +477,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     notify(progress, 2, 5, "verdict and the causes' gains")
     v = verdict(ds, b, steps, folds, rng)
     rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
-    fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]
-    # the joint model of every cause selected, with the last step's held-out figures
+    fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
         replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)
