@@ -118,8 +118,16 @@ def _seen_size(case, effect):
       sensor saw (the drawn size is over the whole range, which the poses may not cover);
     - plane_form: peak-to-valley, over the scanned points, of the true datum height less its
       best-fit plane there (a tilt is the plane's own business, and the scan covers what it covers);
-    - drift, incidence: the drawn size (already defined on what the run saw).
+    - drift, incidence: the drawn size (already defined on what the run saw);
+    - pose_error: RMS over every reading of what the pose error changes (the beams cast from
+      the reported pose less those from the true one, the true head): its offset and tilts.
     """
+    if effect.family == "pose_error":
+        from metrology.sim.forward import cast_beams
+
+        ex = case.export
+        hit = cast_beams(case.surface, case.true.zero, case.true.direction, ex.tcs2tracker_rot, ex.tcs2tracker_trans)
+        return float(np.sqrt(np.nanmean((hit.d - case.d_true) ** 2)))
     if effect.family in ("drift", "incidence"):
         return float(effect.size)
     if effect.family in ("scale", "nonlinearity"):
@@ -138,21 +146,11 @@ def _seen_size(case, effect):
 def _detect_size(case, effect):
     """The truth in the definition of ``metro diagnose``'s ``detectable`` (what its test sees):
 
-    - pose_error: RMS over the poses of the offset part of what the pose error changes (the mean
-      over a pose's sensors of the beams cast from the reported pose less those from the true one,
-      the true head); the tilt part is extra, seen only with 4 sensors;
     - nonlinearity: peak-to-valley of the true characteristic less its best straight line over
       the true distances the sensor saw (the gain is the scale's business);
     - outliers: the smallest gross reading (mm);
     - the others: as :func:`_seen_size`.
     """
-    from metrology.sim.forward import cast_beams
-
-    if effect.family == "pose_error":
-        ex = case.export
-        hit = cast_beams(case.surface, case.true.zero, case.true.direction, ex.tcs2tracker_rot, ex.tcs2tracker_trans)
-        common = np.nanmean(hit.d - case.d_true, axis=1)  # the offset part a pose (tilts are extra)
-        return float(np.sqrt(np.mean(common**2)))
     if effect.family == "nonlinearity":
         curve, d = _true_characteristic(case, effect)
         x = np.linspace(np.nanmin(d), np.nanmax(d), 401)

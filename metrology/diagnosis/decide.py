@@ -249,20 +249,35 @@ def _judged_sensors(chosen, tests_ext, gains, n) -> list:
 
 
 def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
-    """Steps 3-4: refit the selected causes jointly, keep those whose sensors' residuals are
-    then consistent with noise, and describe each with its size, its held-out gain given the
-    others and what the data cannot separate."""
+    """Steps 3-4: refit the selected causes jointly, keep those whose sensors' residuals are then
+    consistent with noise, and describe each with its size, its held-out gain given the others and
+    what the data cannot separate. Where structure remains and no rigid pose error could be fitted
+    (3 sensors), the pose error as a random effect (:mod:`metrology.diagnosis.posevar`)."""
+    from metrology.diagnosis.posevar import random_pose_stage
+
+    v = _verdict(ds, b, steps, folds, rng)
+    rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps)
+    v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe)
+    return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
+
+
+def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdict:
+    """:func:`verdict`; with ``random_pose`` (of :func:`~metrology.diagnosis.posevar.random_pose_stage`)
+    the pose error is a random effect, and the residuals are judged whitened by it."""
     nominal, obs = ds.layout, ds.obs
     n = obs.d.shape[1]
-    chosen = [s.chosen for s in steps if s.chosen is not None]
+    chosen = [s.chosen for s in steps if s.chosen is not None and (random_pose is None or s.chosen.cause != "pose_error")]
     lead = steps[-1].lead
-    if not chosen:
+    if not chosen and random_pose is None:
         cause = "none" if b.tests.consistent else "unexplained"
         # "none" says no effect above the detectable sizes; smaller ones are not ruled out
         confidence = "moderate" if b.tests.consistent and lead is None else "low"
         return Verdict(cause, [], confidence, None, None, [], None, (), lead)
-    f = joint_fit(ds, b, chosen)
+    f = joint_fit(ds, b, chosen) if random_pose is None else random_pose[1]
     r_test, dof_test = f.residual, dof_per_sensor(f, obs, n)
+    if random_pose is not None:  # the residuals whitened by the fitted pose error's covariance
+        r_test = random_pose[0].whitened
+        dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
     rigid = [c for c in f.components if c.per_pose and c.per_pose_columns > 1]
     if rigid:
         # several values a pose take most of each pose's readings, unevenly over the sensors:
@@ -274,13 +289,14 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
         r_test = np.where(1.0 - h > 1e-3, r_test, np.nan)
         dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
     tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
-                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng())
-    gains = drop_one_gains(ds, b, chosen, folds)
+                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),
+                            normality=random_pose is None)  # a pose error need not be Gaussian
+    gains = drop_one_gains(ds, b, chosen, folds) if chosen else []
     judged = _judged_sensors(chosen, tests_ext, gains, n)
     # every cause named must still be needed given the others, Bonferroni over the causes chosen
     # (the selection's later steps test at alpha_heldout each; a member re-chosen or a cause
     # added after can make an earlier one redundant); outliers predict nothing held out
-    alpha_each = THRESHOLDS["alpha_heldout"] / len(chosen)
+    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
     kept = [j for j in range(len(chosen)) if judged[j]
             and (len(chosen) == 1 or isinstance(chosen[j].component, Outliers) or gains[j][1] < alpha_each)]
     # a characteristic that follows another sensor's distance better is crosstalk, not the
@@ -302,6 +318,14 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
                   "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                   "p_insample": s.p_insample, "step": j + 1})
         causes.append(d)
+    if random_pose is not None:
+        from metrology.diagnosis.posevar import random_pose_cause
+
+        rp = random_pose_cause(random_pose[0], tests_ext, len(chosen) + 1, steps[0].scored, f)
+        if rp is None:  # not explained as a pose error: the verdict without it stands
+            return None
+        causes.append(rp[0])  # (its entry, a CandidateResult for it)
+        chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
     causes.sort(key=lambda d: -d["heldout_gain_chi2"])
     best = chosen[kept[0]] if kept else chosen[0]
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
@@ -452,9 +476,10 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     chosen = [st.chosen for st in steps if st.chosen is not None]
     notify(progress, 2, 5, "verdict and the causes' gains")
     v = verdict(ds, b, steps, folds, rng)
-    joint = None
-    if chosen:  # the joint model of every cause selected, with the last step's held-out figures
-        joint = replace(chosen[-1], fit=v.best.fit, label="+".join(s.label for s in chosen))
+    rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
+    fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
+    joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
+        replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)
     notify(progress, 3, 5, "side-by-side simulation")
     discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)

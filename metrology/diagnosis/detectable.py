@@ -17,7 +17,10 @@ follows it, later when it does not. The held-out test must also pass, so this is
   that member is the more sensitive (mm);
 - ``incidence``: the bias at the largest incidence angle seen (mm);
 - ``plane_form``: peak-to-valley of the scanned form seen by the spots (mm; with a datum cloud);
-- ``pose_error``: RMS per reading of independent per-pose offsets along the datum normal (mm);
+- ``pose_error``: RMS change of a reading by a per-pose rigid error, its offset and tilts
+  together, at the least favourable split between them (mm): with 3 sensors the power of the
+  random-effect test (:mod:`metrology.diagnosis.posevar`), with more that of the offset and the
+  offset-and-tilts members' F-tests;
 - ``outliers``: one gross reading (mm; the flagging threshold plus 1.645 sigma).
 """
 
@@ -28,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from metrology.diagnosis.extension import _free_offset, size_of
+from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["detectable_sizes", "noncentrality_95"]
@@ -88,14 +92,6 @@ def _direction(c):
     return None
 
 
-def _base_jacobian(b, ds):
-    """``(p, n, 5)``: the readings' derivatives by the five chart parameters at the base calibration."""
-    from metrology.core.model import jacobian_tangent
-
-    th = b.theta0
-    return jacobian_tangent(ds.layout.zero + th[:, :3], ds.layout.direction, th[:, 3:], ds.obs.normal, ds.obs.offset)
-
-
 def _scale_against_crosstalk(b, ds, J, i) -> float:
     """``|d0_i|`` left once the sensor's five base columns ``J[:, i]`` and the most collinear
     other sensor's distance ``d0_j`` (crosstalk, which ``scale`` must beat to be named) are
@@ -133,7 +129,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
         "drift": "peak-to-valley over the run of a linear drift",
         "incidence": "bias at the largest incidence angle seen",
         "plane_form": "peak-to-valley of the scanned datum form",
-        "pose_error": "RMS per reading of independent per-pose offsets along the normal",
+        "pose_error": "RMS change of a reading by a per-pose rigid error (offset and tilts), any split",
         "outliers": "one gross reading",
     }
     for c in scored:
@@ -154,15 +150,9 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                 i = c.component.sensors[0]
                 lo, hi = b.cov.d_span[i] if b.cov.d_span is not None else b.cov.range_mm[i]
                 if J is None:
-                    J = _base_jacobian(b, ds)
+                    J = base_jacobian(b, ds)
                 r = _scale_against_crosstalk(b, ds, J, i)
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
-        elif c.cause == "pose_error" and c.component.per_pose_columns == 1:
-            # lambda = (readings - base parameters) s^2 / sigma^2 for independent offsets of RMS s
-            S = list(range(len(b.sigma)))
-            m = int(np.sum(n_obs))
-            lam = noncentrality_95(max(int(c.n_params), 1), c.fit.dof, alpha)
-            det = float(np.sqrt(np.mean(b.sigma[S] ** 2)) * np.sqrt(lam / max(m - 5 * len(S), 1)))
         else:
             continue
         fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning.get(c.cause, "")})
@@ -170,6 +160,20 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
         if key not in fam["sensors"] or det < fam["sensors"][key]:
             fam["sensors"][key] = det
             fam["member"][key] = c.label
+    pose = [c for c in scored if c.cause == "pose_error"]
+    if pose and ds is not None:
+        # the RMS change of a reading by a rigid pose error, whatever its split between offset and
+        # tilts: with 3 sensors by the random-effect test that names it (metrology.diagnosis.posevar),
+        # with more by the members' F-tests
+        from metrology.diagnosis.posevar import detectable_rms
+
+        if any(c.component.per_pose_columns > 1 for c in pose):  # (detectable_rms_fixed, below)
+            det = detectable_rms_fixed(ds, b, [(int(c.component.per_pose_columns > 1), c.n_params, c.fit.dof)
+                                                for c in pose], alpha)
+        else:
+            det = detectable_rms(ds, b, THRESHOLDS["alpha_candidates"] / (n_cand + 1))
+        out["pose_error"] = {"sensors": {"all": det}, "member": {"all": "+".join(c.label for c in pose)},
+                             "meaning": meaning["pose_error"]}
     # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
     m = int(np.sum(n_obs))
     t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * max(m, 1))))
@@ -177,3 +181,31 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
                                    for name, s in zip(b.calibrated.names, b.sigma)},
                        "member": {}, "meaning": meaning["outliers"]}
     return out
+
+
+def detectable_rms_fixed(ds, b, members, alpha, power=0.95, splits=5) -> float:
+    """As :func:`metrology.diagnosis.posevar.detectable_rms` for the members fitted pose by pose (4 sensors or more):
+    ``members`` a list of ``(columns, k, dof)``, ``columns`` 0 for the offset alone or 1 for
+    the offset and two tilts, ``k``, ``dof`` its F-test's degrees of freedom. A pose error is
+    detected when one member's F-test passes; its noncentrality is the expected whitened energy
+    of the pose error that the base fit does not absorb, within the member's columns."""
+    from metrology.diagnosis.posevar import _projections, pose_columns
+
+    ok = np.isfinite(ds.obs.d)
+    A_mm = pose_columns(ds, b)
+    A = np.where(ok[..., None], A_mm / b.sigma[None, :, None], 0.0)
+    D, Wa, Wb = _projections(ds, b, (), ok, A)
+    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
+    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+    lam_per = []  # per member: the noncentrality per unit offset and tilt variance
+    for cols, k, dof in members:
+        B = A[..., :1] if cols == 0 else A
+        Pm = np.einsum("pim,pmk,pjk->pij", B, np.linalg.pinv(np.einsum("pnm,pnk->pmk", B, B), hermitian=True), B)
+        lam_per.append((np.array([np.einsum("pij,pji->", Pm, Wa), np.einsum("pij,pji->", Pm, Wb)]),
+                        noncentrality_95(max(int(k), 1), dof, alpha)))
+    worst = 0.0
+    for share in np.linspace(0.0, 1.0, splits):
+        v = np.array([share / per[0], (1 - share) / per[1]])  # variances per unit mean-square
+        rms = min(np.sqrt(l95 / max(float(lam @ v), 1e-300)) for lam, l95 in lam_per)
+        worst = max(worst, float(rms))
+    return worst

@@ -104,6 +104,10 @@ def _project_per_pose_multi(Bw, X, Bpinv=None):
 RIGID_GAUGE_WEIGHT = 1e3
 
 
+#: a column whose norm the per-pose projection leaves below this share of its own is absorbed (zeroed)
+ABSORBED_COLUMN_RTOL = 1e-8
+
+
 #: singular values of the projected base Jacobian below this share of the largest are held
 ABSORBED_RTOL = 1e-3
 
@@ -246,7 +250,12 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         Jr = -np.concatenate(blocks, axis=-1) / sig[None, :, None]
         Jr = np.where(ok[..., None], Jr, 0.0)
         if Bw is not None:
+            n0 = np.sqrt(np.einsum("psk,psk->k", Jr, Jr))
             Jr, _ = project(Jr)
+            # a column the per-pose values absorb (a datum tilt under an offset and two tilts a
+            # pose) is left as rounding noise: zero it, or the column scaling blows it up
+            gone = np.sqrt(np.einsum("psk,psk->k", Jr, Jr)) <= ABSORBED_COLUMN_RTOL * n0
+            Jr[..., gone] = 0.0
         rows = [Jr[ok]]
         off = nb
         for c, v, k in zip(free, vals, k_comp):
@@ -289,7 +298,8 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     chi2 = float(np.sum(rS**2))
     s2 = chi2 / max(dof, 1)
     # covariance s^2 (J^T J)^-1, column-scaled normal equations (small: base + few extras)
-    scale = np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    scale = np.linalg.norm(J, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)  # an absorbed (zeroed) column: no information, no scale
     Js = J / scale
     C = np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True) / np.outer(scale, scale) * s2
     se = np.sqrt(np.maximum(np.diag(C), 0.0))
@@ -338,7 +348,8 @@ def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
         J = jac(x)
         w = np.ones_like(r) if loss == "linear" else 1.0 / np.sqrt(np.sqrt(1 + r * r))
         Jw, rw = J * w[:, None], r * w
-        scale = np.maximum(np.linalg.norm(Jw, axis=0), 1e-300)
+        scale = np.linalg.norm(Jw, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
         Js = Jw / scale
         step = -np.linalg.lstsq(Js, rw, rcond=1e-12)[0] / scale
         t = 1.0

@@ -84,7 +84,7 @@ def ljung_box(x, lags, rng: np.random.Generator | None = None, n_perm: int = 999
 
 
 def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
-                rng: np.random.Generator | None = None) -> NoiseTests:
+                rng: np.random.Generator | None = None, normality: bool = True) -> NoiseTests:
     """Tests of the residuals ``(p, n)`` mm against white Gaussian noise of ``sigma (n,)`` mm.
 
     Returns a :class:`NoiseTests`: per-sensor chi-square (upper tail), Ljung-Box (a permutation
@@ -103,10 +103,10 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
         dof = max(int(dof_per_sensor[i]), 1)
         p_chi = float(stats.chi2.sf(chi2, dof))
         p_lb = ljung_box(r, min(10, max(len(r) // 5, 1)), rng)
-        p_sw = float(stats.shapiro(r).pvalue) if len(r) >= 3 else 1.0
+        p_sw = float(stats.shapiro(r).pvalue) if len(r) >= 3 and normality else None
         per[names[i]] = {"chi2": chi2, "dof": dof, "sigma_est_mm": float(np.sqrt(chi2 / dof)) * sigma[i],
                          "p_chi2": p_chi, "p_whiteness": p_lb, "p_normality": p_sw}
-        pvals += [(p_chi, {i}), (p_lb, {i}), (p_sw, {i})]
+        pvals += [(p_chi, {i}), (p_lb, {i})] + ([(p_sw, {i})] if p_sw is not None else [])
     pair_out = {}
     for i in range(n if pairs else 0):
         for j in range(i + 1, n):

@@ -51,8 +51,9 @@ def verdict_summary(v, tb) -> str:
     parts = []
     for c in v.causes:
         where = f" on {', '.join(c['sensors'])}" if c["sensors"] and c["cause"] not in ("pose_error", "plane_form") else ""
-        parts.append(f"{c['cause']}{where} ({c['label']}: held-out chi-square gain {c['heldout_gain_chi2']:.3g} "
-                     f"given the others, p = {c['p_heldout_given_others']:.2g})")
+        test = (f"{c['test']}, p = {c['p_insample']:.2g}" if c.get("test") else
+                f"held-out chi-square gain {c['heldout_gain_chi2']:.3g} given the others, p = {c['p_heldout_given_others']:.2g}")
+        parts.append(f"{c['cause']}{where} ({c['label']}: {test})")
     text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
         names = list(te.sensors)

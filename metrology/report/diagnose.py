@@ -88,8 +88,9 @@ def report_text(d: Diagnosis) -> str:
         for c in D["causes"]:
             where = f" on {', '.join(c['sensors'])}" if c["sensors"] else ""
             lines.append("")
-            lines.append(f"cause {c['cause']}{where}: {c['label']} (held-out chi-square gain {c['heldout_gain_chi2']:.1f} "
-                         f"given the others, p = {c['p_heldout_given_others']:.3g})")
+            test = (f"{c['test']}, p = {c['p_insample']:.3g}" if c.get("test") else
+                    f"held-out chi-square gain {c['heldout_gain_chi2']:.1f} given the others, p = {c['p_heldout_given_others']:.3g}")
+            lines.append(f"cause {c['cause']}{where}: {c['label']} ({test})")
             if c.get("size"):
                 sz = c["size"]
                 se = "" if sz["stderr"] is None else f" +- {1e3 * sz['stderr']:.2f}"
@@ -174,7 +175,7 @@ def diagnosis_figures(diag: Diagnosis) -> list:
     files.append(("residuals_base.png", fig, "Residuals of the base model (calibrated geometry only) against each "
                   "recorded variable, one row per sensor: a trend is what the base model misses."))
     best = P.best
-    if best is not None:
+    if best is not None and best.fit.components:  # (a random pose error alone fits no term to draw)
         f = best.fit
         comp = f.components[0]
         key = comp.plot_key  # from the effect registry
