@@ -116,7 +116,7 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
                         kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
         out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th0,
-                                   n_cand, given=given, k_ref=k_ref))
+                                   n_cand, given=given, k_ref=k_ref, ho_rank=ref_ho))
     return out
 
 
