@@ -126,6 +126,23 @@ def _lead(scored, n_cand):
     return in_only[0] if in_only else None
 
 
+def _parsimonious(sig):
+    """The candidate a step takes among the significant ones ``sig`` (largest held-out gain
+    first): the first, unless it is a per-pose cause and the best cause that is not per-pose
+    predicts held-out poses as well (the per-pose one not significantly better, ``alpha_order``).
+    An offset and two tilts a pose, as many values as readings nearly, follow any effect that
+    is smooth over the few millimetres between a pose's spots: a datum form, seen by four
+    spots, is locally an offset and two tilts. A fixed cause that explains as much held out
+    is the explanation, the per-pose one its imitation."""
+    first = sig[0]
+    if not first.component.per_pose:
+        return first
+    fixed = next((s for s in sig if not s.component.per_pose), None)
+    if fixed is not None and p_better(first, fixed) >= THRESHOLDS["alpha_order"]:
+        return fixed
+    return first
+
+
 def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None):
     """Add causes while one gives a significant held-out gain given the others (see the module).
 
@@ -146,7 +163,7 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
         if not sig:
             steps.append(Step(None, ranked, _lead(scored, n_cand)))
             return steps
-        chosen = refine_order(sig[0], scored)
+        chosen = refine_order(_parsimonious(sig), scored)
         steps.append(Step(chosen, ranked, None))
         given = given + (chosen.component,)
         ref_fit, ref_ho = chosen.fit, chosen.heldout
