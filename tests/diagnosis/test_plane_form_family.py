@@ -53,3 +53,20 @@ def test_a_large_higher_order_form_is_named_plane_form_not_a_pose_error(tmp_path
     size = res["causes"][0]["size"]
     truth = _true_ptp_beyond_plane(case.surface, case.cloud)
     assert abs(size["value"] - truth) <= 2 * size["stderr"], (size, truth)
+
+
+def test_a_per_pose_cause_yields_the_step_only_to_a_fixed_cause_as_good_held_out():
+    """The rule of ``select._parsimonious`` on its own: the per-pose candidate keeps the step when
+    its per-pose held-out chi-square is significantly lower, and yields it when not."""
+    from types import SimpleNamespace
+
+    from metrology.diagnosis.select import _parsimonious
+
+    rng = np.random.default_rng(3)
+    base = rng.chisquare(4, 60)
+    pose = SimpleNamespace(component=SimpleNamespace(per_pose=True), chi2_pose=base)
+    same = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 0.5 * (-1.0) ** np.arange(60))  # no better, no worse
+    worse = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 3.0 + rng.normal(0, 0.5, 60))
+    assert _parsimonious([pose, same]) is same
+    assert _parsimonious([pose, worse]) is pose
+    assert _parsimonious([same, pose]) is same
