@@ -15,8 +15,10 @@ Families and their members (what is chosen by held-out error, never by the in-sa
 - ``drift``: linear in temperature, linear in time, the temperature with two lagged copies
   (a head that follows the air with a lag of minutes), a cubic in time (a warm-up that levels
   off, a warm-cool cycle); temperature wins a tie (the physical cause, time its proxy);
-- ``plane_form``: quadratic or cubic form, both tested *beyond the plane*: against the datum's
-  tilt fitted as a nuisance parameter (a linear "form" is the plane fit's own uncertainty);
+- ``plane_form``: the datum as scanned (times a gain), quadratic or cubic form, all tested
+  *beyond the plane*: against the datum's tilt fitted as a nuisance parameter (a linear "form"
+  is the plane fit's own uncertainty), and ranked, like every candidate, against the model
+  without that tilt;
 - ``pose_error``: an offset a pose along the datum normal, or (4 or more sensors) an offset and
   two tilts a pose, the visible part of a rigid 6-DOF tracker error.
 """
