@@ -272,5 +272,10 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
     rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
     nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
     sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_
+    if ho_rank is not None:
+        # and better held out than the model it is ranked against: a reference that predicts
+        # badly (a datum tilt beside a rigid pose error, whose per-pose tilts it duplicates,
+        # gave held-out RMS of 1e8 mm) must not make a candidate look like a gain
+        sig = sig and ho_rank.rms(S, excl) > re_
     return CandidateResult(c.label, c.name, [names[i] for i in c.sensors], k, p_in, p_ho, float(np.sum(diff)), rb, re_,
                            rb / re_, float(np.rad2deg(nb_)), float(np.rad2deg(ne_)), bool(sig), c, f, ho, ce)
