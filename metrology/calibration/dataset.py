@@ -26,17 +26,20 @@ MIN_READINGS = 6
 NO_READING = 0.0
 
 
-def load_plane(path):
+def load_plane(path, with_cloud=False):
     """The datum plane from a ``fit-plane --out`` JSON or from a tracker cloud (fitted robustly).
 
     Returns
     -------
     plane : Plane, tracker frame
     points : (m, 3) float, mm, tracker frame, or None (the inlier cloud, when a cloud was given)
+    cloud : (k, 3) float, mm, tracker frame, or None; only ``with_cloud``: every point of the
+        cloud, the plane fit's outliers included (a datum with form beyond the plane fit's
+        window has its highest and lowest regions among them)
     """
     path = Path(path)
     if path.suffix.lower() == ".json":
-        return Plane.from_json(path), None
+        return (Plane.from_json(path), None) + ((None,) if with_cloud else ())
     from metrology.io.clouds import read_cloud
     from metrology.datum import fit_plane_robust
 
@@ -45,7 +48,7 @@ def load_plane(path):
         fit = fit_plane_robust(points)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
-    return fit.plane, points[fit.inliers(points)]
+    return (fit.plane, points[fit.inliers(points)]) + ((points,) if with_cloud else ())
 
 
 @dataclass(frozen=True)
@@ -57,7 +60,8 @@ class Dataset:
     export : TrackerExport (columns in ``layout.names`` order)
     layout : SensorLayout (nominal or calibrated)
     plane : Plane, tracker frame
-    datum_points : (m, 3) float, mm, tracker frame, or None
+    datum_points : (m, 3) float, mm, tracker frame, or None: the plane fit's inliers
+    datum_cloud : (k, 3) float, mm, tracker frame, or None: every point of the datum cloud
     dropped : tuple of (pose_id, sensor name)
         Readings equal to the "no reading" code, dropped on loading (see :func:`drop_no_reading`).
     no_reading : float
@@ -70,6 +74,7 @@ class Dataset:
     datum_points: np.ndarray | None = None
     dropped: tuple = ()
     no_reading: float = NO_READING
+    datum_cloud: np.ndarray | None = None
 
     @property
     def obs(self) -> Observations:
@@ -82,7 +87,7 @@ class Dataset:
 
     def select(self, idx) -> "Dataset":
         return Dataset(self.export.select(idx), self.layout, self.plane, self.datum_points, self.dropped,
-                       self.no_reading)
+                       self.no_reading, self.datum_cloud)
 
     def no_reading_summary(self) -> str | None:
         """One line on the dropped "no reading" codes (for stderr), or None when none was."""
@@ -191,5 +196,6 @@ def load_dataset(export_path, plane_path, layout_path, quaternion_order: str = "
     else:
         dropped = ()
     export = check(export, layout, str(export_path))
-    plane, points = load_plane(plane_path)
-    return Dataset(export, layout, plane, points, dropped, NO_READING if no_reading is None else float(no_reading))
+    plane, points, cloud = load_plane(plane_path, with_cloud=True)
+    return Dataset(export, layout, plane, points, dropped, NO_READING if no_reading is None else float(no_reading),
+                   cloud)

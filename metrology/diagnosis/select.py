@@ -15,8 +15,10 @@ Families and their members (what is chosen by held-out error, never by the in-sa
 - ``drift``: linear in temperature, linear in time, the temperature with two lagged copies
   (a head that follows the air with a lag of minutes), a cubic in time (a warm-up that levels
   off, a warm-cool cycle); temperature wins a tie (the physical cause, time its proxy);
-- ``plane_form``: quadratic or cubic form, both tested *beyond the plane*: against the datum's
-  tilt fitted as a nuisance parameter (a linear "form" is the plane fit's own uncertainty);
+- ``plane_form``: the datum as scanned (times a gain), quadratic or cubic form, all tested
+  *beyond the plane*: against the datum's tilt fitted as a nuisance parameter (a linear "form"
+  is the plane fit's own uncertainty), and ranked, like every candidate, against the model
+  without that tilt;
 - ``pose_error``: an offset a pose along the datum normal, or (4 or more sensors) an offset and
   two tilts a pose, the visible part of a rigid 6-DOF tracker error.
 """
@@ -116,7 +118,7 @@ def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
                         kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
         out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th0,
-                                   n_cand, given=given, k_ref=k_ref))
+                                   n_cand, given=given, k_ref=k_ref, ho_rank=ref_ho))
     return out
 
 
@@ -124,6 +126,23 @@ def _lead(scored, n_cand):
     in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
                      key=lambda s: s.p_insample)
     return in_only[0] if in_only else None
+
+
+def _parsimonious(sig):
+    """The candidate a step takes among the significant ones ``sig`` (largest held-out gain
+    first): the first, unless it is a per-pose cause and the best cause that is not per-pose
+    predicts held-out poses as well (the per-pose one not significantly better, ``alpha_order``).
+    An offset and two tilts a pose, as many values as readings nearly, follow any effect that
+    is smooth over the few millimetres between a pose's spots: a datum form, seen by four
+    spots, is locally an offset and two tilts. A fixed cause that explains as much held out
+    is the explanation, the per-pose one its imitation."""
+    first = sig[0]
+    if not first.component.per_pose:
+        return first
+    fixed = next((s for s in sig if not s.component.per_pose), None)
+    if fixed is not None and p_better(first, fixed) >= THRESHOLDS["alpha_order"]:
+        return fixed
+    return first
 
 
 def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None):
@@ -146,7 +165,7 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
         if not sig:
             steps.append(Step(None, ranked, _lead(scored, n_cand)))
             return steps
-        chosen = refine_order(sig[0], scored)
+        chosen = refine_order(_parsimonious(sig), scored)
         steps.append(Step(chosen, ranked, None))
         given = given + (chosen.component,)
         ref_fit, ref_ho = chosen.fit, chosen.heldout

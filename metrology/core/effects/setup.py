@@ -152,10 +152,12 @@ class PlaneForm(Component):
         s2 = float(np.sum((V @ coef - w) ** 2)) / max(len(w) - V.shape[1], 1)
         cov_coef = np.linalg.pinv(V.T @ V, rcond=1e-12, hermitian=True) * s2
 
-        def height(st_query):
+        def height(st_query, grow=0.0):
+            """Height (mm) at ``st_query (..., 2)`` mm; NaN outside the box widened by ``grow``
+            times its half-widths on each side (0: the box; beyond it the surface extrapolates)."""
             q = np.asarray(st_query, float)
             flat = q.reshape(-1, 2)
-            ok = np.all(np.isfinite(flat), axis=1) & np.all((flat >= lo) & (flat <= hi), axis=1)
+            ok = np.all(np.isfinite(flat), axis=1) & np.all((flat >= lo - grow * half) & (flat <= hi + grow * half), axis=1)
             out = np.full(len(flat), np.nan)
             if np.any(ok):
                 out[ok] = design(flat[ok], deg) @ coef
