@@ -9,6 +9,10 @@ move them apart also drive). It is not a catalogued cause, so it must not come o
 predicts held-out poses significantly better (Bonferroni over the other sensors), the cause is
 not named: the effect follows another sensor's distance. If the two cannot be told apart, it is
 not named either, and the verdict says why (:mod:`metrology.diagnosis.decide`).
+
+Both are compared on the readings the selection judged the characteristic on: a held-out
+reading beyond its sensor's training span tests how a curve with turns extrapolates, not
+which term the data follow (:func:`~metrology.diagnosis.heldout.beyond_span`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.effects import Component
-from metrology.diagnosis.heldout import kfold
+from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["OtherReading", "crosstalk_check"]
@@ -60,11 +64,15 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
     others = [j for j in range(nominal.n) if j != i]
     a = THRESHOLDS["alpha_heldout"]
     out = {"better": None, "p": 1.0, "indistinguishable": []}
-    ref = named.heldout.chi2_pose(b.sigma, [i])
+    # the readings the selection judged a characteristic on (score_candidate): a held-out
+    # reading beyond the training span tests the curve's extrapolation, where a P5 or a spline
+    # diverges, and one such pose swamps the paired test either way
+    excl = beyond_span(obs.d, folds) if named.component.uses_d0 else None
+    ref = named.heldout.chi2_pose(b.sigma, [i], excl)
     for j in others:
         c = OtherReading((i,), names=nominal.names, source=j)
         ho = kfold(nominal, obs, b.cov, b.sigma, tuple(given) + (c,), folds, b.theta0)
-        d = ref - ho.chi2_pose(b.sigma, [i])  # > 0: crosstalk predicts better
+        d = ref - ho.chi2_pose(b.sigma, [i], excl)  # > 0: crosstalk predicts better
         if np.allclose(d, 0):
             continue
         p_better = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)

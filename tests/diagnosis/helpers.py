@@ -57,6 +57,8 @@ def all_components(ds, cov):
         Nonlinearity((3,), [1e-3, 0.01, -0.02, 0.005, 0.003], names=names, with_gain=True, order=5),
         Nonlinearity((0,), [1e-3, 0.01, -0.02, 0.005, 0.003, -0.01, 0.02], names=names, with_gain=True, order=0,
                      span=(float(np.nanmin(ds.export.d[:, 0])), float(np.nanmax(ds.export.d[:, 0])))),
+        Nonlinearity((2,), np.r_[1e-3, rng.normal(0, 0.01, 10)], names=names, with_gain=True, order=0, knots=8,
+                     span=(float(np.nanmin(ds.export.d[:, 2])), float(np.nanmax(ds.export.d[:, 2])))),
         Drift((2,), [0.01, -0.004, 0.003], names=names, variable="time", ref=float(np.mean(cov.time_h)), order=3,
               half=0.5 * float(np.ptp(cov.time_h))),
         Drift((1,), [0.004, -0.002, 0.003], names=names, variable="lag", ref=float(np.mean(cov.temp_c))),

@@ -240,10 +240,11 @@ class Nonlinearity(Component):
 
     ``order`` (3 or 5) is the highest Legendre polynomial: ``order=5`` adds ``c4 P4 + c5 P5``
     for a characteristic with more turns (a calibration table with several knots). ``order=0``
-    is a cubic regression spline instead (:data:`SPLINE_KNOTS` interior knots, evenly over
-    ``span`` (the readings the sensor gave; default the range), its constant and linear parts
-    removed there): any smooth curve with a few turns, ``s1..s6`` mm. The diagnosis takes a richer member only when it predicts held-out
-    poses significantly better.
+    is a cubic regression spline instead (``knots`` interior knots, :data:`SPLINE_KNOTS` by
+    default, evenly over ``span`` (the readings the sensor gave; default the range), its
+    constant and linear parts removed there): any smooth curve with a few turns,
+    ``s1..s{knots + 2}`` mm. The diagnosis takes a richer member (more knots, ``@spline8``)
+    only when it predicts held-out poses significantly better.
     """
 
     #: interior knots of the spline member (``order=0``), evenly spaced over the range
@@ -252,6 +253,7 @@ class Nonlinearity(Component):
     with_gain: bool = False
     order: int = 3
     span: tuple | None = None
+    knots: int = 4
 
     name = "nonlinearity"
     uses_d0 = True
@@ -272,11 +274,13 @@ class Nonlinearity(Component):
     def __post_init__(self):
         if self.order not in (0, 3, 5):
             raise ValueError(f"nonlinearity order must be 3, 5 or 0 (spline), got {self.order}")
+        if self.order == 0 and not 1 <= self.knots <= 32:
+            raise ValueError(f"nonlinearity spline knots must be 1..32, got {self.knots}")
         super().__post_init__()
 
     @property
     def _n_shape(self):
-        return self.SPLINE_KNOTS + 2 if self.order == 0 else self.order - 1
+        return self.knots + 2 if self.order == 0 else self.order - 1
 
     @property
     def param_names(self):
@@ -290,14 +294,15 @@ class Nonlinearity(Component):
 
     @property
     def label(self):
-        return super().label + {0: "@spline", 3: "", 5: "@5"}[self.order]
+        spline = "@spline" + ("" if self.knots == self.SPLINE_KNOTS else str(self.knots))
+        return super().label + {0: spline, 3: "", 5: "@5"}[self.order]
 
     def _spline(self, x, a=-1.0, b=1.0):
-        """``(..., SPLINE_KNOTS + 2)``: cubic B-splines on ``[a, b]`` (normalised units) less
+        """``(..., knots + 2)``: cubic B-splines on ``[a, b]`` (normalised units) less
         their least-squares line there, and their derivatives in ``x``."""
         from scipy.interpolate import BSpline
 
-        t, line, dline = _spline_setup(float(a), float(b), self.SPLINE_KNOTS)
+        t, line, dline = _spline_setup(float(a), float(b), self.knots)
         xf = np.asarray(x, float).ravel()
         ok = np.isfinite(xf)  # a reading the model cannot place (NaN) has no basis value
         nb = len(t) - 4
