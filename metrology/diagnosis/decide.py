@@ -256,7 +256,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     from metrology.diagnosis.posevar import random_pose_stage
 
     v = _verdict(ds, b, steps, folds, rng)
-    rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps)
+    rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe)
     return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
 

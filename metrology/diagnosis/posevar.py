@@ -182,10 +182,18 @@ def _weights(A, V):
     return la, lb
 
 
-def random_pose_error(ds, b, fit_residual, comps=(), flags=None, rng=None) -> RandomPoseError:
+def _per_unit_variance(A_mm, ok) -> np.ndarray:
+    """``(2,)``: a reading's mean square change (mm^2) per unit offset variance and per unit tilt
+    variance, over the readings ``ok (p, n)``; ``A_mm (p, n, 3)`` of :func:`pose_columns`."""
+    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
+    return np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+
+
+def random_pose_error(ds, b, fit_residual, rng: np.random.Generator, comps=(), flags=None) -> RandomPoseError:
     """Test and size a per-pose rigid error as a random effect in ``fit_residual (p, n)`` mm, the
     residuals of the base model plus ``comps`` (no pose error among them), against the stated
-    noise ``b.sigma``; ``flags (p, n)`` bool readings left out (gross). See the module."""
+    noise ``b.sigma``; ``flags (p, n)`` bool readings left out (gross); ``rng`` the generator of
+    the whiteness permutation test (the battery's, ``decide.battery_rng``). See the module."""
     from scipy import stats
 
     from metrology.diagnosis.stats import ljung_box
@@ -214,14 +222,12 @@ def random_pose_error(ds, b, fit_residual, comps=(), flags=None, rng=None) -> Ra
             w, E = np.linalg.eigh(V[q][np.ix_(k, k)])
             y[q, k] = E @ ((E.T @ z[q, k]) / np.sqrt(np.maximum(w, 1e-12)))
     # the RMS change of a reading (mm) and its standard error (delta method)
-    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
-    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+    per = _per_unit_variance(A_mm, ok)
     ms = float(per @ vpos)
     rms = float(np.sqrt(ms))
     rms_se = float(np.sqrt(max(per @ var_cov @ per, 0.0)) / (2 * rms)) if rms > 0 else float(
         np.sqrt(np.sqrt(max(per @ var_cov @ per, 0.0))))
     # explained? every sensor's whitened chi-square (both ways), whiteness, the pairs' correlations
-    rng = np.random.default_rng(20261123) if rng is None else rng
     n = z.shape[1]
     pv = []
     for i in range(n):
@@ -258,8 +264,7 @@ def detectable_rms(ds, b, alpha, power=0.95, splits=5) -> float:
         return optimize.brentq(lambda q: wchisq_sf(q, lam) - alpha / 2, lo, hi, rtol=1e-8)
 
     qa, qb = crit(la), crit(lb)
-    A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
-    per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
+    per = _per_unit_variance(A_mm, ok)
 
     def pw(rms, share):
         va, vb = share * rms**2 / per[0], (1 - share) * rms**2 / per[1]
@@ -280,7 +285,7 @@ def detectable_rms(ds, b, alpha, power=0.95, splits=5) -> float:
 TEST_TEXT = "within-pose covariance of the residuals against the stated noise"
 
 
-def random_pose_stage(ds, b, steps):
+def random_pose_stage(ds, b, steps, rng: np.random.Generator):
     """``(RandomPoseError, the joint fit of the selected causes but a pose error)`` when the random
     pose error is significant at ``alpha_candidates`` split over the first step's candidates and
     itself; else None. With 4 sensors the rigid member is fitted pose by pose first; this is the
@@ -292,7 +297,7 @@ def random_pose_stage(ds, b, steps):
     scored = steps[0].scored
     chosen = [s.chosen for s in steps if s.chosen is not None and s.chosen.cause != "pose_error"]
     f = joint_fit(ds, b, chosen) if chosen else b.fit
-    r = random_pose_error(ds, b, f.residual, f.components, flags_of(chosen))
+    r = random_pose_error(ds, b, f.residual, rng, f.components, flags_of(chosen))
     if r.p >= THRESHOLDS["alpha_candidates"] / (len(scored) + 1):
         return None
     return r, f

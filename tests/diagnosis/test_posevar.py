@@ -64,7 +64,7 @@ def test_three_sensor_orientation_pose_error_is_named_with_its_size(tmp_path):
 def test_structure_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     """A periodic error on one sensor (outside the catalogue) adds variance there alone: it cannot
     take the shape of a rigid motion of the head, so it is not explained as one."""
-    from metrology.diagnosis.decide import base_analysis
+    from metrology.diagnosis.decide import base_analysis, battery_rng
     from metrology.diagnosis.posevar import random_pose_error
     from metrology.jobs.calibrate import load_checked
 
@@ -73,6 +73,6 @@ def test_structure_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     paths = write_case(case, tmp_path)
     ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"], "wxyz", "mm", None, None)
     b = base_analysis(ds, 5)
-    r = random_pose_error(ds, b, b.fit.residual)
+    r = random_pose_error(ds, b, b.fit.residual, battery_rng())
     assert r.p < 1e-6  # the excess variance is there ...
     assert r.p_explained < 0.01  # ... but not as a pose error
