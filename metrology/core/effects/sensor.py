@@ -253,7 +253,7 @@ class Nonlinearity(Component):
     with_gain: bool = False
     order: int = 3
     span: tuple | None = None
-    knots: int = 4
+    knots: int = SPLINE_KNOTS
 
     name = "nonlinearity"
     uses_d0 = True
