@@ -69,7 +69,15 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
     hi_, lo_ = int(np.argmax(beyond)), int(np.argmin(beyond))
     ptp = float(beyond[hi_] - beyond[lo_])
     se = height.stderr(st_grid[ok][[hi_, lo_]])
-    return replace(cov, scan_w=w, scan_ptp_mm=ptp, scan_ptp_se_mm=float(np.hypot(*se)))
+    # the degree is chosen from the cloud, and a peak-to-valley follows the degree: its change at
+    # the next degree joins the tracker noise's share in its standard error (a type B term)
+    other = height.neighbour()
+    by_degree = 0.0
+    if other is not None:
+        w2 = other(st_grid[ok])
+        b2 = w2 - A @ np.linalg.lstsq(A, w2, rcond=None)[0]
+        by_degree = abs(float(b2.max() - b2.min()) - ptp)
+    return replace(cov, scan_w=w, scan_ptp_mm=ptp, scan_ptp_se_mm=float(np.sqrt(se @ se + by_degree**2)))
 
 
 #: at most this many passes of :func:`scan_points` (fit the surface, re-admit, refit)

@@ -44,7 +44,8 @@ MAX_CAUSES = 3
 PRUNE_P = 0.2
 _GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
 #: interior knots of the characteristic's richer splines, tried in turn once a curve is chosen
-SPLINE_LADDER = (8, 12)
+#: (4: the scored member's count, with its knots at the readings' quantiles instead)
+SPLINE_LADDER = (4, 8, 12)
 
 
 def family_of(c) -> tuple:
@@ -92,20 +93,38 @@ def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: Hel
     :func:`refine_order`). A calibration table of 6-7 knots, a shape-preserving cubic through
     them, is followed by the 4-knot spline only to ~5 um RMS (3 % of a 0.16 mm curve): enough
     to name the family, but its sensor's residuals then fail the noise tests and the cause is
-    not named. Scored only after a curve is chosen, so a null data set never reaches it."""
+    not named. Scored only after a curve is chosen, so a null data set never reaches it.
+
+    Each rung has the splines of its knot count with knots evenly over the readings' span and
+    with knots at the readings' quantiles (``@spline{k}q``, as regression splines place them by
+    default): where the readings crowd in part of the span, even knots leave intervals with few
+    or no readings, whose coefficients the fit cannot pin down and whose held-out predictions
+    go astray (a 63-pose run: held-out RMS 0.76 of the base's with even knots, 2.5 times better
+    with quantile knots). The better of a rung's two is taken."""
     c = held.component
     if not isinstance(c, Nonlinearity) or not c.sensors:
         return held
     i = c.sensors[0]
     span = None if b.cov.d_span is None else tuple(float(v) for v in b.cov.d_span[i])
+    d = ds.obs.d[:, i]
+    d = np.sort(d[np.isfinite(d)])
     for k in SPLINE_LADDER:
-        if c.order == 0 and k <= c.knots:
+        rung = []
+        if not (c.order == 0 and k <= c.knots) and k != Nonlinearity.SPLINE_KNOTS:
+            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k))
+        inner = tuple(float(v) for v in np.quantile(d, np.arange(1, k + 1) / (k + 1)))
+        if len(d) >= 2 * (k + 4) and np.all(np.diff((d[0],) + inner + (d[-1],)) > 0):
+            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k, inner_mm=inner))
+        if not rung:
             continue
-        cand = Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k)
-        s = _score_step(ds, b, [cand], given, ref_fit, ref_ho, flags, p_out, folds, n_cand)[0]
-        if not (s.significant and p_better(s, held) < THRESHOLDS["alpha_order"]):
+        scored = _score_step(ds, b, rung, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
+        better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"]]
+        if not better:
+            if k <= max(Nonlinearity.SPLINE_KNOTS, c.knots if c.order == 0 else 0):
+                continue  # a count already scored, its knots moved: an alternative, not a richer rung
             break
-        held = s
+        held = min(better, key=lambda s: float(np.sum(s.chi2_pose)))
+        c = held.component
     return held
 
 

@@ -70,3 +70,70 @@ def test_detectable_gain_error_matches_an_independent_design_matrix(tmp_path):
     # a gross reading: the flagging threshold plus 1.645 sigma, about 5.9 sigma at 180 readings
     assert det["outliers"]["sensors"][case.nominal.names[0]] == pytest.approx(
         0.005 * (stats.norm.isf(0.01 / (2 * 180)) + stats.norm.isf(0.05)), rel=1e-6)
+
+
+def test_family_detectable_is_the_worst_shape_by_its_best_member():
+    # a member detects its own shape at sqrt(lambda_95 / |s|^2) once the base took its part;
+    # a shape the base absorbs whole is invisible (inf); the family is its worst shape
+    from metrology.diagnosis.detectable import family_detectable
+
+    x = np.linspace(-1.0, 1.0, 50)
+    J = np.ones((50, 1))  # the base: a constant
+    lin, sq = x.copy(), x**2
+    members = [(lin[:, None], 40), (sq[:, None], 40)]
+    lam = noncentrality_95(1, 40, 1e-3)
+    own = family_detectable([lin], members, J, 0.01, 1e-3)
+    assert own == pytest.approx(np.sqrt(lam / np.sum((lin / 0.01) ** 2)))
+    sq_c = sq - sq.mean()
+    assert family_detectable([sq], members, J, 0.01, 1e-3) == pytest.approx(np.sqrt(lam / np.sum((sq_c / 0.01) ** 2)))
+    assert family_detectable([lin, sq], members, J, 0.01, 1e-3) == max(own, family_detectable([sq], members, J, 0.01, 1e-3))
+    assert family_detectable([np.ones(50)], members, J, 0.01, 1e-3) == np.inf
+    # a blank reading is left out of the shape and the designs alike
+    gap = lin.copy()
+    gap[3] = np.nan
+    keep = np.arange(50) != 3
+    lin_c = lin[keep] - lin[keep].mean()
+    assert family_detectable([gap], members, J, 0.01, 1e-3) == pytest.approx(np.sqrt(lam / np.sum((lin_c / 0.01) ** 2)))
+
+
+def test_detectable_incidence_is_the_least_favourable_even_shape(tmp_path):
+    # the incidence's detectable size recomputed from a finite-difference design at the true
+    # layout: the worst of (a / a_max)^2, ^4, ^6, each by the better of the tan^2 and
+    # tan^2 + tan^4 members; on these poses the slowest shape, a^2, is the worst, and its size is
+    # well above what the tan^2 member's own shape needs
+    from metrology.jobs.diagnose import diagnose_files
+    from metrology.sim.forward import draw_case, write_case
+
+    case = draw_case(np.random.default_rng(17), "none", n_sensors=3, n_poses=60, noise_mm=0.005, blanks=0)
+    paths = write_case(case, tmp_path)
+    res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    det = res["detectable"]["incidence"]["sensors"]
+    n_cand = len(res["candidates"])
+    alpha = 0.01 / n_cand
+    ex = case.export
+    plane_n = np.asarray(case.surface.normal, float)
+    plane_o = -float(plane_n @ np.asarray(case.surface.origin, float))
+    normal = np.einsum("pji,j->pi", ex.tcs2tracker_rot, plane_n)
+    offset = plane_o + ex.tcs2tracker_trans @ plane_n
+    p = ex.d.shape[0]
+    for i, name in enumerate(case.nominal.names):
+        _, J = _design(case.true.zero[i], case.true.direction[i], normal, offset)
+        a = np.arccos(np.abs(normal @ case.true.direction[i]))
+        t2 = np.tan(a) ** 2
+        X0 = J / 0.005
+
+        def lam(s, B):
+            y = s / 0.005
+            X1 = np.column_stack([X0, B / 0.005])
+            r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
+            r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
+            return float(r0 @ r0 - r1 @ r1)
+
+        # (each member is fitted to its own sensor's readings: p - 5 - k residual dof)
+        members = [(t2[:, None], p - 6), (np.column_stack([t2, t2**2]), p - 7)]
+        sizes = [min(np.sqrt(noncentrality_95(B.shape[1], dof, alpha) / lam((a / a.max()) ** k, B)) for B, dof in members)
+                 for k in (2, 4, 6)]
+        assert det[name] == pytest.approx(max(sizes), rel=0.05)
+        assert max(sizes) == sizes[0]
+        own = np.sqrt(noncentrality_95(1, p - 6, alpha) / lam(t2 / t2.max(), t2[:, None]))
+        assert det[name] > 1.2 * own

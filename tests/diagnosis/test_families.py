@@ -65,6 +65,33 @@ def test_scanned_datum_follows_a_form_no_polynomial_has():
     assert np.isnan(height(np.array([[1e4, 0.0]])))[0]  # no scan there, no height
 
 
+def test_scanned_datum_neighbour_degree_is_the_next_polynomial_fit():
+    """``height.neighbour()``: the least-squares surface of the next total degree (the one below
+    at the top degree), recomputed here with numpy's 2-D Legendre design; the form's size's
+    standard error carries the change of its peak-to-valley between the two."""
+    from numpy.polynomial import legendre
+
+    rng = np.random.default_rng(4)
+    s, t = rng.uniform(-400, 400, 2000), rng.uniform(-300, 300, 2000)
+    w = 0.05 * np.sin(s / 150.0) * np.cos(t / 200.0) + rng.normal(0, 0.008, len(s))
+    pts = np.stack([s, t, w], axis=1)
+    height, (lo, hi) = PlaneForm.scan_surface(pts, np.array([0.0, 0.0, 1.0]), 0.0, np.zeros(3))
+    other = height.neighbour()
+    deg = height.degree
+    assert deg in PlaneForm.SCAN_DEGREES and other.degree in (deg - 1, deg + 1)
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+    def fit(d):
+        x = (np.stack([s, t], axis=1) - mid) / half
+        V = legendre.legvander2d(x[:, 0], x[:, 1], [d, d])
+        V = V[:, [i * (d + 1) + j for i in range(d + 1) for j in range(d + 1) if i + j <= d]]
+        return V @ np.linalg.lstsq(V, w, rcond=None)[0]
+
+    st = np.stack([s, t], axis=1)
+    np.testing.assert_allclose(height(st), fit(deg), atol=1e-9)
+    np.testing.assert_allclose(other(st), fit(other.degree), atol=1e-9)
+    assert np.max(np.abs(other(st) - height(st))) > 1e-4  # another surface, not a copy
+
 def _seed_where(family, pred, n_sensors=4, **kw):
     for seed in range(40):
         case = draw_case(np.random.default_rng([seed, 7]), family, n_sensors=n_sensors, **kw)
@@ -118,3 +145,34 @@ def test_characteristic_named_scale_or_nonlinearity_by_held_out_error(shape, tmp
     case = _seed_where(fam, pred, size=0.18, n_poses=120, noise_mm=0.004)
     res = _diagnose(case, tmp_path)
     assert res["cause"] == fam and res["sensors"] == list(case.sensors), res["summary"]
+
+
+def test_form_size_standard_error_carries_the_degree_choice(tmp_path):
+    # the scanned form's peak-to-valley follows the surface's degree: its standard error is the
+    # tracker noise's share at the two extremes and the change at the next degree, in quadrature
+    from metrology.core.plane import plane_basis
+    from metrology.diagnosis.candidates import covariates_for, scan_points
+    from metrology.jobs.calibrate import load_checked
+
+    case = draw_case(np.random.default_rng([50, 1, 5, 18]), "plane_form")
+    paths = write_case(case, tmp_path)
+    ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"], "wxyz", "mm", None,
+                      lambda *a: None)
+    cov = covariates_for(ds, ds.layout)
+    centre = np.mean(ds.datum_points, axis=0)
+    centre = centre - ds.plane.distance(centre) * ds.plane.normal
+    pts = scan_points(ds, centre)
+    height, _ = PlaneForm.scan_surface(pts, ds.plane.normal, ds.plane.offset, centre)
+    st = (pts - centre) @ plane_basis(ds.plane.normal).T
+    A = np.column_stack([np.ones(len(st)), st])
+
+    def beyond(h):
+        w = h(st)
+        return w - A @ np.linalg.lstsq(A, w, rcond=None)[0]
+
+    b1, b2 = beyond(height), beyond(height.neighbour())
+    assert cov.scan_ptp_mm == pytest.approx(np.ptp(b1), rel=1e-9)
+    se_noise = np.hypot(*height.stderr(st[[np.argmax(b1), np.argmin(b1)]]))
+    by_degree = abs(np.ptp(b2) - np.ptp(b1))
+    assert cov.scan_ptp_se_mm == pytest.approx(np.hypot(se_noise, by_degree), rel=1e-9)
+    assert by_degree > 0.2 * se_noise  # on this draw the degree's share is not negligible

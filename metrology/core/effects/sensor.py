@@ -201,14 +201,15 @@ class Drift(Component):
 _SPLINES = {}
 
 
-def _spline_setup(a, b, n_inner):
-    """Knots of the cubic spline on ``[a, b]`` with ``n_inner`` even interior knots, and each basis
-    function's least-squares line there: ``(t, (a0 (nb,), a1 (nb,)), a1)`` (cached)."""
-    key = (a, b, n_inner)
+def _spline_setup(a, b, n_inner, inner=None):
+    """Knots of the cubic spline on ``[a, b]`` with ``n_inner`` even interior knots (or those of
+    ``inner``, a tuple in the same units), and each basis function's least-squares line there:
+    ``(t, (a0 (nb,), a1 (nb,)), a1)`` (cached)."""
+    key = (a, b, n_inner, inner)
     if key not in _SPLINES:
         from scipy.interpolate import BSpline
 
-        inner = np.linspace(a, b, n_inner + 2)[1:-1]
+        inner = np.linspace(a, b, n_inner + 2)[1:-1] if inner is None else np.asarray(inner, float)
         t = np.concatenate([[a] * 4, inner, [b] * 4])
         g = np.linspace(a, b, 201)
         G = BSpline.design_matrix(g, t, 3).toarray()
@@ -254,6 +255,7 @@ class Nonlinearity(Component):
     order: int = 3
     span: tuple | None = None
     knots: int = SPLINE_KNOTS
+    inner_mm: tuple | None = None
 
     name = "nonlinearity"
     uses_d0 = True
@@ -276,6 +278,10 @@ class Nonlinearity(Component):
             raise ValueError(f"nonlinearity order must be 3, 5 or 0 (spline), got {self.order}")
         if self.order == 0 and not 1 <= self.knots <= 32:
             raise ValueError(f"nonlinearity spline knots must be 1..32, got {self.knots}")
+        if self.inner_mm is not None and (self.order != 0 or len(self.inner_mm) != self.knots
+                                          or np.any(np.diff(self.inner_mm) <= 0)):
+            raise ValueError(f"nonlinearity inner_mm must be {self.knots} increasing knots of a spline "
+                             f"(order 0), got {self.inner_mm} at order {self.order}")
         super().__post_init__()
 
     @property
@@ -294,15 +300,16 @@ class Nonlinearity(Component):
 
     @property
     def label(self):
-        spline = "@spline" + ("" if self.knots == self.SPLINE_KNOTS else str(self.knots))
+        spline = ("@spline" + ("" if self.knots == self.SPLINE_KNOTS and self.inner_mm is None else str(self.knots))
+                  + ("q" if self.inner_mm is not None else ""))
         return super().label + {0: spline, 3: "", 5: "@5"}[self.order]
 
-    def _spline(self, x, a=-1.0, b=1.0):
+    def _spline(self, x, a=-1.0, b=1.0, inner=None):
         """``(..., knots + 2)``: cubic B-splines on ``[a, b]`` (normalised units) less
         their least-squares line there, and their derivatives in ``x``."""
         from scipy.interpolate import BSpline
 
-        t, line, dline = _spline_setup(float(a), float(b), self.knots)
+        t, line, dline = _spline_setup(float(a), float(b), self.knots, inner)
         xf = np.asarray(x, float).ravel()
         ok = np.isfinite(xf)  # a reading the model cannot place (NaN) has no basis value
         nb = len(t) - 4
@@ -326,7 +333,11 @@ class Nonlinearity(Component):
         from numpy.polynomial import legendre
 
         if self.order == 0:
-            return self._spline(x, *self._span_x(cov))
+            inner = None
+            if self.inner_mm is not None:
+                lo, hi = cov.range_mm[self.sensors[0]]
+                inner = tuple(float((2 * k - lo - hi) / (hi - lo)) for k in self.inner_mm)
+            return self._spline(x, *self._span_x(cov), inner)
         V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
         D = np.zeros((self.order, self.order + 1))  # column j: coefficients of P_j' in P0 .. P_order-1
         for j in range(1, self.order + 1):

@@ -84,7 +84,7 @@ class PlaneForm(Component):
     SCAN_DEGREES = (2, 3, 4, 5, 6, 7, 8)
 
     @staticmethod
-    def _cv_degree(st, w, design, folds) -> int:
+    def _cv_degree(st, w, design, folds, with_degrees=False):
         """The degree of :data:`SCAN_DEGREES` with the smallest ``folds``-fold cross-validated
         squared error (1 when the cloud is too small for any). Every degree's columns are a
         subset of the largest's, so each fold's normal equations are summed once over the
@@ -92,7 +92,7 @@ class PlaneForm(Component):
         well conditioned; a cloud of 10^5 points costs one design matrix, not 70 fits)."""
         degs = [d for d in PlaneForm.SCAN_DEGREES if (d + 1) * (d + 2) // 2 * 10 <= len(w)]
         if not degs:
-            return 1
+            return (1, [1]) if with_degrees else 1
         top = degs[-1]
         V = design(st, top)
         # columns of degree d: i + j <= d among the top degree's (i, j) in its column order
@@ -113,7 +113,7 @@ class PlaneForm(Component):
                 err += float(c @ Gk @ c - 2.0 * c @ b[k][cols] + ww[k])
             if best is None or err < best[0]:
                 best = (err, deg)
-        return best[1]
+        return (best[1], degs) if with_degrees else best[1]
 
     @staticmethod
     def scan_surface(points, plane_normal, plane_offset, centre, folds=5):
@@ -146,7 +146,13 @@ class PlaneForm(Component):
             V = legendre.legvander2d(x[:, 0], x[:, 1], [deg, deg])
             return V[:, [i * (deg + 1) + j for i in range(deg + 1) for j in range(deg + 1) if i + j <= deg]]
 
-        deg = PlaneForm._cv_degree(st, w, design, folds)
+        deg, degs = PlaneForm._cv_degree(st, w, design, folds, with_degrees=True)
+        return PlaneForm._surface(st, w, design, deg, degs, lo, hi, half)
+
+    @staticmethod
+    def _surface(st, w, design, deg, degs, lo, hi, half):
+        """The height function of :meth:`scan_surface` at the total degree ``deg`` (``degs`` the
+        degrees the cloud allows, for ``height.neighbour``)."""
         V = design(st, deg)
         coef = np.linalg.lstsq(V, w, rcond=None)[0]
         s2 = float(np.sum((V @ coef - w) ** 2)) / max(len(w) - V.shape[1], 1)
@@ -175,7 +181,17 @@ class PlaneForm(Component):
                 out[ok] = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", D, cov_coef, D), 0.0))
             return out.reshape(q.shape[:-1])
 
+        def neighbour():
+            """The surface of the next degree the cloud allows (the one below at the top; None
+            when there is no other): how much a figure of the surface owes to the degree chosen."""
+            up = [d for d in degs if d > deg]
+            down = [d for d in degs if d < deg]
+            other = up[0] if up else (down[-1] if down else None)
+            return None if other is None else PlaneForm._surface(st, w, design, other, (), lo, hi, half)[0]
+
         height.stderr = stderr
+        height.degree = deg
+        height.neighbour = neighbour
         return height, (lo, hi)
 
     def monomials(self, st_mm):
