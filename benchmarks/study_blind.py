@@ -185,7 +185,10 @@ def run_case(job) -> dict:
     case = draw_pair(rng, *fams, **tilt) if kind == "pair" else draw_case(rng, fams[0], **tilt)
     with tempfile.TemporaryDirectory() as d:
         paths = write_case(case, d)
-        res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+        try:
+            res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+        except ValueError as e:  # refused as a mistaken export: a verdict of its own, counted as not right
+            res = {"cause": "refused", "sensors": [], "confidence": "none", "summary": str(e), "detectable": {}}
     named = _named(res)
     seen = [_seen_size(case, e) for e in case.effects]
     det = [(_detect_size(case, e), _detectable_for(res, e)) for e in case.effects]

@@ -375,7 +375,7 @@ def _raw_history(nominal, i, hist5):
 # batch least squares
 
 
-def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear"):
+def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear", f_scale=1.0):
     from scipy.optimize import least_squares
 
     rows = _pose_order(obs, i)
@@ -383,7 +383,7 @@ def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear"):
         raise ValueError(f"sensor {nominal.names[i]}: {len(rows)} readings, need at least 5 for 5 parameters")
     N, D, z = obs.normal[rows], obs.offset[rows], obs.d[rows, i]
     fun, jac = residual(nominal, i, N, D, z)
-    sol = least_squares(fun, np.zeros(5) if x0 is None else x0, jac=jac, method="trf", loss=loss,
+    sol = least_squares(fun, np.zeros(5) if x0 is None else x0, jac=jac, method="trf", loss=loss, f_scale=f_scale,
                         x_scale=np.array([1.0, 1.0, 1.0, 0.05, 0.05]), xtol=1e-14, ftol=1e-14, gtol=1e-14,
                         max_nfev=200)
     if not np.all(np.isfinite(sol.x)):
@@ -431,16 +431,20 @@ def _plane_residual(nominal, i, N, D, z):
     return fun, jac
 
 
-def lsq(nominal: SensorLayout, obs: Observations, loss="linear") -> Calibration:
+def lsq(nominal: SensorLayout, obs: Observations, loss="linear", f_scale=1.0) -> Calibration:
     """Batch nonlinear least squares on the readings, per sensor (``scipy.optimize.least_squares``).
 
     Standard errors are ``s^2 (J^T J)^-1`` with ``s`` the residual RMS (``m - 5`` degrees of
     freedom): honest also when the stated noise is wrong. ``sigma_mm`` reports ``s``.
+    ``loss``, ``f_scale`` (mm, a scalar or ``(n,)`` per sensor): scipy's robust loss and the
+    residual at which it starts to discount (a robust loss for screening only: its standard
+    errors are the linearised least-squares ones).
     """
     n = nominal.n
     theta, cov, sig = np.zeros((n, 5)), np.zeros((n, 5, 5)), np.zeros(n)
+    scale = np.broadcast_to(np.asarray(f_scale, float), (n,))
     for i in range(n):
-        theta[i], cov[i], sig[i] = _lsq_sensor(nominal, i, obs, _reading_residual, loss=loss)
+        theta[i], cov[i], sig[i] = _lsq_sensor(nominal, i, obs, _reading_residual, loss=loss, f_scale=float(scale[i]))
     return _finish("lsq", nominal, obs, theta, cov, sig)
 
 

@@ -130,9 +130,9 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
     """The size at which every shape of a family is detected at 95 % power by one of its members.
 
     shapes : list of (p,) float, the family's shapes on one sensor's readings, each of size 1 in
-    the family's unit (NaN where the reading is blank); members : list of ``(B, dof)``, ``B (p, k)``
-    a member's columns on that sensor (mm per unit parameter) and ``dof`` its F-test's residual
-    degrees of freedom; J_i : (p, 5) float, the sensor's base Jacobian (the geometry the fit frees
+    the family's unit (NaN where the reading is blank); members : list of ``(B, k, dof)``,
+    ``B (p, m)`` a member's columns on that sensor (mm per unit parameter), ``k`` and ``dof`` its
+    F-test's degrees of freedom (its free parameters; the residual's); J_i : (p, 5) float, the sensor's base Jacobian (the geometry the fit frees
     beside the member); sigma_i : float, mm, the stated noise. A member's noncentrality for a
     shape is what it explains of the shape once the base geometry has taken its part (whitened);
     a shape is detected at the smallest size any member detects it at; the family at the largest
@@ -145,12 +145,12 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
         y = s[rows] / sigma_i
         r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
         best = np.inf
-        for B, dof in members:
+        for B, k, dof in members:
             X1 = np.column_stack([X0, B[rows] / sigma_i])
             r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
             lam1 = float(r0 @ r0 - r1 @ r1)  # the noncentrality of a unit size
             if lam1 > 1e-12 * float(y @ y):  # (not round-off of a shape the base takes whole)
-                best = min(best, float(np.sqrt(noncentrality_95(B.shape[1], dof, alpha) / lam1)))
+                best = min(best, float(np.sqrt(noncentrality_95(max(int(k), 1), dof, alpha) / lam1)))
         worst = max(worst, best)
     return worst
 
@@ -190,17 +190,17 @@ def _worst_shape(cause, members, b, ds, alpha) -> float:
     if not shapes:
         return np.inf
     J_i = base_jacobian(b, ds)[:, i, :]
-    cols = [(c.component.basis(b.d0, b.cov)[:, i, :], c.fit.dof) for c in members]
+    cols = [(c.component.basis(b.d0, b.cov)[:, i, :], c.n_params, c.fit.dof) for c in members]
     return family_detectable(shapes, cols, J_i, float(b.sigma[i]), alpha)
 
 
-def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
+def detectable_sizes(scored, b, n_obs, ds) -> dict:
     """Per family and sensor, the size detectable at 95 % power on these poses (see the module).
 
     scored : the first step's CandidateResults; b : the BaseAnalysis; n_obs : (n,) int, finite
-    readings per sensor; ds : the Dataset (for the scale against crosstalk; without it, the
-    scale's size is against the base geometry alone). Returns ``{family: {"sensors": {name: mm}, "member": label, "meaning":
-    str}}`` (for set-up families the one value under ``"all"``).
+    readings per sensor; ds : the Dataset (the readings, poses and layout). Returns ``{family:
+    {"sensors": {name: mm}, "member": {name: labels}, "meaning": str}}`` (for set-up families the
+    one value under ``"all"``; ``inf`` where some shape of the family is seen by no member).
     """
     from scipy import stats
 
@@ -229,7 +229,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
             k = max(int(c.n_params), 1)
             lam = noncentrality_95(k, c.fit.dof, alpha)
             det = size_v * float(np.sqrt(lam / info))
-            if c.cause == "scale" and ds is not None and ds.layout.n > 1:
+            if c.cause == "scale" and ds.layout.n > 1:
                 # named only where it beats crosstalk (metrology.diagnosis.crosstalk): the gain's
                 # part that no other sensor's distance carries
                 i = c.component.sensors[0]
@@ -246,7 +246,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
             fam["sensors"][key] = det
             fam["member"][key] = c.label
     for cause in ("incidence", "nonlinearity"):
-        if ds is None or cause not in out:
+        if cause not in out:
             continue
         # any shape of the family, not the simplest member's alone, by the best of its members
         fam = out[cause]
@@ -255,7 +255,7 @@ def detectable_sizes(scored, b, n_obs, ds=None) -> dict:
             fam["sensors"][key] = _worst_shape(cause, members, b, ds, alpha)
             fam["member"][key] = "+".join(c.label for c in members)
     pose = [c for c in scored if c.cause == "pose_error"]
-    if pose and ds is not None:
+    if pose:
         # the RMS change of a reading by a rigid pose error, whatever its split between offset and
         # tilts: with 3 sensors by the random-effect test that names it (metrology.diagnosis.posevar),
         # with more by the members' F-tests

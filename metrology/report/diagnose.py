@@ -26,15 +26,23 @@ def p_text(p: float) -> str:
 
 def detectable_words(D: dict) -> str:
     """``detectable`` of :meth:`Diagnosis.to_dict` in words: each family's smallest size over its
-    sensors (and the largest, where they differ), in um."""
+    sensors (and the largest, where they differ), in um; the sensors where no size is (an
+    effect of some shape of the family no member sees, ``inf``; ``null`` in JSON) are named."""
+    import math
+
     out = []
     for fam, v in (D.get("detectable") or {}).items():
-        vals = [1e3 * x for x in v["sensors"].values()]
-        if not vals:
+        vals = [1e3 * x for x in v["sensors"].values() if x is not None and math.isfinite(x)]
+        never = [k for k, x in v["sensors"].items() if x is None or not math.isfinite(x)]
+        if not vals and not never:
             continue
-        lo, hi = min(vals), max(vals)
-        rng = f"{lo:.3g}" if hi < 1.05 * lo else f"{lo:.3g}-{hi:.3g}"
-        out.append(f"{fam} {rng} um ({v['meaning']})")
+        words = []
+        if vals:
+            lo, hi = min(vals), max(vals)
+            words.append((f"{lo:.3g}" if hi < 1.05 * lo else f"{lo:.3g}-{hi:.3g}") + " um")
+        if never:
+            words.append("not detectable on " + ", ".join(never))
+        out.append(f"{fam} {', '.join(words)} ({v['meaning']})")
     return "; ".join(out)
 
 

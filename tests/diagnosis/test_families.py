@@ -92,6 +92,7 @@ def test_scanned_datum_neighbour_degree_is_the_next_polynomial_fit():
     np.testing.assert_allclose(other(st), fit(other.degree), atol=1e-9)
     assert np.max(np.abs(other(st) - height(st))) > 1e-4  # another surface, not a copy
 
+
 def _seed_where(family, pred, n_sensors=4, **kw):
     for seed in range(40):
         case = draw_case(np.random.default_rng([seed, 7]), family, n_sensors=n_sensors, **kw)

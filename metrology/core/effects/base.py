@@ -74,7 +74,7 @@ class Covariates:
     scan_ptp_mm : float, mm, the scanned deviation's peak-to-valley over the cloud beyond its own
         best plane (NaN without)
     scan_ptp_se_mm : float, mm, its standard error (the scan surface's at its two extremes, and the
-        change of the peak-to-valley at the next degree of the surface)
+        change of the peak-to-valley at the next degree of the surface, the one below at the top)
     d_span : (n, 2) float, mm, or None: the span of the readings each sensor gave (min, max)
     temp_lag : (p, m) float, deg C, or None: the temperature history seen through first-order
         lags of time constants :data:`LAG_FRACTIONS` of the run (:func:`lagged_temperature`;

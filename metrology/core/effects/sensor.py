@@ -244,8 +244,11 @@ class Nonlinearity(Component):
     is a cubic regression spline instead (``knots`` interior knots, :data:`SPLINE_KNOTS` by
     default, evenly over ``span`` (the readings the sensor gave; default the range), its
     constant and linear parts removed there): any smooth curve with a few turns,
-    ``s1..s{knots + 2}`` mm. The diagnosis takes a richer member (more knots, ``@spline8``)
-    only when it predicts held-out poses significantly better.
+    ``s1..s{knots + 2}`` mm. ``inner_mm`` (a tuple of ``knots`` increasing readings, mm,
+    inside ``span``), if given, places the interior knots there instead (label ``@spline{k}q``:
+    the diagnosis puts them at the readings' quantiles, where readings crowd in part of the
+    span). The diagnosis takes a richer member (more knots, ``@spline8``) only when it predicts
+    held-out poses significantly better.
     """
 
     #: interior knots of the spline member (``order=0``), evenly spaced over the range
@@ -278,10 +281,13 @@ class Nonlinearity(Component):
             raise ValueError(f"nonlinearity order must be 3, 5 or 0 (spline), got {self.order}")
         if self.order == 0 and not 1 <= self.knots <= 32:
             raise ValueError(f"nonlinearity spline knots must be 1..32, got {self.knots}")
-        if self.inner_mm is not None and (self.order != 0 or len(self.inner_mm) != self.knots
-                                          or np.any(np.diff(self.inner_mm) <= 0)):
-            raise ValueError(f"nonlinearity inner_mm must be {self.knots} increasing knots of a spline "
-                             f"(order 0), got {self.inner_mm} at order {self.order}")
+        if self.inner_mm is not None:
+            lo, hi = self.span if self.span is not None else (-np.inf, np.inf)
+            k = np.asarray(self.inner_mm, float)
+            if (self.order != 0 or len(k) != self.knots or np.any(np.diff(k) <= 0)
+                    or not (np.all(k > lo) and np.all(k < hi))):
+                raise ValueError(f"nonlinearity inner_mm must be {self.knots} increasing knots of a spline "
+                                 f"(order 0) inside its span {self.span}, got {self.inner_mm} at order {self.order}")
         super().__post_init__()
 
     @property
@@ -305,8 +311,9 @@ class Nonlinearity(Component):
         return super().label + {0: spline, 3: "", 5: "@5"}[self.order]
 
     def _spline(self, x, a=-1.0, b=1.0, inner=None):
-        """``(..., knots + 2)``: cubic B-splines on ``[a, b]`` (normalised units) less
-        their least-squares line there, and their derivatives in ``x``."""
+        """``(..., knots + 2)``: cubic B-splines on ``[a, b]`` (normalised units; interior knots
+        ``inner``, a tuple in the same units, or even) less their least-squares line there,
+        and their derivatives in ``x``."""
         from scipy.interpolate import BSpline
 
         t, line, dline = _spline_setup(float(a), float(b), self.knots, inner)

@@ -84,15 +84,16 @@ class PlaneForm(Component):
     SCAN_DEGREES = (2, 3, 4, 5, 6, 7, 8)
 
     @staticmethod
-    def _cv_degree(st, w, design, folds, with_degrees=False):
-        """The degree of :data:`SCAN_DEGREES` with the smallest ``folds``-fold cross-validated
-        squared error (1 when the cloud is too small for any). Every degree's columns are a
+    def _cv_degree(st, w, design, folds):
+        """``(degree, degrees)``: the degree of :data:`SCAN_DEGREES` with the smallest
+        ``folds``-fold cross-validated squared error (1 when the cloud is too small for any), and
+        the degrees the cloud allows. Every degree's columns are a
         subset of the largest's, so each fold's normal equations are summed once over the
         cloud and the folds' fits are solved from them (the Legendre columns on the box are
         well conditioned; a cloud of 10^5 points costs one design matrix, not 70 fits)."""
         degs = [d for d in PlaneForm.SCAN_DEGREES if (d + 1) * (d + 2) // 2 * 10 <= len(w)]
         if not degs:
-            return (1, [1]) if with_degrees else 1
+            return 1, [1]
         top = degs[-1]
         V = design(st, top)
         # columns of degree d: i + j <= d among the top degree's (i, j) in its column order
@@ -113,7 +114,7 @@ class PlaneForm(Component):
                 err += float(c @ Gk @ c - 2.0 * c @ b[k][cols] + ww[k])
             if best is None or err < best[0]:
                 best = (err, deg)
-        return (best[1], degs) if with_degrees else best[1]
+        return best[1], degs
 
     @staticmethod
     def scan_surface(points, plane_normal, plane_offset, centre, folds=5):
@@ -128,7 +129,9 @@ class PlaneForm(Component):
         points : (m, 3) float, mm, tracker frame; plane_normal : (3,) unit; plane_offset : mm;
         centre : (3,) mm, tracker frame. Returns ``(w, box)``: ``w(st)`` a function of in-plane
         positions ``(..., 2)`` mm from ``centre`` giving mm (NaN outside the box), with
-        ``w.stderr(st)`` its standard error (mm), and ``box`` ``(lo (2,), hi (2,))`` mm.
+        ``w.stderr(st)`` its standard error (mm), ``w.degree`` its total degree and
+        ``w.neighbour()`` the surface of the next degree the cloud allows (the one below at the
+        top; None if there is none), and ``box`` ``(lo (2,), hi (2,))`` mm.
         """
         from numpy.polynomial import legendre
 
@@ -146,7 +149,7 @@ class PlaneForm(Component):
             V = legendre.legvander2d(x[:, 0], x[:, 1], [deg, deg])
             return V[:, [i * (deg + 1) + j for i in range(deg + 1) for j in range(deg + 1) if i + j <= deg]]
 
-        deg, degs = PlaneForm._cv_degree(st, w, design, folds, with_degrees=True)
+        deg, degs = PlaneForm._cv_degree(st, w, design, folds)
         return PlaneForm._surface(st, w, design, deg, degs, lo, hi, half)
 
     @staticmethod
