@@ -133,7 +133,8 @@ def _correction(start, fitted):
 
 
 def screen(dataset: Dataset) -> Screening:
-    """Fit ``dataset`` (least squares, its layout as the start) and measure how it fits."""
+    """Fit ``dataset`` (least squares, its layout as the start; a robust refit where that one
+    fails the correction test, see the module) and measure how it fits."""
     from scipy.stats import chi2
 
     from metrology.calibration.estimators import lsq

@@ -132,8 +132,9 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
     shapes : list of (p,) float, the family's shapes on one sensor's readings, each of size 1 in
     the family's unit (NaN where the reading is blank); members : list of ``(B, k, dof)``,
     ``B (p, m)`` a member's columns on that sensor (mm per unit parameter), ``k`` and ``dof`` its
-    F-test's degrees of freedom (its free parameters; the residual's); J_i : (p, 5) float, the sensor's base Jacobian (the geometry the fit frees
-    beside the member); sigma_i : float, mm, the stated noise. A member's noncentrality for a
+    F-test's degrees of freedom (its free parameters; the residual's); J_i : (p, 5) float, mm
+    per unit parameter, the sensor's base Jacobian (the geometry the fit frees beside the
+    member); sigma_i : float, mm, the stated noise. A member's noncentrality for a
     shape is what it explains of the shape once the base geometry has taken its part (whitened);
     a shape is detected at the smallest size any member detects it at; the family at the largest
     such size over its shapes (inf where a shape is invisible to every member).

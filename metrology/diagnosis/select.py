@@ -100,8 +100,8 @@ def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: Hel
     default): where the readings crowd in part of the span, even knots leave intervals with few
     or no readings, whose coefficients the fit cannot pin down and whose held-out predictions
     go astray (a 63-pose run: held-out RMS 1.3 times the base model's with 4 even knots, 2.5
-    times smaller with 4 quantile knots). A rung's two are tested at ``alpha_order`` split between them, and
-    the better of those that pass is taken."""
+    times smaller with 4 quantile knots). A rung's two are tested at ``alpha_order`` split
+    between them, and the better of those that pass is taken."""
     c = held.component
     if not isinstance(c, Nonlinearity) or not c.sensors:
         return held

@@ -37,23 +37,40 @@ def _design(zero, u, normal, offset, h=1e-6):
     return d0, np.stack(cols, axis=1)
 
 
-def test_detectable_gain_error_matches_an_independent_design_matrix(tmp_path):
-    # a null data set of the independent simulator; the scale's detectable size recomputed from
-    # a finite-difference design (5 geometry columns and d0) at the true layout
+@pytest.fixture(scope="module")
+def null_run(tmp_path_factory):
+    """A null data set of the independent simulator (3 sensors, 60 poses, 5 um), its diagnosis,
+    and the datum in each pose's TCS (normal (p, 3), offset (p,) mm) at the truth."""
     from metrology.jobs.diagnose import diagnose_files
     from metrology.sim.forward import draw_case, write_case
 
     case = draw_case(np.random.default_rng(17), "none", n_sensors=3, n_poses=60, noise_mm=0.005, blanks=0)
-    paths = write_case(case, tmp_path)
+    paths = write_case(case, tmp_path_factory.mktemp("null"))
     res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    ex = case.export
+    plane_n = np.asarray(case.surface.normal, float)
+    plane_o = -float(plane_n @ np.asarray(case.surface.origin, float))
+    normal = np.einsum("pji,j->pi", ex.tcs2tracker_rot, plane_n)  # the plane in each TCS
+    return case, res, normal, plane_o + ex.tcs2tracker_trans @ plane_n
+
+
+def _explained(J, s, B, sigma=0.005):
+    """What the columns ``B`` explain of the shape ``s`` beyond the geometry ``J``, whitened: the
+    noncentrality of a unit size."""
+    X0, y = J / sigma, s / sigma
+    X1 = np.column_stack([X0, B / sigma])
+    r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
+    r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
+    return float(r0 @ r0 - r1 @ r1)
+
+
+def test_detectable_gain_error_matches_an_independent_design_matrix(null_run):
+    # a null data set of the independent simulator; the scale's detectable size recomputed from
+    # a finite-difference design (5 geometry columns and d0) at the true layout
+    case, res, normal, offset = null_run
     det = res["detectable"]
     n_cand = len(res["candidates"])
     ex = case.export
-    R, t = ex.tcs2tracker_rot, ex.tcs2tracker_trans
-    plane_n = np.asarray(case.surface.normal, float)
-    plane_o = -float(plane_n @ np.asarray(case.surface.origin, float))
-    normal = np.einsum("pji,j->pi", R, plane_n)  # the plane in each TCS
-    offset = plane_o + t @ plane_n
     designs = [_design(case.true.zero[i], case.true.direction[i], normal, offset) for i in range(case.nominal.n)]
     for i, name in enumerate(case.nominal.names):
         d0, J = designs[i]
@@ -86,7 +103,8 @@ def test_family_detectable_is_the_worst_shape_by_its_best_member():
     assert own == pytest.approx(np.sqrt(lam / np.sum((lin / 0.01) ** 2)))
     sq_c = sq - sq.mean()
     assert family_detectable([sq], members, J, 0.01, 1e-3) == pytest.approx(np.sqrt(lam / np.sum((sq_c / 0.01) ** 2)))
-    assert family_detectable([lin, sq], members, J, 0.01, 1e-3) == max(own, family_detectable([sq], members, J, 0.01, 1e-3))
+    both = family_detectable([lin, sq], members, J, 0.01, 1e-3)
+    assert both == max(own, family_detectable([sq], members, J, 0.01, 1e-3))
     assert family_detectable([np.ones(50)], members, J, 0.01, 1e-3) == np.inf
     # a blank reading is left out of the shape and the designs alike
     gap = lin.copy()
@@ -96,53 +114,33 @@ def test_family_detectable_is_the_worst_shape_by_its_best_member():
     assert family_detectable([gap], members, J, 0.01, 1e-3) == pytest.approx(np.sqrt(lam / np.sum((lin_c / 0.01) ** 2)))
 
 
-def test_detectable_incidence_is_the_least_favourable_even_shape(tmp_path):
+def test_detectable_incidence_is_the_least_favourable_even_shape(null_run):
     # the incidence's detectable size recomputed from a finite-difference design at the true
     # layout: the worst of (a / a_max)^2, ^4, ^6, each by the better of the tan^2 and
     # tan^2 + tan^4 members; on these poses the slowest shape, a^2, is the worst, and its size is
     # well above what the tan^2 member's own shape needs
-    from metrology.jobs.diagnose import diagnose_files
-    from metrology.sim.forward import draw_case, write_case
-
-    case = draw_case(np.random.default_rng(17), "none", n_sensors=3, n_poses=60, noise_mm=0.005, blanks=0)
-    paths = write_case(case, tmp_path)
-    res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    case, res, normal, offset = null_run
     det = res["detectable"]["incidence"]["sensors"]
-    n_cand = len(res["candidates"])
-    alpha = 0.01 / n_cand
-    ex = case.export
-    plane_n = np.asarray(case.surface.normal, float)
-    plane_o = -float(plane_n @ np.asarray(case.surface.origin, float))
-    normal = np.einsum("pji,j->pi", ex.tcs2tracker_rot, plane_n)
-    offset = plane_o + ex.tcs2tracker_trans @ plane_n
-    p = ex.d.shape[0]
+    alpha = 0.01 / len(res["candidates"])
+    p = case.export.d.shape[0]
     for i, name in enumerate(case.nominal.names):
         _, J = _design(case.true.zero[i], case.true.direction[i], normal, offset)
         a = np.arccos(np.abs(normal @ case.true.direction[i]))
         t2 = np.tan(a) ** 2
-        X0 = J / 0.005
-
-        def lam(s, B):
-            y = s / 0.005
-            X1 = np.column_stack([X0, B / 0.005])
-            r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
-            r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
-            return float(r0 @ r0 - r1 @ r1)
-
         # (each member is fitted to its own sensor's readings: p - 5 - k residual dof)
         members = [(t2[:, None], p - 6), (np.column_stack([t2, t2**2]), p - 7)]
-        by_member = np.array([[np.sqrt(noncentrality_95(B.shape[1], dof, alpha) / lam((a / a.max()) ** k, B))
+        by_member = np.array([[np.sqrt(noncentrality_95(B.shape[1], dof, alpha) / _explained(J, (a / a.max()) ** k, B))
                                for B, dof in members] for k in (2, 4, 6)])  # (shape, member)
         sizes = by_member.min(axis=1)
         assert det[name] == pytest.approx(max(sizes), rel=2e-3)
         assert max(sizes) == sizes[0]
         if name != "L1":  # here the tan^2 + tan^4 member is the better one for a^2
             assert by_member[0, 0] > 1.1 * det[name]
-        own = np.sqrt(noncentrality_95(1, p - 6, alpha) / lam(t2 / t2.max(), t2[:, None]))
+        own = np.sqrt(noncentrality_95(1, p - 6, alpha) / _explained(J, t2 / t2.max(), t2[:, None]))
         assert det[name] > 1.2 * own
 
 
-def test_detectable_nonlinearity_is_the_least_favourable_legendre_shape(tmp_path):
+def test_detectable_nonlinearity_is_the_least_favourable_legendre_shape(null_run):
     # recomputed from a finite-difference design at the true layout: the worst of P2, P3, P4 of
     # the reading over its span (each of peak-to-valley 1 beyond its best line), each by the best
     # of the members gain + P2..P3, gain + P2..P5 and gain + the 4-knot spline (scipy's B-splines
@@ -150,19 +148,10 @@ def test_detectable_nonlinearity_is_the_least_favourable_legendre_shape(tmp_path
     from numpy.polynomial import legendre
     from scipy.interpolate import BSpline
 
-    from metrology.jobs.diagnose import diagnose_files
-    from metrology.sim.forward import draw_case, write_case
-
-    case = draw_case(np.random.default_rng(17), "none", n_sensors=3, n_poses=60, noise_mm=0.005, blanks=0)
-    paths = write_case(case, tmp_path)
-    res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    case, res, normal, offset = null_run
     det = res["detectable"]["nonlinearity"]["sensors"]
     alpha = 0.01 / len(res["candidates"])
     ex = case.export
-    plane_n = np.asarray(case.surface.normal, float)
-    plane_o = -float(plane_n @ np.asarray(case.surface.origin, float))
-    normal = np.einsum("pji,j->pi", ex.tcs2tracker_rot, plane_n)
-    offset = plane_o + ex.tcs2tracker_trans @ plane_n
     p = ex.d.shape[0]
     grid = np.linspace(-1.0, 1.0, 401)
     for i, name in enumerate(case.nominal.names):
@@ -179,15 +168,6 @@ def test_detectable_nonlinearity_is_the_least_favourable_legendre_shape(tmp_path
         members = [(np.column_stack([d0, legendre.legvander(x, 3)[:, 2:]]), 3),
                    (np.column_stack([d0, legendre.legvander(x, 5)[:, 2:]]), 5),
                    (np.column_stack([d0, S[:, 1:-1]]), 7)]
-        X0 = J / 0.005
-
-        def lam(s, B):
-            y = s / 0.005
-            X1 = np.column_stack([X0, B / 0.005])
-            r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
-            r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
-            return float(r0 @ r0 - r1 @ r1)
-
         by = np.empty((3, 3))  # (shape P2..P4, member)
         for r, k in enumerate((2, 3, 4)):
             c = np.zeros(k + 1)
@@ -196,7 +176,7 @@ def test_detectable_nonlinearity_is_the_least_favourable_legendre_shape(tmp_path
             e = e - np.polyval(np.polyfit(grid, e, 1), grid)
             shape = legendre.legval(xs, c) / np.ptp(e)
             for m, (B, kk) in enumerate(members):
-                by[r, m] = np.sqrt(noncentrality_95(kk, p - 5 - kk, alpha) / lam(shape, B))
+                by[r, m] = np.sqrt(noncentrality_95(kk, p - 5 - kk, alpha) / _explained(J, shape, B))
         assert det[name] == pytest.approx(by.min(axis=1).max(), rel=2e-3)
         # P4 is the richer members' business: the simplest alone would state a size over 1.5 times
         # as large (on these poses the worst shape is then P3)
