@@ -65,7 +65,11 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
     # tilt against it is the plane's business, carried as a nuisance in the fit)
     ok = np.isfinite(w_grid)
     A = np.column_stack([np.ones(int(ok.sum())), st_grid[ok]])
-    beyond = w_grid[ok] - A @ np.linalg.lstsq(A, w_grid[ok], rcond=None)[0]
+
+    def beyond_plane(h):  # a surface's heights at the scanned points less their best plane
+        return h - A @ np.linalg.lstsq(A, h, rcond=None)[0]
+
+    beyond = beyond_plane(w_grid[ok])
     hi_, lo_ = int(np.argmax(beyond)), int(np.argmin(beyond))
     ptp = float(beyond[hi_] - beyond[lo_])
     se = height.stderr(st_grid[ok][[hi_, lo_]])
@@ -74,9 +78,7 @@ def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
     other = height.neighbour()
     by_degree = 0.0
     if other is not None:
-        w2 = other(st_grid[ok])
-        b2 = w2 - A @ np.linalg.lstsq(A, w2, rcond=None)[0]
-        by_degree = abs(float(b2.max() - b2.min()) - ptp)
+        by_degree = abs(float(np.ptp(beyond_plane(other(st_grid[ok])))) - ptp)
     return replace(cov, scan_w=w, scan_ptp_mm=ptp, scan_ptp_se_mm=float(np.sqrt(se @ se + by_degree**2)))
 
 

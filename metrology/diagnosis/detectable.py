@@ -52,6 +52,8 @@ __all__ = ["detectable_sizes", "noncentrality_95", "family_detectable", "INCIDEN
 INCIDENCE_POWERS = (2, 4, 6)
 #: the Legendre orders over which a nonlinearity's detectable size is the worst
 NONLINEARITY_ORDERS = (2, 3, 4)
+#: the families whose detectable size is that of their least favourable shape (:func:`family_detectable`)
+WORST_SHAPE_FAMILIES = ("incidence", "nonlinearity")
 
 #: the power at which a size is called detectable
 POWER = 0.95
@@ -139,6 +141,7 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
     a shape is detected at the smallest size any member detects it at; the family at the largest
     such size over its shapes (inf where a shape is invisible to every member).
     """
+    lam95 = [noncentrality_95(max(int(k), 1), dof, alpha) for _, k, dof in members]  # per member, once
     worst = 0.0
     for s in shapes:
         rows = np.isfinite(s)
@@ -146,12 +149,12 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
         y = s[rows] / sigma_i
         r0 = y - X0 @ np.linalg.lstsq(X0, y, rcond=None)[0]
         best = np.inf
-        for B, k, dof in members:
+        for (B, _, _), l95 in zip(members, lam95):
             X1 = np.column_stack([X0, B[rows] / sigma_i])
             r1 = y - X1 @ np.linalg.lstsq(X1, y, rcond=None)[0]
             lam1 = float(r0 @ r0 - r1 @ r1)  # the noncentrality of a unit size
             if lam1 > 1e-12 * float(y @ y):  # (not round-off of a shape the base takes whole)
-                best = min(best, float(np.sqrt(noncentrality_95(max(int(k), 1), dof, alpha) / lam1)))
+                best = min(best, float(np.sqrt(l95 / lam1)))
         worst = max(worst, best)
     return worst
 
@@ -183,14 +186,14 @@ def _family_shapes(cause, b, ds, i):
     return out
 
 
-def _worst_shape(cause, members, b, ds, alpha) -> float:
+def _worst_shape(cause, members, b, ds, J, alpha) -> float:
     """:func:`family_detectable` for a family on one sensor (``members`` its scored candidates
-    there) over :func:`_family_shapes`."""
+    there; ``J`` the base Jacobian (p, n, 5)) over :func:`_family_shapes`."""
     i = members[0].component.sensors[0]
     shapes = _family_shapes(cause, b, ds, i)
     if not shapes:
         return np.inf
-    J_i = base_jacobian(b, ds)[:, i, :]
+    J_i = J[:, i, :]
     cols = [(c.component.basis(b.d0, b.cov)[:, i, :], c.n_params, c.fit.dof) for c in members]
     return family_detectable(shapes, cols, J_i, float(b.sigma[i]), alpha)
 
@@ -208,7 +211,8 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
     n_cand = max(len(scored), 1)
     alpha = THRESHOLDS["alpha_candidates"] / n_cand
     out: dict = {}
-    J = None  # the base Jacobian, computed once when the scale needs it
+    J = None  # the base Jacobian, computed once when the scale or a family's shapes need it
+    worst_of = {}  # (family, sensors) -> its members, for the families sized by their worst shape
     meaning = {
         "scale": "peak-to-valley of a gain error over the readings' span, told from crosstalk",
         "nonlinearity": "peak-to-valley beyond a straight line over the readings' span, the least favourable of P2-P4",
@@ -219,6 +223,15 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
         "outliers": "one gross reading",
     }
     for c in scored:
+        if c.cause in WORST_SHAPE_FAMILIES:
+            # any shape of the family, not the simplest member's alone, by the best of its
+            # members (sized below, once its members are all known); listed where its simplest
+            # member (the one with a reported direction) comes, as every other family is
+            key = ", ".join(c.sensors)
+            worst_of.setdefault((c.cause, key), []).append(c)
+            if _direction(c) is not None:
+                out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning[c.cause]})["sensors"][key] = None
+            continue
         v = _direction(c)
         if v is not None:
             got = _size_along(c, v, b.cov, b.d0)
@@ -246,15 +259,13 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
         if key not in fam["sensors"] or det < fam["sensors"][key]:
             fam["sensors"][key] = det
             fam["member"][key] = c.label
-    for cause in ("incidence", "nonlinearity"):
-        if cause not in out:
-            continue
-        # any shape of the family, not the simplest member's alone, by the best of its members
-        fam = out[cause]
-        for key in list(fam["sensors"]):
-            members = [c for c in scored if c.cause == cause and ", ".join(c.sensors) == key]
-            fam["sensors"][key] = _worst_shape(cause, members, b, ds, alpha)
-            fam["member"][key] = "+".join(c.label for c in members)
+    if worst_of and J is None:
+        J = base_jacobian(b, ds)
+    for cause in WORST_SHAPE_FAMILIES:
+        for key in out.get(cause, {}).get("sensors", {}):
+            members = worst_of[(cause, key)]
+            out[cause]["sensors"][key] = _worst_shape(cause, members, b, ds, J, alpha)
+            out[cause]["member"][key] = "+".join(c.label for c in members)
     pose = [c for c in scored if c.cause == "pose_error"]
     if pose:
         # the RMS change of a reading by a rigid pose error, whatever its split between offset and
