@@ -20,11 +20,11 @@ from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag
 from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.detectable import detectable_sizes
-from metrology.diagnosis.extension import describe_named, dof_per_sensor, simulated_figures, size_of, with_model_spread
-from metrology.diagnosis.fit import Fit, fit_any, geometry
+from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
+from metrology.diagnosis.fit import Fit, fit_any, geometry, judged_residuals
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, p_better
-from metrology.diagnosis.stats import NoiseTests, battery_on, noise_tests, structure
+from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
@@ -151,12 +151,6 @@ class Verdict:
 CROSSTALK_CHECKED = ("scale", "nonlinearity", "incidence")
 
 
-def battery_rng() -> np.random.Generator:
-    """The generator of the battery's permutation tests: fixed, so the verdict is a function of
-    the data alone (``diagnose``'s ``seed`` drives only the side-by-side simulation)."""
-    return np.random.default_rng(20261123)
-
-
 def base_analysis(ds, folds) -> BaseAnalysis:
     """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
     calibrated one) and test its residuals."""
@@ -274,19 +268,10 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdic
         confidence = "moderate" if b.tests.consistent and lead is None else "low"
         return Verdict(cause, [], confidence, None, None, [], None, (), lead)
     f = joint_fit(ds, b, chosen) if random_pose is None else random_pose[1]
-    r_test, dof_test = f.residual, dof_per_sensor(f, obs, n)
-    if random_pose is not None:  # the residuals whitened by the fitted pose error's covariance
+    if random_pose is None:
+        r_test, dof_test = judged_residuals(f, obs, b.cov, b.sigma)
+    else:  # the residuals whitened by the fitted pose error's covariance (the fit has no rigid one)
         r_test = random_pose[0].whitened
-        dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
-    rigid = [c for c in f.components if c.per_pose and c.per_pose_columns > 1]
-    if rigid:
-        # several values a pose take most of each pose's readings, unevenly over the sensors:
-        # each residual is scaled by its own leverage, so every sensor's is N(0, sigma^2) again
-        B = rigid[0].pose_columns(b.cov) / b.sigma[None, :, None]
-        B = np.where(np.isfinite(obs.d)[..., None], B, 0.0)
-        h = np.einsum("pnm,pmn->pn", B, np.linalg.pinv(B, rcond=1e-10))
-        r_test = f.residual / np.sqrt(np.clip(1.0 - h, 1e-6, None))
-        r_test = np.where(1.0 - h > 1e-3, r_test, np.nan)
         dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
     tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
                             pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),

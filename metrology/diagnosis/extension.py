@@ -12,7 +12,7 @@ from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import kfold
 
-__all__ = ["describe_named", "size_of", "simulated_figures", "dof_per_sensor", "POSE_FLOOR_REPS"]
+__all__ = ["describe_named", "size_of", "simulated_figures", "POSE_FLOOR_REPS"]
 
 
 #: simulated noise-only copies used to measure the noise floor of the per-pose estimates
@@ -151,18 +151,6 @@ def simulated_figures(nominal, obs, cov, sigma, model: ExtendedModel, k, theta0,
         rms.append(np.sqrt(np.nanmean(b.residual**2, axis=0)))
         ndev.append(np.nanmean(kfold(nominal, o, cov, sigma, (), k, theta0).normal_dev))
     return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
-
-
-def dof_per_sensor(f: Fit, obs, n):
-    cnt = np.isfinite(obs.d).sum(axis=0).astype(float)
-    dof = cnt - 5
-    for c in f.components:
-        if c.sensors:
-            for i in c.sensors:
-                dof[i] -= c.n_params / len(c.sensors)
-        else:
-            dof -= (c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0]))) / n
-    return dof
 
 
 def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None:

@@ -16,7 +16,7 @@ from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_tangent, readings
 from metrology.core.observations import Observations
 
-__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry"]
+__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals"]
 
 
 @dataclass(frozen=True)
@@ -391,3 +391,35 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
         chi2 += f.chi2
         dof += f.dof
     return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
+
+
+def dof_per_sensor(f: Fit, obs, n):
+    """(n,) float: residual degrees of freedom per sensor of ``f`` (readings less the five
+    geometry parameters and each component's share)."""
+    cnt = np.isfinite(obs.d).sum(axis=0).astype(float)
+    dof = cnt - 5
+    for c in f.components:
+        if c.sensors:
+            for i in c.sensors:
+                dof[i] -= c.n_params / len(c.sensors)
+        else:
+            dof -= (c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0]))) / n
+    return dof
+
+
+def judged_residuals(f: Fit, obs, cov, sigma):
+    """``(r (p, n) mm, dof (n,))``: the residuals of ``f`` as the noise battery judges them, and
+    their degrees of freedom per sensor.
+
+    Under a rigid pose error (several values a pose) those values take most of each pose's
+    readings, unevenly over the sensors: each residual is then scaled by its own leverage, so
+    every sensor's is N(0, sigma^2) again (readings of leverage near 1 are left out)."""
+    rigid = [c for c in f.components if c.per_pose and c.per_pose_columns > 1]
+    if not rigid:
+        return f.residual, dof_per_sensor(f, obs, obs.d.shape[1])
+    B = rigid[0].pose_columns(cov) / sigma[None, :, None]
+    B = np.where(np.isfinite(obs.d)[..., None], B, 0.0)
+    h = np.einsum("pnm,pmn->pn", B, np.linalg.pinv(B, rcond=1e-10))
+    r = f.residual / np.sqrt(np.clip(1.0 - h, 1e-6, None))
+    r = np.where(1.0 - h > 1e-3, r, np.nan)
+    return r, np.isfinite(r).sum(axis=0) - 5.0

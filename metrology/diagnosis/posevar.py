@@ -193,7 +193,7 @@ def random_pose_error(ds, b, fit_residual, rng: np.random.Generator, comps=(), f
     """Test and size a per-pose rigid error as a random effect in ``fit_residual (p, n)`` mm, the
     residuals of the base model plus ``comps`` (no pose error among them), against the stated
     noise ``b.sigma``; ``flags (p, n)`` bool readings left out (gross); ``rng`` the generator of
-    the whiteness permutation test (the battery's, ``decide.battery_rng``). See the module."""
+    the whiteness permutation test (the battery's, ``stats.battery_rng``). See the module."""
     from scipy import stats
 
     from metrology.diagnosis.stats import ljung_box

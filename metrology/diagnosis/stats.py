@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Covariates
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "structure"]
+__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "battery_rng", "structure"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +118,12 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
             pvals.append((float(pp), {i, j}))
     p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
     return NoiseTests(per, pair_out, len(pvals), p_all, bool(p_all >= THRESHOLDS["alpha_battery"]), tuple(pvals))
+
+
+def battery_rng() -> np.random.Generator:
+    """The generator of the battery's permutation tests: fixed, so the verdict is a function of
+    the data alone (``diagnose``'s ``seed`` drives only the side-by-side simulation)."""
+    return np.random.default_rng(20261123)
 
 
 def battery_on(tests: NoiseTests, sensors) -> float:

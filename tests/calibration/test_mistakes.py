@@ -250,3 +250,33 @@ def test_a_few_gross_readings_pass_the_screen_a_swapped_column_does_not(tmp_path
     assert screen(bad).gross
     m = explain(bad)
     assert m is not None and m.mistake is not None and "swapped" in m.mistake
+
+
+def test_gross_readings_far_above_the_noise_are_named_for_calibrate_and_let_through_for_diagnose(tmp_path):
+    # a blind case of the independent simulator (the seed-70 study's outliers draw 8): three
+    # gross readings of 1.2-2.0 mm on L2 and one on L3, 59 poses, 3 um noise. L2's residual RMS
+    # is 0.33 mm, 109 times the noise (the noise test of an export mistake), and `diagnose`
+    # refused the run as one; the robust refit's scale on L2 is 3.7 um. A calibration is still
+    # refused (it would follow them), now saying what they are; `diagnose` gets the data. The
+    # same run with two sensor columns swapped is refused for both.
+    from metrology.calibration.sanity import check_dataset
+    from metrology.sim.forward import draw_case, write_case
+
+    case = draw_case(np.random.default_rng([70, 1, 6, 8]), "outliers")
+    cells = case.effects[0].shape["cells"]
+    assert case.effects[0].sensors == ("L2", "L3") and max(abs(c[2]) for c in cells) > 1.9
+    paths = write_case(case, tmp_path)
+    ds = load_dataset(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
+    s = screen(ds)
+    i = list(ds.layout.names).index("L2")
+    assert s.gross and not s.mistaken and s.gross_readings[i]
+    assert s.residual_rms[i] > GROSS_NOISE_FACTOR * s.noise_mm[i] and s.robust_scale_mm[i] < 2 * s.noise_mm[i]
+    with pytest.raises(ValueError, match=r"export.csv: a few gross readings: the residual RMS of L2 is 0.33 mm .*"
+                                         r"robust fit leaves 0.00[0-9]+ mm; .* pose P004 d_L2 = .*metro diagnose"):
+        check_dataset(ds, str(paths["export.csv"]))
+    check_dataset(ds, str(paths["export.csv"]), allow_gross_readings=True)  # no error
+    swapped = write_rows(tmp_path / "swapped.csv", _swap_headers(export_rows(paths["export.csv"]), "d_L1", "d_L3"))
+    bad = load_dataset(swapped, paths["cloud.ply"], paths["layout.toml"])
+    assert screen(bad).mistaken
+    with pytest.raises(ValueError, match="swapped"):
+        check_dataset(bad, str(swapped), allow_gross_readings=True)

@@ -79,8 +79,6 @@ def study():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 12: right above the case's detectable size is below 95 % for "
-                                        "nonlinearity (seed 0: 12/13; docs/diagnose.md)")
 def test_study_right_inside_detectable_range(study):
     for fam, r in study["families"].items():
         assert r["n"] >= 20

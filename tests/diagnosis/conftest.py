@@ -1,0 +1,24 @@
+"""Fixtures of the diagnosis tests."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture
+def adequacy_spy(monkeypatch):
+    """Record each call of ``select.adequate_member`` as ``(member held, held consistent,
+    member returned, returned consistent, its parameters minus the held's)``; returns the list."""
+    import metrology.diagnosis.select as select
+
+    seen = []
+    adequate = select.adequate_member
+
+    def spy(ds, b, held, *args, **kw):
+        out = adequate(ds, b, held, *args, **kw)
+        seen.append((held.label, select._consistent(ds, b, held), out.label, select._consistent(ds, b, out),
+                     out.n_params - held.n_params))
+        return out
+
+    monkeypatch.setattr(select, "adequate_member", spy)
+    return seen
