@@ -21,12 +21,15 @@ least squares, a few ms) and calls the data *gross* when any of these holds:
   the export misplaces every reading, and the robust fit goes as far astray as the plain one.
 
 Where the noise test fails, the same robust refit tells a few gross readings from a mistake:
-its residuals' robust scale (1.4826 times their median absolute value) stays near the noise
-when all but a few readings fit, and is as far off as the plain RMS when every reading is
-misplaced. Three 2-mm gross readings of one sensor in 59 poses at 3 um noise (a blind case)
-put its residual RMS at 0.33 mm, 109 times the noise; its robust scale is 3.7 um. A reading
-further than :data:`GROSS_ZERO_MM` from the robust fit is no gross reading of the surface but
-a code or a mistake (9999 for "no reading").
+the sensor has a few gross readings when its residuals' robust scale (1.4826 times their median
+absolute value) is within :data:`GROSS_READINGS_SCALE` (3) stated noises and at most
+max(:data:`GROSS_READINGS_MIN`, :data:`GROSS_READINGS_FRACTION` of its readings) (3, 15 %) are
+further than :data:`GROSS_READING_SIGMAS` (10) noises from that fit. Three 2-mm gross readings
+of one sensor in 59 poses at 3 um noise (a blind case) put its residual RMS at 0.33 mm, 109
+times the noise; its robust scale is 3.7 um and 3 readings are far. A mistake misplaces many
+readings: all (a swapped column, a unit) or a block of them (two columns swapped in a fifth of
+the rows, a shift from some pose on). A reading further than :data:`GROSS_ZERO_MM` from the
+robust fit is no gross reading of the surface but a code or a mistake (9999 for "no reading").
 :func:`check_dataset` refuses such data for a calibration (a least-squares calibration would
 follow them), saying they are a few gross readings and how to find them, and lets them
 through for ``diagnose`` (``allow_gross_readings``), whose ``outliers`` family flags them.
@@ -45,7 +48,8 @@ import numpy as np
 from metrology.calibration.dataset import MIN_READINGS, Dataset
 from metrology.io.export import POSITION_UNITS
 
-__all__ = ["GROSS_NOISE_FACTOR", "GROSS_P", "GROSS_ZERO_MM", "GROSS_TILT_DEG", "ROBUST_SCALE", "Screening", "Mismatch",
+__all__ = ["GROSS_NOISE_FACTOR", "GROSS_P", "GROSS_ZERO_MM", "GROSS_TILT_DEG", "ROBUST_SCALE", "GROSS_READINGS_SCALE",
+           "GROSS_READING_SIGMAS", "GROSS_READINGS_FRACTION", "GROSS_READINGS_MIN", "Screening", "Mismatch",
            "screen", "explain", "check_dataset"]
 
 #: residual RMS over stated noise above which (with :data:`GROSS_P`) the data are a gross mismatch
@@ -58,6 +62,14 @@ GROSS_ZERO_MM = 10.0
 GROSS_TILT_DEG = 10.0
 #: the robust refit of the correction test discounts residuals beyond this many stated noises
 ROBUST_SCALE = 3.0
+#: a sensor fails the noise test through a few gross readings only (not a mistake) when the robust
+#: refit's scale is within this many stated noises ...
+GROSS_READINGS_SCALE = 3.0
+#: ... and its readings further than this many stated noises from that fit are few: at most
+#: :data:`GROSS_READINGS_MIN` or this fraction of the sensor's readings, whichever is more
+GROSS_READING_SIGMAS = 10.0
+GROSS_READINGS_FRACTION = 0.15
+GROSS_READINGS_MIN = 3
 
 
 def _mm(x) -> str:
@@ -85,6 +97,8 @@ class Screening:
     robust_scale_mm : (n,) float, mm, or None: 1.4826 x the median absolute residual of the
         robust refit, where the noise test was failed (NaN elsewhere; inf where a reading is
         further than :data:`GROSS_ZERO_MM` from that fit); None when not refitted
+    n_far : (n,) int or None: readings further than :data:`GROSS_READING_SIGMAS` stated noises
+        from the robust refit, where the noise test was failed (0 elsewhere)
     """
 
     names: tuple
@@ -97,6 +111,7 @@ class Screening:
     tilt_deg: np.ndarray
     worst: tuple = ()
     robust_scale_mm: np.ndarray | None = None
+    n_far: np.ndarray | None = None
 
     @property
     def geometry_fails(self) -> bool:
@@ -109,12 +124,13 @@ class Screening:
 
     @property
     def gross_readings(self) -> np.ndarray:
-        """(n,) bool: sensors that fail the noise test only through a few gross readings (the
-        robust refit's scale within :data:`GROSS_NOISE_FACTOR` of the noise)."""
-        if self.robust_scale_mm is None:
+        """(n,) bool: sensors that fail the noise test only through a few gross readings (see
+        the module: the robust refit's scale near the noise, few readings far from it)."""
+        if self.robust_scale_mm is None or self.n_far is None:
             return np.zeros(len(self.names), bool)
+        few = self.n_far <= np.maximum(GROSS_READINGS_MIN, GROSS_READINGS_FRACTION * self.n_readings)
         with np.errstate(invalid="ignore"):
-            return self.noise_fails & (self.robust_scale_mm <= GROSS_NOISE_FACTOR * self.noise_mm)
+            return self.noise_fails & few & (self.robust_scale_mm <= GROSS_READINGS_SCALE * self.noise_mm)
 
     @property
     def mistaken(self) -> bool:
@@ -189,7 +205,7 @@ def screen(dataset: Dataset) -> Screening:
     with np.errstate(invalid="ignore"):
         noisy = (rms > GROSS_NOISE_FACTOR * layout.noise_mm) & (p < GROSS_P)
     dragged = ((shift > GROSS_ZERO_MM) | (tilt > GROSS_TILT_DEG)) & stated
-    robust = None
+    robust = far = None
     if np.any(dragged | noisy):
         # a few gross readings can drag the least-squares fit and inflate its RMS: a robust refit
         with np.errstate(all="ignore"):
@@ -198,12 +214,14 @@ def screen(dataset: Dataset) -> Screening:
         better = dragged & (shift_r <= GROSS_ZERO_MM) & (tilt_r <= GROSS_TILT_DEG)
         shift, tilt = np.where(better, shift_r, shift), np.where(better, tilt_r, tilt)
         pred_r, _ = readings(rob.layout.zero, rob.layout.direction, obs.normal, obs.offset)
-        robust = np.full(n, np.nan)
+        robust, far = np.full(n, np.nan), np.zeros(n, int)
         for i in np.flatnonzero(noisy):
             a = np.abs(obs.d[:, i] - pred_r[:, i])
+            a = a[np.isfinite(a)]
             # a reading further off than a calibration can move is a code or a mistake, not a
             # gross reading of the surface (a spot on a scratch or an edge is off by a few mm)
-            robust[i] = np.inf if np.nanmax(a) > GROSS_ZERO_MM else 1.4826 * np.nanmedian(a)
+            robust[i] = np.inf if len(a) == 0 or np.max(a) > GROSS_ZERO_MM else 1.4826 * np.median(a)
+            far[i] = int(np.sum(a > GROSS_READING_SIGMAS * layout.noise_mm[i]))
     pred, _ = readings(cal.layout.zero, cal.layout.direction, obs.normal, obs.offset)
     res = np.abs(obs.d - pred)
     worst = ()
@@ -211,7 +229,7 @@ def screen(dataset: Dataset) -> Screening:
         k, i = np.unravel_index(np.nanargmax(res), res.shape)
         worst = (f"the reading furthest from the fit is pose {dataset.export.pose_id[k]} d_{layout.names[i]} = "
                  f"{obs.d[k, i]:g} mm, {_mm(res[k, i])} off", float(obs.d[k, i]))
-    return Screening(layout.names, n_geo, n_read, rms, layout.noise_mm, p, shift, tilt, worst, robust)
+    return Screening(layout.names, n_geo, n_read, rms, layout.noise_mm, p, shift, tilt, worst, robust, far)
 
 
 @dataclass(frozen=True)
@@ -252,9 +270,9 @@ class Mismatch:
             i = int(np.argmax(np.where(first.gross_readings, first.residual_rms / first.noise_mm, -1)))
             return (f"{source}: a few gross readings: the residual RMS of {first.names[i]} is "
                     f"{_mm(first.residual_rms[i])} against a stated noise of {first.noise_mm[i]:g} mm, but a robust "
-                    f"fit leaves {_mm(first.robust_scale_mm[i])}{worst}; a calibration would follow them: "
-                    f"'metro diagnose' names them (outliers), then leave them out of the export, or pass "
-                    f"--no-reading {code} if {code} is the PLC's 'no reading' code")
+                    f"fit leaves {_mm(first.robust_scale_mm[i])} with {first.n_far[i]} of its {first.n_readings[i]} "
+                    f"readings far from it{worst}; a calibration would follow them: 'metro diagnose' names them "
+                    f"(outliers), then leave them out of the export")
         return (f"{source}: the readings do not fit the poses and the datum: {first.describe()}{worst}; "
                 f"none of the usual export mistakes explains it ({len(self.tried)} tried: quaternion order, position "
                 f"and reading units, swapped sensor columns); if {code} is "

@@ -86,7 +86,7 @@ def refine_order(best: CandidateResult, scored) -> CandidateResult:
 
 
 def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds,
-                  n_cand) -> CandidateResult:
+                  n_cand) -> tuple:
     """The characteristic's order, beyond the members every sensor is scored with: once a curve
     (``nonlinearity``) is chosen, splines with more knots (:data:`SPLINE_LADDER`) are scored in
     turn given the same causes, and each is taken only when it is significant and predicts
@@ -174,8 +174,8 @@ def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, r
     gives a held-out RMS ratio of 3.3 and leaves 10.0 um RMS on its sensor (chi-square
     p = 2e-6); the lagged member, which represents that drift to 0.4 um RMS, is not
     significantly better held out. A 0.11 mm calibration table of 4 knots at 3.5 um noise: the
-    quartic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
-    RMS on the sensor (the quartic failing the battery, the quintic not)."""
+    cubic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
+    RMS on the sensor (the cubic failing the battery, the quintic not)."""
     c = held.component
     if not c.sensors or c.per_pose or isinstance(c, Outliers) or _consistent(ds, b, held):
         return held
@@ -388,7 +388,8 @@ def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
     error, say, is not significantly better than the offset alone while a drift is still
     unmodelled, and its orientation part then stays on every sensor. Each earlier family's
     members are scored again given every other chosen cause (the same tests, the same
-    ``alpha_order`` rule of :func:`refine_order`, from the member held). Where one changes,
+    ``alpha_order`` rule of :func:`refine_order`, from the member held, then
+    :func:`adequate_member` given the others). Where one changes,
     its step and the joint model are refitted (``steps`` is updated in place). Returns
     (given, joint fit, its held-out figures).
     """
@@ -406,6 +407,9 @@ def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
         if held is None or not held.significant:
             continue
         new = refine_order(held, scored)
+        # and the member must explain its sensors given the others (refine_order starts from the
+        # simplest member: a member taken for adequacy would otherwise go back to it)
+        new = adequate_member(ds, b, new, scored, others, ref[0], ref[1], flags, p_out, folds, n_cand)
         if new.label == g.label:
             continue
         given = given[:j] + (new.component,) + given[j + 1:]

@@ -272,7 +272,8 @@ def test_gross_readings_far_above_the_noise_are_named_for_calibrate_and_let_thro
     assert s.gross and not s.mistaken and s.gross_readings[i]
     assert s.residual_rms[i] > GROSS_NOISE_FACTOR * s.noise_mm[i] and s.robust_scale_mm[i] < 2 * s.noise_mm[i]
     with pytest.raises(ValueError, match=r"export.csv: a few gross readings: the residual RMS of L2 is 0.33 mm .*"
-                                         r"robust fit leaves 0.00[0-9]+ mm; .* pose P004 d_L2 = .*metro diagnose"):
+                                         r"robust fit leaves 0.00[0-9]+ mm with 3 of its 59 readings far from it; "
+                                         r".* pose P004 d_L2 = .*metro diagnose"):
         check_dataset(ds, str(paths["export.csv"]))
     check_dataset(ds, str(paths["export.csv"]), allow_gross_readings=True)  # no error
     swapped = write_rows(tmp_path / "swapped.csv", _swap_headers(export_rows(paths["export.csv"]), "d_L1", "d_L3"))
@@ -280,3 +281,29 @@ def test_gross_readings_far_above_the_noise_are_named_for_calibrate_and_let_thro
     assert screen(bad).mistaken
     with pytest.raises(ValueError, match="swapped"):
         check_dataset(bad, str(swapped), allow_gross_readings=True)
+
+
+@pytest.mark.parametrize("mistake", ["swap a fifth of the rows", "shift 40 % of a column", "shift from a pose on"])
+def test_a_mistake_in_part_of_the_export_is_no_few_gross_readings(mistake):
+    # a mistake can misplace a block of readings, not all of them: the robust refit then still
+    # fits the rest (its scale near the noise for a fifth of the rows swapped), but too many
+    # readings are far from it to be a few gross readings; refused for diagnose too
+    from dataclasses import replace
+
+    from metrology.calibration.sanity import check_dataset
+
+    ds = load_dataset(CAL, PLANE, NOMINAL)
+    d = ds.export.d.copy()
+    p = len(d)
+    if mistake == "swap a fifth of the rows":
+        rows = np.arange(0, p, 5)
+        d[rows, 0], d[rows, 2] = ds.export.d[rows, 2], ds.export.d[rows, 0]
+    elif mistake == "shift 40 % of a column":
+        d[: int(0.4 * p), 0] += 2.0
+    else:
+        d[p // 2:, 0] += 5.0
+    bad = replace(ds, export=replace(ds.export, d=d))
+    s = screen(bad)
+    assert s.gross and s.mistaken and not s.gross_readings.any()
+    with pytest.raises(ValueError, match=r"^CAL.csv: (?!a few gross readings)"):
+        check_dataset(bad, "CAL.csv", allow_gross_readings=True)

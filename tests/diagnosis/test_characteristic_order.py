@@ -117,10 +117,10 @@ def test_table_where_readings_crowd_is_named_with_knots_at_their_quantiles(tmp_p
     assert res["causes"][0]["label"].endswith("q")
 
 
-def test_curve_whose_quartic_leaves_structure_is_named_with_the_simplest_adequate_member(tmp_path, adequacy_spy):
+def test_curve_whose_cubic_leaves_structure_is_named_with_the_simplest_adequate_member(tmp_path, adequacy_spy):
     # the blind study's seed-60 draw 3: a 0.11 mm calibration table of 4 knots on L4, 90 poses,
-    # 3.5 um noise. The richer members predict held-out poses no better than the quartic, which
-    # the held-out comparisons therefore keep, but the quartic leaves L4's residuals
+    # 3.5 um noise. The richer members predict held-out poses no better than the cubic, which
+    # the held-out comparisons therefore keep, but the cubic leaves L4's residuals
     # inconsistent with the noise (4.3 um RMS left); chosen on held-out error alone the curve
     # was `unexplained`. ``adequate_member`` takes the simplest member of the family that is
     # consistent and not worse held out.
