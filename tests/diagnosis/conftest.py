@@ -8,7 +8,8 @@ import pytest
 @pytest.fixture
 def adequacy_spy(monkeypatch):
     """Record each call of ``select.adequate_member`` as ``(member held, held consistent,
-    member returned, returned consistent, its parameters minus the held's)``; returns the list."""
+    member returned, returned consistent, its parameters minus the held's, labels of the causes
+    given)``; returns the list."""
     import metrology.diagnosis.select as select
 
     seen = []
@@ -17,7 +18,7 @@ def adequacy_spy(monkeypatch):
     def spy(ds, b, held, *args, **kw):
         out = adequate(ds, b, held, *args, **kw)
         seen.append((held.label, select._consistent(ds, b, held), out.label, select._consistent(ds, b, out),
-                     out.n_params - held.n_params))
+                     out.n_params - held.n_params, tuple(g.label for g in args[1])))
         return out
 
     monkeypatch.setattr(select, "adequate_member", spy)

@@ -202,3 +202,27 @@ def test_lagged_drift_is_named_with_the_member_that_leaves_its_sensor_white(tmp_
     assert res["causes"][0]["label"] == "drift.L2@lag"
     size = res["causes"][0]["size"]
     assert abs(size["value"] - eff.size) < 2 * size["stderr"] + 0.05 * eff.size
+
+
+def test_a_member_taken_for_adequacy_is_kept_when_a_later_cause_is_added(tmp_path, adequacy_spy):
+    # the lagged drift above with three gross readings of 0.09-0.12 mm added on L1 and L3: the
+    # drift is chosen first (as drift@lag, for adequacy), then the gross readings. Re-choosing
+    # the drift's member given them starts from the simplest member (linear in temperature),
+    # which again leaves L2 inconsistent; adequate_member given the others keeps the lag
+    from dataclasses import replace
+
+    from metrology.diagnosis.decide import diagnose
+    from metrology.jobs.calibrate import load_checked
+
+    case = draw_case(np.random.default_rng([60, 1, 3, 9]), "drift")
+    paths = write_case(case, tmp_path)
+    ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"], "wxyz", "mm", None,
+                      lambda *a: None)
+    d = ds.export.d.copy()
+    for k, i, v in ((5, 0, 0.1), (20, 2, -0.12), (41, 0, 0.09)):
+        d[k, i] += v
+    res = diagnose(replace(ds, export=replace(ds.export, d=d), datum_points=None), sim_reps=1).to_dict()
+    assert [c["label"] for c in res["causes"]] == ["drift.L2@lag", "outliers.L1+L3"], res["summary"]
+    assert res["confidence"] == "high"
+    rechosen = [c for c in adequacy_spy if c[5] == ("outliers.L1+L3",)]
+    assert rechosen and rechosen[0][:4] == ("drift.L2@temp", False, "drift.L2@lag", True)
