@@ -72,6 +72,13 @@ GROSS_READINGS_FRACTION = 0.15
 GROSS_READINGS_MIN = 3
 
 
+def _noise_fails(rms, noise_mm, p_value) -> np.ndarray:
+    """(n,) bool: the noise test (RMS over :data:`GROSS_NOISE_FACTOR` stated noises and chi-square
+    p under :data:`GROSS_P`; False where no noise is stated)."""
+    with np.errstate(invalid="ignore"):
+        return (rms > GROSS_NOISE_FACTOR * noise_mm) & (p_value < GROSS_P)
+
+
 def _mm(x) -> str:
     """A length for a message: 2 significant digits, no exponent."""
     if not np.isfinite(x):
@@ -119,8 +126,7 @@ class Screening:
 
     @property
     def noise_fails(self) -> np.ndarray:
-        with np.errstate(invalid="ignore"):
-            return (self.residual_rms > GROSS_NOISE_FACTOR * self.noise_mm) & (self.p_value < GROSS_P)
+        return _noise_fails(self.residual_rms, self.noise_mm, self.p_value)
 
     @property
     def gross_readings(self) -> np.ndarray:
@@ -202,8 +208,7 @@ def screen(dataset: Dataset) -> Screening:
         p = chi2.sf(cal.n_used * rms**2 / layout.noise_mm**2, dof)
     shift, tilt = _correction(layout, cal.layout)
     stated = np.isfinite(layout.noise_mm) & (layout.noise_mm > 0)
-    with np.errstate(invalid="ignore"):
-        noisy = (rms > GROSS_NOISE_FACTOR * layout.noise_mm) & (p < GROSS_P)
+    noisy = _noise_fails(rms, layout.noise_mm, p)
     dragged = ((shift > GROSS_ZERO_MM) | (tilt > GROSS_TILT_DEG)) & stated
     robust = far = None
     if np.any(dragged | noisy):

@@ -21,7 +21,7 @@ from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
-from metrology.diagnosis.fit import Fit, fit_any, geometry, judged_residuals
+from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, p_better
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
@@ -269,13 +269,13 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdic
         return Verdict(cause, [], confidence, None, None, [], None, (), lead)
     f = joint_fit(ds, b, chosen) if random_pose is None else random_pose[1]
     if random_pose is None:
-        r_test, dof_test = judged_residuals(f, obs, b.cov, b.sigma)
-    else:  # the residuals whitened by the fitted pose error's covariance (the fit has no rigid one)
+        tests_ext = residual_battery(f, obs, b.cov, b.sigma, nominal.names)
+    else:  # the residuals whitened by the fitted pose error's covariance (the fit has no rigid one);
+        # a pose error need not be Gaussian: no normality test
         r_test = random_pose[0].whitened
-        dof_test = np.isfinite(r_test).sum(axis=0) - 5.0
-    tests_ext = noise_tests(r_test, b.sigma, dof_test, nominal.names,
-                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),
-                            normality=random_pose is None)  # a pose error need not be Gaussian
+        tests_ext = noise_tests(r_test, b.sigma, np.isfinite(r_test).sum(axis=0) - 5.0, nominal.names,
+                                pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),
+                                normality=False)
     gains = drop_one_gains(ds, b, chosen, folds) if chosen else []
     judged = _judged_sensors(chosen, tests_ext, gains, n)
     # every cause named must still be needed given the others, Bonferroni over the causes chosen

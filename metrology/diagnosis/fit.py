@@ -15,8 +15,9 @@ from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_tangent, readings
 from metrology.core.observations import Observations
+from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
 
-__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals"]
+__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals", "residual_battery"]
 
 
 @dataclass(frozen=True)
@@ -423,3 +424,11 @@ def judged_residuals(f: Fit, obs, cov, sigma):
     r = f.residual / np.sqrt(np.clip(1.0 - h, 1e-6, None))
     r = np.where(1.0 - h > 1e-3, r, np.nan)
     return r, np.isfinite(r).sum(axis=0) - 5.0
+
+
+def residual_battery(f: Fit, obs, cov, sigma, names) -> NoiseTests:
+    """The noise-model battery on ``f``'s residuals as the verdict judges them
+    (:func:`judged_residuals`; the within-pose pairs tested unless a component is per pose):
+    one place for the verdict and for the choice of a family's member."""
+    r, dof = judged_residuals(f, obs, cov, sigma)
+    return noise_tests(r, sigma, dof, names, pairs=not any(c.per_pose for c in f.components), rng=battery_rng())

@@ -32,9 +32,9 @@ import numpy as np
 
 from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, PoseError
 from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals, score_candidate
-from metrology.diagnosis.fit import Fit, fit_any, judged_residuals
+from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
-from metrology.diagnosis.stats import battery_on, battery_rng, noise_tests
+from metrology.diagnosis.stats import battery_on
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "MAX_CAUSES"]
@@ -145,10 +145,7 @@ def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: Hel
 def _consistent(ds, b, cand: CandidateResult) -> bool:
     """Whether ``cand``'s fit leaves its sensors' residuals consistent with the noise (the
     verdict's battery, at ``alpha_battery``)."""
-    f = cand.fit
-    r, dof = judged_residuals(f, ds.obs, b.cov, b.sigma)
-    tests = noise_tests(r, b.sigma, dof, ds.layout.names, pairs=not any(c.per_pose for c in f.components),
-                        rng=battery_rng())
+    tests = residual_battery(cand.fit, ds.obs, b.cov, b.sigma, ds.layout.names)
     return battery_on(tests, list(cand.component.sensors)) >= THRESHOLDS["alpha_battery"]
 
 

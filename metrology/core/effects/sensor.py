@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -198,25 +199,21 @@ class Drift(Component):
         return _sensor_basis(np.array(x), d0.shape[1], self.sensors)
 
 
-_SPLINES = {}
-
-
+@functools.lru_cache(maxsize=256)
 def _spline_setup(a, b, n_inner, inner=None):
     """Knots of the cubic spline on ``[a, b]`` with ``n_inner`` even interior knots (or those of
     ``inner``, a tuple in the same units), and each basis function's least-squares line there:
-    ``(t, (a0 (nb,), a1 (nb,)), a1)`` (cached)."""
-    key = (a, b, n_inner, inner)
-    if key not in _SPLINES:
-        from scipy.interpolate import BSpline
+    ``(t, (a0 (nb,), a1 (nb,)), a1)`` (cached, bounded: knots at the readings' quantiles differ
+    with every data set)."""
+    from scipy.interpolate import BSpline
 
-        inner = np.linspace(a, b, n_inner + 2)[1:-1] if inner is None else np.asarray(inner, float)
-        t = np.concatenate([[a] * 4, inner, [b] * 4])
-        g = np.linspace(a, b, 201)
-        G = BSpline.design_matrix(g, t, 3).toarray()
-        A = np.stack([np.ones_like(g), g], axis=1)
-        coef = np.linalg.lstsq(A, G, rcond=None)[0]  # (2, nb)
-        _SPLINES[key] = (t, (coef[0], coef[1]), coef[1])
-    return _SPLINES[key]
+    inner = np.linspace(a, b, n_inner + 2)[1:-1] if inner is None else np.asarray(inner, float)
+    t = np.concatenate([[a] * 4, inner, [b] * 4])
+    g = np.linspace(a, b, 201)
+    G = BSpline.design_matrix(g, t, 3).toarray()
+    A = np.stack([np.ones_like(g), g], axis=1)
+    coef = np.linalg.lstsq(A, G, rcond=None)[0]  # (2, nb)
+    return t, (coef[0], coef[1]), coef[1]
 
 
 def legendre23(x):
