@@ -20,7 +20,11 @@ Families and their members (what is chosen by held-out error, never by the in-sa
   is the plane fit's own uncertainty), and ranked, like every candidate, against the model
   without that tilt;
 - ``pose_error``: an offset a pose along the datum normal, or (4 or more sensors) an offset and
-  two tilts a pose, the visible part of a rigid 6-DOF tracker error.
+  two tilts a pose, the visible part of a rigid 6-DOF tracker error; the rigid member holds the
+  geometry where the offset member puts it (see :func:`metrology.diagnosis.members.score_step`).
+
+Last, the member must explain its sensors (every sensor for a cause of the set-up):
+:func:`adequate_member`.
 """
 
 from __future__ import annotations
@@ -30,11 +34,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, PoseError
-from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals, score_candidate
-from metrology.diagnosis.fit import Fit, fit_any, residual_battery
-from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
-from metrology.diagnosis.stats import battery_on
+from metrology.core.effects import Outliers, PoseError
+from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals
+from metrology.diagnosis.fit import Fit, fit_any
+from metrology.diagnosis.heldout import beyond_span, kfold
+from metrology.diagnosis.members import adequate_member, family_of, p_better, refine_order, richer_spline, score_step
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "MAX_CAUSES"]
@@ -43,161 +47,6 @@ __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_membe
 MAX_CAUSES = 3
 #: after the first step, a candidate on other sensors is rescored only if its first in-sample p was below this
 PRUNE_P = 0.2
-_GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
-#: interior knots of the characteristic's richer splines, tried in turn once a curve is chosen
-#: (4: the scored member's count, with its knots at the readings' quantiles instead)
-SPLINE_LADDER = (4, 8, 12)
-
-
-def family_of(c) -> tuple:
-    """(family group, sensors) of a candidate: members of one family on the same sensors
-    compete for one place (``scale`` and ``nonlinearity`` are one family, the characteristic)."""
-    return _GROUP.get(c.name, c.name), tuple(c.sensors)
-
-
-def p_better(better: CandidateResult, worse: CandidateResult) -> float:
-    """One-sided paired test that ``better``'s per-pose held-out chi-square is below ``worse``'s
-    on ``better``'s sensors."""
-    from scipy import stats
-
-    d = worse.chi2_pose - better.chi2_pose
-    return float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
-
-
-def _simplicity(s: CandidateResult):
-    c = s.component
-    temp_first = 0 if isinstance(c, Drift) and c.variable in ("temp", "lag") else 1
-    return (s.n_params, temp_first)
-
-
-def refine_order(best: CandidateResult, scored) -> CandidateResult:
-    """The member of ``best``'s family (same sensors) chosen by held-out error: start from the
-    simplest significant member and move to a richer one (or another as rich) only when it
-    predicts held-out poses significantly better (``alpha_order``) than the one held."""
-    mates = sorted([s for s in scored if s.significant and family_of(s.component) == family_of(best.component)],
-                   key=_simplicity)
-    if not mates:
-        return best
-    held = mates[0]
-    for other in mates[1:]:
-        if other.n_params >= held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
-            held = other
-    return held
-
-
-def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds,
-                  n_cand) -> tuple:
-    """The characteristic's order, beyond the members every sensor is scored with: once a curve
-    (``nonlinearity``) is chosen, splines with more knots (:data:`SPLINE_LADDER`) are scored in
-    turn given the same causes, and each is taken only when it is significant and predicts
-    held-out poses significantly better (``alpha_order``) than the member held (the rule of
-    :func:`refine_order`). A calibration table of 6-7 knots, a shape-preserving cubic through
-    them, is followed by the 4-knot spline only to ~5 um RMS (3 % of a 0.16 mm curve): enough
-    to name the family, but its sensor's residuals then fail the noise tests and the cause is
-    not named. Scored only after a curve is chosen, so a null data set never reaches it.
-
-    Each rung has the splines of its knot count with knots evenly over the readings' span and
-    with knots at the readings' quantiles (``@spline{k}q``, as regression splines place them by
-    default): where the readings crowd in part of the span, even knots leave intervals with few
-    or no readings, whose coefficients the fit cannot pin down and whose held-out predictions
-    go astray (a 63-pose run: held-out RMS 1.3 times the base model's with 4 even knots, 2.5
-    times smaller with 4 quantile knots). A rung's two are tested at ``alpha_order`` split
-    between them, and the better of those that pass is taken.
-
-    Returns ``(member, ladder)``: the member held, and every member of the ladder (scored
-    CandidateResults of the rungs climbed, components of those not reached), for
-    :func:`adequate_member`."""
-    c = held.component
-    if not isinstance(c, Nonlinearity) or not c.sensors:
-        return held, []
-    i = c.sensors[0]
-    span = None if b.cov.d_span is None else tuple(float(v) for v in b.cov.d_span[i])
-    d = ds.obs.d[:, i]
-    d = np.sort(d[np.isfinite(d)])
-    tried, rest, climbing = [], [], True
-    for k in SPLINE_LADDER:
-        rung = []
-        if not (c.order == 0 and k <= c.knots) and k != Nonlinearity.SPLINE_KNOTS:
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k))
-        inner = tuple(float(v) for v in np.quantile(d, np.arange(1, k + 1) / (k + 1)))
-        # knots apart by at least a thousandth of the span (quantised or repeated readings can put
-        # two quantiles on one value, and a basis function between them has no support)
-        if len(d) >= 2 * (k + 4) and np.all(np.diff((d[0],) + inner + (d[-1],)) > 1e-3 * (d[-1] - d[0])):
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k, inner_mm=inner))
-        if not rung:
-            continue
-        if not climbing:  # scored by the adequacy step only, if it is needed
-            rest.append(rung)
-            continue
-        scored = _score_step(ds, b, rung, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
-        tried.append(scored)
-        # a rung's two tested at once: the order's level split between them
-        better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"] / len(rung)]
-        if not better:
-            # a count already scored, its knots moved, is an alternative, not a richer rung
-            climbing = k <= max(Nonlinearity.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
-            continue
-        held = min(better, key=lambda s: float(np.sum(s.chi2_pose)))
-        c = held.component
-    return held, [s for rung in tried for s in rung] + [x for rung in rest for x in rung]
-
-
-def _consistent(ds, b, cand: CandidateResult) -> bool:
-    """Whether ``cand``'s fit leaves its sensors' residuals consistent with the noise (the
-    verdict's battery, at ``alpha_battery``); a cause of the set-up (``pose_error``,
-    ``plane_form``) acts on every sensor and is judged on all of them."""
-    tests = residual_battery(cand.fit, ds.obs, b.cov, b.sigma, ds.layout.names)
-    S = list(cand.component.sensors) or list(range(ds.obs.d.shape[1]))
-    return battery_on(tests, S) >= THRESHOLDS["alpha_battery"]
-
-
-def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
-                    folds, n_cand, more=()) -> CandidateResult:
-    """The member of ``held``'s family that explains its sensors: ``held``, or where it leaves
-    them inconsistent with the noise (the verdict's battery at ``alpha_battery``), the simplest
-    other member that is significant, predicts held-out poses no worse (``held`` not
-    significantly better, ``alpha_order``) and leaves them consistent.
-
-    The candidates are the members of the same cause on the same sensors in ``scored`` and the
-    components ``more`` (scored here, given ``given``, when reached), by number of parameters
-    (ties: temperature before time, then the smaller chi-square). Only a per-sensor cause
-    already chosen on its held-out gain reaches this: the family is not changed by it, and a
-    null data set is affected only where a false cause was chosen already (which the verdict
-    would otherwise call ``unexplained``; the null rate is measured in
-    ``benchmarks/study_blind.py``). It turns a cause found "a partial explanation at best"
-    into a cause named.
-
-    Why: the held-out comparison alone cannot tell two members apart when both take most of an
-    effect, yet only one may leave the sensor's residuals white. A drift that follows the air
-    through a 223 s lag, 0.12 mm over a 53-minute run at 7.2 um noise: linear in temperature
-    gives a held-out RMS ratio of 3.3 and leaves 10.0 um RMS on its sensor (chi-square
-    p = 2e-6); the lagged member, which represents that drift to 0.4 um RMS, is not
-    significantly better held out. A 0.11 mm calibration table of 4 knots at 3.5 um noise: the
-    cubic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
-    RMS on the sensor (the cubic failing the battery, the quintic not)."""
-    c = held.component
-    if isinstance(c, Outliers) or _consistent(ds, b, held):
-        return held
-    mates = [s for s in scored if s.component.name == c.name and s.component.sensors == c.sensors
-             and s.label != held.label]
-    pending = sorted(mates + list(more), key=lambda x: x.n_params)
-    seen = {held.label}
-    while pending:
-        k = pending[0].n_params
-        group = [x for x in pending if x.n_params == k]
-        pending = pending[len(group):]
-        todo = [x for x in group if not isinstance(x, CandidateResult)]
-        group = [x for x in group if isinstance(x, CandidateResult)]
-        if todo:
-            group += _score_step(ds, b, todo, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
-        ok = [s for s in group if s.label not in seen and s.significant and s.n_params >= held.n_params
-              and p_better(held, s) >= THRESHOLDS["alpha_order"] and _consistent(ds, b, s)]
-        seen |= {s.label for s in group}
-        if ok:  # temperature before time (the physical cause), then the smaller chi-square
-            return min(ok, key=lambda s: (_simplicity(s), float(np.sum(s.chi2_pose))))
-    return held
-
-
 @dataclass(frozen=True)
 class Step:
     """One step of the forward selection.
@@ -211,46 +60,6 @@ class Step:
     chosen: CandidateResult | None
     scored: tuple
     lead: CandidateResult | None
-
-
-def _score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds, n_cand, on_candidate=None):
-    """Score every candidate of ``pool`` given the components ``given`` (their joint fit
-    ``ref_fit`` and its held-out figures ``ref_ho``). Form is scored against the datum's tilt.
-    ``on_candidate(i, n, label)``, if given, is called before scoring each."""
-    nominal, obs = ds.layout, ds.obs
-    tilt = None
-    out = []
-    # every fit starts from the joint model so far, and one that holds the geometry (a rigid
-    # pose error, given or candidate) holds it there: the base calibration is biased by the
-    # causes already found (gross readings, the pose error itself)
-    th0 = ref_fit.theta if given else b.theta0
-    th_offset = None
-    for i, c in enumerate(pool):
-        if on_candidate is not None:
-            on_candidate(i, len(pool), c.label)
-        ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
-        th_c = th0
-        if isinstance(c, PoseError) and c.holds_base:
-            # the rigid member holds the geometry where the offset member puts it, given the same
-            # causes: the calibration without a pose error takes up part of the error's common
-            # mode, which the offset member profiles out. A 0.066 mm rigid error at 3.1 um noise
-            # (138 poses, 4 sensors): held at the base calibration the rigid member left 4-5 um
-            # RMS and predicted held-out poses 5 times worse than the offset alone (chi-square
-            # 8952 against 1792); held at the offset member's geometry it left the noise and
-            # predicted them better (1241)
-            if th_offset is None:
-                th_offset = fit_any(nominal, obs, b.cov, b.sigma,
-                                    tuple(given) + (replace(c, tilts=False, values=None, stderr=None),), th0).theta
-            th_c = th_offset
-        if isinstance(c, PlaneForm) and c.order != 1:
-            if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
-                comps = tuple(given) + (c.nuisance(),)
-                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
-                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
-            ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
-        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th_c,
-                                   n_cand, given=given, k_ref=k_ref, ho_rank=ref_ho))
-    return out
 
 
 def _lead(scored, n_cand):
@@ -282,17 +91,63 @@ def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candida
     ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the list of
     :class:`Step` (the last one has ``chosen`` None unless ``max_causes`` was reached).
     ``on_candidate(step, i, n, label)``, if given, is called before each candidate is scored.
+
+    Where a per-pose cause (``pose_error``) was chosen, the selection is made again without
+    per-pose causes (the first step's scores reused), and that selection is taken when the
+    per-pose one does not predict held-out poses significantly better (:func:`_fixed_explains`).
     """
+    steps = _select(ds, b, flags, p_out, folds, max_causes, on_candidate)
+    if not any(st.chosen is not None and st.chosen.component.per_pose for st in steps):
+        return steps
+    fixed = _select(ds, b, flags, p_out, folds, max_causes, on_candidate, first=steps[0].scored)
+    return fixed if _fixed_explains(b, steps, fixed) else steps
+
+
+def _fixed_explains(b, steps, fixed) -> bool:
+    """Whether the causes of ``fixed`` (a selection without per-pose causes) predict held-out
+    poses as well as those of ``steps`` (one with a per-pose cause): the latter's joint model
+    not significantly better (``alpha_order``, the paired test of :func:`p_better` on every
+    sensor, the gross readings of either left out).
+
+    The rule of :func:`_parsimonious`, over the whole selection instead of one step. An offset
+    and two tilts a pose take three quarters of any effect on one sensor of a 4-sensor head,
+    so where two sensors drift each on its own, the per-pose cause predicts held-out poses
+    better than either drift alone and takes the first step; the drifts of both sensors, two
+    values, explain it all. A drift of 0.10 mm on L1 and 0.06 mm on L2 (seed-100 pair 6, 4
+    sensors, 93 poses): step 1 took ``pose_error@rigid`` (held-out gain 2780, against 2091 for
+    the drift on L2), step 2 the drift on L2, and the pose error was named, a wrong cause."""
+    from scipy import stats
+
+    main = [st.chosen for st in steps if st.chosen is not None]
+    alt = [st.chosen for st in fixed if st.chosen is not None]
+    if not alt:
+        return False
+    ex = [f for f in (flags_of(main), flags_of(alt)) if f is not None]
+    main, alt = main[-1], alt[-1]
+    ex = None if not ex else np.logical_or.reduce(ex)
+    d = alt.heldout.chi2_pose(b.sigma, exclude=ex) - main.heldout.chi2_pose(b.sigma, exclude=ex)
+    p = 1.0 if np.allclose(d, 0) else float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
+    return p >= THRESHOLDS["alpha_order"]
+
+
+def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None, first=None):
+    """:func:`forward_select`'s steps; with ``first`` (the first step's scored candidates, reused)
+    no per-pose cause is chosen or scored."""
     pool = candidates_for(ds.layout, b.cov, flags)
     members = [c for c in pool if not isinstance(c, Outliers)]  # every member of every family
     n_cand = len(pool)
+    if first is not None:
+        pool = [c for c in pool if not c.per_pose]
     given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
     while True:
         tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
-        scored = _score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand, tick)
+        if first is not None and not steps:
+            scored = list(first)
+        else:
+            scored = score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand, tick)
         ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
-        sig = [s for s in ranked if s.significant]
+        sig = [s for s in ranked if s.significant and not (first is not None and s.component.per_pose)]
         if not sig:
             steps.append(Step(None, ranked, _lead(scored, n_cand)))
             return steps
@@ -415,7 +270,7 @@ def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
         others = given[:j] + given[j + 1:]
         th0 = steps[-1].chosen.fit.theta
         ref = (fit_any(nominal, obs, b.cov, b.sigma, others, th0), kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
-        scored = _score_step(ds, b, mates, others, ref[0], ref[1], flags, p_out, folds, n_cand)
+        scored = score_step(ds, b, mates, others, ref[0], ref[1], flags, p_out, folds, n_cand)
         held = next((s for s in scored if s.label == g.label), None)
         if held is None or not held.significant:
             continue

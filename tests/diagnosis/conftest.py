@@ -11,13 +11,14 @@ def adequacy_spy(monkeypatch):
     member returned, returned consistent, its parameters minus the held's, labels of the causes
     given)``; returns the list."""
     import metrology.diagnosis.select as select
+    from metrology.diagnosis.members import _consistent
 
     seen = []
     adequate = select.adequate_member
 
     def spy(ds, b, held, *args, **kw):
         out = adequate(ds, b, held, *args, **kw)
-        seen.append((held.label, select._consistent(ds, b, held), out.label, select._consistent(ds, b, out),
+        seen.append((held.label, _consistent(ds, b, held), out.label, _consistent(ds, b, out),
                      out.n_params - held.n_params, tuple(g.label for g in args[1])))
         return out
 

@@ -1,6 +1,6 @@
 """The sensor characteristic on data of the independent forward simulator: its order chosen by
 held-out error beyond the members every sensor is scored with
-(``metrology.diagnosis.select.richer_spline``), and every held-out comparison of a curve made on
+(``metrology.diagnosis.members.richer_spline``), and every held-out comparison of a curve made on
 the readings inside its training span (the crosstalk check, the drop-one test).
 
 The datum is passed as the plane fitted to the simulator's scan, without the scan itself (as

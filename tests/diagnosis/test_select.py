@@ -99,7 +99,7 @@ def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
     from metrology.core.effects import PoseError
     from metrology.diagnosis.candidates import candidates_for, flag_outliers
     from metrology.diagnosis.decide import base_analysis
-    from metrology.diagnosis.select import _consistent, _score_step, p_better
+    from metrology.diagnosis.members import _consistent, p_better, score_step
 
     case = draw_case(np.random.default_rng([70, 1, 0, 9]), "pose_error")
     assert case.nominal.n == 4 and case.effects[0].shape["angle_rad"] > 0
@@ -107,7 +107,7 @@ def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
     b = base_analysis(ds, 5)
     flags, p_out = flag_outliers(ds.layout, ds.obs, b.cov, b.sigma, b.theta0)
     n_cand = len(candidates_for(ds.layout, b.cov, flags))
-    off, rigid = _score_step(ds, b, PoseError.candidates_for_setup(ds.layout.names, b.cov), (), b.fit, b.heldout,
+    off, rigid = score_step(ds, b, PoseError.candidates_for_setup(ds.layout.names, b.cov), (), b.fit, b.heldout,
                              flags, p_out, 5, n_cand)
     assert (off.label, rigid.label) == ("pose_error", "pose_error@rigid")
     assert off.significant and not _consistent(ds, b, off)  # the orientation part stays in the offset's residuals
