@@ -208,9 +208,11 @@ def score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, 
             # RMS and predicted held-out poses 5 times worse than the offset alone (chi-square
             # 8952 against 1792); held at the offset member's geometry it left the noise and
             # predicted them better (1241)
-            if th_offset is None:
-                th_offset = fit_any(nominal, obs, b.cov, b.sigma,
-                                    tuple(given) + (replace(c, tilts=False, values=None, stderr=None),), th0).theta
+            if th_offset is None:  # the offset member's fit, as scored just before if it was
+                off = next((r for r in out if isinstance(r.component, PoseError) and not r.component.tilts), None)
+                th_offset = off.fit.theta if off is not None else fit_any(
+                    nominal, obs, b.cov, b.sigma, tuple(given) + (replace(c, tilts=False, values=None, stderr=None),),
+                    th0).theta
             th_c = th_offset
         if isinstance(c, PlaneForm) and c.order != 1:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it

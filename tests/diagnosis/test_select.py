@@ -123,24 +123,31 @@ def test_a_per_pose_cause_gives_way_to_fixed_causes_that_predict_as_well():
     rng = np.random.default_rng(0)
     b = SimpleNamespace(sigma=np.full(4, 0.005))
 
-    def steps(residual, flags=None):
+    def steps(residual, label, flags=None):
         comp = SimpleNamespace(sensors=()) if flags is None else Outliers((0,), names=("a", "b", "c", "d"), flags=flags)
-        return [Step(SimpleNamespace(component=comp, heldout=HeldOut(residual, np.zeros(len(residual)))), (), None),
-                Step(None, (), None)]
+        chosen = SimpleNamespace(component=comp, label=label, fit=SimpleNamespace(residual=residual),
+                                 heldout=HeldOut(residual, np.zeros(len(residual))))
+        return [Step(chosen, (), None), Step(None, (), None)]
 
     r = np.repeat(rng.normal(0, 0.005, (30, 4)), 2, axis=0)  # poses in identical pairs
-    per_pose = steps(r)
+    per_pose = steps(r, "pose_error@rigid")
     # as well held out: half the poses predicted 20 % better, their twins 20 % worse
     as_well = r * np.sqrt(np.where(np.arange(60) % 2, 0.8, 1.2))[:, None]
-    assert _fixed_explains(b, per_pose, steps(as_well))
-    assert not _fixed_explains(b, per_pose, steps(1.3 * r))  # worse held out: the per-pose cause stays
+    assert _fixed_explains(b, per_pose, steps(as_well, "drift.L1@temp"))
+    assert not _fixed_explains(b, per_pose, steps(1.3 * r, "drift.L1@temp"))  # worse: the per-pose cause stays
     assert not _fixed_explains(b, per_pose, [Step(None, (), None)])  # no fixed cause at all
-    # gross readings that one selection flags are left out of both sides of the comparison
-    gross, flags = r.copy(), np.zeros(r.shape, bool)
+    # the fixed causes all among the per-pose selection's: it was added to them on its own test
+    assert not _fixed_explains(b, per_pose, steps(as_well, "pose_error@rigid"))
+    # a pose with a gross reading is left out whole: unflagged in the per-pose model, it spreads
+    # over the pose's other held-out readings (here 0.1 mm), which would make the fixed causes,
+    # 1.3 times worse everywhere else, look as good
+    spread, gross, flags = r.copy(), 1.3 * r, np.zeros(r.shape, bool)
+    spread[::2, 0] += 0.5
+    spread[::2, 1:] += 0.1
     gross[::2, 0] += 0.5
     flags[::2, 0] = True
-    assert not _fixed_explains(b, per_pose, steps(gross))
-    assert _fixed_explains(b, steps(r, flags), steps(gross))
+    assert not _fixed_explains(b, steps(spread, "pose_error@rigid"), steps(gross, "drift.L1@temp", flags))
+    assert not _fixed_explains(b, steps(spread, "pose_error@rigid"), steps(gross, "drift.L1@temp"), flags)
 
 
 @pytest.mark.slow  # ~10 s
