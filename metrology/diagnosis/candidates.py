@@ -12,6 +12,7 @@ from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
+from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
@@ -275,10 +276,7 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
     ce = ho.chi2_pose(sigma, exclude=excl)
     diff = (cb if ho_rank is None else ho_rank.chi2_pose(sigma, exclude=excl)) - ce  # all sensors: comparable between candidates (ranking)
     diff_S = ho_base.chi2_pose(sigma, S, excl) - ho.chi2_pose(sigma, S, excl)  # its sensors: the test
-    if np.allclose(diff_S, 0):
-        p_ho = 1.0
-    else:
-        p_ho = float(stats.ttest_1samp(diff_S, 0.0, alternative="greater").pvalue)
+    p_ho = paired_gain_p(diff_S)
     rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
     nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
     sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_

@@ -20,7 +20,7 @@ from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, Pos
 from metrology.diagnosis.candidates import CandidateResult, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.stats import battery_on
+from metrology.diagnosis.stats import battery_on, paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["SPLINE_LADDER", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
@@ -40,10 +40,7 @@ def family_of(c) -> tuple:
 def p_better(better: CandidateResult, worse: CandidateResult) -> float:
     """One-sided paired test that ``better``'s per-pose held-out chi-square is below ``worse``'s
     on ``better``'s sensors."""
-    from scipy import stats
-
-    d = worse.chi2_pose - better.chi2_pose
-    return float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue) if not np.allclose(d, 0) else 1.0
+    return paired_gain_p(worse.chi2_pose - better.chi2_pose)
 
 
 def _simplicity(s: CandidateResult):

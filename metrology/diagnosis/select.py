@@ -40,6 +40,7 @@ from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.members import adequate_member, family_of, p_better, refine_order, richer_spline, score_step
+from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "MAX_CAUSES"]
@@ -124,8 +125,6 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     sensors, 79 poses, 5.3 um noise): step 1 took ``pose_error@rigid`` (held-out gain 2780,
     against 2091 for the drift on L2), step 2 the drift on L2, and the pose error was named, a
     wrong cause."""
-    from scipy import stats
-
     main = [st.chosen for st in steps if st.chosen is not None]
     alt = [st.chosen for st in fixed if st.chosen is not None]
     if not alt or {s.label for s in alt} <= {s.label for s in main}:
@@ -137,8 +136,7 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     d = (a.heldout.chi2_pose(b.sigma) - m.heldout.chi2_pose(b.sigma))[keep]
     if len(d) < 3:
         return False
-    p = 1.0 if np.allclose(d, 0) else float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
-    return p >= THRESHOLDS["alpha_order"]
+    return paired_gain_p(d) >= THRESHOLDS["alpha_order"]
 
 
 def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None, first=None):
@@ -313,8 +311,6 @@ def drop_one_gains(ds, b, chosen, folds):
     it against the joint model (per-pose chi-square difference over all sensors, and its
     one-sided p-value on the cause's sensors; a characteristic on the readings inside its sensor's
     training span, as it was selected). Returns a list of (gain, p)."""
-    from scipy import stats
-
     nominal, obs = ds.layout, ds.obs
     comps = tuple(s.component for s in chosen)
     full = chosen[-1].heldout
@@ -332,8 +328,7 @@ def drop_one_gains(ds, b, chosen, folds):
         ex = excl if not s.component.uses_d0 else (span if excl is None else excl | span)
         d_all = ho.chi2_pose(b.sigma, exclude=ex) - full.chi2_pose(b.sigma, exclude=ex)
         d_S = ho.chi2_pose(b.sigma, S, ex) - full.chi2_pose(b.sigma, S, ex)
-        p = 1.0 if np.allclose(d_S, 0) else float(stats.ttest_1samp(d_S, 0.0, alternative="greater").pvalue)
-        out.append((float(np.sum(d_all)), p))
+        out.append((float(np.sum(d_all)), paired_gain_p(d_S)))
     return out
 
 

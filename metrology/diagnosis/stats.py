@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Covariates
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "battery_rng", "structure"]
+__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
 
 
 @dataclass(frozen=True)
@@ -124,6 +124,16 @@ def battery_rng() -> np.random.Generator:
     """The generator of the battery's permutation tests: fixed, so the verdict is a function of
     the data alone (``diagnose``'s ``seed`` drives only the side-by-side simulation)."""
     return np.random.default_rng(20261123)
+
+
+def paired_gain_p(d) -> float:
+    """One-sided paired t-test that the per-pose differences ``d (p,)`` (a chi-square without a
+    cause less the chi-square with it) are positive: the cause predicts held-out poses better.
+    1 where every difference is zero (the two models predict alike; the t statistic is undefined)."""
+    from scipy import stats
+
+    d = np.asarray(d, float)
+    return 1.0 if np.allclose(d, 0) else float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
 
 
 def battery_on(tests: NoiseTests, sensors) -> float:
