@@ -172,10 +172,12 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
             # later steps rescore only what the first step saw at all (in-sample p < PRUNE_P), what
             # shares a sensor with a cause found (that cause inflated its F-test's scatter), and
             # the set-up's candidates: a cause on another sensor that showed nothing before stays
-            # hidden after (and the steps cost a full scoring each)
-            p1 = {s.label: s.p_insample for s in scored}
+            # hidden after (and the steps cost a full scoring each). A family stays whole: where
+            # one member showed something, its richer members are scored too (a warm-up that a
+            # line in time barely shows under a large datum form needs its curve to be chosen)
+            seen = {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
             near = {i for g in given for i in g.sensors}
-            pool = [c for c in pool if not c.sensors or p1.get(c.label, 0.0) < PRUNE_P or set(c.sensors) & near
+            pool = [c for c in pool if not c.sensors or family_of(c) in seen or set(c.sensors) & near
                     or isinstance(c, Outliers)]
         rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
         if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers):

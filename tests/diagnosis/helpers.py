@@ -16,14 +16,22 @@ N_POSES = 80
 FOLDS = 5  # the CLI default
 
 #: detectable ranges measured by benchmarks/study_diagnose.py on the typical pose set
-#: (>= 90 % right cause and sensor over 10 seeded trials at both ends; see docs/readme_diagnose.md)
+#: (>= 90 % right cause and sensor over 10 seeded trials at both ends)
 DETECTABLE = {
-    "scale": (0.004, 0.016),  # gain error (unitless)
     "drift": (0.002, 0.03),  # mm/K
     "nonlinearity": (0.04, 0.3),  # mm (c3)
     "plane_form": (0.004, 0.05),  # mm (b_ss)
     "pose_error": (0.004, 0.03),  # mm (1 sigma per axis)
     "outliers": (0.06, 1.0),  # mm
+}
+#: sizes with no detectable range on the typical pose set. A gain error is named only where it
+#: predicts held-out poses better than a shift with another sensor's distance (crosstalk,
+#: outside the catalogue), and these poses' tilts hardly move the sensors' distances apart: the
+#: diagnosis states 0.8-1.3 mm over the readings' span as the detectable size of ``scale`` here
+#: (the 5 blind draws), far above a 1.6 % gain. The range was (0.004, 0.016) before that check;
+#: the blind set still draws it, and asserts that nothing wrong is named.
+BELOW_REACH = {
+    "scale": (0.004, 0.016),  # gain error (unitless)
 }
 #: magnitude check: estimate within K_SIGMA of its own standard error (plus model error)
 K_SIGMA = 4.0
@@ -70,7 +78,7 @@ def all_components(ds, cov):
 def draw(effect, seed):
     """A hidden effect drawn blind: sensor and log-uniform size within the detectable range."""
     rng = np.random.default_rng([seed, 99, len(effect)])
-    lo, hi = DETECTABLE[effect]
+    lo, hi = DETECTABLE[effect] if effect in DETECTABLE else BELOW_REACH[effect]
     size = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
     sensor = None if effect in SETUP_EFFECTS else ["L1", "L2", "L3", "L4"][int(rng.integers(4))]
     return HiddenEffect(effect, sensor, size)

@@ -14,7 +14,7 @@ from metrology.io.data import DATA_DIR
 from metrology.diagnosis import diagnose
 from metrology.sim.synth import SETUP_EFFECTS, HiddenEffect
 
-from .helpers import DETECTABLE, FOLDS, K_SIGMA, draw, run
+from .helpers import BELOW_REACH, DETECTABLE, FOLDS, K_SIGMA, draw, run
 
 def _check_named(d, effect, sensor, truth_rec):
     assert d.cause == effect, (d.cause, d.summary)
@@ -58,24 +58,27 @@ def test_hidden_effect_named_blind(effect):
 #: the blind set's claim: inside the detectable ranges never a wrong catalogued cause, and the
 #: right cause, sensor and magnitude in all but a few draws. The ranges' ends are where >= 90 %
 #: of 10 trials was measured; inside them the rate is higher (the study: 100 % at most inner
-#: sizes; this set: 30/30). At a true 95 %, 4 or more misses of 30 happen 6 % of the time; at
-#: a true 90 %, 35 % (seeded, so a failure means the code changed, not chance)
+#: sizes). At a true 95 %, 4 or more misses of 25 happen 3 % of the time; at a true 90 %, 24 %
+#: (seeded, so a failure means the code changed, not chance). ``BELOW_REACH`` draws are not
+#: counted as misses: there only a wrong cause named fails.
 BLIND_SEEDS = range(1, 6)
 BLIND_MAX_MISSES = 3
 
 
 @pytest.mark.slow
 def test_hidden_effects_blind_set():
-    """5 seeded draws per effect: misses are `none` or `unexplained` (at most 3 of 30), and a
-    named catalogued cause is always the right one, on the right sensor, of the right size."""
+    """5 seeded draws per effect: misses are `none` or `unexplained` (at most 3 of 25 inside the
+    detectable ranges, any number below reach), and a named catalogued cause is always the right
+    one, on the right sensor, of the right size."""
     misses, wrong = [], []
-    for effect in sorted(DETECTABLE):
+    for effect in sorted(DETECTABLE) + sorted(BELOW_REACH):
         for seed in BLIND_SEEDS:
             he = draw(effect, seed)
             ds, truth = run([he], 1000 * seed + len(effect))
             d = diagnose(ds, folds=FOLDS, sim_reps=1)
             if d.cause in ("none", "unexplained"):
-                misses.append((he, d.cause, d.summary))
+                if effect in DETECTABLE:
+                    misses.append((he, d.cause, d.summary))
                 continue
             try:
                 _check_named(d, effect, he.sensor, truth["effects"][0])
