@@ -147,7 +147,7 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
     n_cand = len(pool)
     if first is not None:
         pool = [c for c in pool if not c.per_pose]
-    given, steps = (), []
+    given, steps, pruned = (), [], False
     ref_fit, ref_ho = b.fit, b.heldout
     while True:
         tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
@@ -168,13 +168,17 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
         ref_fit, ref_ho = chosen.fit, chosen.heldout
         fam = family_of(chosen.component)
         pool = [c for c in pool if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
-        if len(steps) == 1:
-            # later steps rescore only what the first step saw at all (in-sample p < PRUNE_P), what
+        if not pruned and chosen.component.sensors:
+            # later steps rescore only what this step saw at all (in-sample p < PRUNE_P), what
             # shares a sensor with a cause found (that cause inflated its F-test's scatter), and
             # the set-up's candidates: a cause on another sensor that showed nothing before stays
             # hidden after (and the steps cost a full scoring each). A family stays whole: where
             # one member showed something, its richer members are scored too (a warm-up that a
-            # line in time barely shows under a large datum form needs its curve to be chosen)
+            # line in time barely shows under a large datum form needs its curve to be chosen).
+            # A set-up cause (datum form, pose error) inflates every sensor's scatter: after one,
+            # the next step scores the whole pool again, and the pruning waits for a step that
+            # chose a cause on its own sensors
+            pruned = True
             seen = {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
             near = {i for g in given for i in g.sensors}
             pool = [c for c in pool if not c.sensors or family_of(c) in seen or set(c.sensors) & near

@@ -195,6 +195,20 @@ def test_form_named_beside_a_drift_its_member_does_not_follow(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_drift_hidden_under_a_datum_form_at_step_one_is_scored_again(tmp_path):
+    """The blind study's seed-103 pair 36: a 0.42 mm datum form and a 0.069 mm drift on L1 (3
+    sensors, 52 poses). Under the form every drift member of L1 had in-sample p 0.3-0.9 at step
+    1: the form inflated every sensor's scatter. Pruned then, the drift was never scored given
+    the form, and the verdict was the form with structure left on L1. A set-up cause defers the
+    pruning to the next step: both are named."""
+    case = draw_pair(np.random.default_rng([103, 3, 4, 36]), "plane_form", "drift")
+    res = _diagnose(case, tmp_path)
+    drift = next(e for e in case.effects if e.family == "drift")
+    named = {(c["cause"], tuple(c["sensors"])) for c in res["causes"]}
+    assert named == {("plane_form", ()), ("drift", tuple(drift.sensors))}, res["summary"]
+
+
+@pytest.mark.slow
 def test_rigid_pose_error_and_gross_readings_both_named(tmp_path):
     case = draw_pair(np.random.default_rng([1, 3, 7, 15]), "pose_error", "outliers")
     res = _diagnose(case, tmp_path)
