@@ -47,7 +47,8 @@ __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_membe
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
-#: after the first step, a candidate on other sensors is rescored only if its first in-sample p was below this
+#: once a step chose a cause on its own sensors, a family on other sensors is rescored only if one of
+#: its members had an in-sample p below this at that step (see _seen_after)
 PRUNE_P = 0.2
 
 
@@ -147,7 +148,8 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
     n_cand = len(pool)
     if first is not None:
         pool = [c for c in pool if not c.per_pose]
-    given, steps, pruned = (), [], False
+    remaining, seen = list(pool), None  # pool: what the next step scores (see _prune)
+    given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
     while True:
         tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
@@ -167,22 +169,8 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
         given = given + (chosen.component,)
         ref_fit, ref_ho = chosen.fit, chosen.heldout
         fam = family_of(chosen.component)
-        pool = [c for c in pool if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
-        if not pruned and chosen.component.sensors:
-            # later steps rescore only what this step saw at all (in-sample p < PRUNE_P), what
-            # shares a sensor with a cause found (that cause inflated its F-test's scatter), and
-            # the set-up's candidates: a cause on another sensor that showed nothing before stays
-            # hidden after (and the steps cost a full scoring each). A family stays whole: where
-            # one member showed something, its richer members are scored too (a warm-up that a
-            # line in time barely shows under a large datum form needs its curve to be chosen).
-            # A set-up cause (datum form, pose error) inflates every sensor's scatter: after one,
-            # the next step scores the whole pool again, and the pruning waits for a step that
-            # chose a cause on its own sensors
-            pruned = True
-            seen = {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
-            near = {i for g in given for i in g.sensors}
-            pool = [c for c in pool if not c.sensors or family_of(c) in seen or set(c.sensors) & near
-                    or isinstance(c, Outliers)]
+        remaining = [c for c in remaining if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
+        seen = _seen_after(chosen.component, scored, seen)
         rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
         if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers):
             # gross readings the new cause reveals (it hid them in its own scatter) join the
@@ -209,12 +197,46 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
             # extremes look gross to a fit without it
             flags, p_out = (flag_given_rigid(ref_fit, b.cov, b.sigma, np.zeros_like(flags)) if rigid
                             else flag_residuals(ref_fit.residual, b.sigma))
-            pool = [c for c in pool if not isinstance(c, Outliers)]
-            pool += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
+            remaining = [c for c in remaining if not isinstance(c, Outliers)]
+            remaining += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
         if len(given) > 1:
             given, ref_fit, ref_ho = rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand)
+        pool = _prune(remaining, given, seen)
         if len(given) >= max_causes or not pool:
             return steps
+
+
+def _seen_after(chosen, scored, seen):
+    """The families a later step rescores for what the scores showed, after the step that chose
+    the component ``chosen`` from ``scored``: ``None`` (rescore every family) or a set of
+    :func:`family_of` keys, those with a member of in-sample p below ``PRUNE_P``.
+
+    A family stays whole: where one member showed something, its richer members are scored
+    too (a warm-up that a line in time barely shows needs its curve to be chosen). The set is
+    taken once, at the first step that chose a cause on its own sensors, and kept. A set-up
+    cause (datum form, pose error: no sensors of its own) inflates every sensor's scatter: after
+    one, the set is dropped and the next step rescores every family. Under a 0.42 mm form
+    every drift member of L1 had in-sample p 0.3-0.9 at step 1 (seed-103 pair 36); pruned
+    there, the drift was never scored given the form."""
+    if not chosen.sensors:
+        return None
+    if seen is not None:
+        return seen
+    return {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
+
+
+def _prune(remaining, given, seen) -> list:
+    """The candidates of ``remaining`` the next step scores, given the components found
+    (``given``) and the families the scores showed (``seen``, from :func:`_seen_after`; None:
+    all of them). Kept: the set-up's candidates, gross readings, every member of a family seen,
+    and whatever shares a sensor with a cause found (that cause inflated its F-test's scatter).
+    A cause on another sensor that showed nothing stays hidden after, and each step is a full
+    scoring."""
+    if seen is None:
+        return list(remaining)
+    near = {i for g in given for i in g.sensors}
+    return [c for c in remaining if not c.sensors or isinstance(c, Outliers) or family_of(c) in seen
+            or set(c.sensors) & near]
 
 
 def flag_given_rigid(f: Fit, cov, sigma, flags):

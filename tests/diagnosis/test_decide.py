@@ -79,6 +79,8 @@ def test_hidden_effects_blind_set():
             if d.cause in ("none", "unexplained"):
                 if effect in DETECTABLE:
                     misses.append((he, d.cause, d.summary))
+                else:  # below reach: the summary says what it cannot be told from
+                    assert "crosstalk" in d.summary, (he, d.summary)
                 continue
             try:
                 _check_named(d, effect, he.sensor, truth["effects"][0])

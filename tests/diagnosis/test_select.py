@@ -33,6 +33,49 @@ def _diagnose(case, tmp_path):
     return diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
 
 
+def test_pruning_keeps_families_whole_and_waits_for_a_cause_on_its_own_sensors():
+    """Which candidates a later step rescores (select._seen_after, select._prune), on scripted
+    step scores: a family stays whole where one member showed something; a set-up cause
+    defers the pruning; a set-up cause after a pruning undoes it; a sensor where a cause was
+    found later gets its candidates back; gross readings are always rescored."""
+    from metrology.core.effects import Drift, PlaneForm, Scale
+    from metrology.diagnosis.select import _prune, _seen_after
+
+    names = ("L1", "L2", "L3", "L4")
+    drift = {(i, v, o): Drift((i,), names=names, variable=v, order=o) for i in range(4)
+             for v, o in (("time", 1), ("time", 3), ("temp", 1))}
+    scale = {i: Scale((i,), names=names) for i in range(4)}
+    form = PlaneForm((), names=names)
+    gross = Outliers((3,), names=names, flags=np.zeros((5, 4), bool))
+    remaining = list(drift.values()) + list(scale.values()) + [form, gross]
+
+    def scored(p):  # in-sample p by label; the rest show nothing
+        return [SimpleNamespace(component=c, label=c.label, p_insample=p.get(c.label, 0.9)) for c in remaining]
+
+    def labels(cs):
+        return {c.label for c in cs}
+
+    # a drift on L2 chosen at step 1; of L1's drift only the line in time showed (p 0.1)
+    step1 = scored({"drift.L1@time": 0.1, "drift.L2@temp": 1e-9})
+    seen = _seen_after(drift[1, "temp", 1], step1, None)
+    left = [c for c in remaining if not (c.sensors == (1,) and c.name == "drift")]  # its family leaves
+    kept = labels(_prune(left, (drift[1, "temp", 1],), seen))
+    assert {"drift.L1@time", "drift.L1@time3", "drift.L1@temp"} <= kept  # L1's drift family whole
+    assert "scale.L2" in kept  # shares L2 with the cause found
+    assert {form.label, gross.label} <= kept
+    assert not kept & {"scale.L1", "scale.L3", "scale.L4", "drift.L3@time", "drift.L4@temp"}
+    # a cause found later on L3 brings back the candidates of L3 that were pruned
+    kept3 = labels(_prune(left, (drift[1, "temp", 1], scale[2]), seen))
+    assert "drift.L3@time3" in kept3 and "drift.L4@time" not in kept3
+    # a set-up cause first: nothing is pruned, whatever the scores showed under it
+    assert _seen_after(form, scored({form.label: 1e-30}), None) is None
+    assert labels(_prune(remaining, (form,), None)) == labels(remaining)
+    # a set-up cause after a pruning undoes it: the next step rescores every family
+    assert _seen_after(form, scored({form.label: 1e-30}), seen) is None
+    # once taken, the families seen are kept (a later step's scores do not replace them)
+    assert _seen_after(scale[2], scored({}), seen) is seen
+
+
 def test_gross_reading_under_a_rigid_pose_error_is_found_and_placed(tmp_path):
     """A rigid pose error spreads a gross reading over its pose; the reading is still found, on
     its own sensor (a 4-sensor head, an orientation-only pose error, 3 gross readings of which
@@ -179,12 +222,13 @@ def test_rigid_member_chosen_once_the_drift_is_modelled(tmp_path):
 
 
 @pytest.mark.slow
-def test_form_named_beside_a_drift_its_member_does_not_follow(tmp_path):
-    """A datum form and a small warm-up drift on one sensor (3 sensors, 51 poses): under the form,
-    only the drift's line in time showed anything at step 1 (in-sample p 0.2), and the line
-    leaves structure on its sensor. Its family stays whole in the pool, so the member that
-    follows the warm-up is chosen: both causes named, and nothing else (with the line alone, the
-    structure it left was taken for a random tracker pose error, a third cause)."""
+def test_form_and_a_warm_up_drift_are_named_and_nothing_else(tmp_path):
+    """A datum form and a small warm-up drift on one sensor (3 sensors, 51 poses). Under the form,
+    only the drift's line in time showed anything at step 1 (in-sample p 0.2); once the line
+    alone was left in the pool, the structure it left on its sensor was taken for a random
+    tracker pose error, a third cause. The step after a set-up cause scores every family (its
+    members ruled on by test_pruning_keeps_families_whole_and_waits_for_a_cause_on_its_own_sensors):
+    the thermal member is chosen, both causes are named, and nothing else."""
     case = draw_pair(np.random.default_rng([2, 3, 4, 12]), "plane_form", "drift")
     res = _diagnose(case, tmp_path)
     drift = next(e for e in case.effects if e.family == "drift")
@@ -206,6 +250,7 @@ def test_a_drift_hidden_under_a_datum_form_at_step_one_is_scored_again(tmp_path)
     drift = next(e for e in case.effects if e.family == "drift")
     named = {(c["cause"], tuple(c["sensors"])) for c in res["causes"]}
     assert named == {("plane_form", ()), ("drift", tuple(drift.sensors))}, res["summary"]
+    assert res["confidence"] == "high"
 
 
 @pytest.mark.slow
