@@ -23,6 +23,7 @@ import numpy as np
 
 from metrology.core.effects import Component
 from metrology.diagnosis.heldout import beyond_span, kfold
+from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["OtherReading", "crosstalk_check"]
@@ -57,8 +58,6 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
     Returns ``{"better": label or None, "p": float, "indistinguishable": [labels]}``: the
     crosstalk term that predicts significantly better, and those that cannot be told apart.
     """
-    from scipy import stats
-
     nominal, obs = ds.layout, ds.obs
     i = named.component.sensors[0]
     others = [j for j in range(nominal.n) if j != i]
@@ -75,8 +74,7 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
         d = ref - ho.chi2_pose(b.sigma, [i], excl)  # > 0: crosstalk predicts better
         if np.allclose(d, 0):
             continue
-        p_better = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
-        p_worse = float(stats.ttest_1samp(d, 0.0, alternative="less").pvalue)
+        p_better, p_worse = paired_gain_p(d), paired_gain_p(-d)
         if p_better < a / len(others) and p_better < out["p"]:
             out.update(better=c.label, p=p_better)
         elif p_worse >= THRESHOLDS["alpha_confound"]:
