@@ -201,6 +201,9 @@ def run_case(job) -> dict:
         "cause": res["cause"], "sensors": list(res.get("sensors") or []), "confidence": res["confidence"],
         "named": [[c, list(s)] for c, s in named],
         "sizes": {e.family: _size(res, e.family) for e in case.effects},
+        # the evidence of each cause named: its held-out p given the others and in-sample p
+        "evidence": [[c.get("label"), c.get("p_heldout_given_others"), c.get("p_insample")]
+                     for c in res.get("causes") or []],
     }
 
 

@@ -131,8 +131,10 @@ class Verdict:
     """Steps 3-4: the first cause, its sensors and confidence, the first named candidate (its
     ``fit`` the joint model of every cause, refitted by ``lsq``; or None), the noise tests after
     the extension, the confounding notes, the first cause's description, every named cause's
-    description (largest held-out gain given the others first) and the lead (a candidate
-    significant in sample only, when the selection stopped)."""
+    description (largest held-out gain given the others first), the lead (a candidate
+    significant in sample only, when the selection stopped) and ``dropped``: a sole cause the
+    selection chose that is not needed against the base model (its label, its step's held-out
+    p, and its held-out chi-square gain and p against the base model), so not named."""
 
     cause: str
     sensors: list
@@ -143,6 +145,7 @@ class Verdict:
     named: dict | None
     causes: tuple = ()
     lead: CandidateResult | None = None
+    dropped: dict | None = None
 
 
 #: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
@@ -206,6 +209,18 @@ def _confounding(best: CandidateResult, sig_list) -> list:
     return out
 
 
+def _needed(chosen, gains) -> list:
+    """Per chosen cause, whether it is still needed given the others: its held-out gain given
+    the others (``gains`` of :func:`~metrology.diagnosis.select.drop_one_gains`; a sole cause's
+    is against the base model) significant at ``alpha_heldout`` Bonferroni-split over the
+    causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
+    re-chosen or a cause added after can make an earlier one redundant, and a step can have
+    tested its cause against another reference (a datum form beyond the plane's tilt).
+    ``outliers`` are exempt: a flagged reading predicts nothing held out."""
+    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
+    return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
+
+
 def _sensors_of(comp, n):
     return list(comp.sensors) if comp.sensors else list(range(n))
 
@@ -251,13 +266,16 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
 
     v = _verdict(ds, b, steps, folds, rng)
     rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
-    v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe)
+    # a sole cause turned down as not needed stays turned down beside the random pose error
+    v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe, exempt_sole=v.dropped is None)
     return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
 
 
-def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdict:
+def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_sole=True) -> Verdict:
     """:func:`verdict`; with ``random_pose`` (of :func:`~metrology.diagnosis.posevar.random_pose_stage`)
-    the pose error is a random effect, and the residuals are judged whitened by it."""
+    the pose error is a random effect, and the residuals are judged whitened by it; a sole fixed
+    cause beside it is then exempt from the drop-one test (``exempt_sole``) unless the verdict
+    without it turned that cause down."""
     nominal, obs = ds.layout, ds.obs
     n = obs.d.shape[1]
     chosen = [s.chosen for s in steps if s.chosen is not None and (random_pose is None or s.chosen.cause != "pose_error")]
@@ -277,13 +295,20 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None) -> Verdic
                                 pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),
                                 normality=False)
     gains = drop_one_gains(ds, b, chosen, folds) if chosen else []
+    needed = _needed(chosen, gains)
+    if random_pose is None and len(chosen) == 1 and not needed[0]:
+        # a sole cause whose held-out gain against the base model is not significant: not named
+        # (a step can test against another reference: a null's datum "form" was selected at
+        # p = 0.032 beyond the plane's tilt and gave p = 0.056 against the base model)
+        cause = "none" if b.tests.consistent else "unexplained"
+        dropped = {"label": chosen[0].label, "p_step": chosen[0].p_heldout, "gain_chi2": gains[0][0],
+                   "p_base": gains[0][1]}
+        return Verdict(cause, [], "low", None, None, [], None, (), lead, dropped)
     judged = _judged_sensors(chosen, tests_ext, gains, n)
-    # every cause named must still be needed given the others, Bonferroni over the causes chosen
-    # (the selection's later steps test at alpha_heldout each; a member re-chosen or a cause
-    # added after can make an earlier one redundant); outliers predict nothing held out
-    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
-    kept = [j for j in range(len(chosen)) if judged[j]
-            and (len(chosen) == 1 or isinstance(chosen[j].component, Outliers) or gains[j][1] < alpha_each)]
+    # beside the random pose error a sole fixed cause keeps its step's test (its drop-one gain
+    # is taken without the random effect), unless the verdict without it turned it down
+    sole_exempt = random_pose is not None and len(chosen) == 1 and exempt_sole
+    kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or needed[j])]
     # a characteristic that follows another sensor's distance better is crosstalk, not the
     # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
     xtalk = {}
@@ -424,11 +449,13 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
     return replace(b.datum, against_readings=ag), confidence, summary
 
 
-def _steps_table(b: BaseAnalysis, steps) -> list:
-    """The residuals after each step: per sensor in-sample RMS and held-out RMS (mm)."""
+def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
+    """The residuals after each step: per sensor in-sample RMS and held-out RMS (mm), and
+    whether the cause it added is named in the verdict ``v`` (a step's cause can be turned down
+    after the selection: not needed given the others, crosstalk, its sensors not explained)."""
     out = [{"added": None, "model": "base", "residual_rms_mm": np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(),
             "heldout_rms_mm": b.heldout.rms()}]
-    labels = []
+    labels, named = [], {c["label"] for c in v.causes}
     for st in steps:
         if st.chosen is None:
             break
@@ -436,7 +463,7 @@ def _steps_table(b: BaseAnalysis, steps) -> list:
         out.append({"added": st.chosen.label, "model": "base + " + " + ".join(labels),
                     "residual_rms_mm": np.sqrt(np.nanmean(st.chosen.fit.residual**2, axis=0)).tolist(),
                     "heldout_rms_mm": st.chosen.heldout.rms(), "p_heldout": st.chosen.p_heldout,
-                    "heldout_gain_chi2": st.chosen.heldout_chi2_reduction})
+                    "heldout_gain_chi2": st.chosen.heldout_chi2_reduction, "named": st.chosen.label in named})
     return out
 
 
@@ -461,6 +488,8 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     chosen = [st.chosen for st in steps if st.chosen is not None]
     notify(progress, 2, 5, "verdict and the causes' gains")
     v = verdict(ds, b, steps, folds, rng)
+    if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
+        chosen = []
     rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
     fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
@@ -480,5 +509,5 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
                     b.structure)
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
-                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps)),
+                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps, v)),
                      detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))

@@ -27,6 +27,16 @@ def verdict_summary(v, tb) -> str:
     worst = max(tb.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
     lead = _lead_text(v.lead)
     te = v.tests_extended
+    if v.dropped is not None:
+        dr = v.dropped
+        turned = (f"{dr['label']} was selected (held-out p = {dr['p_step']:.2g} at its step) but is not needed against "
+                  f"the base model (held-out chi-square gain {dr['gain_chi2']:.3g}, p = {dr['p_base']:.2g}), so it is not "
+                  "named")
+        if v.cause == "none":
+            return (f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g}); {turned}: no "
+                    "effect above the detectable sizes (smaller ones are not ruled out)" + lead)
+        return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst {worst[0]}: "
+                f"sigma {worst[1]['sigma_est_mm']:.4g} mm); {turned}: no catalogued cause explains the structure" + lead)
     if v.cause == "none":
         return (f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g}); "
                 "no candidate gives a significant held-out gain: no effect above the detectable sizes "

@@ -49,6 +49,8 @@ def test_clear_case_names_cause_and_sensor(family, tmp_path):
     assert case.family == family and len(case.effects) == 1
     res = _diagnose(case, tmp_path)
     assert res["cause"] == family, res["summary"]
+    # the steps table marks the steps whose cause is named (a later step's can be turned down)
+    assert {st["added"] for st in res["steps"][1:] if st["named"]} == {c["label"] for c in res["causes"]}
     if family not in ALL_SENSORS:
         assert set(res["sensors"]) == set(case.sensors)
     if family in ("scale", "drift", "incidence"):  # above what these poses detect, as reported

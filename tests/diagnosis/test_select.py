@@ -134,6 +134,40 @@ def test_an_all_sensor_cause_is_judged_beside_structure_that_belongs_elsewhere()
     assert _judged_sensors(_chosen((2,)), _tests(bad, n), needed[:1], n) == [[]]
 
 
+def test_a_cause_is_named_only_while_needed_and_a_sole_cause_too():
+    """Each chosen cause must be needed given the others (held-out p below alpha_heldout split
+    over the causes); a sole cause is tested against the base model the same way, and gross
+    readings, which predict nothing held out, are exempt."""
+    from metrology.diagnosis.decide import _needed
+
+    a = THRESHOLDS["alpha_heldout"]
+    one = _chosen(())
+    assert _needed(one, [(17.2, 0.056)]) == [False]  # seed-104 null 34: a datum "form", refitted
+    assert _needed(one, [(17.2, 0.029)]) == [True]
+    two = _chosen((0,), (1,))
+    assert _needed(two, [(40.0, 0.6 * a), (40.0, 0.4 * a)]) == [False, True]  # Bonferroni over 2
+    flags = np.zeros((4, 3), bool)
+    flags[2, 1] = True
+    gross = [SimpleNamespace(component=Outliers((1,), [0.2], names=("L1", "L2", "L3"), flags=flags))]
+    assert _needed(gross, [(0.0, 1.0)]) == [True]
+
+
+def test_a_sole_cause_turned_down_is_not_named_and_its_test_is_said(tmp_path, monkeypatch):
+    """The wiring of the rule above: a clear drift (4 sensors, 40 poses) whose drop-one test is
+    made to fail is not named, the steps table marks its step not named, and the summary gives
+    that test's p (unpatched, it is named: test_clear_case_names_cause_and_sensor)."""
+    import metrology.diagnosis.decide as decide
+
+    case = draw_case(np.random.default_rng([11]), "drift", n_sensors=4, n_poses=40, size=0.05)
+    drop_one = decide.drop_one_gains
+    monkeypatch.setattr(decide, "drop_one_gains", lambda *a: [(g, 0.2) for g, _ in drop_one(*a)])
+    res = _diagnose(case, tmp_path)
+    assert res["cause"] == "unexplained" and not res["causes"], res["summary"]
+    assert res["confidence"] == "low"
+    assert res["steps"][1]["added"].startswith("drift.") and res["steps"][1]["named"] is False
+    assert "not needed against the base model" in res["summary"] and "p = 0.2)" in res["summary"]
+
+
 def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
     """A 0.066 mm rigid pose error at 3.1 um noise (4 sensors, 138 poses: the blind study's seed-70
     pose-error draw 9). The calibration without a pose error takes up part of its common mode:
@@ -260,3 +294,19 @@ def test_rigid_pose_error_and_gross_readings_both_named(tmp_path):
     gross = next(e for e in case.effects if e.family == "outliers")
     assert {c["cause"] for c in res["causes"]} == {"pose_error", "outliers"}, res["summary"]
     assert next(c for c in res["causes"] if c["cause"] == "outliers")["sensors"] == list(gross.sensors)
+
+
+@pytest.mark.slow
+def test_a_sole_cause_not_needed_against_the_base_model_is_not_named(tmp_path):
+    """The blind study's seed-104 null 34 (4 sensors, 90 poses, no effect). A cubic datum form
+    was selected beyond the plane's tilt (held-out p = 0.032) and named alone, `confidence:
+    high`; against the base model it gives p = 0.056. A sole cause now passes the
+    test that each of several causes passes: nothing is named, and the candidate is said."""
+    case = draw_case(np.random.default_rng([104, 0, 0, 34]), "none")
+    assert not case.effects
+    res = _diagnose(case, tmp_path)
+    assert res["cause"] == "none" and not res["causes"], res["summary"]
+    assert res["confidence"] == "low"
+    assert "plane_form@cubic was selected (held-out p = 0.032" in res["summary"]
+    assert "not needed against the base model (held-out chi-square gain 17.2, p = 0.056)" in res["summary"]
+    assert res["steps"][-1]["added"] == "plane_form@cubic" and res["steps"][-1]["named"] is False
