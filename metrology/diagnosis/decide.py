@@ -23,7 +23,7 @@ from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, p_better
+from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
@@ -209,18 +209,6 @@ def _confounding(best: CandidateResult, sig_list) -> list:
     return out
 
 
-def _needed(chosen, gains) -> list:
-    """Per chosen cause, whether it is still needed given the others: its held-out gain given
-    the others (``gains`` of :func:`~metrology.diagnosis.select.drop_one_gains`; a sole cause's
-    is against the base model) significant at ``alpha_heldout`` Bonferroni-split over the
-    causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
-    re-chosen or a cause added after can make an earlier one redundant, and a step can have
-    tested its cause against another reference (a datum form beyond the plane's tilt).
-    ``outliers`` are exempt: a flagged reading predicts nothing held out."""
-    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
-    return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
-
-
 def _sensors_of(comp, n):
     return list(comp.sensors) if comp.sensors else list(range(n))
 
@@ -295,11 +283,10 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
                                 pairs=not any(c.per_pose for c in f.components), rng=battery_rng(),
                                 normality=False)
     gains = drop_one_gains(ds, b, chosen, folds) if chosen else []
-    needed = _needed(chosen, gains)
-    if random_pose is None and len(chosen) == 1 and not needed[0]:
-        # a sole cause whose held-out gain against the base model is not significant: not named
-        # (a step can test against another reference: a null's datum "form" was selected at
-        # p = 0.032 beyond the plane's tilt and gave p = 0.056 against the base model)
+    need = needed(chosen, gains)
+    if random_pose is None and len(chosen) == 1 and not need[0]:
+        # a sole cause whose held-out gain against the base model is not significant (a null's
+        # datum "form", selected at p = 0.032 beyond the plane's tilt, gave 0.056): not named
         cause = "none" if b.tests.consistent else "unexplained"
         dropped = {"label": chosen[0].label, "p_step": chosen[0].p_heldout, "gain_chi2": gains[0][0],
                    "p_base": gains[0][1]}
@@ -308,7 +295,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     # beside the random pose error a sole fixed cause keeps its step's test (its drop-one gain
     # is taken without the random effect), unless the verdict without it turned it down
     sole_exempt = random_pose is not None and len(chosen) == 1 and exempt_sole
-    kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or needed[j])]
+    kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or need[j])]
     # a characteristic that follows another sensor's distance better is crosstalk, not the
     # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
     xtalk = {}

@@ -43,7 +43,7 @@ from metrology.diagnosis.members import adequate_member, family_of, p_better, re
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "MAX_CAUSES"]
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
@@ -358,6 +358,18 @@ def drop_one_gains(ds, b, chosen, folds):
         d_S = ho.chi2_pose(b.sigma, S, ex) - full.chi2_pose(b.sigma, S, ex)
         out.append((float(np.sum(d_all)), paired_gain_p(d_S)))
     return out
+
+
+def needed(chosen, gains) -> list:
+    """Per chosen cause, whether it is still needed given the others: its held-out gain given
+    the others (``gains`` of :func:`drop_one_gains`; a sole cause's
+    is against the base model) significant at ``alpha_heldout`` Bonferroni-split over the
+    causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
+    re-chosen or a cause added after can make an earlier one redundant, and a step can have
+    tested its cause against another reference (a datum form beyond the plane's tilt).
+    ``outliers`` are exempt: a flagged reading predicts nothing held out."""
+    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
+    return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
 
 
 def flags_of(chosen):

@@ -92,7 +92,7 @@ def report_text(d: Diagnosis) -> str:
         lines.append("residuals after each step of the selection (in-sample RMS um per sensor; held-out RMS um)")
         for st in D["steps"]:
             lines.append(f"  {st['model'][:40]:40s}" + "".join(f"{1e3 * v:9.2f}" for v in st["residual_rms_mm"])
-                         + f"{1e3 * st['heldout_rms_mm']:11.3f}")
+                         + f"{1e3 * st['heldout_rms_mm']:11.3f}" + ("  (not named)" if st.get("named") is False else ""))
         for c in D["causes"]:
             where = f" on {', '.join(c['sensors'])}" if c["sensors"] else ""
             lines.append("")

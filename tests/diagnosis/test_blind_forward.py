@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from metrology.jobs.diagnose import diagnose_files
+from metrology.report.diagnose import report_text
 from metrology.sim.forward import FAMILIES, draw_case, write_case
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -47,10 +48,14 @@ def test_null_names_no_cause(seed, tmp_path):
 def test_clear_case_names_cause_and_sensor(family, tmp_path):
     case = _clear(family)
     assert case.family == family and len(case.effects) == 1
-    res = _diagnose(case, tmp_path)
+    paths = write_case(case, tmp_path)
+    diag = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
+    res = diag.to_dict()
     assert res["cause"] == family, res["summary"]
-    # the steps table marks the steps whose cause is named (a later step's can be turned down)
+    # the steps table marks the steps whose cause is named (a later step's can be turned down),
+    # and the text report says which are not
     assert {st["added"] for st in res["steps"][1:] if st["named"]} == {c["label"] for c in res["causes"]}
+    assert report_text(diag).count("(not named)") == sum(not st["named"] for st in res["steps"][1:])
     if family not in ALL_SENSORS:
         assert set(res["sensors"]) == set(case.sensors)
     if family in ("scale", "drift", "incidence"):  # above what these poses detect, as reported

@@ -138,18 +138,18 @@ def test_a_cause_is_named_only_while_needed_and_a_sole_cause_too():
     """Each chosen cause must be needed given the others (held-out p below alpha_heldout split
     over the causes); a sole cause is tested against the base model the same way, and gross
     readings, which predict nothing held out, are exempt."""
-    from metrology.diagnosis.decide import _needed
+    from metrology.diagnosis.select import needed
 
     a = THRESHOLDS["alpha_heldout"]
     one = _chosen(())
-    assert _needed(one, [(17.2, 0.056)]) == [False]  # seed-104 null 34: a datum "form", refitted
-    assert _needed(one, [(17.2, 0.029)]) == [True]
+    assert needed(one, [(17.2, 0.056)]) == [False]  # seed-104 null 34: a datum "form", refitted
+    assert needed(one, [(17.2, 0.029)]) == [True]
     two = _chosen((0,), (1,))
-    assert _needed(two, [(40.0, 0.6 * a), (40.0, 0.4 * a)]) == [False, True]  # Bonferroni over 2
+    assert needed(two, [(40.0, 0.6 * a), (40.0, 0.4 * a)]) == [False, True]  # Bonferroni over 2
     flags = np.zeros((4, 3), bool)
     flags[2, 1] = True
     gross = [SimpleNamespace(component=Outliers((1,), [0.2], names=("L1", "L2", "L3"), flags=flags))]
-    assert _needed(gross, [(0.0, 1.0)]) == [True]
+    assert needed(gross, [(0.0, 1.0)]) == [True]
 
 
 def test_a_sole_cause_turned_down_is_not_named_and_its_test_is_said(tmp_path, monkeypatch):
