@@ -341,13 +341,19 @@ def drop_one_gains(ds, b, chosen, folds):
     training span, as it was selected). Returns a list of (gain, p)."""
     nominal, obs = ds.layout, ds.obs
     comps = tuple(s.component for s in chosen)
-    full = chosen[-1].heldout
+    full, full_theta = chosen[-1].heldout, chosen[-1].fit.theta
     excl = flags_of(chosen)
     out = []
     span = beyond_span(obs.d, folds)
     for j, s in enumerate(chosen):
         rest = comps[:j] + comps[j + 1:]
-        ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, b.theta0) if rest else b.heldout
+        # a rigid pose error holds the geometry: where the selection held it (the offset member's
+        # fit, :func:`~metrology.diagnosis.members.score_step`), not at the base calibration, which
+        # the pose error itself biases. Held there, the model without a cause predicted held-out
+        # poses far worse than the selection's did, and a nonlinearity added at p = 0.046 beside
+        # a rigid pose error and gross readings was "needed given the others" at p = 1e-6
+        th = full_theta if any(getattr(c, "holds_base", False) for c in rest) else b.theta0
+        ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, th) if rest else b.heldout
         S = list(s.component.sensors) or list(range(nominal.n))
         # a characteristic is judged where its fit saw readings, as when it was selected
         # (score_candidate): a held-out reading beyond its sensor's training span tests how the
