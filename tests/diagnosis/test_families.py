@@ -111,7 +111,7 @@ def test_orientation_only_pose_error_is_named_on_a_four_sensor_head(tmp_path):
 
 def test_two_causes_are_both_named_with_sizes(tmp_path):
     rng = np.random.default_rng([21, 3])
-    case = draw_pair(rng, "drift", "outliers", n_sensors=4, n_poses=100, sizes=(0.12, 4))
+    case = draw_pair(rng, "drift", "outliers", n_sensors=4, n_poses=60, sizes=(0.12, 4))
     res = _diagnose(case, tmp_path)
     named = {(c["cause"], tuple(c["sensors"])) for c in res["causes"]}
     drift = next(e for e in case.effects if e.family == "drift")
