@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from metrology.core.effects import ExtendedModel, Outliers, PlaneForm
+from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.progress import ProgressFn, notify
 from metrology.core.model import readings

@@ -368,9 +368,8 @@ def drop_one_gains(ds, b, chosen, folds):
 
 def needed(chosen, gains) -> list:
     """Per chosen cause, whether it is still needed given the others: its held-out gain given
-    the others (``gains`` of :func:`drop_one_gains`; a sole cause's
-    is against the base model) significant at ``alpha_heldout`` Bonferroni-split over the
-    causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
+    the others (``gains`` of :func:`drop_one_gains`; a sole cause's is against the base model)
+    significant at ``alpha_heldout`` Bonferroni-split over the causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
     re-chosen or a cause added after can make an earlier one redundant, and a step can have
     tested its cause against another reference (a datum form beyond the plane's tilt).
     ``outliers`` are exempt: a flagged reading predicts nothing held out."""

@@ -27,24 +27,23 @@ def verdict_summary(v, tb) -> str:
     worst = max(tb.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
     lead = _lead_text(v.lead)
     te = v.tests_extended
+    consistent = f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g})"
+    inconsistent = (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
+                    f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm)")
+    nothing_above = "no effect above the detectable sizes (smaller ones are not ruled out)"
     if v.dropped is not None:
         dr = v.dropped
         turned = (f"{dr['label']} was selected (held-out p = {dr['p_step']:.2g} at its step) but is not needed against "
                   f"the base model (held-out chi-square gain {dr['gain_chi2']:.3g}, p = {dr['p_base']:.2g}), so it is not "
                   "named")
         if v.cause == "none":
-            return (f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g}); {turned}: no "
-                    "effect above the detectable sizes (smaller ones are not ruled out)" + lead)
-        return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst {worst[0]}: "
-                f"sigma {worst[1]['sigma_est_mm']:.4g} mm); {turned}: no catalogued cause explains the structure" + lead)
+            return f"{consistent}; {turned}: {nothing_above}" + lead
+        return f"{inconsistent}; {turned}: no catalogued cause explains the structure" + lead
     if v.cause == "none":
-        return (f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g}); "
-                "no candidate gives a significant held-out gain: no effect above the detectable sizes "
-                "(smaller ones are not ruled out)" + lead)
+        return f"{consistent}; no candidate gives a significant held-out gain: {nothing_above}" + lead
     if v.best is None:
-        return (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
-                f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm) and no catalogued effect gives a "
-                "significant held-out gain: structure outside the catalogue" + lead)
+        return (f"{inconsistent} and no catalogued effect gives a significant held-out gain: structure outside the "
+                "catalogue" + lead)
     if v.cause == "unexplained" and v.lead is not None and "(crosstalk: predicts held-out poses as well" in v.lead.label:
         return (f"{v.best.label} gives a significant held-out gain, but so does a shift in proportion to another "
                 f"sensor's distance ({v.lead.label.split(' (')[0]}: crosstalk between sensors, outside the catalogue): "
