@@ -369,10 +369,11 @@ def drop_one_gains(ds, b, chosen, folds):
 def needed(chosen, gains) -> list:
     """Per chosen cause, whether it is still needed given the others: its held-out gain given
     the others (``gains`` of :func:`drop_one_gains`; a sole cause's is against the base model)
-    significant at ``alpha_heldout`` Bonferroni-split over the causes chosen. The selection's later steps test at ``alpha_heldout`` each, a member
-    re-chosen or a cause added after can make an earlier one redundant, and a step can have
-    tested its cause against another reference (a datum form beyond the plane's tilt).
-    ``outliers`` are exempt: a flagged reading predicts nothing held out."""
+    significant at ``alpha_heldout`` Bonferroni-split over the causes chosen. The selection's
+    later steps test at ``alpha_heldout`` each, a member re-chosen or a cause added after can
+    make an earlier one redundant, and a step can have tested its cause against another
+    reference (a datum form beyond the plane's tilt). ``outliers`` are exempt: a flagged
+    reading predicts nothing held out."""
     alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
     return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
 

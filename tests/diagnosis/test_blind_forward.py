@@ -22,9 +22,13 @@ CLEAR = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_for
 ALL_SENSORS = ("pose_error", "plane_form")
 
 
-def _diagnose(case, tmp_path):
+def _diagnosis(case, tmp_path):
     paths = write_case(case, tmp_path)
-    return diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
+    return diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
+
+
+def _diagnose(case, tmp_path):
+    return _diagnosis(case, tmp_path).to_dict()
 
 
 def _clear(family, seed=11):
@@ -48,8 +52,7 @@ def test_null_names_no_cause(seed, tmp_path):
 def test_clear_case_names_cause_and_sensor(family, tmp_path):
     case = _clear(family)
     assert case.family == family and len(case.effects) == 1
-    paths = write_case(case, tmp_path)
-    diag = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
+    diag = _diagnosis(case, tmp_path)
     res = diag.to_dict()
     assert res["cause"] == family, res["summary"]
     # the steps table marks the steps whose cause is named (a later step's can be turned down),
