@@ -23,7 +23,7 @@ from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better
+from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
@@ -253,7 +253,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     from metrology.diagnosis.posevar import random_pose_stage
 
     v = _verdict(ds, b, steps, folds, rng)
-    rpe = None if v.confidence in ("high", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
+    rpe = None if v.confidence in ("high", "moderate", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
     # a sole cause turned down as not needed stays turned down beside the random pose error
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe, exempt_sole=v.dropped is None)
     return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
@@ -340,7 +340,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead)
     first = next(s for s in chosen if s.label == causes[0]["label"])
-    confidence = "high" if tests_ext.consistent else "partial"
+    confidence = ("moderate" if weakly_supported(causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:
@@ -351,7 +351,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
                                 "message": f"the data cannot tell {chosen[j].label} from {lab} (a shift in proportion "
                                            f"to another sensor's distance, crosstalk, outside the catalogue); "
                                            f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt"})
-    if confounding and confidence == "high":
+    if confounding and confidence in ("high", "moderate"):
         confidence = "ambiguous"
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
                    causes[0], tuple(causes), lead)

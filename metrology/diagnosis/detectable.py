@@ -300,7 +300,7 @@ def detectable_rms_fixed(ds, b, members, alpha, power=0.95, splits=5) -> float:
     ok = np.isfinite(ds.obs.d)
     A_mm = pose_columns(ds, b)
     A = np.where(ok[..., None], A_mm / b.sigma[None, :, None], 0.0)
-    D, Wa, Wb = _projections(ds, b, (), ok, A)
+    D, Wa, Wb, _ = _projections(ds, b, (), ok, A)
     A2 = np.where(ok[..., None], A_mm, np.nan) ** 2
     per = np.array([np.nanmean(A2[..., 0]), np.nanmean(A2[..., 1] + A2[..., 2])])
     lam_per = []  # per member: the noncentrality per unit offset and tilt variance

@@ -43,7 +43,7 @@ from metrology.diagnosis.members import adequate_member, family_of, p_better, re
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "weakly_supported", "MAX_CAUSES"]
 
 #: at most this many causes are named in one data set
 MAX_CAUSES = 3
@@ -376,6 +376,17 @@ def needed(chosen, gains) -> list:
     reading predicts nothing held out."""
     alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
     return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
+
+
+def weakly_supported(causes) -> list:
+    """The labels of the named causes (the verdict's ``causes`` entries) whose held-out p given
+    the others is at or above ``alpha_high``: named (below ``alpha_heldout``), but on evidence
+    that a null data set gives often enough for ``confidence: high`` to overclaim. In the blind
+    studies of seeds 104-106 (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws
+    named ``high`` on such a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading predicts
+    nothing held out) and a random pose error (no held-out p) are exempt."""
+    return [c["label"] for c in causes if c["cause"] != "outliers" and c.get("p_heldout_given_others") is not None
+            and c["p_heldout_given_others"] >= THRESHOLDS["alpha_high"]]
 
 
 def flags_of(chosen):

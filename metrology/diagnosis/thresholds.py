@@ -17,6 +17,7 @@ THRESHOLDS = {
     "corr_confound": 0.95,  # |correlation| of a component parameter with a base parameter
     "alpha_order": 0.05,  # a richer member of a family must predict held-out poses better at this level
     "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
+    "alpha_high": 0.01,  # confidence high: every cause named has a held-out p given the others below this
 }
 
 #: the poses that separate each cause from the others (read from the effect registry)

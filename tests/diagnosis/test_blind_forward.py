@@ -81,6 +81,21 @@ def _study():
     return study_blind
 
 
+def test_study_scores_a_cause_named_beside_the_right_one_as_wrong():
+    """A single draw named with its cause *and* another (seed-105 drift 13: drift and incidence
+    on L4, ``high``) is not a right ``high``, and the study counts the extra cause."""
+    mod = _study()
+    truth = [{"family": "drift", "sensors": ["L4"], "size": 0.05, "inside": True, "detectable": 0.01}]
+    rec = {"kind": "single", "family": "drift", "truth": truth, "cause": "drift", "sensors": ["L4"],
+           "confidence": "high", "sizes": {"drift": None}}
+    recs = [dict(rec, named=[["drift", ["L4"]], ["incidence", ["L4"]]]), dict(rec, named=[["drift", ["L4"]]]),
+            dict(rec, named=[["drift", ["L4"]]], confidence="moderate")]
+    s = mod.summarize(recs, mod.detectable_ranges())
+    assert s["families"]["drift"]["right"] == 3 and s["families"]["drift"]["extra_named"] == 1
+    assert s["high_precision"] == {"n": 2, "right": 1} and s["moderate_named"] == {"n": 1, "right": 1}
+    assert "a wrong cause named beside the right one: drift 1" in mod.report(s)
+
+
 @pytest.fixture(scope="module")
 def study():
     mod = _study()
