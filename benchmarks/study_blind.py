@@ -11,12 +11,13 @@ all draws and over the draws whose size is above the case's own detectable size 
 in the JSON of ``metro diagnose``: the size its test detects at 95 % power on these poses,
 :mod:`metrology.diagnosis.detectable`; the truth taken in the same definition, see
 :func:`_detect_size`), and, for comparison with earlier runs, inside the upper two thirds of the
-family's drawn size range; draws where a wrong catalogued cause was named (as the first cause,
-or beside the right one); null false-cause rate with a 95 % Clopper-Pearson interval; the rate
-of catalogued causes named for out-of-catalogue effects; precision of ``confidence: high``
-(right: the truth named and nothing else) and of a cause named with ``confidence: moderate``;
-coverage of the true size by the reported size +/- 2 stderr (only where the JSON reports a
-``size`` in the family's unit; otherwise "n/a"); for pairs, both-right (over all pairs, over
+family's drawn size range; draws where a wrong catalogued cause was named first, and those where
+one was named beside the right one (still counted right in the family's rates); null
+false-cause rate with a 95 % Clopper-Pearson interval; the rate of catalogued causes named for
+out-of-catalogue effects; precision of ``confidence: high`` (right: the truth named and nothing
+else) and of a cause named with ``confidence: moderate``; coverage of the true size by the
+reported size +/- 2 stderr (only where the JSON reports a ``size`` in the family's unit;
+otherwise "n/a"); for pairs, both-right (over all pairs, over
 the pairs whose two sizes are both above their detectable sizes, and both in the upper two
 thirds, as issue 15 asks) and wrong-cause-added rates.
 

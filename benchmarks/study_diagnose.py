@@ -68,7 +68,7 @@ def trial(args):
     right = (d.cause == effect) and (effect in SETUP_EFFECTS or d.sensors == [sensor])
     return {"effect": effect, "size": size, "seed": seed, "cause": d.cause, "sensors": d.sensors,
             "confidence": d.confidence, "right": bool(right) if effect != "null" else d.cause == "none",
-            "catalogued_high": d.cause not in ("none", "unexplained") and d.confidence == "high",
+            "catalogued_high": d.cause not in ("none", "unexplained") and d.confidence in ("high", "moderate"),
             "cloud_agrees": None if d.datum_form is None else d.datum_form["against_readings"]["agree"]}
 
 

@@ -340,7 +340,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead)
     first = next(s for s in chosen if s.label == causes[0]["label"])
-    confidence = ("moderate" if weakly_supported(causes) else "high") if tests_ext.consistent else "partial"
+    confidence = ("moderate" if weakly_supported([] if sole_exempt else causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:

@@ -380,13 +380,14 @@ def needed(chosen, gains) -> list:
 
 def weakly_supported(causes) -> list:
     """The labels of the named causes (the verdict's ``causes`` entries) whose held-out p given
-    the others is at or above ``alpha_high``: named (below ``alpha_heldout``), but on evidence
-    that a null data set gives often enough for ``confidence: high`` to overclaim. In the blind
-    studies of seeds 104-106 (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws
-    named ``high`` on such a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading predicts
-    nothing held out) and a random pose error (no held-out p) are exempt."""
+    the others is not below ``alpha_high`` (a NaN p included): named (below ``alpha_heldout``
+    split over the causes, :func:`needed`), but on evidence that a null data set gives often
+    enough for ``confidence: high`` to overclaim. In the blind studies of seeds 104-106
+    (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws named ``high`` on such
+    a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
+    predicts nothing held out) and a random pose error (no held-out p) are exempt."""
     return [c["label"] for c in causes if c["cause"] != "outliers" and c.get("p_heldout_given_others") is not None
-            and c["p_heldout_given_others"] >= THRESHOLDS["alpha_high"]]
+            and not c["p_heldout_given_others"] < THRESHOLDS["alpha_high"]]
 
 
 def flags_of(chosen):

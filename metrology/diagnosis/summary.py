@@ -71,9 +71,9 @@ def verdict_summary(v, tb) -> str:
         where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
-    weak = {c["label"]: c["p_heldout_given_others"] for c in v.causes if c["label"] in weakly_supported(v.causes)}
+    weak = [f"{c['label']} (p = {c['p_heldout_given_others']:.2g})" for c in v.causes
+            if c["label"] in weakly_supported(v.causes)]
     if v.confidence == "moderate" and weak:
-        return text + (f"; confidence moderate: the held-out evidence of {', '.join(weak)} (p = "
-                       f"{', '.join(f'{p:.2g}' for p in weak.values())}) is weak (at or above "
-                       f"{THRESHOLDS['alpha_high']:g}), where named causes were often wrong in the blind study")
+        return text + (f"; confidence moderate: weak held-out evidence for {' and '.join(weak)}, not below "
+                       f"{THRESHOLDS['alpha_high']:g}")
     return text + f"; confidence {v.confidence}"

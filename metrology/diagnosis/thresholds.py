@@ -18,6 +18,9 @@ THRESHOLDS = {
     "alpha_order": 0.05,  # a richer member of a family must predict held-out poses better at this level
     "alpha_form": 0.01,  # level of the datum cloud's form against the readings' (disagreement)
     "alpha_high": 0.01,  # confidence high: every cause named has a held-out p given the others below this
+    # a random pose error's within-pose covariance must gain this much (twice the log-likelihood) over
+    # excess variance on one sensor alone: a margin between non-nested models, not a test at a known level
+    "lr_one_sensor": 3.84,
 }
 
 #: the poses that separate each cause from the others (read from the effect registry)

@@ -9,6 +9,7 @@ reading, so before the random-effect test such a pose error came out ``unexplain
 import numpy as np
 import pytest
 
+from metrology.diagnosis.thresholds import THRESHOLDS
 from metrology.sim.forward import cast_beams, draw_case, write_case
 
 
@@ -49,7 +50,7 @@ def test_three_sensor_orientation_pose_error_is_named_with_its_size(tmp_path):
     res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
     assert res["cause"] == "pose_error", res["summary"]
     entry = next(c for c in res["causes"] if c["cause"] == "pose_error")
-    assert entry["label"] == "pose_error@random" and entry["lr_over_one_sensor"] > 3.84
+    assert entry["label"] == "pose_error@random" and entry["lr_over_one_sensor"] >= THRESHOLDS["lr_one_sensor"]
     truth = _true_rms(case)
     size = entry["size"]
     assert abs(size["value"] - truth) <= 3 * size["stderr"], (size, truth)
@@ -86,7 +87,6 @@ def test_excess_scatter_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     within-pose covariance as well, so the pose error is not named."""
     from metrology.diagnosis.decide import base_analysis, battery_rng
     from metrology.diagnosis.posevar import random_pose_error
-    from metrology.diagnosis.thresholds import THRESHOLDS
     from metrology.jobs.calibrate import load_checked
     from metrology.jobs.diagnose import diagnose_files
 
@@ -97,6 +97,28 @@ def test_excess_scatter_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     b = base_analysis(ds, 5)
     r = random_pose_error(ds, b, b.fit.residual, battery_rng())
     assert r.p < 1e-3 and r.p_explained >= THRESHOLDS["alpha_battery"]  # what named it before
-    assert r.lr_one_sensor < 3.84 and r.one_sensor == 1
+    assert r.lr_one_sensor < THRESHOLDS["lr_one_sensor"] and r.one_sensor == 1
     res = diagnose_files(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"]).to_dict()
     assert not res["causes"], res["summary"]
+
+
+def test_one_sensor_excess_variance_has_its_known_maximum_likelihood():
+    """With no fit (``D = I``) and a unit column on sensor 1, the excess variance's maximum
+    likelihood is ``max(mean z_1^2 - 1, 0)`` in closed form; a blank reading adds nothing."""
+    from metrology.diagnosis.posevar import _max_likelihood, _nll
+
+    rng = np.random.default_rng(7)
+    p, n = 200, 3
+    z = rng.standard_normal((p, n)) * np.array([1.0, 1.6, 1.0])
+    ok = np.ones((p, n), bool)
+    ok[5, 2] = False
+    z[5, 2] = 0.0
+    D = np.broadcast_to(np.eye(n), (p, n, n)).copy()
+    W = np.zeros((p, n, n))
+    W[:, 1, 1] = 1.0
+    v = max(float(np.mean(z[:, 1] ** 2)) - 1.0, 0.0)
+    best = float(np.sum(_nll(z, ok, D + v * W)))
+    assert _max_likelihood(z, ok, D, [W]) == pytest.approx(best, abs=1e-6)
+    z0 = z.copy()
+    z0[:, 1] *= 0.8 / np.sqrt(np.mean(z0[:, 1] ** 2))  # less than the stated noise: the variance stays at zero
+    assert _max_likelihood(z0, ok, D, [W]) == pytest.approx(float(np.sum(_nll(z0, ok, D))), abs=1e-6)

@@ -196,8 +196,8 @@ def test_a_cause_on_weak_evidence_is_named_with_moderate_confidence(tmp_path, mo
     monkeypatch.setattr(decide, "drop_one_gains", lambda *a: [(g, 0.02) for g, _ in drop_one(*a)])
     res = _diagnose(case, tmp_path)
     assert res["cause"] == "drift" and res["confidence"] == "moderate", res["summary"]
-    assert res["summary"].endswith("(p = 0.02) is weak (at or above 0.01), where named causes were often wrong in the "
-                                   "blind study"), res["summary"]
+    assert res["summary"].endswith("; confidence moderate: weak held-out evidence for " + res["causes"][0]["label"]
+                                   + " (p = 0.02), not below 0.01"), res["summary"]
 
 
 def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
