@@ -17,9 +17,9 @@ false-cause rate with a 95 % Clopper-Pearson interval; the rate of catalogued ca
 out-of-catalogue effects; precision of ``confidence: high`` (right: the truth named and nothing
 else) and of a cause named with ``confidence: moderate``; coverage of the true size by the
 reported size +/- 2 stderr (only where the JSON reports a ``size`` in the family's unit;
-otherwise "n/a"); for pairs, both-right (over all pairs, over
-the pairs whose two sizes are both above their detectable sizes, and both in the upper two
-thirds, as issue 15 asks) and wrong-cause-added rates.
+otherwise "n/a"); for pairs, both-right (over all pairs, over the pairs whose two sizes are
+both above their detectable sizes, and both in the upper two thirds, as issue 15 asks) and
+wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
         [--families scale,...] [--tilt-max-deg 14]
@@ -220,6 +220,14 @@ def _right(effect: dict, named: list) -> bool:
     return False
 
 
+def _right_alone(r: dict) -> bool:
+    """A null or single draw's verdict is right and names nothing else: ``none`` for a null, the
+    truth and only it for a single draw."""
+    if r["kind"] == "null":
+        return r["cause"] == "none"
+    return _right(r["truth"][0], [(r["cause"], r["sensors"])]) and len(r["named"]) == 1
+
+
 def _truth_size(t: dict) -> float:
     return t["seen_size"] if t.get("seen_size") is not None else t["size"]
 
@@ -260,14 +268,10 @@ def summarize(records: list, det: dict) -> dict:
     out["ooc"] = {"n": len(ooc), "catalogued_named": int(kc), "ci95": clopper_pearson(kc, len(ooc)),
                   "by_family": {f: dict(Counter(r["cause"] for r in ooc if r["family"] == f)) for f in OOC}}
     high = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "high"]
-    # right: the truth named, and nothing beside it
-    hr = [(r["cause"] == "none") if r["kind"] == "null" else
-          (_right(r["truth"][0], [(r["cause"], r["sensors"])]) and len(r["named"]) == 1) for r in high]
-    out["high_precision"] = {"n": len(high), "right": int(sum(hr))}
+    out["high_precision"] = {"n": len(high), "right": int(sum(map(_right_alone, high)))}
     # a cause named on weak held-out evidence (metrology.diagnosis.select.weakly_supported)
     mod = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "moderate" and r["named"]]
-    out["moderate_named"] = {"n": len(mod), "right": int(sum(r["kind"] == "single" and len(r["named"]) == 1 and _right(
-        r["truth"][0], [(r["cause"], r["sensors"])]) for r in mod))}
+    out["moderate_named"] = {"n": len(mod), "right": int(sum(map(_right_alone, mod)))}
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]

@@ -138,11 +138,12 @@ def base_jacobian(b, ds):
 
 def _projections(ds, b, comps, ok, A):
     """The null blocks and the pose error's blocks through the fit: ``(D, Wa, Wb, through)``, the
-    first three ``(p, n, n)``, ``through(B)`` the same blocks for other columns ``B (p, n, m)``. ``D`` is each pose's block of ``I - H`` (``H`` the hat matrix of the whitened
-    fit of the base geometry, 5 parameters a sensor, and the components ``comps``); ``Wa``, ``Wb``
-    the pose blocks of ``(I - H) K (I - H)``, ``K`` the block-diagonal covariance of a unit
-    offset variance (``c c^T`` a pose) and of a unit tilt variance (``S S^T``): the fit takes up a
-    share of the pose error too, which the moments must not charge to its size."""
+    first three ``(p, n, n)``, ``through(B)`` the same blocks for other columns ``B (p, n, m)``.
+    ``D`` is each pose's block of ``I - H`` (``H`` the hat matrix of the whitened fit of the base
+    geometry, 5 parameters a sensor, and the components ``comps``); ``Wa``, ``Wb`` the pose
+    blocks of ``(I - H) K (I - H)``, ``K`` the block-diagonal covariance of a unit offset
+    variance (``c c^T`` a pose) and of a unit tilt variance (``S S^T``): the fit takes up a share
+    of the pose error too, which the moments must not charge to its size."""
     p, n = ok.shape
     J = base_jacobian(b, ds) / b.sigma[None, :, None]
     cols = [np.zeros((p, n, 5 * n))]

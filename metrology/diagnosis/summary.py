@@ -71,9 +71,9 @@ def verdict_summary(v, tb) -> str:
         where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
-    weak = [f"{c['label']} (p = {c['p_heldout_given_others']:.2g})" for c in v.causes
-            if c["label"] in weakly_supported(v.causes)]
-    if v.confidence == "moderate" and weak:
-        return text + (f"; confidence moderate: weak held-out evidence for {' and '.join(weak)}, not below "
-                       f"{THRESHOLDS['alpha_high']:g}")
+    weak = weakly_supported(v.causes) if v.confidence == "moderate" else []
+    if weak:
+        p = {c["label"]: c["p_heldout_given_others"] for c in v.causes}
+        return text + (f"; confidence moderate: weak held-out evidence for "
+                       f"{' and '.join(f'{k} (p = {p[k]:.2g})' for k in weak)}, not below {THRESHOLDS['alpha_high']:g}")
     return text + f"; confidence {v.confidence}"
