@@ -1,0 +1,218 @@
+"""Each hole's normal, its angle to the drill axis and their first-order (GUM) uncertainty.
+
+At a drilling point the cell reads its sensors; the projection points ``S_i = E_i + d_i u_i``
+(Eq. 17, mm, TCS) lie on the panel. metro fits the micro-plane through them by least squares
+as a graph over the TCS ``xy`` plane,
+
+    z = c + g_x x + g_y y,        n = +-(-g_x, -g_y, 1) / sqrt(1 + g_x^2 + g_y^2),
+
+(the plane through the points for 3 sensors; for 4 it agrees with Eqs. 18-19 to first order in
+the points' misfit) and orients ``n`` along the drill axis (the TCS ``z`` axis signed the way
+the beams point, ``n . axis > 0``): the direction the cell turns the drill onto (Eqs. 20-22).
+The angle between the drill axis and the normal is ``alpha = atan(|g|)``.
+
+**Uncertainty.** To first order only the displacement of each point along the normal matters:
+with ``m = (-g_x, -g_y, 1)`` and ``h_i = m . dS_i``, ``dg = P h`` where ``P`` (2, n) is the
+least-squares map from heights to slopes. A reading error moves ``S_i`` by ``u_i dd_i``; a
+calibration error by ``dE_i + d_i (a e1_i + b e2_i)`` (the chart of
+:mod:`metrology.core.model`, centred on the calibrated beam). So
+
+    Sigma_g = sum_i sigma_i^2 (m.u_i)^2 P_i P_i^T  +  J_theta C J_theta^T,
+
+with ``C`` the layout's ``covariance`` (5n, 5n) and ``J_theta`` row blocks
+``P_i (m, d_i m.e1_i, d_i m.e2_i)``. The angle's standard uncertainty is
+``sqrt(c^T Sigma_g c)`` with ``c = g / (|g| (1 + |g|^2))`` and its expanded uncertainty
+``U95 = K95 u`` (:data:`K95`, normal distribution). Near ``alpha = 0`` the angle is the length
+of a 2-D vector and the linear rule fails; where ``alpha < SMALL_ANGLE_SIGMAS`` standard
+uncertainties, ``U95`` is the 95 % radius of the slope's 2-D distribution
+(:data:`K95_2D` times the square root of its largest eigenvalue), which holds there.
+
+**Redundancy.** With ``n >= 4`` points the fit has ``n - 3`` residual degrees of freedom. For
+4 points the residual is one number, ``rho = q . z`` (mm, ``q`` the unit vector orthogonal to
+``1, x, y``): the misfit of the redundant reading to the micro-plane. To first order
+``d rho = q . h``, so its standard deviation from reading noise alone is
+``sqrt(sum_i q_i^2 (m.u_i)^2 sigma_i^2)``, and ``z = rho / that`` is N(0, 1) while every
+sensor holds its calibration; a zero shift ``delta`` of sensor ``k`` moves ``rho`` by
+``q_k (m.u_k) delta``. For more points :func:`hole_normals` gives the residual's RMS and its
+chi-square over the noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from metrology.core.layout import SensorLayout
+from metrology.core.model import direction_basis
+
+__all__ = ["HoleNormals", "hole_normals", "drill_axis", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
+
+#: coverage factor of a 95 % interval of a normal distribution
+K95 = 1.959963984540054
+#: radius, in standard deviations, of the 95 % disc of an isotropic 2-D normal: sqrt(chi2_2(0.95))
+K95_2D = 2.447746830680816
+#: below this many standard uncertainties the angle's distribution is not close to normal (it is
+#: the length of a 2-D vector), and U95 is the 2-D radius instead of the linear rule
+SMALL_ANGLE_SIGMAS = 4.0
+
+
+def drill_axis(layout: SensorLayout) -> np.ndarray:
+    """(3,) float, unit, TCS: the TCS ``z`` axis signed the way the beams point (the drill axis)."""
+    return np.array([0.0, 0.0, 1.0 if np.mean(layout.direction[:, 2]) > 0 else -1.0])
+
+
+@dataclass(frozen=True)
+class HoleNormals:
+    """Normals of holes measured with one set of sensors.
+
+    Attributes
+    ----------
+    normal : (N, 3) float, unit, TCS, along the drill axis (``n . axis > 0``)
+    angle : (N,) float, rad, between the drill axis and ``normal``
+    u_angle : (N,) float, rad, standard uncertainty of ``angle`` (reading noise + calibration)
+    U95 : (N,) float, rad, expanded uncertainty (95 %) of ``angle``
+    u_angle_noise : (N,) float, rad, the reading noise's share of ``u_angle``
+    residual : (N,) float, mm; 4 sensors: the signed misfit ``rho``; 5+: the RMS misfit of the
+        points to their plane; 3: NaN (no redundancy)
+    residual_z : (N,) float; 4 sensors: ``rho`` over its noise sigma, N(0, 1) in control; 5+:
+        ``sqrt(chi2 / (n - 3))`` of the misfit over the noise; 3: NaN
+    signature : (N, n) float, mm/mm, or None; 4 sensors: ``d rho / d delta_k``, how a zero shift
+        of each sensor moves ``rho``
+    """
+
+    normal: np.ndarray
+    angle: np.ndarray
+    u_angle: np.ndarray
+    U95: np.ndarray
+    u_angle_noise: np.ndarray
+    residual: np.ndarray
+    residual_z: np.ndarray
+    signature: np.ndarray | None
+
+
+def _chart_rows(layout: SensorLayout):
+    """(n, 2, 3): the chart axes e1, e2 of each calibrated beam."""
+    return direction_basis(layout.direction)
+
+
+def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None) -> HoleNormals:
+    """Normals, angles and uncertainties of holes whose every reading is present.
+
+    Parameters
+    ----------
+    layout : SensorLayout, n >= 3 sensors (the ones read at these holes)
+    d : (N, n) float, mm, finite readings
+    covariance : (5n, 5n) float, mm and rad, or None: the calibration's covariance (the layout's
+        ``covariance`` by default; None there too: the calibration's share is left out)
+    sigma_mm : (n,) float, mm, reading noise (default: the layout's ``noise_mm``)
+
+    Returns
+    -------
+    HoleNormals
+    """
+    n = layout.n
+    d = np.asarray(d, dtype=float).reshape(-1, n)
+    N = len(d)
+    cov = layout.covariance if covariance is None else np.asarray(covariance, float)
+    sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
+    sigma = np.where(np.isfinite(sigma), sigma, 0.0)
+    E, u = layout.zero, layout.direction
+    x = E[None, :, 0] + d * u[None, :, 0]  # projection points, mm, TCS, (N, n) each
+    y = E[None, :, 1] + d * u[None, :, 1]
+    z = E[None, :, 2] + d * u[None, :, 2]
+    xc = x - x.mean(axis=1, keepdims=True)
+    yc = y - y.mean(axis=1, keepdims=True)
+    zc = z - z.mean(axis=1, keepdims=True)
+    sxx, syy, sxy = (xc * xc).sum(1), (yc * yc).sum(1), (xc * yc).sum(1)
+    sxz, syz = (xc * zc).sum(1), (yc * zc).sum(1)
+    det = sxx * syy - sxy * sxy
+    if np.any(det <= 0):
+        raise ValueError("the projection points of a hole are collinear: no plane")
+    gx = (syy * sxz - sxy * syz) / det
+    gy = (sxx * syz - sxy * sxz) / det
+    # P_i: the slopes' change per unit height of point i, (N, n) each
+    px = (syy[:, None] * xc - sxy[:, None] * yc) / det[:, None]
+    py = (sxx[:, None] * yc - sxy[:, None] * xc) / det[:, None]
+    axis = drill_axis(layout)
+    g2 = gx * gx + gy * gy
+    gn = np.sqrt(g2)
+    r = np.sqrt(1.0 + g2)
+    normal = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (axis[2] / r)[:, None]
+    angle = np.arctan(gn)
+    mu = u[None, :, 2] - gx[:, None] * u[None, :, 0] - gy[:, None] * u[None, :, 1]  # (N, n): m . u_i
+    # the angle's sensitivity to each point's height: w_i = c . P_i with c = d alpha / d g
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = 1.0 / (gn * (1.0 + g2))
+    k = np.where(np.isfinite(k), k, 0.0)
+    w = (gx * k)[:, None] * px + (gy * k)[:, None] * py
+    var_noise = ((w * mu * sigma[None]) ** 2).sum(1)
+    var = var_noise + (_calibration_var(layout, cov, d, w, gx, gy) if cov is not None else 0.0)
+    u_angle = np.sqrt(var)
+    U95 = K95 * u_angle
+    # near alpha = 0: the 95 % radius of the slopes' 2-D distribution
+    small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
+    if np.any(small):
+        lam = _slope_cov_max_eig(layout, cov, d[small], px[small], py[small], mu[small], sigma, gx[small], gy[small])
+        s2d = np.sqrt(lam) / (1.0 + g2[small])
+        still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
+        idx = np.flatnonzero(small)[still]
+        u_angle[idx] = s2d[still]
+        U95[idx] = K95_2D * s2d[still]
+    residual = np.full(len(d), np.nan)
+    residual_z = np.full(len(d), np.nan)
+    signature = None
+    if n == 4:
+        q = _null_vector_4(xc, yc)  # (N, 4), unit, orthogonal to 1, x, y
+        residual = (q * zc).sum(1)
+        signature = q * mu  # d rho / d delta_k
+        sd = np.sqrt(((signature * sigma[None]) ** 2).sum(1))
+        residual_z = residual / sd
+    elif n > 4:
+        res = zc - gx[:, None] * xc - gy[:, None] * yc
+        residual = np.sqrt((res * res).sum(1) / n)
+        v = (mu * sigma[None]) ** 2
+        residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
+    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature)
+
+
+def _height_rows(layout, d, gx, gy, weight=None):
+    """(N, n, 5): a calibration error's effect on each point's height along ``m``,
+    ``(m, d_i m.e1_i, d_i m.e2_i)`` for ``(x, y, z, a, b)`` of sensor i, times ``weight (N, n)``."""
+    e = _chart_rows(layout)  # (n, 2, 3)
+    w = np.ones_like(d) if weight is None else weight
+    rows = np.empty(d.shape + (5,))
+    rows[..., 0] = -gx[:, None] * w
+    rows[..., 1] = -gy[:, None] * w
+    rows[..., 2] = w
+    dw = d * w
+    for k in range(2):
+        rows[..., 3 + k] = dw * e[None, :, k, 2] - (gx[:, None] * dw) * e[None, :, k, 0] - (gy[:, None] * dw) * e[None, :, k, 1]
+    return rows
+
+
+def _calibration_var(layout, cov, d, w, gx, gy):
+    """(N,) rad^2: the calibration's share of the angle's variance, ``s^T C s``."""
+    s = _height_rows(layout, d, gx, gy, w).reshape(len(d), -1)  # (N, 5n)
+    return np.einsum("ij,ij->i", s @ cov, s)
+
+
+def _slope_cov_max_eig(layout, cov, d, px, py, mu, sigma, gx, gy):
+    """(N,) the largest eigenvalue of the slopes' covariance (2, 2), unitless^2."""
+    a, b = px * mu * sigma[None], py * mu * sigma[None]
+    c00, c11, c01 = (a * a).sum(1), (b * b).sum(1), (a * b).sum(1)
+    if cov is not None:
+        rows = _height_rows(layout, d, gx, gy)
+        sx, sy = (rows * px[..., None]).reshape(len(d), -1), (rows * py[..., None]).reshape(len(d), -1)
+        c00, c11, c01 = c00 + ((sx @ cov) * sx).sum(1), c11 + ((sy @ cov) * sy).sum(1), c01 + ((sx @ cov) * sy).sum(1)
+    return 0.5 * (c00 + c11) + np.sqrt(0.25 * (c00 - c11) ** 2 + c01 ** 2)
+
+
+def _null_vector_4(xc, yc):
+    """(N, 4) unit vectors orthogonal to the columns ``1, x, y`` of 4 points: the signed cofactors
+    ``det [1 x y]`` of the other three rows (twice the signed area of their triangle)."""
+    def area2(a, b, c):
+        return (xc[:, b] - xc[:, a]) * (yc[:, c] - yc[:, a]) - (xc[:, c] - xc[:, a]) * (yc[:, b] - yc[:, a])
+
+    q = np.stack([area2(1, 2, 3), -area2(0, 2, 3), area2(0, 1, 3), -area2(0, 1, 2)], axis=1)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
