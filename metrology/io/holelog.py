@@ -71,6 +71,10 @@ class HoleLog:
     def partitioned(self) -> bool:
         return self.kind == "parquet" and Path(self.source).is_dir()
 
+    def file_columns(self, part: Partition) -> list:
+        """The columns the partition's file itself holds (not its hive keys)."""
+        return _column_names(self, part, with_keys=False)
+
     def batches(self, part: Partition):
         """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
         ``first_row`` is the 0-based row of the partition at which the batch starts."""
@@ -119,7 +123,7 @@ def _hive_keys(rel: Path) -> dict:
     return keys
 
 
-def _column_names(log, part) -> list:
+def _column_names(log, part, with_keys=True) -> list:
     if log.kind == "csv":
         with open(part.path, "rb") as fh:
             head = fh.readline().decode("utf-8-sig", errors="replace").strip()
@@ -134,7 +138,7 @@ def _column_names(log, part) -> list:
         names = pq.read_schema(part.path).names
     except Exception as exc:  # pyarrow raises ArrowInvalid, OSError ... on a corrupt or truncated file
         raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
-    return names + [k for k in part.keys if k not in names]
+    return names + [k for k in part.keys if k not in names] if with_keys else names
 
 
 def _short(exc) -> str:

@@ -153,7 +153,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        h = hole_normals(sub, dd)
+        h = hole_normals(sub, dd, min_radius_mm=settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
         out.residual[rows], out.residual_z[rows] = h.residual, h.residual_z
         if h.signature is not None:

@@ -22,10 +22,23 @@ calibration error by ``dE_i + d_i (a e1_i + b e2_i)`` (the chart of
 with ``C`` the layout's ``covariance`` (5n, 5n) and ``J_theta`` row blocks
 ``P_i (m, d_i m.e1_i, d_i m.e2_i)``. The angle's standard uncertainty is
 ``sqrt(c^T Sigma_g c)`` with ``c = g / (|g| (1 + |g|^2))`` and its expanded uncertainty
-``U95 = K95 u`` (:data:`K95`, normal distribution). Near ``alpha = 0`` the angle is the length
-of a 2-D vector and the linear rule fails; where ``alpha < SMALL_ANGLE_SIGMAS`` standard
-uncertainties, ``U95`` is the 95 % radius of the slope's 2-D distribution
-(:data:`K95_2D` times the square root of its largest eigenvalue), which holds there.
+``U95 = K95 u`` (:data:`K95`, normal distribution).
+
+**Curvature.** On a curved panel the spots do not lie on the tangent plane at the drill point
+(where the drill axis meets the panel): near it the panel is ``h = r^T K r / 2`` (``r`` the
+offset from the drill axis, ``K`` the curvature tensor), and the plane through the spots tilts by
+``dg = sum_i P_i r_i^T K r_i / 2``: the spots' centroid is off the axis (the beams are inclined,
+so a tilted panel moves the spots along them) and they form a trapezoid. metro does not know
+``K`` at a hole; given the panel's smallest radius ``R_min`` and that it curves one way (convex or
+concave: a cylinder, a sphere, a doubly-curved skin; ``K`` semidefinite with eigenvalues within
+``1 / R_min``, any orientation) the angle's bias lies within ``+-b``,
+
+    b = max(sum of the positive, -sum of the negative eigenvalues of M) / (2 R_min),
+    M = sum_i w_i r_i r_i^T                              (w_i = d alpha / d h_i)
+
+the exact worst case, entered as a rectangular distribution, ``u_b = b / sqrt(3)`` (GUM 4.3.7).
+On a flat panel (``min_radius_mm = inf``) ``b = 0``. A saddle (principal curvatures of both
+signs) can tilt the plane further, by up to the nuclear norm of ``M`` over ``2 R_min``.
 
 **Redundancy.** With ``n >= 4`` points the fit has ``n - 3`` residual degrees of freedom. For
 4 points the residual is one number, ``rho = q . z`` (mm, ``q`` the unit vector orthogonal to
@@ -79,6 +92,8 @@ class HoleNormals:
         ``sqrt(chi2 / (n - 3))`` of the misfit over the noise; 3: NaN
     signature : (N, n) float, mm/mm, or None; 4 sensors: ``d rho / d delta_k``, how a zero shift
         of each sensor moves ``rho``
+    curvature_bound : (N,) float, rad, ``b``: the largest bias of ``angle`` a panel of radius
+        ``min_radius_mm`` gives (0 on a flat panel); ``u_angle`` includes ``b / sqrt(3)``
     """
 
     normal: np.ndarray
@@ -89,6 +104,7 @@ class HoleNormals:
     residual: np.ndarray
     residual_z: np.ndarray
     signature: np.ndarray | None
+    curvature_bound: np.ndarray | None = None
 
 
 def _chart_rows(layout: SensorLayout):
@@ -96,7 +112,7 @@ def _chart_rows(layout: SensorLayout):
     return direction_basis(layout.direction)
 
 
-def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None) -> HoleNormals:
+def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_radius_mm=np.inf) -> HoleNormals:
     """Normals, angles and uncertainties of holes whose every reading is present.
 
     Parameters
@@ -106,6 +122,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None) -> Hol
     covariance : (5n, 5n) float, mm and rad, or None: the calibration's covariance (the layout's
         ``covariance`` by default; None there too: the calibration's share is left out)
     sigma_mm : (n,) float, mm, reading noise (default: the layout's ``noise_mm``)
+    min_radius_mm : float, mm, the panel's smallest radius (inf: flat), for the curvature term
 
     Returns
     -------
@@ -148,13 +165,19 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None) -> Hol
     w = (gx * k)[:, None] * px + (gy * k)[:, None] * py
     var_noise = ((w * mu * sigma[None]) ** 2).sum(1)
     var = var_noise + (_calibration_var(layout, cov, d, w, gx, gy) if cov is not None else 0.0)
+    # the curvature bias bound: the worst quadric panel of principal radii >= min_radius_mm
+    flat = not np.isfinite(min_radius_mm)
+    bound = np.zeros(N) if flat else _one_sign(w, x, y) / (2.0 * min_radius_mm)
+    var = var + bound ** 2 / 3.0
     u_angle = np.sqrt(var)
     U95 = K95 * u_angle
     # near alpha = 0: the 95 % radius of the slopes' 2-D distribution
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
     if np.any(small):
         lam = _slope_cov_max_eig(layout, cov, d[small], px[small], py[small], mu[small], sigma, gx[small], gy[small])
-        s2d = np.sqrt(lam) / (1.0 + g2[small])
+        b2 = 0.0 if flat else (_one_sign(px[small], x[small], y[small]) ** 2
+                               + _one_sign(py[small], x[small], y[small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
+        s2d = np.sqrt(lam / (1.0 + g2[small]) ** 2 + b2)
         still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
         idx = np.flatnonzero(small)[still]
         u_angle[idx] = s2d[still]
@@ -167,13 +190,15 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None) -> Hol
         residual = (q * zc).sum(1)
         signature = q * mu  # d rho / d delta_k
         sd = np.sqrt(((signature * sigma[None]) ** 2).sum(1))
-        residual_z = residual / sd
+        with np.errstate(invalid="ignore", divide="ignore"):
+            residual_z = residual / sd
     elif n > 4:
         res = zc - gx[:, None] * xc - gy[:, None] * yc
         residual = np.sqrt((res * res).sum(1) / n)
         v = (mu * sigma[None]) ** 2
-        residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
-    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
+    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound)
 
 
 def _height_rows(layout, d, gx, gy, weight=None):
@@ -206,6 +231,15 @@ def _slope_cov_max_eig(layout, cov, d, px, py, mu, sigma, gx, gy):
         sx, sy = (rows * px[..., None]).reshape(len(d), -1), (rows * py[..., None]).reshape(len(d), -1)
         c00, c11, c01 = c00 + ((sx @ cov) * sx).sum(1), c11 + ((sy @ cov) * sy).sum(1), c01 + ((sx @ cov) * sy).sum(1)
     return 0.5 * (c00 + c11) + np.sqrt(0.25 * (c00 - c11) ** 2 + c01 ** 2)
+
+
+def _one_sign(w, x, y):
+    """(N,) ``max(sum of positive, -sum of negative eigenvalues)`` of ``sum_i w_i r_i r_i^T`` (2 x 2
+    per row): the largest ``|tr(K M)|`` over semidefinite ``K`` of eigenvalues within 1."""
+    a, b, c = (w * x * x).sum(1), (w * y * y).sum(1), (w * x * y).sum(1)
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    lam = np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
+    return np.maximum(np.clip(lam, 0, None).sum(1), -np.clip(lam, None, 0).sum(1))
 
 
 def _null_vector_4(xc, yc):

@@ -158,6 +158,7 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
     feeds, rows = [], 0
     where = _where(log, part)
     write = output is not None and not output.done(part.relative)
+    keys_only = [k for k in part.keys if k not in log.file_columns(part)]
     with (output.sink(part.relative) if write else contextlib.nullcontext()) as own:
         for table, first in log.batches(part):
             batch = measure_batch(layout, table, settings)
@@ -168,8 +169,8 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
             else:
                 _check_order(f)
                 feeds.append(f)
-            if own is not None:
-                own.write(_public(batch.columns))
+            if own is not None:  # the partition's keys are in its path, as in the log
+                own.write(_public(batch.columns, keys_only))
             elif sink is not None:
                 sink.write(_public(batch.columns))
             rows += len(batch)
@@ -179,9 +180,9 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
                       write or sink is not None)
 
 
-def _public(table):
-    """The results as written: without the columns metro added for its own use."""
-    return table.drop_columns([c for c in INTERNAL if c in table.column_names])
+def _public(table, drop=()):
+    """The results as written: without the columns metro added for its own use (and ``drop``)."""
+    return table.drop_columns([c for c in (*INTERNAL, *drop) if c in table.column_names])
 
 
 def _check_order(f: Feed) -> None:
