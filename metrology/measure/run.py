@@ -48,9 +48,14 @@ class Feed:
     rho_mm: np.ndarray
     noise_sd_mm: np.ndarray
     signature: np.ndarray
+    csv: bool = False
+
+    def line(self, row: int) -> str:
+        """How an error names a row: a CSV's line (the header is line 1), a Parquet file's row."""
+        return f"line {row + 2}" if self.csv else f"row {row + 1}"
 
     @classmethod
-    def of(cls, batch: HoleBatch, where: str, first_row: int) -> "Feed":
+    def of(cls, batch: HoleBatch, where: str, first_row: int, csv: bool = False) -> "Feed":
         t = batch.columns
         n = len(batch)
         charted = np.zeros(n, bool)
@@ -63,7 +68,7 @@ class Feed:
         if batch.chart["index"].size:
             sig[batch.chart["index"]] = batch.chart["signature"]
         return cls(where, first_row + np.arange(n), _str(t.column(CELL)), _str(t.column(PANEL)),
-                   _str(t.column("hole_id")), t.column(TIME_S).to_numpy(), charted, rho, sd, sig)
+                   _str(t.column("hole_id")), t.column(TIME_S).to_numpy(), charted, rho, sd, sig, csv)
 
     @classmethod
     def concat(cls, feeds) -> "Feed":
@@ -72,7 +77,13 @@ class Feed:
             return None
         return cls(feeds[0].where, *(np.concatenate([getattr(f, k) for f in feeds]) for k in
                                      ("row", "cell", "panel", "hole_id", "time_s", "charted", "rho_mm", "noise_sd_mm",
-                                      "signature")))
+                                      "signature")), feeds[0].csv)
+
+
+def _iso(t_s: float) -> str:
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(float(t_s), dt.timezone.utc).isoformat().replace("+00:00", "Z")
 
 
 def _str(col) -> np.ndarray:
@@ -103,15 +114,15 @@ class Watch:
             back = np.flatnonzero(np.diff(t) < 0)
             prev = self.last.get(cell)
             if prev is not None and t[0] < prev[0]:
-                raise ValueError(f"{f.where} row {rows[0] + 1}: time {t[0]:.3f} s is before the previous hole of cell "
-                                 f"{cell!r} ({prev[1]} row {prev[2] + 1}, {prev[0]:.3f} s): a log must be in time "
-                                 f"order within each cell")
+                raise ValueError(f"{f.where} {f.line(rows[0])}: time {_iso(t[0])} is before the previous hole of cell "
+                                 f"'{cell}' ({prev[1]} {prev[2]}, {_iso(prev[0])}): a log must be in time order "
+                                 f"within each cell")
             if back.size:
                 i = int(back[0])
-                raise ValueError(f"{f.where} row {rows[i + 1] + 1}: time {t[i + 1]:.3f} s is before the previous hole "
-                                 f"of cell {cell!r} (row {rows[i] + 1}, {t[i]:.3f} s): a log must be in time order "
+                raise ValueError(f"{f.where} {f.line(rows[i + 1])}: time {_iso(t[i + 1])} is before the previous hole "
+                                 f"of cell '{cell}' ({f.line(rows[i])}, {_iso(t[i])}): a log must be in time order "
                                  f"within each cell")
-            self.last[cell] = (float(t[-1]), f.where, int(rows[-1]))
+            self.last[cell] = (float(t[-1]), f.where, f.line(rows[-1]))
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
                 chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors))
@@ -163,7 +174,7 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
         for table, first in log.batches(part):
             batch = measure_batch(layout, table, settings)
             summary.add(batch)
-            f = Feed.of(batch, where, first)
+            f = Feed.of(batch, where, first, csv=log.kind == "csv")
             if watch is not None:
                 watch.feed(f)
             else:
