@@ -158,15 +158,20 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     normal = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (axis[2] / r)[:, None]
     angle = np.arctan(gn)
     mu = u[None, :, 2] - gx[:, None] * u[None, :, 0] - gy[:, None] * u[None, :, 1]  # (N, n): m . u_i
-    # the angle's sensitivity to each point's height: w_i = c . P_i with c = d alpha / d g
+    # the slopes' covariance (2, 2) per hole: reading noise and the calibration
+    qn = (mu * sigma[None]) ** 2  # (N, n): each point's height variance from its reading noise
+    noise_g = _spread(px, py, qn)
+    cal_g = _calibration_cov(layout, cov, d, px, py, gx, gy) if cov is not None else 0.0
+    # the angle: c = d alpha / d g
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
     k = np.where(np.isfinite(k), k, 0.0)
-    w = (gx * k)[:, None] * px + (gy * k)[:, None] * py
-    var_noise = ((w * mu * sigma[None]) ** 2).sum(1)
-    var = var_noise + (_calibration_var(layout, cov, d, w, gx, gy) if cov is not None else 0.0)
-    # the curvature bias bound: the worst quadric panel of principal radii >= min_radius_mm
+    cx, cy = gx * k, gy * k
+    var_noise = _quad(cx, cy, noise_g)
+    var = var_noise + (_quad(cx, cy, cal_g) if cov is not None else 0.0)
+    # the curvature bias bound: the worst one-signed quadric panel of radii >= min_radius_mm
     flat = not np.isfinite(min_radius_mm)
+    w = cx[:, None] * px + cy[:, None] * py  # d alpha / d h_i
     bound = np.zeros(N) if flat else _one_sign(w, x, y) / (2.0 * min_radius_mm)
     var = var + bound ** 2 / 3.0
     u_angle = np.sqrt(var)
@@ -174,7 +179,8 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     # near alpha = 0: the 95 % radius of the slopes' 2-D distribution
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
     if np.any(small):
-        lam = _slope_cov_max_eig(layout, cov, d[small], px[small], py[small], mu[small], sigma, gx[small], gy[small])
+        tot = [noise_g[j][small] + (cal_g[j][small] if cov is not None else 0.0) for j in range(3)]
+        lam = 0.5 * (tot[0] + tot[2]) + np.sqrt(0.25 * (tot[0] - tot[2]) ** 2 + tot[1] ** 2)
         b2 = 0.0 if flat else (_one_sign(px[small], x[small], y[small]) ** 2
                                + _one_sign(py[small], x[small], y[small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
         s2d = np.sqrt(lam / (1.0 + g2[small]) ** 2 + b2)
@@ -201,36 +207,50 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound)
 
 
-def _height_rows(layout, d, gx, gy, weight=None):
-    """(N, n, 5): a calibration error's effect on each point's height along ``m``,
-    ``(m, d_i m.e1_i, d_i m.e2_i)`` for ``(x, y, z, a, b)`` of sensor i, times ``weight (N, n)``."""
+def _height_rows(layout, d, gx, gy):
+    """(n, N, 5): a calibration error's effect on each point's height along ``m``,
+    ``(m, d_i m.e1_i, d_i m.e2_i)`` for ``(x, y, z, a, b)`` of sensor i (sensor first: each
+    sensor's rows are contiguous)."""
     e = _chart_rows(layout)  # (n, 2, 3)
-    w = np.ones_like(d) if weight is None else weight
-    rows = np.empty(d.shape + (5,))
-    rows[..., 0] = -gx[:, None] * w
-    rows[..., 1] = -gy[:, None] * w
-    rows[..., 2] = w
-    dw = d * w
+    rows = np.empty((d.shape[1], d.shape[0], 5))
+    rows[..., 0] = -gx[None, :]
+    rows[..., 1] = -gy[None, :]
+    rows[..., 2] = 1.0
     for k in range(2):
-        rows[..., 3 + k] = dw * e[None, :, k, 2] - (gx[:, None] * dw) * e[None, :, k, 0] - (gy[:, None] * dw) * e[None, :, k, 1]
+        rows[..., 3 + k] = d.T * (e[:, k, 2, None] - gx[None, :] * e[:, k, 0, None] - gy[None, :] * e[:, k, 1, None])
     return rows
 
 
-def _calibration_var(layout, cov, d, w, gx, gy):
-    """(N,) rad^2: the calibration's share of the angle's variance, ``s^T C s``."""
-    s = _height_rows(layout, d, gx, gy, w).reshape(len(d), -1)  # (N, 5n)
-    return np.einsum("ij,ij->i", s @ cov, s)
+def _spread(px, py, q):
+    """The slopes' covariance ``(c00, c01, c11)`` of independent point heights of variance ``q (N, n)``."""
+    return (px * px * q).sum(1), (px * py * q).sum(1), (py * py * q).sum(1)
 
 
-def _slope_cov_max_eig(layout, cov, d, px, py, mu, sigma, gx, gy):
-    """(N,) the largest eigenvalue of the slopes' covariance (2, 2), unitless^2."""
-    a, b = px * mu * sigma[None], py * mu * sigma[None]
-    c00, c11, c01 = (a * a).sum(1), (b * b).sum(1), (a * b).sum(1)
-    if cov is not None:
-        rows = _height_rows(layout, d, gx, gy)
-        sx, sy = (rows * px[..., None]).reshape(len(d), -1), (rows * py[..., None]).reshape(len(d), -1)
-        c00, c11, c01 = c00 + ((sx @ cov) * sx).sum(1), c11 + ((sy @ cov) * sy).sum(1), c01 + ((sx @ cov) * sy).sum(1)
-    return 0.5 * (c00 + c11) + np.sqrt(0.25 * (c00 - c11) ** 2 + c01 ** 2)
+def _quad(cx, cy, c):
+    """``c^T Sigma c`` per row, ``Sigma = (c00, c01, c11)``."""
+    return cx * cx * c[0] + 2 * cx * cy * c[1] + cy * cy * c[2]
+
+
+def _calibration_cov(layout, cov, d, px, py, gx, gy):
+    """The slopes' covariance ``(c00, c01, c11)`` from the calibration's covariance ``cov (5n, 5n)``.
+
+    A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: then each
+    point's height has its own variance ``r_i^T C_ii r_i`` and the points are independent (fast);
+    any other covariance is propagated whole."""
+    n = layout.n
+    rows = _height_rows(layout, d, gx, gy)  # (n, N, 5)
+    blocks = [cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)]
+    off = cov.copy()
+    for i in range(n):
+        off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
+    if not np.any(off):
+        q = np.stack([np.einsum("pk,pk->p", rows[i] @ blocks[i], rows[i]) for i in range(n)], axis=1)
+        return _spread(px, py, q)
+    rows = rows.transpose(1, 0, 2)  # (N, n, 5)
+    sx = (rows * px[..., None]).reshape(len(d), -1)
+    sy = (rows * py[..., None]).reshape(len(d), -1)
+    cx, cy = sx @ cov, sy @ cov
+    return np.einsum("ij,ij->i", cx, sx), np.einsum("ij,ij->i", cx, sy), np.einsum("ij,ij->i", cy, sy)
 
 
 def _one_sign(w, x, y):
