@@ -51,6 +51,33 @@ def _bins(angle_deg):
     return np.clip(np.searchsorted(EDGES_DEG, angle_deg, side="right") - 1, 0, len(EDGES_DEG) - 1)
 
 
+def _codes(col):
+    """Dictionary codes (N,) int64 and the values of a string column."""
+    import pyarrow.compute as pc
+
+    enc = pc.dictionary_encode(col).combine_chunks()
+    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
+
+
+def _groups(t):
+    """Each row's group (N,) int and the groups' keys ``(cell, panel, day)`` (day: UTC date)."""
+    import datetime as dt
+
+    ci, cells = _codes(t.column(CELL))
+    pi, panels = _codes(t.column(PANEL))
+    day = np.floor(t.column(TIME_S).to_numpy() / 86400.0).astype(np.int64)
+    d0 = int(day.min()) if len(day) else 0
+    nd = int(day.max()) - d0 + 1 if len(day) else 1
+    code = (ci * len(panels) + pi) * nd + (day - d0)
+    uniq, g = np.unique(code, return_inverse=True)
+    keys = []
+    for c in uniq:
+        cp, dd = divmod(int(c), nd)
+        ck, pk = divmod(cp, len(panels))
+        keys.append((cells[ck], panels[pk], (dt.date(1970, 1, 1) + dt.timedelta(days=d0 + dd)).isoformat()))
+    return g.reshape(-1), keys
+
+
 def quantile_deg(hist, q):
     """The ``q`` quantile (deg) of a histogram on :data:`EDGES_DEG`; NaN when empty."""
     total = hist.sum()
@@ -82,17 +109,8 @@ class FleetSummary:
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
-        import pyarrow.compute as pc
-
         t = batch.columns
-        import pyarrow as pa
-
-        us = pc.multiply(t.column(TIME_S), 1e6).cast(pa.int64())
-        day = pc.strftime(us.cast(pa.timestamp("us", tz="UTC")), format="%Y-%m-%d")
-        key = pc.binary_join_element_wise(t.column(CELL), t.column(PANEL), day, "\x1f")
-        enc = pc.dictionary_encode(key).combine_chunks()
-        g = enc.indices.to_numpy(zero_copy_only=False)
-        keys = [tuple(k.split("\x1f")) for k in enc.dictionary.to_pylist()]
+        g, keys = _groups(t)
         G = len(keys)
         code = batch.status.astype(np.int64)
         counts = np.bincount(g * len(_STATUSES) + code, minlength=G * len(_STATUSES)).reshape(G, len(_STATUSES))
