@@ -115,11 +115,12 @@ def _curvature_bound(layout, d, min_radius_mm):
     from metrology.measure.normals import _null_vector_4
 
     E, u = layout.zero, layout.direction
-    x = E[None, :, 0] + d * u[None, :, 0]
-    y = E[None, :, 1] + d * u[None, :, 1]
-    xc, yc = x - x.mean(1, keepdims=True), y - y.mean(1, keepdims=True)
+    dT = d.T
+    x = E[:, 0, None] + dT * u[:, 0, None]
+    y = E[:, 1, None] + dT * u[:, 1, None]
+    xc, yc = x - x.mean(0), y - y.mean(0)
     q = _null_vector_4(xc, yc)
-    a, b, c = (q * xc * xc).sum(1), (q * yc * yc).sum(1), (q * xc * yc).sum(1)
+    a, b, c = (q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)
     # nuclear norm of [[a, c], [c, b]]: the sum of |eigenvalues|
     disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
     nuc = np.abs(0.5 * (a + b) + disc) + np.abs(0.5 * (a + b) - disc)
@@ -158,7 +159,8 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         out.residual[rows], out.residual_z[rows] = h.residual, h.residual_z
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
-            out.noise_sd[rows] = h.residual / h.residual_z
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out.noise_sd[rows] = h.residual / h.residual_z
             bound = _curvature_bound(sub, dd, settings.min_radius_mm)
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * np.abs(out.noise_sd[rows])
             for i, r in zip(np.flatnonzero(gross), rows[gross]):

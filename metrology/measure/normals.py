@@ -133,97 +133,97 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     N = len(d)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
-    sigma = np.where(np.isfinite(sigma), sigma, 0.0)
+    sigma = np.where(np.isfinite(sigma), sigma, 0.0)[:, None]
     E, u = layout.zero, layout.direction
-    x = E[None, :, 0] + d * u[None, :, 0]  # projection points, mm, TCS, (N, n) each
-    y = E[None, :, 1] + d * u[None, :, 1]
-    z = E[None, :, 2] + d * u[None, :, 2]
-    xc = x - x.mean(axis=1, keepdims=True)
-    yc = y - y.mean(axis=1, keepdims=True)
-    zc = z - z.mean(axis=1, keepdims=True)
-    sxx, syy, sxy = (xc * xc).sum(1), (yc * yc).sum(1), (xc * yc).sum(1)
-    sxz, syz = (xc * zc).sum(1), (yc * zc).sum(1)
+    # sensor-major (n, N) arrays: a sum over the sensors is a sum of contiguous rows
+    dT = np.ascontiguousarray(d.T)
+    x = E[:, 0, None] + dT * u[:, 0, None]  # projection points, mm, TCS
+    y = E[:, 1, None] + dT * u[:, 1, None]
+    z = E[:, 2, None] + dT * u[:, 2, None]
+    xc, yc, zc = x - x.mean(0), y - y.mean(0), z - z.mean(0)
+    sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
+    sxz, syz = (xc * zc).sum(0), (yc * zc).sum(0)
     det = sxx * syy - sxy * sxy
     if np.any(det <= 0):
         raise ValueError("the projection points of a hole are collinear: no plane")
     gx = (syy * sxz - sxy * syz) / det
     gy = (sxx * syz - sxy * sxz) / det
-    # P_i: the slopes' change per unit height of point i, (N, n) each
-    px = (syy[:, None] * xc - sxy[:, None] * yc) / det[:, None]
-    py = (sxx[:, None] * yc - sxy[:, None] * xc) / det[:, None]
+    # P_i: the slopes' change per unit height of point i
+    px = (syy * xc - sxy * yc) / det
+    py = (sxx * yc - sxy * xc) / det
     axis = drill_axis(layout)
     g2 = gx * gx + gy * gy
     gn = np.sqrt(g2)
     r = np.sqrt(1.0 + g2)
     normal = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (axis[2] / r)[:, None]
     angle = np.arctan(gn)
-    mu = u[None, :, 2] - gx[:, None] * u[None, :, 0] - gy[:, None] * u[None, :, 1]  # (N, n): m . u_i
+    mu = u[:, 2, None] - gx * u[:, 0, None] - gy * u[:, 1, None]  # m . u_i
     # the slopes' covariance (2, 2) per hole: reading noise and the calibration
-    qn = (mu * sigma[None]) ** 2  # (N, n): each point's height variance from its reading noise
+    qn = (mu * sigma) ** 2  # each point's height variance from its reading noise
     noise_g = _spread(px, py, qn)
-    cal_g = _calibration_cov(layout, cov, d, px, py, gx, gy) if cov is not None else 0.0
+    cal_g = _calibration_cov(layout, cov, dT, px, py, gx, gy) if cov is not None else None
     # the angle: c = d alpha / d g
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
     k = np.where(np.isfinite(k), k, 0.0)
     cx, cy = gx * k, gy * k
     var_noise = _quad(cx, cy, noise_g)
-    var = var_noise + (_quad(cx, cy, cal_g) if cov is not None else 0.0)
+    var = var_noise + (_quad(cx, cy, cal_g) if cal_g is not None else 0.0)
     # the curvature bias bound: the worst one-signed quadric panel of radii >= min_radius_mm
     flat = not np.isfinite(min_radius_mm)
-    w = cx[:, None] * px + cy[:, None] * py  # d alpha / d h_i
-    bound = np.zeros(N) if flat else _one_sign(w, x, y) / (2.0 * min_radius_mm)
+    bound = np.zeros(N) if flat else _one_sign(cx * px + cy * py, x, y) / (2.0 * min_radius_mm)
     var = var + bound ** 2 / 3.0
     u_angle = np.sqrt(var)
     U95 = K95 * u_angle
     # near alpha = 0: the 95 % radius of the slopes' 2-D distribution
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
     if np.any(small):
-        tot = [noise_g[j][small] + (cal_g[j][small] if cov is not None else 0.0) for j in range(3)]
+        tot = [noise_g[j][small] + (cal_g[j][small] if cal_g is not None else 0.0) for j in range(3)]
         lam = 0.5 * (tot[0] + tot[2]) + np.sqrt(0.25 * (tot[0] - tot[2]) ** 2 + tot[1] ** 2)
-        b2 = 0.0 if flat else (_one_sign(px[small], x[small], y[small]) ** 2
-                               + _one_sign(py[small], x[small], y[small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
+        b2 = 0.0 if flat else (_one_sign(px[:, small], x[:, small], y[:, small]) ** 2
+                               + _one_sign(py[:, small], x[:, small], y[:, small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
         s2d = np.sqrt(lam / (1.0 + g2[small]) ** 2 + b2)
         still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
         idx = np.flatnonzero(small)[still]
         u_angle[idx] = s2d[still]
         U95[idx] = K95_2D * s2d[still]
-    residual = np.full(len(d), np.nan)
-    residual_z = np.full(len(d), np.nan)
+    residual = np.full(N, np.nan)
+    residual_z = np.full(N, np.nan)
     signature = None
     if n == 4:
-        q = _null_vector_4(xc, yc)  # (N, 4), unit, orthogonal to 1, x, y
-        residual = (q * zc).sum(1)
-        signature = q * mu  # d rho / d delta_k
-        sd = np.sqrt(((signature * sigma[None]) ** 2).sum(1))
+        q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
+        residual = (q * zc).sum(0)
+        sig = q * mu  # d rho / d delta_k
+        sd = np.sqrt(((sig * sigma) ** 2).sum(0))
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
+        signature = np.ascontiguousarray(sig.T)
     elif n > 4:
-        res = zc - gx[:, None] * xc - gy[:, None] * yc
-        residual = np.sqrt((res * res).sum(1) / n)
-        v = (mu * sigma[None]) ** 2
+        res = zc - gx * xc - gy * yc
+        residual = np.sqrt((res * res).sum(0) / n)
+        v = (mu * sigma) ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
-            residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
+            residual_z = np.sqrt((res * res / v).sum(0) / (n - 3))
     return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound)
 
 
-def _height_rows(layout, d, gx, gy):
+def _height_rows(layout, dT, gx, gy):
     """(n, N, 5): a calibration error's effect on each point's height along ``m``,
     ``(m, d_i m.e1_i, d_i m.e2_i)`` for ``(x, y, z, a, b)`` of sensor i (sensor first: each
-    sensor's rows are contiguous)."""
+    sensor's rows are contiguous); ``dT (n, N)`` the readings."""
     e = _chart_rows(layout)  # (n, 2, 3)
-    rows = np.empty((d.shape[1], d.shape[0], 5))
+    rows = np.empty(dT.shape + (5,))
     rows[..., 0] = -gx[None, :]
     rows[..., 1] = -gy[None, :]
     rows[..., 2] = 1.0
     for k in range(2):
-        rows[..., 3 + k] = d.T * (e[:, k, 2, None] - gx[None, :] * e[:, k, 0, None] - gy[None, :] * e[:, k, 1, None])
+        rows[..., 3 + k] = dT * (e[:, k, 2, None] - gx[None, :] * e[:, k, 0, None] - gy[None, :] * e[:, k, 1, None])
     return rows
 
 
 def _spread(px, py, q):
-    """The slopes' covariance ``(c00, c01, c11)`` of independent point heights of variance ``q (N, n)``."""
-    return (px * px * q).sum(1), (px * py * q).sum(1), (py * py * q).sum(1)
+    """The slopes' covariance ``(c00, c01, c11)`` of independent point heights of variance ``q (n, N)``."""
+    return (px * px * q).sum(0), (px * py * q).sum(0), (py * py * q).sum(0)
 
 
 def _quad(cx, cy, c):
@@ -231,42 +231,43 @@ def _quad(cx, cy, c):
     return cx * cx * c[0] + 2 * cx * cy * c[1] + cy * cy * c[2]
 
 
-def _calibration_cov(layout, cov, d, px, py, gx, gy):
+def _calibration_cov(layout, cov, dT, px, py, gx, gy):
     """The slopes' covariance ``(c00, c01, c11)`` from the calibration's covariance ``cov (5n, 5n)``.
 
     A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: then each
     point's height has its own variance ``r_i^T C_ii r_i`` and the points are independent (fast);
     any other covariance is propagated whole."""
     n = layout.n
-    rows = _height_rows(layout, d, gx, gy)  # (n, N, 5)
+    rows = _height_rows(layout, dT, gx, gy)  # (n, N, 5)
     blocks = [cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)]
     off = cov.copy()
     for i in range(n):
         off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
     if not np.any(off):
-        q = np.stack([np.einsum("pk,pk->p", rows[i] @ blocks[i], rows[i]) for i in range(n)], axis=1)
+        q = np.stack([np.einsum("pk,pk->p", rows[i] @ blocks[i], rows[i]) for i in range(n)], axis=0)
         return _spread(px, py, q)
-    rows = rows.transpose(1, 0, 2)  # (N, n, 5)
-    sx = (rows * px[..., None]).reshape(len(d), -1)
-    sy = (rows * py[..., None]).reshape(len(d), -1)
+    N = dT.shape[1]
+    sx = (rows * px[..., None]).transpose(1, 0, 2).reshape(N, -1)
+    sy = (rows * py[..., None]).transpose(1, 0, 2).reshape(N, -1)
     cx, cy = sx @ cov, sy @ cov
     return np.einsum("ij,ij->i", cx, sx), np.einsum("ij,ij->i", cx, sy), np.einsum("ij,ij->i", cy, sy)
 
 
 def _one_sign(w, x, y):
     """(N,) ``max(sum of positive, -sum of negative eigenvalues)`` of ``sum_i w_i r_i r_i^T`` (2 x 2
-    per row): the largest ``|tr(K M)|`` over semidefinite ``K`` of eigenvalues within 1."""
-    a, b, c = (w * x * x).sum(1), (w * y * y).sum(1), (w * x * y).sum(1)
+    per hole; ``w, x, y`` (n, N)): the largest ``|tr(K M)|`` over semidefinite ``K`` of eigenvalues
+    within 1."""
+    a, b, c = (w * x * x).sum(0), (w * y * y).sum(0), (w * x * y).sum(0)
     disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    lam = np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
-    return np.maximum(np.clip(lam, 0, None).sum(1), -np.clip(lam, None, 0).sum(1))
+    l1, l2 = 0.5 * (a + b) + disc, 0.5 * (a + b) - disc
+    return np.maximum(np.maximum(l1, 0) + np.maximum(l2, 0), -(np.minimum(l1, 0) + np.minimum(l2, 0)))
 
 
 def _null_vector_4(xc, yc):
-    """(N, 4) unit vectors orthogonal to the columns ``1, x, y`` of 4 points: the signed cofactors
-    ``det [1 x y]`` of the other three rows (twice the signed area of their triangle)."""
+    """(4, N) unit vectors orthogonal to ``1, x, y`` of 4 points (``xc, yc`` (4, N)): the signed
+    cofactors ``det [1 x y]`` of the other three rows (twice the signed area of their triangle)."""
     def area2(a, b, c):
-        return (xc[:, b] - xc[:, a]) * (yc[:, c] - yc[:, a]) - (xc[:, c] - xc[:, a]) * (yc[:, b] - yc[:, a])
+        return (xc[b] - xc[a]) * (yc[c] - yc[a]) - (xc[c] - xc[a]) * (yc[b] - yc[a])
 
-    q = np.stack([area2(1, 2, 3), -area2(0, 2, 3), area2(0, 1, 3), -area2(0, 1, 2)], axis=1)
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.stack([area2(1, 2, 3), -area2(0, 2, 3), area2(0, 1, 3), -area2(0, 1, 2)], axis=0)
+    return q / np.sqrt((q * q).sum(0))
