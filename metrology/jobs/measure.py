@@ -59,9 +59,10 @@ class MeasureReport:
 
     def to_dict(self) -> dict:
         s = self.result.summary
-        groups = []
-        for (cell, panel, day), grp in sorted(s.groups.items()):
-            groups.append({"cell": cell, "panel": panel, "day": day, "counts": s.counts(grp), **s.figures(grp)})
+        groups = [{"cell": cell, "panel": panel, "day": day, "counts": s.counts(grp), **s.figures(grp)}
+                  for (cell, panel, day), grp in sorted(s.groups.items())]
+        series = [{"cell": cell, "panel": panel, "counts": s.counts(grp), **s.figures(grp)}
+                  for (cell, panel), grp in sorted(s.series.items())]
         return {
             "schema": SCHEMA,
             "sources": dict(self.sources),
@@ -77,6 +78,7 @@ class MeasureReport:
             "partitions_written": self.result.written,
             "counts": self.counts,
             "fleet": s.figures(s.total()),
+            "cells": series,
             "groups": groups,
             "drift": {"chart": dict(self.chart), "cells_charted": sorted(self.result.watch.charts),
                       "alarms": [a.to_dict() for a in self.result.alarms]},

@@ -28,22 +28,29 @@ _STATUSES = tuple(str(s) for s in Status)
 
 @dataclass
 class Group:
-    """One cell's holes on one panel on one day (UTC)."""
+    """Holes counted together: by status, and the judged angle's moments (deg); with ``hists``
+    the angle's histograms before and after the adjustment (on :data:`EDGES_DEG`). A group of a
+    cell, panel and day keeps no histogram (a fleet has many days: 13 kB a group would add up);
+    a group of a cell and panel, and the fleet, keep one."""
 
     counts: np.ndarray = field(default_factory=lambda: np.zeros(len(_STATUSES), np.int64))
     n: int = 0
     total: float = 0.0
     total_sq: float = 0.0
-    hist_before: np.ndarray = field(default_factory=lambda: np.zeros(len(EDGES_DEG), np.int64))
-    hist_after: np.ndarray = field(default_factory=lambda: np.zeros(len(EDGES_DEG), np.int64))
+    hist_before: np.ndarray | None = None
+    hist_after: np.ndarray | None = None
 
     def merge(self, other: "Group") -> None:
         self.counts += other.counts
         self.n += other.n
         self.total += other.total
         self.total_sq += other.total_sq
-        self.hist_before += other.hist_before
-        self.hist_after += other.hist_after
+        if other.hist_before is not None:
+            if self.hist_before is None:
+                self.hist_before = np.zeros(len(EDGES_DEG), np.int64)
+                self.hist_after = np.zeros(len(EDGES_DEG), np.int64)
+            self.hist_before += other.hist_before
+            self.hist_after += other.hist_after
 
 
 def _bins(angle_deg):
@@ -80,8 +87,8 @@ def _groups(t):
 
 def quantile_deg(hist, q):
     """The ``q`` quantile (deg) of a histogram on :data:`EDGES_DEG`; NaN when empty."""
-    total = hist.sum()
-    if total == 0:
+    total = 0 if hist is None else hist.sum()
+    if hist is None or total == 0:
         return float("nan")
     k = int(np.searchsorted(np.cumsum(hist), q * total, side="left"))
     lo = EDGES_DEG[k]
@@ -96,13 +103,15 @@ class FleetSummary:
     Attributes
     ----------
     tolerance_deg : float
-    groups : dict, (cell, panel, day) -> Group
+    groups : dict, (cell, panel, day) -> Group (no histograms)
+    series : dict, (cell, panel) -> Group (with histograms)
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
     """
 
     tolerance_deg: float
     groups: dict = field(default_factory=dict)
+    series: dict = field(default_factory=dict)
     worst: list = field(default_factory=list)
     judged_after: int = 0
     judged_before: int = 0
@@ -119,15 +128,21 @@ class FleetSummary:
         n = np.bincount(g[ok], minlength=G)
         s1 = np.bincount(g[ok], weights=judged[ok], minlength=G)
         s2 = np.bincount(g[ok], weights=judged[ok] ** 2, minlength=G)
-        nb = len(EDGES_DEG)
+        for j, k in enumerate(keys):
+            self.groups.setdefault(k, Group()).merge(Group(counts[j], int(n[j]), float(s1[j]), float(s2[j])))
+        # the histograms by cell and panel
+        cps = sorted({k[:2] for k in keys})
+        cp_of = np.array([cps.index(k[:2]) for k in keys])[g] if len(g) else np.zeros(0, int)
+        nb, C = len(EDGES_DEG), len(cps)
         hists = []
         for ang in (batch.angle_before, batch.angle_after):
             a = np.degrees(ang)
             f = np.isfinite(a)
-            hists.append(np.bincount(g[f] * nb + _bins(a[f]), minlength=G * nb).reshape(G, nb))
-        for j, k in enumerate(keys):
-            grp = self.groups.setdefault(k, Group())
-            grp.merge(Group(counts[j], int(n[j]), float(s1[j]), float(s2[j]), hists[0][j], hists[1][j]))
+            hists.append(np.bincount(cp_of[f] * nb + _bins(a[f]), minlength=C * nb).reshape(C, nb))
+        for j, k in enumerate(cps):
+            sel = [i for i, kk in enumerate(keys) if kk[:2] == k]
+            self.series.setdefault(k, Group()).merge(Group(counts[sel].sum(0), int(n[sel].sum()), float(s1[sel].sum()),
+                                                           float(s2[sel].sum()), hists[0][j], hists[1][j]))
         after = np.isfinite(batch.angle_after)
         self.judged_after += int((ok & after).sum())
         self.judged_before += int((ok & ~after).sum())
@@ -149,6 +164,8 @@ class FleetSummary:
     def merge(self, other: "FleetSummary") -> None:
         for k, grp in other.groups.items():
             self.groups.setdefault(k, Group()).merge(grp)
+        for k, grp in other.series.items():
+            self.series.setdefault(k, Group()).merge(grp)
         self.judged_after += other.judged_after
         self.judged_before += other.judged_before
         self.worst = sorted(self.worst + other.worst,
@@ -157,7 +174,7 @@ class FleetSummary:
     # ------------------------------------------------------------------ figures
     def total(self) -> Group:
         out = Group()
-        for grp in self.groups.values():
+        for grp in self.series.values():
             out.merge(grp)
         return out
 
@@ -172,6 +189,8 @@ class FleetSummary:
         sd = float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else float("nan")
         cpk = (self.tolerance_deg - mean) / (3 * sd) if sd and np.isfinite(sd) and sd > 0 else float("nan")
         qs = (0.5, 0.95, 0.99, 0.999)
-        return {"measured": grp.n, "mean_deg": mean, "sd_deg": sd, "cpk": cpk,
-                "quantiles_before_deg": {f"p{q * 100:g}": quantile_deg(grp.hist_before, q) for q in qs},
-                "quantiles_after_deg": {f"p{q * 100:g}": quantile_deg(grp.hist_after, q) for q in qs}}
+        out = {"measured": grp.n, "mean_deg": mean, "sd_deg": sd, "cpk": cpk}
+        if grp.hist_before is not None:
+            out["quantiles_before_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_before, q) for q in qs}
+            out["quantiles_after_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_after, q) for q in qs}
+        return out
