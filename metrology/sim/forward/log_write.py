@@ -229,9 +229,9 @@ def check_log_output(out, truth=None) -> str:
         t = Path(str(truth))
         if t.suffix.lower() not in _TRUTH_SINKS:
             raise ValueError(f"--truth {truth}: expected a .csv or .parquet file")
-        if t.is_dir() or not t.resolve().parent.is_dir():
-            raise ValueError(f"--truth {truth}: not a file in an existing folder")
         if t.resolve() == p.resolve() or (kind == "parquet" and p.resolve() in t.resolve().parents):
             raise ValueError(f"--truth {truth}: must lie apart from the log {out}")
+        if t.is_dir() or not t.resolve().parent.is_dir():
+            raise ValueError(f"--truth {truth}: not a file in an existing folder")
     return kind
 
