@@ -186,11 +186,11 @@ class _Geometry:
         e2 = _cross(n, e1)
         ct, st = np.cos(theta)[:, None], np.sin(theta)[:, None]
         a = -(ct * n + st * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
-        M = rotation_taking_axis(-1.0, a) * self.flip  # Q(-e_z -> a) F
-        R = M.copy()
-        cp, sp = np.cos(psi)[:, None], np.sin(psi)[:, None]
-        R[:, :, 0] = cp * M[:, :, 0] + sp * M[:, :, 1]
-        R[:, :, 1] = -sp * M[:, :, 0] + cp * M[:, :, 1]
+        R = rotation_taking_axis(-1.0, a) * self.flip  # Q(-e_z -> a) F
+        if spec.spin_rad > 0:  # ... Rz(psi)
+            M, cp, sp = R.copy(), np.cos(psi)[:, None], np.sin(psi)[:, None]
+            R[:, :, 0] = cp * M[:, :, 0] + sp * M[:, :, 1]
+            R[:, :, 1] = -sp * M[:, :, 0] + cp * M[:, :, 1]
         O = P - self.D * a
         offset = self._offset(cell_index, hole, time_s)
         d, gross = self.read(rng, self.cast(R, O), offset)
