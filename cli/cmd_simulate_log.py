@@ -22,6 +22,7 @@ def register(app: typer.Typer) -> None:
                                                    "--layout moved by --layout-error-mm/-deg, drawn from the seed."),
         truth: Optional[Path] = typer.Option(None, "--truth", help="Truth per hole_id (.csv or .parquet); default "
                                              "LOG.truth.csv beside a CSV, FOLDER.truth.parquet beside a folder."),
+        no_truth: bool = typer.Option(False, "--no-truth", help="Write no truth file (a throughput run)."),
         holes: int = typer.Option(10_000, "--holes", help="Holes in all, split evenly over the cells."),
         cells: int = typer.Option(1, "--cells", help="Cells C1..CK (the same head), each its own time line."),
         panel: str = typer.Option("flat", "--panel", help="flat, sphere or cylinder (convex toward the head)."),
@@ -63,7 +64,8 @@ def register(app: typer.Typer) -> None:
                 layout, out, truth=truth, true_layout_path=true_layout, holes=holes, cells=cells, panel=panel,
                 radius_mm=radius_mm, noise_mm=noise_mm, angle_deg=angles, standoff_mm=standoff_mm, spin_deg=spin_deg,
                 patch_mm=patch_mm, holes_per_hour=holes_per_hour, drifts=drifts, shifts=shifts, gross_rate=gross_rate,
-                layout_error_mm=layout_error_mm, layout_error_deg=layout_error_deg, seed=seed, progress=progress)
+                layout_error_mm=layout_error_mm, layout_error_deg=layout_error_deg, seed=seed,
+                write_truth=not no_truth, progress=progress)
         if json_out:
             echo_json(summary, "simulate-log")
         else:

@@ -107,9 +107,10 @@ def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_
 def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, holes=10_000, cells=1,
                        panel="flat", radius_mm=None, noise_mm=None, angle_deg=(0.5, 5.0), standoff_mm=None,
                        spin_deg=0.0, patch_mm=400.0, holes_per_hour=600.0, drifts=(), shifts=(), gross_rate=0.0,
-                       layout_error_mm=0.03, layout_error_deg=0.03, seed=0, progress=None) -> dict:
+                       layout_error_mm=0.03, layout_error_deg=0.03, seed=0, write_truth=True, progress=None) -> dict:
     """Write a simulated log at ``out`` (``.csv``: one file; else a new folder of partitioned Parquet)
-    and its truth at ``truth`` (default :func:`default_truth_path`); returns the summary.
+    and its truth at ``truth`` (default :func:`default_truth_path`; none when ``write_truth`` is False,
+    e.g. for a throughput run); returns the summary.
 
     ``drifts``/``shifts`` are SensorDrift/SensorShift (:func:`parse_drift`, :func:`parse_shift`);
     angles are in degrees (the edge), lengths in mm. Everything is checked before a file is written.
@@ -119,7 +120,9 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     from metrology.sim.forward.log_write import LOG_FORMATS, check_log_output
     from metrology.sim.forward.panels import make_panel
 
-    truth = default_truth_path(out) if truth is None else Path(truth)
+    if not write_truth and truth is not None:
+        raise ValueError("--truth and --no-truth exclude each other")
+    truth = None if not write_truth else default_truth_path(out) if truth is None else Path(truth)
     kind = check_log_output(out, truth)
     if holes < 1 or cells < 1 or holes < cells:
         raise ValueError(f"--holes {holes} --cells {cells}: expected holes >= cells >= 1")
@@ -145,7 +148,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     written = LOG_FORMATS[kind](chunks(), out, truth)
     seconds = time.perf_counter() - t0
     n, files = (written, [Path(out)]) if kind == "csv" else written
-    return {"out": str(out), "format": kind, "truth": str(truth), "holes": n, "cells": cells, "files": len(files),
+    return {"out": str(out), "format": kind, "truth": None if truth is None else str(truth), "holes": n, "cells": cells, "files": len(files),
             "seed": seed, "seconds": seconds, "holes_per_s": n / seconds if seconds > 0 else None,
             "true_layout": str(true_layout_path) if true_layout_path else "drawn from --layout and the seed",
             "spec": spec.to_dict()}

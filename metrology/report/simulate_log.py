@@ -16,5 +16,5 @@ def simulate_log_text(summary: dict) -> str:
     return (f"wrote {summary['out']}: {summary['holes']} holes, {summary['cells']} cell(s), {shape} panel, "
             f"true angle {spec['angle_deg'][0]:g}-{spec['angle_deg'][1]:g} deg"
             + (f", {', '.join(faults)}" if faults else "") + f" ({summary['files']} file(s))\n"
-            f"truth: {summary['truth']}; {summary['seconds']:.2f} s"
+            f"truth: {summary['truth'] or 'not written'}; {summary['seconds']:.2f} s"
             + (f" ({rate:,.0f} holes/s written)" if rate else ""))

@@ -60,6 +60,15 @@ def test_bad_values_are_one_line_exit_2_and_write_nothing(tmp_path, args, msg):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_no_truth_writes_the_log_alone(tmp_path):
+    r = runner.invoke(app, ["simulate-log", "--out", str(tmp_path / "log.csv"), "--holes", "100", "--no-truth"])
+    assert r.exit_code == 0, r.output
+    assert [p.name for p in tmp_path.iterdir()] == ["log.csv"] and "truth: not written" in r.stdout
+    r = runner.invoke(app, ["simulate-log", "--out", str(tmp_path / "b.csv"), "--no-truth", "--truth",
+                            str(tmp_path / "t.csv")])
+    assert r.exit_code == 2 and "exclude each other" in r.output
+
+
 def test_an_existing_log_folder_is_never_written_over(tmp_path):
     (tmp_path / "logs").mkdir()
     (tmp_path / "logs" / "keep.parquet").write_bytes(b"x")
