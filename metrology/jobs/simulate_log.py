@@ -148,7 +148,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     written = LOG_FORMATS[kind](chunks(), out, truth)
     seconds = time.perf_counter() - t0
     n, files = (written, [Path(out)]) if kind == "csv" else written
-    return {"out": str(out), "format": kind, "truth": None if truth is None else str(truth), "holes": n, "cells": cells, "files": len(files),
-            "seed": seed, "seconds": seconds, "holes_per_s": n / seconds if seconds > 0 else None,
+    return {"out": str(out), "format": kind, "truth": None if truth is None else str(truth), "holes": n,
+            "cells": cells, "files": len(files), "seed": seed, "seconds": seconds, "holes_per_s": n / seconds if seconds > 0 else None,
             "true_layout": str(true_layout_path) if true_layout_path else "drawn from --layout and the seed",
             "spec": spec.to_dict()}
