@@ -128,7 +128,7 @@ def test_no_module_over_the_size_limit():
 def test_heavy_libraries_load_lazily(entry):
     """``metro --help`` stays fast: importing the CLI or the package pulls in no heavy library."""
     code = (f"import sys, {entry}; heavy = [m for m in ('numpy', 'scipy', 'open3d', 'trimesh', 'matplotlib', "
-            f"'filterpy') if m in sys.modules]; print(','.join(heavy))")
+            f"'filterpy', 'pyarrow') if m in sys.modules]; print(','.join(heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT).stdout
     allowed = {"numpy"} if entry == "metrology" else set()
     assert set(filter(None, out.strip().split(","))) <= allowed

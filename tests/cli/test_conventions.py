@@ -55,6 +55,7 @@ def _cases(tmp, small_export):
         "reproduce": (["reproduce", "--poses", "20", "--figures", "-"], None),
         "demo": (["demo", "--out", str(tmp / "demo")], None),
         "version": (["version"], None),
+        "simulate-log": (["simulate-log", "--out", str(tmp / "log.csv"), "--holes", "50"], None),
         "plan": (["plan", "--layout", str(M / "nominal.toml"), "--plane", "-", "--poses", "6", "--candidates", "300"],
                  _read(M / "datum.ply")),
     }
