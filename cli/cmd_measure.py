@@ -32,6 +32,9 @@ def register(app: typer.Typer) -> None:
                                                 "(tcp://host:port), one task per partition (needs metro[fleet])."),
         fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm too (by default "
                                            "an alarm is reported, and the exit code judges the holes)."),
+        chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
+                                            "panel (for panels whose shape moves the redundant reading's misfit); "
+                                            "misses a drift slower than a panel."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
     ) -> None:
@@ -62,12 +65,12 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>")
+                           report, "<stdin>", chart_by_panel)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None)
+                       report, None, chart_by_panel)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -78,10 +81,12 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"report: {report}", err=True)
         raise typer.Exit(exit_code(rep.verdict))
 
-    def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display):
+    def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
+             chart_by_panel):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
             return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
                                  workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
-                                 warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display)
+                                 warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
+                                 chart_by_panel=chart_by_panel)

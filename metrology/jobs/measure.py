@@ -99,7 +99,8 @@ def _digest(layout) -> str:
 def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float = 500.0,
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
-                  log_display: str | None = None, batch_rows: int | None = None) -> MeasureReport:
+                  log_display: str | None = None, batch_rows: int | None = None,
+                  chart_by_panel: bool = False) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
     report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask.
@@ -150,6 +151,7 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     output = None
     if target is not None and (target.is_dir() or target.suffix == ""):
         output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
+                                            "chart_by_panel": chart_by_panel,
                                             "layout_sha256": _digest(layout), "log": str(log_path)})
     total = None
     done = [0]
@@ -166,7 +168,7 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         client = connect(workers, scheduler)
         try:
             engine = (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
-            result = measure_log_dask(client, log, layout, settings, output, progress=tick)
+            result = measure_log_dask(client, log, layout, settings, output, progress=tick, by_panel=chart_by_panel)
         finally:
             cluster = getattr(client, "cluster", None)
             client.close()
@@ -177,12 +179,12 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
 
         engine = "one process"
         if output is not None:
-            result = measure_log(log, layout, settings, output=output, progress=tick)
+            result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)
         else:
             with TableSink(target) as sink:
-                result = measure_log(log, layout, settings, sink=sink, progress=tick)
+                result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
-                           engine, tuple(warnings), fail_on_drift, chart_settings())
+                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel})
     if report_html is not None:
         from metrology.io.atomic import write_text
         from metrology.report.html import render_html, run_info

@@ -5,9 +5,16 @@ On a 4-sensor head every hole carries one redundant reading: its misfit ``rho`` 
 about a level set by the calibration's small errors and the panel's shape; when one sensor's
 zero moves by ``delta``, ``rho`` moves by ``q_k (m.u_k) delta``. The chart:
 
-1. **Baseline** (phase I): the first :data:`BASELINE_HOLES` holes of each cell on each panel
-   give the in-control level (median) and scale (1.4826 MAD, floored at the reading noise's own
-   sigma of ``rho``). They are not charted.
+1. **Baseline** (phase I): the first :data:`BASELINE_HOLES` holes of each cell give the
+   in-control level (median) and scale: the standard deviation of the holes within 5 MAD of the
+   median, raised to its upper 95 % confidence bound (``1 + 1.645 / sqrt(2 (n - 1))``: a scale
+   estimated low would shorten the in-control run length a lot, one estimated high lengthens the
+   time to detect a little), and never below the reading noise's own sigma of ``rho``. The
+   residual's spread is more than the noise's: the calibration's small errors move ``rho`` with
+   the hole's geometry. The baseline's holes are not charted. The chart runs on across panels, so a drift slower than a
+   panel is seen; with ``by_panel`` each panel takes a new baseline instead (for panels whose
+   shape moves the residual's level: a twist under the foot), which cannot see a change that
+   coincides with a new panel, nor a drift slower than a panel.
 2. **Chart** (phase II): ``x_t = (rho_t - level) / scale`` into the two-sided CUSUM
 
        S+_t = max(0, S+_{t-1} + x_t - k),   S-_t = max(0, S-_{t-1} - x_t - k),
@@ -42,8 +49,8 @@ __all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HO
 CUSUM_K = 0.5
 #: in-control average run length, holes: about one false alarm per million holes per cell
 ARL0_HOLES = 1_000_000
-#: holes of each cell on each panel that set the chart's level and scale before it is charted
-BASELINE_HOLES = 200
+#: holes of each cell (each panel with ``by_panel``) that set the chart's level and scale
+BASELINE_HOLES = 1000
 #: standardized residuals are clipped to +-CLIP before the CUSUM (a gross reading adds at most this)
 CLIP = 4.0
 #: the decision interval, scales: ``cusum_h(ARL0_HOLES, CUSUM_K)`` (tests/measure/test_chart.py
@@ -172,7 +179,9 @@ class CusumChart:
     alarms: list = field(default_factory=list)
     series: list = field(default_factory=list)
     charted: int = 0
+    by_panel: bool = False
     panel: str | None = None
+    _segment: str | None = None
     level: float = float("nan")
     scale: float = float("nan")
     signature: np.ndarray | None = None
@@ -182,9 +191,9 @@ class CusumChart:
     _stride: int = 1
     _pending: dict | None = None  # an alarm waiting for the new baseline to size the change
 
-    def _restart(self, panel) -> None:
+    def _restart(self, segment) -> None:
         self.finish()
-        self.panel = panel
+        self._segment = segment
         self._base = []
         self.level = self.scale = float("nan")
         self.signature = None
@@ -202,13 +211,15 @@ class CusumChart:
         signature : (N, 4) float, ``d rho / d delta_k`` (mm per mm)
         """
         panel = np.asarray(panel).astype(str)
+        seg = panel if self.by_panel else np.zeros(len(panel), dtype="<U1")
         N = len(rho_mm)
         i = 0
         while i < N:
-            if panel[i] != self.panel:
-                self._restart(panel[i])
-            other = np.flatnonzero(panel[i:] != panel[i])
+            if seg[i] != self._segment:
+                self._restart(seg[i])
+            other = np.flatnonzero(seg[i:] != seg[i])
             j = i + (int(other[0]) if other.size else N - i)
+            self.panel = str(panel[j - 1])
             if np.isnan(self.level):
                 take = min(self.baseline_holes - sum(len(b[0]) for b in self._base), j - i)
                 self._base.append((rho_mm[i:i + take], noise_sd_mm[i:i + take], signature[i:i + take]))
@@ -216,7 +227,7 @@ class CusumChart:
                 if sum(len(b[0]) for b in self._base) >= self.baseline_holes:
                     self._set_baseline()
                 continue
-            at = self._chart(hole_id[i:j], time_s[i:j], rho_mm[i:j])
+            at = self._chart(hole_id[i:j], time_s[i:j], rho_mm[i:j], panel[i:j])
             i = j if at is None else i + at + 1
 
     def _set_baseline(self) -> None:
@@ -224,7 +235,9 @@ class CusumChart:
         sd = np.concatenate([b[1] for b in self._base])
         self.level = float(np.median(rho))
         mad = 1.4826 * float(np.median(np.abs(rho - self.level)))
-        self.scale = max(mad, float(np.median(sd)))
+        kept = rho[np.abs(rho - self.level) <= 5.0 * max(mad, 1e-12)]
+        sdev = float(np.std(kept, ddof=1)) if len(kept) > 1 else mad
+        self.scale = max(sdev * (1.0 + 1.645 / np.sqrt(2.0 * max(len(kept) - 1, 1))), float(np.median(sd)))
         self.signature = np.median(np.concatenate([b[2] for b in self._base]), axis=0)
         self._base = []
         self._size_pending()
@@ -248,7 +261,7 @@ class CusumChart:
             self._base = []
         self._size_pending()
 
-    def _chart(self, hole_id, time_s, rho):
+    def _chart(self, hole_id, time_s, rho, panel):
         """Chart the holes of one panel run; the index of the alarming hole, or None."""
         raw = (np.asarray(rho, float) - self.level) / self.scale
         x = np.clip(raw, -CLIP, CLIP)
@@ -272,10 +285,10 @@ class CusumChart:
         run = self._runs[0 if up else 1]
         pending = {"level": self.level, "signature": self.signature,
                    "fallback_mm": run.total / max(run.count, 1) * self.scale,
-                   "alarm": dict(cell=self.cell, panel=str(self.panel), hole_id=str(hole_id[first]),
+                   "alarm": dict(cell=self.cell, panel=str(panel[first]), hole_id=str(hole_id[first]),
                                  time_s=float(time_s[first]), start_hole_id=run.hole_id, start_time_s=run.time_s,
                                  holes_since_start=self.charted - run.index, direction="up" if up else "down")}
-        self._restart(self.panel)  # a new baseline: one alarm per change, sized by the new level
+        self._restart(self._segment)  # a new baseline: one alarm per change, sized by the new level
         self._pending = pending
         return first
 

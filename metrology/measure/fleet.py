@@ -45,13 +45,13 @@ def _task(log, part, layout, settings, output):
 
 
 def measure_log_dask(client, log: HoleLog, layout: SensorLayout, settings: Settings, output,
-                     progress=None) -> MeasureResult:
+                     progress=None, by_panel: bool = False) -> MeasureResult:
     """Measure ``log`` on ``client``'s workers, one task per partition, results into ``output``."""
     output.begin()
     futures = [client.submit(_task, log, part, layout, settings, output, pure=False, key=f"metro-measure-{i}-{part.relative}")
                for i, part in enumerate(log.partitions)]
     summary = FleetSummary(float(np.degrees(settings.tolerance)))
-    watch = Watch(layout.names)
+    watch = Watch(layout.names, by_panel)
     rows = written = 0
     for fut in futures:  # in the log's order: the watch needs it; later tasks run meanwhile
         r = fut.result()

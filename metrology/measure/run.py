@@ -100,6 +100,7 @@ class Watch:
     """
 
     sensors: tuple
+    by_panel: bool = False
     charts: dict = field(default_factory=dict)
     last: dict = field(default_factory=dict)
 
@@ -125,7 +126,7 @@ class Watch:
             self.last[cell] = (float(t[-1]), f.where, f.line(rows[-1]))
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
-                chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors))
+                chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors, by_panel=self.by_panel))
                 chart.update(f.hole_id[c], f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c], f.signature[c])
 
     def finish(self) -> None:
@@ -223,10 +224,10 @@ class MeasureResult:
 
 
 def measure_log(log: HoleLog, layout: SensorLayout, settings: Settings, sink=None, output=None,
-                progress=None) -> MeasureResult:
+                progress=None, by_panel: bool = False) -> MeasureResult:
     """Measure every partition of ``log`` in one process, in order (see :func:`measure_partition`)."""
     summary = FleetSummary(float(np.degrees(settings.tolerance)))
-    watch = Watch(layout.names)
+    watch = Watch(layout.names, by_panel)
     rows = written = 0
     if output is not None:
         output.begin()

@@ -68,7 +68,7 @@ def measure_text(report) -> str:
     lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.get('k')}, "
                   f"h {ch.get('h')}, in-control ARL {ch.get('arl0_holes', 0):,.0f} holes; a shift of 1 scale is "
                   f"flagged after {ch.get('arl_at_detectable_holes')} holes on average; "
-                  f"{ch.get('baseline_holes')} holes of baseline per cell and panel)"]
+                  f"{ch.get('baseline_holes')} holes of baseline per " + ("panel" if ch.get("by_panel") else "cell") + ")"]
     if not report.result.watch.charts:
         lines.append("  no cell charted (the drift watch needs holes read by all 4 sensors of a 4-sensor head)")
     alarms = report.result.alarms
@@ -117,9 +117,9 @@ def _chart_figure(chart, alarms):
             ax.axvline((a.time_s - t[0]) / 3600.0, color="C3", lw=1)
         ax.axhline(chart.h, color="k", ls="--", lw=1, label=f"h = {chart.h:g}")
         ax.set_xlabel(f"hours since {utc(t[0])}")
+        ax.legend(loc="upper left")
     ax.set_ylabel("CUSUM [scales]")
     ax.set_title(f"cell {chart.cell}")
-    ax.legend(loc="upper left")
     fig.tight_layout()
     return fig
 

@@ -125,7 +125,7 @@ def test_partitioned_log_resumes_without_duplicating(tmp_path, layout):
 
 
 def test_report_is_written_and_named(tmp_path, layout):
-    log = _log(tmp_path, n=400, angle_deg=(1, 4), after_deg=(0.0, 0.1), shift=(2, 300, 0.03))
+    log = _log(tmp_path, n=1300, angle_deg=(1, 4), after_deg=(0.0, 0.1), shift=(2, 1150, 0.03))
     rep = tmp_path / "r.html"
     r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv"),
                             "--report", str(rep), "--json", "--fail-on-drift"])

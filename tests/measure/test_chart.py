@@ -116,10 +116,17 @@ def test_a_gross_reading_alone_raises_no_alarm():
     assert not _feed(CusumChart("C1", SENSORS), rho).alarms
 
 
-def test_a_new_panel_takes_a_new_baseline():
-    """A panel whose shape moves the residual's level is not a drift."""
+def test_the_chart_runs_on_across_panels_and_by_panel_takes_new_baselines():
+    """By default a drift spread over many panels is seen; with by_panel, a panel whose shape moves
+    the residual's level is not a drift."""
     rng = np.random.default_rng(6)
+    rho = rng.normal(0, 0.003, 6000) + np.arange(6000) * (0.015 / 6000)  # 15 um of residual over 30 panels
+    panels = np.repeat([f"P{i}" for i in range(30)], 200)
     chart = CusumChart("C1", SENSORS)
+    chart.update(np.array([f"H{i}" for i in range(6000)]), np.arange(6000.0), panels, rho, np.full(6000, 0.003),
+                 np.tile(SIG, (6000, 1)))
+    assert chart.alarms
+    chart = CusumChart("C1", SENSORS, by_panel=True)
     for panel, level in (("A", 0.0), ("B", 0.050), ("C", -0.030)):
         rho = rng.normal(level, 0.003, 2000)
         n = len(rho)

@@ -30,10 +30,10 @@ def fleet(tmp_path_factory):
     lay = calibrated_layout()
     save_layout(lay, root / "calibrated.toml")
     for k, cell in enumerate(("C1", "C2", "C3")):
-        cols, _, _ = hole_log(lay, n=900, seed=k, cells=(cell,), angle_deg=(1, 4), after_deg=(0.0, 0.3),
-                              shift=(1, 600, 0.03) if cell == "C2" else None)
+        cols, _, _ = hole_log(lay, n=1400, seed=k, cells=(cell,), angle_deg=(1, 4), after_deg=(0.0, 0.3),
+                              shift=(1, 1200, 0.03) if cell == "C2" else None)
         t = pa.table(cols).drop_columns(["cell"])
-        for day, rows in (("2026-11-25", slice(0, 450)), ("2026-11-26", slice(450, 900))):
+        for day, rows in (("2026-11-25", slice(0, 700)), ("2026-11-26", slice(700, 1400))):
             d = root / "log" / f"cell={cell}" / f"date={day}"
             d.mkdir(parents=True)
             pq.write_table(t.slice(rows.start, rows.stop - rows.start), d / "part-0.parquet")
