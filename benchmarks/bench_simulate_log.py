@@ -1,6 +1,7 @@
 """Speed of the hole-log simulator (``metro simulate-log``, issue 29): holes/s drawn, and written.
 
-    python benchmarks/bench_simulate_log.py [--holes 1000000] [--repeat 3] [--out benchmarks/results/simulate_log.txt]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_simulate_log.py [--holes 1000000] [--repeat 3] \
+        [--out benchmarks/results/simulate_log.txt]
 
 Per panel (flat, sphere R 800 mm, cylinder R 800 mm; the Table 6 head, a calibrated layout 0.015-0.03
 mm / deg from the truth): the generation alone (:func:`metrology.sim.forward.log.simulate_log`,
@@ -44,12 +45,14 @@ def draws_only(holes, n_sensors):
 
 
 def best(fn, repeat):
-    times = []
+    """Best wall time and best CPU time of this process (s) over ``repeat`` runs."""
+    wall, cpu = [], []
     for _ in range(repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return min(wall), min(cpu)
 
 
 def main(argv=None):
@@ -61,13 +64,17 @@ def main(argv=None):
     lay = load_layout(data_path("measured", "nominal.toml"))
     true = perturb_layout(np.random.default_rng(1), lay, (0.015, 0.03), (0.015, 0.03))
     lines = [f"# {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; {a.holes} holes, "
-             f"best of {a.repeat}; numpy {np.__version__}"]
-    t_base = best(lambda: draws_only(a.holes, lay.n), a.repeat)
-    lines.append(f"baseline (random draws only): {t_base:.3f} s, {a.holes / t_base:,.0f} holes/s")
+             f"best of {a.repeat}; numpy {np.__version__}; "
+             f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}",
+             "# wall time counts other processes' load; CPU time is this process's own (all its threads)"]
+    t_base, c_base = best(lambda: draws_only(a.holes, lay.n), a.repeat)
+    lines.append(f"baseline (random draws only): {t_base:.3f} s, {a.holes / t_base:,.0f} holes/s; "
+                 f"CPU {c_base:.3f} s")
     for kind in ("flat", "sphere", "cylinder"):
         spec = LogSpec(true, lay, make_panel(kind, 800.0))
-        t = best(lambda: sum(c.n for c in simulate_log(spec, 0, a.holes, 1, chunk_holes=8 * BLOCK_HOLES)), a.repeat)
-        lines.append(f"generate {kind:8s}: {t:.3f} s, {a.holes / t:,.0f} holes/s, {t / t_base:.2f}x the baseline")
+        t, c = best(lambda: sum(c.n for c in simulate_log(spec, 0, a.holes, 1, chunk_holes=8 * BLOCK_HOLES)), a.repeat)
+        lines.append(f"generate {kind:8s}: {t:.3f} s, {a.holes / t:,.0f} holes/s, {t / t_base:.2f}x the baseline; "
+                     f"CPU {c:.3f} s, {a.holes / c:,.0f} holes per CPU-s")
     spec = LogSpec(true, lay, make_panel("flat"))
     with tempfile.TemporaryDirectory() as d:
         t = time.perf_counter()
