@@ -6,8 +6,10 @@ cast at the panel, the cell's own adjustment), measured by the same code as `met
   (one per ARL0 = 1e6 holes a cell);
 - **shift** (a knocked sensor): the zero of a random sensor jumps by ``m`` times its detectable
   size at a random hole; the holes from the jump to the alarm;
-- **drift**: the zero of a random sensor grows linearly; the holes from the moment the drift
-  reaches its detectable size to the alarm.
+- **drift**: the zero of a random sensor grows linearly, reaching ``m`` times its detectable size
+  after ``--drift-holes`` holes; the holes from the drift's start to the alarm, and the drift's size
+  then (in detectable sizes). A CUSUM sums: a drift is often flagged before it reaches one
+  detectable size.
 
 The detectable size of sensor k is the zero shift that moves the redundant residual by one chart
 scale (DETECTABLE_SCALES): ``scale / |signature_k|``, read off the chart's own baseline.
@@ -93,7 +95,7 @@ def run(args):
     print(f"in control: {n_alarms} alarm(s) in {int(args.control):,} holes (stated rate: 1 per 1,000,000)", flush=True)
     for kind in ("shift", "drift"):
         for mult in (1.0, 2.0):
-            delays, missed, early = [], 0, 0
+            delays, missed, early, sizes = [], 0, 0, []
             for trial in range(args.trials):
                 s = str(rng.choice(cal.names))
                 k0 = int(rng.integers(1000, 3000))
@@ -109,22 +111,27 @@ def run(args):
                     reach = k0 + int(np.ceil(det[s] / abs(rate)))  # where it reaches the detectable size
                     holes = k0 + 3 * args.drift_holes
                 w = watch_log(spec, 100 + trial, holes)
-                after = [hole_of(a.hole_id) for a in w.alarms if hole_of(a.hole_id) >= min(reach, k0)]
-                early += sum(hole_of(a.hole_id) < k0 for a in w.alarms)
+                after = [hole_of(a.hole_id) - 1 for a in w.alarms if hole_of(a.hole_id) - 1 >= k0]
+                early += sum(hole_of(a.hole_id) - 1 < k0 for a in w.alarms)
                 if not after:
                     missed += 1
                     continue
-                delays.append(after[0] - reach)
+                delays.append(after[0] - (k0 if kind == "drift" else reach))
+                if kind == "drift":
+                    sizes.append((after[0] - k0) * abs(rate) / det[s])
             d = np.array(delays)
             row = {"kind": kind, "size_x_detectable": mult, "trials": args.trials, "missed": missed,
                    "alarms_before_the_change": early,
                    "delay_holes_median": float(np.median(d)) if d.size else None,
                    "delay_holes_p95": float(np.quantile(d, 0.95)) if d.size else None,
-                   "delay_holes_max": int(d.max()) if d.size else None}
+                   "delay_holes_max": int(d.max()) if d.size else None,
+                   "delay_from": "the shift" if kind == "shift" else "the drift's start",
+                   "size_at_alarm_x_detectable_median": float(np.median(sizes)) if sizes else None}
             out[f"{kind}_x{mult:g}"] = row
+            size = row["size_at_alarm_x_detectable_median"]
             print(f"| {kind} | {mult:g} x detectable | {args.trials - missed}/{args.trials} | "
-                  f"{row['delay_holes_median']} | {row['delay_holes_p95']} | {row['delay_holes_max']} | {early} |",
-                  flush=True)
+                  f"{row['delay_holes_median']:.0f} | {row['delay_holes_p95']:.0f} | {row['delay_holes_max']} | "
+                  f"{'-' if size is None else format(size, '.2f')} | {early} |", flush=True)
     return out
 
 
@@ -136,9 +143,12 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    print("| change | size | flagged | holes to the alarm: median | p95 | max | drift at the alarm (x detectable) "
+          "| alarms before the change |")
+    print("|---|---|---|---|---|---|---|---|")
     out = run(args)
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        args.json.write_text(json.dumps(out, indent=1, default=str))
 
 
 if __name__ == "__main__":

@@ -154,7 +154,7 @@ def main(argv=None):
     print("|---|---|---|---|---|---|---|---|---|")
     out = run(args)
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        args.json.write_text(json.dumps(out, indent=1, default=str))
 
 
 if __name__ == "__main__":
