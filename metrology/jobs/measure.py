@@ -88,6 +88,27 @@ class MeasureReport:
         }
 
 
+#: a log in which more than this share of holes have readings that disagree does not fit the layout
+MISFIT_SHARE = 0.5
+
+
+def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) -> None:
+    """Refuse (ValueError) results the data cannot support: most holes' readings disagreeing with
+    one plane means the layout is not this head's (another head's file, a nominal layout on a head
+    far from it, readings in other units). A partitioned output is already written: a warning."""
+    rows = result.rows
+    bad = result.summary.disagree
+    if rows >= 20 and bad > MISFIT_SHARE * rows:
+        line = (f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with one plane by more than a "
+                f"panel of radius >= {min_radius_mm:g} mm allows: this layout does not fit the head that made the "
+                f"log (another head's layout? readings not in mm? a more curved panel: --min-radius-mm)")
+        if warnings is None:
+            raise ValueError(line)
+        warnings.append(line)
+        if warn is not None:
+            warn(line)
+
+
 def _digest(layout) -> str:
     import hashlib
 
@@ -183,6 +204,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         else:
             with TableSink(target) as sink:
                 result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
+                _check_fit(result, shown_layout, min_radius_mm)  # before the file appears
+    if output is not None:
+        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
                            engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel})
     if report_html is not None:

@@ -81,6 +81,7 @@ class HoleBatch:
     judged : (N,) float, rad, the angle the verdict judged (NaN where not measured)
     judged_u95 : (N,) float, rad
     angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
+    disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
     chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
         ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
     """
@@ -92,6 +93,7 @@ class HoleBatch:
     angle_before: np.ndarray
     angle_after: np.ndarray
     chart: dict
+    disagree: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -108,6 +110,7 @@ class _Measured:
     signature: np.ndarray
     used: np.ndarray  # (N, n) bool
     reason: np.ndarray  # (N,) object: "" or why
+    disagree: np.ndarray  # (N,) bool: rule 2, the readings disagree
 
 
 def _curvature_bound(layout, d, min_radius_mm):
@@ -135,7 +138,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
     in_range = finite & (d >= lo[None]) & (d <= hi[None])
     out = _Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full(N, np.nan), np.full((N, n), np.nan), in_range,
-                    np.full(N, "", dtype=object))
+                    np.full(N, "", dtype=object), np.zeros(N, bool))
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -163,6 +166,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
                 out.noise_sd[rows] = h.residual / h.residual_z
             bound = _curvature_bound(sub, dd, settings.min_radius_mm)
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * np.abs(out.noise_sd[rows])
+            out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
                                  f"{h.residual[i] * 1e3:.1f} um, {abs(h.residual_z[i]):.0f} noise sigmas beyond what a "
@@ -278,5 +282,6 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     idx = np.flatnonzero(full4)
     chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": np.abs(before.noise_sd[idx]),
              "signature": before.signature[idx]}
+    disagree = before.disagree | (after.disagree & judge_after if after is not None else False)
     return HoleBatch(out, code, judged, judged_u, before.angle,
-                     after.angle if after is not None else np.full(N, np.nan), chart)
+                     after.angle if after is not None else np.full(N, np.nan), chart, disagree)

@@ -115,6 +115,7 @@ class FleetSummary:
     worst: list = field(default_factory=list)
     judged_after: int = 0
     judged_before: int = 0
+    disagree: int = 0
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
@@ -146,6 +147,7 @@ class FleetSummary:
         after = np.isfinite(batch.angle_after)
         self.judged_after += int((ok & after).sum())
         self.judged_before += int((ok & ~after).sum())
+        self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -168,6 +170,7 @@ class FleetSummary:
             self.series.setdefault(k, Group()).merge(grp)
         self.judged_after += other.judged_after
         self.judged_before += other.judged_before
+        self.disagree += other.disagree
         self.worst = sorted(self.worst + other.worst,
                             key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
 

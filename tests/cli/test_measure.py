@@ -137,3 +137,17 @@ def test_report_is_written_and_named(tmp_path, layout):
     html = rep.read_text()
     assert "Hole measurement" in html and "recalibrate" in html.lower()
     assert f"report: {rep}" in r.stderr
+
+
+def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):
+    """Readings that disagree with one plane at most holes: another head's layout, exit 2, no file."""
+    lay = calibrated_layout()
+    other = lay.with_params(lay.zero + [[0.4, 0, 0], [0, 0.4, 0], [0, 0, 0.4], [0.2, 0.2, 0]], lay.direction)
+    p = tmp_path / "other.toml"
+    save_layout(other, p)
+    log = _log(tmp_path, n=100, angle_deg=(0.5, 2))
+    out = tmp_path / "h.csv"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(p), "--out", str(out), "--min-radius-mm", "inf"])
+    assert r.exit_code == 2
+    assert "the readings of 100 of 100 holes disagree with one plane" in r.stderr
+    assert not out.exists()
