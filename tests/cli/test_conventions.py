@@ -38,6 +38,14 @@ def small_export(tmp_path_factory):
     return out
 
 
+def _tiny_log(tmp):
+    """30 holes cast at planes for the bundled Table 6 layout, as CSV bytes."""
+    from tests.measure.helpers import calibrated_layout, hole_log, write_log_csv
+
+    cols, _, _ = hole_log(calibrated_layout(), n=30, angle_deg=(0.01, 0.1))
+    return write_log_csv(cols, tmp / "tiny.csv").read_bytes()
+
+
 def _cases(tmp, small_export):
     """One cheap --json run of each command: (args, stdin). Several read an input from '-'."""
     return {
@@ -56,6 +64,8 @@ def _cases(tmp, small_export):
         "demo": (["demo", "--out", str(tmp / "demo")], None),
         "version": (["version"], None),
         "simulate-log": (["simulate-log", "--out", str(tmp / "log.csv"), "--holes", "50"], None),
+        "measure": (["measure", "-", "--layout", str(M / "nominal.toml"), "--out", str(tmp / "holes.csv")],
+                    _tiny_log(tmp)),
         "plan": (["plan", "--layout", str(M / "nominal.toml"), "--plane", "-", "--poses", "6", "--candidates", "300"],
                  _read(M / "datum.ply")),
     }
