@@ -8,9 +8,11 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 1. **in process**: :func:`metrology.measure.holes.measure_batch` on batches already in memory, with
    and without after-readings (holes/s; the issue's goal: >= 1e6 holes/s);
 2. **whole process**: ``metro measure LOG.parquet --layout L --out holes.parquet`` against a plain
-   script that reads the same file with pyarrow, fits the 4-point planes with batched numpy (the
-   same closed-form least squares, normals only: no uncertainty, verdict, drift watch or summary)
-   and writes the normals (best wall time of ``--repeat``, run in turn; peak RSS). Goal: <= 1.5x;
+   script that reads the same file with pyarrow, fits the 4-point planes before and after the
+   adjustment with batched numpy (the same closed-form least squares, normals only: no
+   uncertainty, verdict, drift watch or summary) and writes the normals (best wall time of
+   ``--repeat``, run in turn; its CPU time, which the other jobs on a shared machine disturb
+   less; peak RSS). Goal: <= 1.5x;
 3. **Dask**: the partitioned log with ``--workers 1`` and ``--workers 2`` (holes/s, the cluster's
    start included), against the single process on the same folder;
 4. ``--big N``: a partitioned log of N holes (generated in ``--workdir``, never committed) measured in
@@ -41,7 +43,8 @@ RUN = ("import resource, subprocess, sys, time\n"
        "t = time.perf_counter()\n"
        "r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
        "dt = time.perf_counter() - t\n"
-       "print(dt, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, r.returncode)\n")
+       "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+       "print(dt, u.ru_maxrss, r.returncode, u.ru_utime + u.ru_stime)\n")
 
 BASELINE = '''
 import sys, tomllib
@@ -51,18 +54,30 @@ with open(layout, "rb") as fh:
     sensors = tomllib.load(fh)["sensors"]
 E = np.array([s["zero"] for s in sensors]); u = np.array([s["direction"] for s in sensors])
 u /= np.linalg.norm(u, axis=1, keepdims=True)
-cols = [f"d_{s['name']}" for s in sensors]
+names = [s["name"] for s in sensors]
 pf = pq.ParquetFile(log)
+after = all(f"d_{n}_after" in pf.schema_arrow.names for n in names)
+sets = [[f"d_{n}" for n in names]] + ([[f"d_{n}_after" for n in names]] if after else [])
 writer = None
-for b in pf.iter_batches(batch_size=1 << 18, columns=["hole_id", *cols]):
-    d = np.stack([b.column(c).to_numpy(zero_copy_only=False) for c in cols], axis=1)
+
+
+def normals(d):
     x, y, z = (E[None, :, k] + d * u[None, :, k] for k in range(3))
     xc, yc, zc = (v - v.mean(1, keepdims=True) for v in (x, y, z))
     sxx, syy, sxy, sxz, syz = ((a * c).sum(1) for a, c in ((xc, xc), (yc, yc), (xc, yc), (xc, zc), (yc, zc)))
     det = sxx * syy - sxy * sxy
     gx, gy = (syy * sxz - sxy * syz) / det, (sxx * syz - sxy * sxz) / det
     r = np.sqrt(1 + gx * gx + gy * gy)
-    t = pa.table({"hole_id": b.column("hole_id"), "normal_x": -gx / r, "normal_y": -gy / r, "normal_z": 1 / r})
+    return -gx / r, -gy / r, 1 / r
+
+
+for b in pf.iter_batches(batch_size=1 << 18, columns=["hole_id", *sum(sets, [])]):
+    cols = {"hole_id": b.column("hole_id")}
+    for k, cs in enumerate(sets):
+        d = np.stack([b.column(c).to_numpy(zero_copy_only=False) for c in cs], axis=1)
+        for axis, v in zip("xyz", normals(d)):
+            cols[f"normal{'_after' * k}_{axis}"] = v
+    t = pa.table(cols)
     if writer is None:
         writer = pq.ParquetWriter(out, t.schema)
     writer.write_table(t)
@@ -109,37 +124,41 @@ def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool 
     return workdir / "log.parquet", folder, workdir / "calibrated.toml"
 
 
-def in_process(log, layout, repeat):
+def in_process(log, layout, repeat, cpu=False):
     import pyarrow.parquet as pq
 
     from metrology.io.layout import load_layout
     from metrology.measure.holes import Settings, measure_batch
 
     lay = load_layout(layout)
+    clock = time.process_time if cpu else time.perf_counter
     table = pq.read_table(log)
     before_only = table.drop_columns([c for c in table.column_names if c.endswith("_after")])
     out = {}
     for name, t in (("before", before_only), ("before+after", table)):
         best = np.inf
         for _ in range(repeat):
-            t0 = time.perf_counter()
+            t0 = clock()
             for b in t.to_batches(max_chunksize=1 << 18):
                 import pyarrow as pa
 
                 measure_batch(lay, pa.Table.from_batches([b]), Settings())
-            best = min(best, time.perf_counter() - t0)
+            best = min(best, clock() - t0)
         out[name] = t.num_rows / best
     return out
 
 
-def process(cmd, repeat):
-    best, rss = np.inf, 0
+def process(cmd, repeat, cpu=None):
+    """Best wall time (s) and peak RSS (MB) of ``cmd`` over ``repeat`` runs; its best CPU time into ``cpu``."""
+    best, rss, best_cpu = np.inf, 0, np.inf
     for _ in range(repeat):
         r = subprocess.run([sys.executable, "-c", RUN, *cmd], capture_output=True, text=True, check=True)
-        dt, kb, rc = r.stdout.split()
+        dt, kb, rc, c = r.stdout.split()
         if int(rc) not in (0, 1):
             raise RuntimeError(f"{cmd} exited {rc}")
-        best, rss = min(best, float(dt)), max(rss, int(kb))
+        best, rss, best_cpu = min(best, float(dt)), max(rss, int(kb)), min(best_cpu, float(c))
+    if cpu is not None:
+        cpu.append(best_cpu)
     return best, rss / 1024.0
 
 
@@ -159,11 +178,15 @@ def main(argv=None):
     log, folder, layout = make_log(work, int(args.holes), 8)
     res["generate_s"] = time.perf_counter() - t0
     res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
+    res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
     out = work / "holes.parquet"
+    cpu_m, cpu_b = [], []
     res["metro_s"], res["metro_rss_mb"] = process([metro, "-q", "measure", str(log), "--layout", str(layout),
-                                                   "--out", str(out)], args.repeat)
+                                                   "--out", str(out)], args.repeat, cpu_m)
     res["baseline_s"], res["baseline_rss_mb"] = process([sys.executable, "-c", BASELINE, str(log), str(layout),
-                                                         str(work / "normals.parquet")], args.repeat)
+                                                         str(work / "normals.parquet")], args.repeat, cpu_b)
+    res["metro_cpu_s"], res["baseline_cpu_s"] = cpu_m[0], cpu_b[0]
+    res["ratio_cpu"] = cpu_m[0] / cpu_b[0]
     res["ratio_time"] = res["metro_s"] / res["baseline_s"]
     res["ratio_rss"] = res["metro_rss_mb"] / res["baseline_rss_mb"]
     for label, extra in (("one process", []), ("dask 1 worker", ["--workers", "1"]), ("dask 2 workers", ["--workers", "2"])):

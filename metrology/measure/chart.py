@@ -205,7 +205,7 @@ class CusumChart:
 
         Parameters
         ----------
-        hole_id : (N,) str; time_s : (N,) float, s; panel : (N,) str
+        hole_id : (N,) str (an array or a pyarrow StringArray); time_s : (N,) float, s; panel : (N,) str
         rho_mm : (N,) float, mm, the redundant residual
         noise_sd_mm : (N,) float, mm, its sigma from the reading noise
         signature : (N, 4) float, ``d rho / d delta_k`` (mm per mm)

@@ -113,21 +113,20 @@ class _Measured:
     disagree: np.ndarray  # (N,) bool: rule 2, the readings disagree
 
 
-def _curvature_bound(layout, d, min_radius_mm):
-    """(N,) mm: the largest |rho| a panel of radius >= min_radius_mm gives (4 points, all read)."""
-    from metrology.measure.normals import _null_vector_4
+#: rows per call of the per-hole maths: its temporaries stay in the processor's cache (measured:
+#: about twice the holes per CPU-second of 262 144-row calls)
+CACHE_ROWS = 16384
 
-    E, u = layout.zero, layout.direction
-    dT = d.T
-    x = E[:, 0, None] + dT * u[:, 0, None]
-    y = E[:, 1, None] + dT * u[:, 1, None]
-    xc, yc = x - x.mean(0), y - y.mean(0)
-    q = _null_vector_4(xc, yc)
-    a, b, c = (q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)
-    # nuclear norm of [[a, c], [c, b]]: the sum of |eigenvalues|
-    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    nuc = np.abs(0.5 * (a + b) + disc) + np.abs(0.5 * (a + b) - disc)
-    return 0.5 * nuc / min_radius_mm if np.isfinite(min_radius_mm) else np.zeros(len(d))
+
+def _hole_normals(layout, d, min_radius_mm):
+    """:func:`hole_normals` in slices of :data:`CACHE_ROWS` rows, joined."""
+    if len(d) <= CACHE_ROWS:
+        return hole_normals(layout, d, min_radius_mm=min_radius_mm)
+    parts = [hole_normals(layout, d[i:i + CACHE_ROWS], min_radius_mm=min_radius_mm)
+             for i in range(0, len(d), CACHE_ROWS)]
+    fields = [f for f in parts[0].__dataclass_fields__]
+    return type(parts[0])(**{f: None if getattr(parts[0], f) is None else np.concatenate([getattr(p, f) for p in parts])
+                             for f in fields})
 
 
 def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
@@ -157,14 +156,14 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        h = hole_normals(sub, dd, min_radius_mm=settings.min_radius_mm)
+        h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
         out.residual[rows], out.residual_z[rows] = h.residual, h.residual_z
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
             with np.errstate(invalid="ignore", divide="ignore"):
                 out.noise_sd[rows] = h.residual / h.residual_z
-            bound = _curvature_bound(sub, dd, settings.min_radius_mm)
+            bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * np.abs(out.noise_sd[rows])
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):

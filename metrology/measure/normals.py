@@ -94,6 +94,8 @@ class HoleNormals:
         of each sensor moves ``rho``
     curvature_bound : (N,) float, rad, ``b``: the largest bias of ``angle`` a panel of radius
         ``min_radius_mm`` gives (0 on a flat panel); ``u_angle`` includes ``b / sqrt(3)``
+    twist : (N,) float, mm^2, or None; 4 sensors: ``||sum_i q_i r_i r_i^T||_*``: a panel of
+        principal radii >= R moves ``rho`` by at most ``twist / (2 R)`` (any shape, saddles too)
     """
 
     normal: np.ndarray
@@ -105,6 +107,7 @@ class HoleNormals:
     residual_z: np.ndarray
     signature: np.ndarray | None
     curvature_bound: np.ndarray | None = None
+    twist: np.ndarray | None = None
 
 
 def _chart_rows(layout: SensorLayout):
@@ -189,7 +192,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         U95[idx] = K95_2D * s2d[still]
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
-    signature = None
+    signature = twist = None
     if n == 4:
         q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
         residual = (q * zc).sum(0)
@@ -198,13 +201,14 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
         signature = np.ascontiguousarray(sig.T)
+        twist = _nuclear(q, xc, yc)
     elif n > 4:
         res = zc - gx * xc - gy * yc
         residual = np.sqrt((res * res).sum(0) / n)
         v = (mu * sigma) ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(0) / (n - 3))
-    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound)
+    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound, twist)
 
 
 def _height_rows(layout, dT, gx, gy):
@@ -261,6 +265,13 @@ def _one_sign(w, x, y):
     disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
     l1, l2 = 0.5 * (a + b) + disc, 0.5 * (a + b) - disc
     return np.maximum(np.maximum(l1, 0) + np.maximum(l2, 0), -(np.minimum(l1, 0) + np.minimum(l2, 0)))
+
+
+def _nuclear(w, x, y):
+    """(N,) the nuclear norm of ``sum_i w_i r_i r_i^T`` (2 x 2 per hole; ``w, x, y`` (n, N))."""
+    a, b, c = (w * x * x).sum(0), (w * y * y).sum(0), (w * x * y).sum(0)
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    return np.abs(0.5 * (a + b) + disc) + np.abs(0.5 * (a + b) - disc)
 
 
 def _null_vector_4(xc, yc):

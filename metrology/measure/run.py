@@ -32,7 +32,8 @@ class Feed:
     ----------
     where : str, the partition (for errors)
     first_row : (m,) int, each hole's row in the partition (0-based)
-    cell, panel, hole_id : (m,) str
+    cell, panel : (m,) str
+    hole_id : pyarrow.StringArray, length m (kept as Arrow: only the alarms' holes become Python strings)
     time_s : (m,) float, s
     charted : (m,) bool, measured on all 4 sensors (the chart takes those)
     rho_mm, noise_sd_mm : (m,) float, mm; signature : (m, 4) float
@@ -68,16 +69,19 @@ class Feed:
         if batch.chart["index"].size:
             sig[batch.chart["index"]] = batch.chart["signature"]
         return cls(where, first_row + np.arange(n), _str(t.column(CELL)), _str(t.column(PANEL)),
-                   _str(t.column("hole_id")), t.column(TIME_S).to_numpy(), charted, rho, sd, sig, csv)
+                   t.column("hole_id").combine_chunks(), t.column(TIME_S).to_numpy(), charted, rho, sd, sig, csv)
 
     @classmethod
     def concat(cls, feeds) -> "Feed":
         feeds = list(feeds)
         if not feeds:
             return None
-        return cls(feeds[0].where, *(np.concatenate([getattr(f, k) for f in feeds]) for k in
-                                     ("row", "cell", "panel", "hole_id", "time_s", "charted", "rho_mm", "noise_sd_mm",
-                                      "signature")), feeds[0].csv)
+        import pyarrow as pa
+
+        row, cell, panel = (np.concatenate([getattr(f, k) for f in feeds]) for k in ("row", "cell", "panel"))
+        rest = (np.concatenate([getattr(f, k) for f in feeds]) for k in
+                ("time_s", "charted", "rho_mm", "noise_sd_mm", "signature"))
+        return cls(feeds[0].where, row, cell, panel, pa.concat_arrays([f.hole_id for f in feeds]), *rest, feeds[0].csv)
 
 
 def _iso(t_s: float) -> str:
@@ -87,7 +91,11 @@ def _iso(t_s: float) -> str:
 
 
 def _str(col) -> np.ndarray:
-    return np.asarray(col.to_numpy(zero_copy_only=False)).astype(str)
+    """A string column with few values (cell, panel) as a numpy array, through its dictionary."""
+    import pyarrow.compute as pc
+
+    enc = pc.dictionary_encode(col).combine_chunks()
+    return np.array(enc.dictionary.to_pylist() or [""], dtype=str)[enc.indices.to_numpy(zero_copy_only=False)]
 
 
 @dataclass
@@ -127,7 +135,10 @@ class Watch:
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
                 chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors, by_panel=self.by_panel))
-                chart.update(f.hole_id[c], f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c], f.signature[c])
+                import pyarrow as pa
+
+                chart.update(f.hole_id.filter(pa.array(c)), f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c],
+                             f.signature[c])
 
     def finish(self) -> None:
         """The log has ended: size the alarms still waiting for their new baseline."""
