@@ -18,18 +18,19 @@ def register(app: typer.Typer) -> None:
         log: str = typer.Argument(..., help="The hole log: .csv ('-' for stdin), .parquet, or a folder of hive-"
                                   "partitioned .parquet (cell=C1/date=2026-11-25/part-0.parquet)."),
         layout: Path = typer.Option(..., "--layout", help="The calibrated layout (.toml) from metro calibrate --out; "
-                                    "its [calibration] covariance is propagated into U95."),
+                                    "its \\[calibration] covariance is propagated into U95."),
         out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
                                            "partitioned log (one file per partition; a re-run resumes). Default: CSV "
                                            "on stdout (not with --json)."),
-        tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Perpendicularity tolerance [deg]: the "
+        tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Perpendicularity tolerance, deg: the "
                                             "largest angle between drill axis and surface normal."),
-        min_radius_mm: float = typer.Option(500.0, "--min-radius-mm", help="Smallest panel radius [mm] the "
-                                            "gross-reading check allows for ('inf': flat panels only, the tightest)."),
+        min_radius_mm: float = typer.Option(500.0, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
+                                            "the micro-plane's curvature bias in U95 and sets what the gross-reading "
+                                            "check allows ('inf': flat panels)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Run on a new Dask LocalCluster of N worker "
-                                              "processes, one task per partition (needs metro[fleet])."),
+                                              "processes, one task per partition (needs metro\\[fleet])."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run on a running Dask cluster "
-                                                "(tcp://host:port), one task per partition (needs metro[fleet])."),
+                                                "(tcp://host:port), one task per partition (needs metro\\[fleet])."),
         fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm too (by default "
                                            "an alarm is reported, and the exit code judges the holes)."),
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
@@ -40,8 +41,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
-        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided
-        (or a drift alarm with --fail-on-drift), 2 on bad input.
+        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided (or a drift alarm with --fail-on-drift), 2 on bad input.
         """
         import sys
 
