@@ -17,7 +17,7 @@ _PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
 
 
 def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None, report=None,
-                   command=None, progress=None) -> PlaneFit:
+                   command=None, progress=None, flatness_mm=None) -> PlaneFit:
     """Read a cloud, fit its datum plane, and write the JSON and the residual map.
 
     Parameters
@@ -40,6 +40,8 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         ``warn(message)`` for what the caller should know but is not an error: points with
         NaN coordinates dropped (organized scans), a cloud whose size suggests metres. None:
         :func:`warnings.warn`.
+    flatness_mm : float or None
+        The flatness tolerance the report judges the P-V against (None: none judged).
     progress : callable or None
         ``progress(done, total, what)`` at each of 3 stages: read, fit, write
         (:mod:`metrology.core.progress`).
@@ -93,7 +95,7 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
             from metrology.report.html import render_html, run_info
             from metrology.report.pages import plane_section
 
-            page = render_html("Datum plane fit", run_info({"cloud": cloud}, command, seed), [plane_section(fit, points)])
+            page = render_html("Datum plane fit", run_info({"cloud": cloud}, command, seed), [plane_section(fit, points, flatness_mm)])
             tmp = stack.enter_context(atomic_path(report))
             tmp.write_text(page, encoding="utf-8")
     notify(progress, 3, 3, "done")

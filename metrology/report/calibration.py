@@ -28,6 +28,7 @@ from metrology.calibration.convergence import batch_convergence, residual_table
 from metrology.calibration.identifiability import CHART_NAMES, sigma_words
 from metrology.report.fit_report import FitSummary, correlations_from_cov, fit_report
 from metrology.report.plots import pyplot, save_figure
+from metrology.report.verdicts import verdict_text
 from metrology.report.validation import plot_validation, validation_text  # noqa: F401 (their home before)
 
 __all__ = ["calibration_text", "validation_text",
@@ -60,6 +61,7 @@ def calibration_text(report: CalibrationReport) -> str:
         lines.append(f"  least determined: {ident.words[-1]} (1 sigma {sigma_words(ident.combination_sigma[-1])}; "
                      f"moves the measured normal by {np.rad2deg(ident.normal_effect[-1]):.2g} deg RMS)")
     lines += precision_advice(report) + noise_advice(report)
+    lines.append(verdict_text(report.verdict()))
     return "\n".join(lines)
 
 
@@ -82,23 +84,18 @@ def fit_summaries(report: CalibrationReport) -> list:
     return out
 
 
-def noise_advice(report: CalibrationReport, alpha: float = 1e-3) -> list:
-    """A pointer to ``metro diagnose`` when the residuals exceed the stated noise: chi-square of
-    each sensor's residuals against ``noise_mm`` (dof = readings - 5), one-sided at ``alpha``."""
-    from scipy import stats
+def noise_advice(report: CalibrationReport) -> list:
+    """A pointer to ``metro diagnose`` when the residuals exceed the stated noise: the model
+    adequacy checks of :meth:`CalibrationReport.adequacy` (chi-square of each sensor's residuals
+    against ``noise_mm``, dof = readings - 5, one-sided at ``MODEL_ADEQUACY_ALPHA``)."""
+    from metrology.calibration.calibrate import MODEL_ADEQUACY_ALPHA
 
-    d = report.to_dict()
-    high = []
-    for s in d["sensors"]:
-        dof = s["n_readings"] - 5
-        if dof > 0 and s["noise_mm"] > 0:
-            chi2 = s["n_readings"] * (s["residual_rms_mm"] / s["noise_mm"]) ** 2
-            if stats.chi2.sf(chi2, dof) < alpha:
-                high.append(f"{s['name']} {1e3 * s['residual_rms_mm']:.1f} um")
+    high = [f"{name} {1e3 * rms:.1f} µm (allowed {1e3 * limit:.1f} µm)"
+            for name, rms, limit, p in report.adequacy() if p < MODEL_ADEQUACY_ALPHA]
     if not high:
         return []
-    return [f"residuals above the stated noise ({', '.join(high)}; chi-square p < {alpha:g}): the model misses "
-            "something. Run `metro diagnose` on the same files to name it."]
+    return [f"model adequacy: residuals above the stated noise ({', '.join(high)}; chi-square p < "
+            f"{MODEL_ADEQUACY_ALPHA:g}): the model misses something. Run `metro diagnose` on the same files to name it."]
 
 
 def precision_advice(report: CalibrationReport) -> list:
@@ -114,8 +111,12 @@ def precision_advice(report: CalibrationReport) -> list:
     target = fix["target"]
     ways = [ident.fix["within_range"] for ident in short if ident.fix.get("within_range")]
     lines = [f"precision: 1 sigma up to {np.nanmax(z):.3g} mm (zero points) and {np.nanmax(tilt):.3g} deg (beams) on "
-             f"{', '.join(ident.name for ident in short)}, against a target of {target['zero_mm']:g} mm / "
-             f"{target['tilt_deg']:g} deg (--target-mm, --target-deg)."]
+             f"{', '.join(ident.name for ident in short)}, against " + ("your target of " if report.target_set else
+                                                                      "the default target of ")
+             + f"{target['zero_mm']:g} mm / {target['tilt_deg']:g} deg" + (" (--target-mm, --target-deg)." if
+                                                                           report.target_set else
+                                                                           " (information; --target-mm and --target-deg "
+                                                                           "set one that gates).")]
     now = f"now tilts up to {short[0].tilt_max_deg:.1f} deg, stand-off spread {short[0].standoff_spread_mm:.1f} mm"
     more = max((ident.fix["poses_needed_at_current_spread"] or 0) for ident in short)
     if ways:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["Figure", "Table", "Verdict", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -67,16 +67,34 @@ class Verdict:
     label : str, the verdict's words when the default ones (from ``ok``) would say less or
         something else: what was found where no tolerance was stated ("flat within the
         noise"), or the cause named before the tolerance ("cause: drift on L3; ...")
+    checks : tuple of (tag, words), one line per judged quantity, each coloured by its tag:
+        ``pass``, ``FAIL`` (a limit the user set), ``info`` or ``note`` (information within
+        or beyond a limit the user did not set) (:func:`metrology.report.verdicts.check_words`)
     """
 
     ok: bool | None
     headline: str
     cause: str = ""
     label: str = ""
+    checks: tuple = ()
 
     @property
     def word(self) -> str:
-        return self.label or {True: "within tolerance", False: "NOT within tolerance", None: "information"}[self.ok]
+        return self.label or WORDS[self.ok]
+
+
+#: the verdict's words: passed (every gating check passed), FAILED, information (nothing gated)
+WORDS = {True: "passed", False: "FAILED", None: "information"}
+
+
+def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
+    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`: passed or
+    FAILED when a check gates, information when none does; one line per check."""
+    from metrology.report.verdicts import check_words
+
+    gated = any(c.gate for c in verdict.checks)
+    return Verdict(verdict.passed if gated else None, headline, cause, label,
+                   tuple(check_words(c) for c in verdict.checks))
 
 
 @dataclass(frozen=True)
@@ -232,7 +250,8 @@ def render_html(title: str, run: RunInfo, sections) -> str:
     env.filters["ticks"] = _ticks
     overall = [s.verdict.ok for s in sections]
     ok = False if False in overall else (True if True in overall else None)
-    return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok)
+    return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok,
+                                                     words=WORDS)
 
 
 def _ticks(text):

@@ -32,7 +32,10 @@ def test_cli_table_json_out_plot(tmp_path):
     r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--json", "--out", str(out), "--plot", str(png)])
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)
-    assert out.read_text() == r.stdout  # --json and --out carry the same bytes
+    # --json is what --out holds, plus the verdict (no --flatness-mm: information only, passed)
+    verdict = printed.pop("verdict")
+    assert json.loads(out.read_text()) == printed and verdict["passed"] is True
+    assert not any(c["gate"] for c in verdict["checks"])
     plane = Plane.from_json(out)
     np.testing.assert_array_equal(plane.normal, printed["normal"])
     assert plane.offset == printed["offset"] < 0
