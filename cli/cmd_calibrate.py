@@ -22,6 +22,39 @@ def _check_out_dir(path: Optional[Path], what: str) -> None:
         fail(f"{what} {path}: directory {Path(path).parent} does not exist")
 
 
+META_KEY = r"[A-Za-z][A-Za-z0-9_-]*"
+
+
+def _meta(pairs, meta_file) -> dict:
+    """The certificate's header fields: ``--meta-file`` (a TOML table of key = value), then each
+    ``--meta key=value`` (later wins); one-line errors naming the option."""
+    import re
+    import tomllib
+
+    meta = {}
+    if meta_file is not None:
+        try:
+            with open(meta_file, "rb") as fh:
+                data = tomllib.load(fh)
+        except FileNotFoundError:
+            fail(f"--meta-file {meta_file}: no such file")
+        except OSError as exc:
+            fail(f"--meta-file {meta_file}: cannot read ({exc.strerror})")
+        except tomllib.TOMLDecodeError as exc:
+            fail(f"--meta-file {meta_file}: not valid TOML ({exc})")
+        data = data.get("certificate", data) if isinstance(data.get("certificate"), dict) else data
+        for k, v in data.items():
+            if isinstance(v, (dict, list)):
+                fail(f"--meta-file {meta_file}: '{k}' must be a value (text, number or date), not a table or array")
+            meta[str(k)] = str(v)
+    for pair in pairs or ():
+        key, eq, value = pair.partition("=")
+        if not eq or not re.fullmatch(META_KEY, key.strip()):
+            fail(f"--meta {pair!r}: expected key=value (the key letters, digits, _ or -), e.g. --meta operator=J.Smith")
+        meta[key.strip()] = value.strip()
+    return meta
+
+
 def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg, idle_s,
             stop_when_met, quaternion_order, position_units, no_reading, target_set=False) -> None:
     """``calibrate --follow``: one line per pose (stderr with --json), then the final report."""
@@ -94,6 +127,12 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        meta: Optional[list[str]] = typer.Option(None, "--meta", help="A certificate header field, key=value "
+                                                 "(repeat): part, instrument, serial, operator, temperature, notes, "
+                                                 "customer, certificate, approved_by, valid_until ...; also written "
+                                                 "into --out's [certificate] table."),
+        meta_file: Optional[Path] = typer.Option(None, "--meta-file", help="The certificate header fields as a TOML "
+                                                 "table of key = value (--meta given too wins)."),
     ) -> None:
         """Calibrate the normal sensors from a tracker export, the datum and the nominal layout."""
         if method not in METHODS:
@@ -108,6 +147,7 @@ def register(app: typer.Typer) -> None:
         if not (target_mm > 0 and target_deg > 0):
             fail(f"--target-mm and --target-deg must be positive, got {target_mm:g} and {target_deg:g}")
         _check_out_dir(out, "--out")
+        fields = _meta(meta, meta_file)
         import math
 
         if follow:
@@ -125,7 +165,7 @@ def register(app: typer.Typer) -> None:
                                      target_set=target_set,
                                      out=out, plot_dir=plot, quaternion_order=quaternion_order,
                                      position_units=position_units, no_reading=no_reading, warn=warn, progress=progress,
-                                     report_html=report_html, command=invocation(ctx))
+                                     report_html=report_html, command=invocation(ctx), meta=fields)
         for w in calibration_warnings(report):
             warn(w)
         if json_out:

@@ -57,6 +57,9 @@ class CalibrationReport:
         The precision target: zero point 1 sigma (mm) and beam tilt 1 sigma (rad).
     target_set : bool
         Whether the user set ``target`` (it gates the verdict) or it is the default (information).
+    certificate : object or None
+        The calibration certificate of the calibrated layout as written
+        (:class:`metrology.report.certificate.Certificate`, made by the file job), else None.
     """
 
     calibration: Calibration
@@ -65,6 +68,7 @@ class CalibrationReport:
     sources: dict = field(default_factory=dict)
     target: tuple | None = None
     target_set: bool = False
+    certificate: object = None
 
     @property
     def layout(self) -> SensorLayout:
@@ -151,6 +155,8 @@ class CalibrationReport:
             "warnings": self.warnings,
             "verdict": self.verdict().to_dict(),
         }
+        if self.certificate is not None:
+            out["certificate"] = self.certificate.to_dict()
         if self.dataset.dropped:
             out["no_reading"] = self.dataset.no_reading_dict()
         return out

@@ -105,7 +105,8 @@ class Section:
     text : tuple of str, preformatted blocks (the command's text output, a fit report);
     limits : tuple of str, what the data could not determine; next_steps : tuple of str,
     what to do next (poses to add, a command to run, a datum to re-measure);
-    link : str, a relative link to this section's own report (the demo's index)
+    link : str, a relative link to this section's own report (the demo's index);
+    statements : tuple of str, what the section states (a certificate's conditions)
     """
 
     title: str
@@ -116,6 +117,7 @@ class Section:
     limits: tuple = ()
     next_steps: tuple = ()
     link: str = ""
+    statements: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,11 @@ def _written() -> str:
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
     t = datetime.fromtimestamp(int(epoch), timezone.utc) if epoch else datetime.now(timezone.utc)
     return t.strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def written() -> str:
+    """The time a file is written, UTC (``SOURCE_DATE_EPOCH`` when set)."""
+    return _written()
 
 
 def command_line() -> str:

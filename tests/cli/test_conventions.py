@@ -219,3 +219,19 @@ def test_files_written_from_stdin_name_it_stdin_never_its_temporary_copy(tmp_pat
     assert hashlib.sha256(_read(M / "calibration.csv")).hexdigest() in html
     for f in ("plane.json", "f.html", "c.toml", "c.html"):
         assert "metro-stdin-" not in (tmp_path / f).read_text(), f
+
+
+def test_q_and_v_anywhere_and_usage_errors_are_one_line_and_a_hint():
+    args = ["validate", "-", "--plane", str(M / "plane.json"), "--layout", str(M / "nominal.toml"), "--tolerance-deg", "1"]
+    first = runner.invoke(app, ["-q", *args], input=_zero_reading_export())
+    last = runner.invoke(app, [*args, "-q"], input=_zero_reading_export())
+    assert first.exit_code == last.exit_code == 0 and last.stderr == "" and last.stdout == first.stdout
+    loud = runner.invoke(app, [*args[:2], "-v", *args[2:]], input=_zero_reading_export())
+    assert re.search(r"^\[ *[0-9.]+ s\] metro validate$", loud.stderr, re.M)
+    for bad, words in ((["calibrate", "x.csv"], "error: Missing option '--plane'"),
+                       (["version", "--bogus"], "error: No such option: --bogus"),
+                       (["reproduce", "--poses", "x"], "error: Invalid value for '--poses'")):
+        r = runner.invoke(app, bad)
+        lines = r.stderr.strip().splitlines()
+        assert r.exit_code == 2 and len(lines) == 2 and lines[0].startswith(words), r.stderr
+        assert lines[1] == f"hint: 'metro {bad[0]} -h' lists the arguments and options"

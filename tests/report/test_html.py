@@ -115,7 +115,7 @@ def test_calibrate_report_names_the_cause_and_the_next_command(tmp_path):
     assert pdf.startswith(b"%PDF") and b"/Count 2" in pdf
     # no target set: the residuals against the stated noise (model adequacy) and the default
     # precision target are information, each its own line, not a failed tolerance
-    text = check_page(out, [export, PLANE, NOMINAL], 2, "information")
+    text = check_page(out, [export, PLANE, NOMINAL], 2, "overall: information")  # the certificate, the calibration
     html = out.read_text(encoding="utf-8")
     assert "tolerance" not in html[:html.index("<img")].lower()
     assert re.search(r'<li class="note"><span class="tag">note</span> model adequacy: L1 residual RMS', html)
@@ -125,7 +125,7 @@ def test_calibrate_report_names_the_cause_and_the_next_command(tmp_path):
     assert r.stderr.strip().splitlines()[-1] == f"report: {out}"
     _ok(runner.invoke(app, ["calibrate", str(export), "--plane", str(PLANE), "--layout", str(NOMINAL),
                             "--report", str(out), "--target-mm", "1", "--target-deg", "1"]))
-    check_page(out, [export], 2, "passed")
+    check_page(out, [export], 2, "overall: passed")
     assert '<li class="pass"><span class="tag">pass</span> precision target: zero points' in out.read_text()
     assert "[[Fit Statistics]]" in r.output and "reduced chi-square" in r.output and "[[Correlations]]" in r.output
 
