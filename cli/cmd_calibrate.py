@@ -37,7 +37,7 @@ def _meta(pairs, meta_file) -> dict:
             with open(meta_file, "rb") as fh:
                 data = tomllib.load(fh)
         except FileNotFoundError:
-            fail(f"--meta-file {meta_file}: no such file")
+            fail(f"{meta_file}: no such file (--meta-file)")
         except OSError as exc:
             fail(f"--meta-file {meta_file}: cannot read ({exc.strerror})")
         except tomllib.TOMLDecodeError as exc:

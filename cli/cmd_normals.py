@@ -8,9 +8,9 @@ import typer
 
 from ._common import (JSON_HELP, REPORT_HELP, echo, echo_json, fail, finish, guarded, invocation, progress_bar, reported,
                       warn, with_verdict)
+from ._stdin import MESH_FORMATS
 
 STDIN = " ('-' for stdin)"
-MESH_FORMATS = ("stl", "obj", "ply", "off", "glb", "gltf", "step", "stp")
 
 
 def register(app: typer.Typer) -> None:

@@ -152,6 +152,9 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
         raise ValueError(f"{label}: no pose rows (a header line, then one line per pose)")
     export = export_from_rows([header, *rows], label, quaternion_order, position_units)
     export, dropped = drop_no_reading(export.reordered(layout.names), layout, no_reading)
+    if not np.any(np.isfinite(export.d)):
+        raise ValueError(f"{label}: {len(rows)} pose(s) read, none with a reading yet (the d_ columns are empty: "
+                         "a planned file waiting for readings?); nothing to calibrate")
     export = check(export, layout, label)
     dataset = Dataset(export, layout, plane, points, dropped)
     check_dataset(dataset, label, quaternion_order, position_units)

@@ -85,7 +85,7 @@ def test_the_certificate_names_the_file_by_its_sha256_and_carries_the_header(run
 @pytest.mark.parametrize("args, words", [
     (["--meta", "no-equals"], "--meta 'no-equals': expected key=value"),
     (["--meta", "1x=y"], "expected key=value"),
-    (["--meta-file", "missing.toml"], "--meta-file missing.toml: no such file"),
+    (["--meta-file", "missing.toml"], "missing.toml: no such file (--meta-file)"),
 ])
 def test_bad_meta_is_one_line_exit_2(args, words, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
