@@ -191,6 +191,8 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        per_pose: Optional[Path] = typer.Option(None, "--per-pose", help="Write each pose's deviation per layout and "
+                                                "whether it is within the tolerance (.csv)."),
     ) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
@@ -205,7 +207,8 @@ def register(app: typer.Typer) -> None:
                          ("--layout-before", layout_before, ".toml")) as (export, plane, layout, layout_before):
             report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
                                     position_units=position_units, no_reading=no_reading, warn=warn,
-                                    tolerance_deg=tolerance_deg, report_html=report_html, command=invocation(ctx))
+                                    tolerance_deg=tolerance_deg, report_html=report_html, command=invocation(ctx),
+                                    per_pose=per_pose)
         verdict = validation_checks(validation_verdict(report, tolerance_deg))
         if json_out:
             echo_json(with_verdict({**report.to_dict(), "tolerance_deg": tolerance_deg}, verdict), "validation")

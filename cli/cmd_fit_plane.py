@@ -32,6 +32,10 @@ def register(app: typer.Typer) -> None:
         report: Optional[str] = typer.Option(None, "--report", help=REPORT_HELP),
         flatness_mm: Optional[float] = typer.Option(None, "--flatness-mm", help="Flatness tolerance of the datum, mm: "
                                                     "P-V of the inliers above it fails (exit 1). Default: none judged."),
+        inliers: Optional[str] = typer.Option(None, "--inliers", help="Write the inlier points here (.ply, mm)."),
+        outliers: Optional[str] = typer.Option(None, "--outliers", help="Write the outlier points here (.ply, mm)."),
+        residuals: Optional[str] = typer.Option(None, "--residuals", help="Write each point's signed distance to the "
+                                                "plane and whether it is an inlier (.csv, or .parquet with pyarrow)."),
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
@@ -51,7 +55,8 @@ def register(app: typer.Typer) -> None:
         suffix = format_suffix("CLOUD", fmt, {"." + f for f in CLOUD_FORMATS}, "cloud")
         with stdin_files(("CLOUD", cloud, suffix)) as (path,), progress_bar("fit-plane") as progress:
             fit = fit_plane_file(path, threshold_mm=threshold_mm, seed=seed, out=out, plot=plot, units=units, warn=warn,
-                                 report=report, command=invocation(ctx), flatness_mm=flatness_mm,
+                                 report=report, command=invocation(ctx), flatness_mm=flatness_mm, inliers=inliers,
+                                 outliers=outliers, residuals=residuals,
                                  progress=progress)
         verdict = plane_verdict(fit, flatness_mm)
         if as_json:

@@ -127,17 +127,23 @@ def _check_report(path):
 
 def validate_files(export_path, plane_path, layout_path, layout_before_path=None, plot=None, quaternion_order="wxyz",
                    position_units="mm", no_reading=None, warn=None, tolerance_deg=DRILLING_TOLERANCE_DEG,
-                   report_html=None, command=None) -> ValidationReport:
+                   report_html=None, command=None, per_pose=None) -> ValidationReport:
     """Validate ``layout_path`` (and ``layout_before_path``, first, if given) on an export.
 
     The layouts are reported under the labels ``layout_before`` and ``layout``; ``plot``
     writes the deviation per pose (atomically; the format from the suffix) with the
     tolerance ``tolerance_deg`` drawn; ``report_html`` the HTML report judging the
-    validated layout against it.
+    validated layout against it; ``per_pose`` a CSV of each pose: ``pose_id``, ``n_readings``,
+    ``deviation_deg`` of the validated layout (and ``deviation_deg_before``), ``within_tolerance``
+    (1/0, empty where the pose has no normal).
     """
     from metrology.io.layout import load_layout
 
     _check_report(report_html)
+    if per_pose is not None:
+        from metrology.jobs.outputs import check_table_path
+
+        check_table_path(per_pose, "--per-pose", (".csv",))
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     layouts = {}
     paths = {"export": export_path, "plane": plane_path}
@@ -157,8 +163,24 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
         from metrology.report.validation import plot_validation
 
         plot_validation(report, plot, tolerance_deg)
+    if per_pose is not None:
+        _write_per_pose(report, per_pose, tolerance_deg)
     if page is not None:
         from metrology.io.atomic import write_text
 
         write_text(report_html, page)
     return report
+
+
+def _write_per_pose(report: ValidationReport, path, tolerance_deg: float) -> None:
+    import numpy as np
+
+    from metrology.jobs.outputs import write_table
+
+    cols = {"pose_id": list(report.pose_id), "n_readings": report.n_readings}
+    for k, label in enumerate(report.labels):
+        cols["deviation_deg" if label == "layout" else f"deviation_deg_{label.replace('layout_', '')}"] = \
+            np.rad2deg(report.deviation[k])
+    dev = np.rad2deg(report.deviation[-1])
+    cols["within_tolerance"] = [("" if not np.isfinite(d) else int(d <= tolerance_deg)) for d in dev]
+    write_table(path, cols)
