@@ -127,11 +127,14 @@ def invocation(ctx) -> str:
         if p.param_type_name == "argument":
             parts.append(str(v))
             continue
-        if v is None or v is False or v == p.default or not p.opts:
+        if v is None or v is False or v == p.default or not p.opts or (isinstance(v, (tuple, list)) and not v):
             continue
         opt = max(p.opts, key=len)
         if v is True:
             parts.append(opt)
+        elif isinstance(v, (tuple, list)) and getattr(p, "multiple", False):  # a repeatable option: --meta a=1 --meta b=2
+            for item in v:
+                parts += [opt, str(item)]
         elif isinstance(v, (tuple, list)):
             parts += [opt, *map(str, v)]
         else:

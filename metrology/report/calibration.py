@@ -155,7 +155,7 @@ def convergence_figure(report: CalibrationReport, convergence=None):
     names = cal.nominal.names
     n = len(names)
     plt = pyplot()
-    fig, axes = plt.subplots(n, 2, figsize=(11, 2.4 * n), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(n, 2, figsize=(10, 2.6 * n), sharex=True, squeeze=False)
     if cal.history:
         for i in range(n):
             h = cal.history[i]
@@ -183,16 +183,34 @@ def convergence_figure(report: CalibrationReport, convergence=None):
                 axes[i, 1].fill_between(k, y - s, y + s, color=_COLOURS[3 + j], alpha=0.2, lw=0)
             axes[i, 0].set_ylabel(f"{names[i]}\nzero error [mm]")
             axes[i, 1].set_ylabel("beam tilt [deg]")
-        title = f"{cal.method}: estimate from the first k poses, +-1 sigma bands"
+            tilt = np.rad2deg(np.arctan(th[:, 3:]))
+            _settled_ylim(axes[i, 0], k, th[:, :3], se[:, :3])
+            _settled_ylim(axes[i, 1], k, tilt, np.rad2deg(se[:, 3:]))
+        title = f"{cal.method}: estimate from the first k poses, ±1 σ bands (y range: the last three quarters)"
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[0, 1].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[0, 0].legend(loc="upper right", ncol=3)
+    axes[0, 1].legend(loc="upper right", ncol=3)
     axes[-1, 0].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     axes[-1, 1].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig
+
+
+#: the convergence plot's y range is set by the estimates and bands of the poses after this share of
+#: the run: the first poses' bands (a few poses, a wide 1 sigma) would otherwise flatten the rest
+SETTLED_FROM = 0.25
+
+
+def _settled_ylim(ax, k, y, s) -> None:
+    """Set ``ax``'s y range to cover ``y +- s`` over ``k >= SETTLED_FROM * k.max()`` (a tenth of
+    that span as margin); the earlier, wider bands run off the axis."""
+    sel = np.asarray(k) >= SETTLED_FROM * np.max(k)
+    lo, hi = np.nanmin((y - s)[sel]), np.nanmax((y + s)[sel])
+    if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+        pad = 0.1 * (hi - lo)
+        ax.set_ylim(lo - pad, hi + pad)
 
 
 def plot_residuals(report: CalibrationReport, path) -> Path:
@@ -207,7 +225,7 @@ def residuals_figure(report: CalibrationReport):
     d = report.dataset.obs.d
     names = report.layout.names
     plt = pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    fig, axes = plt.subplots(3, 1, figsize=(10, 9), sharey=True)
     idx = np.arange(1, len(d) + 1)
     for i, name in enumerate(names):
         c = _COLOURS[i % len(_COLOURS)]
@@ -219,11 +237,12 @@ def residuals_figure(report: CalibrationReport):
     axes[0].set_xlabel("reading [mm]")
     axes[1].set_xlabel("incidence angle of the beam on the datum [deg]")
     axes[2].set_xlabel("pose [index]")
-    axes[0].set_ylabel("residual, measured - predicted [µm]")
+    for ax in axes:
+        ax.set_ylabel("residual [µm]\n(measured - predicted)")
     for ax in axes:
         ax.axhline(0, color="0.3", lw=0.8)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
+    axes[0].legend()
     from matplotlib.ticker import MaxNLocator
 
     axes[2].xaxis.set_major_locator(MaxNLocator(integer=True))

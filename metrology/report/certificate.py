@@ -164,9 +164,10 @@ def certificate_section(cert: Certificate):
         "Values are those of the calibrated layout file named, whose SHA-256 is given: zero points in mm (TCS), "
         "directions as unit vectors (TCS), tilt uncertainties about the chart axes e1, e2 of the nominal direction.",
     )
-    return Section("Calibration certificate", Verdict(None, f"certificate {cert.number}: {cert.file or 'no file'} "
-                                                            f"(SHA-256 {cert.sha256[:16]}…)", label="certificate"),
-                   tables=(Table("Certificate", ("field", "value"), tuple(head)),
+    return Section("Calibration certificate", Verdict(None, f"{cert.number}: calibrated layout "
+                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…",
+                                                            label="certificate"),
+                   tables=(Table("Certificate", ("field", "value"), tuple(head), wrap=True),
                            Table(f"Calibrated values, standard uncertainty u (1 σ) and expanded uncertainty U "
                                  f"(k = {COVERAGE_K:g})", ("sensor", "parameter", "value", "u", "U", "unit"), rows),
                            Table(f"Correlations of each sensor's parameters with |r| > {CORRELATION_REPORT:g}",

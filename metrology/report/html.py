@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -37,24 +37,36 @@ REPORT_SUFFIXES = (".html", ".htm")
 _VERSIONED = (("metro",), ("numpy",), ("scipy",), ("open3d-cpu", "open3d"), ("trimesh",), ("matplotlib",))
 
 
+#: the page's column at a 1280 px window (62 rem less the padding, 16 px rem), in inches at 96
+#: px per inch: a report's figure is drawn this wide, so it shows at its own size
+COLUMN_IN = 960 / 96
+#: the smallest text in a report's figure, pt, at the figure's own size (as it shows at 1280 px)
+MIN_FIGURE_PT = 9.0
+
+
 @dataclass(frozen=True)
 class Figure:
-    """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption."""
+    """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption;
+    ``min_font_px``: its smallest text's height in the image's pixels (0: not known), which
+    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it."""
 
     caption: str
     data_uri: str
     alt: str = ""
+    min_font_px: float = 0.0
 
 
 @dataclass(frozen=True)
 class Table:
     """A table of numbers: ``header`` (tuple of str, units in the header) and ``rows`` (tuple of
-    tuples of str, already formatted); ``note`` under it."""
+    tuples of str, already formatted); ``note`` under it; ``wrap``: a table of words (its cells
+    wrap and align left, as the "what was run" table) rather than of numbers."""
 
     caption: str
     header: tuple
     rows: tuple
     note: str = ""
+    wrap: bool = False
 
 
 @dataclass(frozen=True)
@@ -200,23 +212,46 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
     return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
 
 
-def figure_from_png(png: bytes, caption: str, alt: str = "") -> Figure:
+def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0) -> Figure:
     """Embed PNG bytes as a :class:`Figure`."""
-    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption)
+    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption,
+                  min_font_px)
+
+
+def fit_to_column(fig) -> float:
+    """Draw ``fig`` for the page: no wider than :data:`COLUMN_IN` (the height kept), every text at
+    least :data:`MIN_FIGURE_PT`, laid out again; returns its smallest text size, pt."""
+    from matplotlib.text import Text
+
+    w, h = fig.get_size_inches()
+    if w > COLUMN_IN:
+        fig.set_size_inches(COLUMN_IN, h)
+    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip()]
+    for t in texts:
+        if t.get_fontsize() < MIN_FIGURE_PT:
+            t.set_fontsize(MIN_FIGURE_PT)
+    if fig.get_layout_engine() is None:
+        import warnings
+
+        with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
+            warnings.simplefilter("ignore")
+            fig.tight_layout()
+    return min((t.get_fontsize() for t in texts), default=MIN_FIGURE_PT)
 
 
 def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> Figure:
-    """Embed a matplotlib figure as PNG (and close it)."""
+    """Embed a matplotlib figure as PNG (and close it), drawn for the page (:func:`fit_to_column`)."""
     import io
 
     from metrology.report.style import close
 
     buf = io.BytesIO()
     try:
+        pt = fit_to_column(fig)
         fig.savefig(buf, format="png", dpi=dpi)
     finally:
         close(fig)
-    return figure_from_png(buf.getvalue(), caption, alt)
+    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0)
 
 
 def check_report_path(path) -> None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from metrology.core.tolerances import CORRELATION_REPORT, DRILLING_TOLERANCE_DEG
-from metrology.report.html import Section, Table, Verdict, figure_from_matplotlib, figure_from_png, verdict_box
+from metrology.report.html import Section, Table, figure_from_matplotlib, verdict_box
 
 __all__ = ["plane_section", "calibration_section", "validation_section", "diagnosis_section", "normals_section"]
 
@@ -81,7 +81,8 @@ def plane_section(fit, points, flatness_mm: float | None = None) -> Section:
     fig = residual_map_figure(points, fit)
     return Section("Datum plane (metro fit-plane)", verdict_box(plane_verdict(fit, flatness_mm), head, cause, label),
                    figures=(figure_from_matplotlib(fig, "Residual to the fitted plane over the plate (inliers coloured, "
-                                                   "outliers grey ×; contours: the fitted quadratic form)."),),
+                                                   "outliers grey ×; contours: the fitted quadratic form, dotted when not "
+                                                   "significant)."),),
                    tables=(Table("Plane and its uncertainty (1 σ)", ("quantity", "value", "1 σ", "unit"), tuple(rows)),),
                    text=(format_plane_fit(fit),), limits=tuple(limits), next_steps=tuple(nxt))
 
@@ -265,16 +266,18 @@ def extension_fit_summary(diag):
                       float(f.chi2), tuple(params), corr)
 
 
-def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> Section:
-    """``metro normals``: the recommended method's first measurements against the tolerance."""
+def normals_section(summary: dict, fig, tolerance_deg: float) -> Section:
+    """``metro normals``: the recommended method's errors against the tolerance; ``fig`` the
+    error map (:func:`metrology.report.normals.error_map_figure`, or None); every fact of the
+    text output (:func:`metrology.report.normals.summary_text`) is on the page."""
     from metrology.panel.attitude import STATUS
+    from metrology.report.normals import summary_text
     from metrology.report.verdicts import normals_verdict
 
     rec = summary["recommendation"]
     m = rec["method"]
     s = summary[m]
     verdict = normals_verdict(summary, tolerance_deg)
-    ok = verdict.passed
     head = (f"micro-{m}: {100 * s['within_tolerance']:.1f} % of {s['n']} points within {tolerance_deg:g} deg "
             f"(max {s['max_deg']:.4f}, 95th percentile {s['p95_deg']:.4f} deg)")
     rows = []
@@ -285,17 +288,24 @@ def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> S
                      _num(t.get("final_max_deg"), "— (no loop)")))
     bad = {k: v for k, v in summary["status"].items() if k != "ok" and v}
     limits = [f"{v} point(s) not measured: {STATUS[k]}" for k, v in bad.items()]
-    nxt = []
-    if bad:
-        nxt.append("Move the points not measured away from the panel's edges, or use a shorter stand-off.")
-    if not ok:
-        nxt.append("Calibrate the head (`metro calibrate`) and check it with `metro validate` before drilling.")
-    figs = () if png is None else (figure_from_png(png, "Normal error over the panel, each method; open red circles: "
-                                                    "over the tolerance; grey ×: not measured."),)
+    if summary.get("grid_dropped"):
+        limits.append(f"grid: {summary['grid_dropped']} nodes left out: the head's footprint would cross a crease, "
+                      "a hole or the panel boundary")
+    limits += list(summary.get("warnings", ()))
     info = summary["info"]
+    limits.append(f"units: {info['units']}")
+    nxt = []
+    if bad or summary.get("grid_dropped"):
+        nxt.append("Move the points not measured away from the panel's edges, or use a shorter stand-off.")
+    if not verdict.passed:
+        nxt.append("Calibrate the head (`metro calibrate`) and check it with `metro validate` before drilling.")
+    nxt.append(f"Use micro-{m} on this panel (the recommendation below).")
+    marks = "grey ×: not measured." if bad else "every point was measured."
+    figs = () if fig is None else (figure_from_matplotlib(fig, "Normal error over the panel, each method on its own "
+                                                          f"colour scale; open red circles: over the tolerance; {marks}"),)
     return Section("Normals on the panel (metro normals)", verdict_box(verdict, head, rec["text"]), figures=figs,
                    tables=(Table("Normal error of the first measurement [deg] (mean ± std over the points)",
                                  ("method", "points", "max", "mean ± std", "p95", "within tol.", "after loop, max"),
                                  tuple(rows), f"engine {info['engine']}, stand-off {info['standoff_mm']:.3f} mm, "
                                  f"tilt {info['tilt_deg']:g} deg, reference normal: {info['reference_normal']}"),),
-                   limits=tuple(limits), next_steps=tuple(nxt))
+                   text=(summary_text(summary),), limits=tuple(limits), next_steps=tuple(nxt))

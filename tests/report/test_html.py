@@ -178,7 +178,14 @@ def test_normals_report(tmp_path):
     panel, layout = DATA_DIR / "panel_cyl800.stl", DATA_DIR / "layout_table6.toml"
     _ok(runner.invoke(app, ["normals", str(panel), "--layout", str(layout), "--grid", "80", "--report", str(out),
                             "--engine", "trimesh"]))
-    check_page(out, [panel, layout], 1, "passed")
+    text = check_page(out, [panel, layout], 1, "passed")
+    # every fact of the text output is on the page, and the caption promises no mark it does not draw
+    r = _ok(runner.invoke(app, ["normals", str(panel), "--layout", str(layout), "--grid", "80", "--engine", "trimesh"]))
+    page = html_lib.unescape(" ".join(text.split()))
+    for line in r.stdout.splitlines():
+        if not line.startswith(("verdict:", "  [")):
+            assert " ".join(line.split()) in page, line
+    assert "grey ×" not in text and "each method on its own colour scale" in text
 
 
 def test_demo_report_gathers_each_step_and_links_its_own(tmp_path):
@@ -258,8 +265,9 @@ def _report_of(command, tmp_path) -> Path:
                                      pytest.param("diagnose", marks=pytest.mark.slow),
                                      pytest.param("demo", marks=pytest.mark.slow)])
 def test_reports_open_in_chromium_without_console_error_or_request(tmp_path, command):
-    """Every command's report in headless Chromium at a phone's width: no console message, no
-    request, a screenshot (diagnose and the real demo are slow: marked so)."""
+    """Every command's report in headless Chromium at 1280 px and a phone's width: no console
+    message, no request, no clipped text, figure text of 9 pt or more at 1280 px, a screenshot
+    each (diagnose and the real demo are slow: marked so)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -267,5 +275,28 @@ def test_reports_open_in_chromium_without_console_error_or_request(tmp_path, com
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     out = _report_of(command, tmp_path)
-    assert mod.main([str(out), "--width", "412", "--height", "900"]) == 0
-    assert out.with_suffix(".png").stat().st_size > 0
+    assert mod.main([str(out), "--widths", "1280,412", "--height", "900"]) == 0
+    for width in (1280, 412):
+        assert out.with_name(f"{out.stem}-{width}.png").stat().st_size > 0
+
+
+def test_report_figures_are_drawn_to_the_column_with_9_pt_text():
+    """A figure wider than the page's column is drawn at the column's width, every text at 9 pt
+    or more, and the page states its smallest text (what the Chromium check turns into pt)."""
+    from metrology.report.html import COLUMN_IN, MIN_FIGURE_PT, figure_from_matplotlib
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(13, 4))
+    ax.plot([0, 1], [0, 1], label="a line")
+    ax.legend(fontsize=6)
+    ax.set_title("small", fontsize=5)
+    f = figure_from_matplotlib(fig, "caption")
+    import base64
+    import io
+
+    from matplotlib.image import imread
+
+    png = imread(io.BytesIO(base64.b64decode(f.data_uri.split(",", 1)[1])))
+    assert png.shape[1] == round(COLUMN_IN * 96)  # 960 px: shown at its own size at 1280 px
+    assert f.min_font_px == pytest.approx(MIN_FIGURE_PT * 96 / 72)
