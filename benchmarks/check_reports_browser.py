@@ -98,12 +98,31 @@ def _requests(netlog: Path) -> list:
     return sorted(urls)
 
 
+#: headless Chromium keeps its window 500 px wide or more: a narrower page is drawn in an
+#: iframe of that width (``srcdoc``: the page's own origin, its media queries at the iframe's width)
+MIN_WINDOW = 500
+
+
+def drawn_at(text: str, width: int, height: int) -> str:
+    """``text`` (a page) as drawn ``width`` CSS px wide: itself, or inside an iframe that wide."""
+    import html as html_lib
+
+    if width >= MIN_WINDOW:
+        return text
+    return (f'<!DOCTYPE html><html><body style="margin:0"><iframe style="border:0;width:{width}px;height:{height}px" '
+            f'srcdoc="{html_lib.escape(text, quote=True)}"></iframe></body></html>')
+
+
 def browse(report: Path, shot: Path, width: int, height: int, chromium: str) -> list:
     """Screenshot ``report`` in headless Chromium; return the console lines and requests seen."""
     with tempfile.TemporaryDirectory() as profile:
         netlog = Path(profile) / "net.json"
+        page = report.resolve()
+        if width < MIN_WINDOW:
+            page = Path(profile) / report.name
+            page.write_text(drawn_at(report.read_text(encoding="utf-8"), width, height), encoding="utf-8")
         cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}/p", f"--log-net-log={netlog}",
-               f"--screenshot={shot}", f"--window-size={width},{height}", report.resolve().as_uri()]
+               f"--screenshot={shot}", f"--window-size={max(width, MIN_WINDOW)},{height}", page.as_uri()]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
         problems = [f"console: {line.split('CONSOLE', 1)[1][:100]}" for line in r.stderr.splitlines()
                     if ":CONSOLE" in line]
@@ -131,7 +150,7 @@ window.addEventListener("load", () => {
   const pre = document.createElement("pre");
   pre.id = "metro-check";
   pre.textContent = JSON.stringify(out);
-  document.body.appendChild(pre);
+  (window.parent !== window ? window.parent.document : document).body.appendChild(pre);
 });
 </script>"""
 
@@ -144,15 +163,17 @@ def measure(report: Path, width: int, height: int, chromium: str, min_pt: float)
     text = report.read_text(encoding="utf-8")
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / report.name
-        copy.write_text(text.replace("</body>", MEASURE + "\n</body>"), encoding="utf-8")
+        copy.write_text(drawn_at(text.replace("</body>", MEASURE + "\n</body>"), width, height), encoding="utf-8")
         cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp}/p", "--virtual-time-budget=10000",
-               f"--window-size={width},{height}", "--dump-dom", copy.as_uri()]
+               f"--window-size={max(width, MIN_WINDOW)},{height}", "--dump-dom", copy.as_uri()]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     m = re.search(r'<pre id="metro-check">(.*?)</pre>', r.stdout, re.S)
     if m is None:
         return [f"layout not measured (chromium exit {r.returncode})"]
     d = json.loads(html_lib.unescape(m.group(1)))
     out = [f"clipped: {c}" for c in d["clipped"]]
+    if d["window"] != width:
+        out.append(f"the page was drawn {d['window']} px wide, not {width} px")
     if d["page"] > d["window"]:
         out.append(f"page {d['page']} px wider than the window {d['window']} px")
     if width >= 1280:

@@ -16,8 +16,8 @@ from metrology.report.html import Section, Table, figure_from_matplotlib, verdic
 __all__ = ["plane_section", "calibration_section", "validation_section", "diagnosis_section", "normals_section"]
 
 
-#: "±" between non-breaking spaces: a value and its uncertainty stay on one line
-_PM = "\u00a0±\u00a0"
+#: "±" between spaces: on a narrow page a cell breaks there rather than inside a number
+_PM = " ± "
 
 
 def _pm(v, se, unit, digits=4):
