@@ -29,6 +29,9 @@ class SensorLayout:
         tilt (rad) about the axes ``e1, e2`` of :func:`metrology.core.model.direction_basis`
         of the layout's *own* directions (the chart centred on the calibrated beam). The
         direction is a unit vector: its sixth number (the scale) is not a parameter.
+    certificate : dict of str -> str
+        The calibration certificate's header fields (part, operator, instrument, serial,
+        temperature, notes, ...), carried with a calibrated layout; empty for a nominal one.
     """
 
     names: tuple
@@ -40,6 +43,7 @@ class SensorLayout:
     direction_stderr_deg: np.ndarray | None = None
     effects: dict = field(default_factory=dict)
     covariance: np.ndarray | None = None
+    certificate: dict = field(default_factory=dict)
 
     def __post_init__(self):
         n = len(self.names)

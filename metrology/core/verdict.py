@@ -32,6 +32,7 @@ class Check:
     unit : str, the unit of ``value`` and ``limit`` (``"deg"``, ``"mm"``, ``"holes"``, ``""``)
     passed : bool
     gate : bool, whether ``passed`` counts toward the verdict (False: information only)
+    at_least : bool, the value must be at least ``limit`` (default: at most), for the words
     """
 
     name: str
@@ -40,6 +41,7 @@ class Check:
     unit: str
     passed: bool
     gate: bool = True
+    at_least: bool = False
 
     def to_dict(self) -> dict:
         return {"name": self.name, "value": self.value, "limit": self.limit, "unit": self.unit,

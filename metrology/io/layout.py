@@ -19,6 +19,13 @@ writes the calibration's full parameter covariance, which ``metro measure`` prop
     parameters = ["L1.x", "L1.y", "L1.z", "L1.a", "L1.b", "L2.x", ...]   # 5 per sensor
     covariance = [[...], ...]     # (5n, 5n): mm for x y z (TCS), rad for a b
 
+The calibration certificate's header fields (``metro calibrate --meta key=value``) are carried
+in a table of strings::
+
+    [certificate]
+    part = "EE-7 pressure foot"
+    operator = "J. Smith"
+
 ``a, b`` are the beam's tilts about the axes ``e1, e2`` of
 :func:`metrology.core.model.direction_basis` of the file's own (calibrated) direction: the
 direction is a unit vector, so of the six numbers of a sensor only these five are parameters.
@@ -26,6 +33,7 @@ direction is a unit vector, so of the six numbers of a sensor only these five ar
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 import numpy as np
@@ -92,10 +100,18 @@ def load_layout(path) -> SensorLayout:
                 raise ValueError(f"{path}: sensor {name} 'effects' must be a table")
             effects[name] = {k: float(v) for k, v in s["effects"].items()}
     covariance = _covariance(path, data.get("calibration"), tuple(names))
+    certificate = _certificate(path, data.get("certificate", {}))
     zse_arr = None if any(z is None for z in zse) else np.array(zse)
     dse_arr = None if any(z is None for z in dse) else np.array(dse)
     return SensorLayout(tuple(names), np.array(zero), np.array(direction), np.array(noise), np.array(rng), zse_arr, dse_arr, effects,
-                        covariance)
+                        covariance, certificate)
+
+
+def _certificate(path, table) -> dict:
+    """The ``[certificate]`` table: header fields, each a string (numbers and dates as written)."""
+    if not isinstance(table, dict) or any(isinstance(v, (dict, list)) for v in table.values()):
+        raise ValueError(f"{path}: [certificate] must be a table of key = \"text\" fields")
+    return {str(k): str(v) for k, v in table.items()}
 
 
 def covariance_names(names) -> list:
@@ -155,7 +171,18 @@ def layout_to_toml(layout: SensorLayout, header: str = "") -> str:
                   "covariance = ["]
         lines += ["  [" + ", ".join(f"{v:.9g}" for v in row) + "]," for row in layout.covariance]
         lines += ["]", ""]
+    if layout.certificate:
+        lines += ["[certificate]", "# the calibration certificate's header fields (metro calibrate --meta)"]
+        lines += [f"{_key(k)} = {json.dumps(str(v), ensure_ascii=False)}" for k, v in layout.certificate.items()]
+        lines.append("")
     return "\n".join(lines)
+
+
+def _key(k) -> str:
+    """A TOML key: bare when it can be, else quoted."""
+    import re
+
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k, ensure_ascii=False)
 
 
 def save_layout(layout: SensorLayout, path, header: str = "") -> None:
