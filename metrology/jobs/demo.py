@@ -29,8 +29,8 @@ DEMO_STEPS = (
     ("6. Simulate a production log: 20 000 holes drilled with the calibrated head, L3 knocked at hole 12 000",
      "simulate-log --layout {out}/calibrated.toml --holes 20000 --shift L3:0.03@12000 --seed 1 "
      "--out {out}/hole_log.csv"),
-    ("7. Measure every hole: angle to the drill axis with U95, verdict, drift watch",
-     "measure {out}/hole_log.csv --layout {out}/calibrated.toml --out {out}/holes.csv"),
+    ("7. Measure every hole on the flat panel: angle to the drill axis with U95, verdict, drift watch",
+     "measure {out}/hole_log.csv --layout {out}/calibrated.toml --min-radius-mm inf --out {out}/holes.csv"),
 )
 
 
