@@ -59,7 +59,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
 
-__all__ = ["HoleNormals", "hole_normals", "drill_axis", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
+__all__ = ["HoleNormals", "hole_normals", "drill_axis", "radius95", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
 
 #: coverage factor of a 95 % interval of a normal distribution
 K95 = 1.959963984540054
@@ -182,14 +182,17 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
     if np.any(small):
         tot = [noise_g[j][small] + (cal_g[j][small] if cal_g is not None else 0.0) for j in range(3)]
-        lam = 0.5 * (tot[0] + tot[2]) + np.sqrt(0.25 * (tot[0] - tot[2]) ** 2 + tot[1] ** 2)
+        disc = np.sqrt(0.25 * (tot[0] - tot[2]) ** 2 + tot[1] ** 2)
+        l1, l2 = 0.5 * (tot[0] + tot[2]) + disc, np.maximum(0.5 * (tot[0] + tot[2]) - disc, 0.0)
         b2 = 0.0 if flat else (_one_sign(px[:, small], x[:, small], y[:, small]) ** 2
                                + _one_sign(py[:, small], x[:, small], y[:, small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
-        s2d = np.sqrt(lam / (1.0 + g2[small]) ** 2 + b2)
+        scale = (1.0 + g2[small]) ** 2
+        l1, l2 = l1 / scale + b2, l2 / scale + b2  # the curvature term, as a round spread
+        s2d = np.sqrt(l1)
         still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
         idx = np.flatnonzero(small)[still]
         u_angle[idx] = s2d[still]
-        U95[idx] = K95_2D * s2d[still]
+        U95[idx] = radius95(l1[still], l2[still])
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
     signature = twist = None
@@ -209,6 +212,54 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(0) / (n - 3))
     return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound, twist)
+
+
+def _radius_table():
+    """``f(r)`` on a grid of ``r = l2 / l1`` in [0, 1]: ``P(Z1^2 + r Z2^2 <= f^2) = 0.95``, Z standard
+    normal (the integral over ``Z2`` of the normal probability of ``Z1``, bisection in ``f``)."""
+    from scipy.special import erf
+
+    z = np.linspace(-8.0, 8.0, 4001)
+    w = np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi) * (z[1] - z[0])
+    grid = np.linspace(0.0, 1.0, 101)
+    out = np.empty_like(grid)
+    for i, r in enumerate(grid):
+        lo, hi = 1.9, 2.5
+        for _ in range(50):
+            f = 0.5 * (lo + hi)
+            inside = np.clip(f * f - r * z * z, 0.0, None)
+            p = np.sum(w * erf(np.sqrt(inside / 2.0)))
+            lo, hi = (f, hi) if p < 0.95 else (lo, f)
+        out[i] = 0.5 * (lo + hi)
+    return grid, out
+
+
+#: ``f`` of :func:`radius95` on the ratios 0, 0.01, ..., 1 (from :func:`_radius_table`, which
+#: tests/measure/test_normals.py runs again)
+RADIUS95_F = np.array([
+    1.959964, 1.962530, 1.965125, 1.967751, 1.970408, 1.973097, 1.975819, 1.978576, 1.981368, 1.984196,
+    1.987062, 1.989968, 1.992914, 1.995901, 1.998933, 2.002011, 2.005137, 2.008314, 2.011543, 2.014828,
+    2.018172, 2.021576, 2.025045, 2.028580, 2.032184, 2.035859, 2.039607, 2.043430, 2.047329, 2.051305,
+    2.055359, 2.059490, 2.063700, 2.067987, 2.072350, 2.076790, 2.081304, 2.085892, 2.090552, 2.095282,
+    2.100078, 2.104943, 2.109872, 2.114859, 2.119913, 2.125020, 2.130180, 2.135398, 2.140663, 2.145980,
+    2.151344, 2.156755, 2.162203, 2.167693, 2.173223, 2.178791, 2.184398, 2.190029, 2.195702, 2.201396,
+    2.207121, 2.212874, 2.218654, 2.224461, 2.230296, 2.236131, 2.242012, 2.247889, 2.253792, 2.259718,
+    2.265672, 2.271625, 2.277584, 2.283557, 2.289550, 2.295562, 2.301583, 2.307598, 2.313653, 2.319679,
+    2.325738, 2.331801, 2.337858, 2.343931, 2.350026, 2.356117, 2.362201, 2.368294, 2.374393, 2.380498,
+    2.386611, 2.392702, 2.398801, 2.404914, 2.411041, 2.417181, 2.423259, 2.429390, 2.435510, 2.441618,
+    2.447771
+])
+
+
+def radius95(l1, l2):
+    """The radius of the disc about the centre that holds 95 % of a 2-D normal distribution of
+    eigenvalues ``l1 >= l2 >= 0`` (arrays): ``sqrt(l1) f(l2 / l1)``, ``f`` from 1.96 (a line) to
+    :data:`K95_2D` (round), :data:`RADIUS95_F` on 101 ratios, interpolated (to 1e-4)."""
+    grid, f = np.linspace(0.0, 1.0, len(RADIUS95_F)), RADIUS95_F
+    l1 = np.asarray(l1, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(l1 > 0, np.asarray(l2, float) / l1, 1.0)
+    return np.sqrt(l1) * np.interp(np.clip(r, 0.0, 1.0), grid, f)
 
 
 def _height_rows(layout, dT, gx, gy):
