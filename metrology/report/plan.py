@@ -100,7 +100,7 @@ def follow_line(step) -> str:
     parts = [f"{step.k:4d} {step.pose_id}:"]
     known = np.all(np.isfinite(step.stderr), axis=1)
     if not np.any(known):  # no sensor has enough readings yet (a planned file before the cell fills it)
-        return " ".join(parts + ["waiting for readings"])
+        return " ".join(parts + ["waiting for readings (no 1 σ until each sensor has 6)"])
     for name, se, ok in zip(step.names, step.stderr, known):
         parts.append(f"{name} zero {se[:3].max():.4f} mm tilt {np.rad2deg(se[3:].max()):.4f} deg;" if ok else
                      f"{name} waiting for readings;")

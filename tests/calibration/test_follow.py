@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 import threading
 import time
 
@@ -81,7 +82,9 @@ def test_cli_follow_prints_every_pose_and_when_to_stop(tmp_path):
     k = out["met_after_poses"]
     assert out["stopped"] == "targets met" and out["poses_read"] == k
     assert f"targets met after {k} poses" in r.stderr
-    assert len([ln for ln in r.stderr.splitlines() if "normal" in ln and "deg" in ln]) == k
+    # one line per pose: the first ones wait for enough readings, then the 1 sigmas
+    lines = [ln for ln in r.stderr.splitlines() if re.match(r" *[0-9]+ C[0-9]+: ", ln)]
+    assert len(lines) == k and "waiting for readings" in lines[0] and "normal" in lines[-1]
 
 
 def test_cli_follow_bad_input_is_one_line_exit_2(tmp_path):

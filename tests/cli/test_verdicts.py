@@ -103,10 +103,23 @@ def test_diagnose_fails_on_a_cause_only_with_fail_on_cause(exports):
     base = ["--plane", H / "plane.json", "--layout", H / "layout.toml", "--folds", "2"]
     v = _run(["diagnose", exports["clean"], *base, "--fail-on-cause"], 0)
     assert v["checks"][1]["name"] == "cause found: none" and v["checks"][1]["gate"]
-    v = _run(["diagnose", exports["outliers"], *base], 0)  # a cause named: information by default
-    assert v["checks"][1]["name"] == "cause found: outliers" and not v["checks"][1]["gate"]
     v = _run(["diagnose", exports["outliers"], *base, "--fail-on-cause"], 1)
     assert _failed(v) == ["cause found: outliers"]
+
+
+def test_a_cause_is_information_without_fail_on_cause():
+    """The one function that reads a Diagnosis for the exit code (its ``to_dict()`` only)."""
+    from metrology.report.verdicts import diagnosis_verdict
+
+    class Found:
+        def to_dict(self):
+            return {"cause": "drift", "causes": [{"cause": "drift"}],
+                    "discrepancy": {"measured_heldout_normal_deg": 0.2}}
+
+    v = diagnosis_verdict(Found())
+    assert v.passed and [c.gate for c in v.checks] == [True, False] and v.checks[1].value == 1
+    assert not diagnosis_verdict(Found(), fail_on_cause=True).passed
+    assert not diagnosis_verdict(Found(), tolerance_deg=0.1).passed  # 0.2 deg held out: out of tolerance
 
 
 def test_normals_fails_out_of_tolerance():
