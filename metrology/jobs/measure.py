@@ -61,8 +61,7 @@ class MeasureReport:
         s = self.result.summary
         groups = [{"cell": cell, "panel": panel, "day": day, "counts": s.counts(grp), **s.figures(grp)}
                   for (cell, panel, day), grp in sorted(s.groups.items())]
-        series = [{"cell": cell, "panel": panel, "counts": s.counts(grp), **s.figures(grp)}
-                  for (cell, panel), grp in sorted(s.series.items())]
+        series = [{"cell": cell, "counts": s.counts(grp), **s.figures(grp)} for cell, grp in sorted(s.series.items())]
         return {
             "schema": SCHEMA,
             "sources": dict(self.sources),

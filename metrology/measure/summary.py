@@ -30,8 +30,8 @@ _STATUSES = tuple(str(s) for s in Status)
 class Group:
     """Holes counted together: by status, and the judged angle's moments (deg); with ``hists``
     the angle's histograms before and after the adjustment (on :data:`EDGES_DEG`). A group of a
-    cell, panel and day keeps no histogram (a fleet has many days: 13 kB a group would add up);
-    a group of a cell and panel, and the fleet, keep one."""
+    cell, panel and day keeps no histogram (a fleet drills many panels on many days: 13 kB a
+    group would grow with the log); a cell, and the fleet, keep one."""
 
     counts: np.ndarray = field(default_factory=lambda: np.zeros(len(_STATUSES), np.int64))
     n: int = 0
@@ -104,7 +104,7 @@ class FleetSummary:
     ----------
     tolerance_deg : float
     groups : dict, (cell, panel, day) -> Group (no histograms)
-    series : dict, (cell, panel) -> Group (with histograms)
+    series : dict, cell -> Group (with histograms)
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
     """
@@ -132,8 +132,8 @@ class FleetSummary:
         for j, k in enumerate(keys):
             self.groups.setdefault(k, Group()).merge(Group(counts[j], int(n[j]), float(s1[j]), float(s2[j])))
         # the histograms by cell and panel
-        cps = sorted({k[:2] for k in keys})
-        cp_of = np.array([cps.index(k[:2]) for k in keys])[g] if len(g) else np.zeros(0, int)
+        cps = sorted({k[0] for k in keys})
+        cp_of = np.array([cps.index(k[0]) for k in keys])[g] if len(g) else np.zeros(0, int)
         nb, C = len(EDGES_DEG), len(cps)
         hists = []
         for ang in (batch.angle_before, batch.angle_after):
@@ -141,7 +141,7 @@ class FleetSummary:
             f = np.isfinite(a)
             hists.append(np.bincount(cp_of[f] * nb + _bins(a[f]), minlength=C * nb).reshape(C, nb))
         for j, k in enumerate(cps):
-            sel = [i for i, kk in enumerate(keys) if kk[:2] == k]
+            sel = [i for i, kk in enumerate(keys) if kk[0] == k]
             self.series.setdefault(k, Group()).merge(Group(counts[sel].sum(0), int(n[sel].sum()), float(s1[sel].sum()),
                                                            float(s2[sel].sum()), hists[0][j], hists[1][j]))
         after = np.isfinite(batch.angle_after)
