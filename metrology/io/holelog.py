@@ -226,13 +226,18 @@ def _parquet_batches(log, part):
     import pyarrow.parquet as pq
 
     try:
-        pf = pq.ParquetFile(part.path)
-        for batch in pf.iter_batches(batch_size=log.batch_rows):
-            table = pa.Table.from_batches([batch])
-            for k, v in part.keys.items():
-                if k not in table.column_names:
-                    table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
-            yield table
+        # one row group at a time, without read-ahead: memory is bounded by the larger of a batch and
+        # a row group (pyarrow's iter_batches reads ahead: 260 MB against 135 MB on a 1e6-hole file)
+        pf = pq.ParquetFile(part.path, pre_buffer=False)
+        for g in range(pf.num_row_groups):
+            group = pf.read_row_group(g, use_threads=False)
+            for start in range(0, group.num_rows, log.batch_rows):
+                table = group.slice(start, log.batch_rows)
+                for k, v in part.keys.items():
+                    if k not in table.column_names:
+                        table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
+                yield table
+            del group
     except (pa.ArrowInvalid, OSError) as exc:
         raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
 
