@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from ._common import JSON_HELP, REPORT_HELP, echo, echo_json, fail, guarded, invocation, progress_bar, warn
+from ._common import JSON_HELP, REPORT_HELP, STATE, echo, echo_json, fail, guarded, invocation, progress_bar, warn
 
 STDIN = " ('-' for stdin)"
 MESH_FORMATS = ("stl", "obj", "ply", "off", "glb", "gltf", "step", "stp")
@@ -65,7 +65,7 @@ def register(app: typer.Typer) -> None:
                 true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
                 motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
                 progress=progress, report=report, command=invocation(ctx), units=units,
-                footprint_mm=footprint_mm, on_warning=warn, beams=beams,
+                footprint_mm=footprint_mm, on_warning=None if STATE.quiet else warn, beams=beams,
             )
         if as_json:
             echo_json(summary, "normals")

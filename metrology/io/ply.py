@@ -386,6 +386,8 @@ def parse_rows(path, lines, start, element, first_line_no):
     """Check and parse ``element.count`` rows of ``lines`` from index ``start``; line numbers
     in messages count from ``first_line_no`` (the file line of ``lines[0]``). Returns the
     ``(count, k) float`` values of the element's k scalar properties."""
+    if element.count == 0:  # nothing to parse (and numpy's loadtxt would warn of "no data")
+        return np.empty((0, sum(p.count_dtype is None for p in element.properties)))
     values = None
     if all(p.count_dtype is None for p in element.properties):
         values = _parse_rows_fast(lines, start, element)

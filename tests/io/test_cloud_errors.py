@@ -62,6 +62,7 @@ CASES = [
     # real files from trimesh's models
     ("trimesh_points_emptyascii.ply", r"line 23: '-0\.009618 -0\.013861 0\.0384' after the last element \(0 face\), a row of element 'vertex' \(12 declared\), expected the end of the file"),
     ("trimesh_ply_empty_header.ply", r"the PLY header declares no vertex element"),
+    ("pcl_empty_cloud.ply", r"no points in the file$"),  # PCL test_ply_io.cpp EmptyCloud (PCL reads 0 points)
     # PCD and text
     ("pcd_ascii_short_row.pcd", r"line 13: 3 value\(s\), the row ends before property 'rgb'"),
     ("pcd_ascii_extra_value.pcd", r"line 13: 5 values \('9' left over\), expected 4"),
@@ -150,3 +151,10 @@ def test_binary_ply_with_mixed_face_sizes_is_walked_row_by_row(tmp_path):
     path.write_bytes(head + faces[:-1] + xyz.tobytes())  # one byte short: the vertices are shifted
     with pytest.raises(ValueError, match=r"mixed\.ply: truncated: the header declares 3 vertices, the file holds 2"):
         read_cloud(path)
+
+
+def test_empty_ply_error_is_the_only_line_on_stderr(tmp_path):
+    # issue 32: numpy's "loadtxt: input contained no data" warning leaked before the error
+    r = CliRunner().invoke(app, ["fit-plane", str(BAD / "pcl_empty_cloud.ply")])
+    assert r.exit_code == 2
+    assert r.stderr.strip().splitlines() == [f"error: {BAD / 'pcl_empty_cloud.ply'}: no points in the file"]
