@@ -92,8 +92,10 @@ def _collinear(evals) -> bool:
 
 
 
-#: RANSAC hypotheses scored together (one (n, batch) distance matrix: 20 MB at 2 x 10^4 points)
-RANSAC_BATCH = 128
+#: RANSAC hypotheses scored together: the first batch this many (a clean datum stops after ~10),
+#: each next one twice as many, up to RANSAC_BATCH_MAX (an (n, batch) matrix: 20 MB at 2 x 10^4 points)
+RANSAC_BATCH = 16
+RANSAC_BATCH_MAX = 128
 
 
 def _ransac(sub, threshold, rng):
@@ -106,9 +108,10 @@ def _ransac(sub, threshold, rng):
     takes longer than the whole fit of 10^6 points) and draws from the caller's generator.
     """
     n = len(sub)
-    best, best_count, needed, done = None, 0, RANSAC_ITERATIONS, 0
+    best, best_count, needed, done, batch = None, 0, RANSAC_ITERATIONS, 0, RANSAC_BATCH
     while done < needed:
-        b = min(RANSAC_BATCH, needed - done)
+        b = min(batch, needed - done)
+        batch = min(2 * batch, RANSAC_BATCH_MAX)
         idx = rng.integers(0, n, (b, 3))
         p0 = sub[idx[:, 0]]
         normals = np.cross(sub[idx[:, 1]] - p0, sub[idx[:, 2]] - p0)

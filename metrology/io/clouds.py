@@ -236,10 +236,13 @@ def _finite(points, path, allow_nan, fmt):
     """Drop (``allow_nan``) or refuse points with a NaN coordinate; always refuse inf."""
     m = len(points)
     keep = None
+    ones = np.ones(points.shape[1]) if points.ndim == 2 else None
     for start in range(0, m, _CHUNK):
         block = points[start : start + _CHUNK]
+        if np.isfinite(block @ ones).all():  # a NaN or inf makes its row's sum non-finite (BLAS: fast)
+            continue
         ok = np.isfinite(block).all(axis=1)
-        if ok.all():
+        if ok.all():  # finite values whose sum overflowed
             continue
         bad = ~ok if not allow_nan else np.isinf(block).any(axis=1)
         if bad.any():

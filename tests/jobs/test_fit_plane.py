@@ -110,3 +110,21 @@ def test_a_scene_refusal_names_the_threshold_option_with_a_value_that_fits():
     t = float(re.search(r"--threshold-mm (\S+) fits", str(info.value)).group(1))
     fit = fit_plane_file(milk, threshold_mm=t, warn=said.append)
     assert fit.n_inliers >= 0.2 * fit.n_points and fit.threshold == t
+
+
+def test_fit_plane_of_a_binary_ply_imports_neither_open3d_nor_scipy(tmp_path, rng):
+    # issue 32: `import open3d` alone took longer than the whole fit of 10^6 points
+    import subprocess
+
+    from metrology.io.clouds import write_ply
+
+    xy = rng.uniform(-100, 100, (5000, 2))
+    write_ply(tmp_path / "plate.ply", np.column_stack([xy, rng.normal(0, 0.02, len(xy))]))
+    code = ("import sys\nfrom cli.main import main\nsys.argv = ['metro', 'fit-plane', sys.argv[1], '--json']\n"
+            "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
+            "heavy = sorted(m for m in ('open3d', 'scipy.special', 'scipy.stats', 'scipy.spatial', 'matplotlib', 'trimesh')"
+            " if m in sys.modules)\nprint('HEAVY', heavy, file=sys.stderr)\n")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "plate.ply")], capture_output=True, text=True,
+                       cwd=Path(__file__).resolve().parents[2])
+    assert '"n_inliers"' in r.stdout, r.stderr
+    assert "HEAVY []" in r.stderr, r.stderr
