@@ -254,7 +254,7 @@ def test_cli_layout_tolerance_option():
     r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5,3", "--json"])
     assert r.exit_code == 0, r.output
     cost = json.loads(r.stdout)["tolerance_cost"]
-    assert (cost["zero_mm"], cost["direction_deg"]) == (1.5, 3.0) and cost["margin_mm_max"] > 0
+    assert (cost["zero_mm"], cost["direction_deg"]) == pytest.approx((1.5, 3.0)) and cost["margin_mm_max"] > 0
     r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5"])
     assert r.exit_code == 2 and "expected two numbers ZERO_MM,DIRECTION_DEG" in r.stderr
     r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5,-3"])
