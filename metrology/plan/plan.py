@@ -257,7 +257,7 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     random = design_for("random", layout, plane, X, pool[:n_poses], cands, G, prior, inc)
     cost = None
     if limits.zero_tol_mm > 0 or limits.direction_tol_rad > 0:
-        cost = _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned, n_poses, G, inc)
+        cost = _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned, n_poses, G, inc, len(pool))
     args = (layout, plane, extent, limits, sigma, G, prior, robot_error_mm, robot_error_rad, robustness_trials)
     planned = replace(planned, robustness=_robustness(rng, planned, *args))
     random = replace(random, robustness=_robustness(rng, random, *args))
@@ -272,7 +272,7 @@ def _tol_words(limits) -> str:
             "nominal (the layout tolerance)")
 
 
-def _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned: Design, n_poses, G, inc) -> dict:
+def _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned: Design, n_poses, G, inc, n_feasible) -> dict:
     """What planning against the layout tolerance costs (:attr:`PosePlan.tolerance_cost`): the same
     candidates planned on the nominal layout alone, and the margin the tolerance keeps."""
     nominal = replace(limits, zero_tol_mm=0.0, direction_tol_rad=0.0)
@@ -282,6 +282,6 @@ def _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned: Des
     d, _ = pose_readings(layout, plane, planned.poses)
     d_lo, d_hi, _ = reading_bounds(layout, plane, planned.poses, limits.zero_tol_mm, limits.direction_tol_rad)
     return {"zero_mm": limits.zero_tol_mm, "direction_deg": float(np.rad2deg(limits.direction_tol_rad)),
-            "feasible_without": int(len(pool)), "margin_mm_max": float(np.max(np.maximum(d_hi - d, d - d_lo))),
+            "feasible": int(n_feasible), "feasible_without": int(len(pool)), "margin_mm_max": float(np.max(np.maximum(d_hi - d, d - d_lo))),
             "normal_sigma_deg_without": float(np.rad2deg(without.normal_sigma_rad)),
             "normal_sigma_deg": float(np.rad2deg(planned.normal_sigma_rad))}
