@@ -239,8 +239,9 @@ def _finite(points, path, allow_nan, fmt):
     ones = np.ones(points.shape[1]) if points.ndim == 2 else None
     for start in range(0, m, _CHUNK):
         block = points[start : start + _CHUNK]
-        if np.isfinite(block @ ones).all():  # a NaN or inf makes its row's sum non-finite (BLAS: fast)
-            continue
+        with np.errstate(over="ignore", invalid="ignore"):  # huge finite values may overflow the sum
+            if np.isfinite(block @ ones).all():  # a NaN or inf makes its row's sum non-finite (BLAS: fast)
+                continue
         ok = np.isfinite(block).all(axis=1)
         if ok.all():  # finite values whose sum overflowed
             continue
