@@ -175,8 +175,8 @@ def bench(m, repeat, workdir):
     print(f"{'metro fit-plane --json':34s} {p_metro[0]:8.3f} {p_metro[1]:8.0f}")
     print(f"{'load + segment_plane (python -c)':34s} {p_base[0]:8.3f} {p_base[1]:8.0f}")
     goal = 0.5 if m <= 1_000_000 else 0.4
-    print(f"ratios: time {p_metro[0] / p_base[0]:.2f} (goal <= {goal}), peak memory {p_metro[1] / p_base[1]:.2f} (goal <= 1); "
-          f"in process metro/o3d {t_metro / t_o3d:.2f} (goal <= 1)")
+    print(f"ratios: time {p_metro[0] / p_base[0]:.2f} (goal <= {goal}), peak memory {p_metro[1] / p_base[1]:.2f} "
+          f"(goal <= 1); in process metro/o3d {t_metro / t_o3d:.2f} (goal <= 1)")
     path.unlink()
 
 
@@ -188,7 +188,8 @@ def main():
     args = ap.parse_args()
     if args.workdir is not None:  # a --workdir that does not exist yet is made (it crashed before)
         Path(args.workdir).mkdir(parents=True, exist_ok=True)
-    print(f"python {sys.version.split()[0]}, numpy {np.__version__}, open3d {open3d().__version__}, {os.cpu_count()} cpu")
+    print(f"python {sys.version.split()[0]}, numpy {np.__version__}, open3d {open3d().__version__}, "
+          f"{os.cpu_count()} cpu")
     with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
         for m in args.sizes:
             bench(int(m), args.repeat, tmp)
