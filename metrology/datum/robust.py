@@ -433,6 +433,7 @@ def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
         threshold=float(threshold),
         threshold_auto=auto,
         threshold_ran_away=ran_away,
+        threshold_at_floor=bool(auto and threshold <= THRESHOLD_FLOOR_MM),
         noise_sigma=float(math.sqrt(sigma2)) if dof > 0 else math.nan,
         rms=float(math.sqrt(rss / cnt)),
         residual_min=rmin,
