@@ -39,6 +39,13 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Fit the datum plane to a point cloud: RANSAC inliers, total-least-squares refit,
         uncertainty and form."""
+        import os
+
+        # numpy is not imported yet: one BLAS thread (the fit's products are thin, (k, 3) by 3, and
+        # memory-bound; on a loaded 2-core machine OpenBLAS's second thread spins: 0.6 s -> 0.4 s
+        # for the whole 10^6-point run, benchmarks/bench_fit_plane.py). A value the user set wins.
+        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(name, "1")
         from metrology.jobs.fit_plane import fit_plane_file
         from metrology.report.datum import format_plane_fit
         from metrology.report.verdicts import plane_verdict, verdict_text

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import typer
 
-from ._common import (JSON_HELP, REPORT_HELP, echo, echo_json, fail, finish, guarded, invocation, progress_bar, reported,
-                      warn, with_verdict)
+from ._common import (JSON_HELP, REPORT_HELP, STATE, echo, echo_json, fail, finish, guarded, invocation, progress_bar,
+                      reported, warn, with_verdict)
 from ._stdin import MESH_FORMATS
 
 STDIN = " ('-' for stdin)"
@@ -67,7 +67,7 @@ def register(app: typer.Typer) -> None:
                 true_layout_path=true_layout, motion_repeat_deg=motion_repeat_deg, motion_scale=motion_scale,
                 motion_position_mm=motion_position_mm, prior_radius_mm=sphere_prior_radius_mm, loop=not no_loop,
                 progress=progress, report=report, command=invocation(ctx), units=units,
-                footprint_mm=footprint_mm, on_warning=warn, beams=beams,
+                footprint_mm=footprint_mm, on_warning=None if STATE.quiet else warn, beams=beams,
             )
         verdict = normals_verdict(summary, tolerance_deg)
         if as_json:

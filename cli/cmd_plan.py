@@ -13,6 +13,17 @@ from ._stdin import plane_suffix, stdin_files
 STDIN = " ('-' for stdin)"
 
 
+def _tolerance(text: Optional[str]):
+    """``"zero_mm,direction_deg"`` -> two floats >= 0, or None; a one-line error otherwise."""
+    if text is None:
+        return None
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        fail(f"--layout-tolerance {text!r}: expected two numbers ZERO_MM,DIRECTION_DEG")
+    return a, b
+
+
 def register(app: typer.Typer) -> None:
     @app.command("plan")
     @guarded
@@ -37,6 +48,7 @@ def register(app: typer.Typer) -> None:
         out: Optional[str] = typer.Option(None, "--out", help="Write the poses CSV (export contract, empty d_ columns) here."),
         plot: Optional[str] = typer.Option(None, "--plot", help="Write the sigma-against-k figure here (PNG, PDF, SVG)."),
         separate: Optional[str] = typer.Option(None, "--separate", help="Also tell these causes from the sensor parameters (comma-separated): incidence (with the gain and curve), scale, nonlinearity."),
+        layout_tolerance: Optional[str] = typer.Option(None, "--layout-tolerance", help="ZERO_MM,DIRECTION_DEG: how far the real zero points (each coordinate) and beams may be from the layout's; the poses keep their limits on every such layout (default: the layout's [tolerance], else none)."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The plan and its predictions."),
     ) -> None:
         """Plan the calibration poses: D-optimal for the identifiable parameters, feasible, ordered."""
@@ -56,7 +68,8 @@ def register(app: typer.Typer) -> None:
             result = plan_files(layout, plane, poses, tilt_max_deg, parse_range(standoff_mm, "--standoff-mm"), working_standoff_mm,
                                 noise_mm, parse_range(range_mm, "--range-mm"), extent, extent_radius_mm, margin_mm,
                                 spot_margin_mm, robot_error_mm, robot_error_deg, tool_side, candidates, seed, out, plot,
-                                tuple(c.strip() for c in separate.split(",")) if separate else ())
+                                tuple(c.strip() for c in separate.split(",")) if separate else (),
+                                _tolerance(layout_tolerance))
         if json_out:
             from metrology.report.verdicts import NO_VERDICT
 

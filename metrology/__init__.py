@@ -1,24 +1,56 @@
 """metro: metrology for robotic drilling.
 
-Public names are listed in ``__all__``. Heavy libraries (Open3D, trimesh, scipy, filterpy,
-matplotlib) are imported inside the functions that need them, so importing this package
-is cheap.
+Public names are listed in ``__all__`` and imported on first use (PEP 562 ``__getattr__``):
+``import metrology`` (and any ``metrology.x.y``) loads none of the subpackages it does not use.
 """
 
-from metrology.core.layout import SensorLayout
-from metrology.io.layout import load_layout, save_layout
-from metrology.core.model import readings, jacobian_raw, jacobian_tangent, direction_from_tangent, gauge_null_vector
-from metrology.core.normals import projection_points, normal_eq18, normal_lsq, micro_plane_normal, attitude_angles, normal_from_angles, angle_between
-from metrology.core.plane import Plane, fit_plane_tls
-from metrology.datum import PlaneFit, fit_plane_robust
-from metrology.jobs.fit_plane import fit_plane_file
-from metrology.io.clouds import read_cloud
-from metrology.calibration.calibrate import CalibrationReport, calibrate_dataset
-from metrology.calibration.validation import validate
-from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
-from metrology.panel.mesh import load_panel
-from metrology.panel.run import run_normals
-from metrology.diagnosis import diagnose
+import importlib
+
+#: public name -> the module that defines it (imported on first use, PEP 562: `import metrology` stays cheap)
+_LAZY = {
+    'SensorLayout': 'metrology.core.layout',
+    'load_layout': 'metrology.io.layout',
+    'save_layout': 'metrology.io.layout',
+    'readings': 'metrology.core.model',
+    'jacobian_raw': 'metrology.core.model',
+    'jacobian_tangent': 'metrology.core.model',
+    'direction_from_tangent': 'metrology.core.model',
+    'gauge_null_vector': 'metrology.core.model',
+    'projection_points': 'metrology.core.normals',
+    'normal_eq18': 'metrology.core.normals',
+    'normal_lsq': 'metrology.core.normals',
+    'micro_plane_normal': 'metrology.core.normals',
+    'attitude_angles': 'metrology.core.normals',
+    'normal_from_angles': 'metrology.core.normals',
+    'angle_between': 'metrology.core.normals',
+    'Plane': 'metrology.core.plane',
+    'fit_plane_tls': 'metrology.core.plane',
+    'PlaneFit': 'metrology.datum',
+    'fit_plane_robust': 'metrology.datum',
+    'fit_plane_file': 'metrology.jobs.fit_plane',
+    'read_cloud': 'metrology.io.clouds',
+    'CalibrationReport': 'metrology.calibration.calibrate',
+    'calibrate_dataset': 'metrology.calibration.calibrate',
+    'validate': 'metrology.calibration.validation',
+    'fit_algebraic_sphere': 'metrology.core.sphere',
+    'micro_sphere_normal': 'metrology.core.sphere',
+    'load_panel': 'metrology.panel.mesh',
+    'run_normals': 'metrology.panel.run',
+    'diagnose': 'metrology.diagnosis',
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'metrology' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "SensorLayout", "load_layout", "save_layout",

@@ -138,6 +138,41 @@ def drop_no_reading(export: TrackerExport, layout: SensorLayout, value=None) -> 
     return replace(export, d=np.where(hit, np.nan, export.d)), dropped
 
 
+#: readings outside their sensor's range dropped as blanks (with a warning naming them) when
+#: they are at most this share of the readings (rounded down): a planned pose that a real
+#: head, not quite the nominal one, reads just past its range. More is an error (a unit, a code).
+MAX_OUT_OF_RANGE_SHARE = 0.02
+#: ... and each lies at most this share of its range's span past the range (5 mm on [15, 65]):
+#: a reading far past it, or one value repeated (a PLC code), is not a reading of the datum
+NEAR_RANGE_SHARE = 0.1
+
+
+def drop_out_of_range(export: TrackerExport, layout: SensorLayout, source="export", warn=None) -> TrackerExport:
+    """Readings outside their sensor's range become blanks (NaN) when they are few (at most
+    :data:`MAX_OUT_OF_RANGE_SHARE` of the readings), each just past the range (at most
+    :data:`NEAR_RANGE_SHARE` of its span) and no two equal (a code), each named in one
+    ``warn(line)``; otherwise they are left for :func:`check` to refuse. ``export``'s columns
+    are in ``layout.names`` order."""
+    from dataclasses import replace
+
+    lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
+    finite = np.isfinite(export.d)
+    bad = finite & ((export.d < lo) | (export.d > hi))
+    n_bad, allowed = int(bad.sum()), int(MAX_OUT_OF_RANGE_SHARE * finite.sum())
+    if n_bad == 0 or n_bad > allowed:
+        return export
+    near = NEAR_RANGE_SHARE * (hi - lo)
+    past = np.maximum(lo - export.d, export.d - hi)
+    if np.any(bad & ~(past <= near)) or len(np.unique(export.d[bad])) < n_bad:
+        return export
+    if warn is not None:
+        named = ", ".join(f"pose {export.pose_id[p]} d_{layout.names[i]} = {export.d[p, i]:g} mm "
+                          f"(range [{lo[i]:g}, {hi[i]:g}])" for p, i in np.argwhere(bad))
+        warn(f"{source}: {n_bad} of {int(finite.sum())} readings outside their sensor's range dropped as blanks "
+             f"(at most {MAX_OUT_OF_RANGE_SHARE:.0%} are): {named}")
+    return replace(export, d=np.where(bad, np.nan, export.d))
+
+
 def _range_hint(d, bad, lo, hi) -> str:
     """What the out-of-range readings look like: another unit, or a repeated "no reading" code."""
     finite = np.isfinite(d)
@@ -181,18 +216,20 @@ def check(export: TrackerExport, layout: SensorLayout, source="export") -> Track
 
 
 def load_dataset(export_path, plane_path, layout_path, quaternion_order: str = "wxyz", position_units: str = "mm",
-                 no_reading=None) -> Dataset:
+                 no_reading=None, warn=None) -> Dataset:
     """Read and cross-check the three files of a run (errors name the file and the problem).
 
     ``quaternion_order`` and ``position_units`` are passed to
     :func:`~metrology.io.export.read_export`; ``no_reading`` is the PLC's "no reading" code
-    (default 0, see :func:`drop_no_reading`).
+    (default 0, see :func:`drop_no_reading`); a few readings out of range are dropped as
+    blanks with a ``warn(line)`` naming them (:func:`drop_out_of_range`).
     """
     layout = load_layout(layout_path)
     export = read_export(export_path, quaternion_order, position_units)
     if sorted(export.names) == sorted(layout.names):
         export = export.reordered(layout.names)
         export, dropped = drop_no_reading(export, layout, no_reading)
+        export = drop_out_of_range(export, layout, str(export_path), warn)
     else:
         dropped = ()
     export = check(export, layout, str(export_path))

@@ -75,6 +75,8 @@ class PlaneFit:
     source: str = ""
     format: str = ""
     threshold_ran_away: bool = False
+    #: the automatic threshold is the floor (the residuals' robust sigma is 0: noise-free points)
+    threshold_at_floor: bool = False
     #: what the reader did (:meth:`metrology.io.clouds.CloudRead.to_dict`), when read from a file
     read: dict | None = None
 
@@ -139,6 +141,8 @@ class PlaneFit:
             "inlier_ratio": float(self.inlier_ratio),
             "threshold_mm": float(self.threshold),
             "threshold_source": ("user" if not self.threshold_auto else
+                                 "auto: the floor (the robust sigma of the residuals is 0: noise-free points)"
+                                 if self.threshold_at_floor else
                                  f"auto: {INLIER_K_SIGMA:g} x robust sigma" if not self.threshold_ran_away else
                                  f"auto: {INLIER_K_SIGMA:g} x the least-quantile sigma of the densest plane (the refined "
                                  "threshold ran away: more than one surface near the datum)"),

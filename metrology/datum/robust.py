@@ -12,8 +12,8 @@ The procedure (:func:`fit_plane_robust`), for a cloud of ``m`` points:
    :data:`LQS_QUANTILE` quantile of the absolute residuals of :data:`LQS_POINTS` points;
    the best gives a first noise scale ``sigma`` (breakdown point 75 %: up to three
    points in four may be outliers). The threshold is ``INLIER_K_SIGMA * sigma``.
-3. **RANSAC.** Open3D's ``segment_plane`` on the subsample, with Open3D's generator
-   seeded from the same ``Generator`` (Open3D >= 0.19 is deterministic once seeded).
+3. **RANSAC** on the subsample (:func:`_ransac`, numpy, as Open3D's ``segment_plane``),
+   its triples drawn from the same ``Generator``.
 4. **Refinement** on the subsample: inliers within the threshold -> total-least-squares
    plane -> (default threshold only) ``sigma`` re-estimated from the inliers' residuals,
    corrected for the truncation at ``+-K sigma`` so that it is consistent for Gaussian
@@ -56,14 +56,20 @@ from metrology.datum.form import fit_form
 from metrology.datum.result import PlaneFit
 from metrology.datum.scale import INLIER_K_SIGMA, LQS_POINTS, lqs_scale, truncated_normal_std, window_sigmas
 
-__all__ = ["fit_plane_robust"]
+__all__ = ["fit_plane_robust", "check_threshold", "MIN_FIT_POINTS", "MIN_FIT_INLIERS", "TooFewPoints", "NoDatumPlane"]
 
 #: RANSAC and the threshold search run on a seeded subsample of at most this many points
 RANSAC_MAX_POINTS = 20_000
-#: maximum RANSAC hypotheses; Open3D stops earlier once it has found, with probability
+#: maximum RANSAC hypotheses; RANSAC stops earlier once it has found, with probability
 #: RANSAC_PROBABILITY, a hypothesis of all inliers
 RANSAC_ITERATIONS = 1000
 RANSAC_PROBABILITY = 0.99999999
+#: fewest points of a fit: three beyond the plane's three parameters, so that a fit is redundant
+#: (a plane through 3 points "fits" with residual 0 and no uncertainty at all)
+MIN_FIT_POINTS = 6
+#: fewest inliers of a fit: one residual degree of freedom at least, so that the noise and the
+#: uncertainty are estimated (a plane through its 3 inliers has none)
+MIN_FIT_INLIERS = 4
 #: a fit whose inliers are less than this share of the cloud is refused (unitless)
 MIN_INLIER_RATIO = 0.2
 #: a fit whose inliers are thicker (RMS about the plane) than this share of their
@@ -86,20 +92,49 @@ def _collinear(evals) -> bool:
 
 
 
-def _ransac(sub, threshold, rng):
-    from metrology.io._o3d import open3d
+#: RANSAC hypotheses scored together: the first batch this many (a clean datum stops after ~10),
+#: each next one twice as many, up to RANSAC_BATCH_MAX (an (n, batch) matrix: 20 MB at 2 x 10^4 points)
+RANSAC_BATCH = 16
+RANSAC_BATCH_MAX = 128
 
-    o3d = open3d()
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
-    o3d.utility.random.seed(int(rng.integers(0, 2**31 - 1)))
-    model, idx = cloud.segment_plane(
-        distance_threshold=float(threshold), ransac_n=3, num_iterations=RANSAC_ITERATIONS, probability=RANSAC_PROBABILITY
-    )
-    model = np.asarray(model, dtype=float).ravel()
-    scale = np.linalg.norm(model[:3])
-    if len(idx) < 3 or not np.isfinite(model).all() or scale == 0:
+
+def _ransac(sub, threshold, rng):
+    """RANSAC plane on ``sub (n, 3) mm``: planes through random triples drawn by ``rng``,
+    scored by their count of points within ``threshold`` mm, in batches; stops once a
+    hypothesis of all inliers has been drawn with probability ``RANSAC_PROBABILITY``
+    (at most ``RANSAC_ITERATIONS``). Returns the best plane's unit normal and offset.
+
+    Open3D's ``segment_plane`` does the same; metro's own is numpy (no Open3D import: it
+    takes longer than the whole fit of 10^6 points) and draws from the caller's generator.
+    """
+    n = len(sub)
+    best, best_count, needed, done, batch = None, 0, RANSAC_ITERATIONS, 0, RANSAC_BATCH
+    while done < needed:
+        b = min(batch, needed - done)
+        batch = min(2 * batch, RANSAC_BATCH_MAX)
+        idx = rng.integers(0, n, (b, 3))
+        p0 = sub[idx[:, 0]]
+        normals = np.cross(sub[idx[:, 1]] - p0, sub[idx[:, 2]] - p0)
+        norm = np.linalg.norm(normals, axis=1)
+        ok = norm > 0
+        done += b
+        if not ok.any():
+            continue
+        normals = normals[ok] / norm[ok, None]
+        offsets = -np.einsum("ij,ij->i", normals, p0[ok])
+        counts = (np.abs(sub @ normals.T + offsets) <= threshold).sum(axis=0)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best_count, best = int(counts[k]), (normals[k], float(offsets[k]))
+            w = best_count / n
+            miss = 1.0 - w**3
+            if miss <= 0.0:
+                needed = done
+            else:
+                needed = min(RANSAC_ITERATIONS, math.ceil(math.log(1.0 - RANSAC_PROBABILITY) / math.log(miss)))
+    if best is None or best_count < 3:
         raise ValueError(f"RANSAC found no plane with 3 or more points within {threshold:.3g} mm: the cloud is all outliers")
-    return model[:3] / scale, float(model[3] / scale)
+    return best
 
 
 def _refine(sub, normal, offset, threshold, auto):
@@ -138,6 +173,25 @@ def _refine(sub, normal, offset, threshold, auto):
     return normal, offset, threshold, False
 
 
+def check_threshold(threshold_mm):
+    """``None`` or the threshold as a positive finite float, mm; raise naming a bad one."""
+    if threshold_mm is None:
+        return None
+    t = float(threshold_mm)
+    if not math.isfinite(t) or t <= 0:
+        raise ValueError(f"threshold {t} mm: expected a positive distance in mm")
+    return t
+
+
+class TooFewPoints(ValueError):
+    """Fewer points than :data:`MIN_FIT_POINTS` (a ``ValueError``; ``count`` the points given)."""
+
+    def __init__(self, count):
+        super().__init__(f"{count} point{'s' if count != 1 else ''}, need at least {MIN_FIT_POINTS} for a plane fit "
+                         "with redundancy")
+        self.count = count
+
+
 class NoDatumPlane(ValueError):
     """No plane holds enough of the cloud, or the best one is not thin (a ``ValueError``)."""
 
@@ -153,8 +207,11 @@ def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
     """Fit the datum plane to a cloud with gross outliers (see :func:`_fit_plane`).
 
     When the automatic threshold finds no datum plane (a scene with several surfaces), the
-    thresholds below it are tried, halving, and the refusal names the largest one that fits
-    the densest plane: ``--threshold-mm X`` then works, and says what it found.
+    thresholds below it are tried, halving, and the refusal always names ``--threshold-mm``:
+    with the largest threshold whose band holds Gaussian-like noise (window of at least
+    ``SUGGEST_WINDOW_K`` sigmas), else with the largest that fits at all, saying that its
+    residuals fill the band evenly (a scanner's depth steps, a textured surface), else
+    with the range tried.
     """
     try:
         return _fit_plane(points, threshold_mm, seed)
@@ -162,18 +219,27 @@ def fit_plane_robust(points, threshold_mm=None, seed=0) -> PlaneFit:
         if threshold_mm is not None or exc.args[1:] == ():
             raise
         start = exc.args[1]
+        fallback = None
         for k in range(1, SUGGEST_STEPS + 1):
             t = start / 2**k
             try:
                 fit = _fit_plane(points, t, seed)
             except ValueError:
                 continue
-            if not fit.window_k >= SUGGEST_WINDOW_K:  # the band is filled by other surfaces, not noise
-                continue
+            if fit.window_k >= SUGGEST_WINDOW_K:
+                raise NoDatumPlane(f"{exc.args[0]}; --threshold-mm {t:.3g} fits the densest plane ({fit.n_inliers} of "
+                                   f"{fit.n_points} points, noise {fit.noise_sigma:.3g} mm): pass it, or crop the cloud "
+                                   "to the datum") from None
+            fallback = fallback or (t, fit)
+        if fallback is not None:
+            t, fit = fallback
             raise NoDatumPlane(f"{exc.args[0]}; --threshold-mm {t:.3g} fits the densest plane ({fit.n_inliers} of "
-                               f"{fit.n_points} points, noise {fit.noise_sigma:.3g} mm): pass it, or crop the cloud "
-                               "to the datum") from None
-        raise NoDatumPlane(exc.args[0]) from None
+                               f"{fit.n_points} points, noise {fit.noise_sigma:.3g} mm, its residuals filling the band "
+                               f"evenly, {fit.window_k:.2g} sigmas wide: depth steps or texture rather than Gaussian "
+                               "noise): pass it and check the residual map, or crop the cloud to the datum") from None
+        raise NoDatumPlane(f"{exc.args[0]}; no --threshold-mm from {start / 2:.3g} down to "
+                           f"{start / 2**SUGGEST_STEPS:.3g} mm fits a plane holding {MIN_INLIER_RATIO:.0%} of the cloud: "
+                           "crop the cloud to the datum") from None
 
 
 def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
@@ -188,7 +254,7 @@ def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
         (``INLIER_K_SIGMA`` times a robust residual scale).
     seed : int
         Seed of the ``numpy.random.Generator`` driving the subsample, the robust scale
-        and Open3D's RANSAC. Same seed and points, same result, to the bit.
+        and the RANSAC triples. Same seed and points, same result, to the bit.
 
     Returns
     -------
@@ -197,21 +263,18 @@ def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
     Raises
     ------
     ValueError
-        Fewer than 3 points, NaN/inf, collinear points, a bad threshold or seed, or no
+        Fewer than ``MIN_FIT_POINTS`` points or ``MIN_FIT_INLIERS`` inliers, NaN/inf, collinear points, a bad threshold or seed, or no
         plane (inliers under ``MIN_INLIER_RATIO`` of the cloud, or a cloud as thick as wide).
     """
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must be an (m, 3) array of x, y, z, got shape {pts.shape}")
     m = len(pts)
-    if m < 3:
-        raise ValueError(f"{m} point{'s' if m != 1 else ''}, need at least 3")
-    if threshold_mm is not None:
-        threshold_mm = float(threshold_mm)
-        if not math.isfinite(threshold_mm) or threshold_mm <= 0:
-            raise ValueError(f"threshold {threshold_mm} mm: expected a positive distance in mm")
+    threshold_mm = check_threshold(threshold_mm)
     if int(seed) != seed or seed < 0:
         raise ValueError(f"seed {seed}: expected a non-negative integer")
+    if m < MIN_FIT_POINTS:
+        raise TooFewPoints(m)
     seed = int(seed)
     rng = np.random.default_rng(seed)
     auto = threshold_mm is None
@@ -294,8 +357,9 @@ def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
         X[6] -= o_w
         G += X @ X.T
     cnt = int(round(G[0, 0]))
-    if cnt < 3:
-        raise ValueError(f"{cnt} point(s) within {threshold:.3g} mm of the best plane: the cloud is all outliers")
+    if cnt < MIN_FIT_INLIERS:
+        raise ValueError(f"{cnt} point(s) within {threshold:.3g} mm of the best plane, need at least {MIN_FIT_INLIERS}: "
+                         "the cloud is all outliers")
 
     # TLS plane from the scatter of (u, v, w) about the inliers' mean
     idx = [1, 2, 6]
@@ -369,6 +433,7 @@ def _fit_plane(points, threshold_mm=None, seed=0) -> PlaneFit:
         threshold=float(threshold),
         threshold_auto=auto,
         threshold_ran_away=ran_away,
+        threshold_at_floor=bool(auto and threshold <= THRESHOLD_FLOOR_MM),
         noise_sigma=float(math.sqrt(sigma2)) if dof > 0 else math.nan,
         rms=float(math.sqrt(rss / cnt)),
         residual_min=rmin,

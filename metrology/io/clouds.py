@@ -15,9 +15,10 @@ bodies the byte or point count that is wrong):
 
 - ``.ply`` ASCII is read by metro's strict parser (:mod:`metrology.io.ply`): Open3D's
   (RPly's) ASCII reader, on a bad token or a short row, returns the declared number of
-  points padded with uninitialised memory. Binary PLY is read by Open3D after metro has
+  points padded with uninitialised memory. Binary PLY is read by numpy after metro has
   checked the header's grammar and the body's length against it (RPly fills a truncated
-  file from uninitialised memory too); Open3D's console output goes to stderr.
+  file from uninitialised memory); only a binary vertex element with list properties goes
+  to Open3D (its console output to stderr).
 - ``.pcd``: ``binary_compressed`` is read by Open3D; ``ascii`` (as strictly as ASCII PLY)
   and ``binary`` (length checked both ways) by metro, because Open3D 0.20 reads 8-byte
   (double) binary coordinates as zeros.
@@ -57,7 +58,8 @@ from pathlib import Path
 
 import numpy as np
 
-from metrology.io.ply import PlyElement, PlyProperty, body_lines, check_binary_size, parse_rows, read_ascii_ply, read_ply_header, vertex_element
+from metrology.io.ply import (PAD, PlyElement, PlyProperty, body_lines, check_binary_size, parse_rows, read_ascii_ply,
+                              read_binary_vertices, read_ply_header, vertex_element)
 from metrology.io.text_clouds import read_text_cloud
 from metrology.io.units import UnitsHint, infer_units, mm_per_unit
 
@@ -122,6 +124,9 @@ class CloudRead:
     units_hint : UnitsHint or None
         What the cloud's extent and spacing suggest (:func:`metrology.io.units.infer_units`),
         computed on the file's numbers; ``None`` when not asked for.
+    ignored_lines : tuple of int
+        File lines (1-based) read past after a PLY's last element (none parses as a vertex
+        row; RPly and PCL read past them too, :func:`metrology.io.ply.read_ascii_ply`).
     """
 
     points: np.ndarray
@@ -129,11 +134,13 @@ class CloudRead:
     n_dropped_nonfinite: int
     units: str
     units_hint: UnitsHint | None = None
+    ignored_lines: tuple = ()
 
     def to_dict(self) -> dict:
         return {"n_points": len(self.points), "n_in_file": self.n_in_file,
                 "n_dropped_nonfinite": self.n_dropped_nonfinite, "units": self.units,
-                "units_hint": None if self.units_hint is None else self.units_hint.to_dict()}
+                "units_hint": None if self.units_hint is None else self.units_hint.to_dict(),
+                "ignored_lines": list(self.ignored_lines)}
 
 
 def read_cloud(path):
@@ -200,8 +207,9 @@ def read_cloud_checked(path, *, units=None, nonfinite="drop", min_points=3, hint
         raise ValueError(f"{path}: empty file")
     suffix = p.suffix.lower()
     allow_nan = nonfinite == "drop"
+    ignored = ()
     if suffix == ".ply":
-        points = _read_ply(path)
+        points, ignored = _read_ply(path)
     elif suffix == ".pcd":
         points = _read_pcd(path)
     elif suffix == ".e57":
@@ -221,17 +229,21 @@ def read_cloud_checked(path, *, units=None, nonfinite="drop", min_points=3, hint
     guess = infer_units(points) if hint and suffix != ".e57" else None
     if scale != 1.0:
         points = points * scale
-    return CloudRead(points, n_file, dropped, units or "mm", guess)
+    return CloudRead(points, n_file, dropped, units or "mm", guess, ignored)
 
 
 def _finite(points, path, allow_nan, fmt):
     """Drop (``allow_nan``) or refuse points with a NaN coordinate; always refuse inf."""
     m = len(points)
     keep = None
+    ones = np.ones(points.shape[1]) if points.ndim == 2 else None
     for start in range(0, m, _CHUNK):
         block = points[start : start + _CHUNK]
+        with np.errstate(over="ignore", invalid="ignore"):  # huge finite values may overflow the sum
+            if np.isfinite(block @ ones).all():  # a NaN or inf makes its row's sum non-finite (BLAS: fast)
+                continue
         ok = np.isfinite(block).all(axis=1)
-        if ok.all():
+        if ok.all():  # finite values whose sum overflowed
             continue
         bad = ~ok if not allow_nan else np.isinf(block).any(axis=1)
         if bad.any():
@@ -258,21 +270,30 @@ def _read_open3d(path, fmt):
 
 
 def _read_ply(path):
-    """ASCII PLY by metro's strict parser; binary PLY by Open3D after the header and the
-    body's length are checked (RPly fills missing vertices from uninitialised memory)."""
+    """PLY by metro's readers: ASCII by the strict parser, binary by numpy after the header
+    and the body's length are checked. Returns ``(points, ignored_lines)``.
+
+    Open3D is not needed (its import alone takes longer than reading 10^6 binary points);
+    it reads only a binary vertex element holding list properties, which metro does not lay out.
+    """
     header = read_ply_header(path)
     if header.format == "ascii":
         return read_ascii_ply(path, header)
     check_binary_size(path, header)
-    count = vertex_element(header).count
-    if count == 0:
-        return np.empty((0, 3))
-    points = _read_open3d(path, "PLY")
-    if len(points) != count:
-        raise ValueError(f"{path}: the header declares {count} vertices, {len(points)} were read")
-    return points
+    vertex = vertex_element(header)
+    if vertex.count == 0:
+        return np.empty((0, 3)), ()
+    if vertex.row_bytes is None:
+        points = _read_open3d(path, "PLY")
+        if len(points) != vertex.count:
+            raise ValueError(f"{path}: the header declares {vertex.count} vertices, {len(points)} were read")
+        return points, ()
+    return read_binary_vertices(path, header), ()
 
 
+#: PCL's padding field: its bytes (binary) or tokens (ASCII) are skipped, whatever its TYPE and
+#: SIZE, as PCL's ``PCDReader`` skips them (PCL's ``ComplexPCDFileASCII`` test: ``_`` of TYPE F, SIZE 1)
+_PCD_PAD = "_"
 _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8",
               ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}
 
@@ -328,7 +349,8 @@ def _read_pcd(path):
     if data_mode != "binary":
         raise ValueError(f"{path}: unknown PCD DATA mode {data_mode!r}")
     try:
-        dtype = np.dtype([(f"f{i}", "<" + _PCD_TYPES[(t, z)], (c,) if c > 1 else ()) for i, (t, z, c) in enumerate(zip(types, sizes, counts))])
+        dtype = np.dtype([(f"f{i}", f"V{z}" if name == _PCD_PAD else "<" + _PCD_TYPES[(t, z)], (c,) if c > 1 else ())
+                          for i, (name, t, z, c) in enumerate(zip(fields, types, sizes, counts))])
     except KeyError:
         raise ValueError(f"{path}: unsupported PCD field types {types} / sizes {sizes}") from None
     have = (Path(path).stat().st_size - pos) // dtype.itemsize
@@ -349,6 +371,9 @@ def _read_pcd_ascii(path, offset, header_lines, fields, types, sizes, counts, np
     value of its declared TYPE and SIZE; ``nan`` allowed in F fields (organized scans)."""
     props = []
     for name, t, z, c in zip(fields, types, sizes, counts):
+        if name == _PCD_PAD:
+            props += [PlyProperty(f"_[{i}]", PAD) for i in range(c)]
+            continue
         code = _PCD_TYPES.get((t, z))
         if code is None:
             raise ValueError(f"{path}: unsupported PCD field type {t} of size {z} (field {name!r})")

@@ -4,8 +4,9 @@ Why metro parses ASCII PLY itself: Open3D's (RPly's) ASCII reader, on a bad toke
 in an integer field, ``3.3`` in a ``uchar``, ``abc``) or a short row, prints a message of its
 own and still returns the declared number of vertices, the unread ones filled from
 uninitialised memory. Here every token is checked against its declared type and range, every
-row must hold exactly its declared tokens, every element exactly its declared rows, and
-nothing but blank lines may follow the last element. The first problem raises one
+row must hold exactly its declared tokens, every element exactly its declared rows. Lines
+after the last element are read past, as RPly and PCL read past them, unless one parses as a
+vertex row (then the vertex count may be wrong, and the file is refused). The first problem raises one
 ``ValueError``: ``<file>: line <n>: <what was found>, expected <what>``.
 Why not the ``plyfile`` library: its ASCII path accepts ``Inf``, 1e39 in a ``float`` (as
 inf) and rows after the last element, names rows not file lines, and is a Python loop per
@@ -26,6 +27,7 @@ scan, counted by the caller); ``inf`` and values out of the declared type's rang
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +44,8 @@ _FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 _INT = re.compile(r"[+-]?[0-9]+\Z")
 _FLOAT = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?\Z|[+-]?nan\Z", re.IGNORECASE)
 _F32_MAX = float(np.finfo(np.float32).max)
+#: the dtype of a padding property (PCD's ``_`` fields): any token, skipped unparsed, as PCL does
+PAD = "pad"
 
 
 @dataclass(frozen=True)
@@ -227,6 +231,52 @@ def check_binary_size(path, header: PlyHeader) -> None:
                          f"({', '.join(f'{e.count} {e.name}' for e in header.elements)}), the file holds {size}")
 
 
+_READ_CHUNK = 1 << 20
+
+
+def read_binary_vertices(path, header: PlyHeader):
+    """x, y, z of a binary PLY's vertex element (scalar properties only) as ``(n, 3) float``.
+
+    The body's size must have been checked (:func:`check_binary_size`). Rows are read in
+    chunks of ``_READ_CHUNK``: memory is the output plus one chunk, whatever the row layout.
+    """
+    order = "<" if header.format == "binary_little_endian" else ">"
+    vertex = vertex_element(header)
+    offset = header.body_offset
+    for e in header.elements:
+        if e is vertex:
+            break
+        if e.row_bytes is not None:
+            offset += e.count * e.row_bytes
+        else:
+            data = np.memmap(path, np.uint8, "r", offset=header.body_offset)
+            offset = header.body_offset + _walk_rows(path, data, offset - header.body_offset, len(data), e, order)
+            del data
+    names = [p.name for p in vertex.properties]
+    row = np.dtype([(p.name, order + p.dtype) for p in vertex.properties])
+    n = vertex.count
+    out = np.empty((n, 3))
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        if names == ["x", "y", "z"] and all(p.dtype == "f8" for p in vertex.properties):
+            raw = out.reshape(-1).view(np.uint8)
+            got = fh.readinto(raw)
+            if got != raw.nbytes:
+                raise ValueError(f"{path}: truncated: the header declares {n} vertices, the file holds {got // 24}")
+            if np.dtype(order + "f8") != np.dtype("=f8"):
+                out.byteswap(inplace=True)
+            return out
+        buf = np.empty(min(n, _READ_CHUNK), dtype=row)
+        for a in range(0, n, len(buf)):
+            part = buf[: min(len(buf), n - a)]
+            got = fh.readinto(part.view(np.uint8))
+            if got != part.nbytes:
+                raise ValueError(f"{path}: truncated: the header declares {n} vertices, the file holds {a + got // row.itemsize}")
+            for j, axis in enumerate("xyz"):
+                out[a : a + len(part), j] = part[axis]
+    return out
+
+
 def body_lines(path, offset):
     """The lines of the file from byte ``offset`` (``\\n``, ``\\r\\n`` or ``\\r`` endings)."""
     with open(path, "rb") as fh:
@@ -242,6 +292,8 @@ def body_lines(path, offset):
 
 def _check_token(path, lineno, col, prop, tok, dtype):
     """Parse one token as ``dtype``; raise naming the line, column and value when it is not one."""
+    if dtype == PAD:
+        return math.nan
     kind = np.dtype(dtype)
     where = f"{path}: line {lineno}, column {col}: {tok!r}"
     what = f"(property {prop.name!r})"
@@ -302,7 +354,7 @@ def _parse_rows_fast(lines, first, element):
     props = element.properties
     # every column as float64, integers checked below: numpy < 2 reads '3.3', 'Inf' or '256'
     # into a uint8 field without a word, so its integer parsing cannot be the check
-    dtype = [(f"p{i}", "f8") for i, p in enumerate(props)]
+    dtype = [(f"p{i}", "U64" if p.dtype == PAD else "f8") for i, p in enumerate(props)]
     block = lines[first:first + element.count]
     try:
         rec = np.loadtxt(block, dtype=dtype, comments=None, ndmin=1)
@@ -312,6 +364,9 @@ def _parse_rows_fast(lines, first, element):
         return None
     out = np.empty((element.count, len(props)))
     for i, p in enumerate(props):
+        if p.dtype == PAD:
+            out[:, i] = np.nan
+            continue
         col = rec[f"p{i}"]
         kind = np.dtype(p.dtype)
         if kind.kind == "f":
@@ -331,6 +386,8 @@ def parse_rows(path, lines, start, element, first_line_no):
     """Check and parse ``element.count`` rows of ``lines`` from index ``start``; line numbers
     in messages count from ``first_line_no`` (the file line of ``lines[0]``). Returns the
     ``(count, k) float`` values of the element's k scalar properties."""
+    if element.count == 0:  # nothing to parse (and numpy's loadtxt would warn of "no data")
+        return np.empty((0, sum(p.count_dtype is None for p in element.properties)))
     values = None
     if all(p.count_dtype is None for p in element.properties):
         values = _parse_rows_fast(lines, start, element)
@@ -339,8 +396,30 @@ def parse_rows(path, lines, start, element, first_line_no):
     return values
 
 
+def _could_be_row(path, line, element) -> bool:
+    """Whether ``line`` parses as one row of ``element`` (every token of its declared type)."""
+    one = PlyElement(element.name, 1, element.properties, element.line)
+    try:
+        _parse_rows_slow(path, [line], 0, one, 1)
+    except ValueError:
+        return False
+    return True
+
+
 def read_ascii_ply(path, header: PlyHeader):
-    """The vertex element's x, y, z of an ASCII PLY, as ``(n, 3) float`` (NaN kept)."""
+    """The vertex element's x, y, z of an ASCII PLY, and the file lines ignored after the last element.
+
+    Returns
+    -------
+    xyz : (n, 3) float, file units
+        NaN kept.
+    ignored : tuple of int
+        File line numbers (1-based) of non-blank lines after the last element. They are
+        read past, as RPly (Open3D) and PCL do (RPly's own ``etc/input.ply`` has a second face
+        row under ``element face 1``; PCL's ``CommentAtTheEnd`` test a ``comment hi`` line),
+        only when none of them parses as a vertex row: a line that does may be a vertex the
+        header's count left out, and the file is refused.
+    """
     lines = body_lines(path, header.body_offset)
     first_line_no = header.header_lines + 1
     start, xyz = 0, None
@@ -354,9 +433,14 @@ def read_ascii_ply(path, header: PlyHeader):
             names = [p.name for p in element.properties if p.count_dtype is None]
             xyz = values[:, [names.index(a) for a in "xyz"]]
         start += element.count
+    ignored = []
+    vertex = vertex_element(header)
     for i in range(start, len(lines)):
-        if lines[i].strip():
-            last = header.elements[-1] if header.elements else None
-            _fail(path, first_line_no + i, f"{lines[i].strip()[:40]!r} after the last element"
-                  + (f" ({last.count} {last.name})" if last else ""), "the end of the file")
-    return xyz
+        if not lines[i].strip():
+            continue
+        if _could_be_row(path, lines[i], vertex):
+            last = header.elements[-1]
+            _fail(path, first_line_no + i, f"{lines[i].strip()[:40]!r} after the last element ({last.count} {last.name}),"
+                  f" a row of element 'vertex' ({vertex.count} declared)", "the end of the file")
+        ignored.append(first_line_no + i)
+    return xyz, tuple(ignored)

@@ -109,8 +109,6 @@ def read_text_cloud(path, suffix, allow_nan=False):
         raise ValueError(f"{path}: the first line says {expected} points, the file holds {len(data)}")
     if not data:
         raise ValueError(f"{path}: no points in the file (a header only)")
-    if len(data) < 3:
-        raise ValueError(f"{path}: {len(data)} point{'s' if len(data) != 1 else ''}, need at least 3")
     n_fields = len(_split(lines[data[0]], delim))
     points = None
     if not decimal_comma and all(_number(f, False) is not None for f in _split(lines[data[0]], delim)):

@@ -1,18 +1,23 @@
 """Length units of a point cloud: scale factors to mm, and a guess from the cloud itself.
 
 A cloud exported in metres and read as mm gives a "noise 0.02654 mm" that looks like a
-superb scan. metro cannot know a file's unit, but the cloud's size says a lot: the parts
-metro measures (datum plates, panels, sensor spots) are tens to thousands of mm across and
-scanned with spots 0.01 mm to a few mm apart.
+superb scan. metro cannot know a file's unit, but the cloud's size says something: what
+metro measures (datum plates, panels, fuselage sections, cells) lies within the bounds
+below, read in mm. The rule (:func:`infer_units`) reads the cloud both ways, as mm and as
+metres, and asks of each reading whether it falls inside all three bounds:
 
-The rule (:func:`infer_units`): with ``extent`` the largest side of the bounding box and
-``spacing`` the median nearest-neighbour distance (both in the file's numbers),
+- ``extent`` (the largest side of the box holding the 1st to 99th percentile of each
+  coordinate: a few stray points do not stretch it) in :data:`EXTENT_MM`;
+- ``spacing`` (the median distance of a point to its nearest neighbour, on a contiguous
+  patch of :data:`SPACING_PATCH` points) in :data:`SPACING_MM`;
+- ``position`` (the distance of the cloud's median point from the frame's origin) at most
+  :data:`POSITION_MM_MAX`: a tracker's or an aircraft's frame, not a map projection.
 
-- ``extent < 5`` and ``spacing < 0.01`` -> ``"m"`` (a part under 5 mm sampled every 10 µm is
-  not what metro measures; a 5 m cell sampled every 10 mm is);
-- otherwise ``"mm"`` (what metro assumes).
-
-Inches are never guessed (their range overlaps mm): pass ``units="in"``.
+Only one reading plausible -> that unit (``"mm"``: "consistent with mm"; ``"m"``: "looks like
+metres; pass --units m"). Both plausible (a 29 m room scan is also a 29 mm part scanned
+every 20 µm), neither (UTM coordinates), a cloud with fewer than :data:`MIN_DISTINCT`
+distinct points, or no spacing (identical points): ``None``, the evidence is weak and
+metro says nothing. Inches are never guessed (their range overlaps mm): pass ``units="in"``.
 """
 
 from __future__ import annotations
@@ -23,9 +28,16 @@ import numpy as np
 
 #: unit name -> mm per unit
 MM_PER_UNIT = {"mm": 1.0, "m": 1000.0, "in": 25.4}
-#: below both, a cloud looks like metres (file's numbers)
-METRES_MAX_EXTENT = 5.0
-METRES_MAX_SPACING = 0.01
+#: what metro measures, in mm: a part from 2 mm (a sensor spot's patch) to 100 m (a hangar cell) across
+EXTENT_MM = (2.0, 1e5)
+#: scanned with spots from 1 µm (a confocal line) to 200 mm (tracker points on a fuselage) apart
+SPACING_MM = (1e-3, 200.0)
+#: in a frame whose origin is within 200 m (a tracker's range; an aircraft's frame from its nose)
+POSITION_MM_MAX = 2e5
+#: fewer distinct points than this: no judgement (a handful of corners is not a sampled surface)
+MIN_DISTINCT = 20
+#: the spacing is measured on this many points nearest (max norm) to the cloud's middle point
+SPACING_PATCH = 2000
 _SAMPLE = 20_000
 
 
@@ -43,12 +55,15 @@ class UnitsHint:
 
     Attributes
     ----------
-    likely : str
-        ``"mm"`` or ``"m"``.
+    likely : str or None
+        ``"mm"``, ``"m"``, or ``None`` when the evidence is weak (both readings plausible,
+        neither, or too few distinct points): then nothing is said.
     extent : (3,) float, file units
-        Bounding-box sides.
+        Sides of the box holding the 1st to 99th percentile of each coordinate.
     spacing : float, file units
-        Median nearest-neighbour distance (on a patch of 2 x 10^4 points for large clouds).
+        Median nearest-neighbour distance on a contiguous patch (NaN under 2 points).
+    position : float, file units
+        Distance of the cloud's median point from the frame's origin.
     noise : float, file units
         RMS distance of the points to their best-fit (total least squares) plane.
     sentence : str
@@ -56,9 +71,10 @@ class UnitsHint:
         looks like metres; pass --units m"``.
     """
 
-    likely: str
+    likely: str | None
     extent: tuple
     spacing: float
+    position: float
     noise: float
     sentence: str
 
@@ -67,39 +83,65 @@ class UnitsHint:
 
 
 def _spacing(points) -> float:
-    """Median nearest-neighbour distance. Above ``_SAMPLE`` points, on the ``_SAMPLE`` points
-    nearest (in the max norm) to the cloud's middle point: a contiguous patch, so the local
-    density is kept (a regular or random thinning would change it)."""
-    from scipy.spatial import cKDTree
-
+    """Median nearest-neighbour distance (zero distances, duplicates, skipped) on the
+    ``SPACING_PATCH`` points nearest (in the max norm) to the cloud's middle point: a
+    contiguous patch keeps the local density (a thinning would not). Brute force in numpy:
+    no k-d tree, whose import alone takes longer than this."""
     P = points
-    if len(P) > _SAMPLE:
-        d = np.abs(P - P[len(P) // 2]).max(axis=1)
-        P = P[np.argpartition(d, _SAMPLE)[:_SAMPLE]]
+    if len(P) > SPACING_PATCH:  # in chunks: memory of one float32 per point, not of the cloud
+        mid = P[len(P) // 2]
+        d = np.empty(len(P), dtype=np.float32)
+        for a in range(0, len(P), 1 << 18):  # column by column: a reduction along axis 1 is 10 x slower
+            block, out = P[a : a + (1 << 18)], d[a : a + (1 << 18)]
+            out[:] = np.abs(block[:, 0] - mid[0])
+            np.maximum(out, np.abs(block[:, 1] - mid[1]), out=out)
+            np.maximum(out, np.abs(block[:, 2] - mid[2]), out=out)
+        kth = np.partition(d, SPACING_PATCH - 1)[SPACING_PATCH - 1]
+        P = P[np.flatnonzero(d <= kth)[: 4 * SPACING_PATCH]]
     if len(P) < 2:
         return float("nan")
-    dist, _ = cKDTree(P).query(P, k=2)
-    nn = dist[:, 1]
-    nn = nn[nn > 0]
-    return float(np.median(nn)) if len(nn) else 0.0
+    P = P - P.mean(axis=0)
+    sq = np.einsum("ij,ij->i", P, P)
+    nn = np.empty(len(P))
+    for a in range(0, len(P), 500):
+        d2 = sq[a : a + 500, None] + sq[None, :] - 2.0 * (P[a : a + 500] @ P.T)
+        d2[d2 <= 1e-12 * np.maximum(sq[a : a + 500, None], 1e-300)] = np.inf  # itself and duplicates
+        nn[a : a + 500] = d2.min(axis=1)
+    nn = nn[np.isfinite(nn)]
+    return float(np.sqrt(np.median(nn))) if len(nn) else 0.0
+
+
+def _plausible(extent, spacing, position, mm) -> bool:
+    """The cloud read with ``mm`` mm per unit is something metro measures (module rule)."""
+    return (EXTENT_MM[0] <= extent * mm <= EXTENT_MM[1] and SPACING_MM[0] <= spacing * mm <= SPACING_MM[1]
+            and position * mm <= POSITION_MM_MAX)
 
 
 def infer_units(points) -> UnitsHint:
-    """Guess the unit of ``points (n, 3) float, file units`` from extent and spacing (module rule).
+    """Guess the unit of ``points (n, 3) float, file units`` from extent, spacing and position (module rule).
 
     Returns
     -------
     UnitsHint
     """
     P = np.asarray(points, dtype=float)
-    extent = np.ptp(P, axis=0) if len(P) else np.zeros(3)
-    spacing = _spacing(P)
     sub = P[:: max(1, len(P) // _SAMPLE)]
-    sub = sub - sub.mean(axis=0)
-    noise = float(np.linalg.svd(sub, compute_uv=False)[-1] / np.sqrt(len(sub))) if len(sub) >= 3 else float("nan")
-    metres = float(extent.max()) < METRES_MAX_EXTENT and spacing < METRES_MAX_SPACING
-    likely = "m" if metres else "mm"
+    if len(sub):
+        lo, hi = np.percentile(sub, [1, 99], axis=0)
+        extent, position = hi - lo, float(np.linalg.norm(np.median(sub, axis=0)))
+    else:
+        extent, position = np.zeros(3), 0.0
+    spacing = _spacing(P)
+    c = sub - sub.mean(axis=0) if len(sub) else sub
+    noise = float(np.linalg.svd(c, compute_uv=False)[-1] / np.sqrt(len(c))) if len(c) >= 3 else float("nan")
+    e = float(extent.max())
+    distinct = len(np.unique(sub[:1000], axis=0)) if len(sub) else 0
+    likely = None
+    if distinct >= MIN_DISTINCT and spacing > 0 and e > 0:
+        as_mm, as_m = _plausible(e, spacing, position, 1.0), _plausible(e, spacing, position, MM_PER_UNIT["m"])
+        likely = "mm" if as_mm and not as_m else "m" if as_m and not as_mm else None
     dims = " x ".join(f"{v:.3g}" for v in extent)
-    advice = "looks like metres; pass --units m" if metres else "consistent with mm"
+    advice = {"m": "looks like metres; pass --units m", "mm": "consistent with mm",
+              None: "the size does not tell the unit"}[likely]
     sentence = f"extent {dims}, spacing {spacing:.2g}, noise {noise:.2g}: {advice}"
-    return UnitsHint(likely, tuple(float(v) for v in extent), spacing, noise, sentence)
+    return UnitsHint(likely, tuple(float(v) for v in extent), spacing, position, noise, sentence)

@@ -18,7 +18,7 @@ def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", 
     from metrology.calibration.dataset import load_dataset
     from metrology.calibration.sanity import check_dataset
 
-    dataset = load_dataset(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading)
+    dataset = load_dataset(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
     check_dataset(dataset, str(export_path), quaternion_order, position_units, allow_gross_readings)
     if warn is not None and dataset.dropped:
         warn(f"{export_path}: {dataset.no_reading_summary()}")

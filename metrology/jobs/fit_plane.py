@@ -10,6 +10,7 @@ from metrology.core.progress import notify
 from metrology.io.atomic import check_output_file
 from metrology.io.names import display_name
 from metrology.datum import PlaneFit, fit_plane_robust
+from metrology.datum.robust import MIN_FIT_POINTS, check_threshold
 
 __all__ = ["fit_plane_file"]
 
@@ -81,13 +82,13 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         def warn(message):
             warnings.warn(message, stacklevel=2)
 
+    check_threshold(threshold_mm)
     notify(progress, 0, 3, "reading the cloud")
-    read = read_cloud_checked(cloud, units=units, nonfinite="drop", hint=units is None)
+    # a plane fit needs MIN_FIT_POINTS points after the NaN rows are dropped (the message counts both)
+    read = read_cloud_checked(cloud, units=units, nonfinite="drop", min_points=MIN_FIT_POINTS, hint=units is None)
     if read.n_dropped_nonfinite:
         warn(f"{cloud}: {read.n_dropped_nonfinite} of {read.n_in_file} points have NaN coordinates "
              "(missing returns of an organized scan): dropped")
-    if units is None and read.units_hint is not None and read.units_hint.likely != "mm":
-        warn(f"{cloud}: {read.units_hint.sentence}")
     points = read.points
     notify(progress, 1, 3, f"fitting the plane to {len(points)} points")
     try:
@@ -95,6 +96,14 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
     except ValueError as exc:
         raise ValueError(f"{cloud}: {exc}") from None
     fit = replace(fit, source=display_name(cloud), format=fmt, read=read.to_dict())
+    # said only of a cloud that was fitted (a refused one is not worth a unit doubt), and only
+    # when its size points at metres (metrology.io.units: weak evidence says nothing)
+    if units is None and read.units_hint is not None and read.units_hint.likely == "m":
+        warn(f"{cloud}: {read.units_hint.sentence}")
+    if read.ignored_lines:
+        lines = read.ignored_lines
+        warn(f"{cloud}: {len(lines)} line(s) after the last element read past (line {lines[0]}"
+             f"{'' if len(lines) == 1 else ', ...'}): not vertex rows (RPly, Open3D and PCL read past them too)")
     notify(progress, 2, 3, "writing the plane and the residual map")
     with contextlib.ExitStack() as stack:
         if out is not None:

@@ -71,8 +71,10 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     if foot is None and grid_mm is not None:
         standoff = default_standoff(layout) if standoff_mm is None else float(standoff_mm)
         foot = footprint_radius(layout, standoff)
-    # an error repeats the unit doubt in full: under -q the warning itself is not printed
-    unit_hint = [panel.unit_warning] if panel.unit_warning is not None else []
+    # an error repeats the unit doubt in full when no one was told it (no on_warning, e.g. under
+    # -q); told once already, it is not printed a second time
+    unit_hint = [] if panel.unit_warning is None else [panel.unit_warning] if on_warning is None else \
+        ["the panel's unit is in doubt, see the warning above: give --units"]
     try:
         drill, dropped = (read_points(points_path), 0) if points_path is not None else \
             grid_points(panel, float(grid_mm), caster, footprint_mm=foot, with_dropped=True)

@@ -12,7 +12,17 @@ A pose is *feasible* when, with the nominal layout, every beam meets the datum i
 measured extent at least ``spot_margin_mm`` from the edge, every reading lies inside the
 sensor's range shrunk by ``reading_margin_mm`` at each end, and the tilt is at most
 ``tilt_max - tilt_margin``. The margins are what keeps a pose feasible when the robot does
-not reach it exactly and the real sensors are not where the drawing puts them.
+not reach it exactly.
+
+The real sensors are not where the drawing puts them: with a layout tolerance (``zero_tol_mm``
+on each coordinate of every zero point, ``direction_tol_rad`` on the angle of every beam from
+its nominal direction) a pose is feasible only if the readings of *every* layout within the
+tolerance keep the range (less the margin) and their spots the extent: for a beam meeting the
+datum at incidence ``gamma`` with nominal reading ``d = h / cos(gamma)``, the reading of a
+layout within tolerance lies in ``[(h - e) / cos(gamma - t), (h + e) / cos(gamma + t)]`` with
+``e = zero_tol_mm * |n|_1`` (``n`` the datum normal in the TCS) and ``t = direction_tol_rad``
+(:func:`reading_bounds`), and its spot moves at most ``(sqrt(3) zero_tol_mm + d_max sin(t)) /
+cos(gamma + t)`` on the datum.
 """
 
 from __future__ import annotations
@@ -28,7 +38,7 @@ from metrology.core.model import readings
 from metrology.core.plane import Plane, plane_basis
 from metrology.plan.extent import DatumExtent
 
-__all__ = ["Limits", "PoseSet", "draw_candidates", "feasible", "perturb", "pose_readings"]
+__all__ = ["Limits", "PoseSet", "draw_candidates", "feasible", "perturb", "pose_readings", "reading_bounds"]
 
 
 @dataclass(frozen=True)
@@ -45,6 +55,8 @@ class Limits:
     tilt_margin_rad : float, rad, kept below ``tilt_max_rad``
     tool_side : float, +1 or -1: the tool is on the side of the datum the plane's normal
         points to (+1) or the other (-1)
+    zero_tol_mm : float, mm, the layout's stated uncertainty of each zero-point coordinate
+    direction_tol_rad : float, rad, of each beam's angle from its nominal direction
     """
 
     tilt_max_rad: float
@@ -54,12 +66,15 @@ class Limits:
     spot_margin_mm: float = 5.0
     tilt_margin_rad: float = float(np.deg2rad(0.1))
     tool_side: float = 1.0
+    zero_tol_mm: float = 0.0
+    direction_tol_rad: float = 0.0
 
     def to_dict(self) -> dict:
         return {"tilt_max_deg": float(np.rad2deg(self.tilt_max_rad)), "standoff_mm": list(map(float, self.standoff_mm)),
                 "range_mm": np.asarray(self.range_mm).tolist(), "reading_margin_mm": self.reading_margin_mm,
                 "spot_margin_mm": self.spot_margin_mm, "tilt_margin_deg": float(np.rad2deg(self.tilt_margin_rad)),
-                "tool_side": "normal" if self.tool_side > 0 else "against"}
+                "tool_side": "normal" if self.tool_side > 0 else "against",
+                "layout_tolerance": {"zero_mm": self.zero_tol_mm, "direction_deg": float(np.rad2deg(self.direction_tol_rad))}}
 
 
 @dataclass(frozen=True)
@@ -158,9 +173,34 @@ def pose_readings(layout: SensorLayout, plane: Plane, poses: PoseSet):
     return d, np.einsum("pij,pnj->pni", poses.rot, S) + poses.trans[:, None, :]
 
 
+def reading_bounds(layout: SensorLayout, plane: Plane, poses: PoseSet, zero_tol_mm: float, direction_tol_rad: float):
+    """The readings of every layout within the tolerance (module docstring), at every pose.
+
+    Returns
+    -------
+    d_lo, d_hi : (p, n) float, mm; NaN where a beam within the tolerance may miss the datum
+    spot_shift : (p, n) float, mm, how far the spot may move on the datum
+    """
+    N, _ = poses.plane_in_tcs(plane)
+    d, _ = pose_readings(layout, plane, poses)
+    cos_g = np.abs(np.einsum("pk,nk->pn", N, layout.direction))
+    h = d * cos_g  # the zero point's distance to the datum
+    gamma = np.arccos(np.clip(cos_g, 0.0, 1.0))
+    e = zero_tol_mm * np.abs(N).sum(axis=1)[:, None]
+    t = direction_tol_rad
+    far = gamma + t < np.pi / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_hi = np.where(far, (h + e) / np.cos(np.minimum(gamma + t, np.pi / 2)), np.nan)
+        d_lo = np.where(far, (h - e) / np.cos(np.maximum(gamma - t, 0.0)), np.nan)
+        # a moved origin moves the spot by at most |dz| / cos(gamma'), a turned beam by d' sin(t) / cos(gamma')
+        shift = (np.sqrt(3.0) * zero_tol_mm + d_hi * np.sin(t)) / np.cos(np.minimum(gamma + t, np.pi / 2))
+    return d_lo, d_hi, shift
+
+
 def feasible(layout: SensorLayout, plane: Plane, extent: DatumExtent, poses: PoseSet, limits: Limits,
              margins: bool = True) -> np.ndarray:
-    """``(p,)`` bool: the poses that keep every limit (with the margins unless ``margins`` is False).
+    """``(p,)`` bool: the poses that keep every limit (with the margins and the layout tolerance
+    unless ``margins`` is False).
 
     The tilt is measured from the poses' rotations, not taken from how they were drawn.
     """
@@ -168,6 +208,10 @@ def feasible(layout: SensorLayout, plane: Plane, extent: DatumExtent, poses: Pos
     rm, sm, tm = (limits.reading_margin_mm, limits.spot_margin_mm, limits.tilt_margin_rad) if margins else (0, 0, 0)
     lo, hi = limits.range_mm[:, 0] + rm, limits.range_mm[:, 1] - rm
     ok = np.all(np.isfinite(d) & (d >= lo) & (d <= hi), axis=1)
+    if margins and (limits.zero_tol_mm > 0 or limits.direction_tol_rad > 0):
+        d_lo, d_hi, shift = reading_bounds(layout, plane, poses, limits.zero_tol_mm, limits.direction_tol_rad)
+        ok &= np.all(np.isfinite(d_lo) & np.isfinite(d_hi) & (d_lo >= lo) & (d_hi <= hi), axis=1)
+        sm = sm + np.nan_to_num(shift, nan=np.inf)
     ok &= np.all(extent.inside(spots, sm), axis=1)
     a = tool_axis(layout)
     cos = np.clip((poses.rot @ a) @ (-limits.tool_side * plane.normal), -1.0, 1.0)

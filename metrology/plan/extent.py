@@ -92,11 +92,12 @@ class DatumExtent:
         return (np.asarray(points, float) - self.origin) @ self.basis.T
 
     def inside(self, points, margin_mm: float = 0.0) -> np.ndarray:
-        """``(...)`` bool: the points' projections lie inside, at least ``margin_mm`` from the edge;
+        """``(...)`` bool: the points' projections lie inside, at least ``margin_mm`` (a number, or
+        one per point) from the edge;
         False for non-finite points."""
         st = self.plane_coords(points)
         A, b = self.halfplanes
-        ok = np.all(st @ A.T <= b - margin_mm, axis=-1)
+        ok = np.all(st @ A.T <= b - np.asarray(margin_mm, dtype=float)[..., None], axis=-1)
         return ok & np.all(np.isfinite(st), axis=-1)
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -17,7 +17,8 @@ from metrology.calibration.identifiability import CHART_NAMES
 from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma
 from metrology.core.layout import SensorLayout
 from metrology.core.plane import Plane
-from metrology.plan.candidates import Limits, PoseSet, draw_candidates, feasible, perturb, pose_readings
+from metrology.plan.candidates import (Limits, PoseSet, draw_candidates, feasible, perturb, pose_readings,
+                                       reading_bounds)
 from metrology.plan.design import (EXTRA_COLUMNS, covariance, exchange, greedy_order, log_det, pose_information,
                                    prior_information)
 from metrology.plan.extent import DatumExtent
@@ -115,6 +116,12 @@ class PosePlan:
     limits : Limits; sigma_mm : (n,) float, mm; working_standoff_mm : float, mm
     n_candidates, n_feasible : int; seed : int or None
     planned, random : Design
+    tolerance_cost : dict or None, what planning against the layout tolerance costs (None without
+        one): ``feasible_without`` candidates feasible on the nominal layout alone, ``margin_mm_max``
+        the largest distance a planned reading may move on a layout within the tolerance (the
+        margin kept on top of ``reading_margin_mm``), ``normal_sigma_deg_without`` the predicted
+        normal sigma of the plan made on the nominal layout alone (the planned one is
+        ``planned.normal_sigma_rad``)
     """
 
     layout: SensorLayout
@@ -129,6 +136,7 @@ class PosePlan:
     planned: Design
     random: Design
     separate: tuple = ()
+    tolerance_cost: dict | None = None
 
     @property
     def d_efficiency_random(self) -> float:
@@ -145,7 +153,7 @@ class PosePlan:
             "extent": self.extent.to_dict(), "candidates": self.n_candidates, "feasible_candidates": self.n_feasible,
             "separate": list(self.separate), "seed": self.seed,
             "planned": self.planned.to_dict(names), "random": self.random.to_dict(names),
-            "d_efficiency_random": self.d_efficiency_random,
+            "d_efficiency_random": self.d_efficiency_random, "tolerance_cost": self.tolerance_cost,
         }
 
 
@@ -237,7 +245,7 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     pool = np.flatnonzero(feasible(layout, plane, extent, cands, limits))
     if len(pool) < n_poses:
         raise ValueError(f"only {len(pool)} of {n_candidates} candidate poses keep every limit (extent, range with "
-                         f"{limits.reading_margin_mm:g} mm margin, tilt, stand-off {limits.standoff_mm}); need "
+                         f"{limits.reading_margin_mm:g} mm margin{_tol_words(limits)}, tilt, stand-off {limits.standoff_mm}); need "
                          f"{n_poses}: widen the stand-off or tilt limits, or draw more candidates"
                          + ("; none at all: is the tool on the other side of the datum (--tool-side)?" if not len(pool) else ""))
     X = pose_information(layout, *cands.plane_in_tcs(plane), sigma, inc)
@@ -247,8 +255,33 @@ def plan_poses(layout: SensorLayout, plane: Plane, extent: DatumExtent, n_poses:
     G = normal_sensitivity(layout, work)
     planned = design_for("planned", layout, plane, X, order, cands, G, prior, inc)
     random = design_for("random", layout, plane, X, pool[:n_poses], cands, G, prior, inc)
+    cost = None
+    if limits.zero_tol_mm > 0 or limits.direction_tol_rad > 0:
+        cost = _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned, n_poses, G, inc, len(pool))
     args = (layout, plane, extent, limits, sigma, G, prior, robot_error_mm, robot_error_rad, robustness_trials)
     planned = replace(planned, robustness=_robustness(rng, planned, *args))
     random = replace(random, robustness=_robustness(rng, random, *args))
     return PosePlan(layout, plane, extent, limits, sigma, work, n_candidates, len(pool), seed, planned, random,
-                    tuple(separate))
+                    tuple(separate), cost)
+
+
+def _tol_words(limits) -> str:
+    if limits.zero_tol_mm == 0 and limits.direction_tol_rad == 0:
+        return ""
+    return (f" on every layout within {limits.zero_tol_mm:g} mm and {np.rad2deg(limits.direction_tol_rad):g} deg of the "
+            "nominal (the layout tolerance)")
+
+
+def _tolerance_cost(layout, plane, extent, limits, cands, X, prior, planned: Design, n_poses, G, inc, n_feasible) -> dict:
+    """What planning against the layout tolerance costs (:attr:`PosePlan.tolerance_cost`): the same
+    candidates planned on the nominal layout alone, and the margin the tolerance keeps."""
+    nominal = replace(limits, zero_tol_mm=0.0, direction_tol_rad=0.0)
+    pool = np.flatnonzero(feasible(layout, plane, extent, cands, nominal))
+    chosen = exchange(X, greedy_order(X, n_poses, prior, pool), prior, pool)
+    without = design_for("planned", layout, plane, X, chosen, cands, G, prior, inc)
+    d, _ = pose_readings(layout, plane, planned.poses)
+    d_lo, d_hi, _ = reading_bounds(layout, plane, planned.poses, limits.zero_tol_mm, limits.direction_tol_rad)
+    return {"zero_mm": limits.zero_tol_mm, "direction_deg": float(np.rad2deg(limits.direction_tol_rad)),
+            "feasible": int(n_feasible), "feasible_without": int(len(pool)), "margin_mm_max": float(np.max(np.maximum(d_hi - d, d - d_lo))),
+            "normal_sigma_deg_without": float(np.rad2deg(without.normal_sigma_rad)),
+            "normal_sigma_deg": float(np.rad2deg(planned.normal_sigma_rad))}

@@ -39,6 +39,13 @@ def plan_text(plan: PosePlan, out=None) -> str:
              f"spots {lim.spot_margin_mm:g} mm inside the datum's extent)",
              f"noise {', '.join(f'{s:g}' for s in plan.sigma_mm)} mm; normal predicted at the working stand-off "
              f"{plan.working_standoff_mm:g} mm (datum perpendicular to the tool axis)", ""]
+    tc = plan.tolerance_cost
+    if tc is not None:
+        lines[-1:-1] = [f"layout tolerance {tc['zero_mm']:g} mm (zero points), {tc['direction_deg']:g} deg (beams): "
+                        f"readings kept up to {tc['margin_mm_max']:.2f} mm further inside the range; {plan.n_feasible} "
+                        f"candidates feasible instead of {tc['feasible_without']}; normal sigma "
+                        f"{tc['normal_sigma_deg']:.5f} deg instead of {tc['normal_sigma_deg_without']:.5f} deg planned "
+                        "on the nominal layout alone"]
     lines.append(f"{'':8} {'poses':>5} {'max zero sigma mm':>17} {'max tilt sigma deg':>18} {'normal sigma deg':>16}")
     for d in (p, r):
         lines.append(f"{d.label:8} {len(d.poses):5d} {d.stderr[:, :3].max():17.4f} "

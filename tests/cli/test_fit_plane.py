@@ -67,10 +67,10 @@ def _collinear(tmp_path):
     "make, extra, match",
     [
         (lambda d: _write(d, "empty.ply", ""), [], r"empty\.ply: empty file"),
-        (lambda d: _write(d, "two.csv", "1,2,3\n4,5,6\n"), [], r"two\.csv: 2 points, need at least 3"),
+        (lambda d: _write(d, "two.csv", "1,2,3\n4,5,6\n"), [], r"two\.csv: 2 points, need at least 6"),
         (_collinear, [], r"line\.csv: points are collinear"),
         # NaN rows are missing returns: dropped with a count, refused only when too few remain
-        (lambda d: _write(d, "nan.xyz", "1 2 3\nnan 1 1\nnan 5 6\n7 8 9\n"), [], r"nan\.xyz: 2 points of 4 \(2 with NaN dropped\), need at least 3"),
+        (lambda d: _write(d, "nan.xyz", "1 2 3\nnan 1 1\nnan 5 6\n7 8 9\n"), [], r"nan\.xyz: 2 points of 4 \(2 with NaN dropped\), need at least 6"),
         (lambda d: _write(d, "abc.csv", "x,y,z\n1,2,3\n4,5,6\n7,8,z9\n"), [], r"abc\.csv: line 4, column 3: 'z9' is not a number"),
         (lambda d: _write(d, "cloud.stl", "solid\n"), [], r"cloud\.stl: unknown extension '\.stl' for CLOUD; expected one of \.csv"),
         (_cube, [], r"cube\.xyz: no datum plane: the cloud is .* thick"),

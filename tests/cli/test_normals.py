@@ -109,6 +109,7 @@ def test_cli_unitless_mesh_warns_before_it_fails_and_runs_with_units(files):
     lines = r.stderr.strip().splitlines()
     assert lines[0].startswith("warning: ") and "is it in m or inch? give --units" in lines[0]
     assert "assumed" in lines[0] and lines[-1].startswith("error: ") and "--units" in lines[-1]
+    assert r.stderr.count("is it in m or inch") == 1  # issue 32: the doubt once, not again in the error
     # under -q the warning is silent, so the error repeats the unit doubt in full
     r = _invoke(["-q", "normals", REAL / "trimesh_cylinder.stl", "--layout", files / "t6.toml", "--grid", "1", "--no-loop"])
     assert r.exit_code == 2 and len(r.stderr.strip().splitlines()) == 1

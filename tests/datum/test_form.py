@@ -59,3 +59,16 @@ def test_plane_form_dict_round_trips_to_json():
     assert isinstance(fit.form, DatumForm)
     assert d["form"]["coefficients"]["cuu_per_mm"] == fit.form.coefficients[3]
     assert d["normal_sigma_deg"] == pytest.approx(math.degrees(fit.normal_sigma))
+
+
+@pytest.mark.parametrize("d1", [1, 3, 7])
+def test_f_survival_function_matches_scipy(d1):
+    from scipy.special import fdtrc
+
+    from metrology.datum.form import f_sf
+
+    for d2 in [1, 2, 5, 30, 997, 10**5, 10**7]:
+        for f in [0.0, 1e-6, 0.01, 0.3, 1.0, 2.5, 10.0, 100.0, 1e4, 1e8]:
+            want = float(fdtrc(d1, d2, f))
+            got = f_sf(d1, d2, f)
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-300), (d1, d2, f)

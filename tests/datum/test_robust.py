@@ -181,3 +181,15 @@ def test_refusal_names_a_threshold_that_works():
     t = float(re.search(r"--threshold-mm ([0-9.e-]+) fits", str(info.value)).group(1))
     fit = fit_plane_robust(pts, threshold_mm=t, seed=0)
     assert abs(fit.plane.normal[2]) > np.cos(np.radians(0.05)) and abs(fit.plane.offset) < 2.0
+
+
+def test_a_floored_automatic_threshold_is_not_called_three_robust_sigma():
+    # issue 32: noise-free points (the conventions test's six) got "auto: 3 x robust sigma" for 1e-6 mm
+    pts = np.array([[0, 0, 0], [100, 0, 0.01], [0, 100, -0.01], [100, 100, 0], [50, 50, 0.02], [20, 70, -0.02],
+                    [60, 10, 0.006], [10, 40, -0.004]], float)
+    pts[:, 2] = 1e-4 * pts[:, 0] - 1e-4 * pts[:, 1]  # all on one plane
+    d = fit_plane_robust(pts).to_dict()
+    assert d["threshold_mm"] == pytest.approx(1e-6) and d["threshold_source"].startswith("auto: the floor")
+    rng = np.random.default_rng(0)
+    noisy = pts + rng.normal(0, 0.01, pts.shape) * [0, 0, 1]
+    assert fit_plane_robust(noisy).to_dict()["threshold_source"] == "auto: 3 x robust sigma"

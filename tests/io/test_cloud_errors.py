@@ -54,14 +54,15 @@ CASES = [
     ("issue11_non_numeric.ply", r"line 11, column 2: 'abc' is not a number, expected float32"),
     ("issue11_short_row.ply", r"line 12: 3 value\(s\), the row ends before property 'red'"),
     ("issue11_truncated_ascii.ply", r"line 13: the end of the file after 3 row\(s\) of element 'vertex', expected 4 rows"),
-    ("issue11_trailing_garbage.ply", r"line 14: '5 6 7 8' after the last element \(4 vertex\), expected the end of the file"),
+    ("issue11_trailing_garbage.ply", r"line 14: '5 6 7 8' after the last element \(4 vertex\), a row of element 'vertex' \(4 declared\), expected the end of the file"),
     ("issue11_blank_row.ply", r"line 12: 0 value\(s\), the row ends before property 'x'"),
     ("issue11_float32_overflow.ply", r"line 10, column 1: '1e39' is out of range, expected a finite float32"),
     ("binary_count_too_large.ply", r"truncated: the header declares 5 vertices, the file holds 4"),
     ("binary_count_too_small.ply", r"24 byte\(s\) after the last element: the header declares 72 bytes of data \(3 vertex\), the file holds 96"),
     # real files from trimesh's models
-    ("trimesh_points_emptyascii.ply", r"line 23: '-0\.009618 -0\.013861 0\.0384' after the last element \(0 face\), expected the end of the file"),
+    ("trimesh_points_emptyascii.ply", r"line 23: '-0\.009618 -0\.013861 0\.0384' after the last element \(0 face\), a row of element 'vertex' \(12 declared\), expected the end of the file"),
     ("trimesh_ply_empty_header.ply", r"the PLY header declares no vertex element"),
+    ("pcl_empty_cloud.ply", r"no points in the file$"),  # PCL test_ply_io.cpp EmptyCloud (PCL reads 0 points)
     # PCD and text
     ("pcd_ascii_short_row.pcd", r"line 13: 3 value\(s\), the row ends before property 'rgb'"),
     ("pcd_ascii_extra_value.pcd", r"line 13: 5 values \('9' left over\), expected 4"),
@@ -150,3 +151,10 @@ def test_binary_ply_with_mixed_face_sizes_is_walked_row_by_row(tmp_path):
     path.write_bytes(head + faces[:-1] + xyz.tobytes())  # one byte short: the vertices are shifted
     with pytest.raises(ValueError, match=r"mixed\.ply: truncated: the header declares 3 vertices, the file holds 2"):
         read_cloud(path)
+
+
+def test_empty_ply_error_is_the_only_line_on_stderr(tmp_path):
+    # issue 32: numpy's "loadtxt: input contained no data" warning leaked before the error
+    r = CliRunner().invoke(app, ["fit-plane", str(BAD / "pcl_empty_cloud.ply")])
+    assert r.exit_code == 2
+    assert r.stderr.strip().splitlines() == [f"error: {BAD / 'pcl_empty_cloud.ply'}: no points in the file"]

@@ -180,3 +180,70 @@ def test_any_well_formed_ascii_ply_round_trips_exactly(tmp_path_factory, case):
     path = tmp_path_factory.mktemp("ply") / "c.ply"
     path.write_bytes(text.encode("ascii"))
     np.testing.assert_array_equal(read_cloud(path), xyz)
+
+
+# issue 32: files the format's own readers read, where the points are unambiguous
+
+def test_rply_input_with_a_row_after_the_last_element_is_read_as_rply_reads_it():
+    # RPly's own test input (Open3D 3rdparty/rply/etc/input.ply): `element face 1` then two
+    # face rows; the second (line 16) cannot be a vertex row (4 values for x y z)
+    r = read_cloud_checked(DATA / "rply_input.ply", hint=False)
+    np.testing.assert_array_equal(r.points, [[-1, 0, 0], [0, 1, 0], [1, 0, 0]])
+    assert r.ignored_lines == (16,)
+    assert r.to_dict()["ignored_lines"] == [16]
+
+
+def test_pcl_comment_at_the_end_is_read_as_pcl_reads_it():
+    # PCL test/io/test_ply_io.cpp CommentAtTheEnd: 'comment hi' after the 4 vertex rows;
+    # its third point has a NaN intensity (not a coordinate: kept)
+    r = read_cloud_checked(DATA / "pcl_comment_at_the_end.ply", hint=False)
+    np.testing.assert_array_equal(r.points, [[4.23607, 0, 1.61803], [2.61803, 2.61803, 0], [0, 1.61803, 4.23607],
+                                             [0, -1.61803, 4.23607]])
+    assert (r.ignored_lines, r.n_dropped_nonfinite) == ((13,), 0)
+
+
+def test_a_trailing_line_that_parses_as_a_vertex_row_is_still_refused(tmp_path):
+    text = (DATA / "pcl_comment_at_the_end.ply").read_text().replace("comment hi", "1 2 3 4")
+    path = tmp_path / "count_too_small.ply"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"line 13: '1 2 3 4' after the last element \(4 vertex\), a row of element 'vertex'"):
+        read_cloud(path)
+
+
+def test_pcl_complex_ascii_pcd_with_padding_fields():
+    # PCL test/io/test_io.cpp ComplexPCDFileASCII: FIELDS fpfh _ x y z, the `_` field TYPE F
+    # SIZE 1 COUNT 10 (padding, skipped); PCL expects x, y, z = -69.234001 -65.460999 19.173
+    r = read_cloud_checked(DATA / "pcl_complex_ascii.pcd", min_points=1, hint=False)
+    np.testing.assert_array_equal(r.points, [[-69.234001, -65.460999, 19.173]])
+
+
+def test_binary_pcd_with_pcl_point_xyz_padding():
+    # PCL's PointXYZ layout in binary: FIELDS x y z _, the padding's 4 bytes skipped
+    pts = read_cloud(DATA / "pcl_xyz_padding_binary.pcd")
+    np.testing.assert_array_equal(pts, np.array([[1.5, -2.25, 3], [1000.125, 2000.5, -14.75], [0, 0.001, 7],
+                                                 [-5.5, 6.5, 1690.25]], dtype=np.float32).astype(float))
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+@pytest.mark.parametrize("layout", ["xyz_double", "float_with_extras"])
+def test_binary_ply_read_by_numpy(tmp_path, order, layout):
+    from metrology.io._o3d import open3d
+
+    rng = np.random.default_rng(3)
+    xyz = rng.normal(0, 100, (1000, 3))
+    if layout == "xyz_double":
+        props, rec = "property double x\nproperty double y\nproperty double z\n", xyz.astype(order + "f8")
+    else:
+        props = "property uchar red\nproperty float z\nproperty float x\nproperty double t\nproperty float y\n"
+        rec = np.zeros(len(xyz), dtype=[("red", "u1"), ("z", order + "f4"), ("x", order + "f4"), ("t", order + "f8"),
+                                        ("y", order + "f4")])
+        rec["x"], rec["y"], rec["z"], rec["red"] = xyz[:, 0], xyz[:, 1], xyz[:, 2], 7
+    fmt = "binary_little_endian" if order == "<" else "binary_big_endian"
+    path = tmp_path / "c.ply"
+    path.write_bytes(f"ply\nformat {fmt} 1.0\nelement vertex {len(xyz)}\n{props}end_header\n".encode() + rec.tobytes())
+    ours = read_cloud(path)
+    if layout == "xyz_double":
+        np.testing.assert_array_equal(ours, xyz)
+        np.testing.assert_array_equal(ours, np.asarray(open3d().io.read_point_cloud(str(path)).points))
+    else:  # Open3D 0.20 aborts on this layout ("RPly: Aborted by user") and returns garbage
+        np.testing.assert_array_equal(ours, xyz.astype(np.float32).astype(float))

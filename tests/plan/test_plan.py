@@ -155,3 +155,107 @@ def test_the_characteristic_columns_make_incidence_separable_from_it(setup):
         prior = prior_information(layout.n, incidence=use)
         chosen[use] = exchange(Xc, greedy_order(Xc, 20, prior, pool), prior, pool)
     assert se_c(chosen[cols]) < se_c(chosen[("incidence",)])
+
+
+# issue 32: plans that survive the real head
+
+def _heads_within(rng, layout, zero_mm, direction_rad, k):
+    """``k`` layouts within the tolerance: every zero coordinate moved by up to ``zero_mm``, every
+    beam turned by up to ``direction_rad`` about a random axis (half of them by exactly that)."""
+    from scipy.spatial.transform import Rotation
+
+    for j in range(k):
+        z = layout.zero + rng.uniform(-zero_mm, zero_mm, layout.zero.shape)
+        axis = rng.normal(size=(layout.n, 3))
+        ang = np.full(layout.n, direction_rad) if j % 2 else rng.uniform(0, direction_rad, layout.n)
+        R = Rotation.from_rotvec(axis / np.linalg.norm(axis, axis=1)[:, None] * ang[:, None]).as_matrix()
+        yield z, np.einsum("nij,nj->ni", R, layout.direction)
+
+
+def test_reading_bounds_hold_the_readings_of_heads_within_the_tolerance(setup):
+    """Readings and spots cast by the forward simulator on 400 heads within 1.5 mm / 3 deg lie
+    inside the bounds (metrology.plan.candidates.reading_bounds) at 300 random poses."""
+    from metrology.plan.candidates import draw_candidates, pose_readings, reading_bounds
+
+    layout, plane, _, extent, limits = setup
+    rng = np.random.default_rng(5)
+    poses = draw_candidates(rng, layout, plane, extent, 300, limits)
+    tz, tt = 1.5, np.deg2rad(3.0)
+    d_lo, d_hi, shift = reading_bounds(layout, plane, poses, tz, tt)
+    d0, s0 = pose_readings(layout, plane, poses)
+    assert np.all(d_lo < d0) and np.all(d0 < d_hi)
+    surface = flat_surface(-plane.offset * plane.normal, -plane.normal, (1e4, 1e4))
+    seen_lo, seen_hi = np.full_like(d0, np.inf), np.full_like(d0, -np.inf)
+    for z, u in _heads_within(rng, layout, tz, tt, 400):
+        hits = cast_beams(surface, z, u, poses.rot, poses.trans)
+        assert hits.valid.all()
+        assert np.all(hits.d >= d_lo - 1e-9) and np.all(hits.d <= d_hi + 1e-9)
+        assert np.all(np.linalg.norm(hits.spot - s0, axis=-1) <= shift + 1e-9)
+        seen_lo, seen_hi = np.minimum(seen_lo, hits.d), np.maximum(seen_hi, hits.d)
+    assert np.max(seen_lo - d_lo) < 1.5 and np.max(d_hi - seen_hi) < 1.5  # and not far outside what is seen
+
+
+def test_a_plan_against_the_layout_tolerance_keeps_every_head_within_it_in_range(setup):
+    from dataclasses import replace
+
+    layout, plane, _, extent, limits = setup
+    tz, tt = 1.5, np.deg2rad(3.0)
+    tol = replace(limits, zero_tol_mm=tz, direction_tol_rad=tt)
+    plan = plan_poses(layout, plane, extent, 12, tol, layout.noise_mm, np.random.default_rng(1), n_candidates=2000,
+                      robustness_trials=0)
+    surface = flat_surface(-plane.offset * plane.normal, -plane.normal, (1e4, 1e4))
+    lo, hi = layout.range_mm[:, 0] + tol.reading_margin_mm, layout.range_mm[:, 1] - tol.reading_margin_mm
+    poses = plan.planned.poses
+    for z, u in _heads_within(np.random.default_rng(2), layout, tz, tt, 200):
+        hits = cast_beams(surface, z, u, poses.rot, poses.trans)
+        assert np.all((hits.d >= lo) & (hits.d <= hi)), hits.d
+    cost = plan.tolerance_cost
+    assert cost["feasible_without"] > plan.n_feasible
+    assert 0 < cost["margin_mm_max"] < 10
+    assert cost["normal_sigma_deg"] >= cost["normal_sigma_deg_without"] * 0.99
+    assert plan.to_dict()["tolerance_cost"] == cost
+    # the nominal plan of the same candidates lets some head read outside the range
+    nominal = plan_poses(layout, plane, extent, 12, limits, layout.noise_mm, np.random.default_rng(1), n_candidates=2000,
+                         robustness_trials=0)
+    assert nominal.tolerance_cost is None
+    out = 0
+    for z, u in _heads_within(np.random.default_rng(2), layout, tz, tt, 200):
+        d = cast_beams(surface, z, u, nominal.planned.poses.rot, nominal.planned.poses.trans).d
+        out += int(np.sum((d < layout.range_mm[:, 0]) | (d > layout.range_mm[:, 1])))
+    assert out > 0
+
+
+def test_the_layout_tolerance_from_the_file_or_the_option(tmp_path):
+    from metrology.jobs.plan import layout_tolerance
+
+    text = (M / "nominal.toml").read_text()
+    path = tmp_path / "tol.toml"
+    path.write_text(text + "\n[tolerance]\nzero_mm = 1.5\ndirection_deg = 3\n")
+    assert layout_tolerance(path) == (1.5, 3.0)
+    assert layout_tolerance(path, (0.5, 1.0)) == (0.5, 1.0)
+    assert layout_tolerance(M / "nominal.toml") == (0.0, 0.0)
+    path.write_text(text + "\n[tolerance]\nzero_mm = -1\n")
+    with pytest.raises(ValueError, match=r"tol\.toml: \[tolerance\]: zero_mm -1, expected a number >= 0"):
+        layout_tolerance(path)
+    path.write_text(text + "\n[tolerance]\nzero = 1\n")
+    with pytest.raises(ValueError, match=r"expected a table of zero_mm and direction_deg"):
+        layout_tolerance(path)
+
+
+def test_cli_layout_tolerance_option():
+    import json
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    args = ["plan", "--layout", str(M / "nominal.toml"), "--plane", str(M / "datum.ply"), "--poses", "6",
+            "--candidates", "800"]
+    r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5,3", "--json"])
+    assert r.exit_code == 0, r.output
+    cost = json.loads(r.stdout)["tolerance_cost"]
+    assert (cost["zero_mm"], cost["direction_deg"]) == pytest.approx((1.5, 3.0)) and cost["margin_mm_max"] > 0
+    r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5"])
+    assert r.exit_code == 2 and "expected two numbers ZERO_MM,DIRECTION_DEG" in r.stderr
+    r = CliRunner().invoke(app, [*args, "--layout-tolerance", "1.5,-3"])
+    assert r.exit_code == 2 and "direction_deg -3.0, expected a number >= 0" in r.stderr
