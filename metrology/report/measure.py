@@ -141,18 +141,20 @@ def measure_section(report):
         figs.append(figure_from_matplotlib(_chart_figure(chart, [a for a in alarms if a.cell == cell]),
                                            f"Drift watch of cell {cell}: the CUSUM of the redundant reading's misfit; "
                                            f"dashed: the decision interval h; red: alarms."))
-    rows = []
+    counts, angles = [], []
     for cell, grp in sorted(s.series.items())[:_MAX_GROUP_ROWS]:
         f = s.figures(grp)
         k = s.counts(grp)
-        rows.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
-                     f"{k['undecided']:,}", f"{k['not_measured']:,}", _q(f, "before", "p50"), _q(f, "after", "p50"),
-                     _q(f, "after", "p99"), "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
+        counts.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
+                       f"{k['undecided']:,}", f"{k['not_measured']:,}"))
+        angles.append((cell or "-", _q(f, "before", "p50"), _q(f, "after", "p50"), _q(f, "after", "p99"),
+                       "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
     note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
             f"per panel and day (UTC): {len(s.groups)} groups in --json")
-    tables = [Table("Per cell: holes by status; the angle's quantiles [deg]; the judged angle's Cpk",
-                    ("cell", "holes", "conform", "fail", "undecided", "not measured", "p50 before",
-                     "p50 after", "p99 after", "Cpk"), tuple(rows), note)]
+    tables = [Table("Holes by status, per cell", ("cell", "holes", "conform", "fail", "undecided", "not measured"),
+                    tuple(counts), note),
+              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Cpk",
+                    ("cell", "p50 before", "p50 after", "p99 after", "Cpk"), tuple(angles))]
     worst = tuple((w["hole_id"], w["cell"] or "-", w["panel"] or "-", utc(w["time_s"]), f"{w['angle_deg']:.4f}",
                    f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell", "panel", "time", "angle [deg]",
