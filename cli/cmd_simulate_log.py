@@ -19,7 +19,7 @@ def register(app: typer.Typer) -> None:
         layout: Optional[Path] = typer.Option(None, "--layout", help="The cell's calibrated layout TOML (default: "
                                               "the bundled Table 6 head, measured/nominal.toml)."),
         true_layout: Optional[Path] = typer.Option(None, "--true-layout", help="The head as it is (TOML); default: "
-                                                   "--layout moved by --layout-error-mm/-deg, drawn from the seed."),
+                                                   "one drawn from --layout's covariance (or moved by --layout-error-mm, -deg), from the seed."),
         truth: Optional[Path] = typer.Option(None, "--truth", help="Truth per hole_id (.csv or .parquet); default "
                                              "LOG.truth.csv beside a CSV, FOLDER.truth.parquet beside a folder."),
         no_truth: bool = typer.Option(False, "--no-truth", help="Write no truth file (a throughput run)."),
@@ -43,10 +43,12 @@ def register(app: typer.Typer) -> None:
                                                   "its zero jumps by MM at hole HOLE; repeatable."),
         gross_rate: float = typer.Option(0.0, "--gross-rate", help="Probability that a reading is gross "
                                          "(0.2-2 mm off)."),
-        layout_error_mm: float = typer.Option(0.03, "--layout-error-mm", help="Without --true-layout: zero points "
-                                              "moved by 0.5-1 times this, mm."),
-        layout_error_deg: float = typer.Option(0.03, "--layout-error-deg", help="Without --true-layout: beams "
-                                               "turned by 0.5-1 times this, deg."),
+        layout_error_mm: Optional[float] = typer.Option(None, "--layout-error-mm", help="Without --true-layout: "
+                                                        "zero points moved by 0.5-1 times this, mm (default: a head "
+                                                        "drawn from the layout's covariance; 0.03 without one)."),
+        layout_error_deg: Optional[float] = typer.Option(None, "--layout-error-deg", help="Without --true-layout: "
+                                                         "beams turned by 0.5-1 times this, deg (default: as "
+                                                         "--layout-error-mm)."),
         seed: int = typer.Option(0, "--seed", help="Seed: same seed, same bytes."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " What was written and how it was drawn."),
     ) -> None:

@@ -2,9 +2,11 @@
 
 The log is drawn by the independent forward simulator (:mod:`metrology.sim.forward.log`): the
 cell adjusts its attitude with the calibrated layout (``--layout``) while its beams are those of
-the true layout (``--true-layout``, or the calibrated one with each zero point moved by
-``U(0.5, 1) layout_error_mm`` mm and each beam turned by ``U(0.5, 1) layout_error_deg`` deg, drawn
-from the seed: a calibration's error, not a drawing's).
+the true layout (``--true-layout``; else, when the calibrated layout carries its covariance, a
+head drawn from it, ``theta ~ N(0, C)`` added to its zero points and beam tilts: a head as its
+calibration says it may be; else, or with ``layout_error_mm``/``layout_error_deg`` given, the
+calibrated one with each zero point moved by ``U(0.5, 1) layout_error_mm`` mm and each beam turned
+by ``U(0.5, 1) layout_error_deg`` deg; drawn from the seed).
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from pathlib import Path
 
 __all__ = ["simulate_log_files", "parse_drift", "parse_shift", "parse_range", "default_truth_path"]
 
+#: without a covariance in the layout: the drawn head's zero error (mm) and beam error (deg)
+DEFAULT_LAYOUT_ERROR = 0.03
 #: the random stream of the drawn true layout: ``SeedSequence(seed, spawn_key=(LAYOUT_STREAM,))``
 #: (the holes use 2-element keys, so the streams never meet)
 LAYOUT_STREAM = 2**32 - 1
@@ -96,9 +100,17 @@ def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_
             raise ValueError(f"{true_layout_path}: sensors {list(true.names)} differ from {layout_path}'s "
                              f"{list(cell.names)}")
         return cell, true
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(LAYOUT_STREAM,)))
+    if layout_error_mm is None and layout_error_deg is None and cell.covariance is not None:
+        from metrology.core.model import direction_basis
+
+        theta = rng.multivariate_normal(np.zeros(5 * cell.n), cell.covariance, method="eigh").reshape(cell.n, 5)
+        u = cell.direction + np.einsum("nk,nkj->nj", theta[:, 3:], direction_basis(cell.direction))
+        return cell, cell.with_params(cell.zero + theta[:, :3], u / np.linalg.norm(u, axis=1, keepdims=True))
+    layout_error_mm = DEFAULT_LAYOUT_ERROR if layout_error_mm is None else layout_error_mm
+    layout_error_deg = DEFAULT_LAYOUT_ERROR if layout_error_deg is None else layout_error_deg
     if layout_error_mm < 0 or layout_error_deg < 0:
         raise ValueError("--layout-error-mm and --layout-error-deg must be >= 0")
-    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(LAYOUT_STREAM,)))
     true = perturb_layout(rng, cell, (0.5 * layout_error_mm, layout_error_mm),
                           (0.5 * layout_error_deg, layout_error_deg))
     return cell, true
@@ -107,7 +119,7 @@ def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_
 def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, holes=10_000, cells=1,
                        panel="flat", radius_mm=None, noise_mm=None, angle_deg=(0.5, 5.0), standoff_mm=None,
                        spin_deg=0.0, patch_mm=400.0, holes_per_hour=600.0, drifts=(), shifts=(), gross_rate=0.0,
-                       layout_error_mm=0.03, layout_error_deg=0.03, seed=0, write_truth=True, progress=None) -> dict:
+                       layout_error_mm=None, layout_error_deg=None, seed=0, write_truth=True, progress=None) -> dict:
     """Write a simulated log at ``out`` (``.csv``: one file; else a new folder of partitioned Parquet)
     and its truth at ``truth`` (default :func:`default_truth_path`; none when ``write_truth`` is False,
     e.g. for a throughput run); returns the summary.

@@ -9,8 +9,10 @@ threshold and reason:
 2. ``NOT_MEASURED``, the readings disagree (4 sensors): the redundant reading's misfit ``rho``
    exceeds what any panel of radius >= ``min_radius_mm`` can give (``|M|_* / (2 R)``, the
    nuclear norm of the points' second moments weighted by ``q``) by more than
-   :data:`GROSS_SIGMAS` of its noise sigma: one reading is gross (a chip, a burr, a spot on an
-   edge), and no normal from these readings can be trusted.
+   :data:`GROSS_SIGMAS` of its standard deviation (the reading noise and the calibration's
+   uncertainty: a head within its calibration): one reading is gross (a chip, a burr, a spot on
+   an edge), or a sensor has moved far beyond its calibration; no normal from these readings can
+   be trusted. (A smaller move is the drift watch's.)
 3. ISO 14253-1 (conformity with specifications, the supplier's proof): ``CONFORMS`` when
    ``angle + U95 <= tolerance``, ``FAILS`` when ``angle - U95 > tolerance``, ``UNDECIDED``
    otherwise. The angle judged is the drilled hole's: the one measured after the attitude
@@ -164,11 +166,11 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
             with np.errstate(invalid="ignore", divide="ignore"):
                 out.noise_sd[rows] = h.residual / h.residual_z
             bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
-            gross = np.abs(h.residual) > bound + GROSS_SIGMAS * np.abs(out.noise_sd[rows])
+            gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
-                                 f"{h.residual[i] * 1e3:.1f} µm, {abs(h.residual_z[i]):.0f} noise sigmas beyond what a "
+                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
                                  f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)")
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan

@@ -96,6 +96,9 @@ class HoleNormals:
         ``min_radius_mm`` gives (0 on a flat panel); ``u_angle`` includes ``b / sqrt(3)``
     twist : (N,) float, mm^2, or None; 4 sensors: ``||sum_i q_i r_i r_i^T||_*``: a panel of
         principal radii >= R moves ``rho`` by at most ``twist / (2 R)`` (any shape, saddles too)
+    residual_sd : (N,) float, mm, or None; 4 sensors: the standard deviation of ``rho`` from the
+        reading noise and the calibration's uncertainty (its per-sensor blocks): how far from 0 a
+        head within its calibration puts the redundant reading
     """
 
     normal: np.ndarray
@@ -108,6 +111,7 @@ class HoleNormals:
     signature: np.ndarray | None
     curvature_bound: np.ndarray | None = None
     twist: np.ndarray | None = None
+    residual_sd: np.ndarray | None = None
 
 
 def _chart_rows(layout: SensorLayout):
@@ -164,7 +168,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     # the slopes' covariance (2, 2) per hole: reading noise and the calibration
     qn = (mu * sigma) ** 2  # each point's height variance from its reading noise
     noise_g = _spread(px, py, qn)
-    cal_g = _calibration_cov(layout, cov, dT, px, py, gx, gy) if cov is not None else None
+    cal_g, q_cal = _calibration_cov(layout, cov, dT, px, py, gx, gy) if cov is not None else (None, 0.0)
     # the angle: c = d alpha / d g
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
@@ -195,7 +199,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         U95[idx] = radius95(l1[still], l2[still])
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
-    signature = twist = None
+    signature = twist = residual_sd = None
     if n == 4:
         q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
         residual = (q * zc).sum(0)
@@ -203,6 +207,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         sd = np.sqrt(((sig * sigma) ** 2).sum(0))
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
+        residual_sd = np.sqrt(sd * sd + (q * q * q_cal).sum(0))  # the calibration's own blocks added
         signature = np.ascontiguousarray(sig.T)
         twist = _nuclear(q, xc, yc)
     elif n > 4:
@@ -211,7 +216,8 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         v = (mu * sigma) ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(0) / (n - 3))
-    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound, twist)
+    return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound, twist,
+                       residual_sd)
 
 
 def _radius_table():
@@ -287,25 +293,25 @@ def _quad(cx, cy, c):
 
 
 def _calibration_cov(layout, cov, dT, px, py, gx, gy):
-    """The slopes' covariance ``(c00, c01, c11)`` from the calibration's covariance ``cov (5n, 5n)``.
+    """The slopes' covariance ``(c00, c01, c11)`` from the calibration's covariance ``cov (5n, 5n)``,
+    and each point's height variance ``r_i^T C_ii r_i`` (n, N) from its own sensor's block.
 
-    A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: then each
-    point's height has its own variance ``r_i^T C_ii r_i`` and the points are independent (fast);
-    any other covariance is propagated whole."""
+    A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: then the
+    points are independent (fast); any other covariance is propagated whole."""
     n = layout.n
     rows = _height_rows(layout, dT, gx, gy)  # (n, N, 5)
     blocks = [cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)]
     off = cov.copy()
     for i in range(n):
         off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
+    q = np.stack([np.einsum("pk,pk->p", rows[i] @ blocks[i], rows[i]) for i in range(n)], axis=0)
     if not np.any(off):
-        q = np.stack([np.einsum("pk,pk->p", rows[i] @ blocks[i], rows[i]) for i in range(n)], axis=0)
-        return _spread(px, py, q)
+        return _spread(px, py, q), q
     N = dT.shape[1]
     sx = (rows * px[..., None]).transpose(1, 0, 2).reshape(N, -1)
     sy = (rows * py[..., None]).transpose(1, 0, 2).reshape(N, -1)
     cx, cy = sx @ cov, sy @ cov
-    return np.einsum("ij,ij->i", cx, sx), np.einsum("ij,ij->i", cx, sy), np.einsum("ij,ij->i", cy, sy)
+    return (np.einsum("ij,ij->i", cx, sx), np.einsum("ij,ij->i", cx, sy), np.einsum("ij,ij->i", cy, sy)), q
 
 
 def _one_sign(w, x, y):
