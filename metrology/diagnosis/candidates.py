@@ -245,6 +245,7 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
     from scipy import stats
 
     names = nominal.names
+    c = c.locate(base.residual, cov, sigma)  # an effect with a place in the run is put there first
     f = fit_any(nominal, obs, cov, sigma, tuple(given) + (c,), theta0)
     k = c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0])) - k_ref
     S = list(c.sensors) if c.sensors else list(range(nominal.n))
@@ -258,7 +259,8 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
         p_in = p_out  # selection by the largest residual: its own test
     else:
         F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
-        p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
+        # Bonferroni over the positions a located candidate was chosen among
+        p_in = min(1.0, float(stats.f.sf(F, k, max(dof_e, 1))) * c.searched)
     ho = kfold(nominal, obs, cov, sigma, tuple(given) + (c,), folds, theta0)
     excl = None
     if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given):

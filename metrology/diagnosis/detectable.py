@@ -41,6 +41,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from metrology.core.effects import Component
 from metrology.diagnosis.extension import _free_offset, size_of
 from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis.thresholds import THRESHOLDS
@@ -223,6 +224,17 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
         "outliers": "one gross reading",
     }
     for c in scored:
+        if type(c.component).detectable_size is not Component.detectable_size and c.component.sensors:
+            # the registry entry says what its test detects (a located effect: over its positions)
+            if J is None:
+                J = base_jacobian(b, ds)
+            i = c.component.sensors[0]
+            det = c.component.detectable_size(J[:, i, :], b.cov, np.isfinite(ds.obs.d[:, i]), float(b.sigma[i]), alpha)
+            if det is not None:
+                fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.size_meaning})
+                fam["sensors"][c.sensors[0]] = float(det)
+                fam["member"][c.sensors[0]] = c.label
+            continue
         if c.cause in WORST_SHAPE_FAMILIES:
             # any shape of the family, not the simplest member's alone, by the best of its
             # members (sized below, once its members are all known); listed where its simplest
