@@ -231,7 +231,7 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
             i = c.component.sensors[0]
             det = c.component.detectable_size(J[:, i, :], b.cov, np.isfinite(ds.obs.d[:, i]), float(b.sigma[i]), alpha)
             if det is not None:
-                fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.size_meaning})
+                fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.detectable_meaning})
                 fam["sensors"][c.sensors[0]] = float(det)
                 fam["member"][c.sensors[0]] = c.label
             continue

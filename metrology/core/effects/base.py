@@ -184,6 +184,8 @@ class Component:
     #: how many positions :meth:`locate` chose among (the in-sample test is Bonferroni-split
     #: over them); 1 for an effect with nothing to locate
     searched = 1
+    #: what :meth:`detectable_size` measures (the ``meaning`` of the diagnosis' ``detectable``)
+    detectable_meaning = ""
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov) -> list:
