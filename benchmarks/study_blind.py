@@ -38,7 +38,7 @@ import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same direc
 import numpy as np
 
 # catalogued families and their pairs, out-of-catalogue effects (metrology.sim.forward.families)
-FAMILY_ORDER = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers")
+FAMILY_ORDER = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers", "shift")
 OOC = ("periodic", "crosstalk")
 PAIRS = (("drift", "outliers"), ("scale", "drift"), ("pose_error", "drift"), ("nonlinearity", "outliers"),
          ("plane_form", "drift"), ("scale", "incidence"), ("drift", "drift"), ("pose_error", "outliers"))
@@ -121,7 +121,7 @@ def _seen_size(case, effect):
       sensor saw (the drawn size is over the whole range, which the poses may not cover);
     - plane_form: peak-to-valley, over the scanned points, of the true datum height less its
       best-fit plane there (a tilt is the plane's own business, and the scan covers what it covers);
-    - drift, incidence: the drawn size (already defined on what the run saw);
+    - drift, incidence, shift: the drawn size (already defined on what the run saw);
     - pose_error: RMS over every reading of what the pose error changes (the beams cast from
       the reported pose less those from the true one, the true head): its offset and tilts.
     """
@@ -131,7 +131,7 @@ def _seen_size(case, effect):
         ex = case.export
         hit = cast_beams(case.surface, case.true.zero, case.true.direction, ex.tcs2tracker_rot, ex.tcs2tracker_trans)
         return float(np.sqrt(np.nanmean((hit.d - case.d_true) ** 2)))
-    if effect.family in ("drift", "incidence"):
+    if effect.family in ("drift", "incidence", "shift"):
         return float(effect.size)
     if effect.family in ("scale", "nonlinearity"):
         curve, d = _true_characteristic(case, effect)
@@ -272,6 +272,11 @@ def summarize(records: list, det: dict) -> dict:
     # a cause named on weak held-out evidence (metrology.diagnosis.select.weakly_supported)
     mod = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "moderate" and r["named"]]
     out["moderate_named"] = {"n": len(mod), "right": int(sum(map(_right_alone, mod)))}
+    # a knocked sensor named where no sensor was knocked (any kind of case)
+    no_shift = [r for r in records if all(e["family"] != "shift" for e in r["truth"])]
+    out["false_shift"] = {"n": len(no_shift), "named": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift)),
+                          "nulls": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift
+                                           if r["kind"] == "null")), "n_nulls": len(nulls)}
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
@@ -313,6 +318,10 @@ def report(s: dict) -> str:
     o = s["ooc"]
     lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])}, 95 % CP "
                  f"[{100 * o['ci95'][0]:.1f}, {100 * o['ci95'][1]:.1f}] %; {o['by_family']}")
+    fs = s.get("false_shift")
+    if fs:
+        lines.append(f"shift named where no sensor was knocked: {_pct(fs['named'], fs['n'])} of the cases "
+                     f"({fs['nulls']} of {fs['n_nulls']} nulls)")
     h = s["high_precision"]
     lines.append(f"confidence high precision (nulls and singles): {_pct(h['right'], h['n'])}")
     m = s.get("moderate_named", {"n": 0, "right": 0})
