@@ -207,7 +207,15 @@ def run_case(job) -> dict:
         # the evidence of each cause named: its held-out p given the others and in-sample p
         "evidence": [[c.get("label"), c.get("p_heldout_given_others"), c.get("p_insample")]
                      for c in res.get("causes") or []],
+        # the datum check: the cloud's form against the readings' (p, and whether it says "disagrees")
+        "datum": _datum_check(res),
     }
+
+
+def _datum_check(res: dict):
+    """``{"p", "agree"}`` of the datum check in the JSON, or None without one."""
+    ag = (res.get("datum_form") or {}).get("against_readings")
+    return None if not ag else {"p": ag["p"], "agree": bool(ag["agree"])}
 
 
 def _right(effect: dict, named: list) -> bool:
@@ -272,6 +280,13 @@ def summarize(records: list, det: dict) -> dict:
     # a cause named on weak held-out evidence (metrology.diagnosis.select.weakly_supported)
     mod = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "moderate" and r["named"]]
     out["moderate_named"] = {"n": len(mod), "right": int(sum(map(_right_alone, mod)))}
+    # the datum check on flat datums (every case without plane_form): "disagrees" is a false alarm
+    flat = [r for r in records if r.get("datum") and all(e["family"] != "plane_form" for e in r["truth"])]
+    flat_nulls = [r for r in flat if r["kind"] == "null"]
+    out["datum_flat"] = {"n": len(flat), "disagrees": int(sum(not r["datum"]["agree"] for r in flat)),
+                         "n_nulls": len(flat_nulls), "disagrees_nulls": int(sum(not r["datum"]["agree"] for r in flat_nulls)),
+                         "ci95_nulls": clopper_pearson(sum(not r["datum"]["agree"] for r in flat_nulls), len(flat_nulls)),
+                         "p_below_0.05_nulls": int(sum(r["datum"]["p"] < 0.05 for r in flat_nulls))}
     # a knocked sensor named where no sensor was knocked (any kind of case)
     no_shift = [r for r in records if all(e["family"] != "shift" for e in r["truth"])]
     out["false_shift"] = {"n": len(no_shift), "named": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift)),
@@ -318,6 +333,11 @@ def report(s: dict) -> str:
     o = s["ooc"]
     lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])}, 95 % CP "
                  f"[{100 * o['ci95'][0]:.1f}, {100 * o['ci95'][1]:.1f}] %; {o['by_family']}")
+    df = s.get("datum_flat")
+    if df and df["n"]:
+        lines.append(f"datum check 'disagrees' on flat datums: {_pct(df['disagrees'], df['n'])} of the cases; nulls "
+                     f"{_pct(df['disagrees_nulls'], df['n_nulls'])}, 95 % CP [{100 * df['ci95_nulls'][0]:.2f}, "
+                     f"{100 * df['ci95_nulls'][1]:.2f}] % (p < 0.05: {df['p_below_0.05_nulls']})")
     fs = s.get("false_shift")
     if fs:
         lines.append(f"shift named where no sensor was knocked: {_pct(fs['named'], fs['n'])} of the cases "
