@@ -28,8 +28,32 @@ from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
-__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "diagnose", "base_analysis", "verdict",
+__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
            "side_by_side", "check_datum"]
+
+
+@dataclass(frozen=True)
+class Rival:
+    """An explanation outside the catalogue that predicts held-out poses as well as a cause, or
+    better (crosstalk: a shift in proportion to another sensor's distance).
+
+    label : str, the rival term (``crosstalk.L2<-L1``); family : str; of : str, the label of the
+    catalogued cause it rivals; better : bool, it predicts significantly better (the cause is then
+    not named) rather than as well (the cause is named, confidence ``ambiguous``); p : float or
+    None, the p-value of "better" (None for a tie); separate : str, the command that designs poses
+    telling them apart.
+    """
+
+    label: str
+    family: str
+    of: str
+    better: bool
+    p: float | None
+    separate: str
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "family": self.family, "of": self.of, "better": self.better, "p": self.p,
+                "separate": self.separate}
 
 
 @dataclass(frozen=True)
@@ -146,6 +170,7 @@ class Verdict:
     causes: tuple = ()
     lead: CandidateResult | None = None
     dropped: dict | None = None
+    rivals: tuple = ()
 
 
 #: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
@@ -296,16 +321,23 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     # is taken without the random effect), unless the verdict without it turned it down
     sole_exempt = random_pose is not None and len(chosen) == 1 and exempt_sole
     kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or need[j])]
-    # a characteristic that follows another sensor's distance better is crosstalk, not the
-    # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
-    xtalk = {}
+    # crosstalk rules (the check is in metrology.diagnosis.crosstalk), at alpha_heldout and alpha_confound:
+    # - crosstalk_better: a characteristic that another sensor's distance predicts significantly
+    #   better is crosstalk, not the sensor's own: not named, the rival said;
+    # - crosstalk_tie: one that crosstalk predicts only as well is named, confidence ambiguous,
+    #   the rival listed (gain errors are common, crosstalk rare; a user with no cause at all
+    #   gets nothing to act on), with the poses that would separate them
+    xtalk, rivals = {}, []
     for j in list(kept):
         if chosen[j].cause in CROSSTALK_CHECKED:
-            xtalk[j] = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
-            if xtalk[j]["better"] is not None or xtalk[j]["indistinguishable"]:
-                # crosstalk is outside the catalogue: a characteristic is named only where it
-                # predicts held-out poses better than a shift with every other sensor's distance
+            xtalk[j] = x = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
+            separate = f"metro plan --separate {chosen[j].cause}"
+            if x["better"] is not None:
                 kept.remove(j)
+                rivals.append(Rival(x["better"], "crosstalk", chosen[j].label, True, x["p"], separate))
+            else:
+                rivals += [Rival(lab, "crosstalk", chosen[j].label, False, None, separate)
+                           for lab in x["indistinguishable"]]
     causes = []
     for j in kept:
         s = chosen[j]
@@ -314,6 +346,9 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                   "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                   "p_insample": s.p_insample, "step": j + 1})
+        tied = [r.to_dict() for r in rivals if r.of == s.label]
+        if tied:  # (only where there is one: the JSON of every other cause is unchanged)
+            d["rivals"] = tied
         causes.append(d)
     if random_pose is not None:
         from metrology.diagnosis.posevar import random_pose_cause
@@ -328,33 +363,28 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
-        xt = next((x for x in xtalk.values() if x["better"]), None)
-        amb = next(((j, x) for j, x in xtalk.items() if x["indistinguishable"]), None)
-        if xt is not None:  # the characteristic follows another sensor: crosstalk, outside the catalogue
-            lead = replace(chosen[0], label=f"{xt['better']} (crosstalk: predicts held-out poses better than "
-                                            f"{chosen[0].label}, p = {xt['p']:.2g})")
-        elif amb is not None:  # a gain error or crosstalk: these poses cannot tell
-            lead = replace(chosen[amb[0]], label=f"{', '.join(amb[1]['indistinguishable'])} (crosstalk: predicts "
-                                                 f"held-out poses as well as {chosen[amb[0]].label})")
         p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
-                       None, (), lead)
+                       None, (), lead, rivals=tuple(r for r in rivals if r.better))
     first = next(s for s in chosen if s.label == causes[0]["label"])
     confidence = ("moderate" if weakly_supported([] if sole_exempt else causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:
             confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
-    for j, xc in xtalk.items():
-        for lab in xc["indistinguishable"]:
-            confounding.append({"between": [chosen[j].label, lab], "p_separation": None,
-                                "message": f"the data cannot tell {chosen[j].label} from {lab} (a shift in proportion "
+    for r in rivals:
+        if not r.better and any(c["label"] == r.of for c in causes):
+            j = next(k for k in kept if chosen[k].label == r.of)
+            confounding.append({"between": [r.of, r.label], "p_separation": None,
+                                "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
                                            f"to another sensor's distance, crosstalk, outside the catalogue); "
-                                           f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt"})
+                                           f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
+                                           f"({r.separate})"})
     if confounding and confidence in ("high", "moderate"):
         confidence = "ambiguous"
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
-                   causes[0], tuple(causes), lead)
+                   causes[0], tuple(causes), lead, rivals=tuple(r for r in rivals if any(c["label"] == r.of
+                                                                                        for c in causes)))
 
 
 def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
