@@ -23,6 +23,7 @@ from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.results import Cause, Confidence, Outcome, Rival
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
@@ -31,29 +32,6 @@ from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
            "side_by_side", "check_datum"]
 
-
-@dataclass(frozen=True)
-class Rival:
-    """An explanation outside the catalogue that predicts held-out poses as well as a cause, or
-    better (crosstalk: a shift in proportion to another sensor's distance).
-
-    label : str, the rival term (``crosstalk.L2<-L1``); family : str; of : str, the label of the
-    catalogued cause it rivals; better : bool, it predicts significantly better (the cause is then
-    not named) rather than as well (the cause is named, confidence ``ambiguous``); p : float or
-    None, the p-value of "better" (None for a tie); separate : str, the command that designs poses
-    telling them apart.
-    """
-
-    label: str
-    family: str
-    of: str
-    better: bool
-    p: float | None
-    separate: str
-
-    def to_dict(self) -> dict:
-        return {"label": self.label, "family": self.family, "of": self.of, "better": self.better, "p": self.p,
-                "separate": self.separate}
 
 
 @dataclass(frozen=True)
@@ -79,9 +57,13 @@ class PlotData:
 class Diagnosis:
     """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
 
+    ``cause`` the first cause's family, or ``none``/``unexplained`` (:attr:`outcome`);
+    ``confidence`` a :class:`~metrology.diagnosis.results.Confidence`; ``named`` the first
+    :class:`~metrology.diagnosis.results.Cause` (or None);
     ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
-    with its parameters and standard errors, its size in the family's unit where one is
-    defined, and its held-out gain given the others, largest first (``cause`` is the first);
+    a :class:`~metrology.diagnosis.results.Cause` with its parameters and standard errors, its
+    size in the family's unit where one is defined, its held-out gain given the others and any
+    rival outside the catalogue it cannot be told from, largest gain first (``cause`` is the first);
     ``steps`` the residuals after each step of the selection;
     ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
     ``tests_extended`` the noise-model battery before and after the extension;
@@ -92,9 +74,9 @@ class Diagnosis:
 
     cause: str
     sensors: list
-    confidence: str
+    confidence: Confidence
     summary: str
-    named: dict | None
+    named: Cause | None
     candidates: tuple
     tests_base: NoiseTests
     tests_extended: NoiseTests | None
@@ -111,11 +93,19 @@ class Diagnosis:
     steps: tuple = ()
     detectable: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        object.__setattr__(self, "confidence", Confidence(self.confidence))
+
+    @property
+    def outcome(self) -> Outcome:
+        """A cause named, or none, or unexplained."""
+        return Outcome(self.cause) if self.cause in (Outcome.NONE, Outcome.UNEXPLAINED) else Outcome.NAMED
+
     def to_dict(self):
         return {
             "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
-            "causes": list(self.causes), "steps": list(self.steps),
-            "extended": self.named, "heldout": self.heldout, "discrepancy": self.discrepancy,
+            "causes": [c.to_dict() for c in self.causes], "steps": list(self.steps),
+            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout, "discrepancy": self.discrepancy,
             "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
             "tests": {"base": self.tests_base.to_dict(),
                       "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
@@ -171,6 +161,7 @@ class Verdict:
     lead: CandidateResult | None = None
     dropped: dict | None = None
     rivals: tuple = ()
+    random_pose: bool = False
 
 
 #: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
@@ -281,7 +272,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     rpe = None if v.confidence in ("high", "moderate", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
     # a sole cause turned down as not needed stays turned down beside the random pose error
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe, exempt_sole=v.dropped is None)
-    return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
+    return v2 if v2 is not None and v2.random_pose else v
 
 
 def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_sole=True) -> Verdict:
@@ -346,10 +337,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                   "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                   "p_insample": s.p_insample, "step": j + 1})
-        tied = [r.to_dict() for r in rivals if r.of == s.label]
-        if tied:  # (only where there is one: the JSON of every other cause is unchanged)
-            d["rivals"] = tied
-        causes.append(d)
+        causes.append(Cause.from_description(d, [r for r in rivals if r.of == s.label and not r.better]))
     if random_pose is not None:
         from metrology.diagnosis.posevar import random_pose_cause
 
@@ -358,7 +346,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
             return None
         causes.append(rp[0])  # (its entry, a CandidateResult for it)
         chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
-    causes.sort(key=lambda d: -d["heldout_gain_chi2"])
+    causes.sort(key=lambda c: -c.heldout_gain_chi2)
     best = chosen[kept[0]] if kept else chosen[0]
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
@@ -366,14 +354,14 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead, rivals=tuple(r for r in rivals if r.better))
-    first = next(s for s in chosen if s.label == causes[0]["label"])
+    first = next(s for s in chosen if s.label == causes[0].label)
     confidence = ("moderate" if weakly_supported([] if sole_exempt else causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:
             confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
     for r in rivals:
-        if not r.better and any(c["label"] == r.of for c in causes):
+        if not r.better and any(c.label == r.of for c in causes):
             j = next(k for k in kept if chosen[k].label == r.of)
             confounding.append({"between": [r.of, r.label], "p_separation": None,
                                 "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
@@ -383,8 +371,8 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     if confounding and confidence in ("high", "moderate"):
         confidence = "ambiguous"
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
-                   causes[0], tuple(causes), lead, rivals=tuple(r for r in rivals if any(c["label"] == r.of
-                                                                                        for c in causes)))
+                   causes[0], tuple(causes), lead, rivals=tuple(r for r in rivals if any(c.label == r.of for c in causes)),
+                   random_pose=random_pose is not None)
 
 
 def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
@@ -438,7 +426,7 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
     # sensors of a pose; a form fitted without it would carry standard errors too small for
     # the comparison)
     named_forms = [c for c in v.best.fit.components if isinstance(c, PlaneForm)] if v.causes else []
-    if named_forms and named_forms[0].order >= 2 and any(c["cause"] == "plane_form" for c in v.causes):
+    if named_forms and named_forms[0].order >= 2 and any(c.cause == "plane_form" for c in v.causes):
         pf = v.best.fit
     elif not chosen:  # nothing named: the plane_form candidate's own fit
         pf = next(s.fit for s in scored if s.label == "plane_form")
@@ -450,7 +438,7 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
         pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
     ag = form_agreement(b.datum, pf)
     ag["fitted_with"] = [c.label for c in pf.components]
-    if named_forms and named_forms[0].order == 0 and any(c["cause"] == "plane_form" for c in v.causes):
+    if named_forms and named_forms[0].order == 0 and any(c.cause == "plane_form" for c in v.causes):
         # the form named is the scan itself: the readings agree with the cloud when they see it
         # at gain 1 (a two-sided z-test of the gain's standard error)
         from scipy import stats
@@ -472,7 +460,7 @@ def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
     after the selection: not needed given the others, crosstalk, its sensors not explained)."""
     out = [{"added": None, "model": "base", "residual_rms_mm": np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(),
             "heldout_rms_mm": b.heldout.rms()}]
-    labels, named = [], {c["label"] for c in v.causes}
+    labels, named = [], {c.label for c in v.causes}
     for st in steps:
         if st.chosen is None:
             break
@@ -507,7 +495,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     v = verdict(ds, b, steps, folds, rng)
     if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
         chosen = []
-    rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
+    rand = v.random_pose  # a random pose error predicts no reading: not in the model
     fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
         replace(v.best, heldout=b.heldout) if rand else None)

@@ -378,6 +378,7 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
     alone (``lr_one_sensor`` at least the margin ``THRESHOLDS["lr_one_sensor"]``)."""
     from dataclasses import replace
 
+    from metrology.diagnosis.results import Cause
     from metrology.diagnosis.thresholds import THRESHOLDS
 
     if not tests.consistent or r.p_explained < THRESHOLDS["alpha_battery"]:
@@ -394,4 +395,4 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "lr_over_one_sensor": r.lr_one_sensor,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}
-    return entry, replace(pe, fit=f, label="pose_error@random", p_insample=r.p)
+    return Cause.from_description(entry), replace(pe, fit=f, label="pose_error@random", p_insample=r.p)

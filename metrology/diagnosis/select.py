@@ -386,8 +386,8 @@ def weakly_supported(causes) -> list:
     (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws named ``high`` on such
     a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
     predicts nothing held out) and a random pose error (no held-out p) are exempt."""
-    return [c["label"] for c in causes if c["cause"] != "outliers" and c.get("p_heldout_given_others") is not None
-            and not c["p_heldout_given_others"] < THRESHOLDS["alpha_high"]]
+    return [c.label for c in causes if c.cause != "outliers" and c.p_heldout_given_others is not None
+            and not c.p_heldout_given_others < THRESHOLDS["alpha_high"]]
 
 
 def flags_of(chosen):

@@ -56,10 +56,10 @@ def verdict_summary(v, tb) -> str:
                 f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains")
     parts = []
     for c in v.causes:
-        where = f" on {', '.join(c['sensors'])}" if c["sensors"] and c["cause"] not in ("pose_error", "plane_form") else ""
-        test = (f"{c['test']}, p = {c['p_insample']:.2g}" if c.get("test") else
-                f"held-out chi-square gain {c['heldout_gain_chi2']:.3g} given the others, p = {c['p_heldout_given_others']:.2g}")
-        parts.append(f"{c['cause']}{where} ({c['label']}: {test})")
+        where = f" on {', '.join(c.sensors)}" if c.sensors and c.cause not in ("pose_error", "plane_form") else ""
+        test = (f"{c.test}, p = {c.p_insample:.2g}" if c.test else
+                f"held-out chi-square gain {c.heldout_gain_chi2:.3g} given the others, p = {c.p_heldout_given_others:.2g}")
+        parts.append(f"{c.cause}{where} ({c.label}: {test})")
     text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
         names = list(te.sensors)
@@ -76,7 +76,7 @@ def verdict_summary(v, tb) -> str:
             + f"; poses that separate them: {', '.join(dict.fromkeys(r.separate for r in ties))}")
     weak = weakly_supported(v.causes) if v.confidence == "moderate" else []
     if weak:
-        p = {c["label"]: c["p_heldout_given_others"] for c in v.causes}
+        p = {c.label: c.p_heldout_given_others for c in v.causes}
         return text + (f"; confidence moderate: weak held-out evidence for "
                        f"{' and '.join(f'{k} (p = {p[k]:.2g})' for k in weak)}, not below {THRESHOLDS['alpha_high']:g}")
     return text + f"; confidence {v.confidence}"

@@ -176,8 +176,10 @@ def test_confidence_high_needs_strong_held_out_evidence_for_every_cause():
 
     a = THRESHOLDS["alpha_high"]
 
+    from metrology.diagnosis.results import Cause
+
     def cause(label, p):
-        return {"cause": label.split(".")[0].split("@")[0], "label": label, "p_heldout_given_others": p}
+        return Cause(label, label.split(".")[0].split("@")[0], [], None, 1.0, p, 1e-9, 1)
 
     assert weakly_supported([cause("incidence.L3@4", 0.026)]) == ["incidence.L3@4"]
     assert weakly_supported([cause("drift.L2@temp", 0.9 * a), cause("scale.L1", a)]) == ["scale.L1"]
