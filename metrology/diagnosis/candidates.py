@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.calibration.dataset import Dataset
 from metrology.core.effects import REGISTRY, Component, Covariates, Outliers
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
@@ -18,8 +19,8 @@ from metrology.diagnosis.thresholds import THRESHOLDS
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
 
 
-def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
-    """Covariates of a :class:`~metrology.dataset.Dataset` at the calibrated geometry.
+def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
+    """Covariates of a :class:`~metrology.calibration.dataset.Dataset` at the calibrated geometry.
 
     ``centre`` (3,) mm tracker: the datum centre; default the centroid of the datum cloud if
     there is one, else the mean of the spots projected on the plane.
@@ -89,7 +90,7 @@ SCAN_PASSES = 20
 SCAN_GROW = 0.1
 
 
-def scan_points(ds, centre):
+def scan_points(ds: Dataset, centre):
     """The points of the datum cloud on the datum surface ``(m, 3)`` mm, tracker frame.
 
     The plane fit keeps the points within its window about the *plane* (``ds.datum_points``);
@@ -107,7 +108,7 @@ def scan_points(ds, centre):
     from metrology.core.effects import PlaneForm
     from metrology.core.plane import plane_basis
 
-    cloud = getattr(ds, "datum_cloud", None)
+    cloud = ds.datum_cloud
     pts = ds.datum_points
     if cloud is None or len(cloud) == len(pts):
         return pts

@@ -8,10 +8,11 @@ procedure): :func:`base_analysis`, the forward selection of causes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from metrology.calibration.dataset import Dataset
 from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.progress import ProgressFn, notify
@@ -23,7 +24,7 @@ from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.results import Cause, Confidence, Outcome, Rival
+from metrology.diagnosis.results import Cause, Diagnosis, PlotData, Rival
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
@@ -32,90 +33,6 @@ from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
            "side_by_side", "check_datum"]
 
-
-
-@dataclass(frozen=True)
-class PlotData:
-    """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
-
-    base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
-    (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
-    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
-    """
-
-    base: Fit
-    cov: object
-    d0: np.ndarray
-    best: CandidateResult | None
-    names: tuple
-    sigma: np.ndarray
-    flags: np.ndarray
-    structure: dict
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
-
-    ``cause`` the first cause's family, or ``none``/``unexplained`` (:attr:`outcome`);
-    ``confidence`` a :class:`~metrology.diagnosis.results.Confidence`; ``named`` the first
-    :class:`~metrology.diagnosis.results.Cause` (or None);
-    ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
-    a :class:`~metrology.diagnosis.results.Cause` with its parameters and standard errors, its
-    size in the family's unit where one is defined, its held-out gain given the others and any
-    rival outside the catalogue it cannot be told from, largest gain first (``cause`` is the first);
-    ``steps`` the residuals after each step of the selection;
-    ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
-    ``tests_extended`` the noise-model battery before and after the extension;
-    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
-    ``detectable`` the size of each family these poses detect at 95 % power
-    (:mod:`metrology.diagnosis.detectable`).
-    """
-
-    cause: str
-    sensors: list
-    confidence: Confidence
-    summary: str
-    named: Cause | None
-    candidates: tuple
-    tests_base: NoiseTests
-    tests_extended: NoiseTests | None
-    structure_base: dict
-    discrepancy: dict
-    heldout: dict
-    confounding: list
-    base_theta: np.ndarray
-    base_stderr: np.ndarray
-    thresholds: dict
-    datum_form: DatumFormCheck | None = None
-    plot_data: PlotData | None = None
-    causes: tuple = ()
-    steps: tuple = ()
-    detectable: dict = field(default_factory=dict)
-
-    def __post_init__(self):
-        object.__setattr__(self, "confidence", Confidence(self.confidence))
-
-    @property
-    def outcome(self) -> Outcome:
-        """A cause named, or none, or unexplained."""
-        return Outcome(self.cause) if self.cause in (Outcome.NONE, Outcome.UNEXPLAINED) else Outcome.NAMED
-
-    def to_dict(self):
-        return {
-            "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
-            "causes": [c.to_dict() for c in self.causes], "steps": list(self.steps),
-            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout, "discrepancy": self.discrepancy,
-            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
-            "tests": {"base": self.tests_base.to_dict(),
-                      "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
-            "structure": self.structure_base,
-            "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
-                     "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
-            "thresholds": self.thresholds,
-            "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
-            "detectable": self.detectable,
-        }
 
 
 @dataclass(frozen=True)
@@ -170,7 +87,7 @@ class Verdict:
 CROSSTALK_CHECKED = ("scale", "nonlinearity", "incidence")
 
 
-def base_analysis(ds, folds) -> BaseAnalysis:
+def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
     calibrated one) and test its residuals."""
     nominal, obs = ds.layout, ds.obs
@@ -472,7 +389,7 @@ def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
     return out
 
 
-def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: ProgressFn | None = None) -> Diagnosis:
+def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: ProgressFn | None = None) -> Diagnosis:
     """Run the full diagnosis on a :class:`~metrology.calibration.dataset.Dataset` (see
     :mod:`metrology.diagnosis`).
 

@@ -10,7 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-__all__ = ["Outcome", "Confidence", "Size", "Rival", "Cause"]
+import numpy as np
+
+__all__ = ["Outcome", "Confidence", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
 
 
 class Outcome(StrEnum):
@@ -135,3 +137,87 @@ class Cause:
         if self.rivals:
             out["rivals"] = [r.to_dict() for r in self.rivals]
         return out
+
+
+@dataclass(frozen=True)
+class PlotData:
+    """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
+
+    base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
+    (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
+    """
+
+    base: object
+    cov: object
+    d0: np.ndarray
+    best: object
+    names: tuple
+    sigma: np.ndarray
+    flags: np.ndarray
+    structure: dict
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
+
+    ``cause`` the first cause's family, or ``none``/``unexplained`` (:attr:`outcome`);
+    ``confidence`` a :class:`~metrology.diagnosis.results.Confidence`; ``named`` the first
+    :class:`~metrology.diagnosis.results.Cause` (or None);
+    ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
+    a :class:`~metrology.diagnosis.results.Cause` with its parameters and standard errors, its
+    size in the family's unit where one is defined, its held-out gain given the others and any
+    rival outside the catalogue it cannot be told from, largest gain first (``cause`` is the first);
+    ``steps`` the residuals after each step of the selection;
+    ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
+    ``tests_extended`` the noise-model battery before and after the extension;
+    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
+    ``detectable`` the size of each family these poses detect at 95 % power
+    (:mod:`metrology.diagnosis.detectable`).
+    """
+
+    cause: str
+    sensors: list
+    confidence: Confidence
+    summary: str
+    named: Cause | None
+    candidates: tuple
+    tests_base: object
+    tests_extended: object
+    structure_base: dict
+    discrepancy: dict
+    heldout: dict
+    confounding: list
+    base_theta: np.ndarray
+    base_stderr: np.ndarray
+    thresholds: dict
+    datum_form: object = None
+    plot_data: PlotData | None = None
+    causes: tuple = ()
+    steps: tuple = ()
+    detectable: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "confidence", Confidence(self.confidence))
+
+    @property
+    def outcome(self) -> Outcome:
+        """A cause named, or none, or unexplained."""
+        return Outcome(self.cause) if self.cause in (Outcome.NONE, Outcome.UNEXPLAINED) else Outcome.NAMED
+
+    def to_dict(self):
+        return {
+            "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
+            "causes": [c.to_dict() for c in self.causes], "steps": list(self.steps),
+            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout, "discrepancy": self.discrepancy,
+            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
+            "tests": {"base": self.tests_base.to_dict(),
+                      "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
+            "structure": self.structure_base,
+            "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
+                     "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
+            "thresholds": self.thresholds,
+            "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
+            "detectable": self.detectable,
+        }
