@@ -16,7 +16,8 @@ from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
+__all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
+           "score_candidate"]
 
 
 def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -182,6 +183,25 @@ def flag_residuals(residual, sigma):
 
 
 @dataclass(frozen=True)
+class Scoring:
+    """What every candidate of one selection is scored in (the values that travel together).
+
+    ds : Dataset; b : the base analysis (:class:`~metrology.diagnosis.decide.BaseAnalysis`: its
+    ``cov``, ``sigma``, ``theta0``, fit and held-out figures); flags : (p, n) bool, the readings
+    flagged gross so far; p_out : float, the largest residual's p (the ``outliers`` candidate's
+    test); folds : int, k of the k-fold by pose; n_cand : int, the candidates the in-sample
+    test's level is Bonferroni-split over.
+    """
+
+    ds: object
+    b: object
+    flags: np.ndarray
+    p_out: float
+    folds: int
+    n_cand: int
+
+
+@dataclass(frozen=True)
 class CandidateResult:
     """One candidate scored against the base model (:func:`score_candidate`).
 
@@ -229,11 +249,12 @@ class CandidateResult:
         }
 
 
-def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: HeldOut, flags, p_out, folds,
-                    theta0, n_cand, given=(), k_ref=0, ho_rank: HeldOut | None = None) -> CandidateResult:
-    """Score the candidate ``c``: in-sample F-test of the nested models against ``base`` (for
-    ``outliers`` the largest residual's own test ``p_out``) and the k-fold held-out gain
-    against ``ho_base``; significant when both pass (``n_cand``: the Bonferroni family).
+def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, theta0, given=(), k_ref=0,
+                    ho_rank: HeldOut | None = None) -> CandidateResult:
+    """Score the candidate ``c`` in ``sc``: in-sample F-test of the nested models against ``base``
+    (for ``outliers`` the largest residual's own test ``sc.p_out``) and the k-fold held-out gain
+    against ``ho_base``; significant when both pass (``sc.n_cand``: the Bonferroni family).
+    ``theta0``: the geometry the fits start from (or hold).
 
     ``given``: components already in the model (fitted jointly with ``c``; ``base`` and
     ``ho_base`` are then their fit and held-out figures); ``k_ref``: parameters of ``c`` that
@@ -245,6 +266,8 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
     """
     from scipy import stats
 
+    nominal, obs, cov, sigma = sc.ds.layout, sc.ds.obs, sc.b.cov, sc.b.sigma
+    flags, p_out, folds, n_cand = sc.flags, sc.p_out, sc.folds, sc.n_cand
     names = nominal.names
     c = c.locate(base.residual, cov, sigma)  # an effect with a place in the run is put there first
     f = fit_any(nominal, obs, cov, sigma, tuple(given) + (c,), theta0)
