@@ -96,8 +96,7 @@ def scan_points(ds: Dataset, centre):
 
     The plane fit keeps the points within its window about the *plane* (``ds.datum_points``);
     on a datum whose form exceeds that window its highest and lowest regions fall outside it
-    with the gross points (on one blind draw 122 of 2000 points, and the form over the rest
-    was 0.20 mm of 0.37 mm). Starting from those inliers, the smooth surface of
+    with the gross points, and the form measured over the rest is too small. Starting from those inliers, the smooth surface of
     :meth:`~metrology.core.effects.PlaneForm.scan_surface` is fitted and every point of the
     cloud whose distance from it is within the 1 % family-wise normal quantile of the
     surface's robust (MAD) residual scale is admitted; refitted until the set stops changing

@@ -25,8 +25,7 @@ this is a lower bound.
   the first) and the best of the family's members for each (:func:`family_detectable`): the
   family is any even bias, and one that grows slowly with the angle (``a^2``) changes least over
   the angles seen for its value at the largest, so the zero point takes most of it; the ``tan^2``
-  member's own shape is among the easiest (on the 20 seed-50 blind draws its size, the earlier
-  definition, was 0.54-0.91 of this one, median 0.73);
+  member's own shape is among the easiest;
 - ``plane_form``: peak-to-valley of the scanned form seen by the spots (mm; with a datum cloud);
 - ``pose_error``: RMS change of a reading by a per-pose rigid error, its offset and tilts
   together, at the least favourable split between them (mm): with 3 sensors the power of the

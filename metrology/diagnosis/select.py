@@ -123,10 +123,8 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     and two tilts a pose take three quarters of any effect on one sensor of a 4-sensor head,
     so where two sensors drift each on its own, the per-pose cause predicts held-out poses
     better than either drift alone and takes the first step; the drifts of both sensors, two
-    values, explain it all. Drifts of 0.086 mm on L1 and 0.094 mm on L2 (seed-100 pair 6, 4
-    sensors, 79 poses, 5.3 um noise): step 1 took ``pose_error@rigid`` (held-out gain 2780,
-    against 2091 for the drift on L2), step 2 the drift on L2, and the pose error was named, a
-    wrong cause."""
+    values, explain it all (the case that motivated the rule is in
+    ``benchmarks/results/diagnose_history.md``)."""
     main = [st.chosen for st in steps if st.chosen is not None]
     alt = [st.chosen for st in fixed if st.chosen is not None]
     if not alt or {s.label for s in alt} <= {s.label for s in main}:
@@ -220,9 +218,9 @@ def _seen_after(chosen, scored, seen):
     too (a warm-up that a line in time barely shows needs its curve to be chosen). The set is
     taken once, at the first step that chose a cause on its own sensors, and kept. A set-up
     cause (datum form, pose error: no sensors of its own) inflates every sensor's scatter: after
-    one, the set is dropped and the next step rescores every family. Under a 0.42 mm form
-    every drift member of L1 had in-sample p 0.3-0.9 at step 1 (seed-103 pair 36); pruned
-    there, the drift was never scored given the form."""
+    one, the set is dropped and the next step rescores every family: under a large form a
+    drift's members can all show nothing at step 1, and pruned there the drift would never be
+    scored given the form."""
     if not chosen.sensors:
         return None
     if seen is not None:
