@@ -6,16 +6,24 @@ A developer's check, not a dependency: it needs a ``chromium`` binary on the PAT
 
     python benchmarks/check_reports_browser.py                 # runs `metro demo --report` first
     python benchmarks/check_reports_browser.py a.html b.html   # checks these reports
-    python benchmarks/check_reports_browser.py --width 412     # a phone's width
+    python benchmarks/check_reports_browser.py --widths 412    # a phone's width only
 
-For each report it checks, and prints one line:
+Each report is checked at every width of ``--widths`` (default 1280 and 412 px). For each
+report and width it checks, and prints one line:
 
 * statically (html.parser): no ``src``/``href`` to ``http(s)://`` or ``//``, no ``<script>``,
   no ``<link>`` to a stylesheet, every ``<img>`` a ``data:`` URI;
 * in Chromium (``--enable-logging=stderr --v=0``): no ``CONSOLE`` line on stderr (our pages
   have no script, so any console message is an error), and no request from the page to an
   ``http(s)`` URL in Chromium's network log (``--log-net-log``; Chromium's own background
-  requests are told apart by their network partition).
+  requests are told apart by their network partition);
+* the layout, measured in Chromium on a copy of the page with a measuring script added
+  (``--dump-dom``; the report itself has none): no clipped text, i.e. no text block (``pre``,
+  ``p``, ``li``, a table cell, a ``div`` such as a table's scroll box) whose ``scrollWidth``
+  exceeds its ``clientWidth``, and a page no wider than the window; and at widths of 1280 px
+  and more, no figure whose smallest text shows below ``--min-figure-pt`` (9 pt): the report
+  states each figure's smallest text in image pixels (``data-min-font-px``), shown at
+  ``clientWidth / naturalWidth`` of that, 0.75 pt per CSS px.
 
 Screenshots go next to each report (``<report>.png``, or ``--shots DIR``). Exit status 1 when
 any check fails.
@@ -90,12 +98,31 @@ def _requests(netlog: Path) -> list:
     return sorted(urls)
 
 
+#: headless Chromium keeps its window 500 px wide or more: a narrower page is drawn in an
+#: iframe of that width (``srcdoc``: the page's own origin, its media queries at the iframe's width)
+MIN_WINDOW = 500
+
+
+def drawn_at(text: str, width: int, height: int) -> str:
+    """``text`` (a page) as drawn ``width`` CSS px wide: itself, or inside an iframe that wide."""
+    import html as html_lib
+
+    if width >= MIN_WINDOW:
+        return text
+    return (f'<!DOCTYPE html><html><body style="margin:0"><iframe style="border:0;width:{width}px;height:{height}px" '
+            f'srcdoc="{html_lib.escape(text, quote=True)}"></iframe></body></html>')
+
+
 def browse(report: Path, shot: Path, width: int, height: int, chromium: str) -> list:
     """Screenshot ``report`` in headless Chromium; return the console lines and requests seen."""
     with tempfile.TemporaryDirectory() as profile:
         netlog = Path(profile) / "net.json"
+        page = report.resolve()
+        if width < MIN_WINDOW:
+            page = Path(profile) / report.name
+            page.write_text(drawn_at(report.read_text(encoding="utf-8"), width, height), encoding="utf-8")
         cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}/p", f"--log-net-log={netlog}",
-               f"--screenshot={shot}", f"--window-size={width},{height}", report.resolve().as_uri()]
+               f"--screenshot={shot}", f"--window-size={max(width, MIN_WINDOW)},{height}", page.as_uri()]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
         problems = [f"console: {line.split('CONSOLE', 1)[1][:100]}" for line in r.stderr.splitlines()
                     if ":CONSOLE" in line]
@@ -105,21 +132,76 @@ def browse(report: Path, shot: Path, width: int, height: int, chromium: str) -> 
     return problems
 
 
+#: added to a copy of the page: measures the layout once the page has loaded and writes the
+#: result, as JSON, into a <pre id="metro-check"> that --dump-dom prints
+MEASURE = """<script>
+window.addEventListener("load", () => {
+  const out = {window: window.innerWidth, page: document.documentElement.scrollWidth, clipped: [], figures: []};
+  for (const el of document.querySelectorAll("pre, p, li, td, th, caption, figcaption, h1, h2, h3, div, table")) {
+    if (el.clientWidth > 0 && el.scrollWidth > el.clientWidth + 1) {
+      out.clipped.push(el.tagName.toLowerCase() + (el.className ? "." + el.className : "") + " by "
+                       + (el.scrollWidth - el.clientWidth) + " px: " + el.textContent.trim().slice(0, 50));
+    }
+  }
+  for (const img of document.querySelectorAll("img[data-min-font-px]")) {
+    const px = parseFloat(img.dataset.minFontPx) * img.clientWidth / img.naturalWidth;
+    out.figures.push({alt: img.alt.slice(0, 60), pt: 0.75 * px});
+  }
+  const pre = document.createElement("pre");
+  pre.id = "metro-check";
+  pre.textContent = JSON.stringify(out);
+  (window.parent !== window ? window.parent.document : document).body.appendChild(pre);
+});
+</script>"""
+
+
+def measure(report: Path, width: int, height: int, chromium: str, min_pt: float) -> list:
+    """Clipped text blocks and small figure text of ``report`` at ``width`` px (list of str)."""
+    import html as html_lib
+    import re
+
+    text = report.read_text(encoding="utf-8")
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / report.name
+        copy.write_text(drawn_at(text.replace("</body>", MEASURE + "\n</body>"), width, height), encoding="utf-8")
+        cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp}/p", "--virtual-time-budget=10000",
+               f"--window-size={max(width, MIN_WINDOW)},{height}", "--dump-dom", copy.as_uri()]
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    m = re.search(r'<pre id="metro-check">(.*?)</pre>', r.stdout, re.S)
+    if m is None:
+        return [f"layout not measured (chromium exit {r.returncode})"]
+    d = json.loads(html_lib.unescape(m.group(1)))
+    out = [f"clipped: {c}" for c in d["clipped"]]
+    if d["window"] != width:
+        out.append(f"the page was drawn {d['window']} px wide, not {width} px")
+    if d["page"] > d["window"]:
+        out.append(f"page {d['page']} px wider than the window {d['window']} px")
+    if width >= 1280:
+        out += [f"figure text {f['pt']:.1f} pt < {min_pt:g} pt: {f['alt']}" for f in d["figures"]
+                if f["pt"] < min_pt - 0.05]
+    return out
+
+
 def _demo_reports(folder: Path) -> list:
     out = folder / "demo"
+    folder.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", "cli.main", "demo", "--out", str(out), "--report", str(folder / "demo.html")]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    r = subprocess.run(cmd, stdout=subprocess.DEVNULL)
+    if r.returncode not in (0, 1):  # 1: a step's verdict failed; its report is still written
+        raise SystemExit(f"metro demo exited {r.returncode}")
     return [folder / "demo.html"] + sorted(out.glob("*.html"))
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("reports", nargs="*", type=Path, help="HTML reports (default: run `metro demo --report`)")
-    ap.add_argument("--width", type=int, default=1000, help="window width, px (412: a phone)")
+    ap.add_argument("--widths", default="1280,412", help="window widths, px, comma-separated (412: a phone)")
     ap.add_argument("--height", type=int, default=2400, help="window height, px (the screenshot's)")
+    ap.add_argument("--min-figure-pt", type=float, default=9.0, help="smallest figure text at 1280 px and more, pt")
     ap.add_argument("--shots", type=Path, default=None, help="folder for the screenshots (default: beside each report)")
     ap.add_argument("--work", type=Path, default=None, help="folder for the demo's reports (default: a temporary one)")
     args = ap.parse_args(argv)
+    widths = [int(w) for w in args.widths.split(",")]
     chromium = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
     if chromium is None:
         print("error: no chromium on the PATH (Debian: apt-get install chromium)", file=sys.stderr)
@@ -131,14 +213,17 @@ def main(argv=None) -> int:
         reports = _demo_reports(work)
     failed = 0
     for rep in reports:
-        shot = (args.shots / f"{rep.stem}.png") if args.shots else rep.with_suffix(".png")
-        if args.shots:
-            args.shots.mkdir(parents=True, exist_ok=True)
-        problems = static_problems(rep.read_text(encoding="utf-8")) + browse(rep, shot, args.width, args.height,
-                                                                            chromium)
-        failed += bool(problems)
-        print(f"{'FAIL' if problems else 'ok  '} {rep} ({rep.stat().st_size // 1024} KiB) -> {shot}"
-              + "".join(f"\n      {p}" for p in problems))
+        for width in widths:
+            name = f"{rep.stem}-{width}.png"
+            shot = (args.shots / name) if args.shots else rep.with_name(name)
+            if args.shots:
+                args.shots.mkdir(parents=True, exist_ok=True)
+            problems = (static_problems(rep.read_text(encoding="utf-8"))
+                        + browse(rep, shot, width, args.height, chromium)
+                        + measure(rep, width, args.height, chromium, args.min_figure_pt))
+            failed += bool(problems)
+            print(f"{'FAIL' if problems else 'ok  '} {rep} at {width} px ({rep.stat().st_size // 1024} KiB) -> {shot}"
+                  + "".join(f"\n      {p}" for p in problems))
     if tmp is not None and args.work is None:
         print(f"reports and screenshots in {tmp}")
     return 1 if failed else 0

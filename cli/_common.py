@@ -62,6 +62,23 @@ def fail(message: str) -> None:
     raise typer.Exit(EXIT_BAD_INPUT)
 
 
+RANGE_HELP = "MIN,MAX"
+
+
+def parse_range(text, option: str, unit: str = "mm", positive: bool = False):
+    """``"a,b"`` -> (a, b) floats with a < b (and 0 < a when ``positive``), or None for None; a
+    one-line error otherwise. The one range syntax of every command (``--standoff-mm 40,60``)."""
+    if text is None:
+        return None
+    try:
+        a, b = (float(v) for v in str(text).split(","))
+    except ValueError:
+        fail(f"{option} {text}: expected two numbers MIN,MAX in {unit} (e.g. {option} 40,60)")
+    if not a < b or (positive and not a > 0):
+        fail(f"{option} {text}: expected {'0 < ' if positive else ''}MIN < MAX")
+    return a, b
+
+
 def output_path(value, option: str):
     """The path of an output file option, or None; fails (one line, exit 2) on a value that names a
     folder or lies in one that does not exist (:func:`metrology.io.atomic.check_output_file`)."""
@@ -110,16 +127,41 @@ def invocation(ctx) -> str:
         if p.param_type_name == "argument":
             parts.append(str(v))
             continue
-        if v is None or v is False or v == p.default or not p.opts:
+        if v is None or v is False or v == p.default or not p.opts or (isinstance(v, (tuple, list)) and not v):
             continue
         opt = max(p.opts, key=len)
         if v is True:
             parts.append(opt)
+        elif isinstance(v, (tuple, list)) and getattr(p, "multiple", False):  # a repeatable option: --meta a=1 --meta b=2
+            for item in v:
+                parts += [opt, str(item)]
         elif isinstance(v, (tuple, list)):
             parts += [opt, *map(str, v)]
         else:
             parts += [opt, str(v)]
     return shlex.join(parts)
+
+
+def with_verdict(obj: dict, verdict) -> dict:
+    """``obj`` (a command's JSON) with its ``verdict`` (:class:`metrology.core.verdict.Verdict`) added."""
+    return {**obj, "verdict": verdict.to_dict()}
+
+
+def finish(verdict) -> None:
+    """End the command with the exit code of its verdict: 0 passed, 1 failed (docs/cli.md)."""
+    from metrology.core.verdict import exit_code
+
+    code = exit_code(verdict)
+    if code:
+        raise typer.Exit(code)
+
+
+def reported(*paths) -> None:
+    """One ``report: FILE`` line on stderr per report written (not under ``-q``)."""
+    if not STATE.quiet:
+        for p in paths:
+            if p is not None:
+                typer.echo(f"report: {shown(str(p))}", err=True)
 
 
 def warn(line: str) -> None:

@@ -30,8 +30,45 @@ class _Fixed:
         return params
 
 
+#: the root options that may be given anywhere on the line (``metro validate -q ...``)
+ANYWHERE = ("-q", "--quiet", "-v", "--verbose")
+
+
+def root_options_first(args: list) -> list:
+    """``args`` with the root options of :data:`ANYWHERE` moved before the command (tokens after
+    ``--`` are left alone): ``validate x.csv -q`` -> ``-q validate x.csv``."""
+    end = args.index("--") if "--" in args else len(args)
+    moved = [a for a in args[:end] if a in ANYWHERE]
+    return moved + [a for a in args[:end] if a not in ANYWHERE] + args[end:]
+
+
 class MetroGroup(_Fixed, typer.core.TyperGroup):
-    """The root ``metro`` group, its options shown as in :class:`MetroCommand`."""
+    """The root ``metro`` group, its options shown as in :class:`MetroCommand`; ``-q``/``-v``
+    anywhere on the line; a usage error as one ``error:`` line and a ``hint:`` line, exit 2."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        import sys
+
+        click = getattr(typer.core, "_click", None) or __import__("click")  # typer >= 0.2x vendors click
+        abort = getattr(typer.core, "Abort", None) or click.exceptions.Abort
+
+        args = root_options_first(list(sys.argv[1:] if args is None else args))
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.UsageError as e:
+            path = e.ctx.command_path if e.ctx is not None else "metro"
+            click.echo(f"error: {' '.join(e.format_message().split())}", err=True)
+            click.echo(f"hint: '{path} -h' lists the arguments and options", err=True)
+            sys.exit(e.exit_code)
+        except click.ClickException as e:
+            click.echo(f"error: {' '.join(e.format_message().split())}", err=True)
+            sys.exit(e.exit_code)
+        except abort:
+            click.echo("error: aborted", err=True)
+            sys.exit(1)
+        sys.exit(rv if isinstance(rv, int) else 0)
 
 
 class MetroCommand(_Fixed, typer.core.TyperCommand):

@@ -48,6 +48,9 @@ def stdin_files(*inputs):
         (``".csv"``), or a callable ``suffix(data) -> str`` that fails with a message when
         the data do not tell.
     """
+    for label, value, _ in inputs:
+        if value is not None and str(value) != "-":
+            check_input(label, value)
     dashes = [(label, suffix) for label, value, suffix in inputs if value is not None and str(value) == "-"]
     if len(dashes) > 1:
         fail(f"'-' (stdin) given to both {dashes[0][0]} and {dashes[1][0]}: only one input can be read from stdin")
@@ -73,6 +76,31 @@ def stdin_files(*inputs):
             yield [path if value is not None and str(value) == "-" else value for _, value, _ in inputs]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+#: the suffixes an input is read by, where the suffix chooses the reader (else any name)
+def _accepted(label: str):
+    from metrology.io.clouds import CLOUD_SUFFIXES
+
+    clouds = tuple(sorted(CLOUD_SUFFIXES))
+    return {"--plane": (".json",) + clouds, "--extent": (".json",) + clouds, "CLOUD": clouds,
+            "PANEL": tuple("." + f for f in MESH_FORMATS)}.get(label)
+
+
+MESH_FORMATS = ("stl", "obj", "ply", "off", "glb", "gltf", "step", "stp")
+
+
+def check_input(label: str, value) -> None:
+    """One wording for every command: ``FILE: no such file (LABEL)``, ``FILE: a folder, not a file
+    (LABEL)``, and for an input whose suffix picks its reader, the suffixes accepted."""
+    path = Path(value)
+    if not path.exists():
+        fail(f"{value}: no such file ({label})")
+    if path.is_dir():
+        fail(f"{value}: a folder, not a file ({label})")
+    ok = _accepted(label)
+    if ok is not None and path.suffix.lower() not in ok:
+        fail(f"{value}: unknown extension {path.suffix or '(none)'!r} for {label}; expected one of {', '.join(ok)}")
 
 
 def format_suffix(label: str, fmt: str | None, known, what: str):

@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, REPORT_HELP, echo, echo_json, fail,
-                      guarded, invocation, progress_bar, warn)
+                      finish, guarded, invocation, progress_bar, reported, warn, with_verdict)
 from ._stdin import STDIN_NAME, plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
@@ -22,8 +22,41 @@ def _check_out_dir(path: Optional[Path], what: str) -> None:
         fail(f"{what} {path}: directory {Path(path).parent} does not exist")
 
 
+META_KEY = r"[A-Za-z][A-Za-z0-9_-]*"
+
+
+def _meta(pairs, meta_file) -> dict:
+    """The certificate's header fields: ``--meta-file`` (a TOML table of key = value), then each
+    ``--meta key=value`` (later wins); one-line errors naming the option."""
+    import re
+    import tomllib
+
+    meta = {}
+    if meta_file is not None:
+        try:
+            with open(meta_file, "rb") as fh:
+                data = tomllib.load(fh)
+        except FileNotFoundError:
+            fail(f"{meta_file}: no such file (--meta-file)")
+        except OSError as exc:
+            fail(f"--meta-file {meta_file}: cannot read ({exc.strerror})")
+        except tomllib.TOMLDecodeError as exc:
+            fail(f"--meta-file {meta_file}: not valid TOML ({exc})")
+        data = data.get("certificate", data) if isinstance(data.get("certificate"), dict) else data
+        for k, v in data.items():
+            if isinstance(v, (dict, list)):
+                fail(f"--meta-file {meta_file}: '{k}' must be a value (text, number or date), not a table or array")
+            meta[str(k)] = str(v)
+    for pair in pairs or ():
+        key, eq, value = pair.partition("=")
+        if not eq or not re.fullmatch(META_KEY, key.strip()):
+            fail(f"--meta {pair!r}: expected key=value (the key letters, digits, _ or -), e.g. --meta operator=J.Smith")
+        meta[key.strip()] = value.strip()
+    return meta
+
+
 def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg, idle_s,
-            stop_when_met, quaternion_order, position_units, no_reading) -> None:
+            stop_when_met, quaternion_order, position_units, no_reading, target_set=False) -> None:
     """``calibrate --follow``: one line per pose (stderr with --json), then the final report."""
     import math
 
@@ -52,7 +85,7 @@ def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg,
     name = STDIN_NAME if str(export) == "-" else str(export)
     result = follow_export(str(export), plane, layout, targets, on_step, idle_s=idle_s, stop_when_met=stop_when_met,
                            quaternion_order=quaternion_order, position_units=position_units, no_reading=no_reading,
-                           name=name)
+                           name=name, target_set=target_set)
     if out is not None:
         save_layout(result.report.layout, out, f"Calibrated by metro calibrate --follow (iterated EKF), {name}, "
                     f"{len(result.steps)} poses")
@@ -63,6 +96,7 @@ def _follow(export, plane, layout, method, out, json_out, target_mm, target_deg,
     else:
         typer.echo(f"stopped: {result.stopped} after {len(result.steps)} poses; final: batch iterated EKF on them")
         typer.echo(calibration_text(result.report))
+    finish(result.report.verdict())
 
 
 def register(app: typer.Typer) -> None:
@@ -80,8 +114,12 @@ def register(app: typer.Typer) -> None:
         plot: Optional[Path] = typer.Option(None, "--plot", help="Convergence and residual figures: a .pdf file (a "
                                             "page each) or a directory (PNGs)."),
         report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
-        target_mm: float = typer.Option(0.05, "--target-mm", "--target-zero-mm", help="Wanted 1-sigma of the zero points, mm."),
-        target_deg: float = typer.Option(0.05, "--target-deg", "--target-beam-deg", help="Wanted 1-sigma of the beam tilts, deg."),
+        target_mm: Optional[float] = typer.Option(None, "--target-mm", help="Precision target: wanted 1 σ of the "
+                                                  "zero points, mm; not met: exit 1. Default: 0.05, information only."),
+        target_deg: Optional[float] = typer.Option(None, "--target-deg", help="Precision target: wanted 1 σ of the "
+                                                   "beam tilts, deg; not met: exit 1. Default: 0.05, information only."),
+        target_zero_mm: Optional[float] = typer.Option(None, "--target-zero-mm", hidden=True),  # old name of --target-mm
+        target_beam_deg: Optional[float] = typer.Option(None, "--target-beam-deg", hidden=True),  # of --target-deg
         target_normal_deg: Optional[float] = typer.Option(None, "--target-normal-deg", help="--follow: wanted 1-sigma of the normal at the working stand-off, deg."),
         follow: bool = typer.Option(False, "--follow", help="Read poses as they are appended (EXPORT may be '-' for stdin); iterated EKF pose by pose."),
         idle_s: float = typer.Option(5.0, "--idle-s", help="--follow: stop after this many seconds with no new line."),
@@ -89,20 +127,34 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        meta: Optional[list[str]] = typer.Option(None, "--meta", help="A certificate header field, key=value "
+                                                 "(repeat): part, instrument, serial, operator, temperature, notes, "
+                                                 "customer, certificate, approved_by, valid_until ...; also written "
+                                                 "into --out's [certificate] table."),
+        meta_file: Optional[Path] = typer.Option(None, "--meta-file", help="The certificate header fields as a TOML "
+                                                 "table of key = value (--meta given too wins)."),
     ) -> None:
         """Calibrate the normal sensors from a tracker export, the datum and the nominal layout."""
         if method not in METHODS:
             fail(f"--method {method!r}: expected one of {', '.join(METHODS)}")
+        from metrology.core.tolerances import TARGET_TILT_DEG, TARGET_ZERO_MM
+
+        target_mm = target_zero_mm if target_mm is None else target_mm
+        target_deg = target_beam_deg if target_deg is None else target_deg
+        target_set = target_mm is not None or target_deg is not None
+        target_mm = TARGET_ZERO_MM if target_mm is None else target_mm
+        target_deg = TARGET_TILT_DEG if target_deg is None else target_deg
         if not (target_mm > 0 and target_deg > 0):
             fail(f"--target-mm and --target-deg must be positive, got {target_mm:g} and {target_deg:g}")
         _check_out_dir(out, "--out")
+        fields = _meta(meta, meta_file)
         import math
 
         if follow:
             if plot is not None or report_html is not None:
                 fail("--follow writes no figures or report: run calibrate on the finished file for --plot/--report")
             return _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg,
-                           idle_s, stop_when_met, quaternion_order, position_units, no_reading)
+                           idle_s, stop_when_met, quaternion_order, position_units, no_reading, target_set)
 
         from metrology.jobs.calibrate import calibrate_files
         from metrology.report.calibration import calibration_text, calibration_warnings
@@ -110,15 +162,18 @@ def register(app: typer.Typer) -> None:
         with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
                          ("--layout", layout, ".toml")) as (export, plane, layout), progress_bar("calibrate") as progress:
             report = calibrate_files(export, plane, layout, method, target=(target_mm, math.radians(target_deg)),
+                                     target_set=target_set,
                                      out=out, plot_dir=plot, quaternion_order=quaternion_order,
                                      position_units=position_units, no_reading=no_reading, warn=warn, progress=progress,
-                                     report_html=report_html, command=invocation(ctx))
+                                     report_html=report_html, command=invocation(ctx), meta=fields)
         for w in calibration_warnings(report):
             warn(w)
         if json_out:
             echo_json(report.to_dict(), "calibration")
         else:
             echo(calibration_text(report))
+        reported(report_html)
+        finish(report.verdict())
 
     @app.command("validate")
     @guarded
@@ -136,11 +191,14 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: Optional[float] = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        per_pose: Optional[Path] = typer.Option(None, "--per-pose", help="Write each pose's deviation per layout and "
+                                                "whether it is within the tolerance (.csv)."),
     ) -> None:
         """Angular deviation of the measured normal from the datum normal, per pose and layout."""
         _check_out_dir(plot, "--plot")
         from metrology.jobs.calibrate import validate_files
-        from metrology.report.validation import validation_text
+        from metrology.report.validation import validation_text, validation_verdict
+        from metrology.report.verdicts import validation_checks
 
         if not tolerance_deg > 0:
             fail(f"--tolerance-deg must be positive, got {tolerance_deg:g}")
@@ -149,8 +207,12 @@ def register(app: typer.Typer) -> None:
                          ("--layout-before", layout_before, ".toml")) as (export, plane, layout, layout_before):
             report = validate_files(export, plane, layout, layout_before, plot=plot, quaternion_order=quaternion_order,
                                     position_units=position_units, no_reading=no_reading, warn=warn,
-                                    tolerance_deg=tolerance_deg, report_html=report_html, command=invocation(ctx))
+                                    tolerance_deg=tolerance_deg, report_html=report_html, command=invocation(ctx),
+                                    per_pose=per_pose)
+        verdict = validation_checks(validation_verdict(report, tolerance_deg))
         if json_out:
-            echo_json(report.to_dict(), "validation")
+            echo_json(with_verdict({**report.to_dict(), "tolerance_deg": tolerance_deg}, verdict), "validation")
         else:
             echo(validation_text(report, tolerance_deg))
+        reported(report_html)
+        finish(verdict)

@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo_json, fail, guarded, invocation, progress_bar
+from ._common import (JSON_HELP, echo_json, fail, finish, guarded, invocation, parse_range, progress_bar, reported,
+                      with_verdict)
 
 
 def register(app: typer.Typer) -> None:
@@ -29,8 +30,10 @@ def register(app: typer.Typer) -> None:
 
         from typer.main import get_command
 
+        from metrology.core.verdict import EXIT_FAILED
         from metrology.io.data import DATA_DIR
         from metrology.jobs.demo import new_output_dir, run_demo
+        from metrology.report.verdicts import steps_verdict, verdict_text
 
         fixtures = DATA_DIR if fixtures is None else fixtures
         out = new_output_dir() if out is None else out
@@ -44,11 +47,13 @@ def register(app: typer.Typer) -> None:
 
         def run_step(args):
             if not json_out:
-                return command.main(args, prog_name="metro", standalone_mode=False)
-            buf = io.StringIO()
-            with contextlib.redirect_stdout(buf):
-                rc = command.main([*args, "--json"], prog_name="metro", standalone_mode=False)
-            steps[-1]["result"] = None if rc else json.loads(buf.getvalue())
+                rc = command.main(args, prog_name="metro", standalone_mode=False) or 0
+            else:
+                buf = io.StringIO()
+                with contextlib.redirect_stdout(buf):
+                    rc = command.main([*args, "--json"], prog_name="metro", standalone_mode=False) or 0
+                steps[-1]["result"] = json.loads(buf.getvalue()) if rc in (0, EXIT_FAILED) else None
+            steps[-1]["exit_code"] = rc
             return rc
 
         try:
@@ -57,12 +62,15 @@ def register(app: typer.Typer) -> None:
                               progress=progress)
         except ValueError as exc:
             fail(str(exc))
-        if rc:  # a failing step has printed its one-line error
+        if rc and rc != EXIT_FAILED:  # bad input: the failing step has printed its one-line error
             raise typer.Exit(rc)
+        verdict = steps_verdict((s["command"].split()[1], s["exit_code"]) for s in steps)
         if json_out:
-            echo_json({"out": str(out), "fixtures": str(fixtures), "steps": steps}, "demo")
+            echo_json(with_verdict({"out": str(out), "fixtures": str(fixtures), "steps": steps}, verdict), "demo")
         else:
-            typer.echo(f"\ndemo outputs in {out}/")
+            typer.echo(f"\ndemo outputs in {out}/\n" + verdict_text(verdict))
+        reported(report)
+        finish(verdict)
 
     @app.command("version")
     def version(json_out: bool = typer.Option(False, "--json", help=JSON_HELP)) -> None:
@@ -70,7 +78,9 @@ def register(app: typer.Typer) -> None:
         from metrology import __version__
 
         if json_out:
-            echo_json({"version": __version__}, "version")
+            from metrology.report.verdicts import NO_VERDICT
+
+            echo_json(with_verdict({"version": __version__}, NO_VERDICT), "version")
         else:
             typer.echo(__version__)
 
@@ -83,7 +93,7 @@ def register(app: typer.Typer) -> None:
         poses: int = typer.Option(100, min=6, help="Calibration poses."),
         noise_mm: float = typer.Option(0.01, min=0.0, help="Reading noise, 1 sigma, mm."),
         tilt_deg: float = typer.Option(5.0, min=0.0, max=60.0, help="Largest tilt of the tool axis from the datum normal, deg."),
-        standoff_mm: tuple[float, float] = typer.Option((40.0, 60.0), help="Range of the mean reading (stand-off), mm."),
+        standoff_mm: str = typer.Option("40,60", help="MIN,MAX of the mean reading (stand-off), mm."),
         spread_mm: float = typer.Option(200.0, min=0.0, help="Side of the square the drilling points spread over, mm."),
         figures: Optional[Path] = typer.Option(Path("metro-reproduce"), help="Directory for Figures 7 and 8 (PNG); '-' for none."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP),
@@ -96,15 +106,16 @@ def register(app: typer.Typer) -> None:
         from metrology.sim.reproduce import ReproduceConfig
         from metrology.sim.simulation import PoseSpec
 
-        if standoff_mm[0] >= standoff_mm[1] or standoff_mm[0] <= 0:
-            fail(f"--standoff-mm {standoff_mm[0]:g} {standoff_mm[1]:g}: expected 0 < min < max")
+        standoff_mm = parse_range(standoff_mm, "--standoff-mm", positive=True)
         fig_dir = None if figures is None or str(figures) == "-" else figures
         cfg = ReproduceConfig(layout=layout, n_poses=poses, noise_mm=noise_mm,
                               poses=PoseSpec(tuple(standoff_mm), float(np.deg2rad(tilt_deg)), spread_mm))
         with progress_bar("reproduce") as progress:
             summary = run_reproduce(cfg, seed, trials, fig_dir, progress=progress)
         if json_out:
-            echo_json(summary, "reproduce")
+            from metrology.report.verdicts import NO_VERDICT
+
+            echo_json(with_verdict(summary, NO_VERDICT), "reproduce")
         else:
             typer.echo(format_reproduce(summary))
             if fig_dir is not None:

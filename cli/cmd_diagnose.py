@@ -7,8 +7,8 @@ from pathlib import Path
 
 import typer
 
-from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo, echo_json, fail, guarded,
-                      invocation, progress_bar, warn)
+from ._common import (JSON_HELP, NO_READING_HELP, POSITION_HELP, QUATERNION_HELP, dumps, echo, echo_json, fail, finish,
+                      guarded, invocation, progress_bar, reported, warn, with_verdict)
 from ._stdin import plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
@@ -30,10 +30,13 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: float = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        fail_on_cause: bool = typer.Option(False, "--fail-on-cause", help="Exit 1 when a cause is named (or the "
+                                           "residuals stay unexplained), not only when the normal is out of tolerance."),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
         from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report
         from metrology.report.diagnose import report_text
+        from metrology.report.verdicts import diagnosis_verdict, verdict_text
 
         if folds < 2:
             fail(f"--folds must be at least 2, got {folds}")
@@ -43,15 +46,20 @@ def register(app: typer.Typer) -> None:
                          ("--layout", layout, ".toml")) as (export_p, plane_p, layout_p), progress_bar("diagnose") as progress:
             d = diagnose_files(export_p, plane_p, layout_p, quaternion_order, position_units, no_reading, warn=warn,
                                folds=folds, seed=seed, progress=progress)
-            text = dumps(d.to_dict(), "diagnosis") if json_out else report_text(d)
+            verdict = diagnosis_verdict(d, fail_on_cause=fail_on_cause)
+            text = dumps(with_verdict(d.to_dict(), verdict), "diagnosis") if json_out else \
+                report_text(d) + "\n" + verdict_text(verdict)
+            html = report is not None and str(report).lower().endswith((".html", ".htm"))
             if report is not None:  # inside: a report reads the inputs' checksums
                 progress(0, 1, "writing the report")
                 sources = {"export": str(export_p), "plane": str(plane_p), "layout": str(layout_p)}
                 files = diagnose_report(d, report, sources, command=invocation(ctx), seed=seed)
-                if not json_out:
-                    html = str(report).lower().endswith((".html", ".htm"))
-                    text += ("\n\nreport: " if html else "\n\nplots: ") + ", ".join(files)
+                if not json_out and not html:
+                    text += "\n\nplots: " + ", ".join(files)
         echo(text)
+        if html:
+            reported(report)
+        finish(verdict)
 
     @app.command("simulate")
     @guarded
@@ -71,10 +79,11 @@ def register(app: typer.Typer) -> None:
         """Write a synthetic export hiding an effect of chosen size on a chosen sensor."""
         from metrology.jobs.simulate import simulate_files
         from metrology.report.diagnose import simulate_text
+        from metrology.report.verdicts import NO_VERDICT
 
         with stdin_files(("--layout", layout, ".toml"), ("--plane", plane, ".json")) as (layout, plane):
             truth, n_points = simulate_files(layout, plane, out, effect, sensor, size, poses, seed, cloud)
         if json_out:
-            echo_json(truth, "simulation")
+            echo_json(with_verdict(truth, NO_VERDICT), "simulation")
         else:
             echo(simulate_text(out, poses, effect, sensor, size, cloud, n_points))

@@ -6,10 +6,11 @@ from pathlib import Path
 
 import typer
 
-from ._common import JSON_HELP, REPORT_HELP, echo, echo_json, fail, guarded, invocation, progress_bar, warn
+from ._common import (JSON_HELP, REPORT_HELP, echo, echo_json, fail, finish, guarded, invocation, progress_bar, reported,
+                      warn, with_verdict)
+from ._stdin import MESH_FORMATS
 
 STDIN = " ('-' for stdin)"
-MESH_FORMATS = ("stl", "obj", "ply", "off", "glb", "gltf", "step", "stp")
 
 
 def register(app: typer.Typer) -> None:
@@ -49,6 +50,7 @@ def register(app: typer.Typer) -> None:
         """Micro-plane against micro-sphere normals at drilling points on a panel, and the attitude loop."""
         from metrology.jobs.normals import normals_job
         from metrology.report.normals import summary_text
+        from metrology.report.verdicts import normals_verdict, verdict_text
 
         from ._stdin import format_suffix, stdin_files
 
@@ -67,7 +69,10 @@ def register(app: typer.Typer) -> None:
                 progress=progress, report=report, command=invocation(ctx), units=units,
                 footprint_mm=footprint_mm, on_warning=warn, beams=beams,
             )
+        verdict = normals_verdict(summary, tolerance_deg)
         if as_json:
-            echo_json(summary, "normals")
+            echo_json(with_verdict(summary, verdict), "normals")
         else:
-            echo(summary_text(summary))
+            echo(summary_text(summary) + "\n" + verdict_text(verdict))
+        reported(report)
+        finish(verdict)

@@ -7,23 +7,10 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, fail, guarded, output_path, progress_bar
+from ._common import JSON_HELP, echo, echo_json, fail, guarded, output_path, parse_range, progress_bar, with_verdict
 from ._stdin import plane_suffix, stdin_files
 
 STDIN = " ('-' for stdin)"
-
-
-def _pair(text: Optional[str], option: str):
-    """``"a,b"`` -> (a, b) floats with a < b, or None; a one-line error otherwise."""
-    if text is None:
-        return None
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        fail(f"{option} {text!r}: expected two numbers MIN,MAX in mm")
-    if not a < b:
-        fail(f"{option} {text!r}: expected MIN < MAX")
-    return a, b
 
 
 def register(app: typer.Typer) -> None:
@@ -66,11 +53,13 @@ def register(app: typer.Typer) -> None:
         with stdin_files(("--layout", layout, ".toml"), ("--plane", plane, plane_suffix),
                          ("--extent", extent, plane_suffix)) as (layout, plane, extent), progress_bar("plan") as progress:
             progress(0, 1, f"choosing {poses} poses from {candidates} candidates")
-            result = plan_files(layout, plane, poses, tilt_max_deg, _pair(standoff_mm, "--standoff-mm"), working_standoff_mm,
-                                noise_mm, _pair(range_mm, "--range-mm"), extent, extent_radius_mm, margin_mm,
+            result = plan_files(layout, plane, poses, tilt_max_deg, parse_range(standoff_mm, "--standoff-mm"), working_standoff_mm,
+                                noise_mm, parse_range(range_mm, "--range-mm"), extent, extent_radius_mm, margin_mm,
                                 spot_margin_mm, robot_error_mm, robot_error_deg, tool_side, candidates, seed, out, plot,
                                 tuple(c.strip() for c in separate.split(",")) if separate else ())
         if json_out:
-            echo_json({**result.to_dict(), "out": None if out is None else str(out)}, "plan")
+            from metrology.report.verdicts import NO_VERDICT
+
+            echo_json(with_verdict({**result.to_dict(), "out": None if out is None else str(out)}, NO_VERDICT), "plan")
         else:
             echo(plan_text(result, out))

@@ -56,9 +56,11 @@ def _root(
         typer.echo(ctx.get_help())
         raise typer.Exit(0)
 
-from . import cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_normals, cmd_plan  # noqa: E402
+from . import (cmd_calibrate, cmd_core, cmd_diagnose, cmd_fit_plane, cmd_measure, cmd_normals,  # noqa: E402
+               cmd_plan, cmd_simulate_log)
 
-for _module in (cmd_fit_plane, cmd_plan, cmd_calibrate, cmd_normals, cmd_diagnose, cmd_core):
+for _module in (cmd_fit_plane, cmd_plan, cmd_calibrate, cmd_normals, cmd_diagnose, cmd_measure, cmd_simulate_log,
+                cmd_core):
     _module.register(app)
 use_metro_command(app)
 

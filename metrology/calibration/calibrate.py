@@ -8,7 +8,8 @@ from metrology.calibration.dataset import Dataset
 from metrology.calibration.estimators import METHODS, Calibration, calibrate
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.core.tolerances import CORRELATION_REPORT
+from metrology.core.tolerances import CORRELATION_REPORT, TARGET_TILT_DEG, TARGET_ZERO_MM
+from metrology.core.verdict import Check, Verdict
 from metrology.core.paper import EKF_PRESETS
 from metrology.calibration.identifiability import CHART_NAMES, identifiability
 
@@ -18,6 +19,10 @@ from metrology.calibration.identifiability import CHART_NAMES, identifiability
 #: scaled by the residual, so they stay honest when the stated noise is optimistic
 DEFAULT_METHOD = "lsq"
 
+
+#: model adequacy: a sensor's residuals are above its stated noise when the chi-square of its
+#: readings (dof = readings - 5) has a one-sided p below this (one false alarm in 1000 runs)
+MODEL_ADEQUACY_ALPHA = 1e-3
 
 #: the paper's EKF runs with the experiment's settings (section 6) unless told otherwise
 _METHOD_DEFAULTS = {"ekf_paper": EKF_PRESETS["experiment"]}
@@ -48,12 +53,22 @@ class CalibrationReport:
     identifiability : list of Identifiability
     sources : dict of str -> str
         Where the inputs came from (for the report).
+    target : (float, float) or None
+        The precision target: zero point 1 sigma (mm) and beam tilt 1 sigma (rad).
+    target_set : bool
+        Whether the user set ``target`` (it gates the verdict) or it is the default (information).
+    certificate : object or None
+        The calibration certificate of the calibrated layout as written
+        (:class:`metrology.report.certificate.Certificate`, made by the file job), else None.
     """
 
     calibration: Calibration
     dataset: Dataset
     identifiability: list
     sources: dict = field(default_factory=dict)
+    target: tuple | None = None
+    target_set: bool = False
+    certificate: object = None
 
     @property
     def layout(self) -> SensorLayout:
@@ -62,6 +77,45 @@ class CalibrationReport:
     @property
     def warnings(self) -> list:
         return [w for ident in self.identifiability for w in ident.warnings]
+
+    def adequacy(self) -> list:
+        """Model adequacy per sensor: (name, residual RMS mm, the RMS the stated noise allows at
+        :data:`MODEL_ADEQUACY_ALPHA` mm, p-value); sensors without a stated noise or dof are left out."""
+        from scipy import stats
+
+        cal = self.calibration
+        out = []
+        for i, name in enumerate(cal.nominal.names):
+            n, noise, rms = int(cal.n_used[i]), float(cal.nominal.noise_mm[i]), float(cal.residual_rms[i])
+            dof = n - 5
+            if dof > 0 and noise > 0 and np.isfinite(rms):
+                chi2 = n * (rms / noise) ** 2
+                limit = noise * float(np.sqrt(stats.chi2.isf(MODEL_ADEQUACY_ALPHA, dof) / n))
+                out.append((name, rms, limit, float(stats.chi2.sf(chi2, dof))))
+        return out
+
+    def verdict(self) -> Verdict:
+        """What the calibration is judged on, each check named for what it judges:
+
+        - ``model adequacy``: each sensor's residual RMS against what its stated noise allows
+          (chi-square, one-sided at :data:`MODEL_ADEQUACY_ALPHA`). Information: the stated noise
+          is an assumption, not a tolerance (``metro diagnose`` names what is missed).
+        - ``precision target``: the largest predicted 1 sigma of the zero points (mm) and beam
+          tilts (deg) against the target; gates only when the user set it (``target_set``).
+        """
+        checks = [Check(f"model adequacy: {name} residual RMS against its stated noise", rms, limit, "mm",
+                        bool(p >= MODEL_ADEQUACY_ALPHA), gate=False)
+                  for name, rms, limit, p in self.adequacy()]
+        if self.target is not None and self.identifiability:
+            pse = np.array([ident.predicted_stderr for ident in self.identifiability])
+            z, t = float(np.max(pse[:, :3])), float(np.rad2deg(np.max(pse[:, 3:])))
+            tz, tt = float(self.target[0]), float(np.rad2deg(self.target[1]))
+            how = "" if self.target_set else " (default target)"
+            checks += [Check(f"precision target: zero points, largest 1σ{how}", z, tz, "mm", bool(z <= tz),
+                             gate=self.target_set),
+                       Check(f"precision target: beam tilts, largest 1σ{how}", t, tt, "deg", bool(t <= tt),
+                             gate=self.target_set)]
+        return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:
         """The report as plain data; ``no_reading`` (value, count, readings) only when codes were dropped."""
@@ -99,14 +153,17 @@ class CalibrationReport:
             "unidentified": cal.unidentified,
             "identifiability": [ident.to_dict() for ident in self.identifiability],
             "warnings": self.warnings,
+            "verdict": self.verdict().to_dict(),
         }
+        if self.certificate is not None:
+            out["certificate"] = self.certificate.to_dict()
         if self.dataset.dropped:
             out["no_reading"] = self.dataset.no_reading_dict()
         return out
 
 
 def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=None, target=None,
-                      **kwargs) -> CalibrationReport:
+                      target_set: bool = False, **kwargs) -> CalibrationReport:
     """Calibrate the sensors of ``dataset`` (its layout is the nominal) with ``method``.
 
     Parameters
@@ -118,7 +175,10 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     sources : dict, optional
         Input file names, copied into the report.
     target : (float, float), optional
-        Wanted 1-sigma of zero point (mm) and tilt (rad) for the identifiability advice.
+        Wanted 1-sigma of zero point (mm) and tilt (rad) for the identifiability advice and
+        the verdict (None: :data:`metrology.core.tolerances.TARGET_ZERO_MM`, ``TARGET_TILT_DEG``).
+    target_set : bool
+        The user set ``target``: it gates the verdict (else it is information).
 
     Returns
     -------
@@ -137,5 +197,7 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     with np.errstate(divide="ignore", invalid="ignore"):
         scatter = cal.residual_rms * np.sqrt(m / (m - 5))
     sigma = np.where(np.isfinite(scatter) & (scatter > 0) & (m > 5), scatter, cal.sigma_mm)
+    if target is None:
+        target = (TARGET_ZERO_MM, float(np.deg2rad(TARGET_TILT_DEG)))
     ident = identifiability(dataset.layout, cal.layout, cal.theta, obs, sigma, target)
-    return CalibrationReport(cal, dataset, ident, dict(sources or {}))
+    return CalibrationReport(cal, dataset, ident, dict(sources or {}), tuple(target), bool(target_set))

@@ -34,6 +34,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.observations import Observations
 from metrology.core.model import (
+    chart_cov_recentred,
     direction_basis,
     direction_from_tangent,
     jacobian_raw,
@@ -131,7 +132,13 @@ def _finish(method, nominal, obs, theta, cov, sigma, **extra) -> Calibration:
     n_used = ok.sum(axis=0)
     rms = np.sqrt(np.nansum(np.where(ok, res, 0.0) ** 2, axis=0) / np.maximum(n_used, 1))
     se = np.sqrt(np.maximum(np.einsum("nii->ni", cov), 0.0))
-    layout = nominal.with_params(zero, u, zero_stderr_mm=se[:, :3], direction_stderr_deg=np.rad2deg(se[:, 3:]))
+    # the layout states its covariance in the chart centred on its own (calibrated) directions;
+    # sensors are fitted one by one from their own readings, so it is block diagonal
+    from scipy.linalg import block_diag
+
+    full = block_diag(*chart_cov_recentred(nominal.direction, theta[:, 3:], cov)) if np.all(np.isfinite(cov)) else None
+    layout = nominal.with_params(zero, u, zero_stderr_mm=se[:, :3], direction_stderr_deg=np.rad2deg(se[:, 3:]),
+                                 covariance=full)
     delta_raw = np.concatenate([theta[:, :3], u - nominal.direction], axis=1)
     return Calibration(method, nominal, layout, theta, cov, delta_raw, n_used, rms, sigma, **extra)
 

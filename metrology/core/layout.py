@@ -23,6 +23,15 @@ class SensorLayout:
     zero_stderr_mm : (n, 3) float, mm, or None (a nominal layout)
     direction_stderr_deg : (n, 2) float, deg, or None
     effects : dict of sensor name -> dict of effect-term name -> float
+    covariance : (5n, 5n) float, mm and rad, or None (a nominal layout)
+        The calibration's covariance of the five identifiable parameters of every sensor,
+        ``(x, y, z, a, b)`` per sensor in layout order: the zero point (mm, TCS) and the beam's
+        tilt (rad) about the axes ``e1, e2`` of :func:`metrology.core.model.direction_basis`
+        of the layout's *own* directions (the chart centred on the calibrated beam). The
+        direction is a unit vector: its sixth number (the scale) is not a parameter.
+    certificate : dict of str -> str
+        The calibration certificate's header fields (part, operator, instrument, serial,
+        temperature, notes, ...), carried with a calibrated layout; empty for a nominal one.
     """
 
     names: tuple
@@ -33,6 +42,8 @@ class SensorLayout:
     zero_stderr_mm: np.ndarray | None = None
     direction_stderr_deg: np.ndarray | None = None
     effects: dict = field(default_factory=dict)
+    covariance: np.ndarray | None = None
+    certificate: dict = field(default_factory=dict)
 
     def __post_init__(self):
         n = len(self.names)
@@ -54,6 +65,11 @@ class SensorLayout:
         object.__setattr__(self, "noise_mm", noise)
         rng = np.tile([-np.inf, np.inf], (n, 1)) if self.range_mm is None else np.asarray(self.range_mm, float).reshape(n, 2)
         object.__setattr__(self, "range_mm", rng)
+        if self.covariance is not None:
+            cov = np.asarray(self.covariance, float)
+            if cov.shape != (5 * n, 5 * n) or not np.all(np.isfinite(cov)):
+                raise ValueError(f"covariance must be a finite ({5 * n}, {5 * n}) matrix for {n} sensors, got shape {cov.shape}")
+            object.__setattr__(self, "covariance", 0.5 * (cov + cov.T))
 
     @property
     def n(self) -> int:
@@ -70,4 +86,10 @@ class SensorLayout:
             None if self.zero_stderr_mm is None else self.zero_stderr_mm[idx],
             None if self.direction_stderr_deg is None else self.direction_stderr_deg[idx],
             {k: v for k, v in self.effects.items() if k in names},
+            None if self.covariance is None else self.covariance[np.ix_(_rows(idx), _rows(idx))],
         )
+
+
+def _rows(idx):
+    """The rows of the covariance of sensors ``idx`` (five per sensor)."""
+    return [5 * i + k for i in idx for k in range(5)]

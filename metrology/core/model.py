@@ -35,6 +35,7 @@ __all__ = [
     "tangent_from_direction",
     "jacobian_tangent",
     "gauge_null_vector",
+    "chart_cov_recentred",
     "PARAMS_RAW",
     "PARAMS_TANGENT",
 ]
@@ -226,3 +227,46 @@ def gauge_null_vector(direction):
     direction = np.asarray(direction, dtype=float)
     u = direction / np.linalg.norm(direction, axis=1, keepdims=True)
     return np.concatenate([np.zeros_like(u), u], axis=1)
+
+
+def chart_cov_recentred(u0, ab, cov):
+    """The chart covariance moved from the chart around ``u0`` to the chart around ``u(ab)``.
+
+    A calibration fits ``(x, y, z, a, b)`` in the chart centred on the nominal direction
+    ``u0``; a calibrated layout states its covariance in the chart centred on its own
+    direction ``u = direction_from_tangent(u0, ab)``, so a reader needs only the layout. To
+    first order ``du = (I - u u^T) / |w| E^T dab`` (``w = u0 + ab E``), and the new chart
+    coordinates are ``dab' = E'(u) du``.
+
+    Parameters
+    ----------
+    u0 : (n, 3) float, TCS, chart centres of the fit
+    ab : (n, 2) float, rad, the fitted chart coordinates
+    cov : (n, 5, 5) float, mm and rad, per-sensor covariance in the chart around ``u0``;
+        or (5n, 5n) for the covariance of all sensors at once
+
+    Returns
+    -------
+    cov : same shape as the input, mm and rad, in the chart around ``u``
+    """
+    u0 = np.asarray(u0, dtype=float)
+    u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
+    E = direction_basis(u0)  # (n, 2, 3)
+    w = u0 + np.einsum("nk,nkj->nj", np.asarray(ab, dtype=float), E)
+    wn = np.linalg.norm(w, axis=1)
+    u = w / wn[:, None]
+    proj = (np.eye(3)[None] - u[:, :, None] * u[:, None, :]) / wn[:, None, None]  # (n, 3, 3)
+    T2 = np.einsum("nkj,nji,nli->nkl", direction_basis(u), proj, E)  # (n, 2, 2): dab' = T2 dab
+    n = len(u0)
+    T = np.zeros((n, 5, 5))
+    T[:, :3, :3] = np.eye(3)
+    T[:, 3:, 3:] = T2
+    cov = np.asarray(cov, dtype=float)
+    if cov.shape == (n, 5, 5):
+        return np.einsum("nij,njk,nlk->nil", T, cov, T)
+    if cov.shape == (5 * n, 5 * n):
+        from scipy.linalg import block_diag
+
+        Tf = block_diag(*T)
+        return Tf @ cov @ Tf.T
+    raise ValueError(f"cov must be (n, 5, 5) or (5n, 5n) for n = {n}, got {cov.shape}")

@@ -12,11 +12,28 @@ Schema (a public contract, see README "File formats")::
 
 A calibrated layout adds, per sensor, ``zero_stderr_mm`` (3 numbers), ``direction_stderr_deg``
 (2 numbers: tilt about the chart axes e1, e2) and an optional ``[sensors.effects]`` table of
-extra effect terms; files with these keys are read back unchanged.
+extra effect terms; files with these keys are read back unchanged. ``metro calibrate`` also
+writes the calibration's full parameter covariance, which ``metro measure`` propagates::
+
+    [calibration]
+    parameters = ["L1.x", "L1.y", "L1.z", "L1.a", "L1.b", "L2.x", ...]   # 5 per sensor
+    covariance = [[...], ...]     # (5n, 5n): mm for x y z (TCS), rad for a b
+
+The calibration certificate's header fields (``metro calibrate --meta key=value``) are carried
+in a table of strings::
+
+    [certificate]
+    part = "EE-7 pressure foot"
+    operator = "J. Smith"
+
+``a, b`` are the beam's tilts about the axes ``e1, e2`` of
+:func:`metrology.core.model.direction_basis` of the file's own (calibrated) direction: the
+direction is a unit vector, so of the six numbers of a sensor only these five are parameters.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 import numpy as np
@@ -82,9 +99,46 @@ def load_layout(path) -> SensorLayout:
             if not isinstance(s["effects"], dict):
                 raise ValueError(f"{path}: sensor {name} 'effects' must be a table")
             effects[name] = {k: float(v) for k, v in s["effects"].items()}
+    covariance = _covariance(path, data.get("calibration"), tuple(names))
+    certificate = _certificate(path, data.get("certificate", {}))
     zse_arr = None if any(z is None for z in zse) else np.array(zse)
     dse_arr = None if any(z is None for z in dse) else np.array(dse)
-    return SensorLayout(tuple(names), np.array(zero), np.array(direction), np.array(noise), np.array(rng), zse_arr, dse_arr, effects)
+    return SensorLayout(tuple(names), np.array(zero), np.array(direction), np.array(noise), np.array(rng), zse_arr, dse_arr, effects,
+                        covariance, certificate)
+
+
+def _certificate(path, table) -> dict:
+    """The ``[certificate]`` table: header fields, each a string (numbers and dates as written)."""
+    if not isinstance(table, dict) or any(isinstance(v, (dict, list)) for v in table.values()):
+        raise ValueError(f"{path}: [certificate] must be a table of key = \"text\" fields")
+    return {str(k): str(v) for k, v in table.items()}
+
+
+def covariance_names(names) -> list:
+    """The parameter names of the ``[calibration]`` covariance: ``"L1.x" ... "L1.b"`` per sensor."""
+    return [f"{nm}.{p}" for nm in names for p in ("x", "y", "z", "a", "b")]
+
+
+def _covariance(path, table, names):
+    """The ``[calibration]`` table's covariance ``(5n, 5n)``, checked; None when absent."""
+    if table is None:
+        return None
+    if not isinstance(table, dict) or "covariance" not in table:
+        raise ValueError(f"{path}: [calibration] needs 'parameters' and 'covariance'")
+    want = covariance_names(names)
+    if list(table.get("parameters", [])) != want:
+        raise ValueError(f"{path}: [calibration] parameters must be {want[0]} ... {want[-1]} (5 per sensor, "
+                         f"in the order of the sensors), got {table.get('parameters')!r}")
+    try:
+        cov = np.asarray(table["covariance"], dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: [calibration] covariance must be a {len(want)} x {len(want)} table of numbers") from None
+    if cov.shape != (len(want), len(want)) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"{path}: [calibration] covariance must be {len(want)} x {len(want)} finite numbers, "
+                         f"got shape {cov.shape}")
+    if np.max(np.abs(cov - cov.T)) > 1e-9 * max(np.max(np.abs(cov)), 1e-300) or np.min(np.linalg.eigvalsh(0.5 * (cov + cov.T))) < -1e-9 * np.max(np.abs(cov)):
+        raise ValueError(f"{path}: [calibration] covariance is not symmetric positive semi-definite")
+    return cov
 
 
 def _fmt(values, digits=6):
@@ -109,7 +163,26 @@ def layout_to_toml(layout: SensorLayout, header: str = "") -> str:
             lines.append("[sensors.effects]")
             lines += [f"{k} = {v:.9g}" for k, v in layout.effects[name].items()]
         lines.append("")
+    if layout.covariance is not None:
+        lines += ["[calibration]",
+                  "# the calibration's covariance of the parameters below: mm (x y z, TCS) and rad (a b: the beam's",
+                  "# tilt about the axes e1, e2 of metrology.core.model.direction_basis of the direction above)",
+                  "parameters = [" + ", ".join(f'"{p}"' for p in covariance_names(layout.names)) + "]",
+                  "covariance = ["]
+        lines += ["  [" + ", ".join(f"{v:.9g}" for v in row) + "]," for row in layout.covariance]
+        lines += ["]", ""]
+    if layout.certificate:
+        lines += ["[certificate]", "# the calibration certificate's header fields (metro calibrate --meta)"]
+        lines += [f"{_key(k)} = {json.dumps(str(v), ensure_ascii=False)}" for k, v in layout.certificate.items()]
+        lines.append("")
     return "\n".join(lines)
+
+
+def _key(k) -> str:
+    """A TOML key: bare when it can be, else quoted."""
+    import re
+
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k, ensure_ascii=False)
 
 
 def save_layout(layout: SensorLayout, path, header: str = "") -> None:

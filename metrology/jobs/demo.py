@@ -6,6 +6,7 @@ import shlex
 from pathlib import Path
 
 from metrology.core.progress import notify
+from metrology.core.verdict import EXIT_FAILED
 
 __all__ = ["DEMO_STEPS", "run_demo"]
 
@@ -65,7 +66,7 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
         Output directory, created if absent.
     run_step : callable
         ``run_step(args) -> int``: runs one ``metro`` command line (list of str), returns
-        its exit code (0 or None on success).
+        its exit code (0 or None: passed; 1: ran, its verdict failed; 2: bad input).
     announce : callable
         ``announce(title, args)``, called before each step.
     progress : callable or None
@@ -78,7 +79,8 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
     Returns
     -------
     int
-        0, or the exit code of the first failing step (the steps after it are not run).
+        0 when every step passed; 1 when every step ran and a verdict failed; otherwise the
+        exit code of the first step that could not run (the steps after it are not run).
 
     Raises
     ------
@@ -94,6 +96,7 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
     if report is not None:
         check_report_path(report)
     out.mkdir(parents=True, exist_ok=True)
+    worst = 0
     with collect() as pages:
         for k, ((title, line), name) in enumerate(zip(DEMO_STEPS, STEP_REPORTS)):
             args = shlex.split(line.format(fx=fixtures, out=out))
@@ -101,13 +104,14 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
                 args = _with_report(args, out / name)
             notify(progress, k, len(DEMO_STEPS), f"step {title.split(' ', 1)[0]} metro {args[0]}")
             announce(title, args)
-            rc = run_step(args)
-            if rc:  # a failing step has printed its one-line error
+            rc = run_step(args) or 0
+            if rc and rc != EXIT_FAILED:  # a step that could not run has printed its one-line error
                 return rc
+            worst = max(worst, rc)
     notify(progress, len(DEMO_STEPS), len(DEMO_STEPS), "done")
     if report is not None:
         _write_demo_report(report, pages, [out / name for name in STEP_REPORTS], command)
-    return 0
+    return worst
 
 
 def _write_demo_report(report, pages, step_files, command):

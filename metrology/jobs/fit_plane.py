@@ -17,7 +17,8 @@ _PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
 
 
 def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=None, warn=None, report=None,
-                   command=None, progress=None) -> PlaneFit:
+                   command=None, progress=None, flatness_mm=None, inliers=None, outliers=None,
+                   residuals=None) -> PlaneFit:
     """Read a cloud, fit its datum plane, and write the JSON and the residual map.
 
     Parameters
@@ -40,6 +41,14 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         ``warn(message)`` for what the caller should know but is not an error: points with
         NaN coordinates dropped (organized scans), a cloud whose size suggests metres. None:
         :func:`warnings.warn`.
+    flatness_mm : float or None
+        The flatness tolerance the report judges the P-V against (None: none judged).
+    inliers, outliers : str or os.PathLike or None
+        PLY files of the inlier and outlier points (mm, the cloud's frame), as Open3D and PCL
+        read them.
+    residuals : str or os.PathLike or None
+        Per-point table (``.csv`` or ``.parquet``, :mod:`metrology.jobs.outputs`): x, y, z (mm),
+        the signed distance to the fitted plane ``residual_mm`` and ``inlier`` (1/0).
     progress : callable or None
         ``progress(done, total, what)`` at each of 3 stages: read, fit, write
         (:mod:`metrology.core.progress`).
@@ -59,6 +68,13 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
         from metrology.report.html import check_report_path
 
         check_report_path(report)
+    for path, option in ((inliers, "--inliers"), (outliers, "--outliers")):
+        if path is not None:
+            check_output_file(path, option, {".ply"})
+    if residuals is not None:
+        from metrology.jobs.outputs import check_table_path
+
+        check_table_path(residuals, "--residuals")
     if warn is None:
         import warnings
 
@@ -89,12 +105,38 @@ def fit_plane_file(cloud, threshold_mm=None, seed=0, out=None, plot=None, units=
             from metrology.report.datum import plot_residuals
 
             plot_residuals(points, fit, tmp)
+        if inliers is not None or outliers is not None or residuals is not None:
+            _write_points(stack, fit, points, inliers, outliers, residuals)
         if report is not None:
             from metrology.report.html import render_html, run_info
             from metrology.report.pages import plane_section
 
-            page = render_html("Datum plane fit", run_info({"cloud": cloud}, command, seed), [plane_section(fit, points)])
+            page = render_html("Datum plane fit", run_info({"cloud": cloud}, command, seed), [plane_section(fit, points, flatness_mm)])
             tmp = stack.enter_context(atomic_path(report))
             tmp.write_text(page, encoding="utf-8")
     notify(progress, 3, 3, "done")
     return fit
+
+
+def _write_points(stack, fit, points, inliers, outliers, residuals):
+    """The inliers and outliers as PLY, the per-point residual table, each into a temporary file
+    of ``stack`` (moved into place with the other outputs)."""
+    import numpy as np
+
+    from metrology.io.atomic import atomic_path
+    from metrology.io.clouds import write_ply
+
+    mask = fit.inliers(points)
+    for path, keep, what in ((inliers, mask, "inliers"), (outliers, ~mask, "outliers")):
+        if path is not None:
+            write_ply(stack.enter_context(atomic_path(path)), points[keep],
+                      (f"metro fit-plane {what} of {fit.source} (mm)",))
+    if residuals is not None:
+        from pathlib import Path
+
+        from metrology.jobs.outputs import TABLE_WRITERS
+
+        r = points @ fit.plane.normal + fit.plane.offset
+        cols = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2], "residual_mm": r,
+                "inlier": mask.astype(np.int8)}
+        TABLE_WRITERS[Path(residuals).suffix.lower()](stack.enter_context(atomic_path(residuals)), cols)

@@ -96,13 +96,13 @@ def _working_standoff(layout, first_d):
 
 def follow_export(source, plane_path, layout_path, targets: Targets, on_step=None, idle_s: float = 5.0,
                   poll_s: float = 0.2, stop_when_met: bool = False, sigma_mm=None, quaternion_order="wxyz",
-                  position_units="mm", no_reading=None, stream=None, name=None) -> FollowResult:
+                  position_units="mm", no_reading=None, stream=None, name=None, target_set=False) -> FollowResult:
     """Follow a growing export (or ``-``): one filter update per pose, ``on_step(step)`` after each.
 
     Errors are ValueError naming the source and line (the header is checked against the layout
     before any pose is read). ``sigma_mm`` (mm) replaces the layout's ``noise_mm``. ``name`` is
     the source as messages and the report name it (default ``source``; the CLI gives ``<stdin>``
-    for ``-``).
+    for ``-``). ``target_set``: the user set ``targets`` (they gate the verdict).
     """
     from metrology.calibration.dataset import Dataset, check, drop_no_reading, load_plane
     from metrology.calibration.sanity import check_dataset
@@ -152,12 +152,16 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
         raise ValueError(f"{label}: no pose rows (a header line, then one line per pose)")
     export = export_from_rows([header, *rows], label, quaternion_order, position_units)
     export, dropped = drop_no_reading(export.reordered(layout.names), layout, no_reading)
+    if not np.any(np.isfinite(export.d)):
+        raise ValueError(f"{label}: {len(rows)} pose(s) read, none with a reading yet (the d_ columns are empty: "
+                         "a planned file waiting for readings?); nothing to calibrate")
     export = check(export, layout, label)
     dataset = Dataset(export, layout, plane, points, dropped)
     check_dataset(dataset, label, quaternion_order, position_units)
     report = calibrate_dataset(dataset, "iekf", sources={"export": label, "plane": str(plane_path),
                                                          "layout": str(layout_path)},
-                                target=(targets.zero_mm, targets.tilt_rad), sigma_mm=sigma, stderr="residual")
+                                target=(targets.zero_mm, targets.tilt_rad), target_set=target_set, sigma_mm=sigma,
+                                stderr="residual")
     cal = report.calibration
     diff = (follower.x - cal.theta) / np.where(cal.stderr > 0, cal.stderr, np.inf)
     return FollowResult(report, steps, follower.met_at, stopped, targets, diff)

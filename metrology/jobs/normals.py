@@ -95,15 +95,16 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     summary["points"] = len(run.labels)
     summary["grid_dropped"] = dropped
     text = per_point_text(run, out_fmt) if out_fmt else None
-    png = plot_error_map(run, tolerance_deg) if plot_path is not None or report is not None else None
+    png = plot_error_map(run, tolerance_deg) if plot_path is not None else None
     page = None
     if report is not None:
         from metrology.report.html import render_html, run_info
+        from metrology.report.normals import error_map_figure
         from metrology.report.pages import normals_section
 
         inputs = {"panel": panel_path, "layout": layout_path, "points": points_path, "true layout": true_layout_path}
         page = render_html("Normals on a panel", run_info(inputs, command, seed),
-                           [normals_section(summary, png, tolerance_deg)])
+                           [normals_section(summary, error_map_figure(run, tolerance_deg), tolerance_deg)])
     from metrology.io.atomic import atomic_path, write_text
 
     if text is not None:

@@ -316,9 +316,10 @@ def load_panel(path, units=None) -> Panel:
     if not lo <= diag <= hi:
         raw = diag / to_mm
         guess = ", ".join(f"as {u}: {raw * f:.4g} mm" for u, f in UNITS_MM.items() if u != "mm" and lo <= raw * f <= hi)
+        ask = ("is it in m or inch? give --units" + (f" ({guess})" if guess else "") if units is None else
+               f"check the file: --units {units} was given")  # the user said the unit: do not ask again
         unit_warning = (f"{path}: bounding-box diagonal {diag:.4g} mm, units {unit_note}, is implausible for a panel "
-                        f"(expected {lo:g}..{hi:g} mm); is it in m or inch? give --units"
-                        + (f" ({guess})" if guess else ""))
+                        f"(expected {lo:g}..{hi:g} mm); {ask}")
         warnings.append(unit_warning)
     header = mesh.metadata.get("header", "") if isinstance(mesh.metadata, dict) else ""
     surface = _surface_from_header(header)

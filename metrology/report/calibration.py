@@ -28,6 +28,7 @@ from metrology.calibration.convergence import batch_convergence, residual_table
 from metrology.calibration.identifiability import CHART_NAMES, sigma_words
 from metrology.report.fit_report import FitSummary, correlations_from_cov, fit_report
 from metrology.report.plots import pyplot, save_figure
+from metrology.report.verdicts import verdict_text
 from metrology.report.validation import plot_validation, validation_text  # noqa: F401 (their home before)
 
 __all__ = ["calibration_text", "validation_text",
@@ -60,6 +61,7 @@ def calibration_text(report: CalibrationReport) -> str:
         lines.append(f"  least determined: {ident.words[-1]} (1 sigma {sigma_words(ident.combination_sigma[-1])}; "
                      f"moves the measured normal by {np.rad2deg(ident.normal_effect[-1]):.2g} deg RMS)")
     lines += precision_advice(report) + noise_advice(report)
+    lines.append(verdict_text(report.verdict()))
     return "\n".join(lines)
 
 
@@ -82,23 +84,18 @@ def fit_summaries(report: CalibrationReport) -> list:
     return out
 
 
-def noise_advice(report: CalibrationReport, alpha: float = 1e-3) -> list:
-    """A pointer to ``metro diagnose`` when the residuals exceed the stated noise: chi-square of
-    each sensor's residuals against ``noise_mm`` (dof = readings - 5), one-sided at ``alpha``."""
-    from scipy import stats
+def noise_advice(report: CalibrationReport) -> list:
+    """A pointer to ``metro diagnose`` when the residuals exceed the stated noise: the model
+    adequacy checks of :meth:`CalibrationReport.adequacy` (chi-square of each sensor's residuals
+    against ``noise_mm``, dof = readings - 5, one-sided at ``MODEL_ADEQUACY_ALPHA``)."""
+    from metrology.calibration.calibrate import MODEL_ADEQUACY_ALPHA
 
-    d = report.to_dict()
-    high = []
-    for s in d["sensors"]:
-        dof = s["n_readings"] - 5
-        if dof > 0 and s["noise_mm"] > 0:
-            chi2 = s["n_readings"] * (s["residual_rms_mm"] / s["noise_mm"]) ** 2
-            if stats.chi2.sf(chi2, dof) < alpha:
-                high.append(f"{s['name']} {1e3 * s['residual_rms_mm']:.1f} um")
+    high = [f"{name} {1e3 * rms:.1f} µm (allowed {1e3 * limit:.1f} µm)"
+            for name, rms, limit, p in report.adequacy() if p < MODEL_ADEQUACY_ALPHA]
     if not high:
         return []
-    return [f"residuals above the stated noise ({', '.join(high)}; chi-square p < {alpha:g}): the model misses "
-            "something. Run `metro diagnose` on the same files to name it."]
+    return [f"model adequacy: residuals above the stated noise ({', '.join(high)}; chi-square p < "
+            f"{MODEL_ADEQUACY_ALPHA:g}): the model misses something. Run `metro diagnose` on the same files to name it."]
 
 
 def precision_advice(report: CalibrationReport) -> list:
@@ -114,8 +111,12 @@ def precision_advice(report: CalibrationReport) -> list:
     target = fix["target"]
     ways = [ident.fix["within_range"] for ident in short if ident.fix.get("within_range")]
     lines = [f"precision: 1 sigma up to {np.nanmax(z):.3g} mm (zero points) and {np.nanmax(tilt):.3g} deg (beams) on "
-             f"{', '.join(ident.name for ident in short)}, against a target of {target['zero_mm']:g} mm / "
-             f"{target['tilt_deg']:g} deg (--target-mm, --target-deg)."]
+             f"{', '.join(ident.name for ident in short)}, against " + ("your target of " if report.target_set else
+                                                                      "the default target of ")
+             + f"{target['zero_mm']:g} mm / {target['tilt_deg']:g} deg" + (" (--target-mm, --target-deg)." if
+                                                                           report.target_set else
+                                                                           " (information; --target-mm and --target-deg "
+                                                                           "set one that gates).")]
     now = f"now tilts up to {short[0].tilt_max_deg:.1f} deg, stand-off spread {short[0].standoff_spread_mm:.1f} mm"
     more = max((ident.fix["poses_needed_at_current_spread"] or 0) for ident in short)
     if ways:
@@ -154,7 +155,7 @@ def convergence_figure(report: CalibrationReport, convergence=None):
     names = cal.nominal.names
     n = len(names)
     plt = pyplot()
-    fig, axes = plt.subplots(n, 2, figsize=(11, 2.4 * n), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(n, 2, figsize=(10, 2.6 * n), sharex=True, squeeze=False)
     if cal.history:
         for i in range(n):
             h = cal.history[i]
@@ -182,16 +183,34 @@ def convergence_figure(report: CalibrationReport, convergence=None):
                 axes[i, 1].fill_between(k, y - s, y + s, color=_COLOURS[3 + j], alpha=0.2, lw=0)
             axes[i, 0].set_ylabel(f"{names[i]}\nzero error [mm]")
             axes[i, 1].set_ylabel("beam tilt [deg]")
-        title = f"{cal.method}: estimate from the first k poses, +-1 sigma bands"
+            tilt = np.rad2deg(np.arctan(th[:, 3:]))
+            _settled_ylim(axes[i, 0], k, th[:, :3], se[:, :3])
+            _settled_ylim(axes[i, 1], k, tilt, np.rad2deg(se[:, 3:]))
+        title = f"{cal.method}: estimate from the first k poses, ±1 σ bands (y range: the last three quarters)"
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[0, 1].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[0, 0].legend(loc="upper right", ncol=3)
+    axes[0, 1].legend(loc="upper right", ncol=3)
     axes[-1, 0].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     axes[-1, 1].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig
+
+
+#: the convergence plot's y range is set by the estimates and bands of the poses after this share of
+#: the run: the first poses' bands (a few poses, a wide 1 sigma) would otherwise flatten the rest
+SETTLED_FROM = 0.25
+
+
+def _settled_ylim(ax, k, y, s) -> None:
+    """Set ``ax``'s y range to cover ``y +- s`` over ``k >= SETTLED_FROM * k.max()`` (a tenth of
+    that span as margin); the earlier, wider bands run off the axis."""
+    sel = np.asarray(k) >= SETTLED_FROM * np.max(k)
+    lo, hi = np.nanmin((y - s)[sel]), np.nanmax((y + s)[sel])
+    if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+        pad = 0.1 * (hi - lo)
+        ax.set_ylim(lo - pad, hi + pad)
 
 
 def plot_residuals(report: CalibrationReport, path) -> Path:
@@ -206,7 +225,7 @@ def residuals_figure(report: CalibrationReport):
     d = report.dataset.obs.d
     names = report.layout.names
     plt = pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    fig, axes = plt.subplots(3, 1, figsize=(10, 9), sharey=True)
     idx = np.arange(1, len(d) + 1)
     for i, name in enumerate(names):
         c = _COLOURS[i % len(_COLOURS)]
@@ -218,11 +237,12 @@ def residuals_figure(report: CalibrationReport):
     axes[0].set_xlabel("reading [mm]")
     axes[1].set_xlabel("incidence angle of the beam on the datum [deg]")
     axes[2].set_xlabel("pose [index]")
-    axes[0].set_ylabel("residual, measured - predicted [µm]")
+    for ax in axes:
+        ax.set_ylabel("residual [µm]\n(measured - predicted)")
     for ax in axes:
         ax.axhline(0, color="0.3", lw=0.8)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
+    axes[0].legend()
     from matplotlib.ticker import MaxNLocator
 
     axes[2].xaxis.set_major_locator(MaxNLocator(integer=True))

@@ -101,19 +101,24 @@ def residual_map_figure(points, fit: PlaneFit):
         gu = np.linspace(uv[inl, 0].min(), uv[inl, 0].max(), 60)
         gv = np.linspace(uv[inl, 1].min(), uv[inl, 1].max(), 60)
         U, V = np.meshgrid(gu, gv)
-        cs = ax.contour(U, V, fit.form.evaluate(U, V), levels=8, colors="k", linewidths=0.6, alpha=0.6)
-        ax.clabel(cs, fmt="%.4f", fontsize=6)
+        if fit.form.significant:  # a form found: its contours drawn and labelled
+            cs = ax.contour(U, V, fit.form.evaluate(U, V), levels=8, colors="k", linewidths=0.6, alpha=0.6)
+            ax.clabel(cs, fmt="%.4f", fontsize=9)
+        else:  # not significant: faint, unlabelled (a form below the test's reach, not a finding)
+            ax.contour(U, V, fit.form.evaluate(U, V), levels=8, colors="0.5", linewidths=0.4, alpha=0.35,
+                       linestyles="dotted")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("u [mm] (in-plane, from the centroid)")
     ax.set_ylabel("v [mm] (in-plane)")
     form = ""
     if fit.form is not None:
-        form = f", quadratic form P-V {fit.form.pv:.4f} mm (p = {fit.form.p_value:.2g})"
+        form = (f"\nquadratic form P-V {fit.form.pv:.4f} mm (p = {fit.form.p_value:.2g}"
+                + ("" if fit.form.significant else ", not significant: dotted") + ")")
     ax.set_title(
         f"{Path(fit.source).name or 'cloud'}: {fit.n_inliers}/{fit.n_points} inliers, RMS {fit.rms:.4f} mm, "
         f"flatness {fit.flatness:.4f} mm{form}",
         fontsize=9,
     )
     if (~inl).any():
-        ax.legend(loc="upper right", fontsize=7)
+        ax.legend(loc="upper right", fontsize=9)
     return fig

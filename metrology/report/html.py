@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["Figure", "Table", "Verdict", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -37,24 +37,36 @@ REPORT_SUFFIXES = (".html", ".htm")
 _VERSIONED = (("metro",), ("numpy",), ("scipy",), ("open3d-cpu", "open3d"), ("trimesh",), ("matplotlib",))
 
 
+#: the page's column at a 1280 px window (62 rem less the padding, 16 px rem), in inches at 96
+#: px per inch: a report's figure is drawn this wide, so it shows at its own size
+COLUMN_IN = 960 / 96
+#: the smallest text in a report's figure, pt, at the figure's own size (as it shows at 1280 px)
+MIN_FIGURE_PT = 9.0
+
+
 @dataclass(frozen=True)
 class Figure:
-    """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption."""
+    """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption;
+    ``min_font_px``: its smallest text's height in the image's pixels (0: not known), which
+    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it."""
 
     caption: str
     data_uri: str
     alt: str = ""
+    min_font_px: float = 0.0
 
 
 @dataclass(frozen=True)
 class Table:
     """A table of numbers: ``header`` (tuple of str, units in the header) and ``rows`` (tuple of
-    tuples of str, already formatted); ``note`` under it."""
+    tuples of str, already formatted); ``note`` under it; ``wrap``: a table of words (its cells
+    wrap and align left, as the "what was run" table) rather than of numbers."""
 
     caption: str
     header: tuple
     rows: tuple
     note: str = ""
+    wrap: bool = False
 
 
 @dataclass(frozen=True)
@@ -67,16 +79,34 @@ class Verdict:
     label : str, the verdict's words when the default ones (from ``ok``) would say less or
         something else: what was found where no tolerance was stated ("flat within the
         noise"), or the cause named before the tolerance ("cause: drift on L3; ...")
+    checks : tuple of (tag, words), one line per judged quantity, each coloured by its tag:
+        ``pass``, ``FAIL`` (a limit the user set), ``info`` or ``note`` (information within
+        or beyond a limit the user did not set) (:func:`metrology.report.verdicts.check_words`)
     """
 
     ok: bool | None
     headline: str
     cause: str = ""
     label: str = ""
+    checks: tuple = ()
 
     @property
     def word(self) -> str:
-        return self.label or {True: "within tolerance", False: "NOT within tolerance", None: "information"}[self.ok]
+        return self.label or WORDS[self.ok]
+
+
+#: the verdict's words: passed (every gating check passed), FAILED, information (nothing gated)
+WORDS = {True: "passed", False: "FAILED", None: "information"}
+
+
+def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
+    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`: passed or
+    FAILED when a check gates, information when none does; one line per check."""
+    from metrology.report.verdicts import check_words
+
+    gated = any(c.gate for c in verdict.checks)
+    return Verdict(verdict.passed if gated else None, headline, cause, label,
+                   tuple(check_words(c) for c in verdict.checks))
 
 
 @dataclass(frozen=True)
@@ -87,7 +117,8 @@ class Section:
     text : tuple of str, preformatted blocks (the command's text output, a fit report);
     limits : tuple of str, what the data could not determine; next_steps : tuple of str,
     what to do next (poses to add, a command to run, a datum to re-measure);
-    link : str, a relative link to this section's own report (the demo's index)
+    link : str, a relative link to this section's own report (the demo's index);
+    statements : tuple of str, what the section states (a certificate's conditions)
     """
 
     title: str
@@ -98,6 +129,7 @@ class Section:
     limits: tuple = ()
     next_steps: tuple = ()
     link: str = ""
+    statements: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -150,6 +182,11 @@ def _written() -> str:
     return t.strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
+def written() -> str:
+    """The time a file is written, UTC (``SOURCE_DATE_EPOCH`` when set)."""
+    return _written()
+
+
 def command_line() -> str:
     """This process's command line, as a shell would take it back (``metro ...``)."""
     import shlex
@@ -175,23 +212,46 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
     return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
 
 
-def figure_from_png(png: bytes, caption: str, alt: str = "") -> Figure:
+def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0) -> Figure:
     """Embed PNG bytes as a :class:`Figure`."""
-    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption)
+    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption,
+                  min_font_px)
+
+
+def fit_to_column(fig) -> float:
+    """Draw ``fig`` for the page: no wider than :data:`COLUMN_IN` (the height kept), every text at
+    least :data:`MIN_FIGURE_PT`, laid out again; returns its smallest text size, pt."""
+    from matplotlib.text import Text
+
+    w, h = fig.get_size_inches()
+    if w > COLUMN_IN:
+        fig.set_size_inches(COLUMN_IN, h)
+    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip()]
+    for t in texts:
+        if t.get_fontsize() < MIN_FIGURE_PT:
+            t.set_fontsize(MIN_FIGURE_PT)
+    if fig.get_layout_engine() is None:
+        import warnings
+
+        with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
+            warnings.simplefilter("ignore")
+            fig.tight_layout()
+    return min((t.get_fontsize() for t in texts), default=MIN_FIGURE_PT)
 
 
 def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> Figure:
-    """Embed a matplotlib figure as PNG (and close it)."""
+    """Embed a matplotlib figure as PNG (and close it), drawn for the page (:func:`fit_to_column`)."""
     import io
 
     from metrology.report.style import close
 
     buf = io.BytesIO()
     try:
+        pt = fit_to_column(fig)
         fig.savefig(buf, format="png", dpi=dpi)
     finally:
         close(fig)
-    return figure_from_png(buf.getvalue(), caption, alt)
+    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0)
 
 
 def check_report_path(path) -> None:
@@ -232,7 +292,8 @@ def render_html(title: str, run: RunInfo, sections) -> str:
     env.filters["ticks"] = _ticks
     overall = [s.verdict.ok for s in sections]
     ok = False if False in overall else (True if True in overall else None)
-    return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok)
+    return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok,
+                                                     words=WORDS)
 
 
 def _ticks(text):

@@ -140,9 +140,25 @@ def per_point_text(run: NormalsRun, fmt: str) -> str:
 
 
 def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
-    """A PNG map of both methods' errors over the panel (its best-fit plane), as bytes."""
+    """:func:`error_map_figure` as PNG bytes (110 dpi)."""
     import io
 
+    from metrology.report.style import close
+
+    fig = error_map_figure(run, tolerance_deg)
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=110)
+    finally:
+        close(fig)
+    return buf.getvalue()
+
+
+def error_map_figure(run: NormalsRun, tolerance_deg: float):
+    """Both methods' errors over the panel (its best-fit plane), each on its own colour scale
+    (its own smallest to largest error: one method's larger errors do not darken the other's map), the
+    points over the tolerance ringed, the points not measured as grey × where there are any;
+    returns the figure."""
     from metrology.report.plots import pyplot
 
     plt = pyplot()
@@ -152,33 +168,28 @@ def plot_error_map(run: NormalsRun, tolerance_deg: float) -> bytes:
     n = np.linalg.svd(pts - c, full_matrices=False)[2][-1] if len(pts) >= 3 else np.array([0.0, 0.0, 1.0])
     n = n if np.all(np.isfinite(n)) and np.linalg.norm(n) > 0.5 else np.array([0.0, 0.0, 1.0])
     uv = (pts - c) @ np.vstack(plane_axes(n)).T  # the axes of panel_plane
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), constrained_layout=True)
+    fig, axes = plt.subplots(2, 1, figsize=(8, 9), constrained_layout=True)
     ep, es = np.degrees(run.err_plane), np.degrees(run.err_sphere)
-    vmax = float(np.nanmax(np.concatenate([ep, es, [tolerance_deg]])))
     for ax, e, name in ((axes[0], ep, "micro-plane"), (axes[1], es, "micro-sphere")):
         ok = np.isfinite(e)
-        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=e[ok], cmap="viridis", vmin=0, vmax=vmax, s=18)
+        lo, hi = (float(np.min(e[ok])), float(np.max(e[ok]))) if np.any(ok) else (0.0, 1.0)
+        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=e[ok], cmap="viridis", vmin=lo, vmax=hi if hi > lo else lo + 1e-6, s=18)
+        fig.colorbar(sc, ax=ax, label=f"{name} normal error [deg]", shrink=0.9)
         big = ok & (e > tolerance_deg)
         ax.scatter(uv[big, 0], uv[big, 1], facecolors="none", edgecolors="tab:red", s=60, linewidths=1.2,
                    label=f"over tolerance (> {tolerance_deg:g} deg): {int(big.sum())}")
         if np.any(~ok):
             ax.scatter(uv[~ok, 0], uv[~ok, 1], marker="x", c="0.35", s=22, linewidths=1.0,
                        label=f"not measured: {int((~ok).sum())}")
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=7, frameon=False)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
         fin = e[ok]
         stats = f"max {fin.max():.3f}, mean {fin.mean():.3f} deg" if len(fin) else "no point"
-        ax.set_title(f"{name}: {stats}")
+        ax.set_title(f"{name}: {stats} (own colour scale)")
         ax.set_xlabel("u [mm] (panel best-fit plane)")
         ax.set_ylabel("v [mm]")
         ax.set_aspect("equal")
         ax.grid(False)
-    fig.colorbar(sc, ax=axes, label="normal error [deg]", shrink=0.9)
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    return buf.getvalue()
+    return fig
 
 
 def summary_text(summary: dict) -> str:

@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from metrology.core.tolerances import CORRELATION_REPORT, DRILLING_TOLERANCE_DEG
-from metrology.report.html import Section, Table, Verdict, figure_from_matplotlib, figure_from_png
+from metrology.report.html import Section, Table, figure_from_matplotlib, verdict_box
 
 __all__ = ["plane_section", "calibration_section", "validation_section", "diagnosis_section", "normals_section"]
 
 
-#: "±" between non-breaking spaces: a value and its uncertainty stay on one line
-_PM = "\u00a0±\u00a0"
+#: "±" between spaces: on a narrow page a cell breaks there rather than inside a number
+_PM = " ± "
 
 
 def _pm(v, se, unit, digits=4):
@@ -28,11 +28,13 @@ def _num(v, missing="—", digits=4):
     return f"{v:.{digits}f}" if v is not None and np.isfinite(v) else missing
 
 
-def plane_section(fit, points) -> Section:
+def plane_section(fit, points, flatness_mm: float | None = None) -> Section:
     """``metro fit-plane``: the datum plane, described by what was found (no flatness
     tolerance is stated, so none is judged): flat within the noise, a form detected (a
-    significant quadratic form, its P-V in µm), or a scan that holds more than the datum."""
+    significant quadratic form, its P-V in µm), or a scan that holds more than the datum.
+    With ``flatness_mm`` (``--flatness-mm``) the P-V is judged against it."""
     from metrology.report.datum import format_plane_fit, residual_map_figure
+    from metrology.report.verdicts import plane_verdict
 
     d = fit.to_dict()
     form = d["form"]
@@ -77,9 +79,10 @@ def plane_section(fit, points) -> Section:
                       f"{form['pv_mm']:.4f} mm) is not ruled out")
     limits.append("the plane is in the tracker frame: its link to the robot (the poses) is not checked here")
     fig = residual_map_figure(points, fit)
-    return Section("Datum plane (metro fit-plane)", Verdict(None, head, cause, label),
+    return Section("Datum plane (metro fit-plane)", verdict_box(plane_verdict(fit, flatness_mm), head, cause, label),
                    figures=(figure_from_matplotlib(fig, "Residual to the fitted plane over the plate (inliers coloured, "
-                                                   "outliers grey ×; contours: the fitted quadratic form)."),),
+                                                   "outliers grey ×; contours: the fitted quadratic form, dotted when not "
+                                                   "significant)."),),
                    tables=(Table("Plane and its uncertainty (1 σ)", ("quantity", "value", "1 σ", "unit"), tuple(rows)),),
                    text=(format_plane_fit(fit),), limits=tuple(limits), next_steps=tuple(nxt))
 
@@ -103,13 +106,13 @@ def calibration_section(report) -> Section:
     fits = fit_summaries(report)
     noise = noise_advice(report)
     precision = precision_advice(report)
-    ok = not noise and not precision
     worst = max(d["sensors"], key=lambda s: s["residual_rms_mm"] / s["noise_mm"] if s["noise_mm"] > 0 else 0)
     head = (f"{d['method']} on {d['n_poses']} poses: residual RMS up to {1e3 * worst['residual_rms_mm']:.1f} µm "
             f"({worst['name']}) against a stated noise of {1e3 * worst['noise_mm']:.1f} µm")
     causes = []
     if noise:
-        causes.append("the residuals exceed the stated noise: the model misses something (or the noise is understated)")
+        causes.append("model adequacy: the residuals exceed the stated noise: the model misses something (or the noise "
+                      "is understated)")
     if precision:
         causes.append(precision[0])
     if not causes:
@@ -140,13 +143,15 @@ def calibration_section(report) -> Section:
     figs = (figure_from_matplotlib(convergence_figure(report), conv),
             figure_from_matplotlib(residuals_figure(report), "Reading residuals of the calibrated layout against the "
                                    "reading, the incidence angle and the pose: a trend is a missing effect."))
-    return Section("Sensor calibration (metro calibrate)", Verdict(ok, head, "; ".join(causes)), figures=figs,
+    return Section("Sensor calibration (metro calibrate)", verdict_box(report.verdict(), head, "; ".join(causes)),
+                   figures=figs,
                    tables=tables, text=tuple(fit_report(f) for f in fits), limits=tuple(limits), next_steps=tuple(nxt))
 
 
 def validation_section(report, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Section:
     """``metro validate``: the validated layout's largest deviation against the tolerance."""
     from metrology.report.validation import layout_words, left_out, validation_figure, validation_verdict
+    from metrology.report.verdicts import validation_checks
 
     v = validation_verdict(report, tolerance_deg)
     who = layout_words(report, v["label"])
@@ -173,7 +178,7 @@ def validation_section(report, tolerance_deg: float = DRILLING_TOLERANCE_DEG) ->
     if gone:
         nxt.append(f"Re-measure pose(s) {', '.join(gone)} with every beam on the datum.")
     fig = validation_figure(report, tolerance_deg)
-    return Section("Validation on held-out poses (metro validate)", Verdict(v["ok"], head, cause),
+    return Section("Validation on held-out poses (metro validate)", verdict_box(validation_checks(v), head, cause),
                    figures=(figure_from_matplotlib(fig, "Deviation of the measured normal from the datum normal per pose "
                                                    "(log axis), dashed: the tolerance."),),
                    tables=(Table("Deviation of the measured normal [deg]; mean ± 1 σ of the mean",
@@ -186,11 +191,13 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
     from metrology.report.diagnose import UNEXPLAINED_NEXT, detectable_words, diagnosis_figures, report_text
+    from metrology.report.verdicts import diagnosis_verdict
 
     D = diag.to_dict()
     cause = D["cause"]
     held = D["discrepancy"]["measured_heldout_normal_deg"]
-    ok = bool(held <= tolerance_deg)
+    verdict = diagnosis_verdict(diag, tolerance_deg)
+    ok = verdict.passed
     who = f" on {', '.join(D['sensors'])}" if D["sensors"] else ""
     head = (f"cause: {cause}{who} (confidence {D['confidence']}); held-out normal deviation {held:.5f} deg "
             f"against a tolerance of {tolerance_deg:g} deg")
@@ -229,7 +236,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
         text.append(fit_report(fit))
     text.append(report_text(diag))
     figs = tuple(figure_from_matplotlib(f, cap) for _, f, cap in diagnosis_figures(diag))
-    return Section("Diagnosis: what the base model misses (metro diagnose)", Verdict(ok, head, D["summary"], label),
+    return Section("Diagnosis: what the base model misses (metro diagnose)", verdict_box(verdict, head, D["summary"], label),
                    figures=figs, tables=tuple(tables), text=tuple(text), limits=tuple(limits), next_steps=tuple(nxt))
 
 
@@ -259,14 +266,18 @@ def extension_fit_summary(diag):
                       float(f.chi2), tuple(params), corr)
 
 
-def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> Section:
-    """``metro normals``: the recommended method's first measurements against the tolerance."""
+def normals_section(summary: dict, fig, tolerance_deg: float) -> Section:
+    """``metro normals``: the recommended method's errors against the tolerance; ``fig`` the
+    error map (:func:`metrology.report.normals.error_map_figure`, or None); every fact of the
+    text output (:func:`metrology.report.normals.summary_text`) is on the page."""
     from metrology.panel.attitude import STATUS
+    from metrology.report.normals import summary_text
+    from metrology.report.verdicts import normals_verdict
 
     rec = summary["recommendation"]
     m = rec["method"]
     s = summary[m]
-    ok = bool(s["within_tolerance"] >= 1.0)
+    verdict = normals_verdict(summary, tolerance_deg)
     head = (f"micro-{m}: {100 * s['within_tolerance']:.1f} % of {s['n']} points within {tolerance_deg:g} deg "
             f"(max {s['max_deg']:.4f}, 95th percentile {s['p95_deg']:.4f} deg)")
     rows = []
@@ -277,17 +288,24 @@ def normals_section(summary: dict, png: bytes | None, tolerance_deg: float) -> S
                      _num(t.get("final_max_deg"), "— (no loop)")))
     bad = {k: v for k, v in summary["status"].items() if k != "ok" and v}
     limits = [f"{v} point(s) not measured: {STATUS[k]}" for k, v in bad.items()]
-    nxt = []
-    if bad:
-        nxt.append("Move the points not measured away from the panel's edges, or use a shorter stand-off.")
-    if not ok:
-        nxt.append("Calibrate the head (`metro calibrate`) and check it with `metro validate` before drilling.")
-    figs = () if png is None else (figure_from_png(png, "Normal error over the panel, each method; open red circles: "
-                                                    "over the tolerance; grey ×: not measured."),)
+    if summary.get("grid_dropped"):
+        limits.append(f"grid: {summary['grid_dropped']} nodes left out: the head's footprint would cross a crease, "
+                      "a hole or the panel boundary")
+    limits += list(summary.get("warnings", ()))
     info = summary["info"]
-    return Section("Normals on the panel (metro normals)", Verdict(ok, head, rec["text"]), figures=figs,
+    limits.append(f"units: {info['units']}")
+    nxt = []
+    if bad or summary.get("grid_dropped"):
+        nxt.append("Move the points not measured away from the panel's edges, or use a shorter stand-off.")
+    if not verdict.passed:
+        nxt.append("Calibrate the head (`metro calibrate`) and check it with `metro validate` before drilling.")
+    nxt.append(f"Use micro-{m} on this panel (the recommendation below).")
+    marks = "grey ×: not measured." if bad else "every point was measured."
+    figs = () if fig is None else (figure_from_matplotlib(fig, "Normal error over the panel, each method on its own "
+                                                          f"colour scale; open red circles: over the tolerance; {marks}"),)
+    return Section("Normals on the panel (metro normals)", verdict_box(verdict, head, rec["text"]), figures=figs,
                    tables=(Table("Normal error of the first measurement [deg] (mean ± std over the points)",
                                  ("method", "points", "max", "mean ± std", "p95", "within tol.", "after loop, max"),
                                  tuple(rows), f"engine {info['engine']}, stand-off {info['standoff_mm']:.3f} mm, "
                                  f"tilt {info['tilt_deg']:g} deg, reference normal: {info['reference_normal']}"),),
-                   limits=tuple(limits), next_steps=tuple(nxt))
+                   text=(summary_text(summary),), limits=tuple(limits), next_steps=tuple(nxt))

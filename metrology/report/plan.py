@@ -98,9 +98,14 @@ def follow_line(step) -> str:
     """One line per pose of ``calibrate --follow``: each sensor's largest standard errors and the
     normal's, and whether the targets are met (``step`` a :class:`~metrology.calibration.follow.FollowStep`)."""
     parts = [f"{step.k:4d} {step.pose_id}:"]
-    for name, se in zip(step.names, step.stderr):
-        parts.append(f"{name} zero {se[:3].max():.4f} mm tilt {np.rad2deg(se[3:].max()):.4f} deg;")
-    parts.append(f"normal {np.rad2deg(step.normal_sigma_rad):.5f} deg")
+    known = np.all(np.isfinite(step.stderr), axis=1)
+    if not np.any(known):  # no sensor has enough readings yet (a planned file before the cell fills it)
+        return " ".join(parts + ["waiting for readings"])
+    for name, se, ok in zip(step.names, step.stderr, known):
+        parts.append(f"{name} zero {se[:3].max():.4f} mm tilt {np.rad2deg(se[3:].max()):.4f} deg;" if ok else
+                     f"{name} waiting for readings;")
+    sn = np.rad2deg(step.normal_sigma_rad)
+    parts.append(f"normal {sn:.5f} deg" if np.isfinite(sn) else "normal: waiting for readings")
     if step.met:
         parts.append("| targets met")
     return " ".join(parts)

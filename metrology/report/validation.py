@@ -14,6 +14,7 @@ import numpy as np
 
 from metrology.calibration.validation import ValidationReport
 from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
+from metrology.report.verdicts import validation_checks, verdict_text
 
 __all__ = ["validation_text", "plot_validation", "validation_figure", "validation_verdict", "layout_words",
            "left_out"]
@@ -72,9 +73,9 @@ def validation_text(report: ValidationReport, tolerance_deg: float = DRILLING_TO
     if partial:
         lines.append(f"{partial} pose(s) with a missing reading: normal from the least-squares plane of the rest")
     v = validation_verdict(report, tolerance_deg)
-    lines.append(f"verdict: {layout_words(report, v['label'])} is {'within' if v['ok'] else 'NOT within'} "
-                 f"{tolerance_deg:g} deg: max {v['max_deg']:.4f} deg, mean {v['mean_deg']:.4f} +- "
-                 f"{v['mean_stderr_deg']:.4f} deg (1 sigma of the mean) over {v['n_poses']} poses")
+    lines.append(f"{layout_words(report, v['label'])}: max {v['max_deg']:.4f} deg, mean {v['mean_deg']:.4f} ± "
+                 f"{v['mean_stderr_deg']:.4f} deg (1 σ of the mean) over {v['n_poses']} poses")
+    lines.append(verdict_text(validation_checks(v)))
     return "\n".join(lines)
 
 

@@ -54,7 +54,8 @@ def test_reproduce_experiment_layout_and_trials(tmp_path):
 
 
 def test_reproduce_bad_input_is_one_line_exit_2(tmp_path):
-    for args, msg in [(["--layout", "bogus"], "layout must be"), (["--standoff-mm", "60", "40"], "standoff")]:
+    for args, msg in [(["--layout", "bogus"], "layout must be"), (["--standoff-mm", "60,40"], "standoff"),
+                      (["--standoff-mm", "60"], "expected two numbers MIN,MAX in mm")]:
         r = runner.invoke(app, ["reproduce", *args, "--figures", str(tmp_path / "never")])
         assert r.exit_code == 2
         assert msg in r.output and len(r.output.strip().splitlines()) == 1

@@ -32,7 +32,10 @@ def test_cli_table_json_out_plot(tmp_path):
     r = runner.invoke(app, ["fit-plane", str(DATA_DIR / "datum_cloud.ply"), "--json", "--out", str(out), "--plot", str(png)])
     assert r.exit_code == 0, r.output
     printed = json.loads(r.stdout)
-    assert out.read_text() == r.stdout  # --json and --out carry the same bytes
+    # --json is what --out holds, plus the verdict (no --flatness-mm: information only, passed)
+    verdict = printed.pop("verdict")
+    assert json.loads(out.read_text()) == printed and verdict["passed"] is True
+    assert not any(c["gate"] for c in verdict["checks"])
     plane = Plane.from_json(out)
     np.testing.assert_array_equal(plane.normal, printed["normal"])
     assert plane.offset == printed["offset"] < 0
@@ -69,7 +72,7 @@ def _collinear(tmp_path):
         # NaN rows are missing returns: dropped with a count, refused only when too few remain
         (lambda d: _write(d, "nan.xyz", "1 2 3\nnan 1 1\nnan 5 6\n7 8 9\n"), [], r"nan\.xyz: 2 points of 4 \(2 with NaN dropped\), need at least 3"),
         (lambda d: _write(d, "abc.csv", "x,y,z\n1,2,3\n4,5,6\n7,8,z9\n"), [], r"abc\.csv: line 4, column 3: 'z9' is not a number"),
-        (lambda d: _write(d, "cloud.stl", "solid\n"), [], r"cloud\.stl: unknown point-cloud extension"),
+        (lambda d: _write(d, "cloud.stl", "solid\n"), [], r"cloud\.stl: unknown extension '\.stl' for CLOUD; expected one of \.csv"),
         (_cube, [], r"cube\.xyz: no datum plane: the cloud is .* thick"),
         (_cube, ["--threshold-mm", "0.05"], r"cube\.xyz: .*(no datum plane|all outliers)"),
         (lambda d: d / "missing.ply", [], r"missing\.ply: no such file"),

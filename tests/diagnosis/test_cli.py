@@ -27,7 +27,7 @@ def test_cli_simulate_then_diagnose(tmp_path):
     r = runner.invoke(app, ["diagnose", str(tmp_path / "x.csv"), "--plane", str(tmp_path / "plane.json"), "--layout",
                             str(tmp_path / "layout.toml"), "--json", "--folds", "3", "--report", str(tmp_path / "d.html")])
     assert r.exit_code == 0, r.output
-    out = json.loads(r.output)
+    out = json.loads(r.stdout)  # stderr: the "report: FILE" line
     assert out["cause"] == "outliers" and out["sensors"] == ["L4"]
     assert out["datum_form"] is None
     assert {"heldout", "candidates", "extended", "discrepancy"} <= set(out)

@@ -113,9 +113,20 @@ def test_calibrate_report_names_the_cause_and_the_next_command(tmp_path):
                                 "--report", str(out), "--plot", str(tmp_path / "c.pdf")]))
     pdf = (tmp_path / "c.pdf").read_bytes()
     assert pdf.startswith(b"%PDF") and b"/Count 2" in pdf
-    text = check_page(out, [export, PLANE, NOMINAL], 2, "NOT within tolerance")
+    # no target set: the residuals against the stated noise (model adequacy) and the default
+    # precision target are information, each its own line, not a failed tolerance
+    text = check_page(out, [export, PLANE, NOMINAL], 2, "overall: information")  # the certificate, the calibration
+    html = out.read_text(encoding="utf-8")
+    assert "tolerance" not in html[:html.index("<img")].lower()
+    assert re.search(r'<li class="note"><span class="tag">note</span> model adequacy: L1 residual RMS', html)
+    assert re.search(r'<li class="note"><span class="tag">note</span> precision target: zero points', html)
     # the measured run's residuals exceed the stated noise (its truth has effects the base model lacks)
     assert "metro diagnose" in text and "reduced χ²" in text
+    assert r.stderr.strip().splitlines()[-1] == f"report: {out}"
+    _ok(runner.invoke(app, ["calibrate", str(export), "--plane", str(PLANE), "--layout", str(NOMINAL),
+                            "--report", str(out), "--target-mm", "1", "--target-deg", "1"]))
+    check_page(out, [export], 2, "overall: passed")
+    assert '<li class="pass"><span class="tag">pass</span> precision target: zero points' in out.read_text()
     assert "[[Fit Statistics]]" in r.output and "reduced chi-square" in r.output and "[[Correlations]]" in r.output
 
 
@@ -123,7 +134,7 @@ def test_validate_report_judges_the_tolerance_and_names_the_poses_left_out(tmp_p
     out = tmp_path / "val.html"
     r = _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--layout-before",
                                 str(NOMINAL), "--report", str(out), "--tolerance-deg", "0.1"]))
-    text = check_page(out, [VAL, PLANE, TRUTH, NOMINAL], 1, "within tolerance")
+    text = check_page(out, [VAL, PLANE, TRUTH, NOMINAL], 1, "passed")
     d = json.loads(_ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH),
                                            "--json"])).output)
     gone = [p for p, n in zip(d["pose_id"], d["n_readings"]) if n < 3]
@@ -134,9 +145,11 @@ def test_validate_report_judges_the_tolerance_and_names_the_poses_left_out(tmp_p
     assert rows == [["nominal.toml", "(before)"], ["truth.toml", "(validated)"]] and "layout_before" not in r.output
     # a tolerance below the largest deviation turns the verdict
     tight = d["layouts"]["layout"]["max_deg"] / 2
-    _ok(runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out),
-                            "--tolerance-deg", f"{tight:.6f}"]))
-    check_page(out, [VAL], 1, "NOT within tolerance")
+    r = runner.invoke(app, ["validate", str(VAL), "--plane", str(PLANE), "--layout", str(TRUTH), "--report", str(out),
+                            "--tolerance-deg", f"{tight:.6f}"])
+    assert r.exit_code == 1, r.output
+    check_page(out, [VAL], 1, "FAILED")
+    assert '<li class="fail"><span class="tag">FAIL</span> drilling tolerance: max normal deviation' in out.read_text()
 
 
 def test_same_inputs_same_bytes(tmp_path, monkeypatch):
@@ -155,7 +168,7 @@ def test_demo_report_end_to_end(tmp_path):
     """The real demo with ``--report``: one page of the five steps, each step's own report beside it."""
     out = tmp_path / "demo.html"
     _ok(runner.invoke(app, ["demo", "--out", str(tmp_path / "o"), "--report", str(out)]))
-    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 7, "overall: NOT within tolerance")
+    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 7, "overall: passed")
     for name in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
         assert f"(metro {name})" in text and (tmp_path / "o" / f"{name}.html").exists()
 
@@ -165,7 +178,14 @@ def test_normals_report(tmp_path):
     panel, layout = DATA_DIR / "panel_cyl800.stl", DATA_DIR / "layout_table6.toml"
     _ok(runner.invoke(app, ["normals", str(panel), "--layout", str(layout), "--grid", "80", "--report", str(out),
                             "--engine", "trimesh"]))
-    check_page(out, [panel, layout], 1, "within tolerance")
+    text = check_page(out, [panel, layout], 1, "passed")
+    # every fact of the text output is on the page, and the caption promises no mark it does not draw
+    r = _ok(runner.invoke(app, ["normals", str(panel), "--layout", str(layout), "--grid", "80", "--engine", "trimesh"]))
+    page = html_lib.unescape(" ".join(text.split()))
+    for line in r.stdout.splitlines():
+        if not line.startswith(("verdict:", "  [")):
+            assert " ".join(line.split()) in page, line
+    assert "grey ×" not in text and "each method on its own colour scale" in text
 
 
 def test_demo_report_gathers_each_step_and_links_its_own(tmp_path):
@@ -182,7 +202,7 @@ def test_demo_report_gathers_each_step_and_links_its_own(tmp_path):
 
     out = tmp_path / "demo.html"
     assert run_demo(DATA_DIR, tmp_path / "o", step, lambda *a: None, report=out) == 0
-    text = check_page(out, [CAL], 0, "overall: NOT within tolerance")  # one step failed: the overall verdict
+    text = check_page(out, [CAL], 0, "overall: FAILED")  # one step failed: the overall verdict
     for (cmd, _), name in zip((line.split(maxsplit=1) for _, line in DEMO_STEPS), STEP_REPORTS):
         assert f"{cmd} headline" in text and (tmp_path / "o" / name).exists()
         assert f'href="o/{name}"' in out.read_text()
@@ -245,8 +265,9 @@ def _report_of(command, tmp_path) -> Path:
                                      pytest.param("diagnose", marks=pytest.mark.slow),
                                      pytest.param("demo", marks=pytest.mark.slow)])
 def test_reports_open_in_chromium_without_console_error_or_request(tmp_path, command):
-    """Every command's report in headless Chromium at a phone's width: no console message, no
-    request, a screenshot (diagnose and the real demo are slow: marked so)."""
+    """Every command's report in headless Chromium at 1280 px and a phone's width: no console
+    message, no request, no clipped text, figure text of 9 pt or more at 1280 px, a screenshot
+    each (diagnose and the real demo are slow: marked so)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -254,5 +275,28 @@ def test_reports_open_in_chromium_without_console_error_or_request(tmp_path, com
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     out = _report_of(command, tmp_path)
-    assert mod.main([str(out), "--width", "412", "--height", "900"]) == 0
-    assert out.with_suffix(".png").stat().st_size > 0
+    assert mod.main([str(out), "--widths", "1280,412", "--height", "900"]) == 0
+    for width in (1280, 412):
+        assert out.with_name(f"{out.stem}-{width}.png").stat().st_size > 0
+
+
+def test_report_figures_are_drawn_to_the_column_with_9_pt_text():
+    """A figure wider than the page's column is drawn at the column's width, every text at 9 pt
+    or more, and the page states its smallest text (what the Chromium check turns into pt)."""
+    from metrology.report.html import COLUMN_IN, MIN_FIGURE_PT, figure_from_matplotlib
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(13, 4))
+    ax.plot([0, 1], [0, 1], label="a line")
+    ax.legend(fontsize=6)
+    ax.set_title("small", fontsize=5)
+    f = figure_from_matplotlib(fig, "caption")
+    import base64
+    import io
+
+    from matplotlib.image import imread
+
+    png = imread(io.BytesIO(base64.b64decode(f.data_uri.split(",", 1)[1])))
+    assert png.shape[1] == round(COLUMN_IN * 96)  # 960 px: shown at its own size at 1280 px
+    assert f.min_font_px == pytest.approx(MIN_FIGURE_PT * 96 / 72)

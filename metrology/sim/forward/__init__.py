@@ -8,7 +8,10 @@ Modules: :mod:`.surface` (datum height field), :mod:`.beams` (beam casting), :mo
 (sensor rings), :mod:`.poses` (poses and pose error), :mod:`.characteristic` (reading error vs
 distance), :mod:`.drift` (time, temperature, drift), :mod:`.incidence` (incidence bias),
 :mod:`.errors` (noise, gross readings, blanks, periodic error, cross-talk), :mod:`.families`
-(the causes and their sizes), :mod:`.cases` (blind cases), :mod:`.write` (case files).
+(the causes and their sizes), :mod:`.cases` (blind cases), :mod:`.write` (case files); the
+production hole log of ``metro simulate-log``: :mod:`.panels` (flat, sphere, cylinder with
+closed-form rays), :mod:`.log_spec` (set-up, faults, chunks), :mod:`.log` (generation, the cell's
+own attitude adjustment), :mod:`.log_write` (CSV, partitioned Parquet, truth).
 """
 
 from metrology.sim.forward.beams import BeamHits, cast_beams
@@ -18,6 +21,10 @@ from metrology.sim.forward.drift import Drift, TemperatureProfile, draw_drift, d
 from metrology.sim.forward.families import CATALOGUE, FAMILIES, OUT_OF_CATALOGUE, Effect, FamilySpec
 from metrology.sim.forward.head import Head, draw_head, perturb_layout
 from metrology.sim.forward.incidence import IncidenceBias, draw_incidence
+from metrology.sim.forward.log import simulate_cell, simulate_log
+from metrology.sim.forward.log_spec import HoleChunk, LogSpec, SensorDrift, SensorShift
+from metrology.sim.forward.log_write import write_log_csv, write_log_parquet
+from metrology.sim.forward.panels import PANELS, CylinderPanel, FlatPanel, Panel, SpherePanel, make_panel
 from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
 from metrology.sim.forward.surface import DatumSurface, draw_surface, flat_surface, sample_cloud
 from metrology.sim.forward.write import CASE_FILES, write_case
@@ -27,5 +34,7 @@ __all__ = [
     "Drift", "TemperatureProfile", "draw_drift", "draw_temperature", "draw_times", "CATALOGUE", "FAMILIES",
     "OUT_OF_CATALOGUE", "Effect", "FamilySpec", "Head", "draw_head", "perturb_layout", "IncidenceBias",
     "draw_incidence", "draw_poses", "perturb_poses", "tilt_of", "DatumSurface", "draw_surface", "flat_surface",
-    "sample_cloud", "CASE_FILES", "write_case",
+    "sample_cloud", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
+    "SensorDrift", "SensorShift", "write_log_csv", "write_log_parquet", "PANELS", "CylinderPanel", "FlatPanel",
+    "Panel", "SpherePanel", "make_panel",
 ]

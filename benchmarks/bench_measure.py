@@ -1,0 +1,219 @@
+"""Speed and memory of ``metro measure``, against baselines measured in the same run.
+
+    python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
+
+On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
+``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
+
+1. **in process**: :func:`metrology.measure.holes.measure_batch` on batches already in memory, with
+   and without after-readings (holes/s; the issue's goal: >= 1e6 holes/s);
+2. **whole process**: ``metro measure LOG.parquet --layout L --out holes.parquet`` against a plain
+   script that reads the same file with pyarrow, fits the 4-point planes before and after the
+   adjustment with batched numpy (the same closed-form least squares, normals only: no
+   uncertainty, verdict, drift watch or summary) and writes the normals (best wall time of
+   ``--repeat``, run in turn; its CPU time, which the other jobs on a shared machine disturb
+   less; peak RSS). Goal: <= 1.5x;
+3. **Dask**: the partitioned log with ``--workers 1`` and ``--workers 2`` (holes/s, the cluster's
+   start included), against the single process on the same folder;
+4. ``--big N``: a partitioned log of N holes (generated in ``--workdir``, never committed) measured in
+   one process: wall time and peak RSS against the 1e6-hole run's (goal: RSS within 1.2x).
+
+Results go to stdout (a markdown table) and ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+RUN = ("import resource, subprocess, sys, time\n"
+       "t = time.perf_counter()\n"
+       "r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+       "dt = time.perf_counter() - t\n"
+       "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+       "print(dt, u.ru_maxrss, r.returncode, u.ru_utime + u.ru_stime)\n")
+
+BASELINE = '''
+import sys, tomllib
+import numpy as np, pyarrow as pa, pyarrow.parquet as pq
+log, layout, out = sys.argv[1:4]
+with open(layout, "rb") as fh:
+    sensors = tomllib.load(fh)["sensors"]
+E = np.array([s["zero"] for s in sensors]); u = np.array([s["direction"] for s in sensors])
+u /= np.linalg.norm(u, axis=1, keepdims=True)
+names = [s["name"] for s in sensors]
+pf = pq.ParquetFile(log)
+after = all(f"d_{n}_after" in pf.schema_arrow.names for n in names)
+sets = [[f"d_{n}" for n in names]] + ([[f"d_{n}_after" for n in names]] if after else [])
+writer = None
+
+
+def normals(d):
+    x, y, z = (E[None, :, k] + d * u[None, :, k] for k in range(3))
+    xc, yc, zc = (v - v.mean(1, keepdims=True) for v in (x, y, z))
+    sxx, syy, sxy, sxz, syz = ((a * c).sum(1) for a, c in ((xc, xc), (yc, yc), (xc, yc), (xc, zc), (yc, zc)))
+    det = sxx * syy - sxy * sxy
+    gx, gy = (syy * sxz - sxy * syz) / det, (sxx * syz - sxy * sxz) / det
+    r = np.sqrt(1 + gx * gx + gy * gy)
+    return -gx / r, -gy / r, 1 / r
+
+
+for b in pf.iter_batches(batch_size=1 << 18, columns=["hole_id", *sum(sets, [])]):
+    cols = {"hole_id": b.column("hole_id")}
+    for k, cs in enumerate(sets):
+        d = np.stack([b.column(c).to_numpy(zero_copy_only=False) for c in cs], axis=1)
+        for axis, v in zip("xyz", normals(d)):
+            cols[f"normal{'_after' * k}_{axis}"] = v
+    t = pa.table(cols)
+    if writer is None:
+        writer = pq.ParquetWriter(out, t.schema)
+    writer.write_table(t)
+writer.close()
+'''
+
+
+def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True):
+    """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions; the layout."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
+    from metrology.io.layout import save_layout
+    from metrology.sim.forward import perturb_layout
+    from metrology.sim.forward.log import simulate_log
+    from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.forward.log_write import log_table
+    from metrology.sim.forward.panels import make_panel
+
+    rng = np.random.default_rng(seed)
+    nominal = layout_from_table(TABLE6_NOMINAL, noise_mm=0.003)
+    nominal = nominal.with_params(nominal.zero, nominal.direction, range_mm=np.tile([30.0, 70.0], (4, 1)))
+    true = perturb_layout(rng, nominal, zero_error_mm=(0.001, 0.005), direction_error_deg=(0.001, 0.005))
+    C = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, 4))
+    cal = nominal.with_params(nominal.zero, nominal.direction, covariance=C)
+    save_layout(cal, workdir / "calibrated.toml")
+    spec = LogSpec(true_layout=true, cell_layout=cal, panel=make_panel("flat"))
+    single = pq.ParquetWriter(workdir / "log.parquet", log_table(next(simulate_log(spec, seed, 1))).schema) \
+        if single else None
+    per = -(-holes // parts)
+    folder = workdir / "log"
+    k = 0
+    for chunk in simulate_log(spec, seed, holes, 1, chunk_holes=per):
+        t = log_table(chunk)
+        if single is not None:
+            single.write_table(t)
+        d = folder / f"part={k:04d}"
+        d.mkdir(parents=True, exist_ok=True)
+        pq.write_table(t, d / "part-0.parquet")
+        k += 1
+    if single is not None:
+        single.close()
+    return workdir / "log.parquet", folder, workdir / "calibrated.toml"
+
+
+def in_process(log, layout, repeat, cpu=False):
+    import pyarrow.parquet as pq
+
+    from metrology.io.layout import load_layout
+    from metrology.measure.holes import Settings, measure_batch
+
+    lay = load_layout(layout)
+    clock = time.process_time if cpu else time.perf_counter
+    table = pq.read_table(log)
+    before_only = table.drop_columns([c for c in table.column_names if c.endswith("_after")])
+    out = {}
+    for name, t in (("before", before_only), ("before+after", table)):
+        best = np.inf
+        for _ in range(repeat):
+            t0 = clock()
+            for b in t.to_batches(max_chunksize=1 << 18):
+                import pyarrow as pa
+
+                measure_batch(lay, pa.Table.from_batches([b]), Settings())
+            best = min(best, clock() - t0)
+        out[name] = t.num_rows / best
+    return out
+
+
+def process(cmd, repeat, cpu=None):
+    """Best wall time (s) and peak RSS (MB) of ``cmd`` over ``repeat`` runs; its best CPU time into ``cpu``."""
+    best, rss, best_cpu = np.inf, 0, np.inf
+    for _ in range(repeat):
+        r = subprocess.run([sys.executable, "-c", RUN, *cmd], capture_output=True, text=True, check=True)
+        dt, kb, rc, c = r.stdout.split()
+        if int(rc) not in (0, 1):
+            raise RuntimeError(f"{cmd} exited {rc}")
+        best, rss, best_cpu = min(best, float(dt)), max(rss, int(kb)), min(best_cpu, float(c))
+    if cpu is not None:
+        cpu.append(best_cpu)
+    return best, rss / 1024.0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--holes", type=float, default=1e6)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    work = Path(tempfile.mkdtemp(prefix="bench-measure-")) if args.workdir is None else args.workdir
+    work.mkdir(parents=True, exist_ok=True)
+    metro = shutil.which("metro", path=os.path.dirname(sys.executable)) or "metro"
+    res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
+    t0 = time.perf_counter()
+    log, folder, layout = make_log(work, int(args.holes), 8)
+    res["generate_s"] = time.perf_counter() - t0
+    res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
+    res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
+    out = work / "holes.parquet"
+    cpu_m, cpu_b = [], []
+    res["metro_s"], res["metro_rss_mb"] = process([metro, "-q", "measure", str(log), "--layout", str(layout),
+                                                   "--out", str(out)], args.repeat, cpu_m)
+    res["baseline_s"], res["baseline_rss_mb"] = process([sys.executable, "-c", BASELINE, str(log), str(layout),
+                                                         str(work / "normals.parquet")], args.repeat, cpu_b)
+    res["metro_cpu_s"], res["baseline_cpu_s"] = cpu_m[0], cpu_b[0]
+    res["ratio_cpu"] = cpu_m[0] / cpu_b[0]
+    res["ratio_time"] = res["metro_s"] / res["baseline_s"]
+    res["ratio_rss"] = res["metro_rss_mb"] / res["baseline_rss_mb"]
+    for label, extra in (("one process", []), ("dask 1 worker", ["--workers", "1"]), ("dask 2 workers", ["--workers", "2"])):
+        target = work / f"out-{label.replace(' ', '-')}"
+        shutil.rmtree(target, ignore_errors=True)
+        t, rss = process([metro, "-q", "measure", str(folder), "--layout", str(layout), "--out", str(target), *extra], 1)
+        res.setdefault("partitioned_holes_per_s", {})[label] = args.holes / t
+        if label == "one process":
+            res["partitioned_rss_mb"] = rss
+        shutil.rmtree(target, ignore_errors=True)
+    if args.big:
+        bigdir = work / "big"
+        shutil.rmtree(bigdir, ignore_errors=True)
+        bigdir.mkdir()
+        t0 = time.perf_counter()
+        _, bigfolder, biglayout = make_log(bigdir, int(args.big), max(int(args.big // 1e6), 1), seed=2, single=False)
+        res["big_generate_s"] = time.perf_counter() - t0
+        t, rss = process([metro, "-q", "measure", str(bigfolder), "--layout", str(biglayout), "--out",
+                          str(bigdir / "out")], 1)
+        res.update(big_holes=int(args.big), big_s=t, big_rss_mb=rss, big_rss_ratio=rss / res["partitioned_rss_mb"])
+        shutil.rmtree(bigdir, ignore_errors=True)
+    print(json.dumps(res, indent=1))
+    if args.json:
+        args.json.write_text(json.dumps(res, indent=1))
+    if args.workdir is None:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

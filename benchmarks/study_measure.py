@@ -1,0 +1,161 @@
+"""Does `angle ± U95` of `metro measure` hold the true angle in 95 % of holes?
+
+Over many calibrations x holes, for the paper's Table 2 and Table 6 heads and a random 3-sensor ring,
+on flat, spherical and cylindrical panels, everything drawn by the independent forward simulator
+(metrology/sim/forward, never the fit's own formulas):
+
+1. the head's true layout: the nominal with each zero point moved 0.1-1 mm and each beam turned
+   0.1-2 deg (forward.head.perturb_layout);
+2. a calibration: `--poses` poses over a flat datum (forward.poses.draw_poses, beams cast by
+   forward.beams), readings with Gaussian noise, calibrated by `metrology.calibration` (lsq) to a
+   layout carrying its covariance, the datum plane known exactly (its own uncertainty is not
+   propagated: see docs/measure.md);
+3. a shift of holes on a panel (forward.log: true angle uniform 0.5-5 deg, the cell's adjustment with
+   the calibrated layout, after-readings), measured by metrology.measure with that layout;
+4. coverage: the share of holes whose true angle lies within angle ± U95, before and after the
+   adjustment. On curved panels, with --min-radius-mm R (the curvature bound in U95) and without it
+   (what the micro-plane's curvature bias does to a U95 that ignores it).
+
+    python benchmarks/study_measure.py --calibrations 40 --holes 500 --seed 1 --json out.json
+
+The Table 2 head's beams point -z; it is studied in the frame turned 180 deg about x (beams +z), where
+the forward simulator's poses face the datum: the geometry, and every angle, is the same.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import _one_blas_thread  # noqa: E402,F401
+
+
+def heads(rng):
+    from metrology.core.layout import SensorLayout
+    from metrology.core.paper import TABLE2_NOMINAL, TABLE6_NOMINAL, layout_from_table
+    from metrology.sim.forward import draw_head
+
+    flip = np.diag([1.0, -1.0, -1.0])
+    t2 = layout_from_table(TABLE2_NOMINAL)
+    t2 = SensorLayout(t2.names, t2.zero @ flip, t2.direction @ flip)
+    t6 = layout_from_table(TABLE6_NOMINAL)
+    three = draw_head(rng, 3).nominal
+    return {"table2": t2, "table6": t6, "ring3": SensorLayout(three.names, three.zero, three.direction)}
+
+
+def calibrate_head(rng, nominal, true, noise_mm, range_mm, n_poses, tilt_deg=14.0):
+    """The layout a calibration by metro gives (with covariance), from poses the forward simulator draws."""
+    from dataclasses import replace
+
+    from metrology.calibration.estimators import calibrate
+    from metrology.core.frames import plane_in_tcs
+    from metrology.core.observations import Observations
+    from metrology.sim.forward import draw_poses, flat_surface
+
+    surface = flat_surface(np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    z0 = float(-np.mean(true.zero[:, 2]))
+    rot, trans, hits = draw_poses(rng, surface, true.zero, true.direction, n_poses, tilt_max_rad=np.radians(tilt_deg),
+                                  range_mm=range_mm, z0_mm=z0)
+    d = hits.d + rng.normal(0.0, noise_mm, hits.d.shape)
+    normal, offset = plane_in_tcs(surface.normal, -float(surface.normal @ surface.origin), rot, trans)
+    nominal = replace(nominal, noise_mm=np.full(nominal.n, noise_mm), range_mm=np.tile(range_mm, (nominal.n, 1)))
+    return calibrate(nominal, Observations(normal, offset, d), "lsq").layout
+
+
+def run(args):
+    import pyarrow as pa
+
+    from metrology.measure.holes import Settings, measure_batch
+    from metrology.measure.normals import hole_normals
+    from metrology.sim.forward import perturb_layout
+    from metrology.sim.forward.log import simulate_cell
+    from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.forward.panels import make_panel
+
+    rng = np.random.default_rng(args.seed)
+    out = {"args": vars(args), "rows": []}
+    range_mm = np.array([30.0, 70.0])
+    panels = [("flat", None), ("sphere", args.radius), ("cylinder", args.radius)]
+    for hname, nominal in heads(rng).items():
+        for kind, R in panels:
+            t0 = time.perf_counter()
+            hits = {"before": [], "after": [], "before_nobound": [], "after_nobound": []}
+            u95 = {"before": [], "after": []}
+            for c in range(args.calibrations):
+                true = perturb_layout(rng, nominal)
+                true = true.with_params(true.zero, true.direction, noise_mm=np.full(true.n, args.noise),
+                                        range_mm=np.tile(range_mm, (true.n, 1)))
+                cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
+                axis = (np.cos(a := rng.uniform(0, np.pi)), np.sin(a), 0.0)
+                panel = make_panel(kind, R, axis=axis) if R else make_panel(kind)
+                spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, spin_rad=np.pi)
+                chunk = next(simulate_cell(spec, int(rng.integers(2**31)), 0, args.holes, chunk_holes=args.holes))
+                cols = {"hole_id": [f"h{i}" for i in range(chunk.n)]}
+                for j, s in enumerate(cal.names):
+                    cols[f"d_{s}"] = chunk.d[:, j]
+                    cols[f"d_{s}_after"] = chunk.d_after[:, j]
+                table = pa.table(cols)
+                b = measure_batch(cal, table, Settings(min_radius_mm=R or np.inf))
+                for when, ang, U, truth, d in (("before", b.angle_before, "U95_angle_deg", chunk.true_angle, chunk.d),
+                                               ("after", b.angle_after, "U95_after_deg", chunk.true_after,
+                                                chunk.d_after)):
+                    U = np.radians(b.columns.column(U).to_numpy(zero_copy_only=False))
+                    ok = np.isfinite(ang) & np.isfinite(U)
+                    hits[when].append(np.abs(ang - truth)[ok] <= U[ok])
+                    u95[when].append(U[ok])
+                    if R:  # the same holes, U95 without the curvature term: what the bias does
+                        full = ok & np.all(np.isfinite(d), axis=1)
+                        h = hole_normals(cal, d[full], min_radius_mm=np.inf)
+                        hits[when + "_nobound"].append(np.abs(h.angle - truth[full]) <= h.U95)
+            row = {"head": hname, "panel": kind, "radius_mm": R, "calibrations": args.calibrations,
+                   "seconds": round(time.perf_counter() - t0, 1)}
+            for k, v in hits.items():
+                if v:
+                    per = np.array([x.mean() for x in v])  # per calibration: holes share one calibration
+                    allh = np.concatenate(v)
+                    row[f"coverage_{k}"] = float(allh.mean())
+                    row[f"coverage_{k}_se"] = float(per.std(ddof=1) / np.sqrt(len(per)))
+                    row[f"holes_{k}"] = int(allh.size)
+            for k, v in u95.items():
+                row[f"median_U95_{k}_deg"] = float(np.degrees(np.median(np.concatenate(v))))
+            out["rows"].append(row)
+            print(_line(row), flush=True)
+    return out
+
+
+def _line(r):
+    def cov(k):
+        return (f"{100 * r[f'coverage_{k}']:.1f} ± {100 * r[f'coverage_{k}_se']:.1f}" if f"coverage_{k}" in r else "-")
+
+    return (f"| {r['head']} | {r['panel']}{'' if not r['radius_mm'] else ' R ' + format(r['radius_mm'], 'g')} | "
+            f"{cov('before')} | {cov('after')} | {cov('before_nobound')} | {cov('after_nobound')} | "
+            f"{r['median_U95_before_deg']:.4f} | {r['median_U95_after_deg']:.4f} | {r['holes_before']} |")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--calibrations", type=int, default=40)
+    ap.add_argument("--holes", type=int, default=500, help="holes per calibration")
+    ap.add_argument("--poses", type=int, default=60, help="calibration poses")
+    ap.add_argument("--noise", type=float, default=0.005, help="reading noise, mm (1 sigma)")
+    ap.add_argument("--radius", type=float, default=500.0, help="curved panels' radius, mm")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    print("| head | panel | before: coverage % | after | before, no curvature term | after, no term | "
+          "median U95 before [deg] | after | holes |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    out = run(args)
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,92 @@
+"""``metro measure``: every hole of a cell's log measured, judged and watched for drift."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ._common import JSON_HELP, REPORT_HELP, echo_json, fail, guarded, invocation, progress_bar, warn
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("measure")
+    @guarded
+    def measure(
+        ctx: typer.Context,
+        log: str = typer.Argument(..., help="The hole log: .csv ('-' for stdin), .parquet, or a folder of hive-"
+                                  "partitioned .parquet (cell=C1/date=2026-11-25/part-0.parquet)."),
+        layout: Path = typer.Option(..., "--layout", help="The calibrated layout (.toml) from metro calibrate --out; "
+                                    "its \\[calibration] covariance is propagated into U95."),
+        out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
+                                           "partitioned log (one file per partition; a re-run resumes). Default: CSV "
+                                           "on stdout (not with --json)."),
+        tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Perpendicularity tolerance, deg: the "
+                                            "largest angle between drill axis and surface normal."),
+        min_radius_mm: float = typer.Option(500.0, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
+                                            "the micro-plane's curvature bias in U95 and sets what the gross-reading "
+                                            "check allows ('inf': flat panels)."),
+        workers: Optional[int] = typer.Option(None, "--workers", help="Run on a new Dask LocalCluster of N worker "
+                                              "processes, one task per partition (needs metro\\[fleet])."),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run on a running Dask cluster "
+                                                "(tcp://host:port), one task per partition (needs metro\\[fleet])."),
+        fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm too (by default "
+                                           "an alarm is reported, and the exit code judges the holes)."),
+        chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
+                                            "panel (for panels whose shape moves the redundant reading's misfit); "
+                                            "misses a drift slower than a panel."),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
+        report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
+    ) -> None:
+        """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
+
+        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided (or a drift alarm with --fail-on-drift), 2 on bad input.
+        """
+        import sys
+
+        from metrology.core.verdict import exit_code
+        from metrology.jobs.measure import measure_files
+        from metrology.report.measure import measure_text
+
+        if workers is not None and scheduler is not None:
+            fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
+        if json_out and out is None:
+            fail("--json prints the summary on stdout: give --out FILE for the per-hole results")
+        if log == "-":
+            import shutil
+            import tempfile
+
+            tmp = Path(tempfile.mkdtemp(prefix="metro-stdin-"))
+            try:
+                path = tmp / "stdin.csv"
+                with open(path, "wb") as fh:
+                    shutil.copyfileobj(sys.stdin.buffer, fh)
+                if path.stat().st_size == 0:
+                    fail("LOG -: nothing on stdin")
+                rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
+                           report, "<stdin>", chart_by_panel)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
+                       report, None, chart_by_panel)
+        if json_out:
+            echo_json(rep.to_dict(), "measure")
+        else:
+            text = measure_text(rep)
+            lines = [ln for ln in text.splitlines() if not ln.startswith("warning: ")]  # warnings went to warn()
+            typer.echo("\n".join(lines), err=out is None)
+        if report is not None:
+            typer.echo(f"report: {report}", err=True)
+        raise typer.Exit(exit_code(rep.verdict))
+
+    def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
+             chart_by_panel):
+        from metrology.jobs.measure import measure_files
+
+        with progress_bar("measure") as progress:
+            return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
+                                 workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
+                                 warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
+                                 chart_by_panel=chart_by_panel)

@@ -1,0 +1,306 @@
+"""A drilling cell's hole log: read in batches (CSV, stdin, Parquet, hive-partitioned Parquet).
+
+Columns (a public contract, see docs/measure.md): ``hole_id``; ``time`` (ISO 8601, with or
+without a zone offset (without: UTC), or seconds); ``d_<sensor>`` for every sensor of the
+layout (mm; blank = no reading); optional ``d_<sensor>_after`` (re-measured after the attitude
+adjustment); optional ``cell``, ``panel``, ``temperature_c``. Every other column passes through
+(read from CSV as text, verbatim).
+
+A log is a list of *partitions* (a CSV or Parquet file is one; a folder of Parquet files is one
+per file, with its hive keys such as ``cell=C1/date=2026-11-25``), each read in batches of at most
+``batch_rows`` rows, so memory stays bounded whatever the log's size. Batches come out with
+``hole_id`` as string, readings as float64 mm (NaN for blanks), and three columns added for
+metro's own use (:data:`INTERNAL`, dropped before results are written): ``_metro_time_s`` (float
+seconds since 1970-01-01 UTC), ``_metro_cell`` and ``_metro_panel`` (strings, "" when the log has
+none). Every column of the log stays as it was read.
+
+Errors are one line naming the file (and line or partition) and what was expected; pyarrow is
+imported only here, when a log is read.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["HoleLog", "Partition", "open_log", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
+           "CELL", "PANEL"]
+
+#: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
+BATCH_ROWS = 1 << 18
+LOG_SUFFIXES = (".csv", ".parquet")
+#: what a reading looks like in a CSV (blank: no reading)
+READING_RE = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*$|^(?i:nan)$"
+TIME_S, CELL, PANEL = "_metro_time_s", "_metro_cell", "_metro_panel"
+#: the columns metro adds to a batch for its own use
+INTERNAL = (TIME_S, CELL, PANEL)
+
+
+@dataclass(frozen=True)
+class Partition:
+    """One file of a log.
+
+    Attributes
+    ----------
+    path : str, the file ("<stdin>" for a spooled stdin)
+    relative : str, its path below the log's folder (the file name for a single file): where a
+        partitioned output writes its results
+    keys : dict, hive partition keys (``{"cell": "C1", "date": "2026-11-25"}``), {} for none
+    """
+
+    path: str
+    relative: str
+    keys: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class HoleLog:
+    """A log to read: its partitions, its format and the sensors it must carry."""
+
+    source: str
+    kind: str  # "csv" or "parquet"
+    partitions: tuple
+    sensors: tuple
+    batch_rows: int = BATCH_ROWS
+    display: str = ""
+
+    @property
+    def partitioned(self) -> bool:
+        return self.kind == "parquet" and Path(self.source).is_dir()
+
+    def file_columns(self, part: Partition) -> list:
+        """The columns the partition's file itself holds (not its hive keys)."""
+        return _column_names(self, part, with_keys=False)
+
+    def batches(self, part: Partition):
+        """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
+        ``first_row`` is the 0-based row of the partition at which the batch starts."""
+        reader = _csv_batches if self.kind == "csv" else _parquet_batches
+        row = 0
+        for table in reader(self, part):
+            yield _normalise(self, part, table, row), row
+            row += table.num_rows
+
+
+def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = None) -> HoleLog:
+    """A hole log at ``path`` (a ``.csv`` or ``.parquet`` file, or a folder of Parquet files)
+    for a layout with ``sensors``; its columns are checked against them (ValueError)."""
+    p = Path(path)
+    name = display or str(path)
+    if not p.exists():
+        raise ValueError(f"{name}: no such file or folder")
+    if p.is_dir():
+        files = sorted(q for q in p.rglob("*.parquet") if not any(part.startswith((".", "_")) for part in q.relative_to(p).parts))
+        if not files:
+            raise ValueError(f"{name}: a folder of hole logs must hold .parquet files (hive-partitioned, e.g. "
+                             f"cell=C1/date=2026-11-25/part-0.parquet); found none")
+        parts = tuple(Partition(str(q), str(q.relative_to(p)), _hive_keys(q.relative_to(p))) for q in files)
+        log = HoleLog(str(p), "parquet", parts, tuple(sensors), batch_rows, name)
+    else:
+        suffix = p.suffix.lower()
+        if suffix not in LOG_SUFFIXES:
+            raise ValueError(f"{name}: a hole log must be one of {', '.join(LOG_SUFFIXES)} (or a folder of .parquet), "
+                             f"got '{p.suffix}'")
+        log = HoleLog(str(p), suffix[1:], (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
+    for part in log.partitions:
+        _check_columns(log, part, _column_names(log, part))
+    return log
+
+
+def _where(log, part):
+    return log.display if not log.partitioned else f"{log.display}: partition {part.relative}"
+
+
+def _hive_keys(rel: Path) -> dict:
+    keys = {}
+    for piece in rel.parts[:-1]:
+        if "=" in piece:
+            k, v = piece.split("=", 1)
+            keys[k] = v
+    return keys
+
+
+def _column_names(log, part, with_keys=True) -> list:
+    if log.kind == "csv":
+        with open(part.path, "rb") as fh:
+            head = fh.readline().decode("utf-8-sig", errors="replace").strip()
+        if not head:
+            raise ValueError(f"{log.display}: empty file, expected a header line with hole_id, time and d_<sensor> columns")
+        import csv
+
+        return [c.strip() for c in next(csv.reader([head]))]
+    import pyarrow.parquet as pq
+
+    try:
+        names = pq.read_schema(part.path).names
+    except Exception as exc:  # pyarrow raises ArrowInvalid, OSError ... on a corrupt or truncated file
+        raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
+    return names + [k for k in part.keys if k not in names] if with_keys else names
+
+
+def _short(exc) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def _check_columns(log, part, names) -> None:
+    where = _where(log, part)
+    for need in ("hole_id", "time"):
+        if need not in names:
+            raise ValueError(f"{where}: no '{need}' column (a hole log needs hole_id, time and d_<sensor> for each "
+                             f"sensor: {', '.join(log.sensors)})")
+    readings = [c for c in names if c.startswith("d_")]
+    known = {f"d_{s}" for s in log.sensors} | {f"d_{s}_after" for s in log.sensors}
+    unknown = [c for c in readings if c not in known]
+    if unknown:
+        raise ValueError(f"{where}: column {unknown[0]} names no sensor of the layout ({', '.join(log.sensors)}): "
+                         f"expected d_<sensor> or d_<sensor>_after")
+    missing = [s for s in log.sensors if f"d_{s}" not in names]
+    if missing:
+        raise ValueError(f"{where}: no reading column for {', '.join(missing)} (expected d_{missing[0]}): the log's "
+                         f"sensors do not match the layout's ({', '.join(log.sensors)})")
+    after = [s for s in log.sensors if f"d_{s}_after" in names]
+    if after and len(after) != len(log.sensors):
+        lack = [s for s in log.sensors if s not in after]
+        raise ValueError(f"{where}: after-readings for {', '.join(after)} but not for {', '.join(lack)} "
+                         f"(expected d_<sensor>_after for every sensor, or none)")
+
+
+def _csv_types(log, names):
+    import pyarrow as pa
+
+    types = {c: pa.string() for c in names}
+    for c in names:
+        if c.startswith("d_") or c == "temperature_c":
+            types[c] = pa.float64()
+    return types
+
+
+def _csv_batches(log, part):
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    names = _column_names(log, part)
+    opts = pcsv.ConvertOptions(column_types=_csv_types(log, names), strings_can_be_null=False,
+                               null_values=["", "NaN", "nan", "NA"])
+    read = pcsv.ReadOptions(block_size=max(1 << 20, log.batch_rows * 64))
+    try:
+        reader = pcsv.open_csv(part.path, read_options=read, convert_options=opts)
+        for batch in reader:
+            table = pa.Table.from_batches([batch])
+            for i in range(0, table.num_rows, log.batch_rows):
+                yield table.slice(i, log.batch_rows)
+    except pa.ArrowInvalid as exc:
+        raise ValueError(_locate_csv_error(log, part, names, exc)) from None
+
+
+def _locate_csv_error(log, part, names, exc) -> str:
+    """The one-line error of a CSV pyarrow would not convert: the line and value at fault."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
+    numeric = [c for c in names if c.startswith("d_") or c == "temperature_c"]
+    try:
+        reader = pcsv.open_csv(part.path, convert_options=pcsv.ConvertOptions(
+            column_types={c: pa.string() for c in names}, strings_can_be_null=False))
+        line = 2
+        for batch in reader:
+            for c in numeric:
+                ok = pc.match_substring_regex(batch.column(c), READING_RE).to_numpy(zero_copy_only=False)
+                bad = np.flatnonzero(~ok)
+                if bad.size:
+                    value = batch.column(c)[int(bad[0])].as_py()
+                    return (f"{log.display} line {line + int(bad[0])}: {c} = {value!r} is not a number "
+                            f"({'a reading in mm, or blank for no reading' if c.startswith('d_') else 'deg C'})")
+            line += batch.num_rows
+    except pa.ArrowInvalid as exc2:
+        return f"{log.display}: not a readable CSV hole log ({_short(exc2)})"
+    return f"{log.display}: not a readable CSV hole log ({_short(exc)})"
+
+
+def _parquet_batches(log, part):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        pf = pq.ParquetFile(part.path)
+        for batch in pf.iter_batches(batch_size=log.batch_rows):
+            table = pa.Table.from_batches([batch])
+            for k, v in part.keys.items():
+                if k not in table.column_names:
+                    table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
+            yield table
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
+
+
+def _time_seconds(log, part, col, first_row):
+    """float64 seconds since 1970-01-01 UTC from a number, timestamp or ISO 8601 string column."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    t = col.type
+    if pa.types.is_timestamp(t):
+        return pc.cast(col, pa.timestamp("ns", tz=t.tz)).cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9
+    if pa.types.is_integer(t) or pa.types.is_floating(t):
+        return col.cast(pa.float64()).to_numpy(zero_copy_only=False)
+    if pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_dictionary(t):
+        col = col.cast(pa.string()) if not pa.types.is_dictionary(t) else col.cast(pa.string())
+        for target in (pa.float64(), pa.timestamp("ns", tz="UTC"), pa.timestamp("ns")):
+            try:
+                out = col.cast(target)
+            except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+                continue
+            return out.to_numpy(zero_copy_only=False) if target == pa.float64() else \
+                out.cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9
+        for i, v in enumerate(col.to_pylist()):  # the error path: find the value at fault
+            ok = False
+            for target in (pa.float64(), pa.timestamp("ns", tz="UTC"), pa.timestamp("ns")):
+                try:
+                    pa.array([v], pa.string()).cast(target)
+                    ok = True
+                    break
+                except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+                    pass
+            if not ok:
+                raise ValueError(f"{_row(log, part, first_row + i)}: time {v!r} is neither ISO 8601 "
+                                 f"(2026-11-25T08:00:00Z) nor seconds")
+        raise ValueError(f"{_where(log, part)}: the time column mixes formats (ISO 8601 with a zone offset, without one, seconds): expected one")
+    raise ValueError(f"{_where(log, part)}: time column of type {t}, expected ISO 8601 text, a timestamp or seconds")
+
+
+def _row(log, part, row) -> str:
+    """How an error names a row: a CSV's line (the header is line 1), a Parquet file's row."""
+    if log.kind == "csv":
+        return f"{log.display} line {row + 2}"
+    return f"{_where(log, part)} row {row + 1}"
+
+
+def _normalise(log, part, table, first_row):
+    import pyarrow as pa
+
+    cols, names = {}, table.column_names
+    for c in names:
+        col = table.column(c)
+        if c.startswith("d_") or c == "temperature_c":
+            if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type)):
+                raise ValueError(f"{_where(log, part)}: column {c} is {col.type}, expected numbers (mm)")
+            col = col.cast(pa.float64())
+        elif c in ("hole_id", "cell", "panel"):
+            col = col.cast(pa.string())
+        cols[c] = col
+    time_s = _time_seconds(log, part, table.column("time"), first_row)
+    bad = np.flatnonzero(~np.isfinite(time_s))
+    if bad.size:
+        raise ValueError(f"{_row(log, part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
+    cols[TIME_S] = pa.array(time_s)
+    for c, name in (("cell", CELL), ("panel", PANEL)):
+        cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
+    nulls = cols["hole_id"].null_count
+    if nulls:
+        i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
+        raise ValueError(f"{_row(log, part, first_row + i)}: hole_id is blank")
+    return pa.table(cols)

@@ -1,0 +1,146 @@
+"""Where ``metro measure`` writes its per-hole results: one CSV or Parquet file, stdout (CSV),
+or a folder mirroring a partitioned log, one file per partition.
+
+Every file is written atomically (a temporary file beside it, renamed on success): a file is
+complete or absent. A partitioned output is also resumable: a partition whose file exists was
+written whole by an earlier run with the same settings (the folder's ``_metro_measure.json``
+says which), so a re-run leaves it as it is and writes the rest; nothing is written twice and
+nothing already written is lost. A folder written with other settings is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+__all__ = ["OUT_SUFFIXES", "TableSink", "PartitionedOutput", "check_out"]
+
+OUT_SUFFIXES = (".csv", ".parquet")
+MANIFEST = "_metro_measure.json"
+
+
+def check_out(out, partitioned_input: bool, distributed: bool):
+    """Refuse, before any work, an output that cannot be written (ValueError, one line)."""
+    if out is None:
+        if distributed:
+            raise ValueError("--workers/--scheduler write one result file per partition: give --out FOLDER")
+        return None
+    p = Path(out)
+    if p.suffix.lower() in OUT_SUFFIXES and not p.is_dir():
+        if distributed:
+            raise ValueError(f"--out {out}: --workers/--scheduler write one result file per partition: "
+                             f"--out must be a folder, not a {p.suffix} file")
+        if not p.resolve().parent.is_dir():
+            raise ValueError(f"--out {out}: folder {p.parent} does not exist")
+        return p
+    if p.suffix and not p.is_dir():
+        raise ValueError(f"--out {out}: must be one of {', '.join(OUT_SUFFIXES)} (a file) or a folder")
+    if not partitioned_input:
+        raise ValueError(f"--out {out}: a folder output mirrors a partitioned Parquet log (a folder); for a single "
+                         f"log give a file: {', '.join(OUT_SUFFIXES)}")
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"--out {out}: exists and is not a folder")
+    if not p.resolve().parent.is_dir():
+        raise ValueError(f"--out {out}: folder {p.parent} does not exist")
+    return p
+
+
+class TableSink:
+    """Batches of one table into one file (``.csv`` or ``.parquet``), or CSV on stdout (``path`` None).
+
+    Use as a context manager: the file appears, whole, only when the block ends without error.
+    """
+
+    def __init__(self, path=None):
+        self.path = None if path is None else Path(path)
+        self._writer = None
+        self._tmp = None
+        self._schema = None
+
+    def __enter__(self):
+        return self
+
+    def write(self, table) -> None:
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+        import pyarrow.parquet as pq
+
+        if self._writer is None:
+            self._schema = table.schema
+            if self.path is None:
+                self._writer = pcsv.CSVWriter(pa.PythonFile(sys.stdout.buffer, mode="w"), table.schema)
+            else:
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=self.path.suffix, dir=self.path.parent)
+                os.close(fd)
+                self._tmp = tmp
+                self._writer = (pq.ParquetWriter(tmp, table.schema) if self.path.suffix.lower() == ".parquet"
+                                else pcsv.CSVWriter(tmp, table.schema))
+        elif table.schema != self._schema:
+            table = table.cast(self._schema)
+        self._writer.write_table(table)
+
+    def __exit__(self, exc_type, exc, tb):
+        if self._writer is not None:
+            self._writer.close()
+        if self._tmp is not None:
+            if exc_type is None:
+                mask = os.umask(0)
+                os.umask(mask)
+                os.chmod(self._tmp, 0o666 & ~mask)
+                os.replace(self._tmp, self.path)
+            elif os.path.exists(self._tmp):
+                os.unlink(self._tmp)
+        elif exc_type is None and self.path is not None:
+            raise ValueError(f"{self.path}: the log has no rows, nothing to write")
+        if self.path is None and exc_type is None:
+            sys.stdout.flush()
+        return False
+
+
+class PartitionedOutput:
+    """A folder mirroring the log's partitions: ``folder/<partition's relative path>``.
+
+    Parameters
+    ----------
+    folder : Path
+    settings : dict, what the results depend on (tolerance, layout digest, ...), kept in
+        ``_metro_measure.json``; a folder written with other settings is refused
+    """
+
+    def __init__(self, folder, settings: dict):
+        self.folder = Path(folder)
+        self.settings = settings
+        manifest = self.folder / MANIFEST
+        if manifest.exists():
+            old = json.loads(manifest.read_text(encoding="utf-8"))
+            if old != settings:
+                diff = sorted(k for k in set(old) | set(settings) if old.get(k) != settings.get(k))
+                raise ValueError(f"--out {folder}: holds the results of a run with other settings ({', '.join(diff)} "
+                                 f"differ): choose another folder or remove it")
+        elif self.folder.exists() and any(self.folder.iterdir()):
+            raise ValueError(f"--out {folder}: folder is not empty and is not a metro measure output")
+
+    def begin(self) -> None:
+        """Create the folder and its manifest (atomically) before any partition is written."""
+        from metrology.io.atomic import write_text
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        manifest = self.folder / MANIFEST
+        if not manifest.exists():
+            write_text(manifest, json.dumps(self.settings, indent=1, sort_keys=True))
+
+    def target(self, relative: str) -> Path:
+        rel = Path(relative)
+        return self.folder / rel.with_suffix(".parquet")
+
+    def done(self, relative: str) -> bool:
+        """Whether the partition's file exists: written whole by an earlier run."""
+        return self.target(relative).exists()
+
+    def sink(self, relative: str) -> TableSink:
+        t = self.target(relative)
+        t.parent.mkdir(parents=True, exist_ok=True)
+        return TableSink(t)

@@ -1,0 +1,154 @@
+"""``metro simulate-log``'s job: a calibrated layout in, a production hole log with its truth out.
+
+The log is drawn by the independent forward simulator (:mod:`metrology.sim.forward.log`): the
+cell adjusts its attitude with the calibrated layout (``--layout``) while its beams are those of
+the true layout (``--true-layout``, or the calibrated one with each zero point moved by
+``U(0.5, 1) layout_error_mm`` mm and each beam turned by ``U(0.5, 1) layout_error_deg`` deg, drawn
+from the seed: a calibration's error, not a drawing's).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from pathlib import Path
+
+__all__ = ["simulate_log_files", "parse_drift", "parse_shift", "parse_range", "default_truth_path"]
+
+#: the random stream of the drawn true layout: ``SeedSequence(seed, spawn_key=(LAYOUT_STREAM,))``
+#: (the holes use 2-element keys, so the streams never meet)
+LAYOUT_STREAM = 2**32 - 1
+
+_FAULT = re.compile(r"^(?:(?P<cell>[^/:@]+)/)?(?P<sensor>[^/:@]+):(?P<value>[^@]+)(?:@(?P<hole>.+))?$")
+
+
+def _number(text, option, value, what):
+    try:
+        x = float(text)
+    except ValueError:
+        raise ValueError(f"{option} {value}: {what} {text!r} is not a number") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{option} {value}: {what} must be finite")
+    return x
+
+
+def _hole(text, option, value):
+    try:
+        k = int(text)
+    except ValueError:
+        raise ValueError(f"{option} {value}: hole {text!r} is not a whole number") from None
+    if k < 1:
+        raise ValueError(f"{option} {value}: hole {k} must be 1 or more (holes count from 1)")
+    return k - 1
+
+
+def parse_drift(value: str):
+    """``[CELL/]SENSOR:MM_PER_HOUR[@HOLE]`` (HOLE counts from 1; default 1) -> SensorDrift."""
+    from metrology.sim.forward.log_spec import SensorDrift
+
+    m = _FAULT.match(value.strip())
+    if not m:
+        raise ValueError(f"--drift {value}: expected [CELL/]SENSOR:MM_PER_HOUR[@HOLE], e.g. L2:0.002@5000")
+    rate = _number(m["value"], "--drift", value, "rate")
+    start = 0 if m["hole"] is None else _hole(m["hole"], "--drift", value)
+    return SensorDrift(m["sensor"], rate, "hour", start, m["cell"])
+
+
+def parse_shift(value: str):
+    """``[CELL/]SENSOR:MM@HOLE`` (HOLE counts from 1) -> SensorShift."""
+    from metrology.sim.forward.log_spec import SensorShift
+
+    m = _FAULT.match(value.strip())
+    if not m or m["hole"] is None:
+        raise ValueError(f"--shift {value}: expected [CELL/]SENSOR:MM@HOLE, e.g. L3:0.05@20000")
+    return SensorShift(m["sensor"], _number(m["value"], "--shift", value, "size"),
+                       _hole(m["hole"], "--shift", value), m["cell"])
+
+
+def parse_range(value: str, option: str, lo_bound: float = -math.inf) -> tuple:
+    """``MIN,MAX`` -> (min, max) floats with ``lo_bound <= min <= max``."""
+    parts = value.split(",")
+    if len(parts) != 2:
+        raise ValueError(f"{option} {value}: expected MIN,MAX")
+    lo, hi = (_number(p, option, value, "bound") for p in parts)
+    if not (lo_bound <= lo <= hi):
+        raise ValueError(f"{option} {value}: expected {lo_bound:g} <= MIN <= MAX")
+    return lo, hi
+
+
+def default_truth_path(out) -> Path:
+    """``log.csv`` -> ``log.truth.csv``; a folder ``logs`` -> ``logs.truth.parquet`` beside it."""
+    p = Path(str(out).rstrip("/\\"))
+    return p.with_name(p.stem + ".truth.csv") if p.suffix.lower() == ".csv" else p.with_name(p.name + ".truth.parquet")
+
+
+def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_deg):
+    import numpy as np
+
+    from metrology.io.layout import load_layout
+    from metrology.sim.forward.head import perturb_layout
+
+    cell = load_layout(layout_path)
+    if true_layout_path is not None:
+        true = load_layout(true_layout_path)
+        if tuple(true.names) != tuple(cell.names):
+            raise ValueError(f"{true_layout_path}: sensors {list(true.names)} differ from {layout_path}'s "
+                             f"{list(cell.names)}")
+        return cell, true
+    if layout_error_mm < 0 or layout_error_deg < 0:
+        raise ValueError("--layout-error-mm and --layout-error-deg must be >= 0")
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(LAYOUT_STREAM,)))
+    true = perturb_layout(rng, cell, (0.5 * layout_error_mm, layout_error_mm),
+                          (0.5 * layout_error_deg, layout_error_deg))
+    return cell, true
+
+
+def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, holes=10_000, cells=1,
+                       panel="flat", radius_mm=None, noise_mm=None, angle_deg=(0.5, 5.0), standoff_mm=None,
+                       spin_deg=0.0, patch_mm=400.0, holes_per_hour=600.0, drifts=(), shifts=(), gross_rate=0.0,
+                       layout_error_mm=0.03, layout_error_deg=0.03, seed=0, write_truth=True, progress=None) -> dict:
+    """Write a simulated log at ``out`` (``.csv``: one file; else a new folder of partitioned Parquet)
+    and its truth at ``truth`` (default :func:`default_truth_path`; none when ``write_truth`` is False,
+    e.g. for a throughput run); returns the summary.
+
+    ``drifts``/``shifts`` are SensorDrift/SensorShift (:func:`parse_drift`, :func:`parse_shift`);
+    angles are in degrees (the edge), lengths in mm. Everything is checked before a file is written.
+    """
+    from metrology.sim.forward.log import BLOCK_HOLES, simulate_log
+    from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.forward.log_write import LOG_FORMATS, check_log_output
+    from metrology.sim.forward.panels import make_panel
+
+    if not write_truth and truth is not None:
+        raise ValueError("--truth and --no-truth exclude each other")
+    truth = None if not write_truth else default_truth_path(out) if truth is None else Path(truth)
+    kind = check_log_output(out, truth)
+    if holes < 1 or cells < 1 or holes < cells:
+        raise ValueError(f"--holes {holes} --cells {cells}: expected holes >= cells >= 1")
+    cell, true = _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_deg)
+    if noise_mm is None and not all(math.isfinite(x) for x in true.noise_mm):
+        raise ValueError(f"{true_layout_path or layout_path}: no noise_mm for every sensor; give --noise-mm")
+    if standoff_mm is None and not all(math.isfinite(x) for x in true.range_mm.ravel()):
+        raise ValueError(f"{true_layout_path or layout_path}: no range_mm for every sensor; give --standoff-mm")
+    spec = LogSpec(true, cell, make_panel(panel, radius_mm), angle_rad=tuple(math.radians(a) for a in angle_deg),
+                   noise_mm=noise_mm, standoff_mm=standoff_mm, spin_rad=math.radians(spin_deg),
+                   patch_half_mm=patch_mm / 2, holes_per_hour=holes_per_hour, drifts=tuple(drifts),
+                   shifts=tuple(shifts), gross_rate=gross_rate)
+    done = {"n": 0}
+
+    def chunks():
+        for chunk in simulate_log(spec, seed, holes, cells, chunk_holes=8 * BLOCK_HOLES):
+            done["n"] += chunk.n
+            if progress is not None:
+                progress(done["n"], holes, f"{chunk.cell}")
+            yield chunk
+
+    t0 = time.perf_counter()
+    written = LOG_FORMATS[kind](chunks(), out, truth)
+    seconds = time.perf_counter() - t0
+    n, files = (written, [Path(out)]) if kind == "csv" else written
+    return {"out": str(out), "format": kind, "truth": None if truth is None else str(truth), "holes": n,
+            "cells": cells, "files": len(files), "seed": seed, "seconds": seconds, "holes_per_s": n / seconds if seconds > 0 else None,
+            "true_layout": str(true_layout_path) if true_layout_path else "drawn from --layout and the seed",
+            "spec": spec.to_dict()}

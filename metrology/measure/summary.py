@@ -1,0 +1,199 @@
+"""The fleet summary: per cell, panel and day, counts by status, perpendicularity quantiles and
+Cpk; mergeable, so a summary of partitions measured apart (Dask) equals the one measured in
+one pass.
+
+Quantiles come from a histogram of the angle on :data:`EDGES_DEG` (geometric bins, 1.7 % wide):
+a quantile is the geometric middle of its bin, within 0.9 % of the exact one. Cpk is that of a
+one-sided upper limit (the tolerance; an angle has no lower limit): ``(tol - mean) / (3 s)`` of
+the judged angle over the measured holes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from metrology.io.holelog import CELL, PANEL, TIME_S
+from metrology.measure.holes import HoleBatch, Status
+
+__all__ = ["FleetSummary", "Group", "EDGES_DEG", "WORST"]
+
+#: histogram edges of the angle, deg: 1e-4 to 90 deg in geometric steps (and 0 below)
+EDGES_DEG = np.concatenate([[0.0], np.geomspace(1e-4, 90.0, 801)])
+#: the worst holes kept for the report
+WORST = 20
+_STATUSES = tuple(str(s) for s in Status)
+
+
+@dataclass
+class Group:
+    """Holes counted together: by status, and the judged angle's moments (deg); with ``hists``
+    the angle's histograms before and after the adjustment (on :data:`EDGES_DEG`). A group of a
+    cell, panel and day keeps no histogram (a fleet has many days: 13 kB a group would add up);
+    a group of a cell and panel, and the fleet, keep one."""
+
+    counts: np.ndarray = field(default_factory=lambda: np.zeros(len(_STATUSES), np.int64))
+    n: int = 0
+    total: float = 0.0
+    total_sq: float = 0.0
+    hist_before: np.ndarray | None = None
+    hist_after: np.ndarray | None = None
+
+    def merge(self, other: "Group") -> None:
+        self.counts += other.counts
+        self.n += other.n
+        self.total += other.total
+        self.total_sq += other.total_sq
+        if other.hist_before is not None:
+            if self.hist_before is None:
+                self.hist_before = np.zeros(len(EDGES_DEG), np.int64)
+                self.hist_after = np.zeros(len(EDGES_DEG), np.int64)
+            self.hist_before += other.hist_before
+            self.hist_after += other.hist_after
+
+
+def _bins(angle_deg):
+    """Histogram bin of each finite angle (the last bin takes everything above 90 deg)."""
+    return np.clip(np.searchsorted(EDGES_DEG, angle_deg, side="right") - 1, 0, len(EDGES_DEG) - 1)
+
+
+def _codes(col):
+    """Dictionary codes (N,) int64 and the values of a string column."""
+    import pyarrow.compute as pc
+
+    enc = pc.dictionary_encode(col).combine_chunks()
+    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
+
+
+def _groups(t):
+    """Each row's group (N,) int and the groups' keys ``(cell, panel, day)`` (day: UTC date)."""
+    import datetime as dt
+
+    ci, cells = _codes(t.column(CELL))
+    pi, panels = _codes(t.column(PANEL))
+    day = np.floor(t.column(TIME_S).to_numpy() / 86400.0).astype(np.int64)
+    d0 = int(day.min()) if len(day) else 0
+    nd = int(day.max()) - d0 + 1 if len(day) else 1
+    code = (ci * len(panels) + pi) * nd + (day - d0)
+    uniq, g = np.unique(code, return_inverse=True)
+    keys = []
+    for c in uniq:
+        cp, dd = divmod(int(c), nd)
+        ck, pk = divmod(cp, len(panels))
+        keys.append((cells[ck], panels[pk], (dt.date(1970, 1, 1) + dt.timedelta(days=d0 + dd)).isoformat()))
+    return g.reshape(-1), keys
+
+
+def quantile_deg(hist, q):
+    """The ``q`` quantile (deg) of a histogram on :data:`EDGES_DEG`; NaN when empty."""
+    total = 0 if hist is None else hist.sum()
+    if hist is None or total == 0:
+        return float("nan")
+    k = int(np.searchsorted(np.cumsum(hist), q * total, side="left"))
+    lo = EDGES_DEG[k]
+    hi = EDGES_DEG[k + 1] if k + 1 < len(EDGES_DEG) else EDGES_DEG[k]
+    return float(np.sqrt(lo * hi)) if lo > 0 else float(hi / 2)
+
+
+@dataclass
+class FleetSummary:
+    """What a log's holes add up to (:meth:`add` a batch, :meth:`merge` another summary).
+
+    Attributes
+    ----------
+    tolerance_deg : float
+    groups : dict, (cell, panel, day) -> Group (no histograms)
+    series : dict, (cell, panel) -> Group (with histograms)
+    worst : list of dict, the :data:`WORST` holes with the largest judged angle
+    judged_after, judged_before : int, holes judged on the angle after / before the adjustment
+    """
+
+    tolerance_deg: float
+    groups: dict = field(default_factory=dict)
+    series: dict = field(default_factory=dict)
+    worst: list = field(default_factory=list)
+    judged_after: int = 0
+    judged_before: int = 0
+    disagree: int = 0
+
+    def add(self, batch: HoleBatch) -> None:
+        """Count one measured batch in."""
+        t = batch.columns
+        g, keys = _groups(t)
+        G = len(keys)
+        code = batch.status.astype(np.int64)
+        counts = np.bincount(g * len(_STATUSES) + code, minlength=G * len(_STATUSES)).reshape(G, len(_STATUSES))
+        judged = np.degrees(batch.judged)
+        ok = np.isfinite(judged) & (code != list(Status).index(Status.NOT_MEASURED))
+        n = np.bincount(g[ok], minlength=G)
+        s1 = np.bincount(g[ok], weights=judged[ok], minlength=G)
+        s2 = np.bincount(g[ok], weights=judged[ok] ** 2, minlength=G)
+        for j, k in enumerate(keys):
+            self.groups.setdefault(k, Group()).merge(Group(counts[j], int(n[j]), float(s1[j]), float(s2[j])))
+        # the histograms by cell and panel
+        cps = sorted({k[:2] for k in keys})
+        cp_of = np.array([cps.index(k[:2]) for k in keys])[g] if len(g) else np.zeros(0, int)
+        nb, C = len(EDGES_DEG), len(cps)
+        hists = []
+        for ang in (batch.angle_before, batch.angle_after):
+            a = np.degrees(ang)
+            f = np.isfinite(a)
+            hists.append(np.bincount(cp_of[f] * nb + _bins(a[f]), minlength=C * nb).reshape(C, nb))
+        for j, k in enumerate(cps):
+            sel = [i for i, kk in enumerate(keys) if kk[:2] == k]
+            self.series.setdefault(k, Group()).merge(Group(counts[sel].sum(0), int(n[sel].sum()), float(s1[sel].sum()),
+                                                           float(s2[sel].sum()), hists[0][j], hists[1][j]))
+        after = np.isfinite(batch.angle_after)
+        self.judged_after += int((ok & after).sum())
+        self.judged_before += int((ok & ~after).sum())
+        self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
+        self._worst(batch, judged, ok)
+
+    def _worst(self, batch, judged, ok) -> None:
+        idx = np.flatnonzero(ok)
+        if not idx.size:
+            return
+        top = idx[np.argsort(-judged[idx], kind="stable")[:WORST]]
+        t = batch.columns
+        for i in top:
+            self.worst.append({"hole_id": t.column("hole_id")[int(i)].as_py(), "cell": t.column(CELL)[int(i)].as_py(),
+                               "panel": t.column(PANEL)[int(i)].as_py(), "time_s": float(t.column(TIME_S)[int(i)].as_py()),
+                               "angle_deg": float(judged[i]), "U95_deg": float(np.degrees(batch.judged_u95[i])),
+                               "status": _STATUSES[int(batch.status[i])]})
+        self.worst = sorted(self.worst, key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
+
+    def merge(self, other: "FleetSummary") -> None:
+        for k, grp in other.groups.items():
+            self.groups.setdefault(k, Group()).merge(grp)
+        for k, grp in other.series.items():
+            self.series.setdefault(k, Group()).merge(grp)
+        self.judged_after += other.judged_after
+        self.judged_before += other.judged_before
+        self.disagree += other.disagree
+        self.worst = sorted(self.worst + other.worst,
+                            key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
+
+    # ------------------------------------------------------------------ figures
+    def total(self) -> Group:
+        out = Group()
+        for grp in self.series.values():
+            out.merge(grp)
+        return out
+
+    def counts(self, grp: Group | None = None) -> dict:
+        grp = self.total() if grp is None else grp
+        return {s: int(c) for s, c in zip(_STATUSES, grp.counts)}
+
+    def figures(self, grp: Group) -> dict:
+        """Quantiles (deg) of the angle before and after, and the judged angle's mean, s, Cpk."""
+        mean = grp.total / grp.n if grp.n else float("nan")
+        var = (grp.total_sq - grp.n * mean * mean) / (grp.n - 1) if grp.n > 1 else float("nan")
+        sd = float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else float("nan")
+        cpk = (self.tolerance_deg - mean) / (3 * sd) if sd and np.isfinite(sd) and sd > 0 else float("nan")
+        qs = (0.5, 0.95, 0.99, 0.999)
+        out = {"measured": grp.n, "mean_deg": mean, "sd_deg": sd, "cpk": cpk}
+        if grp.hist_before is not None:
+            out["quantiles_before_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_before, q) for q in qs}
+            out["quantiles_after_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_after, q) for q in qs}
+        return out

@@ -1,0 +1,174 @@
+"""Words and figures of ``metro measure``: the text report and the HTML section."""
+
+from __future__ import annotations
+
+import datetime as _dt
+
+import numpy as np
+
+__all__ = ["measure_text", "measure_section", "utc"]
+
+_MAX_GROUP_ROWS = 40
+
+
+def utc(t_s: float) -> str:
+    """ISO 8601 UTC of seconds since the epoch."""
+    return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _judged(report) -> str:
+    s = report.result.summary
+    if s.judged_after and not s.judged_before:
+        return "the angle after the attitude adjustment (the drilled hole's)"
+    if s.judged_before and not s.judged_after:
+        return "the angle measured before any adjustment (the log has no after-readings)"
+    return (f"the angle after the adjustment where the hole has after-readings ({s.judged_after:,} holes), "
+            f"else before it ({s.judged_before:,})")
+
+
+def _alarm_words(a) -> str:
+    shifts = ", ".join(f"{k} {v:+.1f} um" for k, v in a.sensor_shift_um.items())
+    return (f"cell {a.cell!r}, panel {a.panel!r}: alarm at hole {a.hole_id} ({utc(a.time_s)}); the redundant "
+            f"reading's misfit moved {a.size_um:+.1f} um from hole {a.start_hole_id} ({utc(a.start_time_s)}, "
+            f"{a.holes_since_start} holes before); a zero shift of one sensor alone: {shifts} (one redundant "
+            f"reading cannot tell which of the 4): {a.advice}")
+
+
+def _q(fig: dict, which: str, key: str) -> str:
+    v = fig[f"quantiles_{which}_deg"][key]
+    return "-" if not np.isfinite(v) else f"{v:.4g}"
+
+
+def measure_text(report) -> str:
+    """The text report of ``metro measure`` (on stderr when the table goes to stdout)."""
+    s = report.result.summary
+    c = report.counts
+    total = max(report.result.rows, 1)
+    v = report.verdict
+    fig = s.figures(s.total())
+    lines = [f"metro measure: {report.result.rows:,} holes of {report.sources['log']} "
+             f"({report.result.partitions} partition(s)), layout {report.sources['layout']}, {report.engine}",
+             f"verdict: {'PASSED' if v.passed else 'FAILED'}: {c['fails']:,} fail, {c['undecided']:,} undecided "
+             f"against a tolerance of {report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
+             f"judged: {_judged(report)}",
+             "",
+             f"{'status':<14}{'holes':>14}{'share':>9}"]
+    for k in ("conforms", "fails", "undecided", "not_measured"):
+        lines.append(f"{k:<14}{c[k]:>14,}{100 * c[k] / total:>8.2f}%")
+    lines += ["",
+              f"angle before the adjustment [deg]: median {_q(fig, 'before', 'p50')}, p95 {_q(fig, 'before', 'p95')}, "
+              f"p99.9 {_q(fig, 'before', 'p99.9')}",
+              f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
+              f"p99.9 {_q(fig, 'after', 'p99.9')}",
+              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg, Cpk {fig['cpk']:.3g} "
+              f"(one-sided, against {report.tolerance_deg:g} deg)",
+              "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
+                                              " only (the layout has no calibration covariance)") + ", 95 %"]
+    ch = report.chart
+    lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.get('k')}, "
+                  f"h {ch.get('h')}, in-control ARL {ch.get('arl0_holes', 0):,.0f} holes; a shift of 1 scale is "
+                  f"flagged after {ch.get('arl_at_detectable_holes')} holes on average; "
+                  f"{ch.get('baseline_holes')} holes of baseline per " + ("panel" if ch.get("by_panel") else "cell") + ")"]
+    if not report.result.watch.charts:
+        lines.append("  no cell charted (the drift watch needs holes read by all 4 sensors of a 4-sensor head)")
+    alarms = report.result.alarms
+    if not alarms and report.result.watch.charts:
+        lines.append(f"  no alarm on {len(report.result.watch.charts)} cell(s)")
+    for a in alarms:
+        lines.append("  " + _alarm_words(a))
+    if report.result.written < report.result.partitions:
+        lines.append(f"\n{report.result.partitions - report.result.written} partition(s) were already written by an "
+                     f"earlier run and left as they are")
+    for w in report.warnings:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+def _hist_figure(report):
+    from metrology.measure.summary import EDGES_DEG
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    tot = report.result.summary.total()
+    fig, ax = plt.subplots(figsize=(7.5, 3.2))
+    centres = np.sqrt(EDGES_DEG[1:] * EDGES_DEG[:-1])
+    for hist, label in ((tot.hist_before, "before the adjustment"), (tot.hist_after, "after the adjustment")):
+        h = hist[1:]
+        if h.sum():
+            ax.step(centres, h / h.sum(), where="mid", label=label)
+    ax.axvline(report.tolerance_deg, color="k", ls="--", lw=1, label=f"tolerance {report.tolerance_deg:g} deg")
+    ax.set_xscale("log")
+    ax.set_xlabel("angle between drill axis and measured normal [deg]")
+    ax.set_ylabel("share of holes per bin [1]")
+    ax.legend()
+    fig.tight_layout()
+    return fig
+
+
+def _chart_figure(chart, alarms):
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 2.6))
+    if chart.series:
+        t, s = np.array(chart.series).T
+        ax.plot((t - t[0]) / 3600.0, s, lw=0.8)
+        for a in alarms:
+            ax.axvline((a.time_s - t[0]) / 3600.0, color="C3", lw=1)
+        ax.axhline(chart.h, color="k", ls="--", lw=1, label=f"h = {chart.h:g}")
+        ax.set_xlabel(f"hours since {utc(t[0])}")
+        ax.legend(loc="upper left")
+    ax.set_ylabel("CUSUM [scales]")
+    ax.set_title(f"cell {chart.cell}")
+    fig.tight_layout()
+    return fig
+
+
+def measure_section(report):
+    """The HTML section of ``metro measure``: verdict, histogram, one control chart per cell, tables."""
+    from metrology.report.html import Section, Table, Verdict, figure_from_matplotlib
+
+    s = report.result.summary
+    c = report.counts
+    v = report.verdict
+    head = (f"{c['conforms']:,} of {report.result.rows:,} holes conform, {c['fails']:,} fail, {c['undecided']:,} are "
+            f"undecided and {c['not_measured']:,} were not measured, against {report.tolerance_deg:g} deg (ISO 14253-1, U95)")
+    alarms = report.result.alarms
+    cause = (f"{len(alarms)} drift alarm(s): recalibrate" if alarms else "no drift alarm")
+    figs = [figure_from_matplotlib(_hist_figure(report), "Angle between the drill axis and the measured normal, before "
+                                   "and after the attitude adjustment (log axis); dashed: the tolerance.")]
+    for cell, chart in sorted(report.result.watch.charts.items())[:12]:
+        figs.append(figure_from_matplotlib(_chart_figure(chart, [a for a in alarms if a.cell == cell]),
+                                           f"Drift watch of cell {cell}: the CUSUM of the redundant reading's misfit; "
+                                           f"dashed: the decision interval h; red: alarms."))
+    rows = []
+    for (cell, panel), grp in sorted(s.series.items())[:_MAX_GROUP_ROWS]:
+        f = s.figures(grp)
+        k = s.counts(grp)
+        rows.append((cell or "-", panel or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
+                     f"{k['undecided']:,}", f"{k['not_measured']:,}", _q(f, "before", "p50"), _q(f, "after", "p50"),
+                     _q(f, "after", "p99"), "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
+    note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
+            f"per day (UTC): {len(s.groups)} groups in --json")
+    tables = [Table("Per cell and panel: holes by status; the angle's quantiles [deg]; the judged angle's Cpk",
+                    ("cell", "panel", "holes", "conform", "fail", "undecided", "not measured", "p50 before",
+                     "p50 after", "p99 after", "Cpk"), tuple(rows), note)]
+    worst = tuple((w["hole_id"], w["cell"] or "-", w["panel"] or "-", utc(w["time_s"]), f"{w['angle_deg']:.4f}",
+                   f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
+    tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell", "panel", "time", "angle [deg]",
+                                                                       "U95 [deg]", "status"), worst))
+    if alarms:
+        tables.append(Table("Drift alarms", ("cell", "alarm at", "change from", "size [µm]", "one sensor alone [µm]"),
+                            tuple((a.cell, f"{a.hole_id} ({utc(a.time_s)})", f"{a.start_hole_id}", f"{a.size_um:+.1f}",
+                                   ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
+    limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
+              "in the spots' spread over the radius (docs/measure.md gives its size)",
+              "the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would need"]
+    nxt = ["Recalibrate the head (metro plan, metro calibrate) before drilling on."] if alarms else []
+    if c["undecided"]:
+        nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "
+                   "(a better calibration lowers its share).")
+    return Section("Hole measurement (metro measure)",
+                   Verdict(v.passed, head, cause, label="PASSED" if v.passed else "FAILED"),
+                   figures=tuple(figs), tables=tuple(tables), text=(measure_text(report),), limits=tuple(limits),
+                   next_steps=tuple(nxt))

@@ -1,0 +1,153 @@
+"""metro measure from the command line: exit codes by verdict, JSON, stdout, stdin, resume, report."""
+
+import json
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from cli.main import app
+from metrology.io.layout import save_layout
+from tests.measure.helpers import calibrated_layout, hole_log, write_log_csv
+
+runner = CliRunner()
+
+
+@pytest.fixture
+def layout(tmp_path):
+    p = tmp_path / "calibrated.toml"
+    save_layout(calibrated_layout(), p)
+    return p
+
+
+def _log(tmp_path, name="log.csv", **kw):
+    cols, _, _ = hole_log(calibrated_layout(), **kw)
+    return write_log_csv(cols, tmp_path / name)
+
+
+def test_all_conform_exits_0_with_a_passed_verdict(tmp_path, layout):
+    log = _log(tmp_path, n=300, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.parquet"),
+                            "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["schema"] == "metro.measure/1"
+    assert s["verdict"]["passed"] is True
+    assert s["counts"] == {"conforms": 300, "fails": 0, "undecided": 0, "not_measured": 0}
+    assert s["judged"] == {"after_adjustment": 300, "before_adjustment": 0}
+    assert {c["name"] for c in s["verdict"]["checks"]} >= {"holes that fail"}
+    t = pq.read_table(tmp_path / "h.parquet")
+    assert t.column_names[:12] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
+                                   "angle_after_deg", "U95_after_deg", "fit_residual_um", "sensors_used", "status",
+                                   "reason"]
+    assert t.num_rows == 300
+
+
+def test_a_failing_hole_exits_1(tmp_path, layout):
+    log = _log(tmp_path, n=100, angle_deg=(1, 4))  # no after-readings: judged as measured
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv"), "--json"])
+    assert r.exit_code == 1, r.output
+    s = json.loads(r.stdout)
+    assert s["verdict"]["passed"] is False and s["counts"]["fails"] == 100
+
+
+def test_csv_to_stdout_and_the_summary_to_stderr(tmp_path, layout):
+    log = _log(tmp_path, n=20, angle_deg=(0.01, 0.1))
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout)])
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.strip().splitlines()
+    assert lines[0].startswith('"hole_id","normal_x"') and len(lines) == 21
+    assert "verdict: PASSED" in r.stderr
+
+
+def test_stdin(tmp_path, layout):
+    log = _log(tmp_path, n=20, angle_deg=(0.01, 0.1))
+    r = runner.invoke(app, ["measure", "-", "--layout", str(layout), "--out", str(tmp_path / "h.csv"), "--json"],
+                      input=log.read_bytes())
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["sources"]["log"] == "<stdin>"
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda c: c["time"].__setitem__(5, "2026-11-25T07:00:00Z"), r"log\.csv line 7: time 2026-11-25T07:00:00Z is before the previous hole of cell 'C1' \(line 6"),
+    (lambda c: c["d_L2"].__setitem__(3, "abc"), r"line 5: d_L2 = 'abc' is not a number"),
+])
+def test_bad_input_exits_2_with_one_line_and_no_output(tmp_path, layout, mutate, message):
+    import re
+
+    cols, _, _ = hole_log(calibrated_layout(), n=10)
+    cols = {k: list(map(str, v)) if k.startswith("d_") else v for k, v in cols.items()}
+    mutate(cols)
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    out = tmp_path / "h.csv"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(out)])
+    assert r.exit_code == 2
+    assert re.search(message, r.stderr), r.stderr
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert not out.exists()
+
+
+def test_layout_without_covariance_warns(tmp_path):
+    from dataclasses import replace
+
+    p = tmp_path / "nominal.toml"
+    save_layout(replace(calibrated_layout(), covariance=None), p)
+    log = _log(tmp_path, n=10, angle_deg=(0.01, 0.1))
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(p), "--out", str(tmp_path / "h.csv")])
+    assert r.exit_code == 0
+    assert "no [calibration] covariance: U95 carries the reading noise only" in r.stderr
+
+
+def test_partitioned_log_resumes_without_duplicating(tmp_path, layout):
+    root = tmp_path / "fleet"
+    cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
+    t = pa.table(cols)
+    for cell in ("C1", "C2"):
+        part = t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"])
+        (root / f"cell={cell}").mkdir(parents=True)
+        pq.write_table(part, root / f"cell={cell}" / "part-0.parquet")
+    out = tmp_path / "out"
+    args = ["measure", str(root), "--layout", str(layout), "--out", str(out), "--json"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0, first.output
+    (out / "cell=C2" / "part-0.parquet").unlink()  # as if killed before the second partition
+    kept = (out / "cell=C1" / "part-0.parquet").stat().st_mtime_ns
+    second = runner.invoke(app, args)
+    assert second.exit_code == 0
+    s = json.loads(second.stdout)
+    assert s["partitions_written"] == 1 and s["holes"] == 120
+    assert (out / "cell=C1" / "part-0.parquet").stat().st_mtime_ns == kept
+    ds = pq.read_table(out, partitioning="hive")
+    assert ds.num_rows == 120 and sorted(set(ds.column("cell").to_pylist())) == ["C1", "C2"]
+    other = runner.invoke(app, [*args[:-1], "--tolerance-deg", "0.3"])
+    assert other.exit_code == 2 and "other settings" in other.stderr
+
+
+def test_report_is_written_and_named(tmp_path, layout):
+    log = _log(tmp_path, n=1300, angle_deg=(1, 4), after_deg=(0.0, 0.1), shift=(2, 1150, 0.03))
+    rep = tmp_path / "r.html"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv"),
+                            "--report", str(rep), "--json", "--fail-on-drift"])
+    assert r.exit_code == 1, r.output  # the knocked L3 raised an alarm, and --fail-on-drift fails on it
+    s = json.loads(r.stdout)
+    assert len(s["drift"]["alarms"]) == 1 and s["counts"]["fails"] == 0
+    a = s["drift"]["alarms"][0]
+    assert a["advice"] == "recalibrate" and abs(a["sensor_shift_um"]["L3"] - 30) < 5
+    html = rep.read_text()
+    assert "Hole measurement" in html and "recalibrate" in html.lower()
+    assert f"report: {rep}" in r.stderr
+
+
+def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):
+    """Readings that disagree with one plane at most holes: another head's layout, exit 2, no file."""
+    lay = calibrated_layout()
+    other = lay.with_params(lay.zero + [[0.4, 0, 0], [0, 0.4, 0], [0, 0, 0.4], [0.2, 0.2, 0]], lay.direction)
+    p = tmp_path / "other.toml"
+    save_layout(other, p)
+    log = _log(tmp_path, n=100, angle_deg=(0.5, 2))
+    out = tmp_path / "h.csv"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(p), "--out", str(out), "--min-radius-mm", "inf"])
+    assert r.exit_code == 2
+    assert "the readings of 100 of 100 holes disagree with one plane" in r.stderr
+    assert not out.exists()

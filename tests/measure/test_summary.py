@@ -1,0 +1,52 @@
+"""metrology.measure.summary: mergeable counts, quantiles within their bin, Cpk."""
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from metrology.io.holelog import CELL, PANEL, TIME_S
+from metrology.measure.holes import Settings, measure_batch
+from metrology.measure.summary import FleetSummary, quantile_deg
+
+from .helpers import calibrated_layout, hole_log
+
+
+def _batch(n, seed, cells=("C1", "C2")):
+    cols, _, _ = hole_log(calibrated_layout(), n=n, seed=seed, cells=cells, angle_deg=(0.1, 0.8))
+    t = pa.table(cols)
+    t = t.append_column(TIME_S, pa.array(1.79e9 + np.arange(t.num_rows) * 600.0))
+    t = t.append_column(CELL, t.column("cell")).append_column(PANEL, t.column("panel"))
+    return measure_batch(calibrated_layout(), t, Settings())
+
+
+def test_merged_halves_equal_one_pass():
+    b = _batch(500, 1)
+    whole = FleetSummary(0.5)
+    whole.add(b)
+    halves = FleetSummary(0.5)
+    for part in (slice(0, 400), slice(400, None)):
+        other = FleetSummary(0.5)
+        from dataclasses import replace
+
+        idx = np.arange(len(b))[part]
+        sub = replace(b, columns=b.columns.take(pa.array(idx)), status=b.status[idx], judged=b.judged[idx],
+                      judged_u95=b.judged_u95[idx], angle_before=b.angle_before[idx], angle_after=b.angle_after[idx])
+        other.add(sub)
+        halves.merge(other)
+    assert whole.counts() == halves.counts()
+    assert sorted(whole.groups) == sorted(halves.groups) and len(whole.groups) > 2  # cells x days
+    assert whole.figures(whole.total())["cpk"] == pytest.approx(halves.figures(halves.total())["cpk"], rel=1e-9)
+    assert whole.worst == halves.worst
+
+
+def test_quantiles_and_cpk_against_numpy():
+    b = _batch(3000, 2, cells=("C1",))
+    s = FleetSummary(0.5)
+    s.add(b)
+    f = s.figures(s.total())
+    a = np.degrees(b.angle_before)
+    for q in (0.5, 0.95):
+        assert f["quantiles_before_deg"][f"p{q * 100:g}"] == pytest.approx(np.quantile(a, q), rel=0.02)
+    j = np.degrees(b.judged)
+    assert f["cpk"] == pytest.approx((0.5 - j.mean()) / (3 * j.std(ddof=1)), rel=1e-9)
+    assert quantile_deg(np.zeros(10, int), 0.5) != quantile_deg(np.zeros(10, int), 0.5)  # NaN when empty
