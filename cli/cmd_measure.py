@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from ._common import JSON_HELP, REPORT_HELP, echo_json, fail, guarded, invocation, progress_bar, warn
+from ._common import JSON_HELP, REPORT_HELP, echo_json, fail, finish, guarded, invocation, progress_bar, reported, warn
 
 
 def register(app: typer.Typer) -> None:
@@ -16,7 +16,7 @@ def register(app: typer.Typer) -> None:
     def measure(
         ctx: typer.Context,
         log: str = typer.Argument(..., help="The hole log: .csv ('-' for stdin), .parquet, or a folder of hive-"
-                                  "partitioned .parquet (cell=C1/date=2026-11-25/part-0.parquet)."),
+                                  "partitioned .parquet (cell=C1/date=YYYY-MM-DD/)."),
         layout: Path = typer.Option(..., "--layout", help="The calibrated layout (.toml) from metro calibrate --out; "
                                     "its \\[calibration] covariance is propagated into U95."),
         out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
@@ -45,8 +45,6 @@ def register(app: typer.Typer) -> None:
         """
         import sys
 
-        from metrology.core.verdict import exit_code
-        from metrology.jobs.measure import measure_files
         from metrology.report.measure import measure_text
 
         if workers is not None and scheduler is not None:
@@ -77,9 +75,8 @@ def register(app: typer.Typer) -> None:
             text = measure_text(rep)
             lines = [ln for ln in text.splitlines() if not ln.startswith("warning: ")]  # warnings went to warn()
             typer.echo("\n".join(lines), err=out is None)
-        if report is not None:
-            typer.echo(f"report: {report}", err=True)
-        raise typer.Exit(exit_code(rep.verdict))
+        reported(report)
+        finish(rep.verdict)
 
     def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
              chart_by_panel):

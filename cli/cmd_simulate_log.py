@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, guarded, progress_bar
+from ._common import JSON_HELP, echo, echo_json, guarded, progress_bar, with_verdict
 
 
 def register(app: typer.Typer) -> None:
@@ -15,7 +15,7 @@ def register(app: typer.Typer) -> None:
     @guarded
     def simulate_log(
         out: Path = typer.Option(..., "--out", help="The log: a .csv file, or a new folder for partitioned Parquet "
-                                 "(cell=C1/date=2026-11-25/part-0.parquet)."),
+                                 "(cell=C1/date=YYYY-MM-DD/)."),
         layout: Optional[Path] = typer.Option(None, "--layout", help="The cell's calibrated layout TOML (default: "
                                               "the bundled Table 6 head, measured/nominal.toml)."),
         true_layout: Optional[Path] = typer.Option(None, "--true-layout", help="The head as it is (TOML); default: "
@@ -67,6 +67,8 @@ def register(app: typer.Typer) -> None:
                 layout_error_mm=layout_error_mm, layout_error_deg=layout_error_deg, seed=seed,
                 write_truth=not no_truth, progress=progress)
         if json_out:
-            echo_json(summary, "simulate-log")
+            from metrology.report.verdicts import NO_VERDICT
+
+            echo_json(with_verdict(summary, NO_VERDICT), "simulate-log")  # it judges nothing
         else:
             echo(simulate_log_text(summary))

@@ -26,6 +26,11 @@ DEMO_STEPS = (
     ("5. Micro-plane against micro-sphere normals on a curved panel (R = 800 mm)",
      "normals {fx}/panel_cyl800.stl --layout {fx}/layout_table6.toml --grid 40 --tilt-deg 2 --seed 1 "
      "--plot {out}/panel_errors.png"),
+    ("6. Simulate a production log: 20 000 holes drilled with the calibrated head, L3 knocked at hole 12 000",
+     "simulate-log --layout {out}/calibrated.toml --holes 20000 --shift L3:0.03@12000 --seed 1 "
+     "--out {out}/hole_log.csv"),
+    ("7. Measure every hole on the flat panel: angle to the drill axis with U95, verdict, drift watch",
+     "measure {out}/hole_log.csv --layout {out}/calibrated.toml --min-radius-mm inf --out {out}/holes.csv"),
 )
 
 
@@ -41,8 +46,9 @@ def new_output_dir(base="metro-demo") -> Path:
     return cand
 
 
-#: with ``--report``: each step's own HTML report, in ``out``
-STEP_REPORTS = ("fit-plane.html", "calibrate.html", "validate.html", "diagnose.html", "normals.html")
+#: with ``--report``: each step's own HTML report, in ``out`` (None: the step writes no report)
+STEP_REPORTS = ("fit-plane.html", "calibrate.html", "validate.html", "diagnose.html", "normals.html", None,
+                "measure.html")
 
 
 def _with_report(args, path):
@@ -100,7 +106,7 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
     with collect() as pages:
         for k, ((title, line), name) in enumerate(zip(DEMO_STEPS, STEP_REPORTS)):
             args = shlex.split(line.format(fx=fixtures, out=out))
-            if report is not None:
+            if report is not None and name is not None:
                 args = _with_report(args, out / name)
             notify(progress, k, len(DEMO_STEPS), f"step {title.split(' ', 1)[0]} metro {args[0]}")
             announce(title, args)
@@ -110,7 +116,7 @@ def run_demo(fixtures, out, run_step, announce=print, report=None, command=None,
             worst = max(worst, rc)
     notify(progress, len(DEMO_STEPS), len(DEMO_STEPS), "done")
     if report is not None:
-        _write_demo_report(report, pages, [out / name for name in STEP_REPORTS], command)
+        _write_demo_report(report, pages, [out / name for name in STEP_REPORTS if name is not None], command)
     return worst
 
 
@@ -131,5 +137,5 @@ def _write_demo_report(report, pages, step_files, command):
                 seen.add(row[1])
                 inputs.append((f"{row[0]} ({run.command.split()[1]})",) + tuple(row[1:]))
     run = run_info({}, command)
-    write_report(report, "metro demo: fit-plane, calibrate, validate, diagnose, normals",
+    write_report(report, "metro demo: fit-plane, calibrate, validate, diagnose, normals, simulate-log, measure",
                  RunInfo(run.command, tuple(inputs), run.versions, None, run.written), sections)

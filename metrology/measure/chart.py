@@ -27,7 +27,7 @@ zero moves by ``delta``, ``rho`` moves by ``q_k (m.u_k) delta``. The chart:
 3. **Alarm**: the time and hole of the alarm, the hole where the change began (the last hole at
    which the alarming sum was zero: Page's estimate), and says "recalibrate". The chart then takes
    a new baseline (one alarm per change), and the change's size is the new level minus the old
-   one (um; when the log ends first, the level of the holes it has), with what it means at each
+   one (µm; when the log ends first, the level of the holes it has), with what it means at each
    sensor: a zero shift of ``size / signature_k``. One redundant reading cannot tell which of the
    4 sensors moved; the alarm lists all four with their sizes.
 
@@ -117,8 +117,8 @@ class Alarm:
     start_hole_id : str, where the change began (the last hole with the alarming sum at zero);
         start_time_s : float, s
     holes_since_start : int
-    size_um : float, um, the change of the redundant residual since ``start`` (signed)
-    sensor_shift_um : dict, sensor -> um: the zero shift of that sensor alone that explains it
+    size_um : float, µm, the change of the redundant residual since ``start`` (signed)
+    sensor_shift_um : dict, sensor -> µm: the zero shift of that sensor alone that explains it
     direction : str, "up" or "down"
     panel : str
     """

@@ -75,7 +75,7 @@ class HoleBatch:
 
     Attributes
     ----------
-    columns : pyarrow.Table: :data:`OUTPUT_COLUMNS` (angles in deg, the residual in um: the
+    columns : pyarrow.Table: :data:`OUTPUT_COLUMNS` (angles in deg, the residual in µm: the
         file's units) then the log's other columns (not the readings), in the log's row order
     status : (N,) int8, the index of each hole's :class:`Status` in ``list(Status)``
     judged : (N,) float, rad, the angle the verdict judged (NaN where not measured)
@@ -168,7 +168,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
-                                 f"{h.residual[i] * 1e3:.1f} um, {abs(h.residual_z[i]):.0f} noise sigmas beyond what a "
+                                 f"{h.residual[i] * 1e3:.1f} µm, {abs(h.residual_z[i]):.0f} noise sigmas beyond what a "
                                  f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)")
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan

@@ -27,9 +27,9 @@ def _judged(report) -> str:
 
 
 def _alarm_words(a) -> str:
-    shifts = ", ".join(f"{k} {v:+.1f} um" for k, v in a.sensor_shift_um.items())
+    shifts = ", ".join(f"{k} {v:+.1f} µm" for k, v in a.sensor_shift_um.items())
     return (f"cell {a.cell!r}, panel {a.panel!r}: alarm at hole {a.hole_id} ({utc(a.time_s)}); the redundant "
-            f"reading's misfit moved {a.size_um:+.1f} um from hole {a.start_hole_id} ({utc(a.start_time_s)}, "
+            f"reading's misfit moved {a.size_um:+.1f} µm from hole {a.start_hole_id} ({utc(a.start_time_s)}, "
             f"{a.holes_since_start} holes before); a zero shift of one sensor alone: {shifts} (one redundant "
             f"reading cannot tell which of the 4): {a.advice}")
 

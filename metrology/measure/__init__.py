@@ -1,0 +1,16 @@
+"""The production loop: every drilled hole's normal, angle to the drill axis and its uncertainty,
+the verdict against the tolerance, the drift watch, and the fleet summary (``metro measure``).
+
+Modules: :mod:`.normals` (the micro-plane and its GUM uncertainty, pure arrays), :mod:`.holes`
+(a batch of a log measured and judged: the rules), :mod:`.chart` (the CUSUM drift watch),
+:mod:`.summary` (the mergeable fleet summary), :mod:`.run` (a log in one process, in batches),
+:mod:`.fleet` (the same on Dask, one task per partition). pyarrow and Dask load only when a log is
+read or a cluster used.
+"""
+
+from metrology.measure.chart import Alarm, CusumChart, cusum_arl, cusum_h
+from metrology.measure.holes import Settings, Status, measure_batch
+from metrology.measure.normals import HoleNormals, drill_axis, hole_normals
+
+__all__ = ["Alarm", "CusumChart", "cusum_arl", "cusum_h", "Settings", "Status", "measure_batch", "HoleNormals",
+           "drill_axis", "hole_normals"]

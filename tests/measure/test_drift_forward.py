@@ -1,0 +1,65 @@
+"""The drift watch on logs of the independent forward simulator (beams cast at the panel, the
+cell's own adjustment; metrology/sim/forward/log), measured as `metro measure` measures them."""
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
+from metrology.io.holelog import CELL, PANEL, TIME_S
+from metrology.measure.chart import ARL_AT_DETECTABLE
+from metrology.measure.holes import Settings, measure_batch
+from metrology.measure.run import Feed, Watch
+from metrology.sim.forward import perturb_layout
+from metrology.sim.forward.log import simulate_cell
+from metrology.sim.forward.log_spec import LogSpec, SensorDrift, SensorShift
+from metrology.sim.forward.log_write import log_table
+from metrology.sim.forward.panels import make_panel
+
+
+@pytest.fixture(scope="module")
+def spec():
+    rng = np.random.default_rng(4)
+    nominal = layout_from_table(TABLE6_NOMINAL, noise_mm=0.003)
+    nominal = nominal.with_params(nominal.zero, nominal.direction, range_mm=np.tile([30.0, 70.0], (4, 1)))
+    true = perturb_layout(rng, nominal, zero_error_mm=(0.002, 0.01), direction_error_deg=(0.001, 0.01))
+    cov = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, 4))
+    return LogSpec(true_layout=true, cell_layout=nominal.with_params(nominal.zero, nominal.direction, covariance=cov),
+                   panel=make_panel("flat"))
+
+
+def _watch(spec, holes, seed):
+    watch = Watch(spec.cell_layout.names)
+    for c in simulate_cell(spec, seed, 0, holes, chunk_holes=1000):
+        t = log_table(c)
+        t = t.append_column(TIME_S, pa.array(c.time_s)).append_column(CELL, t.column("cell").cast(pa.string())) \
+             .append_column(PANEL, t.column("panel").cast(pa.string()))
+        watch.feed(Feed.of(measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf)), "sim", int(c.hole[0])))
+    watch.finish()
+    return watch
+
+
+def _hole(alarm):
+    return int(alarm.hole_id.rsplit("-", 1)[1]) - 1
+
+
+def test_in_control_log_raises_no_alarm(spec):
+    assert _watch(spec, 6000, 1).alarms == []
+
+
+def test_a_knocked_sensor_is_flagged_within_a_few_holes(spec):
+    from dataclasses import replace
+
+    w = _watch(replace(spec, shifts=(SensorShift("L2", -0.015, 2500),)), 4000, 2)  # ~2.5 detectable sizes
+    assert len(w.alarms) == 1
+    a = w.alarms[0]
+    assert 2500 <= _hole(a) <= 2500 + 2 * ARL_AT_DETECTABLE
+    assert a.sensor_shift_um["L2"] == pytest.approx(-15.0, abs=2.0)
+
+
+def test_a_slow_drift_is_flagged(spec):
+    from dataclasses import replace
+
+    drift = SensorDrift("L4", 0.012 / 3000, per="hole", start_hole=1500)  # 12 um over 3000 holes
+    w = _watch(replace(spec, drifts=(drift,)), 6000, 3)
+    assert w.alarms and 1500 < _hole(w.alarms[0]) < 4500
