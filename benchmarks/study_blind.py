@@ -22,7 +22,7 @@ both above their detectable sizes, and both in the upper two thirds, as issue 15
 wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
-        [--families scale,...] [--tilt-max-deg 14]
+        [--families scale,...] [--tilt-max-deg 14] [--size-range LO,HI]
 """
 
 from __future__ import annotations
@@ -402,8 +402,19 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="save records and summary here")
     ap.add_argument("--families", default="", help="comma-separated: draw only these families (e.g. incidence)")
     ap.add_argument("--tilt-max-deg", type=float, default=None, help="largest tilt of the poses (default 14)")
+    ap.add_argument("--size-range", default=None,
+                    help="LO,HI: draw the --families' sizes in this range instead of the family's own (the same "
+                         "draws of everything else; e.g. shift near its detectable size: 0.005,0.03)")
     a = ap.parse_args(argv)
     fams = tuple(filter(None, a.families.split(",")))
+    if a.size_range:
+        from dataclasses import replace
+
+        from metrology.sim.forward import FAMILIES
+
+        lo, hi = (float(v) for v in a.size_range.split(","))
+        for f in fams:  # in this process, inherited by the pool's (forked) workers
+            FAMILIES[f] = replace(FAMILIES[f], size_range=(lo, hi))
     unknown = [f for f in fams if f not in FAMILY_ORDER + OOC]
     if unknown:
         ap.error(f"--families {','.join(unknown)}: expected some of {','.join(FAMILY_ORDER + OOC)}")

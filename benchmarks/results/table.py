@@ -24,8 +24,11 @@ def _pct(k, n):
 def section(name: str, data: dict) -> list:
     a, s = data["args"], data["summary"]
     cmd = (f"python benchmarks/study_blind.py --draws {a['draws']} --nulls {a['nulls']} --pairs {a['pairs']} "
-           f"--seed {a['seed']} --jobs {a['jobs']}" + (f" --families {a['families']}" if a.get("families") else ""))
-    out = [f"## {name}", "", f"`{cmd}`: {len(data['records'])} cases in {data['wall_s']:.0f} s", "",
+           f"--seed {a['seed']} --jobs {a['jobs']}" + (f" --families {a['families']}" if a.get("families") else "")
+           + (f" --size-range {a['size_range']}" if a.get("size_range") else ""))
+    wall = "" if data.get("wall_s") is None else f" in {data['wall_s']:.0f} s"
+    code = f" (code: {data['code']})" if data.get("code") else ""
+    out = [f"## {name}", "", f"`{cmd}`: {len(data['records'])} cases{wall}{code}", "",
            "| family | right cause and sensor | above the case's detectable size | a wrong cause | size within 2σ "
            "| median detectable (mm) |", "| --- | --- | --- | --- | --- | --- |"]
     for f, r in s["families"].items():
