@@ -1,6 +1,6 @@
-"""Tabulate the blind studies saved here (``study_blind.py --json``) as ``README.md`` beside them.
+"""Tabulate the blind studies saved here (``study_blind.py --json``) as ``diagnose.md`` beside them.
 
-    python benchmarks/results/table.py            # writes benchmarks/results/README.md
+    python benchmarks/results/table.py            # writes benchmarks/results/diagnose.md
 
 Every ``*.json`` of this folder written by ``benchmarks/study_blind.py`` is one section: the
 command's arguments, its wall time, and per family the rates of its ``summary`` (nothing is
@@ -67,7 +67,7 @@ def main(argv=None):
     if argv and "--stdout" in argv:
         sys.stdout.write(text)
         return
-    (HERE / "README.md").write_text(text)
+    (HERE / "diagnose.md").write_text(text)
 
 
 if __name__ == "__main__":
