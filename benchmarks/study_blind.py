@@ -22,7 +22,7 @@ both above their detectable sizes, and both in the upper two thirds, as issue 15
 wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
-        [--families scale,...] [--tilt-max-deg 14]
+        [--families scale,...] [--tilt-max-deg 14] [--size-range LO,HI]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same direc
 import numpy as np
 
 # catalogued families and their pairs, out-of-catalogue effects (metrology.sim.forward.families)
-FAMILY_ORDER = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers")
+FAMILY_ORDER = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers", "shift")
 OOC = ("periodic", "crosstalk")
 PAIRS = (("drift", "outliers"), ("scale", "drift"), ("pose_error", "drift"), ("nonlinearity", "outliers"),
          ("plane_form", "drift"), ("scale", "incidence"), ("drift", "drift"), ("pose_error", "outliers"))
@@ -121,7 +121,7 @@ def _seen_size(case, effect):
       sensor saw (the drawn size is over the whole range, which the poses may not cover);
     - plane_form: peak-to-valley, over the scanned points, of the true datum height less its
       best-fit plane there (a tilt is the plane's own business, and the scan covers what it covers);
-    - drift, incidence: the drawn size (already defined on what the run saw);
+    - drift, incidence, shift: the drawn size (already defined on what the run saw);
     - pose_error: RMS over every reading of what the pose error changes (the beams cast from
       the reported pose less those from the true one, the true head): its offset and tilts.
     """
@@ -131,7 +131,7 @@ def _seen_size(case, effect):
         ex = case.export
         hit = cast_beams(case.surface, case.true.zero, case.true.direction, ex.tcs2tracker_rot, ex.tcs2tracker_trans)
         return float(np.sqrt(np.nanmean((hit.d - case.d_true) ** 2)))
-    if effect.family in ("drift", "incidence"):
+    if effect.family in ("drift", "incidence", "shift"):
         return float(effect.size)
     if effect.family in ("scale", "nonlinearity"):
         curve, d = _true_characteristic(case, effect)
@@ -207,7 +207,15 @@ def run_case(job) -> dict:
         # the evidence of each cause named: its held-out p given the others and in-sample p
         "evidence": [[c.get("label"), c.get("p_heldout_given_others"), c.get("p_insample")]
                      for c in res.get("causes") or []],
+        # the datum check: the cloud's form against the readings' (p, and whether it says "disagrees")
+        "datum": _datum_check(res),
     }
+
+
+def _datum_check(res: dict):
+    """``{"p", "agree"}`` of the datum check in the JSON, or None without one."""
+    ag = (res.get("datum_form") or {}).get("against_readings")
+    return None if not ag else {"p": ag["p"], "agree": bool(ag["agree"])}
 
 
 def _right(effect: dict, named: list) -> bool:
@@ -272,6 +280,18 @@ def summarize(records: list, det: dict) -> dict:
     # a cause named on weak held-out evidence (metrology.diagnosis.select.weakly_supported)
     mod = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "moderate" and r["named"]]
     out["moderate_named"] = {"n": len(mod), "right": int(sum(map(_right_alone, mod)))}
+    # the datum check on flat datums (every case without plane_form): "disagrees" is a false alarm
+    flat = [r for r in records if r.get("datum") and all(e["family"] != "plane_form" for e in r["truth"])]
+    flat_nulls = [r for r in flat if r["kind"] == "null"]
+    out["datum_flat"] = {"n": len(flat), "disagrees": int(sum(not r["datum"]["agree"] for r in flat)),
+                         "n_nulls": len(flat_nulls), "disagrees_nulls": int(sum(not r["datum"]["agree"] for r in flat_nulls)),
+                         "ci95_nulls": clopper_pearson(sum(not r["datum"]["agree"] for r in flat_nulls), len(flat_nulls)),
+                         "p_below_0.05_nulls": int(sum(r["datum"]["p"] < 0.05 for r in flat_nulls))}
+    # a knocked sensor named where no sensor was knocked (any kind of case)
+    no_shift = [r for r in records if all(e["family"] != "shift" for e in r["truth"])]
+    out["false_shift"] = {"n": len(no_shift), "named": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift)),
+                          "nulls": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift
+                                           if r["kind"] == "null")), "n_nulls": len(nulls)}
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
@@ -313,6 +333,15 @@ def report(s: dict) -> str:
     o = s["ooc"]
     lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])}, 95 % CP "
                  f"[{100 * o['ci95'][0]:.1f}, {100 * o['ci95'][1]:.1f}] %; {o['by_family']}")
+    df = s.get("datum_flat")
+    if df and df["n"]:
+        lines.append(f"datum check 'disagrees' on flat datums: {_pct(df['disagrees'], df['n'])} of the cases; nulls "
+                     f"{_pct(df['disagrees_nulls'], df['n_nulls'])}, 95 % CP [{100 * df['ci95_nulls'][0]:.2f}, "
+                     f"{100 * df['ci95_nulls'][1]:.2f}] % (p < 0.05: {df['p_below_0.05_nulls']})")
+    fs = s.get("false_shift")
+    if fs:
+        lines.append(f"shift named where no sensor was knocked: {_pct(fs['named'], fs['n'])} of the cases "
+                     f"({fs['nulls']} of {fs['n_nulls']} nulls)")
     h = s["high_precision"]
     lines.append(f"confidence high precision (nulls and singles): {_pct(h['right'], h['n'])}")
     m = s.get("moderate_named", {"n": 0, "right": 0})
@@ -373,8 +402,19 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="save records and summary here")
     ap.add_argument("--families", default="", help="comma-separated: draw only these families (e.g. incidence)")
     ap.add_argument("--tilt-max-deg", type=float, default=None, help="largest tilt of the poses (default 14)")
+    ap.add_argument("--size-range", default=None,
+                    help="LO,HI: draw the --families' sizes in this range instead of the family's own (the same "
+                         "draws of everything else; e.g. shift near its detectable size: 0.005,0.03)")
     a = ap.parse_args(argv)
     fams = tuple(filter(None, a.families.split(",")))
+    if a.size_range:
+        from dataclasses import replace
+
+        from metrology.sim.forward import FAMILIES
+
+        lo, hi = (float(v) for v in a.size_range.split(","))
+        for f in fams:  # in this process, inherited by the pool's (forked) workers
+            FAMILIES[f] = replace(FAMILIES[f], size_range=(lo, hi))
     unknown = [f for f in fams if f not in FAMILY_ORDER + OOC]
     if unknown:
         ap.error(f"--families {','.join(unknown)}: expected some of {','.join(FAMILY_ORDER + OOC)}")

@@ -132,3 +132,50 @@ def test_heavy_libraries_load_lazily(entry):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT).stdout
     allowed = {"numpy"} if entry == "metrology" else set()
     assert set(filter(None, out.strip().split(","))) <= allowed
+
+
+def _doc_rows() -> dict:
+    """``{subpackage: (modules, folders)}`` from the module table of docs/architecture.md: a
+    backticked ``name`` is a module, ``name/ (`a`, `b`)`` the modules of a nested folder, and
+    ``name/`` alone a folder standing for all of its modules."""
+    import re
+
+    rows = {}
+    for line in (ROOT / "docs" / "architecture.md").read_text().splitlines():
+        m = re.match(r"\| `([a-z_]+)/` \| (.*?) \| ", line)
+        if not m:
+            continue
+        mods, folders = set(), set()
+        for name, inner in re.findall(r"`([\w*]+/?)`(?:\s*\(([^)]*)\))?", m.group(2)):
+            if name.endswith("/") and inner:
+                mods |= {name + x for x in re.findall(r"`(\w+)`", inner)}
+            elif name.endswith("/"):
+                folders.add(name[:-1])
+            else:
+                mods.add(name)
+        rows[m.group(1)] = (mods, folders)
+    return rows
+
+
+def test_the_module_table_is_the_tree():
+    """docs/architecture.md's module table lists every module of every subpackage, and no other."""
+    rows = _doc_rows()
+    # a subpackage: a folder of modules (a namespace package without __init__ too)
+    subs = sorted(p.name for p in PKG.iterdir() if p.is_dir() and p.name != "__pycache__" and any(p.rglob("*.py")))
+    errors = []
+    for sub in subs:
+        tree = {str(p.relative_to(PKG / sub).with_suffix("")) for p in (PKG / sub).rglob("*.py")
+                if p.name != "__init__.py"}
+        if sub not in rows:
+            errors.append(f"no row for metrology/{sub}/ (its modules: {', '.join(sorted(tree))})")
+            continue
+        mods, folders = rows[sub]
+        covered = {m for m in tree if m.split("/")[0] in folders and "/" in m}
+        missing = sorted(tree - mods - covered)
+        extra = sorted(mods - tree) + sorted(f + "/" for f in folders if not (PKG / sub / f).is_dir())
+        if missing:
+            errors.append(f"row `{sub}/` does not list: {', '.join(missing)}")
+        if extra:
+            errors.append(f"row `{sub}/` lists what is not in the tree: {', '.join(extra)}")
+    errors += [f"row `{r}/` has no subpackage metrology/{r}/" for r in sorted(set(rows) - set(subs) - {"cli"})]
+    assert not errors, "docs/architecture.md, module table:\n" + "\n".join(errors)

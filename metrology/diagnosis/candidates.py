@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.calibration.dataset import Dataset
 from metrology.core.effects import REGISTRY, Component, Covariates, Outliers
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
@@ -15,11 +16,12 @@ from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "CandidateResult", "score_candidate"]
+__all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
+           "score_candidate"]
 
 
-def covariates_for(ds, layout_fit: SensorLayout, centre=None) -> Covariates:
-    """Covariates of a :class:`~metrology.dataset.Dataset` at the calibrated geometry.
+def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
+    """Covariates of a :class:`~metrology.calibration.dataset.Dataset` at the calibrated geometry.
 
     ``centre`` (3,) mm tracker: the datum centre; default the centroid of the datum cloud if
     there is one, else the mean of the spots projected on the plane.
@@ -89,13 +91,12 @@ SCAN_PASSES = 20
 SCAN_GROW = 0.1
 
 
-def scan_points(ds, centre):
+def scan_points(ds: Dataset, centre):
     """The points of the datum cloud on the datum surface ``(m, 3)`` mm, tracker frame.
 
     The plane fit keeps the points within its window about the *plane* (``ds.datum_points``);
     on a datum whose form exceeds that window its highest and lowest regions fall outside it
-    with the gross points (on one blind draw 122 of 2000 points, and the form over the rest
-    was 0.20 mm of 0.37 mm). Starting from those inliers, the smooth surface of
+    with the gross points, and the form measured over the rest is too small. Starting from those inliers, the smooth surface of
     :meth:`~metrology.core.effects.PlaneForm.scan_surface` is fitted and every point of the
     cloud whose distance from it is within the 1 % family-wise normal quantile of the
     surface's robust (MAD) residual scale is admitted; refitted until the set stops changing
@@ -107,7 +108,7 @@ def scan_points(ds, centre):
     from metrology.core.effects import PlaneForm
     from metrology.core.plane import plane_basis
 
-    cloud = getattr(ds, "datum_cloud", None)
+    cloud = ds.datum_cloud
     pts = ds.datum_points
     if cloud is None or len(cloud) == len(pts):
         return pts
@@ -181,6 +182,25 @@ def flag_residuals(residual, sigma):
 
 
 @dataclass(frozen=True)
+class Scoring:
+    """What every candidate of one selection is scored in (the values that travel together).
+
+    ds : Dataset; b : the base analysis (:class:`~metrology.diagnosis.decide.BaseAnalysis`: its
+    ``cov``, ``sigma``, ``theta0``, fit and held-out figures); flags : (p, n) bool, the readings
+    flagged gross so far; p_out : float, the largest residual's p (the ``outliers`` candidate's
+    test); folds : int, k of the k-fold by pose; n_cand : int, the candidates the in-sample
+    test's level is Bonferroni-split over.
+    """
+
+    ds: object
+    b: object
+    flags: np.ndarray
+    p_out: float
+    folds: int
+    n_cand: int
+
+
+@dataclass(frozen=True)
 class CandidateResult:
     """One candidate scored against the base model (:func:`score_candidate`).
 
@@ -228,11 +248,12 @@ class CandidateResult:
         }
 
 
-def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: HeldOut, flags, p_out, folds,
-                    theta0, n_cand, given=(), k_ref=0, ho_rank: HeldOut | None = None) -> CandidateResult:
-    """Score the candidate ``c``: in-sample F-test of the nested models against ``base`` (for
-    ``outliers`` the largest residual's own test ``p_out``) and the k-fold held-out gain
-    against ``ho_base``; significant when both pass (``n_cand``: the Bonferroni family).
+def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, theta0, given=(), k_ref=0,
+                    ho_rank: HeldOut | None = None) -> CandidateResult:
+    """Score the candidate ``c`` in ``sc``: in-sample F-test of the nested models against ``base``
+    (for ``outliers`` the largest residual's own test ``sc.p_out``) and the k-fold held-out gain
+    against ``ho_base``; significant when both pass (``sc.n_cand``: the Bonferroni family).
+    ``theta0``: the geometry the fits start from (or hold).
 
     ``given``: components already in the model (fitted jointly with ``c``; ``base`` and
     ``ho_base`` are then their fit and held-out figures); ``k_ref``: parameters of ``c`` that
@@ -244,7 +265,10 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
     """
     from scipy import stats
 
+    nominal, obs, cov, sigma = sc.ds.layout, sc.ds.obs, sc.b.cov, sc.b.sigma
+    flags, p_out, folds, n_cand = sc.flags, sc.p_out, sc.folds, sc.n_cand
     names = nominal.names
+    c = c.locate(base.residual, cov, sigma)  # an effect with a place in the run is put there first
     f = fit_any(nominal, obs, cov, sigma, tuple(given) + (c,), theta0)
     k = c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0])) - k_ref
     S = list(c.sensors) if c.sensors else list(range(nominal.n))
@@ -258,7 +282,8 @@ def score_candidate(c: Component, nominal, obs, cov, sigma, base: Fit, ho_base: 
         p_in = p_out  # selection by the largest residual: its own test
     else:
         F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
-        p_in = float(stats.f.sf(F, k, max(dof_e, 1)))
+        # Bonferroni over the positions a located candidate was chosen among
+        p_in = min(1.0, float(stats.f.sf(F, k, max(dof_e, 1))) * c.searched)
     ho = kfold(nominal, obs, cov, sigma, tuple(given) + (c,), folds, theta0)
     excl = None
     if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given):

@@ -8,10 +8,11 @@ procedure): :func:`base_analysis`, the forward selection of causes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from metrology.calibration.dataset import Dataset
 from metrology.core.effects import ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.progress import ProgressFn, notify
@@ -23,85 +24,15 @@ from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import describe_named, simulated_figures, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, geometry, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.results import Cause, Diagnosis, PlotData, Rival
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
-__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "diagnose", "base_analysis", "verdict",
+__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
            "side_by_side", "check_datum"]
 
-
-@dataclass(frozen=True)
-class PlotData:
-    """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
-
-    base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
-    (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
-    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
-    """
-
-    base: Fit
-    cov: object
-    d0: np.ndarray
-    best: CandidateResult | None
-    names: tuple
-    sigma: np.ndarray
-    flags: np.ndarray
-    structure: dict
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
-
-    ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
-    with its parameters and standard errors, its size in the family's unit where one is
-    defined, and its held-out gain given the others, largest first (``cause`` is the first);
-    ``steps`` the residuals after each step of the selection;
-    ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
-    ``tests_extended`` the noise-model battery before and after the extension;
-    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
-    ``detectable`` the size of each family these poses detect at 95 % power
-    (:mod:`metrology.diagnosis.detectable`).
-    """
-
-    cause: str
-    sensors: list
-    confidence: str
-    summary: str
-    named: dict | None
-    candidates: tuple
-    tests_base: NoiseTests
-    tests_extended: NoiseTests | None
-    structure_base: dict
-    discrepancy: dict
-    heldout: dict
-    confounding: list
-    base_theta: np.ndarray
-    base_stderr: np.ndarray
-    thresholds: dict
-    datum_form: DatumFormCheck | None = None
-    plot_data: PlotData | None = None
-    causes: tuple = ()
-    steps: tuple = ()
-    detectable: dict = field(default_factory=dict)
-
-    def to_dict(self):
-        return {
-            "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
-            "causes": list(self.causes), "steps": list(self.steps),
-            "extended": self.named, "heldout": self.heldout, "discrepancy": self.discrepancy,
-            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
-            "tests": {"base": self.tests_base.to_dict(),
-                      "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
-            "structure": self.structure_base,
-            "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
-                     "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
-            "thresholds": self.thresholds,
-            "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
-            "detectable": self.detectable,
-        }
 
 
 @dataclass(frozen=True)
@@ -146,6 +77,8 @@ class Verdict:
     causes: tuple = ()
     lead: CandidateResult | None = None
     dropped: dict | None = None
+    rivals: tuple = ()
+    random_pose: bool = False
 
 
 #: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
@@ -154,7 +87,7 @@ class Verdict:
 CROSSTALK_CHECKED = ("scale", "nonlinearity", "incidence")
 
 
-def base_analysis(ds, folds) -> BaseAnalysis:
+def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
     calibrated one) and test its residuals."""
     nominal, obs = ds.layout, ds.obs
@@ -256,7 +189,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     rpe = None if v.confidence in ("high", "moderate", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
     # a sole cause turned down as not needed stays turned down beside the random pose error
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe, exempt_sole=v.dropped is None)
-    return v2 if v2 is not None and any(c["label"] == "pose_error@random" for c in v2.causes) else v
+    return v2 if v2 is not None and v2.random_pose else v
 
 
 def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_sole=True) -> Verdict:
@@ -296,16 +229,23 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     # is taken without the random effect), unless the verdict without it turned it down
     sole_exempt = random_pose is not None and len(chosen) == 1 and exempt_sole
     kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or need[j])]
-    # a characteristic that follows another sensor's distance better is crosstalk, not the
-    # sensor's own: not named (the check is in metrology.diagnosis.crosstalk)
-    xtalk = {}
+    # crosstalk rules (the check is in metrology.diagnosis.crosstalk), at alpha_heldout and alpha_confound:
+    # - crosstalk_better: a characteristic that another sensor's distance predicts significantly
+    #   better is crosstalk, not the sensor's own: not named, the rival said;
+    # - crosstalk_tie: one that crosstalk predicts only as well is named, confidence ambiguous,
+    #   the rival listed (gain errors are common, crosstalk rare; a user with no cause at all
+    #   gets nothing to act on), with the poses that would separate them
+    xtalk, rivals = {}, []
     for j in list(kept):
         if chosen[j].cause in CROSSTALK_CHECKED:
-            xtalk[j] = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
-            if xtalk[j]["better"] is not None or xtalk[j]["indistinguishable"]:
-                # crosstalk is outside the catalogue: a characteristic is named only where it
-                # predicts held-out poses better than a shift with every other sensor's distance
+            xtalk[j] = x = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
+            separate = f"metro plan --separate {chosen[j].cause}"
+            if x["better"] is not None:
                 kept.remove(j)
+                rivals.append(Rival(x["better"], "crosstalk", chosen[j].label, True, x["p"], separate))
+            else:
+                rivals += [Rival(lab, "crosstalk", chosen[j].label, False, None, separate)
+                           for lab in x["indistinguishable"]]
     causes = []
     for j in kept:
         s = chosen[j]
@@ -314,7 +254,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                   "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                   "p_insample": s.p_insample, "step": j + 1})
-        causes.append(d)
+        causes.append(Cause.from_description(d, [r for r in rivals if r.of == s.label and not r.better]))
     if random_pose is not None:
         from metrology.diagnosis.posevar import random_pose_cause
 
@@ -323,38 +263,33 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
             return None
         causes.append(rp[0])  # (its entry, a CandidateResult for it)
         chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
-    causes.sort(key=lambda d: -d["heldout_gain_chi2"])
+    causes.sort(key=lambda c: -c.heldout_gain_chi2)
     best = chosen[kept[0]] if kept else chosen[0]
     p_concerned = battery_on(tests_ext, sorted({i for j in kept for i in judged[j]}))
     tests_ext = replace(tests_ext, p_concerned=p_concerned)
     if not kept:
-        xt = next((x for x in xtalk.values() if x["better"]), None)
-        amb = next(((j, x) for j, x in xtalk.items() if x["indistinguishable"]), None)
-        if xt is not None:  # the characteristic follows another sensor: crosstalk, outside the catalogue
-            lead = replace(chosen[0], label=f"{xt['better']} (crosstalk: predicts held-out poses better than "
-                                            f"{chosen[0].label}, p = {xt['p']:.2g})")
-        elif amb is not None:  # a gain error or crosstalk: these poses cannot tell
-            lead = replace(chosen[amb[0]], label=f"{', '.join(amb[1]['indistinguishable'])} (crosstalk: predicts "
-                                                 f"held-out poses as well as {chosen[amb[0]].label})")
         p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
-                       None, (), lead)
-    first = next(s for s in chosen if s.label == causes[0]["label"])
+                       None, (), lead, rivals=tuple(r for r in rivals if r.better))
+    first = next(s for s in chosen if s.label == causes[0].label)
     confidence = ("moderate" if weakly_supported([] if sole_exempt else causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:
             confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
-    for j, xc in xtalk.items():
-        for lab in xc["indistinguishable"]:
-            confounding.append({"between": [chosen[j].label, lab], "p_separation": None,
-                                "message": f"the data cannot tell {chosen[j].label} from {lab} (a shift in proportion "
+    for r in rivals:
+        if not r.better and any(c.label == r.of for c in causes):
+            j = next(k for k in kept if chosen[k].label == r.of)
+            confounding.append({"between": [r.of, r.label], "p_separation": None,
+                                "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
                                            f"to another sensor's distance, crosstalk, outside the catalogue); "
-                                           f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt"})
+                                           f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
+                                           f"({r.separate})"})
     if confounding and confidence in ("high", "moderate"):
         confidence = "ambiguous"
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
-                   causes[0], tuple(causes), lead)
+                   causes[0], tuple(causes), lead, rivals=tuple(r for r in rivals if any(c.label == r.of for c in causes)),
+                   random_pose=random_pose is not None)
 
 
 def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
@@ -408,7 +343,7 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
     # sensors of a pose; a form fitted without it would carry standard errors too small for
     # the comparison)
     named_forms = [c for c in v.best.fit.components if isinstance(c, PlaneForm)] if v.causes else []
-    if named_forms and named_forms[0].order >= 2 and any(c["cause"] == "plane_form" for c in v.causes):
+    if named_forms and named_forms[0].order >= 2 and any(c.cause == "plane_form" for c in v.causes):
         pf = v.best.fit
     elif not chosen:  # nothing named: the plane_form candidate's own fit
         pf = next(s.fit for s in scored if s.label == "plane_form")
@@ -420,7 +355,7 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
         pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
     ag = form_agreement(b.datum, pf)
     ag["fitted_with"] = [c.label for c in pf.components]
-    if named_forms and named_forms[0].order == 0 and any(c["cause"] == "plane_form" for c in v.causes):
+    if named_forms and named_forms[0].order == 0 and any(c.cause == "plane_form" for c in v.causes):
         # the form named is the scan itself: the readings agree with the cloud when they see it
         # at gain 1 (a two-sided z-test of the gain's standard error)
         from scipy import stats
@@ -442,7 +377,7 @@ def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
     after the selection: not needed given the others, crosstalk, its sensors not explained)."""
     out = [{"added": None, "model": "base", "residual_rms_mm": np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(),
             "heldout_rms_mm": b.heldout.rms()}]
-    labels, named = [], {c["label"] for c in v.causes}
+    labels, named = [], {c.label for c in v.causes}
     for st in steps:
         if st.chosen is None:
             break
@@ -454,7 +389,7 @@ def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
     return out
 
 
-def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: ProgressFn | None = None) -> Diagnosis:
+def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: ProgressFn | None = None) -> Diagnosis:
     """Run the full diagnosis on a :class:`~metrology.calibration.dataset.Dataset` (see
     :mod:`metrology.diagnosis`).
 
@@ -477,7 +412,7 @@ def diagnose(ds, folds: int = 5, sim_reps: int = 2, seed: int = 0, progress: Pro
     v = verdict(ds, b, steps, folds, rng)
     if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
         chosen = []
-    rand = any(c["label"] == "pose_error@random" for c in v.causes)  # it predicts no reading: not in the model
+    rand = v.random_pose  # a random pose error predicts no reading: not in the model
     fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
         replace(v.best, heldout=b.heldout) if rand else None)

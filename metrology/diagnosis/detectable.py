@@ -25,8 +25,7 @@ this is a lower bound.
   the first) and the best of the family's members for each (:func:`family_detectable`): the
   family is any even bias, and one that grows slowly with the angle (``a^2``) changes least over
   the angles seen for its value at the largest, so the zero point takes most of it; the ``tan^2``
-  member's own shape is among the easiest (on the 20 seed-50 blind draws its size, the earlier
-  definition, was 0.54-0.91 of this one, median 0.73);
+  member's own shape is among the easiest;
 - ``plane_form``: peak-to-valley of the scanned form seen by the spots (mm; with a datum cloud);
 - ``pose_error``: RMS change of a reading by a per-pose rigid error, its offset and tilts
   together, at the least favourable split between them (mm): with 3 sensors the power of the
@@ -41,6 +40,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from metrology.core.effects import Component
 from metrology.diagnosis.extension import _free_offset, size_of
 from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis.thresholds import THRESHOLDS
@@ -223,6 +223,17 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
         "outliers": "one gross reading",
     }
     for c in scored:
+        if type(c.component).detectable_size is not Component.detectable_size and c.component.sensors:
+            # the registry entry says what its test detects (a located effect: over its positions)
+            if J is None:
+                J = base_jacobian(b, ds)
+            i = c.component.sensors[0]
+            det = c.component.detectable_size(J[:, i, :], b.cov, np.isfinite(ds.obs.d[:, i]), float(b.sigma[i]), alpha)
+            if det is not None:
+                fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.detectable_meaning})
+                fam["sensors"][c.sensors[0]] = float(det)
+                fam["member"][c.sensors[0]] = c.label
+            continue
         if c.cause in WORST_SHAPE_FAMILIES:
             # any shape of the family, not the simplest member's alone, by the best of its
             # members (sized below, once its members are all known); listed where its simplest

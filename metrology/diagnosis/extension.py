@@ -45,10 +45,13 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
         return {"value": g * cov.scan_ptp_mm, "stderr": float(np.hypot(se_g * cov.scan_ptp_mm, g * se_ptp)),
                 "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud (beyond its best "
                                         "plane), times the gain the readings see"}
-    if comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
+    rows = comp.size_rows(d0, cov)
+    if rows is not None:  # the registry entry says how it is sized
+        B, meaning = rows
+    elif comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
         return None
-    i = comp.sensors[0]
-    if comp.name in ("scale", "nonlinearity"):
+    elif comp.name in ("scale", "nonlinearity"):
+        i = comp.sensors[0]
         # over the readings the sensor gave: beyond them the data say nothing of the curve
         lo, hi = cov.d_span[i] if cov.d_span is not None else cov.range_mm[i]
         grid = np.linspace(lo, hi, 201)
@@ -57,9 +60,11 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
         B = comp.basis(d_grid, cov)[:, i, :]  # (g, k): the term along the range
         meaning = "peak-to-valley of the characteristic over the readings' span"
     elif comp.name == "drift":
+        i = comp.sensors[0]
         B = comp.basis(d0, cov)[:, i, :]
         meaning = "peak-to-valley of the drift over the run"
     else:
+        i = comp.sensors[0]
         j = int(np.argmin(cov.cos_inc[:, i]))
         B = comp.basis(d0, cov)[j:j + 1, i, :]
         meaning = "bias at the largest incidence angle seen"

@@ -12,20 +12,30 @@ chosen; :mod:`metrology.diagnosis.select` runs the selection with them.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, PoseError
-from metrology.diagnosis.candidates import CandidateResult, score_candidate
+from metrology.diagnosis.candidates import CandidateResult, Scoring, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["SPLINE_LADDER", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
+__all__ = ["SPLINE_LADDER", "Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
 
 _GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The model a step scores candidates against: the components ``given`` (the causes chosen
+    so far), their joint ``fit`` and its k-fold ``heldout`` figures."""
+
+    given: tuple
+    fit: Fit
+    heldout: HeldOut
 #: interior knots of the characteristic's richer splines, tried in turn once a curve is chosen
 #: (4: the scored member's count, with its knots at the readings' quantiles instead)
 SPLINE_LADDER = (4, 8, 12)
@@ -64,8 +74,7 @@ def refine_order(best: CandidateResult, scored) -> CandidateResult:
     return held
 
 
-def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds,
-                  n_cand) -> tuple:
+def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     """The characteristic's order, beyond the members every sensor is scored with: once a curve
     (``nonlinearity``) is chosen, splines with more knots (:data:`SPLINE_LADDER`) are scored in
     turn given the same causes, and each is taken only when it is significant and predicts
@@ -86,6 +95,7 @@ def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: Hel
     Returns ``(member, ladder)``: the member held, and every member of the ladder (scored
     CandidateResults of the rungs climbed, components of those not reached), for
     :func:`adequate_member`."""
+    ds, b = sc.ds, sc.b
     c = held.component
     if not isinstance(c, Nonlinearity) or not c.sensors:
         return held, []
@@ -108,7 +118,7 @@ def richer_spline(ds, b, held: CandidateResult, given, ref_fit: Fit, ref_ho: Hel
         if not climbing:  # scored by the adequacy step only, if it is needed
             rest.append(rung)
             continue
-        scored = score_step(ds, b, rung, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
+        scored = score_step(sc, ref, rung)
         tried.append(scored)
         # a rung's two tested at once: the order's level split between them
         better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"] / len(rung)]
@@ -130,15 +140,14 @@ def _consistent(ds, b, cand: CandidateResult) -> bool:
     return battery_on(tests, S) >= THRESHOLDS["alpha_battery"]
 
 
-def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out,
-                    folds, n_cand, more=()) -> CandidateResult:
+def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, more=()) -> CandidateResult:
     """The member of ``held``'s family that explains its sensors: ``held``, or where it leaves
     them inconsistent with the noise (the verdict's battery at ``alpha_battery``), the simplest
     other member that is significant, predicts held-out poses no worse (``held`` not
     significantly better, ``alpha_order``) and leaves them consistent.
 
     The candidates are the members of the same cause on the same sensors in ``scored`` and the
-    components ``more`` (scored here, given ``given``, when reached), by number of parameters
+    components ``more`` (scored here, given ``ref.given``, when reached), by number of parameters
     (ties: temperature before time, then the smaller chi-square). A cause of the set-up
     (``pose_error``, ``plane_form``) acts on every sensor and is judged on all of them, so with
     another cause not yet modelled it keeps its member here and is judged again given that
@@ -156,6 +165,7 @@ def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, r
     significantly better held out. A 0.11 mm calibration table of 4 knots at 3.5 um noise: the
     cubic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
     RMS on the sensor (the cubic failing the battery, the quintic not)."""
+    ds, b = sc.ds, sc.b
     c = held.component
     if isinstance(c, Outliers) or _consistent(ds, b, held):
         return held
@@ -170,7 +180,7 @@ def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, r
         todo = [x for x in group if not isinstance(x, CandidateResult)]
         group = [x for x in group if isinstance(x, CandidateResult)]
         if todo:
-            group += score_step(ds, b, todo, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
+            group += score_step(sc, ref, todo)
         ok = [s for s in group if s.label not in seen and s.significant and s.n_params >= held.n_params
               and p_better(held, s) >= THRESHOLDS["alpha_order"] and _consistent(ds, b, s)]
         seen |= {s.label for s in group}
@@ -179,11 +189,13 @@ def adequate_member(ds, b, held: CandidateResult, scored, given, ref_fit: Fit, r
     return held
 
 
-def score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, folds, n_cand, on_candidate=None):
-    """Score every candidate of ``pool`` given the components ``given`` (their joint fit
-    ``ref_fit`` and its held-out figures ``ref_ho``). Form is scored against the datum's tilt;
+def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
+    """Score every candidate of ``pool`` given the components ``ref.given`` (their joint fit
+    ``ref.fit`` and its held-out figures ``ref.heldout``). Form is scored against the datum's tilt;
     the rigid pose error with the geometry held at the offset member's fit given the same causes.
     ``on_candidate(i, n, label)``, if given, is called before scoring each."""
+    ds, b, folds = sc.ds, sc.b, sc.folds
+    given, ref_fit, ref_ho = ref.given, ref.fit, ref.heldout
     nominal, obs = ds.layout, ds.obs
     tilt = None
     out = []
@@ -217,6 +229,5 @@ def score_step(ds, b, pool, given, ref_fit: Fit, ref_ho: HeldOut, flags, p_out, 
                 tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
                         kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
-        out.append(score_candidate(c, nominal, obs, b.cov, b.sigma, ref_f, ref_h, flags, p_out, folds, th_c,
-                                   n_cand, given=given, k_ref=k_ref, ho_rank=ref_ho))
+        out.append(score_candidate(c, sc, ref_f, ref_h, th_c, given=given, k_ref=k_ref, ho_rank=ref_ho))
     return out

@@ -36,10 +36,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from metrology.core.effects import Outliers, PoseError
-from metrology.diagnosis.candidates import CandidateResult, candidates_for, flag_residuals
+from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import beyond_span, kfold
-from metrology.diagnosis.members import adequate_member, family_of, p_better, refine_order, richer_spline, score_step
+from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
+                                         score_step)
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
@@ -122,10 +123,8 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     and two tilts a pose take three quarters of any effect on one sensor of a 4-sensor head,
     so where two sensors drift each on its own, the per-pose cause predicts held-out poses
     better than either drift alone and takes the first step; the drifts of both sensors, two
-    values, explain it all. Drifts of 0.086 mm on L1 and 0.094 mm on L2 (seed-100 pair 6, 4
-    sensors, 79 poses, 5.3 um noise): step 1 took ``pose_error@rigid`` (held-out gain 2780,
-    against 2091 for the drift on L2), step 2 the drift on L2, and the pose error was named, a
-    wrong cause."""
+    values, explain it all (the case that motivated the rule is in
+    ``benchmarks/results/diagnose_history.md``)."""
     main = [st.chosen for st in steps if st.chosen is not None]
     alt = [st.chosen for st in fixed if st.chosen is not None]
     if not alt or {s.label for s in alt} <= {s.label for s in main}:
@@ -151,20 +150,22 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
     remaining, seen = list(pool), None  # pool: what the next step scores (see _prune)
     given, steps = (), []
     ref_fit, ref_ho = b.fit, b.heldout
+    sc = Scoring(ds, b, flags, p_out, folds, n_cand)
     while True:
         tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
         if first is not None and not steps:
             scored = list(first)
         else:
-            scored = score_step(ds, b, pool, given, ref_fit, ref_ho, flags, p_out, folds, n_cand, tick)
+            scored = score_step(sc, Reference(given, ref_fit, ref_ho), pool, tick)
         ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
         sig = [s for s in ranked if s.significant and not (first is not None and s.component.per_pose)]
         if not sig:
             steps.append(Step(None, ranked, _lead(scored, n_cand)))
             return steps
         chosen = refine_order(_parsimonious(sig), scored)
-        chosen, ladder = richer_spline(ds, b, chosen, given, ref_fit, ref_ho, flags, p_out, folds, n_cand)
-        chosen = adequate_member(ds, b, chosen, scored, given, ref_fit, ref_ho, flags, p_out, folds, n_cand, ladder)
+        ref = Reference(given, ref_fit, ref_ho)
+        chosen, ladder = richer_spline(sc, ref, chosen)
+        chosen = adequate_member(sc, ref, chosen, scored, ladder)
         steps.append(Step(chosen, ranked, None))
         given = given + (chosen.component,)
         ref_fit, ref_ho = chosen.fit, chosen.heldout
@@ -180,6 +181,7 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
                                                                                                    b.sigma))[0]
             if np.any(new & ~flags):
                 flags = flags | new
+                sc = replace(sc, flags=flags)
                 k = next(j for j, g in enumerate(given) if isinstance(g, Outliers))
                 out = replace(given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
                               values=None, stderr=None)
@@ -197,10 +199,11 @@ def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None
             # extremes look gross to a fit without it
             flags, p_out = (flag_given_rigid(ref_fit, b.cov, b.sigma, np.zeros_like(flags)) if rigid
                             else flag_residuals(ref_fit.residual, b.sigma))
+            sc = replace(sc, flags=flags, p_out=p_out)
             remaining = [c for c in remaining if not isinstance(c, Outliers)]
             remaining += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
         if len(given) > 1:
-            given, ref_fit, ref_ho = rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand)
+            given, ref_fit, ref_ho = rechoose_members(sc, given, steps, members)
         pool = _prune(remaining, given, seen)
         if len(given) >= max_causes or not pool:
             return steps
@@ -215,9 +218,9 @@ def _seen_after(chosen, scored, seen):
     too (a warm-up that a line in time barely shows needs its curve to be chosen). The set is
     taken once, at the first step that chose a cause on its own sensors, and kept. A set-up
     cause (datum form, pose error: no sensors of its own) inflates every sensor's scatter: after
-    one, the set is dropped and the next step rescores every family. Under a 0.42 mm form
-    every drift member of L1 had in-sample p 0.3-0.9 at step 1 (seed-103 pair 36); pruned
-    there, the drift was never scored given the form."""
+    one, the set is dropped and the next step rescores every family: under a large form a
+    drift's members can all show nothing at step 1, and pruned there the drift would never be
+    scored given the form."""
     if not chosen.sensors:
         return None
     if seen is not None:
@@ -286,7 +289,7 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     return out, p_max
 
 
-def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
+def rechoose_members(sc: Scoring, given, steps, members):
     """Re-choose the member of each earlier cause's family given the causes chosen after it.
 
     A member is chosen by held-out error given the causes known at its step: a rigid pose
@@ -298,6 +301,7 @@ def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
     its step and the joint model are refitted (``steps`` is updated in place). Returns
     (given, joint fit, its held-out figures).
     """
+    ds, b, folds = sc.ds, sc.b, sc.folds
     nominal, obs = ds.layout, ds.obs
     changed = False
     for j, g in enumerate(given[:-1]):
@@ -307,14 +311,14 @@ def rechoose_members(ds, b, given, steps, members, flags, p_out, folds, n_cand):
         others = given[:j] + given[j + 1:]
         th0 = steps[-1].chosen.fit.theta
         ref = (fit_any(nominal, obs, b.cov, b.sigma, others, th0), kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
-        scored = score_step(ds, b, mates, others, ref[0], ref[1], flags, p_out, folds, n_cand)
+        scored = score_step(sc, Reference(others, *ref), mates)
         held = next((s for s in scored if s.label == g.label), None)
         if held is None or not held.significant:
             continue
         new = refine_order(held, scored)
         # and the member must explain its sensors given the others (refine_order starts from the
         # simplest member: a member taken for adequacy would otherwise go back to it)
-        new = adequate_member(ds, b, new, scored, others, ref[0], ref[1], flags, p_out, folds, n_cand)
+        new = adequate_member(sc, Reference(others, *ref), new, scored)
         if new.label == g.label:
             continue
         given = given[:j] + (new.component,) + given[j + 1:]
@@ -386,8 +390,8 @@ def weakly_supported(causes) -> list:
     (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws named ``high`` on such
     a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
     predicts nothing held out) and a random pose error (no held-out p) are exempt."""
-    return [c["label"] for c in causes if c["cause"] != "outliers" and c.get("p_heldout_given_others") is not None
-            and not c["p_heldout_given_others"] < THRESHOLDS["alpha_high"]]
+    return [c.label for c in causes if c.cause != "outliers" and c.p_heldout_given_others is not None
+            and not c.p_heldout_given_others < THRESHOLDS["alpha_high"]]
 
 
 def flags_of(chosen):

@@ -45,14 +45,10 @@ def verdict_summary(v, tb) -> str:
     if v.best is None:
         return (f"{inconsistent} and no catalogued effect gives a significant held-out gain: structure outside the "
                 "catalogue" + lead)
-    if v.cause == "unexplained" and v.lead is not None and "(crosstalk: predicts held-out poses as well" in v.lead.label:
-        return (f"{v.best.label} gives a significant held-out gain, but so does a shift in proportion to another "
-                f"sensor's distance ({v.lead.label.split(' (')[0]}: crosstalk between sensors, outside the catalogue): "
-                f"these poses cannot tell {v.lead.label.split('(crosstalk: predicts held-out poses as well as ')[-1].rstrip(')')} "
-                "from crosstalk, so neither is named; to separate them, spread the tilts so that the sensors' "
-                "distances do not move together")
-    if v.cause == "unexplained" and v.lead is not None and "(crosstalk:" in v.lead.label:
-        return (f"{v.best.label} gives a significant held-out gain, but {v.lead.label}: the effect follows another "
+    better = next((r for r in v.rivals if r.better), None)
+    if v.cause == "unexplained" and better is not None:
+        return (f"{v.best.label} gives a significant held-out gain, but {better.label} (crosstalk: predicts held-out "
+                f"poses better than {better.of}, p = {better.p:.2g}): the effect follows another "
                 "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)")
     if v.cause == "unexplained":
         return (f"{v.best.label} gives a significant held-out gain (RMS ratio {v.best.heldout_rms_ratio:.3g}) but "
@@ -60,10 +56,10 @@ def verdict_summary(v, tb) -> str:
                 f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains")
     parts = []
     for c in v.causes:
-        where = f" on {', '.join(c['sensors'])}" if c["sensors"] and c["cause"] not in ("pose_error", "plane_form") else ""
-        test = (f"{c['test']}, p = {c['p_insample']:.2g}" if c.get("test") else
-                f"held-out chi-square gain {c['heldout_gain_chi2']:.3g} given the others, p = {c['p_heldout_given_others']:.2g}")
-        parts.append(f"{c['cause']}{where} ({c['label']}: {test})")
+        where = f" on {', '.join(c.sensors)}" if c.sensors and c.cause not in ("pose_error", "plane_form") else ""
+        test = (f"{c.test}, p = {c.p_insample:.2g}" if c.test else
+                f"held-out chi-square gain {c.heldout_gain_chi2:.3g} given the others, p = {c.p_heldout_given_others:.2g}")
+        parts.append(f"{c.cause}{where} ({c.label}: {test})")
     text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
         names = list(te.sensors)
@@ -71,9 +67,16 @@ def verdict_summary(v, tb) -> str:
         where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
+    ties = [r for r in v.rivals if not r.better]
+    if ties and v.confidence == "ambiguous":
+        of = list(dict.fromkeys(r.of for r in ties))
+        return text + ("; confidence ambiguous: " + "; ".join(
+            f"{', '.join(r.label for r in ties if r.of == o)} (a shift in proportion to another sensor's distance, "
+            f"crosstalk, outside the catalogue) predicts held-out poses as well as {o}" for o in of)
+            + f"; poses that separate them: {', '.join(dict.fromkeys(r.separate for r in ties))}")
     weak = weakly_supported(v.causes) if v.confidence == "moderate" else []
     if weak:
-        p = {c["label"]: c["p_heldout_given_others"] for c in v.causes}
+        p = {c.label: c.p_heldout_given_others for c in v.causes}
         return text + (f"; confidence moderate: weak held-out evidence for "
                        f"{' and '.join(f'{k} (p = {p[k]:.2g})' for k in weak)}, not below {THRESHOLDS['alpha_high']:g}")
     return text + f"; confidence {v.confidence}"

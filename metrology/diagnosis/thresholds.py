@@ -7,7 +7,7 @@ from metrology.core.effects import REGISTRY
 __all__ = ["THRESHOLDS", "ADVICE"]
 
 #: decision thresholds (family-wise levels, Bonferroni-split over the candidates / tests),
-#: set a priori and checked on null data (benchmarks/study_diagnose.py, docs/readme_diagnose.md)
+#: set a priori and checked on null data (benchmarks/study_blind.py; results in benchmarks/results/)
 THRESHOLDS = {
     "alpha_candidates": 0.01,  # family-wise level of the in-sample F-tests over all candidates
     "alpha_heldout": 0.05,  # level of the one-sided held-out gain test (confirms the F-test)

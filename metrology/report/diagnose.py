@@ -103,6 +103,11 @@ def report_text(d: Diagnosis) -> str:
                 sz = c["size"]
                 se = "" if sz["stderr"] is None else f" +- {1e3 * sz['stderr']:.2f}"
                 lines.append(f"  size {1e3 * sz['value']:.2f}{se} um ({sz['meaning']})")
+            if c.get("at"):  # an effect located in the run (a knocked sensor)
+                at = c["at"]
+                lines.append(f"  between the export's poses {at['last_pose_before'] + 1} and {at['first_pose_after'] + 1} "
+                             f"(rows, from 1; t = {at['time_h']:.4g} h since the first pose, or the pose index without "
+                             f"time; {at['positions_searched']} positions searched)")
             for k, v in c["params"].items():
                 se = "" if v["stderr"] is None else f" +- {v['stderr']:.3g}"
                 lines.append(f"  {k} = {v['value']:.4g}{se} {v['unit']}")

@@ -251,7 +251,7 @@ def extension_fit_summary(diag):
     f = P.best.fit
     params, names = [], []
     for c in diag.causes:
-        for k, v in c["params"].items():
+        for k, v in c.params.items():
             params.append((k, float(v["value"]), None if v["stderr"] is None else float(v["stderr"]), v["unit"]))
             names.append(k)
     # the readings of the fitted sensors, and what the fit's dof leaves of them (held base
@@ -262,7 +262,7 @@ def extension_fit_summary(diag):
     if f.extra_cov.shape == (len(names), len(names)):
         corr = correlations_from_cov(f.extra_cov, names)
     corr += tuple((n, w, float(r)) for n, w, r in zip(names, f.corr_with, f.corr_base) if w)
-    return FitSummary(f"base + {' + '.join(c['label'] for c in diag.causes)}", "lsq", ndata, nvarys,
+    return FitSummary(f"base + {' + '.join(c.label for c in diag.causes)}", "lsq", ndata, nvarys,
                       float(f.chi2), tuple(params), corr)
 
 

@@ -16,10 +16,10 @@ def adequacy_spy(monkeypatch):
     seen = []
     adequate = select.adequate_member
 
-    def spy(ds, b, held, *args, **kw):
-        out = adequate(ds, b, held, *args, **kw)
-        seen.append((held.label, _consistent(ds, b, held), out.label, _consistent(ds, b, out),
-                     out.n_params - held.n_params, tuple(g.label for g in args[1])))
+    def spy(sc, ref, held, *args, **kw):
+        out = adequate(sc, ref, held, *args, **kw)
+        seen.append((held.label, _consistent(sc.ds, sc.b, held), out.label, _consistent(sc.ds, sc.b, out),
+                     out.n_params - held.n_params, tuple(g.label for g in ref.given)))
         return out
 
     monkeypatch.setattr(select, "adequate_member", spy)

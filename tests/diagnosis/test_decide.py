@@ -22,7 +22,7 @@ def _check_named(d, effect, sensor, truth_rec):
         assert d.sensors == [sensor]
     h = d.heldout
     assert h["rms_ratio_concerned"] > 1.0 and h["p_heldout"] < 0.05
-    params = d.named["params"]
+    params = d.named.params
     if effect == "scale":
         v = params["k"]
         assert abs(v["value"] - truth_rec["size"]) < K_SIGMA * v["stderr"]
@@ -40,7 +40,7 @@ def _check_named(d, effect, sensor, truth_rec):
         v = params["sigma_mm"]
         assert abs(v["value"] - truth_rec["size"]) < K_SIGMA * v["stderr"]
     elif effect == "outliers":
-        flagged = d.named["flagged"]
+        flagged = d.named.detail["flagged"]
         assert sorted(f["pose"] for f in flagged) == truth_rec["poses"]
         for f in flagged:
             assert abs(abs(f["gross_mm"]) - truth_rec["size"]) < K_SIGMA * f["stderr"] + K_SIGMA * 0.003

@@ -176,8 +176,10 @@ def test_confidence_high_needs_strong_held_out_evidence_for_every_cause():
 
     a = THRESHOLDS["alpha_high"]
 
+    from metrology.diagnosis.results import Cause
+
     def cause(label, p):
-        return {"cause": label.split(".")[0].split("@")[0], "label": label, "p_heldout_given_others": p}
+        return Cause(label, label.split(".")[0].split("@")[0], [], None, 1.0, p, 1e-9, 1)
 
     assert weakly_supported([cause("incidence.L3@4", 0.026)]) == ["incidence.L3@4"]
     assert weakly_supported([cause("drift.L2@temp", 0.9 * a), cause("scale.L1", a)]) == ["scale.L1"]
@@ -207,9 +209,9 @@ def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
     held-out poses worse than the offset alone, and the case came out ``unexplained``. Held
     where the offset member puts the geometry, it leaves the noise and predicts them better."""
     from metrology.core.effects import PoseError
-    from metrology.diagnosis.candidates import candidates_for, flag_outliers
+    from metrology.diagnosis.candidates import Scoring, candidates_for, flag_outliers
     from metrology.diagnosis.decide import base_analysis
-    from metrology.diagnosis.members import _consistent, p_better, score_step
+    from metrology.diagnosis.members import Reference, _consistent, p_better, score_step
 
     case = draw_case(np.random.default_rng([70, 1, 0, 9]), "pose_error")
     assert case.nominal.n == 4 and case.effects[0].shape["angle_rad"] > 0
@@ -217,8 +219,8 @@ def test_rigid_member_holds_the_geometry_the_offset_member_finds(tmp_path):
     b = base_analysis(ds, 5)
     flags, p_out = flag_outliers(ds.layout, ds.obs, b.cov, b.sigma, b.theta0)
     n_cand = len(candidates_for(ds.layout, b.cov, flags))
-    off, rigid = score_step(ds, b, PoseError.candidates_for_setup(ds.layout.names, b.cov), (), b.fit, b.heldout,
-                             flags, p_out, 5, n_cand)
+    off, rigid = score_step(Scoring(ds, b, flags, p_out, 5, n_cand), Reference((), b.fit, b.heldout),
+                            PoseError.candidates_for_setup(ds.layout.names, b.cov))
     assert (off.label, rigid.label) == ("pose_error", "pose_error@rigid")
     assert off.significant and not _consistent(ds, b, off)  # the orientation part stays in the offset's residuals
     assert rigid.significant and _consistent(ds, b, rigid)

@@ -28,6 +28,8 @@ normalised over the sensor's range ``[lo, hi]``):
 ``pose_error``   ``e_p / (N.u)``                  TCS position error along the datum normal, one
                  number per pose (mm; gauge ``sum e_p = 0``)
 ``outliers``     ``g_j`` on flagged readings      gross readings (mm), equivalent to dropping them
+``shift``        ``s H(t - t_k)``                 a knocked sensor: its zero jumps at a pose the data
+                 locate (change-point search in time order) and stays (mm)
 
 A constant term is absorbed by the zero point along the beam (an exact degeneracy: moving
 ``E`` by ``delta u`` changes every reading by ``-delta``), so components carry no constant.
@@ -53,6 +55,7 @@ from metrology.core.effects.base import REFERENCE_TEMP_C, SECONDS_PER_HOUR, VERD
 from metrology.core.effects.model import ExtendedModel
 from metrology.core.effects.sensor import Drift, Incidence, Nonlinearity, Scale
 from metrology.core.effects.setup import Outliers, PlaneForm, PoseError
+from metrology.core.effects.shift import Shift
 
 __all__ = [
     "Covariates",
@@ -64,6 +67,7 @@ __all__ = [
     "PlaneForm",
     "PoseError",
     "Outliers",
+    "Shift",
     "ExtendedModel",
     "REGISTRY",
     "CATALOGUE",
@@ -73,6 +77,7 @@ __all__ = [
 ]
 
 #: the effect catalogue: name -> Component subclass (the order candidates are built and scored)
-REGISTRY = {cls.name: cls for cls in (Scale, Incidence, Nonlinearity, Drift, PlaneForm, PoseError, Outliers)}
+REGISTRY = {cls.name: cls for cls in (Scale, Incidence, Nonlinearity, Drift, PlaneForm, PoseError, Outliers,
+                                          Shift)}
 #: names of the catalogued effects (the ``cause`` of a diagnosis)
 CATALOGUE = tuple(REGISTRY)

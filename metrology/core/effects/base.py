@@ -181,6 +181,11 @@ class Component:
     key_params = ()
     #: an effect of the set-up (acts on every sensor; the simulator takes no sensor for it)
     setup = False
+    #: how many positions :meth:`locate` chose among (the in-sample test is Bonferroni-split
+    #: over them); 1 for an effect with nothing to locate
+    searched = 1
+    #: what :meth:`detectable_size` measures (the ``meaning`` of the diagnosis' ``detectable``)
+    detectable_meaning = ""
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov) -> list:
@@ -193,6 +198,27 @@ class Component:
         """The candidates of this effect that are not per sensor (values zero); none by default.
         ``flags`` (p, n) bool: readings flagged as gross, or None."""
         return []
+
+    def locate(self, residual, cov, sigma) -> "Component":
+        """The candidate placed where the data put it, before it is fitted: an effect with a
+        location in the run (a change point) finds it in the residuals ``(p, n)`` mm of the model
+        it is scored against (``sigma (n,)`` mm the stated noise) and sets :attr:`searched`. By
+        default nothing to locate: ``self``."""
+        return self
+
+    def size_rows(self, d0, cov):
+        """``(B (m, k), meaning)``: the rows whose fitted values give the effect's size in its
+        family's unit (one row: its absolute value; several: their peak-to-valley), or None where
+        the effect defines none here (the diagnosis' older families are sized in
+        :func:`metrology.diagnosis.extension.size_of`)."""
+        return None
+
+    def detectable_size(self, J_i, cov, fin, sigma_i, alpha) -> float | None:
+        """The size (the family's unit) its in-sample test at level ``alpha`` detects at 95 %
+        power on sensor ``self.sensors[0]``: ``J_i (p, 5)`` mm per unit parameter, the sensor's
+        base Jacobian; ``fin (p,)`` bool, its finite readings; ``sigma_i`` mm. None where the
+        effect defines none here (the older families are in :mod:`metrology.diagnosis.detectable`)."""
+        return None
 
     @classmethod
     def hidden(cls, i, size) -> "Component":

@@ -216,6 +216,17 @@ def _spline_setup(a, b, n_inner, inner=None):
     return t, (coef[0], coef[1]), coef[1]
 
 
+@functools.lru_cache(maxsize=256)
+def _spline_derivatives(a, b, n_inner, inner=None):
+    """The derivative of each cubic B-spline of :func:`_spline_setup`'s knots (same key), built
+    once per knot set (cached, bounded)."""
+    from scipy.interpolate import BSpline
+
+    t = _spline_setup(a, b, n_inner, inner)[0]
+    nb = len(t) - 4
+    return tuple(BSpline(t, np.eye(nb)[j], 3, extrapolate=True).derivative() for j in range(nb))
+
+
 def legendre23(x):
     """``(P2(x), P3(x))``: the bow and S-shape of a reading normalised to ``x`` in [-1, 1]."""
     return 0.5 * (3 * x**2 - 1), 0.5 * (5 * x**3 - 3 * x)
@@ -321,10 +332,8 @@ class Nonlinearity(Component):
         dB = np.full((len(xf), nb), np.nan)
         if np.any(ok):
             B[ok] = BSpline.design_matrix(xf[ok], t, 3, extrapolate=True).toarray()
-        for j in range(nb):  # derivative of each basis function (nb small)
-            c = np.zeros(nb)
-            c[j] = 1.0
-            dB[ok, j] = BSpline(t, c, 3, extrapolate=True).derivative()(xf[ok])
+        for j, dspline in enumerate(_spline_derivatives(float(a), float(b), self.knots, inner)):
+            dB[ok, j] = dspline(xf[ok])  # derivative of each basis function (nb small)
         P = B - line[0][None, :] - xf[:, None] * line[1][None, :]
         dP = dB - dline[None, :]
         shape = np.shape(x) + (nb - 2,)

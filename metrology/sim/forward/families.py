@@ -49,6 +49,8 @@ FAMILIES = {
     "incidence": FamilySpec((0.02, 0.15), "|bias| at the largest incidence angle the sensor sees", "mm"),
     "plane_form": FamilySpec((0.05, 0.50), "peak-to-valley of the datum height field over its extent", "mm", True, False),
     "outliers": FamilySpec((2, 6), "number of gross readings, each 0.1-2 mm off", "readings"),
+    "shift": FamilySpec((0.02, 0.06), "jump of one sensor's zero point along its beam at one pose (a knock), "
+                        "kept to the run's end; the pose uniform over the middle 80 % of the run", "mm"),
     "periodic": FamilySpec((0.02, 0.10), "amplitude of a sine in the pose index or in time", "mm", False),
     "crosstalk": FamilySpec((0.02, 0.10), "peak-to-valley of the shift, in proportion to another sensor's distance", "mm", False),
 }
@@ -159,6 +161,14 @@ def draw_effect(rng: np.random.Generator, family: str, scene: Scene, size: float
         coupling = float(rng.choice([-1.0, 1.0]) * size / ptp)
         off[:, sensor] = crosstalk_offset(scene.d_true[:, src], coupling)
         return Effect(family, name, size, {"source": scene.names[src], "coupling": coupling}), off, None, 0
+    if family == "shift":
+        # the sensor knocked between two poses: its zero point moves by ``delta`` along its beam,
+        # which shortens every later distance by ``delta`` whatever the pose (d = (D - N.E) / (N.u))
+        k = int(rng.integers(int(np.ceil(0.1 * p)), int(np.floor(0.9 * p)) + 1))
+        delta = float(rng.choice([-1.0, 1.0]) * size)
+        off[k:, sensor] = -delta
+        return Effect(family, name, size, {"at_pose": k, "time_s": float(scene.time_s[k]), "zero_moved_mm": delta}), \
+            off, None, 0
     if family == "outliers":
         count = int(round(size))
         return Effect(family, name, count, {"delta_mm": [0.1, 2.0]}), None, None, count

@@ -17,7 +17,7 @@ def _resid(case):
 
 
 def test_families_are_listed_with_size_ranges():
-    assert set(CATALOGUE) == {"pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers"}
+    assert set(CATALOGUE) == {"pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers", "shift"}
     assert set(OUT_OF_CATALOGUE) == {"periodic", "crosstalk"}
     for name, spec in FAMILIES.items():
         assert spec.size_range[0] <= spec.size_range[1] and spec.unit in ("mm", "readings"), name
@@ -43,6 +43,19 @@ def test_a_per_sensor_effect_moves_only_its_sensor_by_its_size(family, rng):
     assert np.ptp(r[:, j]) > 0.08 * 0.5  # the effect is there on its sensor
     if family in ("scale", "nonlinearity", "drift", "crosstalk"):
         assert np.ptp(r[:, j]) <= 0.08 + 12 * 0.003
+
+
+def test_shift_moves_one_sensor_by_a_step_that_stays(rng):
+    """A knock moves the zero point along the beam: every later reading of that sensor shorter
+    by exactly that much, whatever the pose; the other sensors and earlier poses untouched."""
+    case = draw_case(rng, "shift", noise_mm=0.003, n_poses=100, size=0.05, blanks=0)
+    (eff,) = case.effects
+    k, j = eff.shape["at_pose"], case.nominal.names.index(eff.sensors[0])
+    assert 10 <= k <= 90 and abs(eff.shape["zero_moved_mm"]) == 0.05
+    truth = case.d_true.copy()
+    truth[k:, j] -= eff.shape["zero_moved_mm"]
+    assert np.all(np.abs(case.export.d - truth) < 6 * 0.003)
+    assert eff.shape["time_s"] == case.export.time_s[k]
 
 
 def test_pose_error_moves_the_reported_pose_not_the_readings(rng):

@@ -1,0 +1,223 @@
+"""The typed results of a diagnosis: outcome and confidence, each cause named, its size, its rivals.
+
+Text is made from these once, at the edge (:mod:`metrology.diagnosis.summary`, the report), and
+JSON by ``to_dict`` (the ``--json`` schema: every key as before; ``rivals`` and ``at`` appear only
+where there is one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+__all__ = ["Outcome", "Confidence", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
+
+
+class Outcome(StrEnum):
+    """What a diagnosis concludes: a cause named (``cause`` then says which), nothing above the
+    detectable sizes, or residuals no catalogued cause explains."""
+
+    NAMED = "named"
+    NONE = "none"
+    UNEXPLAINED = "unexplained"
+
+
+class Confidence(StrEnum):
+    """How firmly the verdict stands (see docs/diagnose.md, "reading a verdict")."""
+
+    HIGH = "high"
+    MODERATE = "moderate"
+    AMBIGUOUS = "ambiguous"
+    PARTIAL = "partial"
+    LOW = "low"
+
+
+@dataclass(frozen=True)
+class Size:
+    """A cause's size in its family's unit.
+
+    value : float; stderr : float or None (the fit's, plus the family members' spread where
+    there is one); unit : str; meaning : str; stderr_fit, model_spread : float or None (the two
+    parts of ``stderr``, where the spread was added)."""
+
+    value: float
+    stderr: float | None
+    unit: str
+    meaning: str
+    stderr_fit: float | None = None
+    model_spread: float | None = None
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "Size | None":
+        if d is None:
+            return None
+        return cls(d["value"], d.get("stderr"), d["unit"], d["meaning"], d.get("stderr_fit"), d.get("model_spread"))
+
+    def to_dict(self) -> dict:
+        out = {"value": self.value, "stderr": self.stderr, "unit": self.unit, "meaning": self.meaning}
+        if self.stderr_fit is not None or self.model_spread is not None:
+            out.update(stderr_fit=self.stderr_fit, model_spread=self.model_spread)
+        return out
+
+
+@dataclass(frozen=True)
+class Rival:
+    """An explanation outside the catalogue that predicts held-out poses as well as a cause, or
+    better (crosstalk: a shift in proportion to another sensor's distance).
+
+    label : str, the rival term (``crosstalk.L2<-L1``); family : str; of : str, the label of the
+    catalogued cause it rivals; better : bool, it predicts significantly better (the cause is then
+    not named) rather than as well (the cause is named, confidence ``ambiguous``); p : float or
+    None, the p-value of "better" (None for a tie); separate : str, the command that designs poses
+    telling them apart.
+    """
+
+    label: str
+    family: str
+    of: str
+    better: bool
+    p: float | None
+    separate: str
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "family": self.family, "of": self.of, "better": self.better, "p": self.p,
+                "separate": self.separate}
+
+
+#: the keys of a cause's description that :class:`Cause` holds as typed attributes
+_TYPED = ("label", "cause", "sensors", "size", "heldout_gain_chi2", "p_heldout_given_others", "p_insample", "step",
+          "test", "params", "rivals")
+
+
+@dataclass(frozen=True)
+class Cause:
+    """One cause named.
+
+    label : str, the member (``drift.L2@temp``); cause : str, its family (a catalogue name);
+    sensors : list of str (empty for a cause of the set-up); size : Size or None;
+    heldout_gain_chi2 : float, its held-out chi-square gain given the other causes;
+    p_heldout_given_others : float or None (None: a cause with no held-out test, the random pose
+    error); p_insample : float; step : int, the selection step that chose it; test : str or None,
+    the test that named it where that is not the held-out one; params : dict, its parameters
+    (value, unit, stderr); rivals : tuple of Rival it cannot be told from;
+    detail : dict, the rest of its description (component, reference, located pose, pose-error
+    figures...), JSON-ready, in the order ``to_dict`` writes it.
+    """
+
+    label: str
+    cause: str
+    sensors: list
+    size: Size | None
+    heldout_gain_chi2: float
+    p_heldout_given_others: float | None
+    p_insample: float
+    step: int
+    test: str | None = None
+    params: dict = field(default_factory=dict)
+    rivals: tuple = ()
+    detail: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_description(cls, d: dict, rivals=()) -> "Cause":
+        """A cause from its description (a component's ``describe()`` with the verdict's figures)."""
+        return cls(d["label"], d["cause"], list(d["sensors"]), Size.from_dict(d.get("size")), d["heldout_gain_chi2"],
+                   d.get("p_heldout_given_others"), d["p_insample"], d["step"], d.get("test"), d.get("params", {}),
+                   tuple(rivals), dict(d))
+
+    def to_dict(self) -> dict:
+        out = dict(self.detail)
+        out.update(label=self.label, cause=self.cause, sensors=list(self.sensors),
+                   size=None if self.size is None else self.size.to_dict(), heldout_gain_chi2=self.heldout_gain_chi2,
+                   p_heldout_given_others=self.p_heldout_given_others, p_insample=self.p_insample, step=self.step,
+                   params=self.params)
+        if self.test is not None:
+            out["test"] = self.test
+        if self.rivals:
+            out["rivals"] = [r.to_dict() for r in self.rivals]
+        return out
+
+
+@dataclass(frozen=True)
+class PlotData:
+    """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
+
+    base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
+    (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
+    """
+
+    base: object
+    cov: object
+    d0: np.ndarray
+    best: object
+    names: tuple
+    sigma: np.ndarray
+    flags: np.ndarray
+    structure: dict
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`to_dict` is the ``--json`` output.
+
+    ``cause`` the first cause's family, or ``none``/``unexplained`` (:attr:`outcome`);
+    ``confidence`` a :class:`~metrology.diagnosis.results.Confidence`; ``named`` the first
+    :class:`~metrology.diagnosis.results.Cause` (or None);
+    ``causes`` every cause named (forward selection, :mod:`metrology.diagnosis.select`), each
+    a :class:`~metrology.diagnosis.results.Cause` with its parameters and standard errors, its
+    size in the family's unit where one is defined, its held-out gain given the others and any
+    rival outside the catalogue it cannot be told from, largest gain first (``cause`` is the first);
+    ``steps`` the residuals after each step of the selection;
+    ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
+    ``tests_extended`` the noise-model battery before and after the extension;
+    ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
+    ``detectable`` the size of each family these poses detect at 95 % power
+    (:mod:`metrology.diagnosis.detectable`).
+    """
+
+    cause: str
+    sensors: list
+    confidence: Confidence
+    summary: str
+    named: Cause | None
+    candidates: tuple
+    tests_base: object
+    tests_extended: object
+    structure_base: dict
+    discrepancy: dict
+    heldout: dict
+    confounding: list
+    base_theta: np.ndarray
+    base_stderr: np.ndarray
+    thresholds: dict
+    datum_form: object = None
+    plot_data: PlotData | None = None
+    causes: tuple = ()
+    steps: tuple = ()
+    detectable: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "confidence", Confidence(self.confidence))
+
+    @property
+    def outcome(self) -> Outcome:
+        """A cause named, or none, or unexplained."""
+        return Outcome(self.cause) if self.cause in (Outcome.NONE, Outcome.UNEXPLAINED) else Outcome.NAMED
+
+    def to_dict(self):
+        return {
+            "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
+            "causes": [c.to_dict() for c in self.causes], "steps": list(self.steps),
+            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout, "discrepancy": self.discrepancy,
+            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
+            "tests": {"base": self.tests_base.to_dict(),
+                      "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
+            "structure": self.structure_base,
+            "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
+                     "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
+            "thresholds": self.thresholds,
+            "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
+            "detectable": self.detectable,
+        }
