@@ -205,8 +205,8 @@ def main(argv=None):
         res.setdefault("partitioned_holes_per_s", {})[label] = args.dask_holes / t
         if label == "one process":
             res["partitioned_rss_mb"] = rss
-    shutil.rmtree(daskdir, ignore_errors=True)
         shutil.rmtree(target, ignore_errors=True)
+    shutil.rmtree(daskdir, ignore_errors=True)
     if args.big:
         bigdir = work / "big"
         shutil.rmtree(bigdir, ignore_errors=True)
