@@ -50,11 +50,11 @@ class MeasureReport:
     def verdict(self) -> Verdict:
         c = self.counts
         alarms = len(self.result.alarms)
-        checks = [Check("holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
-                  Check("holes undecided (the U95 straddles the tolerance)", c["undecided"], 0, "holes",
-                        c["undecided"] == 0),
-                  Check("holes not measured", c["not_measured"], None, "holes", True, gate=False),
-                  Check("drift alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
+        checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
+                  Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
+                        "holes", c["undecided"] == 0),
+                  Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
+                  Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:

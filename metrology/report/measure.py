@@ -48,8 +48,8 @@ def measure_text(report) -> str:
     fig = s.figures(s.total())
     lines = [f"metro measure: {report.result.rows:,} holes of {report.sources['log']} "
              f"({report.result.partitions} partition(s)), layout {report.sources['layout']}, {report.engine}",
-             f"verdict: {'PASSED' if v.passed else 'FAILED'}: {c['fails']:,} fail, {c['undecided']:,} undecided "
-             f"against a tolerance of {report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
+             f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
+             f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
@@ -79,6 +79,9 @@ def measure_text(report) -> str:
     if report.result.written < report.result.partitions:
         lines.append(f"\n{report.result.partitions - report.result.written} partition(s) were already written by an "
                      f"earlier run and left as they are")
+    from metrology.report.verdicts import verdict_text
+
+    lines += ["", verdict_text(v)]
     for w in report.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)

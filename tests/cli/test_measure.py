@@ -36,7 +36,7 @@ def test_all_conform_exits_0_with_a_passed_verdict(tmp_path, layout):
     assert s["verdict"]["passed"] is True
     assert s["counts"] == {"conforms": 300, "fails": 0, "undecided": 0, "not_measured": 0}
     assert s["judged"] == {"after_adjustment": 300, "before_adjustment": 0}
-    assert {c["name"] for c in s["verdict"]["checks"]} >= {"holes that fail"}
+    assert {c["name"] for c in s["verdict"]["checks"]} >= {"drilling tolerance: holes that fail"}
     t = pq.read_table(tmp_path / "h.parquet")
     assert t.column_names[:12] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
                                    "angle_after_deg", "U95_after_deg", "fit_residual_um", "sensors_used", "status",
@@ -58,7 +58,7 @@ def test_csv_to_stdout_and_the_summary_to_stderr(tmp_path, layout):
     assert r.exit_code == 0, r.output
     lines = r.stdout.strip().splitlines()
     assert lines[0].startswith('"hole_id","normal_x"') and len(lines) == 21
-    assert "verdict: PASSED" in r.stderr
+    assert "verdict: passed (exit code 0)" in r.stderr
 
 
 def test_stdin(tmp_path, layout):
