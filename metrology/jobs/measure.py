@@ -195,8 +195,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
             if cluster is not None and scheduler is None:
                 cluster.close()
     else:
-        from metrology.measure.run import measure_log
+        from metrology.measure.run import measure_log, tune_allocator
 
+        tune_allocator()
         engine = "one process"
         if output is not None:
             result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)

@@ -14,7 +14,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.io.holelog import HoleLog
 from metrology.measure.holes import Settings
-from metrology.measure.run import MeasureResult, Watch, measure_partition
+from metrology.measure.run import MeasureResult, Watch, measure_partition, tune_allocator
 from metrology.measure.summary import FleetSummary
 
 __all__ = ["connect", "measure_log_dask"]
@@ -40,8 +40,8 @@ def connect(workers: int | None = None, scheduler: str | None = None):
 
 
 def _task(log, part, layout, settings, output):
-    r = measure_partition(log, part, layout, settings, output=output)
-    return r
+    tune_allocator()  # a worker started by Dask's nanny maps every batch array otherwise (run.tune_allocator)
+    return measure_partition(log, part, layout, settings, output=output)
 
 
 def measure_log_dask(client, log: HoleLog, layout: SensorLayout, settings: Settings, output,
