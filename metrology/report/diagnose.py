@@ -8,7 +8,7 @@ from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
 
 __all__ = ["report_text", "plot_report", "p_text", "simulate_text", "diagnosis_figures", "discrepancy_lines",
-           "structured_cells", "structure_rows", "GRID_MAX_VARIABLES", "UNEXPLAINED_NEXT"]
+           "structured_cells", "structure_level", "structure_rows", "GRID_MAX_VARIABLES", "UNEXPLAINED_NEXT"]
 
 #: what to do when the residuals are not noise and no catalogued effect explains them
 UNEXPLAINED_NEXT = (
@@ -183,10 +183,8 @@ GRID_MAX_VARIABLES = 3
 def structured_cells(structure: dict) -> list:
     """The cells of a structure table (``variable -> sensor -> {"r2", "p"}``) that carry
     structure (see :data:`GRID_MAX_VARIABLES`'s rule): (variable, sensor, r2, p), smallest p first."""
-    from metrology.diagnosis.thresholds import THRESHOLDS
-
     cells = [(k, s, v["r2"], v["p"]) for k, row in structure.items() for s, v in row.items()]
-    level = THRESHOLDS["alpha_battery"] / max(len(cells), 1)
+    level = structure_level(structure)
     return sorted((c for c in cells if c[3] < level), key=lambda c: c[3])
 
 
@@ -200,16 +198,24 @@ def _grid(structure: dict, names, variables) -> tuple:
     return keys, rows
 
 
+def structure_level(structure: dict) -> float:
+    """The p below which a cell of ``structure`` carries structure (:data:`GRID_MAX_VARIABLES`'s rule)."""
+    from metrology.diagnosis.thresholds import THRESHOLDS
+
+    return THRESHOLDS["alpha_battery"] / max(sum(len(row) for row in structure.values()), 1)
+
+
 def structure_rows(diag: Diagnosis) -> tuple:
     """The structure table of the base residuals as report rows: per variable (in words), per
-    sensor ``R² (p)``, a cell that carries structure (:func:`structured_cells`) marked ``*``."""
+    sensor the R² of the quadratic trend, a cell that carries structure (:func:`structured_cells`)
+    marked ``*`` (the p of each is in ``--json``'s ``structure`` and on its panel)."""
     marked = {(c[0], c[1]) for c in structured_cells(diag.structure_base)}
     out = []
     for key, row in diag.structure_base.items():
         cells = []
         for nm in diag.discrepancy["sensors"]:
             v = row.get(nm)
-            cells.append("—" if v is None else f"{v['r2']:.2f} ({v['p']:.1g})" + ("*" if (key, nm) in marked else ""))
+            cells.append("—" if v is None else f"{v['r2']:.2f}" + ("*" if (key, nm) in marked else ""))
         out.append((AXIS_WORDS.get(key, key), *cells))
     return tuple(out)
 

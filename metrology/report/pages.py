@@ -191,7 +191,7 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
     from metrology.report.diagnose import (GRID_MAX_VARIABLES, UNEXPLAINED_NEXT, detectable_words, diagnosis_figures,
-                                           report_text, structure_rows)
+                                           report_text, structure_level, structure_rows)
     from metrology.report.verdicts import diagnosis_verdict
 
     D = diag.to_dict()
@@ -229,11 +229,13 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
                      f"{disc['simulated_extended_heldout_normal_deg']:.5f}"))
     tables.append(Table("Residual RMS per sensor [µm] and held-out normal deviation [deg]",
                         ("", *(f"{n} [µm]" for n in disc["sensors"]), "normal [deg]"), tuple(rows)))
-    tables.append(Table("Structure of the base residuals: R² of a quadratic trend against each variable (p of its "
-                        "F-test)", ("variable", *disc["sensors"]), structure_rows(diag),
-                        f"*: carries structure (p below the battery's level split over the table's cells); the first "
-                        f"figure draws the variables (at most {GRID_MAX_VARIABLES}, the most structured first) and "
-                        "the sensors of these cells, none when no cell carries structure."))
+    level = structure_level(diag.structure_base)
+    tables.append(Table("Structure of the base residuals: R² of a quadratic trend against each variable",
+                        ("variable", *disc["sensors"]), structure_rows(diag),
+                        f"*: carries structure, its F-test's p below {level:.2g} (the battery's level split over the "
+                        f"table's cells). The first figure draws the variables (at most {GRID_MAX_VARIABLES}, the most "
+                        "structured first) and the sensors of these cells, each with its p; none when no cell carries "
+                        "structure. Every p is in the --json output (structure)."))
     text = []
     fit = extension_fit_summary(diag)
     if fit is not None:
