@@ -427,8 +427,13 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
         notify(progress, 4, 5, "datum check")
         datum, confidence, summary = check_datum(ds, b, v, chosen, scored, confidence, summary)
     notify(progress, 5, 5, "done")
+    gross = np.zeros(ds.obs.d.shape, bool) if named_flags is None else named_flags  # left out of the held-out RMS
+
+    def held(ho):
+        return None if ho is None else np.where(gross, np.nan, ho.residual)
+
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
-                    b.structure)
+                    b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
     return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
                      dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps, v)),

@@ -145,7 +145,11 @@ class PlotData:
 
     base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
     (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
-    flags : (p, n) bool, flagged readings; structure : dict, the base structure table
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table;
+    heldout_base : (p, n) float, mm, or None, the base model's k-fold held-out residuals;
+    heldout_after : (p, n) float, mm, or None, those of the model the ``heldout`` figures of
+    :class:`Diagnosis` judge (base + the causes named; None when nothing is named). In both, a
+    reading flagged gross by a named outliers cause is NaN, as it is left out of those figures.
     """
 
     base: object
@@ -156,6 +160,8 @@ class PlotData:
     sigma: np.ndarray
     flags: np.ndarray
     structure: dict
+    heldout_base: np.ndarray | None = None
+    heldout_after: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ def fit_summaries(report: CalibrationReport) -> list:
         params += tuple((p, float(np.rad2deg(np.arctan(v))), float(np.rad2deg(e)), "deg")
                         for p, v, e in zip(("tilt_e1", "tilt_e2"), th[3:], se[3:]))
         out.append(FitSummary(f"{name} (zero error, beam tilt)", cal.method, n, 5, float(chi2), params,
-                              correlations_from_cov(cov, CHART_NAMES)))
+                              correlations_from_cov(cov, CHART_NAMES), sensor=name))
     return out
 
 

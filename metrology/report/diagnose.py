@@ -7,7 +7,8 @@ import numpy as np
 from metrology.core.effects import REGISTRY
 from metrology.diagnosis.decide import Diagnosis
 
-__all__ = ["report_text", "plot_report", "p_text", "simulate_text", "diagnosis_figures", "UNEXPLAINED_NEXT"]
+__all__ = ["report_text", "plot_report", "p_text", "simulate_text", "diagnosis_figures", "discrepancy_lines",
+           "structured_cells", "structure_level", "structure_rows", "GRID_MAX_VARIABLES", "UNEXPLAINED_NEXT"]
 
 #: what to do when the residuals are not noise and no catalogued effect explains them
 UNEXPLAINED_NEXT = (
@@ -26,7 +27,7 @@ def p_text(p: float) -> str:
 
 def detectable_words(D: dict) -> str:
     """``detectable`` of :meth:`Diagnosis.to_dict` in words: each family's smallest size over its
-    sensors (and the largest, where they differ), in um; the sensors where no size is (an
+    sensors (and the largest, where they differ), in µm; the sensors where no size is (an
     effect of some shape of the family no member sees, ``inf``; ``null`` in JSON) are named."""
     import math
 
@@ -39,11 +40,36 @@ def detectable_words(D: dict) -> str:
         words = []
         if vals:
             lo, hi = min(vals), max(vals)
-            words.append((f"{lo:.3g}" if hi < 1.05 * lo else f"{lo:.3g}-{hi:.3g}") + " um")
+            words.append((f"{lo:.3g}" if hi < 1.05 * lo else f"{lo:.3g}-{hi:.3g}") + " µm")
         if never:
             words.append("not detectable on " + ", ".join(never))
         out.append(f"{fam} {', '.join(words)} ({v['meaning']})")
     return "; ".join(out)
+
+
+def _label_width(labels) -> int:
+    """The width of a text table's label column: its longest label and two spaces, so that no
+    row's numbers shift right of the header's."""
+    return max((len(x) for x in labels), default=0) + 2
+
+
+def discrepancy_lines(disc: dict) -> list:
+    """The text table of ``discrepancy`` (:meth:`Diagnosis.to_dict`): residual RMS per sensor
+    (µm) and held-out normal deviation (deg), stated noise, simulation and measurement, each
+    number under its sensor's header."""
+    rows = [("stated noise", disc["stated_noise_mm"], None),
+            ("simulation, base model", disc["simulated_base_residual_rms_mm"],
+             disc["simulated_base_heldout_normal_deg"]),
+            ("measured", disc["measured_residual_rms_mm"], disc["measured_heldout_normal_deg"])]
+    if "simulated_extended_residual_rms_mm" in disc:
+        rows.append((f"simulation, + {disc['extended_model']}", disc["simulated_extended_residual_rms_mm"],
+                     disc["simulated_extended_heldout_normal_deg"]))
+    w = _label_width([r[0] for r in rows])
+    lines = ["discrepancy (residual RMS µm per sensor; held-out normal deviation deg)",
+             f"  {'':{w}s}" + "".join(f"{n:>9s}" for n in disc["sensors"]) + f"{'normal':>11s}"]
+    for label, rms, nd in rows:
+        lines.append(f"  {label:{w}s}" + "".join(f"{1e3 * v:9.2f}" for v in rms) + ("" if nd is None else f"{nd:11.5f}"))
+    return lines
 
 
 def report_text(d: Diagnosis) -> str:
@@ -54,33 +80,21 @@ def report_text(d: Diagnosis) -> str:
     if D["cause"] == "unexplained":
         lines += ["  next: " + UNEXPLAINED_NEXT[0]] + ["        " + x for x in UNEXPLAINED_NEXT[1:]]
     lines.append("")
-    disc = D["discrepancy"]
-    lines.append("discrepancy (residual RMS um per sensor; held-out normal deviation deg)")
-    head = f"  {'':28s}" + "".join(f"{n:>9s}" for n in disc["sensors"]) + f"{'normal':>11s}"
-    lines.append(head)
-
-    def row(label, rms, nd):
-        return f"  {label:28s}" + "".join(f"{1e3 * v:9.2f}" for v in rms) + ("" if nd is None else f"{nd:11.5f}")
-
-    lines.append(row("stated noise", disc["stated_noise_mm"], None))
-    lines.append(row("simulation, base model", disc["simulated_base_residual_rms_mm"],
-                     disc["simulated_base_heldout_normal_deg"]))
-    lines.append(row("measured", disc["measured_residual_rms_mm"], disc["measured_heldout_normal_deg"]))
-    if "simulated_extended_residual_rms_mm" in disc:
-        lines.append(row(f"simulation, + {disc['extended_model']}", disc["simulated_extended_residual_rms_mm"],
-                         disc["simulated_extended_heldout_normal_deg"]))
+    lines += discrepancy_lines(D["discrepancy"])
     lines.append("")
     tb = D["tests"]["base"]
     lines.append(f"noise-model tests on the base residuals (Bonferroni p = {tb['p_bonferroni']:.3g}, "
                  f"{tb['n_tests']} tests): " + ("consistent" if tb["consistent"] else "INCONSISTENT"))
     for n, t in tb["sensors"].items():
-        lines.append(f"  {n}: sigma {1e3 * t['sigma_est_mm']:.2f} um  p_chi2 {t['p_chi2']:.3g}  "
+        lines.append(f"  {n}: sigma {1e3 * t['sigma_est_mm']:.2f} µm  p_chi2 {t['p_chi2']:.3g}  "
                      f"p_white {t['p_whiteness']:.3g}  p_normal {t['p_normality']:.3g}")
     lines.append("")
     lines.append("candidates (held-out k-fold by pose), best first")
-    lines.append(f"  {'candidate':22s}{'p in-sample':>12s}{'p held-out':>12s}{'chi2 gain':>11s}{'RMS ratio':>11s}  sig")
-    for c in D["candidates"][:10]:
-        lines.append(f"  {c['label']:22s}{c['p_insample']:12.3g}{c['p_heldout']:12.3g}"
+    shown = D["candidates"][:10]
+    w = _label_width(["candidate"] + [c["label"] for c in shown])
+    lines.append(f"  {'candidate':{w}s}{'p in-sample':>12s}{'p held-out':>12s}{'chi2 gain':>11s}{'RMS ratio':>11s}  sig")
+    for c in shown:
+        lines.append(f"  {c['label']:{w}s}{c['p_insample']:12.3g}{c['p_heldout']:12.3g}"
                      f"{c['heldout_chi2_reduction']:11.1f}{c['heldout_rms_ratio']:11.3f}  {'*' if c['significant'] else ''}")
     if len(D["candidates"]) > 10:
         lines.append(f"  ... {len(D['candidates']) - 10} more in --json")
@@ -89,9 +103,10 @@ def report_text(d: Diagnosis) -> str:
         lines += [f"  {x}" for x in detectable_words(D).split("; ")]
     if D["causes"]:
         lines.append("")
-        lines.append("residuals after each step of the selection (in-sample RMS um per sensor; held-out RMS um)")
+        lines.append("residuals after each step of the selection (in-sample RMS µm per sensor; held-out RMS µm)")
+        w = _label_width([st["model"] for st in D["steps"]])
         for st in D["steps"]:
-            lines.append(f"  {st['model'][:40]:40s}" + "".join(f"{1e3 * v:9.2f}" for v in st["residual_rms_mm"])
+            lines.append(f"  {st['model']:{w}s}" + "".join(f"{1e3 * v:9.2f}" for v in st["residual_rms_mm"])
                          + f"{1e3 * st['heldout_rms_mm']:11.3f}" + ("  (not named)" if st.get("named") is False else ""))
         for c in D["causes"]:
             where = f" on {', '.join(c['sensors'])}" if c["sensors"] else ""
@@ -102,7 +117,7 @@ def report_text(d: Diagnosis) -> str:
             if c.get("size"):
                 sz = c["size"]
                 se = "" if sz["stderr"] is None else f" +- {1e3 * sz['stderr']:.2f}"
-                lines.append(f"  size {1e3 * sz['value']:.2f}{se} um ({sz['meaning']})")
+                lines.append(f"  size {1e3 * sz['value']:.2f}{se} µm ({sz['meaning']})")
             if c.get("at"):  # an effect located in the run (a knocked sensor)
                 at = c["at"]
                 lines.append(f"  between the export's poses {at['last_pose_before'] + 1} and {at['first_pose_after'] + 1} "
@@ -113,7 +128,7 @@ def report_text(d: Diagnosis) -> str:
                 lines.append(f"  {k} = {v['value']:.4g}{se} {v['unit']}")
         h = D["heldout"]
         lines.append(f"held-out ({h['folds']}-fold), base -> {h['model']}: RMS {1e3 * h['base_rms_mm']:.3f} -> "
-                     f"{1e3 * h['extended_rms_mm']:.3f} um (ratio {h['rms_ratio']:.3f}; its sensors "
+                     f"{1e3 * h['extended_rms_mm']:.3f} µm (ratio {h['rms_ratio']:.3f}; its sensors "
                      f"{h['rms_ratio_concerned']:.3f}), normal {h['base_normal_deg']:.5f} -> {h['extended_normal_deg']:.5f} "
                      f"deg (ratio {h['normal_ratio']:.3f})")
     for c in D["confounding"]:
@@ -124,9 +139,9 @@ def report_text(d: Diagnosis) -> str:
                       if k in REGISTRY["plane_form"].key_params)
         vis = ", ".join(f"{1e3 * v:.2f}" for v in df["visible_rms_mm"])
         ag = df["against_readings"]
-        lines += ["", f"datum cloud ({df['points_used']} of {df['points']} points, {df['window']}): form {q} um at "
+        lines += ["", f"datum cloud ({df['points_used']} of {df['points']} points, {df['window']}): form {q} µm at "
                       f"{df['radius_mm']:g} mm (quadratic p {p_text(df['p_quadratic'])})",
-                  f"  at this run's spots it would leave {vis} um RMS in the base residuals (per sensor)",
+                  f"  at this run's spots it would leave {vis} µm RMS in the base residuals (per sensor)",
                   f"  the readings' plane_form ({' + '.join(ag['fitted_with'])}) {'agrees' if ag['agree'] else 'DISAGREES'} "
                   f"with it (p {p_text(ag['p'])})"]
     return "\n".join(lines)
@@ -154,10 +169,63 @@ AXIS_WORDS = {"d_mm": "reading [mm]", "incidence_deg": "incidence [deg]", "time_
               "temp_c": "temperature [°C]", "spot_s_mm": "spot s [mm]", "spot_t_mm": "spot t [mm]",
               "pose_index": "pose [index]"}
 
+#: the overview grid draws a (variable, sensor) cell of the base residuals' structure table
+#: (:func:`metrology.diagnosis.stats.structure`, a quadratic trend's F-test) whose p is below
+#: the noise-model battery's family-wise level (``THRESHOLDS["alpha_battery"]``) split over
+#: the table's cells (Bonferroni): a panel is drawn where a trend would fail the noise model;
+#: every cell's R² and p is in the structure table of the report
+#: the grid's most columns (variables, the most structured first): three panels across the
+#: page's column (:data:`metrology.report.html.COLUMN_IN`, 10 in), 3.3 in each, leave their
+#: 9 pt tick labels apart; a variable beyond them is in the table
+GRID_MAX_VARIABLES = 3
+
+
+def structured_cells(structure: dict) -> list:
+    """The cells of a structure table (``variable -> sensor -> {"r2", "p"}``) that carry
+    structure (see :data:`GRID_MAX_VARIABLES`'s rule): (variable, sensor, r2, p), smallest p first."""
+    cells = [(k, s, v["r2"], v["p"]) for k, row in structure.items() for s, v in row.items()]
+    level = structure_level(structure)
+    return sorted((c for c in cells if c[3] < level), key=lambda c: c[3])
+
+
+def _grid(structure: dict, names, variables) -> tuple:
+    """The overview grid's variables (keys, most structured first, at most
+    :data:`GRID_MAX_VARIABLES`) and sensors (indices, in the layout's order): those of the cells
+    that carry structure."""
+    cells = [c for c in structured_cells(structure) if c[0] in variables]
+    keys = list(dict.fromkeys(c[0] for c in cells))[:GRID_MAX_VARIABLES]
+    rows = [i for i, nm in enumerate(names) if any(c[1] == nm and c[0] in keys for c in cells)]
+    return keys, rows
+
+
+def structure_level(structure: dict) -> float:
+    """The p below which a cell of ``structure`` carries structure (:data:`GRID_MAX_VARIABLES`'s rule)."""
+    from metrology.diagnosis.thresholds import THRESHOLDS
+
+    return THRESHOLDS["alpha_battery"] / max(sum(len(row) for row in structure.values()), 1)
+
+
+def structure_rows(diag: Diagnosis) -> tuple:
+    """The structure table of the base residuals as report rows: per variable (in words), per
+    sensor the R² of the quadratic trend, a cell that carries structure (:func:`structured_cells`)
+    marked ``*`` (the p of each is in ``--json``'s ``structure`` and on its panel)."""
+    marked = {(c[0], c[1]) for c in structured_cells(diag.structure_base)}
+    out = []
+    for key, row in diag.structure_base.items():
+        cells = []
+        for nm in diag.discrepancy["sensors"]:
+            v = row.get(nm)
+            cells.append("—" if v is None else f"{v['r2']:.2f}" + ("*" if (key, nm) in marked else ""))
+        out.append((AXIS_WORDS.get(key, key), *cells))
+    return tuple(out)
+
 
 def diagnosis_figures(diag: Diagnosis) -> list:
-    """The residual figures that made the case: (file name, matplotlib figure, caption) for
-    the base residuals against every covariate, and, when a cause is named, before/after."""
+    """The residual figures that made the case: (file name, matplotlib figure, caption) for the
+    base residuals against the variables and on the sensors that carry structure
+    (:func:`structured_cells`; none when no cell does), and, when a cause is named, the
+    held-out residuals before and after it (the figures the ``heldout`` RMS of the text are of)."""
+    from metrology.report.html import COLUMN_IN
     from metrology.report.style import pyplot
 
     plt = pyplot()
@@ -172,50 +240,63 @@ def diagnosis_figures(diag: Diagnosis) -> list:
         "pose_index": np.broadcast_to(np.arange(p, dtype=float)[:, None], (p, n)),
     }
     variables = {k: v for k, v in variables.items() if np.all(np.isfinite(v))}
-    # overview: base residuals against every covariate
-    fig, axes = plt.subplots(n, len(variables), figsize=(2.6 * len(variables), 2.0 * n), squeeze=False, sharey="row")
-    for i in range(n):
-        for j, (key, X) in enumerate(variables.items()):
-            ax = axes[i, j]
-            ax.plot(X[:, i], base.residual[:, i] * 1e3, ".", ms=3)
-            ax.axhline(0, color="k", lw=0.5)
-            if i == n - 1:
-                ax.set_xlabel(AXIS_WORDS.get(key, key))
-            if j == 0:
-                ax.set_ylabel(f"{names[i]} residual [µm]")
-    fig.suptitle("base model: residuals against each variable")
-    fig.tight_layout()
-    files.append(("residuals_base.png", fig, "Residuals of the base model (calibrated geometry only) against each "
-                  "recorded variable, one row per sensor: a trend is what the base model misses."))
+    keys, rows = _grid(P.structure, names, variables)
+    if keys:
+        width = min(COLUMN_IN, 3.3 * len(keys) + 0.6)
+        fig, axes = plt.subplots(len(rows), len(keys), figsize=(width, 0.5 + 2.3 * len(rows)), squeeze=False,
+                                 sharey="row", layout="constrained")
+        for r, i in enumerate(rows):
+            for j, key in enumerate(keys):
+                ax = axes[r, j]
+                ax.plot(variables[key][:, i], base.residual[:, i] * 1e3, ".", ms=3)
+                ax.axhline(0, color="k", lw=0.5)
+                cell = P.structure.get(key, {}).get(names[i])
+                if cell is not None:
+                    ax.set_title(f"{names[i]}: R² {cell['r2']:.2f}, p {p_text(cell['p'])}", fontsize=9)
+                if r == len(rows) - 1:
+                    ax.set_xlabel(AXIS_WORDS.get(key, key))
+                if j == 0:
+                    ax.set_ylabel(f"{names[i]} residual [µm]")
+        fig.suptitle("base model: residuals where they carry structure")
+        files.append(("residuals_base.png", fig, "Residuals of the base model (calibrated geometry only) against the "
+                      "variables and on the sensors where a trend is significant (quadratic fit's F-test, "
+                      "Bonferroni over the structure table's cells); every cell's R² and p is in the structure table. "
+                      "A trend is what the base model misses."))
     best = P.best
-    if best is not None and best.fit.components:  # (a random pose error alone fits no term to draw)
-        f = best.fit
-        comp = f.components[0]
+    if best is not None and best.fit.components and P.heldout_after is not None:
+        # (a random pose error alone fits no term to draw)
+        comp = best.fit.components[0]
         key = comp.plot_key  # from the effect registry
         cols = list(comp.sensors) if comp.sensors else list(range(n))
-        fig, axes = plt.subplots(len(cols), 2, figsize=(9, 2.4 * len(cols)), squeeze=False, sharey="row")
+        model = diag.heldout.get("model", comp.label)
+        fig, axes = plt.subplots(len(cols), 2, figsize=(COLUMN_IN, 0.6 + 2.5 * len(cols)), squeeze=False,
+                                 sharey="row", layout="constrained")
         X = variables.get(key, variables["pose_index"])
         term = comp.evaluate(comp.values, d0, cov)
         for r, i in enumerate(cols):
             a0, a1 = axes[r]
-            a0.plot(X[:, i], base.residual[:, i] * 1e3, ".", ms=3, label="base residual")
+            before, after = P.heldout_base[:, i], P.heldout_after[:, i]
+            a0.plot(X[:, i], before * 1e3, ".", ms=3, label="held-out residual")
             order = np.argsort(X[:, i])
             if comp.plot_term:
-                a0.plot(X[order, i], (term[order, i] - np.nanmean(term[:, i]) + np.nanmean(base.residual[:, i])) * 1e3,
+                a0.plot(X[order, i], (term[order, i] - np.nanmean(term[:, i]) + np.nanmean(before)) * 1e3,
                         "-", color="C3", label=f"fitted {comp.name}")
-            a1.plot(X[:, i], f.residual[:, i] * 1e3, ".", ms=3, color="C2")
-            for a in (a0, a1):
+            a1.plot(X[:, i], after * 1e3, ".", ms=3, color="C2")
+            for a, res, word in ((a0, before, "before (base)"), (a1, after, "after")):
+                a.axhspan(-1e3 * P.sigma[i], 1e3 * P.sigma[i], color="0.85", lw=0)
                 a.axhline(0, color="k", lw=0.5)
-                a.set_xlabel(AXIS_WORDS.get(key, key))
+                if r == len(cols) - 1:
+                    a.set_xlabel(AXIS_WORDS.get(key, key))
+                a.set_title(f"{word}: RMS {1e3 * np.sqrt(np.nanmean(res ** 2)):.2f} µm", fontsize=9)
             a0.set_ylabel(f"{names[i]} residual [µm]")
-            a0.set_title("before (base)" if r == 0 else "")
-            a1.set_title(f"after ({comp.label})" if r == 0 else "")
-            a0.legend(fontsize=7)
-        fig.tight_layout()
-        files.append(("residuals_named.png", fig, f"Before (base model) and after the named cause ({comp.label}): "
-                      "the residuals of the sensors it acts on."))
+            if r == 0:
+                a0.legend(fontsize=9)
+        fig.suptitle(f"held-out residuals (k-fold by pose), base and base + {model}; grey: stated noise ± 1 σ")
+        files.append(("residuals_named.png", fig, f"Held-out residuals (each a prediction of a pose left out of the "
+                      f"fit) of the base model and of the base model + {model}, on the sensors of {comp.label}; grey: "
+                      "the stated noise, ± 1 σ. These are the residuals of the held-out RMS in the text, not the "
+                      "in-sample ones (which are smaller by the parameters fitted to them)."))
     return files
-
 
 
 def simulate_text(out, poses, effect, sensor, size, cloud, n_points) -> str:

@@ -26,7 +26,8 @@ class FitSummary:
 
     title : str; method : str; ndata : int, readings fitted; nvarys : int, free parameters;
     chisqr : float, sum of (residual / stated noise)^2; params : tuple of (name, value,
-    stderr, unit) in display units; correlations : tuple of (name_a, name_b, r), every pair
+    stderr, unit) in display units; correlations : tuple of (name_a, name_b, r), every pair;
+    sensor : str or None, the sensor whose fit it is (None: a fit of several, the diagnosis's)
     """
 
     title: str
@@ -36,6 +37,7 @@ class FitSummary:
     chisqr: float
     params: tuple
     correlations: tuple = ()
+    sensor: str | None = None
 
     @property
     def nfree(self) -> int:

@@ -127,9 +127,9 @@ def calibration_section(report) -> Section:
     rows = []
     for fit in fits:
         for name, value, se, rel, unit in fit.param_rows():
-            rows.append((fit.title.split()[0], name, value, se, rel, unit))
-    stats = tuple((f.title.split()[0], str(f.ndata), str(f.nvarys), f"{f.chisqr:.4g}", f"{f.redchi:.3g}") for f in fits)
-    correl = tuple((f.title.split()[0], f"C({a}, {b})", f"{r:+.3f}") for f in fits for a, b, r in f.correl_above())
+            rows.append((fit.sensor, name, value, se, rel, unit))
+    stats = tuple((f.sensor, str(f.ndata), str(f.nvarys), f"{f.chisqr:.4g}", f"{f.redchi:.3g}") for f in fits)
+    correl = tuple((f.sensor, f"C({a}, {b})", f"{r:+.3f}") for f in fits for a, b, r in f.correl_above())
     tables = (Table("Fit statistics per sensor (χ² against the stated noise)",
                     ("sensor", "data points", "variables", "χ²", "reduced χ²"), stats),
               Table("Parameters: error of the nominal, 1 σ and relative error", ("sensor", "parameter", "value", "1 σ",
@@ -190,7 +190,8 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     """``metro diagnose``: the held-out normal deviation against the drilling tolerance, the
     cause named, the extension's fit report."""
     from metrology.diagnosis.thresholds import ADVICE
-    from metrology.report.diagnose import UNEXPLAINED_NEXT, detectable_words, diagnosis_figures, report_text
+    from metrology.report.diagnose import (GRID_MAX_VARIABLES, UNEXPLAINED_NEXT, detectable_words, diagnosis_figures,
+                                           report_text, structure_level, structure_rows)
     from metrology.report.verdicts import diagnosis_verdict
 
     D = diag.to_dict()
@@ -228,6 +229,13 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
                      f"{disc['simulated_extended_heldout_normal_deg']:.5f}"))
     tables.append(Table("Residual RMS per sensor [µm] and held-out normal deviation [deg]",
                         ("", *(f"{n} [µm]" for n in disc["sensors"]), "normal [deg]"), tuple(rows)))
+    level = structure_level(diag.structure_base)
+    tables.append(Table("Structure of the base residuals: R² of a quadratic trend against each variable",
+                        ("variable", *disc["sensors"]), structure_rows(diag),
+                        f"*: carries structure, its F-test's p below {level:.2g} (the battery's level split over the "
+                        f"table's cells). The first figure draws the variables (at most {GRID_MAX_VARIABLES}, the most "
+                        "structured first) and the sensors of these cells, each with its p; none when no cell carries "
+                        "structure. Every p is in the --json output (structure)."))
     text = []
     fit = extension_fit_summary(diag)
     if fit is not None:

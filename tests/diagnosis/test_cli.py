@@ -32,13 +32,17 @@ def test_cli_simulate_then_diagnose(tmp_path):
     assert out["datum_form"] is None
     assert {"heldout", "candidates", "extended", "discrepancy"} <= set(out)
     assert all("p_heldout" in c and "p_insample" in c for c in out["candidates"])
-    # --report FILE.html: one self-contained page, the cause first, both residual figures
-    # embedded (--report DIR, the PNGs, runs in the demo's test)
+    # --report FILE.html: one self-contained page, the cause first, the residual figures
+    # embedded: the overview grid where a cell of the structure table carries structure (a
+    # gross reading leaves none), the held-out residuals before and after the cause
+    # (--report DIR, the PNGs, runs in the demo's test)
+    from metrology.report.diagnose import structured_cells
     from tests.report.test_html import check_page
 
     held = out["discrepancy"]["measured_heldout_normal_deg"]
     assert held < 0.5  # the cause first, then the held-out normal against the tolerance
-    text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"], 2,
+    text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"],
+                      1 + bool(structured_cells(out["structure"])),
                       f"cause: outliers on L4; normal within tolerance ({held:.4f} vs 0.5 deg)")
     # the fit report's chi-square and dof are of the same readings (L4's): with the simulated
     # noise at the stated level, chi-square over dof lies in the chi-square distribution's band

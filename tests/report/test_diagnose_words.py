@@ -12,4 +12,4 @@ def test_detectable_words_range_and_sensors_no_member_sees():
         "scale": {"sensors": {}, "meaning": "m3"},
     }}
     words = detectable_words(D).split("; ")  # one family a line in the text report
-    assert words == ["drift 6 um (m1)", "incidence 394-454 um, not detectable on L2, L4 (m2)"]
+    assert words == ["drift 6 µm (m1)", "incidence 394-454 µm, not detectable on L2, L4 (m2)"]

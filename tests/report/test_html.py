@@ -305,3 +305,29 @@ def test_report_figures_are_drawn_to_the_column_with_9_pt_text():
     png = imread(io.BytesIO(base64.b64decode(f.data_uri.split(",", 1)[1])))
     assert png.shape[1] == round(COLUMN_IN * 96)  # 960 px: shown at its own size at 1280 px
     assert f.min_font_px == pytest.approx(MIN_FIGURE_PT * 96 / 72)
+
+
+def test_calibrate_report_tables_name_each_sensor_from_its_fit_not_its_title(tmp_path, monkeypatch):
+    """The tables' sensor column is each fit's ``sensor`` field: a title that does not begin with
+    the sensor's name (it was read back with ``title.split()[0]``) changes nothing."""
+    from dataclasses import replace
+
+    import metrology.report.calibration as calib
+
+    made = calib.fit_summaries
+
+    def retitled(report):
+        fits = made(report)
+        assert [f.sensor for f in fits] == list(report.calibration.layout.names)
+        return [replace(f, title=f"zero error and beam tilt of {f.sensor}") for f in fits]
+
+    monkeypatch.setattr(calib, "fit_summaries", retitled)
+    export = write_rows(tmp_path / "cal.csv", export_rows(CAL)[:17])
+    out = tmp_path / "cal.html"
+    _ok(runner.invoke(app, ["calibrate", str(export), "--plane", str(PLANE), "--layout", str(NOMINAL),
+                            "--report", str(out)]))
+    html = out.read_text(encoding="utf-8")
+    table = html[html.index("Fit statistics per sensor"):]
+    table = table[:table.index("</table>")]
+    assert re.findall(r"<tr><td>([^<]*)</td>", table) == ["L1", "L2", "L3", "L4"]
+    assert "<td>zero</td>" not in html
