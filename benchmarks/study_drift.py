@@ -52,14 +52,11 @@ def watch_log(spec, seed, holes, chunk=1 << 16):
     from metrology.measure.run import Feed, Watch
     from metrology.sim.forward.log import simulate_cell
     from metrology.sim.forward.log_write import log_table
-    from metrology.io.holelog import CELL, PANEL, TIME_S
-    import pyarrow as pa
+    from metrology.io.holelog import batch_of
 
     watch = Watch(spec.cell_layout.names)
     for c in simulate_cell(spec, seed, 0, holes, chunk_holes=chunk):
-        t = log_table(c)
-        t = t.append_column(TIME_S, pa.array(c.time_s)).append_column(CELL, t.column("cell").cast(pa.string())) \
-             .append_column(PANEL, t.column("panel").cast(pa.string()))
+        t = batch_of(log_table(c), spec.cell_layout.names)
         b = measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf))
         watch.feed(Feed.of(b, "sim", int(c.hole[0])))
     watch.finish()

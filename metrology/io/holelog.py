@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["HoleLog", "Partition", "open_log", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
+__all__ = ["HoleLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
            "CELL", "PANEL"]
 
 #: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
@@ -108,6 +108,15 @@ def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = 
     for part in log.partitions:
         _check_columns(log, part, _column_names(log, part))
     return log
+
+
+def batch_of(table, sensors, name: str = "<memory>"):
+    """A pyarrow Table of log rows already in memory (a simulator's, a test's) made into the batch a
+    read gives (the same checks, the columns :data:`INTERNAL` added), as if read from a file ``name``."""
+    log = HoleLog(name, "parquet", (), tuple(sensors), max(table.num_rows, 1), name)
+    part = Partition(name, name, {})
+    _check_columns(log, part, table.column_names)
+    return _normalise(log, part, table, 0)
 
 
 def _where(log, part):

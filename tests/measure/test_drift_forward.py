@@ -2,11 +2,10 @@
 cell's own adjustment; metrology/sim/forward/log), measured as `metro measure` measures them."""
 
 import numpy as np
-import pyarrow as pa
 import pytest
 
 from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
-from metrology.io.holelog import CELL, PANEL, TIME_S
+from metrology.io.holelog import batch_of
 from metrology.measure.chart import ARL_AT_DETECTABLE
 from metrology.measure.holes import Settings, measure_batch
 from metrology.measure.run import Feed, Watch
@@ -31,9 +30,7 @@ def spec():
 def _watch(spec, holes, seed):
     watch = Watch(spec.cell_layout.names)
     for c in simulate_cell(spec, seed, 0, holes, chunk_holes=1000):
-        t = log_table(c)
-        t = t.append_column(TIME_S, pa.array(c.time_s)).append_column(CELL, t.column("cell").cast(pa.string())) \
-             .append_column(PANEL, t.column("panel").cast(pa.string()))
+        t = batch_of(log_table(c), spec.cell_layout.names)
         watch.feed(Feed.of(measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf)), "sim", int(c.hole[0])))
     watch.finish()
     return watch

@@ -4,7 +4,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from metrology.io.holelog import CELL, PANEL, TIME_S
+from metrology.io.holelog import batch_of
 from metrology.measure.holes import Settings, measure_batch
 from metrology.measure.summary import FleetSummary, quantile_deg
 
@@ -13,9 +13,8 @@ from .helpers import calibrated_layout, hole_log
 
 def _batch(n, seed, cells=("C1", "C2")):
     cols, _, _ = hole_log(calibrated_layout(), n=n, seed=seed, cells=cells, angle_deg=(0.1, 0.8))
-    t = pa.table(cols)
-    t = t.append_column(TIME_S, pa.array(1.79e9 + np.arange(t.num_rows) * 600.0))
-    t = t.append_column(CELL, t.column("cell")).append_column(PANEL, t.column("panel"))
+    cols["time"] = (1.79e9 + np.arange(len(cols["hole_id"])) * 600.0).tolist()
+    t = batch_of(pa.table(cols), calibrated_layout().names)
     return measure_batch(calibrated_layout(), t, Settings())
 
 
