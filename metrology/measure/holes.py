@@ -163,8 +163,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         out.residual[rows], out.residual_z[rows] = h.residual, h.residual_z
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
-            with np.errstate(invalid="ignore", divide="ignore"):
-                out.noise_sd[rows] = h.residual / h.residual_z
+            out.noise_sd[rows] = h.residual_noise_sd
             bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
             out.disagree[rows[gross]] = True
@@ -281,7 +280,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     out = pa.table({k: v for k, v in cols.items()})
     full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & measured
     idx = np.flatnonzero(full4)
-    chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": np.abs(before.noise_sd[idx]),
+    chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
              "signature": before.signature[idx]}
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False)
     return HoleBatch(out, code, judged, judged_u, before.angle,

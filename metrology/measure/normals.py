@@ -96,6 +96,8 @@ class HoleNormals:
         ``min_radius_mm`` gives (0 on a flat panel); ``u_angle`` includes ``b / sqrt(3)``
     twist : (N,) float, mm^2, or None; 4 sensors: ``||sum_i q_i r_i r_i^T||_*``: a panel of
         principal radii >= R moves ``rho`` by at most ``twist / (2 R)`` (any shape, saddles too)
+    residual_noise_sd : (N,) float, mm, or None; 4 sensors: the standard deviation of ``rho`` from
+        the reading noise alone (``residual / residual_z``)
     residual_sd : (N,) float, mm, or None; 4 sensors: the standard deviation of ``rho`` from the
         reading noise and the calibration's uncertainty (its per-sensor blocks): how far from 0 a
         head within its calibration puts the redundant reading
@@ -112,6 +114,7 @@ class HoleNormals:
     curvature_bound: np.ndarray | None = None
     twist: np.ndarray | None = None
     residual_sd: np.ndarray | None = None
+    residual_noise_sd: np.ndarray | None = None
 
 
 def _chart_rows(layout: SensorLayout):
@@ -199,7 +202,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         U95[idx] = radius95(l1[still], l2[still])
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
-    signature = twist = residual_sd = None
+    signature = twist = residual_sd = sd = None
     if n == 4:
         q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
         residual = (q * zc).sum(0)
@@ -217,7 +220,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(0) / (n - 3))
     return HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z, signature, bound, twist,
-                       residual_sd)
+                       residual_sd, sd)
 
 
 def _radius_table():
