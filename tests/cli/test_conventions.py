@@ -239,7 +239,9 @@ def test_q_and_v_anywhere_and_usage_errors_are_one_line_and_a_hint():
     assert first.exit_code == last.exit_code == 0 and last.stderr == "" and last.stdout == first.stdout
     loud = runner.invoke(app, [*args[:2], "-v", *args[2:]], input=_zero_reading_export())
     assert re.search(r"^\[ *[0-9.]+ s\] metro validate$", loud.stderr, re.M)
-    for bad, words in ((["calibrate", "x.csv"], "error: Missing option '--plane'"),
+    # an export that exists: the missing option is the only usage error (click checks options and
+    # typer's file callbacks in an order that changed between versions)
+    for bad, words in ((["calibrate", str(M / "calibration.csv")], "error: Missing option '--plane'"),
                        (["version", "--bogus"], "error: No such option: --bogus"),
                        (["reproduce", "--poses", "x"], "error: Invalid value for '--poses'")):
         r = runner.invoke(app, bad)

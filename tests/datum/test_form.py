@@ -61,6 +61,16 @@ def test_plane_form_dict_round_trips_to_json():
     assert d["normal_sigma_deg"] == pytest.approx(math.degrees(fit.normal_sigma))
 
 
+def _rel_fdtrc():
+    import scipy
+
+    major, minor = (int(x) for x in scipy.__version__.split(".")[:2])
+    return 1e-9 if (major, minor) >= (1, 12) else 2e-7
+
+
+REL_FDTRC = _rel_fdtrc()
+
+
 @pytest.mark.parametrize("d1", [1, 3, 7])
 def test_f_survival_function_matches_scipy(d1):
     from scipy.special import fdtrc
@@ -71,4 +81,6 @@ def test_f_survival_function_matches_scipy(d1):
         for f in [0.0, 1e-6, 0.01, 0.3, 1.0, 2.5, 10.0, 100.0, 1e4, 1e8]:
             want = float(fdtrc(d1, d2, f))
             got = f_sf(d1, d2, f)
-            assert got == pytest.approx(want, rel=1e-9, abs=1e-300), (d1, d2, f)
+            # scipy's own fdtrc is the reference: Boost's (newer scipy) agrees to 1e-9; the Cephes one of
+            # the lowest scipy allowed (1.11) is itself off by up to 1.2e-7 at d2 = 1e7
+            assert got == pytest.approx(want, rel=REL_FDTRC, abs=1e-300), (d1, d2, f)
