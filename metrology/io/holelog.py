@@ -20,7 +20,6 @@ imported only here, when a log is read.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 

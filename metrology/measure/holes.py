@@ -107,7 +107,6 @@ class _Measured:
     angle: np.ndarray
     U95: np.ndarray
     residual: np.ndarray
-    residual_z: np.ndarray
     noise_sd: np.ndarray
     signature: np.ndarray
     used: np.ndarray  # (N, n) bool
@@ -138,7 +137,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
     finite = np.isfinite(d)
     in_range = finite & (d >= lo[None]) & (d <= hi[None])
     out = _Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
-                    np.full(N, np.nan), np.full(N, np.nan), np.full((N, n), np.nan), in_range,
+                    np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     np.full(N, "", dtype=object), np.zeros(N, bool))
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
@@ -160,7 +159,7 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
         h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
-        out.residual[rows], out.residual_z[rows] = h.residual, h.residual_z
+        out.residual[rows] = h.residual
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
             out.noise_sd[rows] = h.residual_noise_sd

@@ -22,7 +22,6 @@ def cast_plane(zero, direction, normal, point):
     """Distance along each beam ``E + t u`` to the plane through ``point (N, 3)`` with ``normal (N, 3)``:
     ``t = n.(p - E) / n.u`` (N, n), mm."""
     E = np.asarray(zero)[None]
-    u = np.asarray(direction)[None]
     num = np.einsum("pj,pnj->pn", normal, point[:, None, :] - E)
     return num / np.einsum("pj,nj->pn", normal, direction)
 
@@ -88,21 +87,18 @@ def hole_log(layout, n=400, seed=0, angle_deg=(0.5, 5.0), after_deg=None, noise=
     for cell in cells:
         p, axis = standoff_point(layout, float(np.mean(layout.range_mm[0])) if np.all(np.isfinite(layout.range_mm))
                                  else 50.0, n)
-        nrm, a = tilted_normals(rng, n, *angle_deg, axis=axis)
-        d = cast_plane(layout.zero, layout.direction, nrm, p) + rng.normal(0, noise, (n, layout.n))
-        if shift is not None:
-            d[shift[1]:, shift[0]] += shift[2]
-        truth_b.append(a)
-        for j, s in enumerate(layout.names):
-            cols[f"d_{s}"] += np.round(d[:, j], 5).tolist()
-        if after_deg is not None:
-            nrm2, a2 = tilted_normals(rng, n, *after_deg, axis=axis)
-            d2 = cast_plane(layout.zero, layout.direction, nrm2, p) + rng.normal(0, noise, (n, layout.n))
+        def read(angles, suffix, truth):
+            nrm, a = tilted_normals(rng, n, *angles, axis=axis)
+            d = cast_plane(layout.zero, layout.direction, nrm, p) + rng.normal(0, noise, (n, layout.n))
             if shift is not None:
-                d2[shift[1]:, shift[0]] += shift[2]
-            truth_a.append(a2)
+                d[shift[1]:, shift[0]] += shift[2]
+            truth.append(a)
             for j, s in enumerate(layout.names):
-                cols[f"d_{s}_after"] += np.round(d2[:, j], 5).tolist()
+                cols[f"d_{s}{suffix}"] += np.round(d[:, j], 5).tolist()
+
+        read(angle_deg, "", truth_b)
+        if after_deg is not None:
+            read(after_deg, "_after", truth_a)
         cols["hole_id"] += [f"{cell}-{i:06d}" for i in range(n)]
         cols["time"] += [(t0 + dt.timedelta(seconds=20 * i)).isoformat() + "Z" for i in range(n)]
         cols["cell"] += [cell] * n
