@@ -34,7 +34,7 @@ def main(argv=None):
     from metrology.diagnosis.decide import base_analysis
     from metrology.diagnosis.fit import fit_any
     from metrology.diagnosis.thresholds import THRESHOLDS
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
     from metrology.sim.forward import draw_case, write_case
 
     ps = []

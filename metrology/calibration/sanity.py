@@ -45,7 +45,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.calibration.dataset import MIN_READINGS, Dataset
+from metrology.calibration.dataset import MIN_READINGS, Dataset, load_dataset
 from metrology.io.export import POSITION_UNITS
 
 __all__ = ["GROSS_NOISE_FACTOR", "GROSS_P", "GROSS_ZERO_MM", "GROSS_TILT_DEG", "ROBUST_SCALE", "GROSS_READINGS_SCALE",
@@ -374,3 +374,16 @@ def check_dataset(dataset: Dataset, source: str, quaternion_order: str = "wxyz",
     mismatch = explain(dataset, quaternion_order, position_units, allow_gross_readings=allow_gross_readings)
     if mismatch is not None:
         raise ValueError(mismatch.message(source))
+
+
+def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
+                 warn=None, allow_gross_readings=False):
+    """:func:`~metrology.calibration.dataset.load_dataset`, then refuse a gross mismatch naming the
+    likely mistake (:func:`check_dataset`; ``allow_gross_readings``:
+    not data gross only through a few gross readings, which ``diagnose`` flags). ``warn(line)``
+    is called with the count of dropped "no reading" codes, if any."""
+    dataset = load_dataset(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
+    check_dataset(dataset, str(export_path), quaternion_order, position_units, allow_gross_readings)
+    if warn is not None and dataset.dropped:
+        warn(f"{export_path}: {dataset.no_reading_summary()}")
+    return dataset

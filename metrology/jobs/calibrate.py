@@ -3,26 +3,11 @@
 from __future__ import annotations
 
 from metrology.calibration.calibrate import CalibrationReport, DEFAULT_METHOD, calibrate_dataset
+from metrology.calibration.sanity import load_checked
 from metrology.calibration.validation import ValidationReport, validate
 from metrology.core.progress import ProgressFn, notify
 from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
 from metrology.io.names import display_name
-
-
-def load_checked(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
-                 warn=None, allow_gross_readings=False):
-    """:func:`~metrology.calibration.dataset.load_dataset`, then refuse a gross mismatch naming the
-    likely mistake (:func:`metrology.calibration.sanity.check_dataset`; ``allow_gross_readings``:
-    not data gross only through a few gross readings, which ``diagnose`` flags). ``warn(line)``
-    is called with the count of dropped "no reading" codes, if any."""
-    from metrology.calibration.dataset import load_dataset
-    from metrology.calibration.sanity import check_dataset
-
-    dataset = load_dataset(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
-    check_dataset(dataset, str(export_path), quaternion_order, position_units, allow_gross_readings)
-    if warn is not None and dataset.dropped:
-        warn(f"{export_path}: {dataset.no_reading_summary()}")
-    return dataset
 
 
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,

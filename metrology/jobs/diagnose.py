@@ -10,9 +10,9 @@ __all__ = ["diagnose_files", "diagnose_report", "check_report_target"]
 def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
                    warn=None, **kw) -> Diagnosis:
     """:func:`diagnose` on the three files of a run, read and screened as for ``metro calibrate``
-    (:func:`metrology.jobs.calibrate.load_checked`: a gross mismatch is refused, naming the mistake),
+    (:func:`metrology.calibration.sanity.load_checked`: a gross mismatch is refused, naming the mistake),
     except that a few gross readings pass: finding them is a diagnosis (``outliers``)."""
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     ds = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn,
                       allow_gross_readings=True)

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from metrology.jobs.calibrate import load_checked
+from metrology.calibration.sanity import load_checked
 from metrology.sim.forward import draw_case, write_case
 
 

@@ -184,7 +184,7 @@ def test_form_size_standard_error_carries_the_degree_choice(tmp_path):
     # tracker noise's share at the two extremes and the change at the next degree, in quadrature
     from metrology.core.plane import plane_basis
     from metrology.diagnosis.candidates import covariates_for, scan_points
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     case = draw_case(np.random.default_rng([50, 1, 5, 18]), "plane_form")
     paths = write_case(case, tmp_path)
@@ -219,7 +219,7 @@ def test_lagged_drift_is_named_with_the_member_that_leaves_its_sensor_white(tmp_
     from dataclasses import replace
 
     from metrology.diagnosis.decide import diagnose
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     case = draw_case(np.random.default_rng([60, 1, 3, 9]), "drift")
     eff = case.effects[0]
@@ -243,7 +243,7 @@ def test_a_member_taken_for_adequacy_is_kept_when_a_later_cause_is_added(tmp_pat
     from dataclasses import replace
 
     from metrology.diagnosis.decide import diagnose
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     case = draw_case(np.random.default_rng([60, 1, 3, 9]), "drift")
     paths = write_case(case, tmp_path)

@@ -67,7 +67,7 @@ def test_structure_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     take the shape of a rigid motion of the head, so it is not explained as one."""
     from metrology.diagnosis.decide import base_analysis, battery_rng
     from metrology.diagnosis.posevar import random_pose_error
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     case = draw_case(np.random.default_rng([5, 3]), "periodic", n_sensors=3, n_poses=60, noise_mm=0.005, size=0.05,
                      blanks=0)
@@ -87,7 +87,7 @@ def test_excess_scatter_on_one_sensor_is_not_a_random_pose_error(tmp_path):
     within-pose covariance as well, so the pose error is not named."""
     from metrology.diagnosis.decide import base_analysis, battery_rng
     from metrology.diagnosis.posevar import random_pose_error
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
     from metrology.jobs.diagnose import diagnose_files
 
     case = draw_case(np.random.default_rng([107, 2, 1, 0]), "crosstalk")

@@ -20,7 +20,7 @@ from metrology.sim.forward import draw_case, draw_pair, write_case
 
 
 def _dataset(case, tmp_path):
-    from metrology.jobs.calibrate import load_checked
+    from metrology.calibration.sanity import load_checked
 
     paths = write_case(case, tmp_path)
     return load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"], "wxyz", "mm", None, None)
