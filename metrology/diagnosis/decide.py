@@ -81,12 +81,6 @@ class Verdict:
     random_pose: bool = False
 
 
-#: causes that a shift with another sensor's distance (crosstalk) can mimic: each is named only
-#: where it predicts held-out poses better (the distances of all sensors follow the stand-off,
-#: and the incidence angles follow the tilts that move them apart)
-CROSSTALK_CHECKED = ("scale", "nonlinearity", "incidence")
-
-
 def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     """Calibrate the base model per sensor (covariates at the nominal geometry, then at the
     calibrated one) and test its residuals."""
@@ -237,7 +231,7 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     #   gets nothing to act on), with the poses that would separate them
     xtalk, rivals = {}, []
     for j in list(kept):
-        if chosen[j].cause in CROSSTALK_CHECKED:
+        if "crosstalk" in chosen[j].component.confused_with:
             xtalk[j] = x = crosstalk_check(ds, b, tuple(s.component for s in chosen[:j]), chosen[j], folds)
             separate = f"metro plan --separate {chosen[j].cause}"
             if x["better"] is not None:
@@ -413,7 +407,7 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
         chosen = []
     rand = v.random_pose  # a random pose error predicts no reading: not in the model
-    fitted = [s for s in chosen if not (rand and s.cause == "pose_error")]  # joint model, last step's held-out
+    fitted = [s for s in chosen if not (rand and s.component.per_pose)]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
         replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)

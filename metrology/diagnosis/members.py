@@ -12,20 +12,17 @@ chosen; :mod:`metrology.diagnosis.select` runs the selection with them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, PoseError
 from metrology.diagnosis.candidates import CandidateResult, Scoring, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["SPLINE_LADDER", "Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
-
-_GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
+__all__ = ["Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
 
 
 @dataclass(frozen=True)
@@ -36,15 +33,13 @@ class Reference:
     given: tuple
     fit: Fit
     heldout: HeldOut
-#: interior knots of the characteristic's richer splines, tried in turn once a curve is chosen
-#: (4: the scored member's count, with its knots at the readings' quantiles instead)
-SPLINE_LADDER = (4, 8, 12)
 
 
 def family_of(c) -> tuple:
     """(family group, sensors) of a candidate: members of one family on the same sensors
-    compete for one place (``scale`` and ``nonlinearity`` are one family, the characteristic)."""
-    return _GROUP.get(c.name, c.name), tuple(c.sensors)
+    compete for one place (the registry entry's ``family``: ``scale`` and ``nonlinearity`` are one,
+    the characteristic)."""
+    return c.family or c.name, tuple(c.sensors)
 
 
 def p_better(better: CandidateResult, worse: CandidateResult) -> float:
@@ -54,9 +49,7 @@ def p_better(better: CandidateResult, worse: CandidateResult) -> float:
 
 
 def _simplicity(s: CandidateResult):
-    c = s.component
-    temp_first = 0 if isinstance(c, Drift) and c.variable in ("temp", "lag") else 1
-    return (s.n_params, temp_first)
+    return (s.n_params, s.component.tie_rank)
 
 
 def refine_order(best: CandidateResult, scored) -> CandidateResult:
@@ -76,7 +69,7 @@ def refine_order(best: CandidateResult, scored) -> CandidateResult:
 
 def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     """The characteristic's order, beyond the members every sensor is scored with: once a curve
-    (``nonlinearity``) is chosen, splines with more knots (:data:`SPLINE_LADDER`) are scored in
+    (``nonlinearity``) is chosen, splines with more knots (its ``SPLINE_LADDER``) are scored in
     turn given the same causes, and each is taken only when it is significant and predicts
     held-out poses significantly better (``alpha_order``) than the member held (the rule of
     :func:`refine_order`). A calibration table of 6-7 knots, a shape-preserving cubic through
@@ -97,22 +90,15 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     :func:`adequate_member`."""
     ds, b = sc.ds, sc.b
     c = held.component
-    if not isinstance(c, Nonlinearity) or not c.sensors:
+    if not hasattr(c, "richer") or not c.sensors:
         return held, []
     i = c.sensors[0]
     span = None if b.cov.d_span is None else tuple(float(v) for v in b.cov.d_span[i])
     d = ds.obs.d[:, i]
     d = np.sort(d[np.isfinite(d)])
     tried, rest, climbing = [], [], True
-    for k in SPLINE_LADDER:
-        rung = []
-        if not (c.order == 0 and k <= c.knots) and k != Nonlinearity.SPLINE_KNOTS:
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k))
-        inner = tuple(float(v) for v in np.quantile(d, np.arange(1, k + 1) / (k + 1)))
-        # knots apart by at least a thousandth of the span (quantised or repeated readings can put
-        # two quantiles on one value, and a basis function between them has no support)
-        if len(d) >= 2 * (k + 4) and np.all(np.diff((d[0],) + inner + (d[-1],)) > 1e-3 * (d[-1] - d[0])):
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k, inner_mm=inner))
+    for k in c.SPLINE_LADDER:
+        rung = c.richer(k, d, span)
         if not rung:
             continue
         if not climbing:  # scored by the adequacy step only, if it is needed
@@ -124,7 +110,7 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
         better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"] / len(rung)]
         if not better:
             # a count already scored, its knots moved, is an alternative, not a richer rung
-            climbing = k <= max(Nonlinearity.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
+            climbing = k <= max(c.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
             continue
         held = min(better, key=lambda s: float(np.sum(s.chi2_pose)))
         c = held.component
@@ -167,7 +153,7 @@ def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, 
     RMS on the sensor (the cubic failing the battery, the quintic not)."""
     ds, b = sc.ds, sc.b
     c = held.component
-    if isinstance(c, Outliers) or _consistent(ds, b, held):
+    if c.drops_readings or _consistent(ds, b, held):
         return held
     mates = [s for s in scored if s.component.name == c.name and s.component.sensors == c.sensors
              and s.label != held.label]
@@ -209,7 +195,7 @@ def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
             on_candidate(i, len(pool), c.label)
         ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
         th_c = th0
-        if isinstance(c, PoseError) and c.holds_base:
+        if c.holds_base:
             # the rigid member holds the geometry where the offset member puts it, given the same
             # causes: the calibration without a pose error takes up part of the error's common
             # mode, which the offset member profiles out. A 0.066 mm rigid error at 3.1 um noise
@@ -218,16 +204,17 @@ def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
             # 8952 against 1792); held at the offset member's geometry it left the noise and
             # predicted them better (1241)
             if th_offset is None:  # the offset member's fit, as scored just before if it was
-                off = next((r for r in out if isinstance(r.component, PoseError) and not r.component.tilts), None)
+                member = c.geometry_member()
+                off = next((r for r in out if r.label == member.label), None)
                 th_offset = off.fit.theta if off is not None else fit_any(
-                    nominal, obs, b.cov, b.sigma, tuple(given) + (replace(c, tilts=False, values=None, stderr=None),),
-                    th0).theta
+                    nominal, obs, b.cov, b.sigma, tuple(given) + (member,), th0).theta
             th_c = th_offset
-        if isinstance(c, PlaneForm) and c.order != 1:
+        nuisance = c.nuisance()
+        if nuisance is not None:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
-                comps = tuple(given) + (c.nuisance(),)
+                comps = tuple(given) + (nuisance,)
                 tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
                         kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
-            ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
+            ref_f, ref_h, k_ref = tilt[0], tilt[1], nuisance.n_params
         out.append(score_candidate(c, sc, ref_f, ref_h, th_c, given=given, k_ref=k_ref, ho_rank=ref_ho))
     return out

@@ -150,7 +150,7 @@ def _projections(ds, b, comps, ok, A):
     for i in range(n):
         cols[0][:, i, 5 * i:5 * i + 5] = J[:, i]
     for c in comps:
-        if c.per_pose or c.n_params == 0 or c.name == "outliers":
+        if c.per_pose or c.n_params == 0 or c.drops_readings:
             continue
         cols.append(c.jacobian(c.values, b.d0, b.cov) / b.sigma[None, :, None])
     X = np.where(ok[..., None], np.concatenate(cols, axis=-1), 0.0)
@@ -362,7 +362,7 @@ def random_pose_stage(ds, b, steps, rng: np.random.Generator):
     from metrology.diagnosis.thresholds import THRESHOLDS
 
     scored = steps[0].scored
-    chosen = [s.chosen for s in steps if s.chosen is not None and s.chosen.cause != "pose_error"]
+    chosen = [s.chosen for s in steps if s.chosen is not None and not s.chosen.component.per_pose]
     f = joint_fit(ds, b, chosen) if chosen else b.fit
     r = random_pose_error(ds, b, f.residual, rng, f.components, flags_of(chosen))
     if r.p >= THRESHOLDS["alpha_candidates"] / (len(scored) + 1):
@@ -385,14 +385,15 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
         return None
     if not r.lr_one_sensor >= THRESHOLDS["lr_one_sensor"]:  # no better than excess scatter on one sensor
         return None
-    pe = next((s for s in scored if s.cause == "pose_error"), None)
+    pe = next((s for s in scored if s.component.per_pose), None)
     if pe is None:
         return None
-    entry = {"component": "pose_error", "label": "pose_error@random", "cause": "pose_error", "sensors": [],
+    label = pe.cause + "@random"
+    entry = {"component": pe.cause, "label": label, "cause": pe.cause, "sensors": [],
              "params": r.params(),
              "size": {"value": r.rms_mm, "stderr": r.rms_se_mm, "unit": "mm",
                       "meaning": "RMS change of a reading by the pose error (its offset and tilts)"},
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "lr_over_one_sensor": r.lr_one_sensor,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}
-    return Cause.from_description(entry), replace(pe, fit=f, label="pose_error@random", p_insample=r.p)
+    return Cause.from_description(entry), replace(pe, fit=f, label=label, p_insample=r.p)

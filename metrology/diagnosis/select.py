@@ -35,7 +35,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import Outliers, PoseError
+from metrology.core.effects import REGISTRY, Outliers
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import beyond_span, kfold
@@ -379,7 +379,7 @@ def needed(chosen, gains) -> list:
     reference (a datum form beyond the plane's tilt). ``outliers`` are exempt: a flagged
     reading predicts nothing held out."""
     alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
-    return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
+    return [s.component.drops_readings or g[1] < alpha_each for s, g in zip(chosen, gains)]
 
 
 def weakly_supported(causes) -> list:
@@ -390,7 +390,7 @@ def weakly_supported(causes) -> list:
     (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws named ``high`` on such
     a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
     predicts nothing held out) and a random pose error (no held-out p) are exempt."""
-    return [c.label for c in causes if c.cause != "outliers" and c.p_heldout_given_others is not None
+    return [c.label for c in causes if not REGISTRY[c.cause].drops_readings and c.p_heldout_given_others is not None
             and not c.p_heldout_given_others < THRESHOLDS["alpha_high"]]
 
 
@@ -409,6 +409,5 @@ def joint_fit(ds, b, chosen) -> Fit:
     the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
     it free and the directions of the geometry its per-pose values absorb held: see
     :func:`metrology.diagnosis.fit._absorbed_modes`)."""
-    comps = tuple(replace(s.component, values=None, stderr=None, **({"hold": False} if isinstance(s.component, PoseError)
-                                                                     else {})) for s in chosen)
+    comps = tuple(s.component.for_joint_fit() for s in chosen)
     return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")

@@ -111,7 +111,7 @@ def _tests(p_sensor, n):
 
 
 def _chosen(*sensors):
-    return [SimpleNamespace(component=SimpleNamespace(sensors=s)) for s in sensors]
+    return [SimpleNamespace(component=SimpleNamespace(sensors=s, drops_readings=False)) for s in sensors]
 
 
 def test_an_all_sensor_cause_is_judged_beside_structure_that_belongs_elsewhere():
