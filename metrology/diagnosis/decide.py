@@ -28,6 +28,7 @@ from metrology.diagnosis.results import Cause, Diagnosis, PlotData, Rival
 from metrology.diagnosis.select import drop_one_gains, family_of, flags_of, forward_select, joint_fit, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
+from metrology.diagnosis import rules
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
@@ -114,7 +115,7 @@ def _confounding(best: CandidateResult, sig_list) -> list:
         if other is best or family_of(other.component) == family_of(best.component):
             continue
         p_sep = p_better(best, other)
-        if p_sep >= THRESHOLDS["alpha_confound"]:
+        if rules.indistinguishable(p_sep):
             out.append({
                 "between": [best.label, other.label], "p_separation": p_sep,
                 "message": f"the data cannot tell {best.label} from {other.label} (held-out gains "
@@ -127,7 +128,7 @@ def _confounding(best: CandidateResult, sig_list) -> list:
         q0 = len(f.corr_base) - fc.n_params
         for q in range(fc.n_params):
             cb_, w = f.corr_base[q0 + q], f.corr_with[q0 + q]
-            if cb_ > THRESHOLDS["corr_confound"]:
+            if rules.poorly_separated(cb_):
                 out.append({
                     "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
                     "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
@@ -152,22 +153,21 @@ def _judged_sensors(chosen, tests_ext, gains, n) -> list:
     part), or, where no other cause is chosen on any failing sensor, one single sensor
     (structure outside the catalogue there). The structure left is said beside the causes.
     """
-    alpha = THRESHOLDS["alpha_battery"]
-    fails = {i for i in range(n) if battery_on(tests_ext, [i]) < alpha}
+    fails = {i for i in range(n) if not rules.explains_sensors(battery_on(tests_ext, [i]))}
     out = []
     for j, s in enumerate(chosen):
         S = _sensors_of(s.component, n)
-        if battery_on(tests_ext, S) >= alpha:
+        if rules.explains_sensors(battery_on(tests_ext, S)):
             out.append(S)
             continue
-        if s.component.sensors or gains[j][1] >= THRESHOLDS["alpha_heldout"]:
+        if s.component.sensors or not rules.needed_given_others(gains[j][1], 1):
             out.append([])
             continue
         elsewhere = fails & {i for k, o in enumerate(chosen) if k != j for i in o.component.sensors}
         if not elsewhere and len(fails) == 1:
             elsewhere = fails
         rest = [i for i in S if i not in elsewhere]
-        ok = len(rest) >= 2 and battery_on(tests_ext, rest) >= alpha
+        ok = len(rest) >= 2 and rules.explains_sensors(battery_on(tests_ext, rest))
         out.append(rest if ok else [])
     return out
 
@@ -180,7 +180,7 @@ def verdict(ds, b: BaseAnalysis, steps, folds, rng) -> Verdict:
     from metrology.diagnosis.posevar import random_pose_stage
 
     v = _verdict(ds, b, steps, folds, rng)
-    rpe = None if v.confidence in ("high", "moderate", "ambiguous") or v.cause == "none" else random_pose_stage(ds, b, steps, battery_rng())
+    rpe = random_pose_stage(ds, b, steps, battery_rng()) if rules.random_pose_tried(v.cause, v.confidence) else None
     # a sole cause turned down as not needed stays turned down beside the random pose error
     v2 = None if rpe is None else _verdict(ds, b, steps, folds, rng, random_pose=rpe, exempt_sole=v.dropped is None)
     return v2 if v2 is not None and v2.random_pose else v
@@ -193,13 +193,12 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
     without it turned that cause down."""
     nominal, obs = ds.layout, ds.obs
     n = obs.d.shape[1]
-    chosen = [s.chosen for s in steps if s.chosen is not None and (random_pose is None or s.chosen.cause != "pose_error")]
+    chosen = [s.chosen for s in steps if s.chosen is not None and (random_pose is None or not s.chosen.component.per_pose)]
     lead = steps[-1].lead
     if not chosen and random_pose is None:
         cause = "none" if b.tests.consistent else "unexplained"
-        # "none" says no effect above the detectable sizes; smaller ones are not ruled out
-        confidence = "moderate" if b.tests.consistent and lead is None else "low"
-        return Verdict(cause, [], confidence, None, None, [], None, (), lead)
+        return Verdict(cause, [], rules.confidence_of_nothing(b.tests.consistent, lead is not None), None, None, [],
+                       None, (), lead)
     f = joint_fit(ds, b, chosen) if random_pose is None else random_pose[1]
     if random_pose is None:
         tests_ext = residual_battery(f, obs, b.cov, b.sigma, nominal.names)
@@ -266,7 +265,6 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
         return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
                        None, (), lead, rivals=tuple(r for r in rivals if r.better))
     first = next(s for s in chosen if s.label == causes[0].label)
-    confidence = ("moderate" if weakly_supported([] if sole_exempt else causes) else "high") if tests_ext.consistent else "partial"
     confounding = []
     for st in steps:
         if st.chosen is not None:
@@ -279,8 +277,8 @@ def _verdict(ds, b: BaseAnalysis, steps, folds, rng, random_pose=None, exempt_so
                                            f"to another sensor's distance, crosstalk, outside the catalogue); "
                                            f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
                                            f"({r.separate})"})
-    if confounding and confidence in ("high", "moderate"):
-        confidence = "ambiguous"
+    confidence = rules.confidence_of(tests_ext.consistent, bool(weakly_supported([] if sole_exempt else causes)),
+                                     bool(confounding))
     return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
                    causes[0], tuple(causes), lead, rivals=tuple(r for r in rivals if any(c.label == r.of for c in causes)),
                    random_pose=random_pose is not None)
@@ -356,7 +354,7 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
 
         g, se = float(named_forms[0].values[2]), float(named_forms[0].stderr[2])
         p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
-        ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": bool(p_g >= THRESHOLDS["alpha_form"]),
+        ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": rules.datum_agrees(p_g),
                    "fitted_with": [c.label for c in v.best.fit.components]})
     if not ag["agree"]:
         if v.cause in ("none", "plane_form"):

@@ -123,7 +123,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
     added in quadrature (``stderr``; the fit's own is ``stderr_fit``, the spread ``model_spread``).
     """
     from metrology.diagnosis.select import family_of, p_better
-    from metrology.diagnosis.thresholds import THRESHOLDS
+    from metrology.diagnosis import rules
 
     if size is None or size.get("stderr") is None:
         return size
@@ -133,7 +133,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
             continue
         if family_of(m.component) != family_of(chosen.component):
             continue
-        if p_better(chosen, m) < THRESHOLDS["alpha_order"]:
+        if rules.better_held_out(p_better(chosen, m)):
             continue  # the named member predicts held-out poses better: not a rival
         s = size_of(m.fit, len(m.fit.components) - 1, cov, d0)
         if s is not None and s.get("meaning") == size.get("meaning") and np.isfinite(s["value"]):

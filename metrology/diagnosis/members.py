@@ -20,7 +20,7 @@ from metrology.diagnosis.candidates import CandidateResult, Scoring, score_candi
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
 __all__ = ["Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
 
@@ -62,7 +62,7 @@ def refine_order(best: CandidateResult, scored) -> CandidateResult:
         return best
     held = mates[0]
     for other in mates[1:]:
-        if other.n_params >= held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
+        if other.n_params >= held.n_params and rules.better_held_out(p_better(other, held)):
             held = other
     return held
 
@@ -107,7 +107,7 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
         scored = score_step(sc, ref, rung)
         tried.append(scored)
         # a rung's two tested at once: the order's level split between them
-        better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"] / len(rung)]
+        better = [s for s in scored if s.significant and rules.better_held_out(p_better(s, held), len(rung))]
         if not better:
             # a count already scored, its knots moved, is an alternative, not a richer rung
             climbing = k <= max(c.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
@@ -123,7 +123,7 @@ def _consistent(ds, b, cand: CandidateResult) -> bool:
     ``plane_form``) acts on every sensor and is judged on all of them."""
     tests = residual_battery(cand.fit, ds.obs, b.cov, b.sigma, ds.layout.names)
     S = list(cand.component.sensors) or list(range(ds.obs.d.shape[1]))
-    return battery_on(tests, S) >= THRESHOLDS["alpha_battery"]
+    return rules.explains_sensors(battery_on(tests, S))
 
 
 def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, more=()) -> CandidateResult:
@@ -168,7 +168,7 @@ def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, 
         if todo:
             group += score_step(sc, ref, todo)
         ok = [s for s in group if s.label not in seen and s.significant and s.n_params >= held.n_params
-              and p_better(held, s) >= THRESHOLDS["alpha_order"] and _consistent(ds, b, s)]
+              and not rules.better_held_out(p_better(held, s)) and _consistent(ds, b, s)]
         seen |= {s.label for s in group}
         if ok:  # temperature before time (the physical cause), then the smaller chi-square
             return min(ok, key=lambda s: (_simplicity(s), float(np.sum(s.chi2_pose))))

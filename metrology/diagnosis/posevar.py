@@ -358,14 +358,14 @@ def random_pose_stage(ds, b, steps, rng: np.random.Generator):
     itself; else None. With 4 sensors the rigid member is fitted pose by pose first; this is the
     fall-back where it was not named (its held-out prediction, from 3 other spots a few mm apart,
     is weak: an orientation-only error at 92 poses fitted in sample, p = 2e-5, held out p = 0.99)."""
+    from metrology.diagnosis import rules
     from metrology.diagnosis.select import flags_of, joint_fit
-    from metrology.diagnosis.thresholds import THRESHOLDS
 
     scored = steps[0].scored
     chosen = [s.chosen for s in steps if s.chosen is not None and not s.chosen.component.per_pose]
     f = joint_fit(ds, b, chosen) if chosen else b.fit
     r = random_pose_error(ds, b, f.residual, rng, f.components, flags_of(chosen))
-    if r.p >= THRESHOLDS["alpha_candidates"] / (len(scored) + 1):
+    if not rules.random_pose_significant(r.p, len(scored)):
         return None
     return r, f
 
@@ -375,15 +375,13 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
     offset member's, relabelled, with the joint fit ``f``), or None unless the whitened residuals'
     tests ``tests`` are consistent on every sensor, :attr:`RandomPoseError.p_explained` passes, and
     the pose error explains the within-pose covariance better than excess variance on one sensor
-    alone (``lr_one_sensor`` at least the margin ``THRESHOLDS["lr_one_sensor"]``)."""
+    alone (:func:`metrology.diagnosis.rules.random_pose_explains`)."""
     from dataclasses import replace
 
+    from metrology.diagnosis import rules
     from metrology.diagnosis.results import Cause
-    from metrology.diagnosis.thresholds import THRESHOLDS
 
-    if not tests.consistent or r.p_explained < THRESHOLDS["alpha_battery"]:
-        return None
-    if not r.lr_one_sensor >= THRESHOLDS["lr_one_sensor"]:  # no better than excess scatter on one sensor
+    if not rules.random_pose_explains(tests.consistent, r.p_explained, r.lr_one_sensor):
         return None
     pe = next((s for s in scored if s.component.per_pose), None)
     if pe is None:

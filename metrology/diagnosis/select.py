@@ -42,15 +42,10 @@ from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
                                          score_step)
 from metrology.diagnosis.stats import paired_gain_p
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
-__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "weakly_supported", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 
-#: at most this many causes are named in one data set
-MAX_CAUSES = 3
-#: once a step chose a cause on its own sensors, a family on other sensors is rescored only if one of
-#: its members had an in-sample p below this at that step (see _seen_after)
-PRUNE_P = 0.2
 
 
 @dataclass(frozen=True)
@@ -69,8 +64,7 @@ class Step:
 
 
 def _lead(scored, n_cand):
-    in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
-                     key=lambda s: s.p_insample)
+    in_only = sorted([s for s in scored if rules.in_sample_only(s, n_cand)], key=lambda s: s.p_insample)
     return in_only[0] if in_only else None
 
 
@@ -86,12 +80,12 @@ def _parsimonious(sig):
     if not first.component.per_pose:
         return first
     fixed = next((s for s in sig if not s.component.per_pose), None)
-    if fixed is not None and p_better(first, fixed) >= THRESHOLDS["alpha_order"]:
+    if fixed is not None and rules.per_pose_imitates(p_better(first, fixed)):
         return fixed
     return first
 
 
-def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None):
+def forward_select(ds, b, flags, p_out, folds, max_causes=rules.MAX_CAUSES, on_candidate=None):
     """Add causes while one gives a significant held-out gain given the others (see the module).
 
     ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the list of
@@ -134,12 +128,12 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     gross += [flag_residuals(x.fit.residual, b.sigma)[0] for x in (m, a)]
     keep = ~np.any(np.logical_or.reduce(gross), axis=1)
     d = (a.heldout.chi2_pose(b.sigma) - m.heldout.chi2_pose(b.sigma))[keep]
-    if len(d) < 3:
+    if len(d) < rules.MIN_POSES_COMPARED:
         return False
-    return paired_gain_p(d) >= THRESHOLDS["alpha_order"]
+    return rules.fixed_explains_as_well(paired_gain_p(d), len(d))
 
 
-def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None, first=None):
+def _select(ds, b, flags, p_out, folds, max_causes=rules.MAX_CAUSES, on_candidate=None, first=None):
     """:func:`forward_select`'s steps; with ``first`` (the first step's scored candidates, reused)
     no per-pose cause is chosen or scored."""
     pool = candidates_for(ds.layout, b.cov, flags)
@@ -225,7 +219,7 @@ def _seen_after(chosen, scored, seen):
         return None
     if seen is not None:
         return seen
-    return {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
+    return {family_of(s.component) for s in scored if rules.shows_something(s.p_insample)}
 
 
 def _prune(remaining, given, seen) -> list:
@@ -270,7 +264,7 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     z = z / max(1.0, 1.4826 * float(np.median(np.abs(z[ok_z]))))
     zmax = float(np.max(np.abs(z)))
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
-    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
+    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(rules.gross_level(m)))
     if not len(bad):
         return flags, p_max
     good = np.setdiff1d(np.arange(len(B)), bad)
@@ -378,8 +372,7 @@ def needed(chosen, gains) -> list:
     make an earlier one redundant, and a step can have tested its cause against another
     reference (a datum form beyond the plane's tilt). ``outliers`` are exempt: a flagged
     reading predicts nothing held out."""
-    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
-    return [s.component.drops_readings or g[1] < alpha_each for s, g in zip(chosen, gains)]
+    return [rules.needed_given_others(g[1], len(chosen), s.component.drops_readings) for s, g in zip(chosen, gains)]
 
 
 def weakly_supported(causes) -> list:
@@ -391,7 +384,7 @@ def weakly_supported(causes) -> list:
     a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
     predicts nothing held out) and a random pose error (no held-out p) are exempt."""
     return [c.label for c in causes if not REGISTRY[c.cause].drops_readings and c.p_heldout_given_others is not None
-            and not c.p_heldout_given_others < THRESHOLDS["alpha_high"]]
+            and rules.weak_evidence(c.p_heldout_given_others)]
 
 
 def flags_of(chosen):
