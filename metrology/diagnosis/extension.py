@@ -52,8 +52,7 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_
         if comp.tilts and theta_ref is not None:
             # the per-pose values of the fit that holds the geometry at ``theta_ref`` (the base
             # calibration), as the member was scored: freed, the geometry moves along what one
-            # reading a pose leaves weak, and the values take it up (0.5 mm on the bundled set
-            # for a 5 um tracker noise)
+            # reading a pose leaves weak, and the values take it up
             comps = tuple(replace(c, values=None, stderr=None, **({"hold": True} if k == which else {}))
                           for k, c in enumerate(f.components))
             fv = fit_any(nominal, obs, cov, sigma, comps, theta_ref, "lsq")

@@ -72,17 +72,15 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     (``nonlinearity``) is chosen, splines with more knots (its ``SPLINE_LADDER``) are scored in
     turn given the same causes, and each is taken only when it is significant and predicts
     held-out poses significantly better (``alpha_order``) than the member held (the rule of
-    :func:`refine_order`). A calibration table of 6-7 knots, a shape-preserving cubic through
-    them, is followed by the 4-knot spline only to ~5 um RMS (3 % of a 0.16 mm curve): enough
-    to name the family, but its sensor's residuals then fail the noise tests and the cause is
-    not named. Scored only after a curve is chosen, so a null data set never reaches it.
+    :func:`refine_order`): a calibration table with more knots than the scored spline is followed
+    well enough to name the family but not to leave its sensor's residuals white. Scored only
+    after a curve is chosen, so a null data set never reaches it.
 
     Each rung has the splines of its knot count with knots evenly over the readings' span and
     with knots at the readings' quantiles (``@spline{k}q``, as regression splines place them by
     default): where the readings crowd in part of the span, even knots leave intervals with few
     or no readings, whose coefficients the fit cannot pin down and whose held-out predictions
-    go astray (a 63-pose run: held-out RMS 1.3 times the base model's with 4 even knots, 2.5
-    times smaller with 4 quantile knots). A rung's two are tested at ``alpha_order`` split
+    go astray. A rung's two are tested at ``alpha_order`` split
     between them, and the better of those that pass is taken.
 
     Returns ``(member, ladder)``: the member held, and every member of the ladder (scored
@@ -137,20 +135,15 @@ def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, 
     (ties: temperature before time, then the smaller chi-square). A cause of the set-up
     (``pose_error``, ``plane_form``) acts on every sensor and is judged on all of them, so with
     another cause not yet modelled it keeps its member here and is judged again given that
-    cause (:func:`rechoose_members`). Only a cause already chosen on its held-out gain reaches
+    cause (:meth:`~metrology.diagnosis.select.Selection.rechoose`). Only a cause already chosen on its held-out gain reaches
     this (never ``outliers``): the family is not changed by it, and a null data set is affected
     only where a false cause was chosen already (which the verdict would otherwise call
     ``unexplained``; the null rate is measured in ``benchmarks/study_blind.py``). It turns a
     cause found "a partial explanation at best" into a cause named.
 
     Why: the held-out comparison alone cannot tell two members apart when both take most of an
-    effect, yet only one may leave the sensor's residuals white. A drift that follows the air
-    through a 223 s lag, 0.12 mm over a 53-minute run at 7.2 um noise: linear in temperature
-    gives a held-out RMS ratio of 3.3 and leaves 10.0 um RMS on its sensor (chi-square
-    p = 2e-6); the lagged member, which represents that drift to 0.4 um RMS, is not
-    significantly better held out. A 0.11 mm calibration table of 4 knots at 3.5 um noise: the
-    cubic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
-    RMS on the sensor (the cubic failing the battery, the quintic not)."""
+    effect, yet only one may leave the sensor's residuals white (the cases are in
+    ``benchmarks/results/diagnose_history.md``)."""
     ds, b = sc.ds, sc.b
     c = held.component
     if c.drops_readings or _consistent(ds, b, held):
@@ -198,11 +191,7 @@ def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
         if c.holds_base:
             # the rigid member holds the geometry where the offset member puts it, given the same
             # causes: the calibration without a pose error takes up part of the error's common
-            # mode, which the offset member profiles out. A 0.066 mm rigid error at 3.1 um noise
-            # (138 poses, 4 sensors): held at the base calibration the rigid member left 4-5 um
-            # RMS and predicted held-out poses 5 times worse than the offset alone (chi-square
-            # 8952 against 1792); held at the offset member's geometry it left the noise and
-            # predicted them better (1241)
+            # mode, which the offset member profiles out
             if th_offset is None:  # the offset member's fit, as scored just before if it was
                 member = c.geometry_member()
                 off = next((r for r in out if r.label == member.label), None)

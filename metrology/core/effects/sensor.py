@@ -24,10 +24,6 @@ def _characteristic_rows(comp, cov):
     return comp.basis(d_grid, cov)[:, i, :], "peak-to-valley of the characteristic over the readings' span"
 
 
-def _unit(names, name):
-    return np.eye(len(names))[list(names).index(name)]
-
-
 @dataclass(frozen=True)
 class Scale(Component):
     """Gain error ``k``: the reading is ``(1 + k) d0`` (a constant part is a zero shift)."""
@@ -345,8 +341,8 @@ class Nonlinearity(Component):
         return _characteristic_rows(self, cov)
 
     def detectable_direction(self):
-        names = self.param_names
-        return _unit(names, "c2_mm") if "c2_mm" in names and self.n_params == 3 else None
+        names = list(self.param_names)
+        return np.eye(self.n_params)[names.index("c2_mm")] if "c2_mm" in names and self.n_params == 3 else None
 
     @classmethod
     def detectable_shapes(cls, d0_i, cos_inc_i, fin):
