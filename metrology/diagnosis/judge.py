@@ -146,7 +146,7 @@ class Judge:
             dropped = {"label": chosen[0].label, "p_step": chosen[0].p_heldout, "gain_chi2": gains[0][0],
                        "p_base": gains[0][1]}
             return Verdict(cause, [], "low", None, None, [], None, (), self.lead, dropped)
-        return self.named(chosen, f, tests, gains, need, sole_exempt=False)
+        return self.named(chosen, f, tests, gains, sole_exempt=False)
 
     def with_random_pose(self, r, f: Fit, exempt_sole: bool) -> Verdict | None:
         """The fixed causes but a pose error beside the pose error as a random effect ``r`` (a
@@ -160,13 +160,12 @@ class Judge:
         tests = noise_tests(w, self.b.sigma, np.isfinite(w).sum(axis=0) - 5.0, self.ds.layout.names,
                             pairs=not any(c.per_pose for c in f.components), rng=battery_rng(), normality=False)
         gains = self.gains(chosen)
-        return self.named(chosen, f, tests, gains, needed(chosen, gains),
-                          sole_exempt=len(chosen) == 1 and exempt_sole, random_pose=r)
+        return self.named(chosen, f, tests, gains, sole_exempt=len(chosen) == 1 and exempt_sole, random_pose=r)
 
-    def named(self, chosen, f: Fit, tests_ext: NoiseTests, gains, need, sole_exempt, random_pose=None) -> Verdict | None:
+    def named(self, chosen, f: Fit, tests_ext: NoiseTests, gains, sole_exempt, random_pose=None) -> Verdict | None:
         """Keep each cause needed and judged consistent on its sensors, and not crosstalk; describe
         those kept; the confounding and the confidence. None where a random pose error is not named."""
-        n = self.n
+        n, need = self.n, needed(chosen, gains)
         judged = _judged_sensors(chosen, tests_ext, gains, n)
         kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or need[j])]
         kept, rivals = self.not_crosstalk(chosen, kept)

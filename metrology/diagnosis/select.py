@@ -103,8 +103,7 @@ def forward_select(ds, b, flags, p_out, folds, on_candidate=None) -> tuple:
     steps = sel.run()
     if not any(st.chosen is not None and st.chosen.component.per_pose for st in steps):
         return steps
-    fixed = Selection(ds, b, flags, p_out, folds, on_candidate=on_candidate, per_pose=False, scores=sel.scores)
-    alt = fixed.run(first=steps[0].scored)
+    alt = sel.without_per_pose().run(first=steps[0].scored)
     return alt if _fixed_explains(b, steps, alt, flags) else steps
 
 
@@ -125,16 +124,26 @@ class Selection:
     against the same model).
     """
 
-    def __init__(self, ds, b, flags, p_out, folds, on_candidate=None, per_pose=True, scores=None):
+    def __init__(self, ds, b, flags, p_out, folds, on_candidate=None):
         pool = candidates_for(ds.layout, b.cov, flags)
-        self.ds, self.b, self.folds, self.per_pose, self.on_candidate = ds, b, folds, per_pose, on_candidate
+        self.ds, self.b, self.folds, self.per_pose, self.on_candidate = ds, b, folds, True, on_candidate
         self.members = [c for c in pool if not isinstance(c, Outliers)]
-        self.scoring = Scoring(ds, b, flags, p_out, folds, len(pool))
-        self.pool = pool if per_pose else [c for c in pool if not c.per_pose]
+        self.scoring = self.start = Scoring(ds, b, flags, p_out, folds, len(pool))
+        self.pool = pool
         self.remaining, self.seen = list(self.pool), None
         self.given, self.fit, self.heldout = (), b.fit, b.heldout
         self.chosen, self.ranked, self.lead = [], [], None
-        self.scores = {} if scores is None else scores
+        self.scores = {}
+
+    def without_per_pose(self) -> "Selection":
+        """A selection from the same start that neither scores nor chooses per-pose causes (the
+        per-pose candidates' count still splits the in-sample level), sharing this one's scores."""
+        st = self.start
+        alt = Selection(self.ds, self.b, st.flags, st.p_out, self.folds, self.on_candidate)
+        alt.per_pose, alt.scores = False, self.scores
+        alt.pool = [c for c in alt.pool if not c.per_pose]
+        alt.remaining = list(alt.pool)
+        return alt
 
     @property
     def reference(self) -> Reference:
