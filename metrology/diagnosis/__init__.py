@@ -33,7 +33,10 @@ The modules: :mod:`~metrology.diagnosis.fit` (the extended fit and its solver),
 :mod:`~metrology.diagnosis.heldout` (k-fold by pose), :mod:`~metrology.diagnosis.candidates`
 (covariates, the registry's candidates, their scores), :mod:`~metrology.diagnosis.extension`
 (the named component, the side-by-side simulation), :mod:`~metrology.diagnosis.datum` (the
-datum cloud's form against the readings'), :mod:`~metrology.diagnosis.decide` (the decision).
+datum cloud's form against the readings'), :mod:`~metrology.diagnosis.select` (the forward
+selection, a ``Selection``), :mod:`~metrology.diagnosis.judge` (the verdict, a ``Judge``),
+:mod:`~metrology.diagnosis.rules` (the decision rules in the order they apply),
+:mod:`~metrology.diagnosis.decide` (the steps in sequence).
 Words and figures are in :mod:`metrology.report.diagnose`, the file job in
 :mod:`metrology.jobs.diagnose`.
 """

@@ -14,6 +14,7 @@ from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
+from metrology.diagnosis import rules
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
@@ -115,7 +116,7 @@ def scan_points(ds: Dataset, centre):
     n = ds.plane.normal
     st = (cloud - centre) @ plane_basis(n).T
     w = cloud @ n + float(ds.plane.offset)
-    z = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * len(cloud))))
+    z = float(stats.norm.isf(rules.gross_level(len(cloud))))
     keep = None
     for _ in range(SCAN_PASSES):
         height, _box = PlaneForm.scan_surface(pts, n, ds.plane.offset, centre)
@@ -176,7 +177,7 @@ def flag_residuals(residual, sigma):
         z[:, i] = r / max(sigma[i], mad)
     zmax = float(np.nanmax(np.abs(z)))
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
-    t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
+    t = float(stats.norm.isf(rules.gross_level(m)))
     flags = np.isfinite(z) & (np.abs(z) > t)
     return flags, p_max
 

@@ -24,7 +24,7 @@ import numpy as np
 from metrology.core.effects import Component
 from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
 __all__ = ["OtherReading", "crosstalk_check"]
 
@@ -61,7 +61,6 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
     nominal, obs = ds.layout, ds.obs
     i = named.component.sensors[0]
     others = [j for j in range(nominal.n) if j != i]
-    a = THRESHOLDS["alpha_heldout"]
     out = {"better": None, "p": 1.0, "indistinguishable": []}
     # the readings the selection judged a characteristic on (score_candidate): a held-out
     # reading beyond the training span tests the curve's extrapolation, where a P5 or a spline
@@ -75,8 +74,8 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
         if np.allclose(d, 0):
             continue
         p_better, p_worse = paired_gain_p(d), paired_gain_p(-d)
-        if p_better < a / len(others) and p_better < out["p"]:
+        if rules.crosstalk_better(p_better, len(others)) and p_better < out["p"]:
             out.update(better=c.label, p=p_better)
-        elif p_worse >= THRESHOLDS["alpha_confound"]:
+        elif rules.crosstalk_as_good(p_worse):
             out["indistinguishable"].append(c.label)
     return out

@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Covariates, PlaneForm
 from metrology.core.model import jacobian_raw
 from metrology.diagnosis.fit import Fit
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
 __all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS"]
 
@@ -129,4 +129,4 @@ def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> dict:
     return {"readings": dict(zip(FORM_QUADRATIC, v_r.tolist())),
             "readings_stderr": dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
             "z": dict(zip(FORM_QUADRATIC, z.tolist())), "chi2": wald, "p": p,
-            "agree": bool(p >= THRESHOLDS["alpha_form"])}
+            "agree": rules.datum_agrees(p)}

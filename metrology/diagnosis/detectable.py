@@ -40,20 +40,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from metrology.core.effects import Component
+from metrology.core.effects import REGISTRY, Component, Outliers
 from metrology.diagnosis.extension import _free_offset, size_of
 from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["detectable_sizes", "noncentrality_95", "family_detectable", "INCIDENCE_POWERS",
-           "NONLINEARITY_ORDERS"]
-
-#: the even shapes ``(a / a_max)^k`` over which an incidence bias's detectable size is the worst
-INCIDENCE_POWERS = (2, 4, 6)
-#: the Legendre orders over which a nonlinearity's detectable size is the worst
-NONLINEARITY_ORDERS = (2, 3, 4)
-#: the families whose detectable size is that of their least favourable shape (:func:`family_detectable`)
-WORST_SHAPE_FAMILIES = ("incidence", "nonlinearity")
+__all__ = ["detectable_sizes", "noncentrality_95", "family_detectable"]
 
 #: the power at which a size is called detectable
 POWER = 0.95
@@ -96,19 +88,6 @@ def _size_along(c, v, cov, d0):
         return None
     info = float(v @ np.linalg.pinv(C, rcond=1e-12, hermitian=True) @ v)
     return abs(s["value"]), info
-
-
-def _direction(c):
-    """The member's unit shape whose size is reported, or None where this module has none."""
-    comp = c.component
-    names = list(comp.param_names)
-    if c.cause in ("scale", "incidence", "drift") and comp.n_params == 1:
-        return np.ones(1)
-    if c.cause == "nonlinearity" and "c2_mm" in names and comp.n_params == 3:
-        return np.eye(comp.n_params)[names.index("c2_mm")]
-    if c.cause == "plane_form" and "scan_gain" in names:
-        return np.eye(comp.n_params)[names.index("scan_gain")]
-    return None
 
 
 def _scale_against_crosstalk(b, ds, J, i) -> float:
@@ -159,38 +138,12 @@ def family_detectable(shapes, members, J_i, sigma_i, alpha) -> float:
     return worst
 
 
-def _family_shapes(cause, b, ds, i):
-    """The shapes over which a family's detectable size is the worst (see the module), on sensor
-    ``i``'s readings: ``[(p,) float]``, each of size 1 in the family's unit, NaN where blank."""
-    fin = np.isfinite(ds.obs.d[:, i])
-    if cause == "incidence":
-        a = np.where(fin, np.arccos(np.clip(b.cov.cos_inc[:, i], -1.0, 1.0)), np.nan)
-        a_max = float(np.nanmax(a)) if fin.any() else 0.0
-        return [(a / a_max) ** k for k in INCIDENCE_POWERS] if a_max > 0 else []
-    # nonlinearity: the Legendre polynomials of the reading over the span it covered, each of
-    # peak-to-valley 1 once its best straight line there is taken off (as the size is defined)
-    from numpy.polynomial import legendre
-
-    d = np.where(fin, b.d0[:, i], np.nan)
-    lo, hi = float(np.nanmin(d)), float(np.nanmax(d))
-    if not hi > lo:
-        return []
-    out = []
-    grid = np.linspace(-1.0, 1.0, 401)
-    for k in NONLINEARITY_ORDERS:
-        c = np.zeros(k + 1)
-        c[k] = 1.0
-        g = legendre.legval(grid, c)
-        g = g - np.polyval(np.polyfit(grid, g, 1), grid)
-        out.append(legendre.legval((2 * d - lo - hi) / (hi - lo), c) / float(g.max() - g.min()))
-    return out
-
-
 def _worst_shape(cause, members, b, ds, J, alpha) -> float:
     """:func:`family_detectable` for a family on one sensor (``members`` its scored candidates
-    there; ``J`` the base Jacobian (p, n, 5)) over :func:`_family_shapes`."""
+    there; ``J`` the base Jacobian (p, n, 5)) over the family's shapes (the registry entry's
+    :meth:`~metrology.core.effects.Component.detectable_shapes`)."""
     i = members[0].component.sensors[0]
-    shapes = _family_shapes(cause, b, ds, i)
+    shapes = members[0].component.detectable_shapes(b.d0[:, i], b.cov.cos_inc[:, i], np.isfinite(ds.obs.d[:, i]))
     if not shapes:
         return np.inf
     J_i = J[:, i, :]
@@ -213,15 +166,6 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
     out: dict = {}
     J = None  # the base Jacobian, computed once when the scale or a family's shapes need it
     worst_of = {}  # (family, sensors) -> its members, for the families sized by their worst shape
-    meaning = {
-        "scale": "peak-to-valley of a gain error over the readings' span, told from crosstalk",
-        "nonlinearity": "peak-to-valley beyond a straight line over the readings' span, the least favourable of P2-P4",
-        "drift": "peak-to-valley over the run of a linear drift",
-        "incidence": "bias at the largest incidence angle seen, the least favourable even shape",
-        "plane_form": "peak-to-valley of the scanned datum form",
-        "pose_error": "RMS change of a reading by a per-pose rigid error (offset and tilts), any split",
-        "outliers": "one gross reading",
-    }
     for c in scored:
         if type(c.component).detectable_size is not Component.detectable_size and c.component.sensors:
             # the registry entry says what its test detects (a located effect: over its positions)
@@ -234,16 +178,17 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
                 fam["sensors"][c.sensors[0]] = float(det)
                 fam["member"][c.sensors[0]] = c.label
             continue
-        if c.cause in WORST_SHAPE_FAMILIES:
+        if c.component.worst_shape:
             # any shape of the family, not the simplest member's alone, by the best of its
             # members (sized below, once its members are all known); listed where its simplest
             # member (the one with a reported direction) comes, as every other family is
             key = ", ".join(c.sensors)
             worst_of.setdefault((c.cause, key), []).append(c)
-            if _direction(c) is not None:
-                out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning[c.cause]})["sensors"][key] = None
+            if c.component.detectable_direction() is not None:
+                out.setdefault(c.cause, {"sensors": {}, "member": {},
+                                         "meaning": c.component.detectable_meaning})["sensors"][key] = None
             continue
-        v = _direction(c)
+        v = c.component.detectable_direction()
         if v is not None:
             got = _size_along(c, v, b.cov, b.d0)
             if got is None:
@@ -254,7 +199,7 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
             k = max(int(c.n_params), 1)
             lam = noncentrality_95(k, c.fit.dof, alpha)
             det = size_v * float(np.sqrt(lam / info))
-            if c.cause == "scale" and ds.layout.n > 1:
+            if "crosstalk" in c.component.confused_with and ds.layout.n > 1:
                 # named only where it beats crosstalk (metrology.diagnosis.crosstalk): the gain's
                 # part that no other sensor's distance carries
                 i = c.component.sensors[0]
@@ -265,19 +210,19 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
         else:
             continue
-        fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": meaning.get(c.cause, "")})
-        key = ", ".join(c.sensors) if c.sensors and c.cause not in ("plane_form", "pose_error") else "all"
+        fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.detectable_meaning})
+        key = ", ".join(c.sensors) if c.sensors and not c.component.setup else "all"
         if key not in fam["sensors"] or det < fam["sensors"][key]:
             fam["sensors"][key] = det
             fam["member"][key] = c.label
     if worst_of and J is None:
         J = base_jacobian(b, ds)
-    for cause in WORST_SHAPE_FAMILIES:
-        for key in out.get(cause, {}).get("sensors", {}):
+    for cause in [k for k in out if REGISTRY[k].worst_shape]:
+        for key in out[cause]["sensors"]:
             members = worst_of[(cause, key)]
             out[cause]["sensors"][key] = _worst_shape(cause, members, b, ds, J, alpha)
             out[cause]["member"][key] = "+".join(c.label for c in members)
-    pose = [c for c in scored if c.cause == "pose_error"]
+    pose = [c for c in scored if c.component.per_pose]
     if pose:
         # the RMS change of a reading by a rigid pose error, whatever its split between offset and
         # tilts: with 3 sensors by the random-effect test that names it (metrology.diagnosis.posevar),
@@ -290,13 +235,13 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
         else:
             det = detectable_rms(ds, b, THRESHOLDS["alpha_candidates"] / (n_cand + 1))
         out["pose_error"] = {"sensors": {"all": det}, "member": {"all": "+".join(c.label for c in pose)},
-                             "meaning": meaning["pose_error"]}
+                             "meaning": pose[0].component.detectable_meaning}
     # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
     m = int(np.sum(n_obs))
     t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * max(m, 1))))
     out["outliers"] = {"sensors": {name: float((t + stats.norm.isf(1 - POWER)) * s)
                                    for name, s in zip(b.calibrated.names, b.sigma)},
-                       "member": {}, "meaning": meaning["outliers"]}
+                       "member": {}, "meaning": Outliers.detectable_meaning}
     return out
 
 

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from metrology.core.effects import ExtendedModel, Outliers, PoseError
+from metrology.core.effects import ExtendedModel
 from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import kfold
@@ -26,56 +26,14 @@ def _free_offset(f: Fit, which: int) -> int:
 
 def size_of(f: Fit, which: int, cov, d0) -> dict | None:
     """The size of component ``which`` of ``f`` in its family's unit, with a standard error
-    (delta method on the fit's covariance), or None where the family has none:
-
-    - ``scale``, ``nonlinearity``: peak-to-valley of the fitted characteristic over the span of
-      the sensor's readings (mm), the gain included (beyond it the data say nothing);
-    - ``drift``: peak-to-valley of the fitted drift over the run's poses (mm);
-    - ``incidence``: the bias at the largest incidence angle the sensor saw (mm, signed).
-
-    cov : Covariates; d0 : (p, n) float, mm, the base readings.
-    """
+    (delta method on the fit's covariance), or None where the family has none (the registry
+    entry's :meth:`~metrology.core.effects.Component.size`). cov : Covariates; d0 : (p, n) float,
+    mm, the base readings."""
     comp = f.components[which]
-    k0 = _free_offset(f, which)
-    C = f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params]
-    v = comp.values
-    if comp.name == "plane_form" and getattr(comp, "order", None) == 0 and np.isfinite(cov.scan_ptp_mm):
-        g, se_g = abs(float(v[2])), float(np.sqrt(max(C[2, 2], 0.0)))
-        se_ptp = float(getattr(cov, "scan_ptp_se_mm", 0.0) or 0.0)
-        return {"value": g * cov.scan_ptp_mm, "stderr": float(np.hypot(se_g * cov.scan_ptp_mm, g * se_ptp)),
-                "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud (beyond its best "
-                                        "plane), times the gain the readings see"}
-    rows = comp.size_rows(d0, cov)
-    if rows is not None:  # the registry entry says how it is sized
-        B, meaning = rows
-    elif comp.per_pose or comp.name not in ("scale", "nonlinearity", "drift", "incidence") or not comp.sensors:
+    if comp.per_pose:
         return None
-    elif comp.name in ("scale", "nonlinearity"):
-        i = comp.sensors[0]
-        # over the readings the sensor gave: beyond them the data say nothing of the curve
-        lo, hi = cov.d_span[i] if cov.d_span is not None else cov.range_mm[i]
-        grid = np.linspace(lo, hi, 201)
-        d_grid = np.zeros((len(grid), len(cov.range_mm)))
-        d_grid[:, i] = grid
-        B = comp.basis(d_grid, cov)[:, i, :]  # (g, k): the term along the range
-        meaning = "peak-to-valley of the characteristic over the readings' span"
-    elif comp.name == "drift":
-        i = comp.sensors[0]
-        B = comp.basis(d0, cov)[:, i, :]
-        meaning = "peak-to-valley of the drift over the run"
-    else:
-        i = comp.sensors[0]
-        j = int(np.argmin(cov.cos_inc[:, i]))
-        B = comp.basis(d0, cov)[j:j + 1, i, :]
-        meaning = "bias at the largest incidence angle seen"
-    e = B @ v
-    if len(e) == 1:
-        val, g = abs(float(e[0])), B[0]
-    else:
-        hi_, lo_ = int(np.argmax(e)), int(np.argmin(e))
-        val, g = float(e[hi_] - e[lo_]), B[hi_] - B[lo_]
-    se = float(np.sqrt(max(g @ C @ g, 0.0))) if C.shape == (len(g), len(g)) else None
-    return {"value": val, "stderr": se, "unit": "mm", "meaning": meaning}
+    k0 = _free_offset(f, which)
+    return comp.size(f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params], d0, cov)
 
 
 def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_ref=None):
@@ -85,7 +43,7 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_
     that holds the geometry at ``theta_ref``), for outliers the flagged readings."""
     comp = f.components[which]
     d = comp.describe()
-    if isinstance(comp, PoseError):
+    if comp.per_pose:
         # sigma of the pose error along the normal: the spread of the per-pose estimates less
         # the spread that reading noise alone puts in them (through the per-pose fit and the
         # base parameters it trades with), measured on noise-only simulations of these poses
@@ -94,8 +52,7 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_
         if comp.tilts and theta_ref is not None:
             # the per-pose values of the fit that holds the geometry at ``theta_ref`` (the base
             # calibration), as the member was scored: freed, the geometry moves along what one
-            # reading a pose leaves weak, and the values take it up (0.5 mm on the bundled set
-            # for a 5 um tracker noise)
+            # reading a pose leaves weak, and the values take it up
             comps = tuple(replace(c, values=None, stderr=None, **({"hold": True} if k == which else {}))
                           for k, c in enumerate(f.components))
             fv = fit_any(nominal, obs, cov, sigma, comps, theta_ref, "lsq")
@@ -131,10 +88,6 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_
             t = np.asarray(held.values).reshape(-1, m)[:, 1:]
             d["params"]["tilt_sigma_rad"] = {"value": float(np.std(t, ddof=1) / comp.RADIUS_MM), "unit": "rad",
                                              "stderr": None}
-    if isinstance(comp, Outliers):
-        d["flagged"] = [{"pose": int(pp), "sensor": comp.names[i], "gross_mm": float(v), "stderr": float(s)}
-                        for (pp, i), v, s in zip(comp.cells, comp.values, comp.stderr)]
-        d["params"] = {"count": {"value": len(comp.cells), "unit": "1", "stderr": None}}
     q0 = _free_offset(f, which)
     d["base_correlation"] = [] if comp.per_pose else [
         {"param": comp.param_names[q], "max_abs_corr": float(f.corr_base[q0 + q]), "with": f.corr_with[q0 + q]}
@@ -169,7 +122,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
     added in quadrature (``stderr``; the fit's own is ``stderr_fit``, the spread ``model_spread``).
     """
     from metrology.diagnosis.select import family_of, p_better
-    from metrology.diagnosis.thresholds import THRESHOLDS
+    from metrology.diagnosis import rules
 
     if size is None or size.get("stderr") is None:
         return size
@@ -179,7 +132,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
             continue
         if family_of(m.component) != family_of(chosen.component):
             continue
-        if p_better(chosen, m) < THRESHOLDS["alpha_order"]:
+        if rules.better_held_out(p_better(chosen, m)):
             continue  # the named member predicts held-out poses better: not a rival
         s = size_of(m.fit, len(m.fit.components) - 1, cov, d0)
         if s is not None and s.get("meaning") == size.get("meaning") and np.isfinite(s["value"]):

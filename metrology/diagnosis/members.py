@@ -12,20 +12,17 @@ chosen; :mod:`metrology.diagnosis.select` runs the selection with them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.effects import Drift, Nonlinearity, Outliers, PlaneForm, PoseError
 from metrology.diagnosis.candidates import CandidateResult, Scoring, score_candidate
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
-__all__ = ["SPLINE_LADDER", "Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
-
-_GROUP = {"scale": "characteristic", "nonlinearity": "characteristic"}
+__all__ = ["Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
 
 
 @dataclass(frozen=True)
@@ -36,15 +33,13 @@ class Reference:
     given: tuple
     fit: Fit
     heldout: HeldOut
-#: interior knots of the characteristic's richer splines, tried in turn once a curve is chosen
-#: (4: the scored member's count, with its knots at the readings' quantiles instead)
-SPLINE_LADDER = (4, 8, 12)
 
 
 def family_of(c) -> tuple:
     """(family group, sensors) of a candidate: members of one family on the same sensors
-    compete for one place (``scale`` and ``nonlinearity`` are one family, the characteristic)."""
-    return _GROUP.get(c.name, c.name), tuple(c.sensors)
+    compete for one place (the registry entry's ``family``: ``scale`` and ``nonlinearity`` are one,
+    the characteristic)."""
+    return c.family or c.name, tuple(c.sensors)
 
 
 def p_better(better: CandidateResult, worse: CandidateResult) -> float:
@@ -54,9 +49,7 @@ def p_better(better: CandidateResult, worse: CandidateResult) -> float:
 
 
 def _simplicity(s: CandidateResult):
-    c = s.component
-    temp_first = 0 if isinstance(c, Drift) and c.variable in ("temp", "lag") else 1
-    return (s.n_params, temp_first)
+    return (s.n_params, s.component.tie_rank)
 
 
 def refine_order(best: CandidateResult, scored) -> CandidateResult:
@@ -69,27 +62,25 @@ def refine_order(best: CandidateResult, scored) -> CandidateResult:
         return best
     held = mates[0]
     for other in mates[1:]:
-        if other.n_params >= held.n_params and p_better(other, held) < THRESHOLDS["alpha_order"]:
+        if other.n_params >= held.n_params and rules.better_held_out(p_better(other, held)):
             held = other
     return held
 
 
 def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     """The characteristic's order, beyond the members every sensor is scored with: once a curve
-    (``nonlinearity``) is chosen, splines with more knots (:data:`SPLINE_LADDER`) are scored in
+    (``nonlinearity``) is chosen, splines with more knots (its ``SPLINE_LADDER``) are scored in
     turn given the same causes, and each is taken only when it is significant and predicts
     held-out poses significantly better (``alpha_order``) than the member held (the rule of
-    :func:`refine_order`). A calibration table of 6-7 knots, a shape-preserving cubic through
-    them, is followed by the 4-knot spline only to ~5 um RMS (3 % of a 0.16 mm curve): enough
-    to name the family, but its sensor's residuals then fail the noise tests and the cause is
-    not named. Scored only after a curve is chosen, so a null data set never reaches it.
+    :func:`refine_order`): a calibration table with more knots than the scored spline is followed
+    well enough to name the family but not to leave its sensor's residuals white. Scored only
+    after a curve is chosen, so a null data set never reaches it.
 
     Each rung has the splines of its knot count with knots evenly over the readings' span and
     with knots at the readings' quantiles (``@spline{k}q``, as regression splines place them by
     default): where the readings crowd in part of the span, even knots leave intervals with few
     or no readings, whose coefficients the fit cannot pin down and whose held-out predictions
-    go astray (a 63-pose run: held-out RMS 1.3 times the base model's with 4 even knots, 2.5
-    times smaller with 4 quantile knots). A rung's two are tested at ``alpha_order`` split
+    go astray. A rung's two are tested at ``alpha_order`` split
     between them, and the better of those that pass is taken.
 
     Returns ``(member, ladder)``: the member held, and every member of the ladder (scored
@@ -97,22 +88,15 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
     :func:`adequate_member`."""
     ds, b = sc.ds, sc.b
     c = held.component
-    if not isinstance(c, Nonlinearity) or not c.sensors:
+    if not hasattr(c, "richer") or not c.sensors:
         return held, []
     i = c.sensors[0]
     span = None if b.cov.d_span is None else tuple(float(v) for v in b.cov.d_span[i])
     d = ds.obs.d[:, i]
     d = np.sort(d[np.isfinite(d)])
     tried, rest, climbing = [], [], True
-    for k in SPLINE_LADDER:
-        rung = []
-        if not (c.order == 0 and k <= c.knots) and k != Nonlinearity.SPLINE_KNOTS:
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k))
-        inner = tuple(float(v) for v in np.quantile(d, np.arange(1, k + 1) / (k + 1)))
-        # knots apart by at least a thousandth of the span (quantised or repeated readings can put
-        # two quantiles on one value, and a basis function between them has no support)
-        if len(d) >= 2 * (k + 4) and np.all(np.diff((d[0],) + inner + (d[-1],)) > 1e-3 * (d[-1] - d[0])):
-            rung.append(Nonlinearity((i,), names=c.names, with_gain=True, order=0, span=span, knots=k, inner_mm=inner))
+    for k in c.SPLINE_LADDER:
+        rung = c.richer(k, d, span)
         if not rung:
             continue
         if not climbing:  # scored by the adequacy step only, if it is needed
@@ -121,10 +105,10 @@ def richer_spline(sc: Scoring, ref: Reference, held: CandidateResult) -> tuple:
         scored = score_step(sc, ref, rung)
         tried.append(scored)
         # a rung's two tested at once: the order's level split between them
-        better = [s for s in scored if s.significant and p_better(s, held) < THRESHOLDS["alpha_order"] / len(rung)]
+        better = [s for s in scored if s.significant and rules.better_held_out(p_better(s, held), len(rung))]
         if not better:
             # a count already scored, its knots moved, is an alternative, not a richer rung
-            climbing = k <= max(Nonlinearity.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
+            climbing = k <= max(c.SPLINE_KNOTS, c.knots if c.order == 0 else 0)
             continue
         held = min(better, key=lambda s: float(np.sum(s.chi2_pose)))
         c = held.component
@@ -137,7 +121,7 @@ def _consistent(ds, b, cand: CandidateResult) -> bool:
     ``plane_form``) acts on every sensor and is judged on all of them."""
     tests = residual_battery(cand.fit, ds.obs, b.cov, b.sigma, ds.layout.names)
     S = list(cand.component.sensors) or list(range(ds.obs.d.shape[1]))
-    return battery_on(tests, S) >= THRESHOLDS["alpha_battery"]
+    return rules.explains_sensors(battery_on(tests, S))
 
 
 def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, more=()) -> CandidateResult:
@@ -151,23 +135,18 @@ def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, 
     (ties: temperature before time, then the smaller chi-square). A cause of the set-up
     (``pose_error``, ``plane_form``) acts on every sensor and is judged on all of them, so with
     another cause not yet modelled it keeps its member here and is judged again given that
-    cause (:func:`rechoose_members`). Only a cause already chosen on its held-out gain reaches
+    cause (:meth:`~metrology.diagnosis.select.Selection.rechoose`). Only a cause already chosen on its held-out gain reaches
     this (never ``outliers``): the family is not changed by it, and a null data set is affected
     only where a false cause was chosen already (which the verdict would otherwise call
     ``unexplained``; the null rate is measured in ``benchmarks/study_blind.py``). It turns a
     cause found "a partial explanation at best" into a cause named.
 
     Why: the held-out comparison alone cannot tell two members apart when both take most of an
-    effect, yet only one may leave the sensor's residuals white. A drift that follows the air
-    through a 223 s lag, 0.12 mm over a 53-minute run at 7.2 um noise: linear in temperature
-    gives a held-out RMS ratio of 3.3 and leaves 10.0 um RMS on its sensor (chi-square
-    p = 2e-6); the lagged member, which represents that drift to 0.4 um RMS, is not
-    significantly better held out. A 0.11 mm calibration table of 4 knots at 3.5 um noise: the
-    cubic and the quintic give held-out RMS ratios of 2.03 and 2.17 and leave 4.3 and 3.8 um
-    RMS on the sensor (the cubic failing the battery, the quintic not)."""
+    effect, yet only one may leave the sensor's residuals white (the cases are in
+    ``benchmarks/results/diagnose_history.md``)."""
     ds, b = sc.ds, sc.b
     c = held.component
-    if isinstance(c, Outliers) or _consistent(ds, b, held):
+    if c.drops_readings or _consistent(ds, b, held):
         return held
     mates = [s for s in scored if s.component.name == c.name and s.component.sensors == c.sensors
              and s.label != held.label]
@@ -182,7 +161,7 @@ def adequate_member(sc: Scoring, ref: Reference, held: CandidateResult, scored, 
         if todo:
             group += score_step(sc, ref, todo)
         ok = [s for s in group if s.label not in seen and s.significant and s.n_params >= held.n_params
-              and p_better(held, s) >= THRESHOLDS["alpha_order"] and _consistent(ds, b, s)]
+              and not rules.better_held_out(p_better(held, s)) and _consistent(ds, b, s)]
         seen |= {s.label for s in group}
         if ok:  # temperature before time (the physical cause), then the smaller chi-square
             return min(ok, key=lambda s: (_simplicity(s), float(np.sum(s.chi2_pose))))
@@ -209,25 +188,22 @@ def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
             on_candidate(i, len(pool), c.label)
         ref_f, ref_h, k_ref = ref_fit, ref_ho, 0
         th_c = th0
-        if isinstance(c, PoseError) and c.holds_base:
+        if c.holds_base:
             # the rigid member holds the geometry where the offset member puts it, given the same
             # causes: the calibration without a pose error takes up part of the error's common
-            # mode, which the offset member profiles out. A 0.066 mm rigid error at 3.1 um noise
-            # (138 poses, 4 sensors): held at the base calibration the rigid member left 4-5 um
-            # RMS and predicted held-out poses 5 times worse than the offset alone (chi-square
-            # 8952 against 1792); held at the offset member's geometry it left the noise and
-            # predicted them better (1241)
+            # mode, which the offset member profiles out
             if th_offset is None:  # the offset member's fit, as scored just before if it was
-                off = next((r for r in out if isinstance(r.component, PoseError) and not r.component.tilts), None)
+                member = c.geometry_member()
+                off = next((r for r in out if r.label == member.label), None)
                 th_offset = off.fit.theta if off is not None else fit_any(
-                    nominal, obs, b.cov, b.sigma, tuple(given) + (replace(c, tilts=False, values=None, stderr=None),),
-                    th0).theta
+                    nominal, obs, b.cov, b.sigma, tuple(given) + (member,), th0).theta
             th_c = th_offset
-        if isinstance(c, PlaneForm) and c.order != 1:
+        nuisance = c.nuisance()
+        if nuisance is not None:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
-                comps = tuple(given) + (c.nuisance(),)
+                comps = tuple(given) + (nuisance,)
                 tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
                         kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
-            ref_f, ref_h, k_ref = tilt[0], tilt[1], c.nuisance().n_params
+            ref_f, ref_h, k_ref = tilt[0], tilt[1], nuisance.n_params
         out.append(score_candidate(c, sc, ref_f, ref_h, th_c, given=given, k_ref=k_ref, ho_rank=ref_ho))
     return out

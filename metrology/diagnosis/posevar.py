@@ -150,7 +150,7 @@ def _projections(ds, b, comps, ok, A):
     for i in range(n):
         cols[0][:, i, 5 * i:5 * i + 5] = J[:, i]
     for c in comps:
-        if c.per_pose or c.n_params == 0 or c.name == "outliers":
+        if c.per_pose or c.n_params == 0 or c.drops_readings:
             continue
         cols.append(c.jacobian(c.values, b.d0, b.cov) / b.sigma[None, :, None])
     X = np.where(ok[..., None], np.concatenate(cols, axis=-1), 0.0)
@@ -352,20 +352,21 @@ def detectable_rms(ds, b, alpha, power=0.95, splits=5) -> float:
 TEST_TEXT = "within-pose covariance of the residuals against the stated noise"
 
 
-def random_pose_stage(ds, b, steps, rng: np.random.Generator):
+def random_pose_stage(ds, b, steps, rng: np.random.Generator, joint=None):
     """``(RandomPoseError, the joint fit of the selected causes but a pose error)`` when the random
     pose error is significant at ``alpha_candidates`` split over the first step's candidates and
     itself; else None. With 4 sensors the rigid member is fitted pose by pose first; this is the
     fall-back where it was not named (its held-out prediction, from 3 other spots a few mm apart,
-    is weak: an orientation-only error at 92 poses fitted in sample, p = 2e-5, held out p = 0.99)."""
+    is weak).
+    ``joint(chosen)``: the joint fit of causes (default :func:`~metrology.diagnosis.select.joint_fit`)."""
+    from metrology.diagnosis import rules
     from metrology.diagnosis.select import flags_of, joint_fit
-    from metrology.diagnosis.thresholds import THRESHOLDS
 
     scored = steps[0].scored
-    chosen = [s.chosen for s in steps if s.chosen is not None and s.chosen.cause != "pose_error"]
-    f = joint_fit(ds, b, chosen) if chosen else b.fit
+    chosen = [s.chosen for s in steps if s.chosen is not None and not s.chosen.component.per_pose]
+    f = (joint(chosen) if joint is not None else joint_fit(ds, b, chosen)) if chosen else b.fit
     r = random_pose_error(ds, b, f.residual, rng, f.components, flags_of(chosen))
-    if r.p >= THRESHOLDS["alpha_candidates"] / (len(scored) + 1):
+    if not rules.random_pose_significant(r.p, len(scored)):
         return None
     return r, f
 
@@ -375,24 +376,23 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
     offset member's, relabelled, with the joint fit ``f``), or None unless the whitened residuals'
     tests ``tests`` are consistent on every sensor, :attr:`RandomPoseError.p_explained` passes, and
     the pose error explains the within-pose covariance better than excess variance on one sensor
-    alone (``lr_one_sensor`` at least the margin ``THRESHOLDS["lr_one_sensor"]``)."""
+    alone (:func:`metrology.diagnosis.rules.random_pose_explains`)."""
     from dataclasses import replace
 
+    from metrology.diagnosis import rules
     from metrology.diagnosis.results import Cause
-    from metrology.diagnosis.thresholds import THRESHOLDS
 
-    if not tests.consistent or r.p_explained < THRESHOLDS["alpha_battery"]:
+    if not rules.random_pose_explains(tests.consistent, r.p_explained, r.lr_one_sensor):
         return None
-    if not r.lr_one_sensor >= THRESHOLDS["lr_one_sensor"]:  # no better than excess scatter on one sensor
-        return None
-    pe = next((s for s in scored if s.cause == "pose_error"), None)
+    pe = next((s for s in scored if s.component.per_pose), None)
     if pe is None:
         return None
-    entry = {"component": "pose_error", "label": "pose_error@random", "cause": "pose_error", "sensors": [],
+    label = pe.cause + "@random"
+    entry = {"component": pe.cause, "label": label, "cause": pe.cause, "sensors": [],
              "params": r.params(),
              "size": {"value": r.rms_mm, "stderr": r.rms_se_mm, "unit": "mm",
                       "meaning": "RMS change of a reading by the pose error (its offset and tilts)"},
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "lr_over_one_sensor": r.lr_one_sensor,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}
-    return Cause.from_description(entry), replace(pe, fit=f, label="pose_error@random", p_insample=r.p)
+    return Cause.from_description(entry), replace(pe, fit=f, label=label, p_insample=r.p)

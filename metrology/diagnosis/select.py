@@ -25,7 +25,9 @@ Families and their members (what is chosen by held-out error, never by the in-sa
 
 Last, the member must explain its sensors (every sensor for a cause of the set-up):
 :func:`adequate_member`. A selection that took a per-pose cause is checked against one made
-without per-pose causes (:func:`_fixed_explains`).
+without per-pose causes (:func:`_fixed_explains`). One :class:`Selection` owns the state (what
+is chosen so far, the gross readings, the pool) and produces immutable :class:`Step`s; the
+rules it applies are :mod:`metrology.diagnosis.rules`.
 """
 
 from __future__ import annotations
@@ -35,22 +37,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import Outliers, PoseError
+from metrology.core.effects import REGISTRY, Outliers
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
 from metrology.diagnosis.fit import Fit, fit_any
 from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
                                          score_step)
 from metrology.diagnosis.stats import paired_gain_p
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
-__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "rechoose_members", "flag_given_rigid", "p_better", "needed", "weakly_supported", "MAX_CAUSES"]
+__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 
-#: at most this many causes are named in one data set
-MAX_CAUSES = 3
-#: once a step chose a cause on its own sensors, a family on other sensors is rescored only if one of
-#: its members had an in-sample p below this at that step (see _seen_after)
-PRUNE_P = 0.2
 
 
 @dataclass(frozen=True)
@@ -69,8 +66,7 @@ class Step:
 
 
 def _lead(scored, n_cand):
-    in_only = sorted([s for s in scored if not s.significant and s.p_insample < THRESHOLDS["alpha_candidates"] / n_cand],
-                     key=lambda s: s.p_insample)
+    in_only = sorted([s for s in scored if rules.in_sample_only(s, n_cand)], key=lambda s: s.p_insample)
     return in_only[0] if in_only else None
 
 
@@ -86,27 +82,209 @@ def _parsimonious(sig):
     if not first.component.per_pose:
         return first
     fixed = next((s for s in sig if not s.component.per_pose), None)
-    if fixed is not None and p_better(first, fixed) >= THRESHOLDS["alpha_order"]:
+    if fixed is not None and rules.per_pose_imitates(p_better(first, fixed)):
         return fixed
     return first
 
 
-def forward_select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None):
+def forward_select(ds, b, flags, p_out, folds, on_candidate=None) -> tuple:
     """Add causes while one gives a significant held-out gain given the others (see the module).
 
-    ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the list of
-    :class:`Step` (the last one has ``chosen`` None unless ``max_causes`` was reached).
+    ``b`` is the :class:`~metrology.diagnosis.decide.BaseAnalysis`. Returns the tuple of
+    :class:`Step` (the last one has ``chosen`` None unless ``MAX_CAUSES`` were chosen).
     ``on_candidate(step, i, n, label)``, if given, is called before each candidate is scored.
 
     Where a per-pose cause (``pose_error``) was chosen, the selection is made again without
-    per-pose causes (the first step's scores reused), and that selection is taken when the
-    per-pose one does not predict held-out poses significantly better (:func:`_fixed_explains`).
+    per-pose causes (the first step's scores, and every candidate scored against the same
+    model, reused), and that selection is taken when the per-pose one does not predict held-out
+    poses significantly better (:func:`_fixed_explains`).
     """
-    steps = _select(ds, b, flags, p_out, folds, max_causes, on_candidate)
+    sel = Selection(ds, b, flags, p_out, folds, on_candidate=on_candidate)
+    steps = sel.run()
     if not any(st.chosen is not None and st.chosen.component.per_pose for st in steps):
         return steps
-    fixed = _select(ds, b, flags, p_out, folds, max_causes, on_candidate, first=steps[0].scored)
-    return fixed if _fixed_explains(b, steps, fixed, flags) else steps
+    alt = sel.without_per_pose().run(first=steps[0].scored)
+    return alt if _fixed_explains(b, steps, alt, flags) else steps
+
+
+class Selection:
+    """The forward selection's state (one object, its methods the steps of the procedure).
+
+    ds : Dataset; b : BaseAnalysis; folds : int; per_pose : bool, whether per-pose causes may be
+    chosen (a second selection is made without them, :func:`forward_select`); scoring : Scoring,
+    what every candidate is scored in (its ``flags`` and ``p_out``, the gross readings so far);
+    given : tuple of Component, the causes chosen; fit, heldout : their joint fit and k-fold
+    figures (the reference of the next step); chosen : list of CandidateResult, one a step (a
+    later step may revise an earlier one's member or its gross readings); ranked : list of the
+    steps' scored candidates, largest held-out gain first; lead : the last step's in-sample-only
+    candidate; remaining : the candidates not yet chosen from; seen : the families a later step
+    rescores (:func:`_seen_after`); pool : what the next step scores; members : every member of
+    every family (for :meth:`rechoose`); scores : the candidates scored so far, by the model they
+    were scored against (shared with a second selection, so no candidate is scored twice
+    against the same model).
+    """
+
+    def __init__(self, ds, b, flags, p_out, folds, on_candidate=None):
+        pool = candidates_for(ds.layout, b.cov, flags)
+        self.ds, self.b, self.folds, self.per_pose, self.on_candidate = ds, b, folds, True, on_candidate
+        self.members = [c for c in pool if not isinstance(c, Outliers)]
+        self.scoring = self.start = Scoring(ds, b, flags, p_out, folds, len(pool))
+        self.pool = pool
+        self.remaining, self.seen = list(self.pool), None
+        self.given, self.fit, self.heldout = (), b.fit, b.heldout
+        self.chosen, self.ranked, self.lead = [], [], None
+        self.scores = {}
+
+    def without_per_pose(self) -> "Selection":
+        """A selection from the same start that neither scores nor chooses per-pose causes (the
+        per-pose candidates' count still splits the in-sample level), sharing this one's scores."""
+        st = self.start
+        alt = Selection(self.ds, self.b, st.flags, st.p_out, self.folds, self.on_candidate)
+        alt.per_pose, alt.scores = False, self.scores
+        alt.pool = [c for c in alt.pool if not c.per_pose]
+        alt.remaining = list(alt.pool)
+        return alt
+
+    @property
+    def reference(self) -> Reference:
+        """The model the next step scores candidates against."""
+        return Reference(self.given, self.fit, self.heldout)
+
+    @property
+    def steps(self) -> tuple:
+        """The selection so far as immutable :class:`Step`s."""
+        out = [Step(c, r, None) for c, r in zip(self.chosen, self.ranked)]
+        if len(self.ranked) > len(self.chosen):
+            out.append(Step(None, self.ranked[-1], self.lead))
+        return tuple(out)
+
+    def run(self, first=None) -> tuple:
+        """Steps until no candidate is significant, ``MAX_CAUSES`` are chosen or nothing is left
+        to score; ``first``: the first step's scored candidates, reused."""
+        while True:
+            scored = list(first) if first is not None and not self.ranked else self.score(self.pool)
+            if not self.take(scored) or not rules.room_for_another(len(self.given)) or not self.pool:
+                return self.steps
+
+    def score(self, pool, ref: Reference | None = None) -> list:
+        """Score ``pool`` against ``ref`` (default :attr:`reference`, the step's scoring, which
+        ``on_candidate`` follows), each candidate once per model."""
+        step, ref = ref is None, self.reference if ref is None else ref
+        sc = self.scoring
+        model = (tuple(g.label for g in ref.given), sc.flags.tobytes(), sc.p_out, ref.fit.theta.tobytes(),
+                 ref.heldout.residual.tobytes())
+        todo = [c for c in pool if (model, c.label) not in self.scores]
+        tick = functools.partial(self.on_candidate, len(self.ranked) + 1) if step and self.on_candidate else None
+        for c, s in zip(todo, score_step(sc, ref, todo, tick)):
+            self.scores[model, c.label] = s
+        return [self.scores[model, c.label] for c in pool]
+
+    def take(self, scored) -> bool:
+        """Rank a step's scored candidates and add the member chosen, if one is significant."""
+        ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
+        self.ranked.append(ranked)
+        sig = [s for s in ranked if s.significant and (self.per_pose or not s.component.per_pose)]
+        if not sig:
+            self.lead = _lead(scored, self.scoring.n_cand)
+            return False
+        ref = self.reference
+        chosen = refine_order(_parsimonious(sig), scored)
+        chosen, ladder = richer_spline(self.scoring, ref, chosen)
+        self.add(adequate_member(self.scoring, ref, chosen, scored, ladder), ranked)
+        return True
+
+    def add(self, chosen, ranked):
+        """The cause ``chosen`` joins the model; gross readings are flagged again, earlier members
+        re-chosen given it, and the next step's pool pruned."""
+        self.chosen.append(chosen)
+        self.given = self.given + (chosen.component,)
+        self.fit, self.heldout = chosen.fit, chosen.heldout
+        fam = family_of(chosen.component)
+        self.remaining = [c for c in self.remaining
+                          if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
+        self.seen = _seen_after(chosen.component, ranked, self.seen)
+        self.reflag(chosen)
+        if len(self.given) > 1:
+            self.rechoose()
+        self.pool = _prune(self.remaining, self.given, self.seen)
+
+    def reflag(self, chosen):
+        """Gross readings against the causes found. Where ``outliers`` is chosen, those the new cause
+        reveals (it hid them in its own scatter) join it and the joint model is refitted (after a
+        rigid pose error a gross reading shows on every sensor of its pose: :func:`flag_given_rigid`);
+        where it is not, they are flagged anew (a large effect makes its extremes look gross to a
+        fit without it) and the ``outliers`` candidate follows them."""
+        ds, b, sc = self.ds, self.b, self.scoring
+        rigid = any(g.per_pose and g.per_pose_columns > 1 for g in self.given)
+        k = next((j for j, g in enumerate(self.given) if isinstance(g, Outliers)), None)
+        if k is None:
+            flags, p_out = (flag_given_rigid(self.fit, b.cov, b.sigma, np.zeros_like(sc.flags)) if rigid
+                            else flag_residuals(self.fit.residual, b.sigma))
+            self.scoring = replace(sc, flags=flags, p_out=p_out)
+            self.remaining = [c for c in self.remaining if not isinstance(c, Outliers)]
+            self.remaining += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
+            return
+        if isinstance(chosen.component, Outliers):
+            return
+        new = (flag_given_rigid(self.fit, b.cov, b.sigma, sc.flags) if rigid
+               else flag_residuals(self.fit.residual, b.sigma))[0]
+        if not np.any(new & ~sc.flags):
+            return
+        flags = sc.flags | new
+        self.scoring = replace(sc, flags=flags)
+        out = replace(self.given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
+                      values=None, stderr=None)
+        self.given = self.given[:k] + (out,) + self.given[k + 1:]
+        th0 = self.fit.theta if rigid else b.theta0  # a held geometry is held where the joint model is
+        self.fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, self.given, th0)
+        self.heldout = kfold(ds.layout, ds.obs, b.cov, b.sigma, self.given, self.folds, th0)
+        self.chosen[k] = replace(self.chosen[k], component=out, label=out.label,
+                                 sensors=[ds.layout.names[i] for i in out.sensors])
+        self.chosen[-1] = replace(self.chosen[-1], fit=self.fit, heldout=self.heldout)
+
+    def rechoose(self):
+        """Re-choose the member of each earlier cause's family given the causes chosen after it.
+
+        A member is chosen by held-out error given the causes known at its step: a rigid pose
+        error, say, is not significantly better than the offset alone while a drift is still
+        unmodelled, and its orientation part then stays on every sensor. Each earlier family's
+        members are scored again given every other chosen cause (the same tests, the rule of
+        :func:`refine_order` from the member held, then :func:`adequate_member` given the others).
+        Where one changes, its step and the joint model are refitted."""
+        ds, b, folds = self.ds, self.b, self.folds
+        nominal, obs = ds.layout, ds.obs
+        changed = False
+        for j, g in enumerate(self.given[:-1]):
+            mates = [c for c in self.members if family_of(c) == family_of(g)]
+            if len(mates) < 2:
+                continue
+            others = self.given[:j] + self.given[j + 1:]
+            th0 = self.chosen[-1].fit.theta
+            ref = Reference(others, fit_any(nominal, obs, b.cov, b.sigma, others, th0),
+                            kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
+            scored = self.score(mates, ref)
+            held = next((s for s in scored if s.label == g.label), None)
+            if held is None or not held.significant:
+                continue
+            new = refine_order(held, scored)
+            # and the member must explain its sensors given the others (refine_order starts from the
+            # simplest member: a member taken for adequacy would otherwise go back to it)
+            new = adequate_member(self.scoring, ref, new, scored)
+            if new.label == g.label:
+                continue
+            self.given = self.given[:j] + (new.component,) + self.given[j + 1:]
+            th_j = b.theta0 if j == 0 else self.chosen[j - 1].fit.theta
+            self.chosen[j] = replace(new, fit=fit_any(nominal, obs, b.cov, b.sigma, self.given[:j + 1], th_j),
+                                     heldout=kfold(nominal, obs, b.cov, b.sigma, self.given[:j + 1], folds, th_j))
+            changed = True
+        last = self.chosen[-1]
+        if not changed:
+            self.fit, self.heldout = last.fit, last.heldout
+            return
+        th0 = last.fit.theta
+        self.fit = fit_any(nominal, obs, b.cov, b.sigma, self.given, th0)
+        self.heldout = kfold(nominal, obs, b.cov, b.sigma, self.given, folds, th0)
+        self.chosen[-1] = replace(last, fit=self.fit, heldout=self.heldout)
 
 
 def _fixed_explains(b, steps, fixed, flags=None) -> bool:
@@ -134,79 +312,9 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     gross += [flag_residuals(x.fit.residual, b.sigma)[0] for x in (m, a)]
     keep = ~np.any(np.logical_or.reduce(gross), axis=1)
     d = (a.heldout.chi2_pose(b.sigma) - m.heldout.chi2_pose(b.sigma))[keep]
-    if len(d) < 3:
+    if len(d) < rules.MIN_POSES_COMPARED:
         return False
-    return paired_gain_p(d) >= THRESHOLDS["alpha_order"]
-
-
-def _select(ds, b, flags, p_out, folds, max_causes=MAX_CAUSES, on_candidate=None, first=None):
-    """:func:`forward_select`'s steps; with ``first`` (the first step's scored candidates, reused)
-    no per-pose cause is chosen or scored."""
-    pool = candidates_for(ds.layout, b.cov, flags)
-    members = [c for c in pool if not isinstance(c, Outliers)]  # every member of every family
-    n_cand = len(pool)
-    if first is not None:
-        pool = [c for c in pool if not c.per_pose]
-    remaining, seen = list(pool), None  # pool: what the next step scores (see _prune)
-    given, steps = (), []
-    ref_fit, ref_ho = b.fit, b.heldout
-    sc = Scoring(ds, b, flags, p_out, folds, n_cand)
-    while True:
-        tick = None if on_candidate is None else functools.partial(on_candidate, len(steps) + 1)
-        if first is not None and not steps:
-            scored = list(first)
-        else:
-            scored = score_step(sc, Reference(given, ref_fit, ref_ho), pool, tick)
-        ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
-        sig = [s for s in ranked if s.significant and not (first is not None and s.component.per_pose)]
-        if not sig:
-            steps.append(Step(None, ranked, _lead(scored, n_cand)))
-            return steps
-        chosen = refine_order(_parsimonious(sig), scored)
-        ref = Reference(given, ref_fit, ref_ho)
-        chosen, ladder = richer_spline(sc, ref, chosen)
-        chosen = adequate_member(sc, ref, chosen, scored, ladder)
-        steps.append(Step(chosen, ranked, None))
-        given = given + (chosen.component,)
-        ref_fit, ref_ho = chosen.fit, chosen.heldout
-        fam = family_of(chosen.component)
-        remaining = [c for c in remaining if family_of(c) != fam and not (c.per_pose and chosen.component.per_pose)]
-        seen = _seen_after(chosen.component, scored, seen)
-        rigid = any(g.per_pose and g.per_pose_columns > 1 for g in given)
-        if any(isinstance(g, Outliers) for g in given) and not isinstance(chosen.component, Outliers):
-            # gross readings the new cause reveals (it hid them in its own scatter) join the
-            # flagged ones, and the joint model so far is refitted with them (after a rigid pose
-            # error a gross reading shows on every sensor of its pose: see flag_given_rigid)
-            new = (flag_given_rigid(ref_fit, b.cov, b.sigma, flags) if rigid else flag_residuals(ref_fit.residual,
-                                                                                                   b.sigma))[0]
-            if np.any(new & ~flags):
-                flags = flags | new
-                sc = replace(sc, flags=flags)
-                k = next(j for j, g in enumerate(given) if isinstance(g, Outliers))
-                out = replace(given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
-                              values=None, stderr=None)
-                given = given[:k] + (out,) + given[k + 1:]
-                th0 = ref_fit.theta if rigid else b.theta0  # a held geometry is held where the joint model is
-                ref_fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, given, th0)
-                ref_ho = kfold(ds.layout, ds.obs, b.cov, b.sigma, given, folds, th0)
-                j = [i for i, st in enumerate(steps) if st.chosen is not None and isinstance(st.chosen.component, Outliers)][0]
-                steps[j] = Step(replace(steps[j].chosen, component=out, label=out.label,
-                                        sensors=[ds.layout.names[i] for i in out.sensors]),
-                                steps[j].scored, steps[j].lead)
-                steps[-1] = Step(replace(steps[-1].chosen, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
-        elif not any(isinstance(g, Outliers) for g in given):
-            # gross readings flagged anew against the causes found: a large effect makes its
-            # extremes look gross to a fit without it
-            flags, p_out = (flag_given_rigid(ref_fit, b.cov, b.sigma, np.zeros_like(flags)) if rigid
-                            else flag_residuals(ref_fit.residual, b.sigma))
-            sc = replace(sc, flags=flags, p_out=p_out)
-            remaining = [c for c in remaining if not isinstance(c, Outliers)]
-            remaining += Outliers.candidates_for_setup(ds.layout.names, b.cov, flags)
-        if len(given) > 1:
-            given, ref_fit, ref_ho = rechoose_members(sc, given, steps, members)
-        pool = _prune(remaining, given, seen)
-        if len(given) >= max_causes or not pool:
-            return steps
+    return rules.fixed_explains_as_well(paired_gain_p(d), len(d))
 
 
 def _seen_after(chosen, scored, seen):
@@ -225,7 +333,7 @@ def _seen_after(chosen, scored, seen):
         return None
     if seen is not None:
         return seen
-    return {family_of(s.component) for s in scored if s.p_insample < PRUNE_P}
+    return {family_of(s.component) for s in scored if rules.shows_something(s.p_insample)}
 
 
 def _prune(remaining, given, seen) -> list:
@@ -270,7 +378,7 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     z = z / max(1.0, 1.4826 * float(np.median(np.abs(z[ok_z]))))
     zmax = float(np.max(np.abs(z)))
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
-    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * m)))
+    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(rules.gross_level(m)))
     if not len(bad):
         return flags, p_max
     good = np.setdiff1d(np.arange(len(B)), bad)
@@ -289,55 +397,6 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     return out, p_max
 
 
-def rechoose_members(sc: Scoring, given, steps, members):
-    """Re-choose the member of each earlier cause's family given the causes chosen after it.
-
-    A member is chosen by held-out error given the causes known at its step: a rigid pose
-    error, say, is not significantly better than the offset alone while a drift is still
-    unmodelled, and its orientation part then stays on every sensor. Each earlier family's
-    members are scored again given every other chosen cause (the same tests, the same
-    ``alpha_order`` rule of :func:`refine_order`, from the member held, then
-    :func:`adequate_member` given the others). Where one changes,
-    its step and the joint model are refitted (``steps`` is updated in place). Returns
-    (given, joint fit, its held-out figures).
-    """
-    ds, b, folds = sc.ds, sc.b, sc.folds
-    nominal, obs = ds.layout, ds.obs
-    changed = False
-    for j, g in enumerate(given[:-1]):
-        mates = [c for c in members if family_of(c) == family_of(g)]
-        if len(mates) < 2:
-            continue
-        others = given[:j] + given[j + 1:]
-        th0 = steps[-1].chosen.fit.theta
-        ref = (fit_any(nominal, obs, b.cov, b.sigma, others, th0), kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
-        scored = score_step(sc, Reference(others, *ref), mates)
-        held = next((s for s in scored if s.label == g.label), None)
-        if held is None or not held.significant:
-            continue
-        new = refine_order(held, scored)
-        # and the member must explain its sensors given the others (refine_order starts from the
-        # simplest member: a member taken for adequacy would otherwise go back to it)
-        new = adequate_member(sc, Reference(others, *ref), new, scored)
-        if new.label == g.label:
-            continue
-        given = given[:j] + (new.component,) + given[j + 1:]
-        k = [i for i, st in enumerate(steps) if st.chosen is not None][j]
-        th_j = b.theta0 if j == 0 else steps[k - 1].chosen.fit.theta
-        f_j = fit_any(nominal, obs, b.cov, b.sigma, given[:j + 1], th_j)
-        ho_j = kfold(nominal, obs, b.cov, b.sigma, given[:j + 1], folds, th_j)
-        steps[k] = Step(replace(new, fit=f_j, heldout=ho_j), steps[k].scored, steps[k].lead)
-        changed = True
-    last = steps[-1].chosen
-    if not changed:
-        return given, last.fit, last.heldout
-    th0 = last.fit.theta
-    ref_fit = fit_any(nominal, obs, b.cov, b.sigma, given, th0)
-    ref_ho = kfold(nominal, obs, b.cov, b.sigma, given, folds, th0)
-    steps[-1] = Step(replace(last, fit=ref_fit, heldout=ref_ho), steps[-1].scored, None)
-    return given, ref_fit, ref_ho
-
-
 def drop_one_gains(ds, b, chosen, folds):
     """Held-out chi-square gain of each chosen cause given the others: the joint model without
     it against the joint model (per-pose chi-square difference over all sensors, and its
@@ -353,16 +412,13 @@ def drop_one_gains(ds, b, chosen, folds):
         rest = comps[:j] + comps[j + 1:]
         # a rigid pose error holds the geometry: where the selection held it (the offset member's
         # fit, :func:`~metrology.diagnosis.members.score_step`), not at the base calibration, which
-        # the pose error itself biases. Held there, the model without a cause predicted held-out
-        # poses far worse than the selection's did, and a nonlinearity added at p = 0.046 beside
-        # a rigid pose error and gross readings was "needed given the others" at p = 1e-6
+        # the pose error itself biases (held there, a cause looked needed that was not)
         th = full_theta if any(getattr(c, "holds_base", False) for c in rest) else b.theta0
         ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, th) if rest else b.heldout
         S = list(s.component.sensors) or list(range(nominal.n))
         # a characteristic is judged where its fit saw readings, as when it was selected
         # (score_candidate): a held-out reading beyond its sensor's training span tests how the
-        # curve extrapolates, and one such pose swamped the paired test (a 0.16 mm table named
-        # at p = 1e-17 was then "not needed", p = 0.077)
+        # curve extrapolates, and one such pose swamps the paired test
         ex = excl if not s.component.uses_d0 else (span if excl is None else excl | span)
         d_all = ho.chi2_pose(b.sigma, exclude=ex) - full.chi2_pose(b.sigma, exclude=ex)
         d_S = ho.chi2_pose(b.sigma, S, ex) - full.chi2_pose(b.sigma, S, ex)
@@ -378,20 +434,17 @@ def needed(chosen, gains) -> list:
     make an earlier one redundant, and a step can have tested its cause against another
     reference (a datum form beyond the plane's tilt). ``outliers`` are exempt: a flagged
     reading predicts nothing held out."""
-    alpha_each = THRESHOLDS["alpha_heldout"] / max(len(chosen), 1)
-    return [isinstance(s.component, Outliers) or g[1] < alpha_each for s, g in zip(chosen, gains)]
+    return [rules.needed_given_others(g[1], len(chosen), s.component.drops_readings) for s, g in zip(chosen, gains)]
 
 
 def weakly_supported(causes) -> list:
     """The labels of the named causes (the verdict's ``causes`` entries) whose held-out p given
     the others is not below ``alpha_high`` (a NaN p included): named (below ``alpha_heldout``
     split over the causes, :func:`needed`), but on evidence that a null data set gives often
-    enough for ``confidence: high`` to overclaim. In the blind studies of seeds 104-106
-    (``benchmarks/study_blind.py``), 5 of the 10 nulls and single draws named ``high`` on such
-    a p were wrong, and 1 of the 185 named on smaller ones. ``outliers`` (a flagged reading
+    enough for ``confidence: high`` to overclaim. ``outliers`` (a flagged reading
     predicts nothing held out) and a random pose error (no held-out p) are exempt."""
-    return [c.label for c in causes if c.cause != "outliers" and c.p_heldout_given_others is not None
-            and not c.p_heldout_given_others < THRESHOLDS["alpha_high"]]
+    return [c.label for c in causes if not REGISTRY[c.cause].drops_readings and c.p_heldout_given_others is not None
+            and rules.weak_evidence(c.p_heldout_given_others)]
 
 
 def flags_of(chosen):
@@ -409,6 +462,5 @@ def joint_fit(ds, b, chosen) -> Fit:
     the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
     it free and the directions of the geometry its per-pose values absorb held: see
     :func:`metrology.diagnosis.fit._absorbed_modes`)."""
-    comps = tuple(replace(s.component, values=None, stderr=None, **({"hold": False} if isinstance(s.component, PoseError)
-                                                                     else {})) for s in chosen)
+    comps = tuple(s.component.for_joint_fit() for s in chosen)
     return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.effects import Covariates
-from metrology.diagnosis.thresholds import THRESHOLDS
+from metrology.diagnosis import rules
 
 __all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
 
@@ -117,7 +117,7 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
             pair_out[f"{names[i]}-{names[j]}"] = {"r": float(rr), "p": float(pp)}
             pvals.append((float(pp), {i, j}))
     p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
-    return NoiseTests(per, pair_out, len(pvals), p_all, bool(p_all >= THRESHOLDS["alpha_battery"]), tuple(pvals))
+    return NoiseTests(per, pair_out, len(pvals), p_all, rules.explains_sensors(p_all), tuple(pvals))
 
 
 def battery_rng() -> np.random.Generator:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from metrology.core.effects import REGISTRY
 from metrology.diagnosis.select import weakly_supported
 from metrology.diagnosis.stats import battery_on
 from metrology.diagnosis.thresholds import THRESHOLDS
@@ -56,7 +57,7 @@ def verdict_summary(v, tb) -> str:
                 f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains")
     parts = []
     for c in v.causes:
-        where = f" on {', '.join(c.sensors)}" if c.sensors and c.cause not in ("pose_error", "plane_form") else ""
+        where = f" on {', '.join(c.sensors)}" if c.sensors and not REGISTRY[c.cause].setup else ""
         test = (f"{c.test}, p = {c.p_insample:.2g}" if c.test else
                 f"held-out chi-square gain {c.heldout_gain_chi2:.3g} given the others, p = {c.p_heldout_given_others:.2g}")
         parts.append(f"{c.cause}{where} ({c.label}: {test})")

@@ -111,11 +111,11 @@ def _tests(p_sensor, n):
 
 
 def _chosen(*sensors):
-    return [SimpleNamespace(component=SimpleNamespace(sensors=s)) for s in sensors]
+    return [SimpleNamespace(component=SimpleNamespace(sensors=s, drops_readings=False)) for s in sensors]
 
 
 def test_an_all_sensor_cause_is_judged_beside_structure_that_belongs_elsewhere():
-    from metrology.diagnosis.decide import _judged_sensors
+    from metrology.diagnosis.judge import _judged_sensors
 
     n = 3
     bad = {2: 1e-8}  # structure left on sensor 2 only
@@ -156,11 +156,11 @@ def test_a_sole_cause_turned_down_is_not_named_and_its_test_is_said(tmp_path, mo
     """The wiring of the rule above: a clear drift (4 sensors, 40 poses) whose drop-one test is
     made to fail is not named, the steps table marks its step not named, and the summary gives
     that test's p (unpatched, it is named: test_clear_case_names_cause_and_sensor)."""
-    import metrology.diagnosis.decide as decide
+    import metrology.diagnosis.judge as judge
 
     case = draw_case(np.random.default_rng([11]), "drift", n_sensors=4, n_poses=40, size=0.05)
-    drop_one = decide.drop_one_gains
-    monkeypatch.setattr(decide, "drop_one_gains", lambda *a: [(g, 0.2) for g, _ in drop_one(*a)])
+    drop_one = judge.drop_one_gains
+    monkeypatch.setattr(judge, "drop_one_gains", lambda *a: [(g, 0.2) for g, _ in drop_one(*a)])
     res = _diagnose(case, tmp_path)
     assert res["cause"] == "unexplained" and not res["causes"], res["summary"]
     assert res["confidence"] == "low"
@@ -191,11 +191,11 @@ def test_a_cause_on_weak_evidence_is_named_with_moderate_confidence(tmp_path, mo
     """The wiring: the clear drift above (named ``high`` unpatched, at p = 0.0002 against the base
     model) with its drop-one p made 0.02 is still named, ``confidence: moderate``, and the
     summary says why."""
-    import metrology.diagnosis.decide as decide
+    import metrology.diagnosis.judge as judge
 
     case = draw_case(np.random.default_rng([11]), "drift", n_sensors=4, n_poses=40, size=0.05)
-    drop_one = decide.drop_one_gains
-    monkeypatch.setattr(decide, "drop_one_gains", lambda *a: [(g, 0.02) for g, _ in drop_one(*a)])
+    drop_one = judge.drop_one_gains
+    monkeypatch.setattr(judge, "drop_one_gains", lambda *a: [(g, 0.02) for g, _ in drop_one(*a)])
     res = _diagnose(case, tmp_path)
     assert res["cause"] == "drift" and res["confidence"] == "moderate", res["summary"]
     assert res["summary"].endswith("; confidence moderate: weak held-out evidence for " + res["causes"][0]["label"]

@@ -184,8 +184,27 @@ class Component:
     #: how many positions :meth:`locate` chose among (the in-sample test is Bonferroni-split
     #: over them); 1 for an effect with nothing to locate
     searched = 1
-    #: what :meth:`detectable_size` measures (the ``meaning`` of the diagnosis' ``detectable``)
+    #: what the diagnosis' ``detectable`` size of the family measures
     detectable_meaning = ""
+    #: the family its members compete in (one place per family and sensors); empty: its :attr:`name`
+    family = ""
+    #: terms outside the catalogue it can be mistaken for, each checked before it is named
+    #: (``"crosstalk"``: a shift with another sensor's distance, :mod:`metrology.diagnosis.crosstalk`)
+    confused_with = ()
+    #: its term is the same as leaving readings out: it predicts nothing held out, so the held-out
+    #: tests of the verdict do not judge it
+    drops_readings = False
+    #: the fit holds the base geometry where it was put (a rigid pose error, see ``PoseError``)
+    holds_base = False
+    #: its detectable size is that of the least favourable of :meth:`detectable_shapes`, each by
+    #: the best of the family's members (its members' shapes vary most)
+    worst_shape = False
+
+    @property
+    def tie_rank(self) -> int:
+        """Between two members of a family with as many parameters, the smaller rank is taken
+        (the physical cause before its proxy); 1 unless the effect says otherwise."""
+        return 1
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov) -> list:
@@ -209,9 +228,51 @@ class Component:
     def size_rows(self, d0, cov):
         """``(B (m, k), meaning)``: the rows whose fitted values give the effect's size in its
         family's unit (one row: its absolute value; several: their peak-to-valley), or None where
-        the effect defines none here (the diagnosis' older families are sized in
-        :func:`metrology.diagnosis.extension.size_of`)."""
+        the effect defines none."""
         return None
+
+    def size(self, C, d0, cov) -> dict | None:
+        """The size in the family's unit with its standard error (delta method on ``C (k, k)``,
+        the covariance of :attr:`values`): ``{"value", "stderr", "unit", "meaning"}`` from
+        :meth:`size_rows`, or None where the effect defines none. ``d0 (p, n)`` mm, the base readings."""
+        rows = self.size_rows(d0, cov)
+        if rows is None:
+            return None
+        B, meaning = rows
+        e = B @ self.values
+        if len(e) == 1:
+            val, g = abs(float(e[0])), B[0]
+        else:
+            hi_, lo_ = int(np.argmax(e)), int(np.argmin(e))
+            val, g = float(e[hi_] - e[lo_]), B[hi_] - B[lo_]
+        se = float(np.sqrt(max(g @ C @ g, 0.0))) if C.shape == (len(g), len(g)) else None
+        return {"value": val, "stderr": se, "unit": "mm", "meaning": meaning}
+
+    def detectable_direction(self):
+        """``(k,)`` float: the unit shape of its parameters whose size the diagnosis' detectable
+        size reports for this member, or None where this member has none."""
+        return None
+
+    @classmethod
+    def detectable_shapes(cls, d0_i, cos_inc_i, fin) -> list:
+        """The family's shapes over which its detectable size is the worst (:attr:`worst_shape`),
+        on one sensor: ``[(p,) float]``, each of size 1 in the family's unit, NaN where ``fin (p,)``
+        is False; ``d0_i (p,)`` mm its base readings, ``cos_inc_i (p,)`` its incidence cosines."""
+        return []
+
+    def nuisance(self) -> "Component | None":
+        """The part of the effect that is not the cause (tested against, carried in both models),
+        or None."""
+        return None
+
+    def geometry_member(self) -> "Component | None":
+        """For an effect that holds the base geometry (:attr:`holds_base`), the member whose fit
+        places it; None otherwise."""
+        return None
+
+    def for_joint_fit(self) -> "Component":
+        """The component to refit jointly with the others once named (values cleared)."""
+        return replace(self, values=None, stderr=None)
 
     def detectable_size(self, J_i, cov, fin, sigma_i, alpha) -> float | None:
         """The size (the family's unit) its in-sample test at level ``alpha`` detects at 95 %

@@ -12,6 +12,18 @@ from metrology.core.effects.base import REFERENCE_TEMP_C, Component, _sensor_bas
 __all__ = ["Scale", "Incidence", "Drift", "Nonlinearity"]
 
 
+def _characteristic_rows(comp, cov):
+    """The term of a characteristic (gain, curve) along its sensor's readings: ``(B (201, k),
+    meaning)`` over the span of the readings it gave (beyond them the data say nothing of the
+    curve; the stated range without a span)."""
+    i = comp.sensors[0]
+    lo, hi = cov.d_span[i] if cov.d_span is not None else cov.range_mm[i]
+    grid = np.linspace(lo, hi, 201)
+    d_grid = np.zeros((len(grid), len(cov.range_mm)))
+    d_grid[:, i] = grid
+    return comp.basis(d_grid, cov)[:, i, :], "peak-to-valley of the characteristic over the readings' span"
+
+
 @dataclass(frozen=True)
 class Scale(Component):
     """Gain error ``k``: the reading is ``(1 + k) d0`` (a constant part is a zero shift)."""
@@ -23,6 +35,15 @@ class Scale(Component):
     advice = "readings over the whole measuring range (a wider spread of stand-off)"
     size_meaning = "gain error k (unitless)"
     plot_key = "d_mm"
+    family = "characteristic"
+    confused_with = ("crosstalk",)
+    detectable_meaning = "peak-to-valley of a gain error over the readings' span, told from crosstalk"
+
+    def size_rows(self, d0, cov):
+        return _characteristic_rows(self, cov)
+
+    def detectable_direction(self):
+        return np.ones(1)
 
     def basis(self, d0, cov):
         return _sensor_basis(d0[..., None], d0.shape[1], self.sensors)
@@ -53,6 +74,27 @@ class Incidence(Component):
     advice = "a wider spread of tilt against the datum (incidence angles)"
     size_meaning = "c mm (bias at 45 deg incidence)"
     plot_key = "incidence_deg"
+    confused_with = ("crosstalk",)
+    detectable_meaning = "bias at the largest incidence angle seen, the least favourable even shape"
+    worst_shape = True
+    #: the even shapes ``(a / a_max)^k`` (``a`` the incidence angle) over which the detectable size is the worst
+    SHAPE_POWERS = (2, 4, 6)
+
+    def size_rows(self, d0, cov):
+        i = self.sensors[0]
+        j = int(np.argmin(cov.cos_inc[:, i]))
+        return self.basis(d0, cov)[j:j + 1, i, :], "bias at the largest incidence angle seen"
+
+    def detectable_direction(self):
+        return np.ones(1) if self.n_params == 1 else None
+
+    @classmethod
+    def detectable_shapes(cls, d0_i, cos_inc_i, fin):
+        """Any even bias: one that grows slowly with the angle (``a^2``) changes least over the
+        angles seen for its value at the largest, so the zero point takes most of it."""
+        a = np.where(fin, np.arccos(np.clip(cos_inc_i, -1.0, 1.0)), np.nan)
+        a_max = float(np.nanmax(a)) if fin.any() else 0.0
+        return [(a / a_max) ** k for k in cls.SHAPE_POWERS] if a_max > 0 else []
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov):
@@ -116,6 +158,18 @@ class Drift(Component):
     name = "drift"
     advice = "poses repeated cold and warm, interleaved rather than in one sweep"
     size_meaning = "rate mm/K (temperature)"
+    detectable_meaning = "peak-to-valley over the run of a linear drift"
+
+    @property
+    def tie_rank(self) -> int:
+        """Temperature wins a tie (the physical cause, time its proxy)."""
+        return 0 if self.variable in ("temp", "lag") else 1
+
+    def size_rows(self, d0, cov):
+        return self.basis(d0, cov)[:, self.sensors[0], :], "peak-to-valley of the drift over the run"
+
+    def detectable_direction(self):
+        return np.ones(1) if self.n_params == 1 else None
 
     @property
     def plot_key(self):
@@ -273,6 +327,59 @@ class Nonlinearity(Component):
     advice = "readings over the whole measuring range (a wider spread of stand-off)"
     size_meaning = "c3 mm at the range end (c2 = c3/2)"
     plot_key = "d_mm"
+    family = "characteristic"
+    confused_with = ("crosstalk",)
+    detectable_meaning = "peak-to-valley beyond a straight line over the readings' span, the least favourable of P2-P4"
+    worst_shape = True
+    #: the Legendre orders over which the detectable size is the worst
+    SHAPE_ORDERS = (2, 3, 4)
+    #: interior knots of the richer splines, tried in turn once a curve is chosen (4: the scored
+    #: member's count, with its knots at the readings' quantiles instead)
+    SPLINE_LADDER = (4, 8, 12)
+
+    def size_rows(self, d0, cov):
+        return _characteristic_rows(self, cov)
+
+    def detectable_direction(self):
+        names = list(self.param_names)
+        return np.eye(self.n_params)[names.index("c2_mm")] if "c2_mm" in names and self.n_params == 3 else None
+
+    @classmethod
+    def detectable_shapes(cls, d0_i, cos_inc_i, fin):
+        """The Legendre polynomials of the reading over the span it covered, each of peak-to-valley
+        1 once its best straight line there is taken off (as the size is defined)."""
+        from numpy.polynomial import legendre
+
+        d = np.where(fin, d0_i, np.nan)
+        lo, hi = float(np.nanmin(d)), float(np.nanmax(d))
+        if not hi > lo:
+            return []
+        out = []
+        grid = np.linspace(-1.0, 1.0, 401)
+        for k in cls.SHAPE_ORDERS:
+            c = np.zeros(k + 1)
+            c[k] = 1.0
+            g = legendre.legval(grid, c)
+            g = g - np.polyval(np.polyfit(grid, g, 1), grid)
+            out.append(legendre.legval((2 * d - lo - hi) / (hi - lo), c) / float(g.max() - g.min()))
+        return out
+
+    def richer(self, k, d, span):
+        """The rung of ``k`` interior knots of the spline ladder on this member's sensor: the
+        spline with knots evenly over ``span`` (mm, the readings' span, or None: the range), and
+        with knots at the quantiles of the readings ``d`` (sorted, finite, mm) where they are far
+        enough apart; those not already this member."""
+        i = self.sensors[0]
+        rung = []
+        if not (self.order == 0 and k <= self.knots) and k != self.SPLINE_KNOTS:
+            rung.append(Nonlinearity((i,), names=self.names, with_gain=True, order=0, span=span, knots=k))
+        inner = tuple(float(v) for v in np.quantile(d, np.arange(1, k + 1) / (k + 1)))
+        # knots apart by at least a thousandth of the span (quantised or repeated readings can put
+        # two quantiles on one value, and a basis function between them has no support)
+        if len(d) >= 2 * (k + 4) and np.all(np.diff((d[0],) + inner + (d[-1],)) > 1e-3 * (d[-1] - d[0])):
+            rung.append(Nonlinearity((i,), names=self.names, with_gain=True, order=0, span=span, knots=k,
+                                     inner_mm=inner))
+        return rung
 
     @classmethod
     def hidden(cls, i, size):

@@ -43,6 +43,7 @@ class PlaneForm(Component):
     #: the quadratic part (bow, saddle, twist): what the datum cloud is compared on
     key_params = ("b_ss_mm", "b_st_mm", "b_tt_mm")
     setup = True
+    detectable_meaning = "peak-to-valley of the scanned datum form"
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
@@ -76,8 +77,24 @@ class PlaneForm(Component):
     def label(self):
         return self.name + {0: "@scan", 1: "@tilt", 2: "", 3: "@cubic"}[self.order]
 
-    def nuisance(self) -> "PlaneForm":
-        """The datum's tilt alone (order 1): what form is tested against."""
+    def size(self, C, d0, cov):
+        """The form as scanned (``order=0``): the scan's peak-to-valley over the cloud beyond its
+        best plane times the gain the readings see; none for the polynomial members."""
+        if self.order != 0 or not np.isfinite(cov.scan_ptp_mm):
+            return super().size(C, d0, cov)
+        g, se_g = abs(float(self.values[2])), float(np.sqrt(max(C[2, 2], 0.0)))
+        se_ptp = float(getattr(cov, "scan_ptp_se_mm", 0.0) or 0.0)
+        return {"value": g * cov.scan_ptp_mm, "stderr": float(np.hypot(se_g * cov.scan_ptp_mm, g * se_ptp)),
+                "unit": "mm", "meaning": "peak-to-valley of the scanned datum form over the cloud (beyond its best "
+                                        "plane), times the gain the readings see"}
+
+    def detectable_direction(self):
+        return np.eye(self.n_params)[self.param_names.index("scan_gain")] if self.order == 0 else None
+
+    def nuisance(self) -> "PlaneForm | None":
+        """The datum's tilt alone (order 1): what form is tested against (None for the tilt itself)."""
+        if self.order == 1:
+            return None
         return replace(self, order=1, values=None, stderr=None)
 
     #: total degrees tried for the smooth surface fitted to the datum cloud (:meth:`scan_surface`)
@@ -275,6 +292,7 @@ class PoseError(Component):
     size_meaning = "1-sigma TCS position error per axis, mm"
     plot_term = False
     setup = True
+    detectable_meaning = "RMS change of a reading by a per-pose rigid error (offset and tilts), any split"
 
     @classmethod
     def candidates_for_setup(cls, names, cov, flags=None):
@@ -308,6 +326,15 @@ class PoseError(Component):
         predicts held-out poses badly. The diagnosis scores the candidate so, and refits the
         named cause with the geometry free (``hold=False``, the rigid-head gauge fixed)."""
         return self.tilts and self.hold
+
+    def geometry_member(self):
+        """The offset member: the rigid member holds the geometry where the offset member's fit,
+        given the same causes, puts it (it profiles out the error's common mode)."""
+        return replace(self, tilts=False, values=None, stderr=None) if self.holds_base else None
+
+    def for_joint_fit(self):
+        """Refitted with the geometry free (the rigid-head gauge fixed)."""
+        return replace(self, values=None, stderr=None, hold=False)
 
     @property
     def label(self):
@@ -368,6 +395,8 @@ class Outliers(Component):
     advice = "the flagged poses repeated"
     size_meaning = "3 gross readings of +-size mm"
     plot_term = False
+    drops_readings = True
+    detectable_meaning = "one gross reading"
 
     @classmethod
     def candidates_for_sensor(cls, i, names, cov):
@@ -393,6 +422,15 @@ class Outliers(Component):
 
     def select(self, idx):
         return replace(self, flags=self.flags[idx], values=None, stderr=None)
+
+    def describe(self):
+        """The flagged readings (pose, sensor, gross value with its standard error) and their count."""
+        out = super().describe()
+        stderr = np.full(len(self.cells), np.nan) if self.stderr is None else self.stderr
+        out["flagged"] = [{"pose": int(pp), "sensor": self.names[i], "gross_mm": float(v), "stderr": float(s)}
+                          for (pp, i), v, s in zip(self.cells, self.values, stderr)]
+        out["params"] = {"count": {"value": len(self.cells), "unit": "1", "stderr": None}}
+        return out
 
     def basis(self, d0, cov):
         p, n = d0.shape

@@ -1,0 +1,293 @@
+"""Steps 3-4 of the diagnosis: the verdict on the causes the selection chose.
+
+:func:`verdict` reads top to bottom in :class:`Judge`: the causes chosen are refitted jointly
+(:meth:`Judge.joint_fit`); a sole cause not needed against the base model is turned down; each
+cause is kept where it is needed given the others and leaves its sensors' residuals consistent
+with the noise (:func:`_judged_sensors`), and where crosstalk does not predict better; each kept
+cause is described with its size, its held-out gain given the others and what the data cannot
+separate; the confidence follows (:func:`metrology.diagnosis.rules.confidence_of`). Where
+structure remains and no rigid pose error could be fitted (3 sensors), the same judgement is
+made once more with the pose error as a random effect (:meth:`Judge.with_random_pose`), reusing
+every fit the first made. The rules are in :mod:`metrology.diagnosis.rules`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from metrology.diagnosis import rules
+from metrology.diagnosis.candidates import CandidateResult
+from metrology.diagnosis.crosstalk import crosstalk_check
+from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
+from metrology.diagnosis.fit import Fit, residual_battery
+from metrology.diagnosis.results import Cause, Rival
+from metrology.diagnosis.select import drop_one_gains, family_of, joint_fit, needed, p_better, weakly_supported
+from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests
+from metrology.diagnosis.thresholds import ADVICE
+
+__all__ = ["Verdict", "Judge", "verdict"]
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Steps 3-4: the first cause, its sensors and confidence, the first named candidate (its
+    ``fit`` the joint model of every cause, refitted by ``lsq``; or None), the noise tests after
+    the extension, the confounding notes, the first cause's description, every named cause's
+    description (largest held-out gain given the others first), the lead (a candidate
+    significant in sample only, when the selection stopped) and ``dropped``: a sole cause the
+    selection chose that is not needed against the base model (its label, its step's held-out
+    p, and its held-out chi-square gain and p against the base model), so not named; ``rivals``:
+    the Rival explanations outside the catalogue said beside the causes; ``random_pose``: the
+    pose error is named as a random effect (:mod:`metrology.diagnosis.posevar`)."""
+
+    cause: str
+    sensors: list
+    confidence: str
+    best: CandidateResult | None
+    tests_extended: NoiseTests | None
+    confounding: list
+    named: dict | None
+    causes: tuple = ()
+    lead: CandidateResult | None = None
+    dropped: dict | None = None
+    rivals: tuple = ()
+    random_pose: bool = False
+
+
+
+def verdict(ds, b, steps, folds, rng) -> Verdict:
+    """Steps 3-4 (see the module): ``b`` the BaseAnalysis, ``steps`` the selection's Steps,
+    ``rng`` the generator of the pose error's bootstrap."""
+    return Judge(ds, b, steps, folds, rng).verdict()
+
+
+class Judge:
+    """The verdict's state: the data set, the base analysis, the selection's steps, and what is
+    computed once and read by both judgements (with and without a random pose error): the joint
+    fits, the drop-one gains, the crosstalk checks and the causes' descriptions, by the causes
+    they are of."""
+
+    def __init__(self, ds, b, steps, folds, rng):
+        self.ds, self.b, self.steps, self.folds, self.rng = ds, b, steps, folds, rng
+        self.chosen = [st.chosen for st in steps if st.chosen is not None]
+        self.lead = steps[-1].lead
+        self.n = ds.obs.d.shape[1]
+        self._fits, self._gains, self._xtalk, self._described = {}, {}, {}, {}
+
+    def verdict(self) -> Verdict:
+        """The judgement of the causes chosen, or, where it leaves structure and a random pose
+        error explains it, the judgement with that pose error."""
+        from metrology.diagnosis.posevar import random_pose_stage
+
+        v = self.fixed()
+        if not rules.random_pose_tried(v.cause, v.confidence):
+            return v
+        rpe = random_pose_stage(self.ds, self.b, self.steps, battery_rng(), joint=self.joint_fit)
+        if rpe is None:
+            return v
+        # a sole cause turned down as not needed stays turned down beside the random pose error
+        v2 = self.with_random_pose(*rpe, exempt_sole=v.dropped is None)
+        return v if v2 is None else v2
+
+    # -- what both judgements read, computed once ---------------------------------------------
+    def joint_fit(self, chosen) -> Fit:
+        """The causes ``chosen`` refitted jointly (:func:`~metrology.diagnosis.select.joint_fit`)."""
+        key = tuple(s.label for s in chosen)
+        if key not in self._fits:
+            self._fits[key] = joint_fit(self.ds, self.b, chosen)
+        return self._fits[key]
+
+    def gains(self, chosen) -> list:
+        """Each cause's held-out gain and p given the others (:func:`drop_one_gains`)."""
+        key = tuple(s.label for s in chosen)
+        if key not in self._gains:
+            self._gains[key] = drop_one_gains(self.ds, self.b, chosen, self.folds) if chosen else []
+        return self._gains[key]
+
+    def crosstalk(self, chosen, j) -> dict:
+        """The crosstalk check of cause ``j`` given the causes before it."""
+        key = (tuple(s.label for s in chosen[:j + 1]))
+        if key not in self._xtalk:
+            self._xtalk[key] = crosstalk_check(self.ds, self.b, tuple(s.component for s in chosen[:j]), chosen[j],
+                                               self.folds)
+        return self._xtalk[key]
+
+    def described(self, chosen, f: Fit, j, gains) -> dict:
+        """Cause ``j`` of the joint fit ``f`` of ``chosen``: its parameters, size and held-out figures."""
+        key = (tuple(s.label for s in chosen), j)
+        if key not in self._described:
+            b, s = self.b, chosen[j]
+            d = describe_named(f, self.ds.layout, self.ds.obs, b.cov, b.sigma, self.rng, which=j, theta_ref=b.theta0)
+            size = with_model_spread(size_of(f, j, b.cov, b.d0), s, self.steps[j].scored, b.cov, b.d0)
+            d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
+                      "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
+                      "p_insample": s.p_insample, "step": j + 1})
+            self._described[key] = d
+        return self._described[key]
+
+    # -- the two judgements -----------------------------------------------------------------------
+    def fixed(self) -> Verdict:
+        """The causes chosen, each a fixed effect: none chosen, a sole cause not needed, or
+        :meth:`named`."""
+        b, chosen = self.b, self.chosen
+        if not chosen:
+            cause = "none" if b.tests.consistent else "unexplained"
+            return Verdict(cause, [], rules.confidence_of_nothing(b.tests.consistent, self.lead is not None), None,
+                           None, [], None, (), self.lead)
+        f = self.joint_fit(chosen)
+        tests = residual_battery(f, self.ds.obs, b.cov, b.sigma, self.ds.layout.names)
+        gains = self.gains(chosen)
+        need = needed(chosen, gains)
+        if len(chosen) == 1 and not need[0]:
+            # a sole cause whose held-out gain against the base model is not significant: not named
+            cause = "none" if b.tests.consistent else "unexplained"
+            dropped = {"label": chosen[0].label, "p_step": chosen[0].p_heldout, "gain_chi2": gains[0][0],
+                       "p_base": gains[0][1]}
+            return Verdict(cause, [], "low", None, None, [], None, (), self.lead, dropped)
+        return self.named(chosen, f, tests, gains, sole_exempt=False)
+
+    def with_random_pose(self, r, f: Fit, exempt_sole: bool) -> Verdict | None:
+        """The fixed causes but a pose error beside the pose error as a random effect ``r`` (a
+        RandomPoseError; ``f`` the fixed causes' joint fit), the residuals judged whitened by it; a
+        sole fixed cause keeps its step's test (its drop-one gain is taken without the random
+        effect) where ``exempt_sole``. None where the pose error does not explain the data."""
+        chosen = [s for s in self.chosen if not s.component.per_pose]
+        # the residuals whitened by the fitted pose error's covariance (the fit has no rigid one);
+        # a pose error need not be Gaussian: no normality test
+        w = r.whitened
+        tests = noise_tests(w, self.b.sigma, np.isfinite(w).sum(axis=0) - 5.0, self.ds.layout.names,
+                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng(), normality=False)
+        gains = self.gains(chosen)
+        return self.named(chosen, f, tests, gains, sole_exempt=len(chosen) == 1 and exempt_sole, random_pose=r)
+
+    def named(self, chosen, f: Fit, tests_ext: NoiseTests, gains, sole_exempt, random_pose=None) -> Verdict | None:
+        """Keep each cause needed and judged consistent on its sensors, and not crosstalk; describe
+        those kept; the confounding and the confidence. None where a random pose error is not named."""
+        n, need = self.n, needed(chosen, gains)
+        judged = _judged_sensors(chosen, tests_ext, gains, n)
+        kept = [j for j in range(len(chosen)) if judged[j] and (sole_exempt or need[j])]
+        kept, rivals = self.not_crosstalk(chosen, kept)
+        causes = []
+        for j in kept:
+            label = chosen[j].label
+            causes.append(Cause.from_description(self.described(chosen, f, j, gains),
+                                                 [r for r in rivals if r.of == label and not r.better]))
+        if random_pose is not None:
+            from metrology.diagnosis.posevar import random_pose_cause
+
+            rp = random_pose_cause(random_pose, tests_ext, len(chosen) + 1, self.steps[0].scored, f)
+            if rp is None:  # not explained as a pose error: the verdict without it stands
+                return None
+            causes.append(rp[0])  # (its entry, a CandidateResult for it)
+            chosen, kept, judged = chosen + [rp[1]], kept + [len(chosen)], judged + [list(range(n))]
+        causes.sort(key=lambda c: -c.heldout_gain_chi2)
+        best = chosen[kept[0]] if kept else chosen[0]
+        tests_ext = replace(tests_ext, p_concerned=battery_on(tests_ext, sorted({i for j in kept for i in judged[j]})))
+        if not kept:
+            p_all = battery_on(tests_ext, sorted({i for s in chosen for i in _sensors_of(s.component, n)}))
+            return Verdict("unexplained", [], "low", replace(best, fit=f), replace(tests_ext, p_concerned=p_all), [],
+                           None, (), self.lead, rivals=tuple(r for r in rivals if r.better))
+        first = next(s for s in chosen if s.label == causes[0].label)
+        confounding = []
+        for st in self.steps:
+            if st.chosen is not None:
+                confounding += _confounding(st.chosen, [x for x in st.scored if x.significant])
+        for r in rivals:
+            if not r.better and any(c.label == r.of for c in causes):
+                j = next(k for k in kept if chosen[k].label == r.of)
+                confounding.append({"between": [r.of, r.label], "p_separation": None,
+                                    "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
+                                               f"to another sensor's distance, crosstalk, outside the catalogue); "
+                                               f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
+                                               f"({r.separate})"})
+        confidence = rules.confidence_of(tests_ext.consistent, bool(weakly_supported([] if sole_exempt else causes)),
+                                         bool(confounding))
+        return Verdict(first.cause, first.sensors, confidence, replace(first, fit=f), tests_ext, confounding,
+                       causes[0], tuple(causes), self.lead,
+                       rivals=tuple(r for r in rivals if any(c.label == r.of for c in causes)),
+                       random_pose=random_pose is not None)
+
+    def not_crosstalk(self, chosen, kept) -> tuple:
+        """``(kept, rivals)``: a cause the registry says crosstalk can mimic is turned down where
+        another sensor's distance predicts it significantly better (the rival said), and keeps a
+        tie listed as its rival (named, confidence ambiguous, the poses that separate them)."""
+        kept, rivals = list(kept), []
+        for j in list(kept):
+            if "crosstalk" not in chosen[j].component.confused_with:
+                continue
+            x = self.crosstalk(chosen, j)
+            separate = f"metro plan --separate {chosen[j].cause}"
+            if x["better"] is not None:
+                kept.remove(j)
+                rivals.append(Rival(x["better"], "crosstalk", chosen[j].label, True, x["p"], separate))
+            else:
+                rivals += [Rival(lab, "crosstalk", chosen[j].label, False, None, separate)
+                           for lab in x["indistinguishable"]]
+        return kept, rivals
+
+
+def _confounding(best: CandidateResult, sig_list) -> list:
+    """Runner-ups that explain as much (a different cause or sensor), and parameters of the
+    named component too correlated with the base geometry."""
+    out = []
+    for other in sig_list:
+        if other is best or family_of(other.component) == family_of(best.component):
+            continue
+        p_sep = p_better(best, other)
+        if rules.indistinguishable(p_sep):
+            out.append({
+                "between": [best.label, other.label], "p_separation": p_sep,
+                "message": f"the data cannot tell {best.label} from {other.label} (held-out gains "
+                           f"indistinguishable, p = {p_sep:.2g}); to separate them: "
+                           f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
+            })
+    f = best.fit
+    fc = f.components[-1] if f.components else best.component  # as fitted (outliers re-flagged since)
+    if not fc.per_pose:  # its parameters are the last of the fit's (the candidate is fitted last)
+        q0 = len(f.corr_base) - fc.n_params
+        for q in range(fc.n_params):
+            cb_, w = f.corr_base[q0 + q], f.corr_with[q0 + q]
+            if rules.poorly_separated(cb_):
+                out.append({
+                    "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
+                    "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
+                               f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
+                })
+    return out
+
+
+def _sensors_of(comp, n):
+    return list(comp.sensors) if comp.sensors else list(range(n))
+
+
+def _judged_sensors(chosen, tests_ext, gains, n) -> list:
+    """Per chosen cause, the sensors on which it is judged and found consistent with noise
+    (empty: not named).
+
+    A cause is named when the joint model leaves its sensors' residuals consistent with the
+    noise. A cause that acts on every sensor (``pose_error``, ``plane_form``) is also named
+    when it is needed (its held-out gain given the others significant at ``alpha_heldout``)
+    and the residuals are consistent on every sensor but those whose remaining structure
+    belongs elsewhere: the sensors of another cause chosen (a drift its member follows only in
+    part), or, where no other cause is chosen on any failing sensor, one single sensor
+    (structure outside the catalogue there). The structure left is said beside the causes.
+    """
+    fails = {i for i in range(n) if not rules.explains_sensors(battery_on(tests_ext, [i]))}
+    out = []
+    for j, s in enumerate(chosen):
+        S = _sensors_of(s.component, n)
+        if rules.explains_sensors(battery_on(tests_ext, S)):
+            out.append(S)
+            continue
+        if s.component.sensors or not rules.needed_given_others(gains[j][1], 1):
+            out.append([])
+            continue
+        elsewhere = fails & {i for k, o in enumerate(chosen) if k != j for i in o.component.sensors}
+        if not elsewhere and len(fails) == 1:
+            elsewhere = fails
+        rest = [i for i in S if i not in elsewhere]
+        ok = len(rest) >= 2 and rules.explains_sensors(battery_on(tests_ext, rest))
+        out.append(rest if ok else [])
+    return out

@@ -1,0 +1,218 @@
+"""The decision rules of the diagnosis, in the order the engine applies them.
+
+Each rule is a named function with its threshold beside it and the reason in one line. The
+engine (:mod:`~metrology.diagnosis.select` for the selection, :mod:`~metrology.diagnosis.decide`
+for the verdict) calls them by name; :data:`THRESHOLDS`, the levels the ``--json`` output
+reports, is made of the same constants. The levels were set a priori and checked on null data
+(``benchmarks/study_blind.py``; results in ``benchmarks/results/``). What each effect is (its
+family, its size, what it can be mistaken for) is in the registry, :mod:`metrology.core.effects`;
+numerical tolerances of the solvers are not decision rules and stay with them.
+
+Order: gross readings (1), a candidate's significance (2), a step's choice (3-6), the selection's
+stop and scope (7-9), the verdict: each cause needed (10), judged on its sensors (11), not
+crosstalk (12), the random pose error (13), confidence (14-16), the datum cloud (17).
+"""
+
+from __future__ import annotations
+
+__all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "ALPHA_ORDER", "ALPHA_BATTERY",
+           "ALPHA_CONFOUND", "CORR_CONFOUND", "ALPHA_HIGH", "ALPHA_FORM", "LR_ONE_SENSOR", "MAX_CAUSES", "PRUNE_P",
+           "MIN_POSES_COMPARED", "gross_level", "fits_in_sample", "significant", "in_sample_only", "better_held_out",
+           "per_pose_imitates", "explains_sensors", "shows_something", "room_for_another", "fixed_explains_as_well",
+           "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
+           "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
+           "datum_agrees"]
+
+# -- 1. gross readings ---------------------------------------------------------------------------
+#: a reading is gross when its standardised residual is beyond this family-wise level over the readings
+ALPHA_OUTLIER = 0.01
+
+
+def gross_level(m: int) -> float:
+    """The two-sided tail of one reading among ``m``: gross beyond ``norm.isf(gross_level(m))``."""
+    return ALPHA_OUTLIER / (2 * m)
+
+
+# -- 2. a candidate is significant ----------------------------------------------------------------
+#: family-wise level of the in-sample F-tests, Bonferroni-split over every candidate scored
+ALPHA_CANDIDATES = 0.01
+#: the one-sided held-out gain test that confirms the F-test (a fit in sample must predict new poses)
+ALPHA_HELDOUT = 0.05
+
+
+def fits_in_sample(p_insample: float, n_cand: int) -> bool:
+    """The in-sample F-test passes at ``ALPHA_CANDIDATES`` split over the ``n_cand`` candidates."""
+    return p_insample < ALPHA_CANDIDATES / n_cand
+
+
+def significant(p_insample: float, p_heldout: float, n_cand: int, rms_reference: float, rms_extended: float) -> bool:
+    """Both tests pass and the candidate's held-out RMS on its sensors is below the reference's."""
+    return fits_in_sample(p_insample, n_cand) and p_heldout < ALPHA_HELDOUT and rms_reference > rms_extended
+
+
+def in_sample_only(s, n_cand: int) -> bool:
+    """A lead: fits in sample but does not predict held-out poses (too small or too confounded to name)."""
+    return not s.significant and fits_in_sample(s.p_insample, n_cand)
+
+
+# -- 3-6. a step's choice ---------------------------------------------------------------------------
+#: a richer member (or a per-pose cause over a fixed one) must predict held-out poses better at this level
+ALPHA_ORDER = 0.05
+
+
+def better_held_out(p_better: float, n_tested: int = 1) -> bool:
+    """3. A member replaces the one held only when it predicts held-out poses significantly better
+    (the level split over the ``n_tested`` tried at once: a rung of the spline ladder)."""
+    return p_better < ALPHA_ORDER / n_tested
+
+
+def per_pose_imitates(p_per_pose_better: float) -> bool:
+    """4. A per-pose cause is an imitation where the best fixed cause predicts held-out poses as well
+    (an offset and two tilts a pose follow any effect smooth over a pose's spots)."""
+    return not better_held_out(p_per_pose_better)
+
+
+#: 5. the noise-model battery's family-wise level: residuals consistent with the stated noise
+ALPHA_BATTERY = 0.01
+
+
+def explains_sensors(p_battery: float) -> bool:
+    """5. A member (or the joint model) explains its sensors: their residuals pass the battery."""
+    return p_battery >= ALPHA_BATTERY
+
+
+#: 6. after a step chose a cause on its own sensors, a family elsewhere is rescored only if a member showed this
+PRUNE_P = 0.2
+
+
+def shows_something(p_insample: float) -> bool:
+    """6. A family showed something at a step (its members are rescored at the next)."""
+    return p_insample < PRUNE_P
+
+
+# -- 7-9. the selection's stop and scope --------------------------------------------------------------
+#: 7. at most this many causes are named in one data set
+MAX_CAUSES = 3
+
+
+def room_for_another(n_chosen: int) -> bool:
+    """7. The selection goes on while fewer than ``MAX_CAUSES`` causes are chosen."""
+    return n_chosen < MAX_CAUSES
+
+
+#: 8. the fewest poses (without a gross reading) on which two selections' held-out errors are compared
+MIN_POSES_COMPARED = 3
+
+
+def fixed_explains_as_well(p_per_pose_better: float, n_poses: int) -> bool:
+    """8. A selection without per-pose causes is taken where the per-pose one does not predict held-out
+    poses significantly better (the rule of 4 over the whole selection)."""
+    return n_poses >= MIN_POSES_COMPARED and not better_held_out(p_per_pose_better)
+
+
+# -- 10-13. the verdict ------------------------------------------------------------------------------
+def needed_given_others(p_heldout_given_others: float, n_causes: int, drops_readings: bool = False) -> bool:
+    """10. A cause is needed when its held-out gain given the others passes ``ALPHA_HELDOUT`` split over
+    the causes (a later cause can make an earlier one redundant); gross readings predict nothing held
+    out and are exempt."""
+    return drops_readings or p_heldout_given_others < ALPHA_HELDOUT / max(n_causes, 1)
+
+
+def crosstalk_better(p: float, n_others: int) -> bool:
+    """12. Another sensor's distance predicts the characteristic significantly better: crosstalk,
+    not the sensor's own (``ALPHA_HELDOUT`` split over the other sensors)."""
+    return p < ALPHA_HELDOUT / n_others
+
+
+#: 12, 15. a rival whose held-out gain cannot be told from the cause's at this level ties with it
+ALPHA_CONFOUND = 0.05
+
+
+def crosstalk_as_good(p_worse: float) -> bool:
+    """12. Crosstalk predicts as well (not significantly worse): the cause is named, ambiguous, the rival
+    listed (gain errors are common, crosstalk rare)."""
+    return p_worse >= ALPHA_CONFOUND
+
+
+#: 13. a random pose error's covariance must gain this much (twice the log-likelihood) over excess
+#: variance on one sensor alone: a margin between non-nested models, not a test at a known level
+LR_ONE_SENSOR = 3.84
+
+
+def random_pose_tried(cause: str, confidence: str) -> bool:
+    """13. A random pose error is looked for only where the verdict is ``unexplained`` or ``partial``
+    (structure left that no fixed cause took; with 3 sensors no rigid pose error can be fitted)."""
+    return cause != "none" and confidence not in ("high", "moderate", "ambiguous")
+
+
+def random_pose_significant(p: float, n_cand: int) -> bool:
+    """13. The random pose error's test passes at ``ALPHA_CANDIDATES`` split over the candidates and itself."""
+    return p < ALPHA_CANDIDATES / (n_cand + 1)
+
+
+def random_pose_explains(tests_consistent: bool, p_explained: float, lr_one_sensor: float) -> bool:
+    """13. The whitened residuals are noise on every sensor, and no single sensor's excess explains as much."""
+    return tests_consistent and explains_sensors(p_explained) and lr_one_sensor >= LR_ONE_SENSOR
+
+
+# -- 14-16. confidence --------------------------------------------------------------------------------
+#: 14. confidence high only where every cause's held-out p given the others is below this
+ALPHA_HIGH = 0.01
+
+
+def weak_evidence(p_heldout_given_others: float) -> bool:
+    """14. Named, but on a held-out p a null data set gives often enough for ``high`` to overclaim."""
+    return not p_heldout_given_others < ALPHA_HIGH
+
+
+def indistinguishable(p_separation: float) -> bool:
+    """15. A runner-up of another family whose held-out gain cannot be told from the cause's."""
+    return p_separation >= ALPHA_CONFOUND
+
+
+#: 15. |correlation| of a component parameter with a base parameter beyond which it is poorly separated
+CORR_CONFOUND = 0.95
+
+
+def poorly_separated(correlation: float) -> bool:
+    """15. A parameter of the cause too correlated with the base geometry to be told from it."""
+    return correlation > CORR_CONFOUND
+
+
+def confidence_of_nothing(consistent: bool, has_lead: bool) -> str:
+    """16. Nothing named: ``moderate`` where the residuals are noise and nothing fits even in sample
+    (no effect above the detectable sizes; smaller ones are not ruled out), else ``low``."""
+    return "moderate" if consistent and not has_lead else "low"
+
+
+def confidence_of(consistent: bool, weak: bool, confounded: bool) -> str:
+    """16. ``partial`` where structure remains, else ``moderate`` on weak evidence, else ``high``; either
+    becomes ``ambiguous`` where something the data cannot separate is said."""
+    if not consistent:
+        return "partial"
+    return "ambiguous" if confounded else ("moderate" if weak else "high")
+
+
+# -- 17. the datum cloud ---------------------------------------------------------------------------------
+#: the datum cloud's form disagrees with the readings' below this level
+ALPHA_FORM = 0.01
+
+
+def datum_agrees(p: float) -> bool:
+    """17. The readings see the form the tracker scanned."""
+    return p >= ALPHA_FORM
+
+
+#: the levels (the ``thresholds`` of the ``--json`` output; the keys and their order are its schema)
+THRESHOLDS = {
+    "alpha_candidates": ALPHA_CANDIDATES,
+    "alpha_heldout": ALPHA_HELDOUT,
+    "alpha_battery": ALPHA_BATTERY,
+    "alpha_outlier": ALPHA_OUTLIER,
+    "alpha_confound": ALPHA_CONFOUND,
+    "corr_confound": CORR_CONFOUND,
+    "alpha_order": ALPHA_ORDER,
+    "alpha_form": ALPHA_FORM,
+    "alpha_high": ALPHA_HIGH,
+    "lr_one_sensor": LR_ONE_SENSOR,
+}
