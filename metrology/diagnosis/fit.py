@@ -13,8 +13,9 @@ import numpy as np
 
 from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_basis, direction_from_tangent, jacobian_tangent, readings
+from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings
 from metrology.core.observations import Observations
+from metrology.diagnosis.memo import memoised
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
 
 __all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals", "residual_battery"]
@@ -130,8 +131,17 @@ def _absorbed_modes(Jp) -> np.ndarray:
     return vt[sv < ABSORBED_RTOL * sv[0]]
 
 
+def _fit_key(nominal, obs, cov, sigma, components=(), sensors=None, theta0=None, loss="linear", solver="lsq",
+             covariance=True):
+    """What :func:`fit`'s result depends on (its key in :func:`~metrology.diagnosis.memo.memoised`)."""
+    return (nominal.names, nominal.zero, nominal.direction, obs, cov, np.asarray(sigma, float), tuple(components),
+            None if sensors is None else tuple(int(i) for i in sensors),
+            None if theta0 is None else np.asarray(theta0, float), loss, solver, bool(covariance))
+
+
+@memoised(_fit_key)
 def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
-        theta0=None, loss="linear", solver="lsq") -> Fit:
+        theta0=None, loss="linear", solver="lsq", covariance=True) -> Fit:
     """Least squares of the base model plus ``components`` (analytic Jacobian).
 
     Parameters
@@ -149,11 +159,17 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     solver : ``"lsq"`` (``scipy.optimize.least_squares``, trf) or ``"gn"`` (Gauss-Newton on
         the same residual and Jacobian with step halving: the same minimum, several times
         faster; used inside the k-fold loops)
+    covariance : bool, compute the standard errors, correlations and ``extra_cov`` (False: a
+        fit whose residuals and values alone are wanted, as the k-fold's; those are then zero,
+        empty or None)
 
     A per-pose component (:class:`~metrology.effects.PoseError`) is profiled out exactly:
     its basis does not depend on the parameters, so for any base parameters the optimal
     per-pose values are a fixed linear map of the residual (variable projection); its values
     are then recovered with standard errors ``s / ||b_p||`` (reading noise only).
+
+    Results are kept by the content of the inputs (:mod:`metrology.diagnosis.memo`): the same
+    fit asked for again is not computed again, and its arrays are read-only.
     """
     from scipy.optimize import least_squares
 
@@ -187,6 +203,11 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     d_full0 = readings(zero_all, u_all, N, D)[0]
     basis0 = direction_basis(nominal.direction[S])
     u0S = nominal.direction[S]
+    u0n = u0S / np.linalg.norm(u0S, axis=1, keepdims=True)  # the Jacobian's chart (as jacobian_tangent)
+    basis_n = direction_basis(u0n)
+    # a term that does not depend on d0 has the same basis at every step: computed once
+    fixed = [None if c.uses_d0 else c.basis(d_full0, cov) for c in free]
+    last = [None, None]  # the last predict's x (bytes) and result: fun and jac ask at the same x
     Bw = None
     if prof:
         Bw = np.where(ok[..., None], prof[0].pose_columns(cov)[:, S, :] / sig[None, :, None], 0.0)  # (p, s, m)
@@ -210,18 +231,23 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         return th, vals
 
     def predict(x):
+        key = x.tobytes()
+        if last[0] == key:
+            return last[1]
         th, vals = unpack(x)
         w = u0S + np.einsum("nk,nkj->nj", th[S, 3:], basis0)
         d0s, _ = readings(nominal.zero[S] + th[S, :3], w, N, D)
         d0 = d_full0.copy()
         d0[:, S] = d0s
         f = np.zeros_like(d0)
-        for c, v in zip(free, vals):
-            f += c.evaluate(v, d0, cov)
-        return th, vals, d0, f
+        bases = [c.basis(d0, cov) if B is None else B for c, B in zip(free, fixed)]
+        for B, v in zip(bases, vals):
+            f += B @ np.asarray(v, float)  # Component.evaluate: every catalogued term is linear in its values
+        last[0], last[1] = key, (th, vals, d0, f, bases)
+        return last[1]
 
     def residual_matrix(x):
-        th, vals, d0, f = predict(x)
+        th, vals, d0, f, _ = predict(x)
         R = np.where(ok, (dS - d0[:, S] - f[:, S]) / sig, 0.0)
         e = None
         if Bw is not None:
@@ -236,8 +262,10 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         return np.concatenate([R[ok]] + extra)
 
     def jac(x):
-        th, vals, d0, f = predict(x)
-        J0 = jacobian_tangent(nominal.zero[S] + th[S, :3], u0S, th[S, 3:], N, D)  # (p, s, 5)
+        th, vals, d0, f, bases = predict(x)
+        # jacobian_tangent with its chart computed once
+        J6 = jacobian_raw(nominal.zero[S] + th[S, :3], u0n + np.einsum("nk,nkj->nj", th[S, 3:], basis_n), N, D)
+        J0 = np.concatenate([J6[..., :3], np.einsum("pnj,nkj->pnk", J6[..., 3:], basis_n)], axis=-1)  # (p, s, 5)
         g = np.ones_like(d0)
         for c, v in zip(free, vals):
             if c.uses_d0:
@@ -247,7 +275,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         Jb = np.zeros((p, s, nb))
         for a in range(s if nb else 0):
             Jb[:, a, 5 * a:5 * a + 5] = J0[:, a]
-        blocks = [Jb] + [c.jacobian(v, d0, cov)[:, S] for c, v in zip(free, vals)]
+        blocks = [Jb] + [B[:, S] for B in bases]  # Component.jacobian: the basis
         Jr = -np.concatenate(blocks, axis=-1) / sig[None, :, None]
         Jr = np.where(ok[..., None], Jr, 0.0)
         if Bw is not None:
@@ -286,7 +314,6 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     else:
         raise ValueError(f"solver must be 'lsq' or 'gn', got {solver!r}")
     R, e, th, vals, d0 = residual_matrix(x)
-    J = jac(x)
     f = predict(x)[3]
     res = np.full(obs.d.shape, np.nan)
     res[:, S] = np.where(ok, R * sig, np.nan)
@@ -294,10 +321,15 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
     res[:, others] = obs.d[:, others] - d_full0[:, others] - f[:, others]
     rS = R[ok]
     m = rS.size
-    k = J.shape[1] - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (e.size - (0 if hold else n_gauge) if e is not None else 0)
+    k = nb + sum(k_comp) - sum(len(c.constraint(v)[0]) for c, v in zip(free, vals)) + (e.size - (0 if hold else n_gauge) if e is not None else 0)
     dof = m - k
     chi2 = float(np.sum(rS**2))
+    if not covariance:
+        it_free = iter(vals)
+        out = [c.with_values(e.ravel()) if c.per_pose else c.with_values(next(it_free)) for c in comps]
+        return Fit(th, np.zeros((n, 5)), tuple(out), res, chi2, int(dof), tuple(int(i) for i in S))
     s2 = chi2 / max(dof, 1)
+    J = jac(x)
     # covariance s^2 (J^T J)^-1, column-scaled normal equations (small: base + few extras)
     scale = np.linalg.norm(J, axis=0)
     scale = np.where(scale > 0, scale, 1.0)  # an absorbed (zeroed) column: no information, no scale
@@ -369,14 +401,15 @@ def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
     return x
 
 
-def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
-    """:func:`fit`, with the sensors fitted separately when no component couples them (faster, identical)."""
+def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn", covariance=True) -> Fit:
+    """:func:`fit`, with the sensors fitted separately when no component couples them (faster,
+    identical); ``covariance`` as :func:`fit`'s."""
     if comps:
-        f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver)
+        f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver, covariance=covariance)
         if len(f.sensors) == nominal.n:
             return f
         # the other sensors keep the base fit of this subset
-        base = fit_any(nominal, obs, cov, sigma, (), theta0, solver)
+        base = fit_any(nominal, obs, cov, sigma, (), theta0, solver, covariance)
         th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
         S = list(f.sensors)
         th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
@@ -387,7 +420,7 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn") -> Fit:
     res = np.full(obs.d.shape, np.nan)
     chi2, dof = 0.0, 0
     for i in range(nominal.n):
-        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, solver=solver)
+        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, solver=solver, covariance=covariance)
         th[i], se[i], res[:, i] = f.theta[i], f.theta_stderr[i], f.residual[:, i]
         chi2 += f.chi2
         dof += f.dof
