@@ -18,10 +18,18 @@ from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["content_key", "memoised", "freeze", "MAX_KEPT"]
+__all__ = ["content_key", "memoised", "freeze", "clear_all", "MAX_KEPT"]
 
 #: results kept per memoised function (least recently used dropped first)
 MAX_KEPT = 4096
+
+_STORES: list = []  # every memoised function's store (clear_all)
+
+
+def clear_all() -> None:
+    """Forget every kept result (a benchmark timing one diagnosis as a fresh process runs it)."""
+    for store in _STORES:
+        store.clear()
 
 
 def content_key(*values) -> bytes:
@@ -92,6 +100,7 @@ def memoised(key_of):
 
     def wrap(fn):
         store: OrderedDict = OrderedDict()
+        _STORES.append(store)
 
         @functools.wraps(fn)
         def inner(*args, **kwargs):
