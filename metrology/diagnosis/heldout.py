@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit_any, geometry
-from metrology.diagnosis.memo import memoised
+from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
 
@@ -156,10 +156,28 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
     gross = [c.flags for c in components if isinstance(c, Outliers)]
-    for test in folds(p, k):
-        train = np.setdiff1d(np.arange(p), test)
+    for test, train, obs_t, cov_t in _training_sets(obs, cov, k):
         comps = [c.select(train) for c in components]
-        f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0, covariance=False)
+        f = fit_any(nominal, obs_t, cov_t, sigma, comps, theta0, covariance=False)
         res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
+
+
+_TRAINING = new_store()  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)
+
+
+def _training_sets(obs, cov, k):
+    """``[(test, train, obs of train, cov of train)]`` per fold: made once per data set, so the
+    fits of every candidate on a fold see the same objects (their content keyed once)."""
+    key = content_key(obs, cov, int(k))
+    if key not in _TRAINING:
+        if len(_TRAINING) >= 8:
+            _TRAINING.popitem(last=False)
+        p = obs.n_poses
+        sets = []
+        for test in folds(p, k):
+            train = np.setdiff1d(np.arange(p), test)
+            sets.append((test, train, obs.select(train), cov.select(train)))
+        _TRAINING[key] = freeze(sets)
+    return _TRAINING[key]
 

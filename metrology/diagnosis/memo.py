@@ -18,12 +18,19 @@ from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["content_key", "memoised", "freeze", "clear_all", "MAX_KEPT"]
+__all__ = ["content_key", "memoised", "freeze", "clear_all", "new_store", "MAX_KEPT"]
 
 #: results kept per memoised function (least recently used dropped first)
 MAX_KEPT = 4096
 
 _STORES: list = []  # every memoised function's store (clear_all)
+
+
+def new_store() -> OrderedDict:
+    """An empty store of kept results that :func:`clear_all` clears too."""
+    store: OrderedDict = OrderedDict()
+    _STORES.append(store)
+    return store
 
 
 def clear_all() -> None:
@@ -99,8 +106,7 @@ def memoised(key_of):
     result depends on, passed to :func:`content_key`), at most :data:`MAX_KEPT` of them."""
 
     def wrap(fn):
-        store: OrderedDict = OrderedDict()
-        _STORES.append(store)
+        store = new_store()
 
         @functools.wraps(fn)
         def inner(*args, **kwargs):
