@@ -19,7 +19,9 @@ with standard errors); the input layout is never changed.
     Gauss-Newton on the MAP cost in filter form; converges to batch least squares with
     the prior.
 ``lsq``
-    Batch nonlinear least squares (``scipy.optimize.least_squares``) on the readings.
+    Batch nonlinear least squares (``scipy.optimize.least_squares``) on the readings: the
+    base model of :class:`~metrology.calibration.engine.LeastSquares`, the engine the
+    diagnosis' extended fits use too.
 ``method1``
     The paper's baseline (method 1): least squares on the plane-fitting residual, the
     distance from the point Eq. 17 predicts to the datum, with unit directions.
@@ -382,6 +384,10 @@ def _raw_history(nominal, i, hist5):
 # batch least squares
 
 
+#: the chart parameters' typical scales for the solver (mm, mm, mm, rad, rad)
+LSQ_X_SCALE = np.array([1.0, 1.0, 1.0, 0.05, 0.05])
+
+
 def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear", f_scale=1.0):
     from scipy.optimize import least_squares
 
@@ -391,7 +397,7 @@ def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear", f_scale=1.0):
     N, D, z = obs.normal[rows], obs.offset[rows], obs.d[rows, i]
     fun, jac = residual(nominal, i, N, D, z)
     sol = least_squares(fun, np.zeros(5) if x0 is None else x0, jac=jac, method="trf", loss=loss, f_scale=f_scale,
-                        x_scale=np.array([1.0, 1.0, 1.0, 0.05, 0.05]), xtol=1e-14, ftol=1e-14, gtol=1e-14,
+                        x_scale=LSQ_X_SCALE, xtol=1e-14, ftol=1e-14, gtol=1e-14,
                         max_nfev=200)
     if not np.all(np.isfinite(sol.x)):
         raise ValueError(f"sensor {nominal.names[i]}: least squares did not converge")
@@ -401,21 +407,6 @@ def _lsq_sensor(nominal, i, obs, residual, x0=None, loss="linear", f_scale=1.0):
     JTJ = J.T @ J
     cov = np.linalg.pinv(JTJ) * s2
     return sol.x, cov, np.sqrt(s2)
-
-
-def _reading_residual(nominal, i, N, D, z):
-    u0 = nominal.direction[i][None]
-
-    def fun(x):
-        E = nominal.zero[i][None] + x[:3]
-        d, _ = readings(E, direction_from_tangent(u0, x[None, 3:]), N, D)
-        return np.nan_to_num(z - d[:, 0], nan=1e6)
-
-    def jac(x):
-        E = nominal.zero[i][None] + x[:3]
-        return -jacobian_tangent(E, u0, x[None, 3:], N, D)[:, 0, :]
-
-    return fun, jac
 
 
 def _plane_residual(nominal, i, N, D, z):
@@ -451,8 +442,25 @@ def lsq(nominal: SensorLayout, obs: Observations, loss="linear", f_scale=1.0) ->
     theta, cov, sig = np.zeros((n, 5)), np.zeros((n, 5, 5)), np.zeros(n)
     scale = np.broadcast_to(np.asarray(f_scale, float), (n,))
     for i in range(n):
-        theta[i], cov[i], sig[i] = _lsq_sensor(nominal, i, obs, _reading_residual, loss=loss, f_scale=float(scale[i]))
+        theta[i], cov[i], sig[i] = _lsq_base(nominal, i, obs, loss=loss, f_scale=float(scale[i]))
     return _finish("lsq", nominal, obs, theta, cov, sig)
+
+
+def _lsq_base(nominal, i, obs, loss="linear", f_scale=1.0):
+    """Sensor ``i``'s base model by :class:`~metrology.calibration.engine.LeastSquares` (unit
+    weights: residuals in mm): ``(theta (5,), cov (5, 5), s mm)``."""
+    from metrology.calibration.engine import LeastSquares
+
+    m = len(_pose_order(obs, i))
+    if m < 5:
+        raise ValueError(f"sensor {nominal.names[i]}: {m} readings, need at least 5 for 5 parameters")
+    p = LeastSquares(nominal, obs, np.ones(nominal.n), sensors=[i])
+    x = p.solve("lsq", loss, f_scale=f_scale, x_scale=LSQ_X_SCALE, xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"sensor {nominal.names[i]}: least squares did not converge")
+    s2 = float(np.sum(p.result.fun**2) / max(m - 5, 1))
+    # scipy's Jacobian at the solution: under a robust loss, weighted as its Gauss-Newton step was
+    return x, p.covariance(x, s2, J=p.result.jac), np.sqrt(s2)
 
 
 def method1(nominal: SensorLayout, obs: Observations) -> Calibration:

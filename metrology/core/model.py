@@ -23,6 +23,8 @@ returned as a ``valid`` mask and NaN readings, never as a silent number.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from metrology.core.tolerances import BEAM_PARALLEL_COS
@@ -132,7 +134,15 @@ def direction_basis(u0):
         component of the TCS axis least aligned with ``u0``, made orthogonal to it: a
         deterministic choice, so a chart is reproducible from the layout alone.
     """
-    u0 = np.asarray(u0, dtype=float)
+    u0 = np.ascontiguousarray(u0, dtype=float)
+    return _direction_basis(u0.tobytes(), u0.shape).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _direction_basis(u0_bytes, shape):
+    """:func:`direction_basis` of the directions whose float64 bytes are ``u0_bytes`` (kept: the
+    diagnosis asks for the same few layouts' bases thousands of times)."""
+    u0 = np.frombuffer(u0_bytes, dtype=float).reshape(shape)
     u0 = u0 / np.linalg.norm(u0, axis=1, keepdims=True)
     axis = np.eye(3)[np.argmin(np.abs(u0), axis=1)]
     e1 = axis - np.sum(axis * u0, axis=1, keepdims=True) * u0

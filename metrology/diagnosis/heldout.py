@@ -9,6 +9,7 @@ import numpy as np
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.diagnosis.fit import Fit, fit_any, geometry
+from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
 
@@ -71,13 +72,13 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
         # their noise: the values are shrunk towards zero by their spread over the training
         # poses (the best linear unbiased predictor of a random per-pose error)
         prior = None if m == 1 else _per_pose_precision(fitted, nominal, cov, sigma, test)
-        pred = np.zeros_like(res)
-        for i in range(res.shape[1]):
-            wi = w.copy()
-            wi[:, i, :] = 0.0  # without reading i
-            e_i = _solve_per_pose(wi, r, prior)  # (h, m)
-            pred[:, i] = np.einsum("hm,hm->h", B[:, i, :], e_i)
-        e_all = _solve_per_pose(w, r, prior)  # for the normal: every reading
+        n = res.shape[1]
+        # every sensor left out at once, and last every reading (for the normal): (n + 1, h, n, m)
+        wi = np.repeat(w[None], n + 1, axis=0)
+        wi[np.arange(n), :, np.arange(n), :] = 0.0  # stack i without reading i
+        e = _solve_per_pose(wi, np.broadcast_to(r, wi.shape[:3]), prior)  # (n + 1, h, m)
+        pred = np.einsum("hnm,nhm->hn", B, e[:n])
+        e_all = e[n]
         res = res - pred
         terms = terms + np.einsum("hnm,hm->hn", B, e_all)
     dc = o.d - terms
@@ -87,12 +88,13 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
 
 
 def _solve_per_pose(w, r, prior=None):
-    """Per pose, the values ``e (h, m)`` minimising ``|r - w e|^2 + e^T P e`` (``P`` the prior
-    precision (m, m), or none: the minimum-norm least squares)."""
+    """Per pose, the values ``e (..., h, m)`` minimising ``|r - w e|^2 + e^T P e`` (``w (..., h,
+    n, m)``, ``r (..., h, n)``; ``P`` the prior precision (m, m), or none: the minimum-norm least
+    squares)."""
     if prior is None:
         return (np.linalg.pinv(w, rcond=1e-10) @ r[..., None])[..., 0]
-    A = np.einsum("hnm,hnq->hmq", w, w) + prior[None]
-    b = np.einsum("hnm,hn->hm", w, r)
+    A = np.einsum("...nm,...nq->...mq", w, w) + prior
+    b = np.einsum("...nm,...n->...m", w, r)
     # minimum norm where a pose's other readings and a weak prior leave a value undetermined
     # (a blank reading beside the left-out one; per-pose values of no spread-limited size)
     return (np.linalg.pinv(A, rcond=1e-12, hermitian=True) @ b[..., None])[..., 0]
@@ -141,16 +143,41 @@ class HeldOut:
         return float(np.sqrt(np.nanmean(r**2)))
 
 
+def _kfold_key(nominal, obs, cov, sigma, components, k, theta0):
+    return (nominal.names, nominal.zero, nominal.direction, obs, cov, np.asarray(sigma, float), tuple(components),
+            int(k), None if theta0 is None else np.asarray(theta0, float))
+
+
+@memoised(_kfold_key)
 def kfold(nominal, obs, cov, sigma, components, k, theta0):
-    """k-fold-by-pose held-out figures of the base model plus ``components``."""
+    """k-fold-by-pose held-out figures of the base model plus ``components`` (kept by the
+    content of the inputs: the same figures asked for again are not computed again)."""
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
     gross = [c.flags for c in components if isinstance(c, Outliers)]
-    for test in folds(p, k):
-        train = np.setdiff1d(np.arange(p), test)
+    for test, train, obs_t, cov_t in _training_sets(obs, cov, k):
         comps = [c.select(train) for c in components]
-        f = fit_any(nominal, obs.select(train), cov.select(train), sigma, comps, theta0)
+        f = fit_any(nominal, obs_t, cov_t, sigma, comps, theta0, covariance=False)
         res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
+
+
+_TRAINING = new_store()  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)
+
+
+def _training_sets(obs, cov, k):
+    """``[(test, train, obs of train, cov of train)]`` per fold: made once per data set, so the
+    fits of every candidate on a fold see the same objects (their content keyed once)."""
+    key = content_key(obs, cov, int(k))
+    if key not in _TRAINING:
+        if len(_TRAINING) >= 8:
+            _TRAINING.popitem(last=False)
+        p = obs.n_poses
+        sets = []
+        for test in folds(p, k):
+            train = np.setdiff1d(np.arange(p), test)
+            sets.append((test, train, obs.select(train), cov.select(train)))
+        _TRAINING[key] = freeze(sets)
+    return _TRAINING[key]
 
