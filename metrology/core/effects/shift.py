@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,13 +48,27 @@ class Shift(Component):
     :data:`MIN_SIDE_FRACTION` of the run each side), and :attr:`searched` (the number of splits
     tried) Bonferroni-splits the in-sample test. Unlocated (``at_h`` NaN) the step is placed at the
     middle of the run's time.
+
+    A located step restricted to some of its poses (:meth:`select`: a fold's training poses) is
+    located again among them, in the residuals it was located in (:attr:`located_in`): the
+    held-out poses then judge a place chosen without them. Located on every pose, a chance
+    excursion of the held-out readings has chosen the place and the held-out gain confirms it.
+    The data place the knock only between the two poses that bracket it (:attr:`gap_h`): a
+    reading inside that interval (a held-out pose between two training poses) is predicted by
+    the step times the chance it came after the knock, the knock's time uniform in the interval
+    (no pose it was located among lies inside, so their fit is the plain step's).
     """
 
     at_h: float = math.nan
-    #: the first pose after the step and the last before it (indices of the data set's poses)
+    #: the first pose after the step and the last before it (indices of the poses it was located among)
     at_pose: int = -1
     before_pose: int = -1
     searched: int = 1
+    #: the times (h) of the last pose before the step and the first after it, among those it was
+    #: located among (NaN unlocated: a plain step at ``at_h``)
+    gap_h: tuple = (math.nan, math.nan)
+    #: ``(time_h (p,), residual (p,) mm)`` of its sensor where :meth:`locate` placed it (None unlocated)
+    located_in: tuple | None = field(default=None, compare=False, repr=False)
 
     name = "shift"
     param_names = ("step_mm",)
@@ -86,7 +100,11 @@ class Shift(Component):
         return 0.5 * float(np.min(t) + np.max(t))
 
     def basis(self, d0, cov):
-        step = (cov.time_h >= self._at(cov)).astype(float)
+        lo, hi = self.gap_h
+        if np.isfinite(lo) and np.isfinite(hi):
+            step = np.clip((cov.time_h - lo) / (hi - lo), 0.0, 1.0)  # 0 or 1 outside the gap
+        else:
+            step = (cov.time_h >= self._at(cov)).astype(float)
         cols = np.broadcast_to(step[:, None, None], d0.shape + (1,))
         return _sensor_basis(np.array(cols), d0.shape[1], self.sensors)
 
@@ -94,9 +112,17 @@ class Shift(Component):
         """The step at the split of sensor ``i``'s residuals ``residual[:, i]`` (in time order)
         that explains most of their sum of squares: ``S_k^2 m / (k (m - k))``, ``S_k`` the sum of
         the centred residuals after the first ``k`` of ``m`` poses."""
-        i = self.sensors[0]
-        r = np.asarray(residual[:, i], float)
-        t = np.asarray(cov.time_h, float)
+        return self._split(np.asarray(cov.time_h, float), np.asarray(residual[:, self.sensors[0]], float))
+
+    def select(self, idx):
+        """Restricted to the poses ``idx`` (a fold's training poses), a located step is located
+        again in its residuals at those poses only (see the class notes)."""
+        if self.located_in is None:
+            return self
+        t, r = self.located_in
+        return self._split(t[idx], r[idx])
+
+    def _split(self, t, r):
         order, ks = step_positions(t, np.isfinite(r), self.min_side(int(np.isfinite(r).sum())))
         if len(ks) == 0:
             return self
@@ -107,7 +133,9 @@ class Shift(Component):
         k = int(ks[int(np.argmax(gain))])
         ts = t[order]
         return replace(self, at_h=0.5 * float(ts[k - 1] + ts[k]), at_pose=int(order[k]),
-                       before_pose=int(order[k - 1]), searched=int(len(ks)), values=None, stderr=None)
+                       before_pose=int(order[k - 1]), searched=int(len(ks)), values=None, stderr=None,
+                       gap_h=(float(ts[k - 1]), float(ts[k])),
+                       located_in=(t, r))
 
     def size_rows(self, d0, cov):
         return np.ones((1, 1)), "the step in the sensor's zero point (its absolute value)"
