@@ -15,7 +15,6 @@ from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
-from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
            "score_candidate"]
@@ -305,11 +304,10 @@ def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, thet
     p_ho = paired_gain_p(diff_S)
     rb, re_ = ho_base.rms(S, excl), ho.rms(S, excl)
     nb_, ne_ = float(np.nanmean(ho_base.normal_dev)), float(np.nanmean(ho.normal_dev))
-    sig = (p_in < THRESHOLDS["alpha_candidates"] / n_cand) and (p_ho < THRESHOLDS["alpha_heldout"]) and rb > re_
-    if ho_rank is not None:
-        # and better held out than the model it is ranked against: a reference that predicts
-        # badly (a datum tilt beside a rigid pose error, whose per-pose tilts it duplicates,
-        # gave held-out RMS of 1e8 mm) must not make a candidate look like a gain
-        sig = sig and ho_rank.rms(S, excl) > re_
+    # against the model it is ranked against too, when that is another (ho_rank): a reference that
+    # predicts badly (a datum tilt beside a rigid pose error, whose per-pose tilts it duplicates,
+    # gave held-out RMS of 1e8 mm) must not make a candidate look like a gain
+    rms_ref = rb if ho_rank is None else min(rb, ho_rank.rms(S, excl))
+    sig = rules.significant(p_in, p_ho, n_cand, rms_ref, re_)
     return CandidateResult(c.label, c.name, [names[i] for i in c.sensors], k, p_in, p_ho, float(np.sum(diff)), rb, re_,
                            rb / re_, float(np.rad2deg(nb_)), float(np.rad2deg(ne_)), bool(sig), c, f, ho, ce)

@@ -461,6 +461,6 @@ def joint_fit(ds, b, chosen) -> Fit:
     """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``),
     the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
     it free and the directions of the geometry its per-pose values absorb held: see
-    :func:`metrology.diagnosis.fit._absorbed_modes`)."""
+    :func:`metrology.calibration.engine._absorbed_modes`)."""
     comps = tuple(s.component.for_joint_fit() for s in chosen)
     return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")
