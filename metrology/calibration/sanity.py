@@ -47,6 +47,7 @@ import numpy as np
 
 from metrology.calibration.dataset import MIN_READINGS, Dataset, load_dataset
 from metrology.io.export import POSITION_UNITS
+from metrology.core.stats import robust_sigma
 
 __all__ = ["GROSS_NOISE_FACTOR", "GROSS_P", "GROSS_ZERO_MM", "GROSS_TILT_DEG", "ROBUST_SCALE", "GROSS_READINGS_SCALE",
            "GROSS_READING_SIGMAS", "GROSS_READINGS_FRACTION", "GROSS_READINGS_MIN", "Screening", "Mismatch",
@@ -225,7 +226,7 @@ def screen(dataset: Dataset) -> Screening:
             a = a[np.isfinite(a)]
             # a reading further off than a calibration can move is a code or a mistake, not a
             # gross reading of the surface (a spot on a scratch or an edge is off by a few mm)
-            robust[i] = np.inf if len(a) == 0 or np.max(a) > GROSS_ZERO_MM else 1.4826 * np.median(a)
+            robust[i] = np.inf if len(a) == 0 or np.max(a) > GROSS_ZERO_MM else robust_sigma(a, about=0.0)
             far[i] = int(np.sum(a > GROSS_READING_SIGMAS * layout.noise_mm[i]))
     pred, _ = readings(cal.layout.zero, cal.layout.direction, obs.normal, obs.offset)
     res = np.abs(obs.d - pred)

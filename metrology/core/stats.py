@@ -1,4 +1,4 @@
-"""Small descriptive statistics shared by every report: one home for max / mean / std."""
+"""Small descriptive statistics shared by every report and test: one home for max / mean / std and the robust scale."""
 
 from __future__ import annotations
 
@@ -36,3 +36,19 @@ def describe(values, suffix: str = "_deg", p95: bool = False, count: bool = Fals
     if p95:
         out[f"p95{suffix}"] = math.nan if empty else float(np.percentile(v, 95))
     return out
+
+
+#: 1 / Phi^-1(3/4): the median absolute deviation of a normal sample times this estimates its sigma
+#: (``scipy.stats.median_abs_deviation(..., scale="normal")`` to five digits, without importing scipy)
+MAD_NORMAL = 1.4826
+
+
+def robust_sigma(x, about=None) -> float:
+    """The normal-consistent robust scale ``1.4826 median|x - c|`` of the finite ``x``: ``c`` their
+    median, or ``about`` (0 for residuals already centred by a fit). NaN when no value is finite."""
+    v = np.asarray(x, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan
+    c = float(np.median(v)) if about is None else float(about)
+    return MAD_NORMAL * float(np.median(np.abs(v - c)))

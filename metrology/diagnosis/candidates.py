@@ -15,6 +15,7 @@ from metrology.diagnosis.fit import Fit, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
+from metrology.core.stats import robust_sigma
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
            "score_candidate"]
@@ -121,7 +122,7 @@ def scan_points(ds: Dataset, centre):
         height, _box = PlaneForm.scan_surface(pts, n, ds.plane.offset, centre)
         r = w - height(st, grow=SCAN_GROW)  # NaN beyond the box of the points fitted, a little widened
         r_in = (pts @ n + float(ds.plane.offset)) - height((pts - centre) @ plane_basis(n).T)
-        scale = 1.4826 * float(np.median(np.abs(r_in - np.median(r_in))))
+        scale = robust_sigma(r_in)
         new = np.isfinite(r) & (np.abs(r) <= z * scale)
         if keep is not None and np.array_equal(new, keep):
             break
@@ -172,7 +173,7 @@ def flag_residuals(residual, sigma):
     z = np.full(residual.shape, np.nan)
     for i in range(residual.shape[1]):
         r = residual[:, i]
-        mad = 1.4826 * np.nanmedian(np.abs(r - np.nanmedian(r)))
+        mad = robust_sigma(r)
         z[:, i] = r / max(sigma[i], mad)
     zmax = float(np.nanmax(np.abs(z)))
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))

@@ -45,6 +45,7 @@ from metrology.diagnosis.members import (Reference, adequate_member, family_of, 
                                          score_step)
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
+from metrology.core.stats import robust_sigma
 
 __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 
@@ -375,7 +376,7 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     m = int(ok_z.sum())
     if m == 0:
         return flags, 1.0
-    z = z / max(1.0, 1.4826 * float(np.median(np.abs(z[ok_z]))))
+    z = z / max(1.0, robust_sigma(z[ok_z], about=0.0))
     zmax = float(np.max(np.abs(z)))
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
     bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(rules.gross_level(m)))

@@ -42,6 +42,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from metrology.core.stats import robust_sigma
+
 __all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HOLES", "CLIP", "cusum_h", "cusum_arl", "Alarm", "CusumChart",
            "chart_settings"]
 
@@ -234,7 +236,7 @@ class CusumChart:
         rho = np.concatenate([b[0] for b in self._base])
         sd = np.concatenate([b[1] for b in self._base])
         self.level = float(np.median(rho))
-        mad = 1.4826 * float(np.median(np.abs(rho - self.level)))
+        mad = robust_sigma(rho, about=self.level)
         kept = rho[np.abs(rho - self.level) <= 5.0 * max(mad, 1e-12)]
         sdev = float(np.std(kept, ddof=1)) if len(kept) > 1 else mad
         self.scale = max(sdev * (1.0 + 1.645 / np.sqrt(2.0 * max(len(kept) - 1, 1))), float(np.median(sd)))
