@@ -39,6 +39,7 @@ import tomllib
 import numpy as np
 from metrology.io.atomic import write_text
 from metrology.core.layout import SensorLayout
+from metrology.core.model import PARAMS_TANGENT
 
 
 #: direction vectors in a layout file must be unit within this (typed drawings round to
@@ -116,7 +117,7 @@ def _certificate(path, table) -> dict:
 
 def covariance_names(names) -> list:
     """The parameter names of the ``[calibration]`` covariance: ``"L1.x" ... "L1.b"`` per sensor."""
-    return [f"{nm}.{p}" for nm in names for p in ("x", "y", "z", "a", "b")]
+    return [f"{nm}.{p}" for nm in names for p in PARAMS_TANGENT]
 
 
 def _covariance(path, table, names):

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.core.model import PARAMS_TANGENT
 from metrology.core.tolerances import CORRELATION_REPORT
 
 __all__ = ["Certificate", "certificate_from_toml", "certificate_section", "HEADER_FIELDS", "COVERAGE_K"]
@@ -106,7 +107,7 @@ def certificate_from_toml(text: str, layout, file, method: str, n_poses: int, st
     sha = hashlib.sha256(text.encode("utf-8")).hexdigest()
     raw = {s["name"]: s for s in tomllib.loads(text)["sensors"]}  # the numbers as written, not renormalised
     rows, corr = [], []
-    names = ("x", "y", "z", "a", "b")
+    names = PARAMS_TANGENT
     for i, name in enumerate(layout.names):
         s = raw[name]
         zse = s.get("zero_stderr_mm")
