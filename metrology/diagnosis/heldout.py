@@ -103,16 +103,26 @@ def _solve_per_pose(w, r, prior=None):
 def _per_pose_precision(fitted, nominal, cov, sigma, test):
     """Inverse of the spread of the per-pose values over the training poses, less what reading
     noise puts in them (``(m, m)``; a large number where they show none)."""
-    p = cov.n_poses
-    train = np.setdiff1d(np.arange(p), test)
     m = fitted.per_pose_columns
     e = np.asarray(fitted.values, float).reshape(-1, m)
-    B = fitted.pose_columns(cov.select(train)) / sigma[None, :, None]
-    noise = np.mean(np.linalg.pinv(np.einsum("hnm,hnq->hmq", B, B), hermitian=True), axis=0)
-    S = np.cov(e, rowvar=False) - noise
+    S = np.cov(e, rowvar=False) - _pose_noise(replace(fitted, values=None, stderr=None), cov, sigma, test)
     vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
     vals = np.maximum(vals, 1e-12 * max(float(np.max(np.abs(vals))), 1e-300))
     return (vecs / vals) @ vecs.T
+
+
+def _pose_noise_key(columns, cov, sigma, test):
+    return (columns, cov, np.asarray(sigma, float), np.asarray(test))
+
+
+@memoised(_pose_noise_key)
+def _pose_noise(columns, cov, sigma, test):
+    """``(m, m)``: what reading noise puts in the per-pose values of ``columns`` (a per-pose
+    component, its values aside), averaged over the training poses (all but ``test``); the same
+    for every model with that component on that fold (kept)."""
+    train = np.setdiff1d(np.arange(cov.n_poses), test)
+    B = columns.pose_columns(cov.select(train)) / sigma[None, :, None]
+    return np.mean(np.linalg.pinv(np.einsum("hnm,hnq->hmq", B, B), hermitian=True), axis=0)
 
 
 @dataclass(frozen=True)
