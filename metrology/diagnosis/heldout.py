@@ -8,7 +8,9 @@ import numpy as np
 
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
-from metrology.diagnosis.fit import Fit, fit_any, geometry
+from metrology.calibration.engine import LeastSquares
+from metrology.diagnosis.fit import Fit, _fit_result, fit_any, geometry, with_base
+from metrology.diagnosis.foldfit import FoldBatch
 from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
@@ -166,11 +168,27 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
     gross = [c.flags for c in components if isinstance(c, Outliers)]
-    for test, train, obs_t, cov_t in _training_sets(obs, cov, k):
-        comps = [c.select(train) for c in components]
-        f = fit_any(nominal, obs_t, cov_t, sigma, comps, theta0, covariance=False)
+    sets = _training_sets(obs, cov, k)
+    for (test, _, _, _), f in zip(sets, _fold_fits(nominal, sigma, components, theta0, sets)):
         res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
+
+
+def _fold_fits(nominal, sigma, components, theta0, sets):
+    """Each fold's fit of the base model plus ``components`` (:func:`fit_any`'s, without the
+    covariance); the folds of a fit of one sensor's components solved as one problem
+    (:class:`~metrology.diagnosis.foldfit.FoldBatch`)."""
+    comps = [[c.select(train) for c in components] for _, train, _, _ in sets]
+    one = {c.sensors for c in components}
+    if components and len(one) == 1 and len(next(iter(one))) == 1 and not any(c.per_pose for c in components):
+        problems = [LeastSquares(nominal, obs_t, sigma, cs, None, theta0, cov_t)
+                    for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
+        if FoldBatch.applies(problems):
+            X = FoldBatch(problems).solve()
+            return [with_base(_fit_result(p, x, covariance=False), nominal, p.obs, p.cov, sigma, theta0, covariance=False)
+                    for p, x in zip(problems, X)]
+    return [fit_any(nominal, obs_t, cov_t, sigma, cs, theta0, covariance=False)
+            for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
 
 
 _TRAINING = new_store()  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)
