@@ -21,7 +21,8 @@ from metrology.core.observations import Observations
 from metrology.diagnosis.memo import memoised
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
 
-__all__ = ["Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals", "residual_battery"]
+__all__ = ["Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals",
+           "residual_battery"]
 
 
 @dataclass(frozen=True)
@@ -166,7 +167,6 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn", covariance=Tru
     if comps:
         f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver, covariance=covariance)
         return with_base(f, nominal, obs, cov, sigma, theta0, solver, covariance)
-        th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
     th = np.zeros((nominal.n, 5))
     se = np.zeros((nominal.n, 5))
     res = np.full(obs.d.shape, np.nan)

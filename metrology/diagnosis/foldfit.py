@@ -41,7 +41,8 @@ class FoldBatch:
 
         self.normal = stack([p.obs.normal for p in problems]).reshape(k * pm, 3)
         self.offset = stack([p.obs.offset for p in problems]).reshape(k * pm)
-        self.ok = stack([p.ok[:, 0] for p in problems]) & (np.arange(pm)[None, :] < np.array([pm - q for q in pad])[:, None])
+        real = np.arange(pm)[None, :] < np.array([pm - q for q in pad])[:, None]  # not padding
+        self.ok = stack([p.ok[:, 0] for p in problems]) & real
         self.dS = np.where(self.ok, stack([p.dS[:, 0] for p in problems]), 0.0)
         self.sig = float(p0.sig[0])
         self.fixed = [None if B is None else stack([p.fixed[j][:, self.i] for p in problems])
@@ -124,7 +125,7 @@ class FoldBatch:
         g = np.ones_like(d0)
         for c, v in zip(p0.free, self._values(X)):
             if c.uses_d0:
-                g += self._stack_rows([c.d_dd0(v[f], d, p.cov)[:, i] for f, (d, p) in enumerate(zip(full, self.problems))])
+                g += self._stack_rows([c.d_dd0(vf, d, p.cov)[:, i] for vf, d, p in zip(v, full, self.problems)])
         Jr = -np.concatenate([J0 * g[..., None]] + bases, axis=-1) / self.sig
         return np.where(self.ok[..., None], Jr, 0.0)
 

@@ -185,8 +185,8 @@ def _fold_fits(nominal, sigma, components, theta0, sets):
                     for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
         if FoldBatch.applies(problems):
             X = FoldBatch(problems).solve()
-            return [with_base(_fit_result(p, x, covariance=False), nominal, p.obs, p.cov, sigma, theta0, covariance=False)
-                    for p, x in zip(problems, X)]
+            return [with_base(_fit_result(p, x, covariance=False), nominal, p.obs, p.cov, sigma, theta0,
+                              covariance=False) for p, x in zip(problems, X)]
     return [fit_any(nominal, obs_t, cov_t, sigma, cs, theta0, covariance=False)
             for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
 
