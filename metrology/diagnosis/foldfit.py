@@ -86,9 +86,9 @@ class FoldBatch:
                 d[:, i] = d0[f, :p.obs.n_poses]
                 full.append(d)
         bases = []
-        for j, (c, B) in enumerate(zip(p0.free, self.fixed)):
+        for j, B in enumerate(self.fixed):
             if B is None:
-                B = self._stack_rows([c.basis(d, p.cov)[:, i] for d, p in zip(full, self.problems)])
+                B = self._stack_rows([p.free[j].basis(d, p.cov)[:, i] for d, p in zip(full, self.problems)])
             bases.append(B)
         self._last = (key, (d0, bases, full))
         return self._last[1]
@@ -123,9 +123,9 @@ class FoldBatch:
         J6 = self._diag(jacobian_raw(p0.nominal.zero[i] + X[:, :3], u, self.normal, self.offset))  # (k, pm, 6)
         J0 = np.concatenate([J6[..., :3], J6[..., 3:] @ p0.basis_n[0].T], axis=-1)
         g = np.ones_like(d0)
-        for c, v in zip(p0.free, self._values(X)):
-            if c.uses_d0:
-                g += self._stack_rows([c.d_dd0(vf, d, p.cov)[:, i] for vf, d, p in zip(v, full, self.problems)])
+        for j, (c, v) in enumerate(zip(p0.free, self._values(X))):
+            if c.uses_d0:  # each fold's own component (its state of the fold's poses, if any)
+                g += self._stack_rows([p.free[j].d_dd0(vf, d, p.cov)[:, i] for vf, d, p in zip(v, full, self.problems)])
         Jr = -np.concatenate([J0 * g[..., None]] + bases, axis=-1) / self.sig
         return np.where(self.ok[..., None], Jr, 0.0)
 
