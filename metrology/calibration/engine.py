@@ -296,7 +296,11 @@ class LeastSquares:
             self.result = least_squares(self.residual, self.x0, jac=self.jacobian, method="trf", **kw)
             return self.result.x
         if solver == "gn":
-            return gauss_newton(self.residual, self.jacobian, self.x0, loss)
+            # with the base held (nb = 0) every term is linear in the values (the readings of the
+            # held geometry fixed, the per-pose projection and the constraint rows linear): the
+            # residual is affine in ``x`` and one step is the minimum (a second finds rounding)
+            affine = self.nb == 0 and loss == "linear"
+            return gauss_newton(self.residual, self.jacobian, self.x0, loss, max_iter=1 if affine else 30)
         raise ValueError(f"solver must be 'lsq' or 'gn', got {solver!r}")
 
     def dof(self, x) -> int:
@@ -349,7 +353,8 @@ def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
             xn = x + t * step
             rn = fun(xn)
             cn = cost_of(rn)
-            if cn <= cost or t < 1e-4:
+            # a rise within the tolerance is rounding at the minimum: halving would not find a descent
+            if cn <= cost or t < 1e-4 or cn - cost <= tol * max(cost, 1e-300):
                 break
             t *= 0.5
         done = abs(cost - cn) <= tol * max(cost, 1e-300)

@@ -21,7 +21,8 @@ from metrology.core.observations import Observations
 from metrology.diagnosis.memo import memoised
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
 
-__all__ = ["Fit", "fit", "fit_any", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals", "residual_battery"]
+__all__ = ["Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals",
+           "residual_battery"]
 
 
 @dataclass(frozen=True)
@@ -165,15 +166,7 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn", covariance=Tru
     identical); ``covariance`` as :func:`fit`'s."""
     if comps:
         f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver, covariance=covariance)
-        if len(f.sensors) == nominal.n:
-            return f
-        # the other sensors keep the base fit of this subset
-        base = fit_any(nominal, obs, cov, sigma, (), theta0, solver, covariance)
-        th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
-        S = list(f.sensors)
-        th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
-        # chi2 and dof both of the fitted sensors (as ``fit`` defines them), not the others' chi2 over these' dof
-        return Fit(th, se, f.components, res, f.chi2, f.dof, f.sensors, f.corr_base, f.corr_with, f.extra_cov)
+        return with_base(f, nominal, obs, cov, sigma, theta0, solver, covariance)
     th = np.zeros((nominal.n, 5))
     se = np.zeros((nominal.n, 5))
     res = np.full(obs.d.shape, np.nan)
@@ -184,6 +177,19 @@ def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn", covariance=Tru
         chi2 += f.chi2
         dof += f.dof
     return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
+
+
+def with_base(f: Fit, nominal, obs, cov, sigma, theta0, solver="gn", covariance=True) -> Fit:
+    """The fit ``f`` of some sensors with the other sensors' base fit (:func:`fit_any`'s)."""
+    if len(f.sensors) == nominal.n:
+        return f
+    # the other sensors keep the base fit of this subset
+    base = fit_any(nominal, obs, cov, sigma, (), theta0, solver, covariance)
+    th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
+    S = list(f.sensors)
+    th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
+    # chi2 and dof both of the fitted sensors (as ``fit`` defines them), not the others' chi2 over these' dof
+    return Fit(th, se, f.components, res, f.chi2, f.dof, f.sensors, f.corr_base, f.corr_with, f.extra_cov)
 
 
 def dof_per_sensor(f: Fit, obs, n):

@@ -8,7 +8,9 @@ import numpy as np
 
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
-from metrology.diagnosis.fit import Fit, fit_any, geometry
+from metrology.calibration.engine import LeastSquares
+from metrology.diagnosis.fit import Fit, _fit_result, fit_any, geometry, with_base
+from metrology.diagnosis.foldfit import FoldBatch
 from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
@@ -103,16 +105,26 @@ def _solve_per_pose(w, r, prior=None):
 def _per_pose_precision(fitted, nominal, cov, sigma, test):
     """Inverse of the spread of the per-pose values over the training poses, less what reading
     noise puts in them (``(m, m)``; a large number where they show none)."""
-    p = cov.n_poses
-    train = np.setdiff1d(np.arange(p), test)
     m = fitted.per_pose_columns
     e = np.asarray(fitted.values, float).reshape(-1, m)
-    B = fitted.pose_columns(cov.select(train)) / sigma[None, :, None]
-    noise = np.mean(np.linalg.pinv(np.einsum("hnm,hnq->hmq", B, B), hermitian=True), axis=0)
-    S = np.cov(e, rowvar=False) - noise
+    S = np.cov(e, rowvar=False) - _pose_noise(replace(fitted, values=None, stderr=None), cov, sigma, test)
     vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
     vals = np.maximum(vals, 1e-12 * max(float(np.max(np.abs(vals))), 1e-300))
     return (vecs / vals) @ vecs.T
+
+
+def _pose_noise_key(columns, cov, sigma, test):
+    return (columns, cov, np.asarray(sigma, float), np.asarray(test))
+
+
+@memoised(_pose_noise_key)
+def _pose_noise(columns, cov, sigma, test):
+    """``(m, m)``: what reading noise puts in the per-pose values of ``columns`` (a per-pose
+    component, its values aside), averaged over the training poses (all but ``test``); the same
+    for every model with that component on that fold (kept)."""
+    train = np.setdiff1d(np.arange(cov.n_poses), test)
+    B = columns.pose_columns(cov.select(train)) / sigma[None, :, None]
+    return np.mean(np.linalg.pinv(np.einsum("hnm,hnq->hmq", B, B), hermitian=True), axis=0)
 
 
 @dataclass(frozen=True)
@@ -156,11 +168,27 @@ def kfold(nominal, obs, cov, sigma, components, k, theta0):
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
     gross = [c.flags for c in components if isinstance(c, Outliers)]
-    for test, train, obs_t, cov_t in _training_sets(obs, cov, k):
-        comps = [c.select(train) for c in components]
-        f = fit_any(nominal, obs_t, cov_t, sigma, comps, theta0, covariance=False)
+    sets = _training_sets(obs, cov, k)
+    for (test, _, _, _), f in zip(sets, _fold_fits(nominal, sigma, components, theta0, sets)):
         res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
+
+
+def _fold_fits(nominal, sigma, components, theta0, sets):
+    """Each fold's fit of the base model plus ``components`` (:func:`fit_any`'s, without the
+    covariance); the folds of a fit of one sensor's components solved as one problem
+    (:class:`~metrology.diagnosis.foldfit.FoldBatch`)."""
+    comps = [[c.select(train) for c in components] for _, train, _, _ in sets]
+    one = {c.sensors for c in components}
+    if components and len(one) == 1 and len(next(iter(one))) == 1 and not any(c.per_pose for c in components):
+        problems = [LeastSquares(nominal, obs_t, sigma, cs, None, theta0, cov_t)
+                    for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
+        if FoldBatch.applies(problems):
+            X = FoldBatch(problems).solve()
+            return [with_base(_fit_result(p, x, covariance=False), nominal, p.obs, p.cov, sigma, theta0,
+                              covariance=False) for p, x in zip(problems, X)]
+    return [fit_any(nominal, obs_t, cov_t, sigma, cs, theta0, covariance=False)
+            for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
 
 
 _TRAINING = new_store()  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)

@@ -253,6 +253,14 @@ class Drift(Component):
         return _sensor_basis(np.array(x), d0.shape[1], self.sensors)
 
 
+@functools.lru_cache(maxsize=16)
+def _legendre_derivatives(order):
+    """``(order, order + 1)``, read-only: column ``j`` the coefficients of ``P_j'`` in ``P0 .. P_order-1``."""
+    D = np.polynomial.legendre.legder(np.eye(order + 1), axis=0)
+    D.flags.writeable = False
+    return D
+
+
 @functools.lru_cache(maxsize=256)
 def _spline_setup(a, b, n_inner, inner=None):
     """Knots of the cubic spline on ``[a, b]`` with ``n_inner`` even interior knots (or those of
@@ -447,9 +455,9 @@ class Nonlinearity(Component):
         # nb - 2 independent columns remain after removing the line: drop the first and last
         return P[:, 1:-1].reshape(shape), dP[:, 1:-1].reshape(shape)
 
-    def _legendre(self, x, cov):
+    def _legendre(self, x, cov, deriv=True):
         """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
-        spline's columns for ``order=0``)."""
+        spline's columns for ``order=0``; none if not ``deriv``, with Legendre columns)."""
         from numpy.polynomial import legendre
 
         if self.order == 0:
@@ -459,12 +467,9 @@ class Nonlinearity(Component):
                 inner = tuple(float((2 * k - lo - hi) / (hi - lo)) for k in self.inner_mm)
             return self._spline(x, *self._span_x(cov), inner)
         V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
-        D = np.zeros((self.order, self.order + 1))  # column j: coefficients of P_j' in P0 .. P_order-1
-        for j in range(1, self.order + 1):
-            c = np.zeros(j + 1)
-            c[j] = 1.0
-            D[:j, j] = legendre.legder(c)
-        dV = legendre.legvander(x, self.order - 1) @ D
+        if not deriv:
+            return V[..., 2:], None
+        dV = legendre.legvander(x, self.order - 1) @ _legendre_derivatives(self.order)
         return V[..., 2:], dV[..., 2:]
 
     def _x(self, d0, cov):
@@ -482,7 +487,7 @@ class Nonlinearity(Component):
 
     def basis(self, d0, cov):
         x, _ = self._x(d0, cov)
-        P, _ = self._legendre(x, cov)
+        P, _ = self._legendre(x, cov, deriv=False)
         cols = np.concatenate([d0[..., None], P], axis=-1) if self.with_gain else P
         return _sensor_basis(cols, d0.shape[1], self.sensors)
 

@@ -341,6 +341,10 @@ class PoseError(Component):
         return self.name + ("@rigid" if self.tilts else "")
 
     @property
+    def n_params(self) -> int:  # as len(param_names), without making a name for every pose
+        return self.n_poses * self.per_pose_columns
+
+    @property
     def param_names(self):
         if not self.tilts:
             return tuple(f"e{j}_mm" for j in range(self.n_poses))
