@@ -16,7 +16,7 @@ import numpy as np
 from metrology.calibration.engine import LeastSquares, gauss_newton, geometry
 from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_from_tangent
+from metrology.core.model import PARAMS_TANGENT, direction_from_tangent
 from metrology.core.observations import Observations
 from metrology.diagnosis.memo import memoised
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
@@ -138,7 +138,7 @@ def _components_with_stderr(p: LeastSquares, vals, e, s2, C, se):
     by value its largest |correlation| with a base parameter and that parameter's name."""
     nb, j = p.nb, p.nb
     out, corr_b, corr_w = [], [], []
-    base_names = [f"{p.nominal.names[i]}.{q}" for i in p.S for q in ("x", "y", "z", "a", "b")]
+    base_names = [f"{p.nominal.names[i]}.{q}" for i in p.S for q in PARAMS_TANGENT]
     it_free = iter(zip(p.free, vals))
     for c in p.comps:
         if c.per_pose:
