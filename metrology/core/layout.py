@@ -8,6 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 import numpy as np
 
+#: names of the five identifiable parameters of a sensor's chart (the zero point's x, y, z; the beam's
+#: tangent a, b): the calibration's parameters and the layout's ``[calibration]`` covariance
+PARAMS_TANGENT = ("x", "y", "z", "a", "b")
+
 
 @dataclass(frozen=True)
 class SensorLayout:

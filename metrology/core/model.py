@@ -27,6 +27,7 @@ import functools
 
 import numpy as np
 
+from metrology.core.layout import PARAMS_TANGENT  # noqa: F401  (re-exported: the model's chart)
 from metrology.core.tolerances import BEAM_PARALLEL_COS
 
 __all__ = [
@@ -44,8 +45,6 @@ __all__ = [
 
 #: names of the paper's six sensor parameters (Eq. 9), in order
 PARAMS_RAW = ("x", "y", "z", "m", "n", "q")
-#: names of the five identifiable parameters of metro's chart
-PARAMS_TANGENT = ("x", "y", "z", "a", "b")
 
 
 def _geometry(zero, direction, normal, offset):

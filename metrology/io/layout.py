@@ -38,8 +38,7 @@ import math
 import tomllib
 import numpy as np
 from metrology.io.atomic import write_text
-from metrology.core.layout import SensorLayout
-from metrology.core.model import PARAMS_TANGENT
+from metrology.core.layout import PARAMS_TANGENT, SensorLayout
 
 
 #: direction vectors in a layout file must be unit within this (typed drawings round to

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.model import PARAMS_TANGENT
+from metrology.core.layout import PARAMS_TANGENT
 from metrology.core.tolerances import CORRELATION_REPORT
 
 __all__ = ["Certificate", "certificate_from_toml", "certificate_section", "HEADER_FIELDS", "COVERAGE_K"]
