@@ -62,15 +62,7 @@ class Fit:
 
 
 
-def _fit_key(nominal, obs, cov, sigma, components=(), sensors=None, theta0=None, loss="linear", solver="lsq",
-             covariance=True):
-    """What :func:`fit`'s result depends on (its key in :func:`~metrology.diagnosis.memo.memoised`)."""
-    return (nominal.names, nominal.zero, nominal.direction, obs, cov, np.asarray(sigma, float), tuple(components),
-            None if sensors is None else tuple(int(i) for i in sensors),
-            None if theta0 is None else np.asarray(theta0, float), loss, solver, bool(covariance))
-
-
-@memoised(_fit_key)
+@memoised
 def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
         theta0=None, loss="linear", solver="lsq", covariance=True) -> Fit:
     """Least squares of the base model plus ``components`` (analytic Jacobian).

@@ -113,11 +113,7 @@ def _per_pose_precision(fitted, nominal, cov, sigma, test):
     return (vecs / vals) @ vecs.T
 
 
-def _pose_noise_key(columns, cov, sigma, test):
-    return (columns, cov, np.asarray(sigma, float), np.asarray(test))
-
-
-@memoised(_pose_noise_key)
+@memoised
 def _pose_noise(columns, cov, sigma, test):
     """``(m, m)``: what reading noise puts in the per-pose values of ``columns`` (a per-pose
     component, its values aside), averaged over the training poses (all but ``test``); the same
@@ -155,12 +151,7 @@ class HeldOut:
         return float(np.sqrt(np.nanmean(r**2)))
 
 
-def _kfold_key(nominal, obs, cov, sigma, components, k, theta0):
-    return (nominal.names, nominal.zero, nominal.direction, obs, cov, np.asarray(sigma, float), tuple(components),
-            int(k), None if theta0 is None else np.asarray(theta0, float))
-
-
-@memoised(_kfold_key)
+@memoised
 def kfold(nominal, obs, cov, sigma, components, k, theta0):
     """k-fold-by-pose held-out figures of the base model plus ``components`` (kept by the
     content of the inputs: the same figures asked for again are not computed again)."""

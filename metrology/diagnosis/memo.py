@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import inspect
 from collections import OrderedDict
 
 import numpy as np
@@ -101,28 +102,29 @@ def freeze(v):
     return v
 
 
-def memoised(key_of):
-    """Decorator: keep the results of a function by ``key_of(*args, **kwargs)`` (the inputs the
-    result depends on, passed to :func:`content_key`), at most :data:`MAX_KEPT` of them."""
+def memoised(fn):
+    """Decorator: keep the results of ``fn`` by the content of every argument it is called with
+    (bound to its signature, defaults applied, passed to :func:`content_key`), at most
+    :data:`MAX_KEPT` of them. An argument given as a list where an array was given before is a
+    different key (a miss, never a wrong hit)."""
+    sig = inspect.signature(fn)
+    store = new_store()
 
-    def wrap(fn):
-        store = new_store()
+    @functools.wraps(fn)
+    def inner(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        bound.apply_defaults()
+        key = content_key(tuple(bound.arguments.values()))
+        hit = store.get(key)
+        if hit is not None:
+            store.move_to_end(key)
+            return hit
+        out = freeze(fn(*args, **kwargs))
+        store[key] = out
+        if len(store) > MAX_KEPT:
+            store.popitem(last=False)
+        return out
 
-        @functools.wraps(fn)
-        def inner(*args, **kwargs):
-            key = content_key(key_of(*args, **kwargs))
-            hit = store.get(key)
-            if hit is not None:
-                store.move_to_end(key)
-                return hit
-            out = freeze(fn(*args, **kwargs))
-            store[key] = out
-            if len(store) > MAX_KEPT:
-                store.popitem(last=False)
-            return out
-
-        inner.cache_clear = store.clear
-        inner.uncached = fn
-        return inner
-
-    return wrap
+    inner.cache_clear = store.clear
+    inner.uncached = fn
+    return inner
