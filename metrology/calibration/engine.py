@@ -36,6 +36,12 @@ ABSORBED_RTOL = 1e-3
 #: that a solver stepping there steps back
 INVALID_RESIDUAL = 1e6
 
+#: Gauss-Newton (:func:`gauss_newton`, and the batched folds of ``diagnosis.foldfit``): at most this
+#: many steps; stop when the cost changes by less than this share of itself; the shortest step halving tries
+GN_MAX_ITER = 30
+GN_TOL = 1e-10
+GN_MIN_STEP = 1e-4
+
 
 def geometry(nominal, theta):
     """Zero points ``(n, 3)`` mm TCS and unit directions ``(n, 3)`` TCS of the chart errors
@@ -141,7 +147,7 @@ class LeastSquares:
         self.k_comp = [c.n_params for c in self.free]
         # a per-pose rigid error (offset and two tilts a pose) leaves one reading in four to the
         # geometry; scored, it holds the base parameters at ``theta0`` (the base calibration)
-        self.hold = any(getattr(c, "holds_base", False) for c in comps)
+        self.hold = any(c.holds_base for c in comps)
         self.nb = 0 if self.hold else 5 * len(S)
         self.x0 = np.concatenate([np.zeros(0) if self.hold else self.theta0[S].ravel()] + [c.values for c in self.free])
         self._last = (None, None)  # the last prediction's x (bytes) and value: residual and jacobian ask at one x
@@ -329,7 +335,7 @@ class LeastSquares:
         return np.diagonal(np.linalg.pinv(BtB, rcond=1e-10, hermitian=True), axis1=1, axis2=2)
 
 
-def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
+def gauss_newton(fun, jac, x0, loss, max_iter=GN_MAX_ITER, tol=GN_TOL):
     """Gauss-Newton with step halving (IRLS weights for ``soft_l1``) on column-scaled normal
     equations; stops when the cost changes by less than ``tol`` relative."""
 
@@ -354,7 +360,7 @@ def gauss_newton(fun, jac, x0, loss, max_iter=30, tol=1e-10):
             rn = fun(xn)
             cn = cost_of(rn)
             # a rise within the tolerance is rounding at the minimum: halving would not find a descent
-            if cn <= cost or t < 1e-4 or cn - cost <= tol * max(cost, 1e-300):
+            if cn <= cost or t < GN_MIN_STEP or cn - cost <= tol * max(cost, 1e-300):
                 break
             t *= 0.5
         done = abs(cost - cn) <= tol * max(cost, 1e-300)

@@ -51,7 +51,7 @@ from metrology.core.stats import robust_sigma
 
 __all__ = ["GROSS_NOISE_FACTOR", "GROSS_P", "GROSS_ZERO_MM", "GROSS_TILT_DEG", "ROBUST_SCALE", "GROSS_READINGS_SCALE",
            "GROSS_READING_SIGMAS", "GROSS_READINGS_FRACTION", "GROSS_READINGS_MIN", "Screening", "Mismatch",
-           "screen", "explain", "check_dataset"]
+           "screen", "explain", "check_dataset", "load_checked"]
 
 #: residual RMS over stated noise above which (with :data:`GROSS_P`) the data are a gross mismatch
 GROSS_NOISE_FACTOR = 100.0

@@ -27,6 +27,7 @@ from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.judge import Verdict, verdict
+from metrology.diagnosis.memo import clear_all
 from metrology.diagnosis.results import Diagnosis, PlotData, Rival
 from metrology.diagnosis.select import flags_of, forward_select
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests, structure
@@ -157,9 +158,8 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
         p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
         ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": rules.datum_agrees(p_g),
                    "fitted_with": [c.label for c in v.best.fit.components]})
+    confidence = rules.confidence_given_datum(confidence, v.cause, ag["agree"])
     if not ag["agree"]:
-        if v.cause in ("none", "plane_form"):
-            confidence = "low"  # the inputs contradict each other on the datum
         summary += DATUM_DISAGREES.format(p=ag["p"])
     return replace(b.datum, against_readings=ag), confidence, summary
 
@@ -194,6 +194,7 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     p = ds.obs.d.shape[0]
     if p < 2 * folds:
         raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
+    clear_all()  # the fits kept are this data set's: none of an earlier one can be asked for again
     rng = np.random.default_rng(seed)
     notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)

@@ -43,6 +43,7 @@ import numpy as np
 from metrology.core.effects import REGISTRY, Component, Outliers
 from metrology.diagnosis.extension import _free_offset, size_of
 from metrology.diagnosis.posevar import base_jacobian
+from metrology.diagnosis import rules
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["detectable_sizes", "noncentrality_95", "family_detectable"]
@@ -238,7 +239,7 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
                              "meaning": pose[0].component.detectable_meaning}
     # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
     m = int(np.sum(n_obs))
-    t = float(stats.norm.isf(THRESHOLDS["alpha_outlier"] / (2 * max(m, 1))))
+    t = float(stats.norm.isf(rules.gross_level(max(m, 1))))
     out["outliers"] = {"sensors": {name: float((t + stats.norm.isf(1 - POWER)) * s)
                                    for name, s in zip(b.calibrated.names, b.sigma)},
                        "member": {}, "meaning": Outliers.detectable_meaning}

@@ -86,7 +86,7 @@ def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, compon
         fit whose residuals and values alone are wanted, as the k-fold's; those are then zero,
         empty or None)
 
-    A per-pose component (:class:`~metrology.effects.PoseError`) is profiled out exactly:
+    A per-pose component (:class:`~metrology.core.effects.PoseError`) is profiled out exactly:
     its basis does not depend on the parameters, so for any base parameters the optimal
     per-pose values are a fixed linear map of the residual (variable projection); its values
     are then recovered with standard errors ``s / ||b_p||`` (reading noise only).

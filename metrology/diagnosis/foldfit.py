@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrology.calibration.engine import INVALID_RESIDUAL, LeastSquares
+from metrology.calibration.engine import GN_MAX_ITER, GN_MIN_STEP, GN_TOL, INVALID_RESIDUAL, LeastSquares
 from metrology.core.model import jacobian_raw, readings
 
 __all__ = ["FoldBatch"]
@@ -129,7 +129,7 @@ class FoldBatch:
         Jr = -np.concatenate([J0 * g[..., None]] + bases, axis=-1) / self.sig
         return np.where(self.ok[..., None], Jr, 0.0)
 
-    def solve(self, max_iter=30, tol=1e-10):
+    def solve(self, max_iter=GN_MAX_ITER, tol=GN_TOL):
         """``(k, nx)``: each fold's minimum, by :func:`~metrology.calibration.engine.gauss_newton`'s
         iteration (linear loss) on every fold still moving."""
         X = self.x0.copy()
@@ -149,7 +149,7 @@ class FoldBatch:
                 Rt = self.residual(Xt)
                 ct = np.sum(Rt * Rt, axis=1)
                 Xn[todo], Rn[todo], cn[todo] = Xt[todo], Rt[todo], ct[todo]
-                settled = (ct <= cost) | (t < 1e-4) | (ct - cost <= tol * np.maximum(cost, 1e-300))
+                settled = (ct <= cost) | (t < GN_MIN_STEP) | (ct - cost <= tol * np.maximum(cost, 1e-300))
                 todo &= ~settled
                 t = np.where(todo, 0.5 * t, t)
             done = np.abs(cost - cn) <= tol * np.maximum(cost, 1e-300)

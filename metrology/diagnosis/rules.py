@@ -1,8 +1,9 @@
 """The decision rules of the diagnosis, in the order the engine applies them.
 
 Each rule is a named function with its threshold beside it and the reason in one line. The
-engine (:mod:`~metrology.diagnosis.select` for the selection, :mod:`~metrology.diagnosis.decide`
-for the verdict) calls them by name; :data:`THRESHOLDS`, the levels the ``--json`` output
+engine (:mod:`~metrology.diagnosis.select` and :mod:`~metrology.diagnosis.members` for the
+selection, :mod:`~metrology.diagnosis.judge`, :mod:`~metrology.diagnosis.crosstalk` and
+:mod:`~metrology.diagnosis.posevar` for the verdict) calls them by name; :data:`THRESHOLDS`, the levels the ``--json`` output
 reports, is made of the same constants. The levels were set a priori and checked on null data
 (``benchmarks/study_blind.py``; results in ``benchmarks/results/``). What each effect is (its
 family, its size, what it can be mistaken for) is in the registry, :mod:`metrology.core.effects`;
@@ -21,7 +22,7 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "per_pose_imitates", "explains_sensors", "shows_something", "room_for_another", "fixed_explains_as_well",
            "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
-           "datum_agrees"]
+           "datum_agrees", "confidence_given_datum"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -201,6 +202,12 @@ ALPHA_FORM = 0.01
 def datum_agrees(p: float) -> bool:
     """17. The readings see the form the tracker scanned."""
     return p >= ALPHA_FORM
+
+
+def confidence_given_datum(confidence: str, cause: str, agrees: bool) -> str:
+    """17. ``low`` where the datum cloud disagrees and the verdict rests on the datum (nothing named, or
+    its form named): the inputs contradict each other there; a cause of the head keeps its confidence."""
+    return "low" if not agrees and cause in ("none", "plane_form") else confidence
 
 
 #: the levels (the ``thresholds`` of the ``--json`` output; the keys and their order are its schema)

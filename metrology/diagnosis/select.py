@@ -414,7 +414,7 @@ def drop_one_gains(ds, b, chosen, folds):
         # a rigid pose error holds the geometry: where the selection held it (the offset member's
         # fit, :func:`~metrology.diagnosis.members.score_step`), not at the base calibration, which
         # the pose error itself biases (held there, a cause looked needed that was not)
-        th = full_theta if any(getattr(c, "holds_base", False) for c in rest) else b.theta0
+        th = full_theta if any(c.holds_base for c in rest) else b.theta0
         ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, th) if rest else b.heldout
         S = list(s.component.sensors) or list(range(nominal.n))
         # a characteristic is judged where its fit saw readings, as when it was selected
@@ -450,8 +450,6 @@ def weakly_supported(causes) -> list:
 
 def flags_of(chosen):
     """The flagged readings of a chosen ``outliers`` cause ((p, n) bool), or None."""
-    from metrology.core.effects import Outliers
-
     for s in chosen:
         if isinstance(s.component, Outliers):
             return s.component.flags

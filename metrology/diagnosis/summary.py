@@ -5,6 +5,7 @@ from __future__ import annotations
 from metrology.core.effects import REGISTRY
 from metrology.diagnosis.select import weakly_supported
 from metrology.diagnosis.stats import battery_on
+from metrology.diagnosis import rules
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["verdict_summary", "DATUM_DISAGREES"]
@@ -64,7 +65,7 @@ def verdict_summary(v, tb) -> str:
     text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
     if not te.consistent:
         names = list(te.sensors)
-        where = [k for i, k in enumerate(names) if battery_on(te, [i]) < THRESHOLDS["alpha_battery"]]
+        where = [k for i, k in enumerate(names) if not rules.explains_sensors(battery_on(te, [i]))]
         where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
