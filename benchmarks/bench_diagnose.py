@@ -34,15 +34,12 @@ def main(argv=None):
     ap.add_argument("--plane", default=str(DATA / "datum.ply"))
     ap.add_argument("--layout", default=str(DATA / "nominal.toml"))
     a = ap.parse_args(argv)
-    from metrology.diagnosis.memo import clear_all
     from metrology.jobs.calibrate import calibrate_files
     from metrology.jobs.diagnose import diagnose_files
 
-    def diagnose():  # as a fresh process runs it: no fit kept from the run before
-        clear_all()
-        return diagnose_files(a.export, a.plane, a.layout)
-
-    jobs = {"calibrate": lambda: calibrate_files(a.export, a.plane, a.layout), "diagnose": diagnose}
+    # each diagnosis starts with no fit kept (``diagnose`` forgets the run before's): as a fresh process
+    jobs = {"calibrate": lambda: calibrate_files(a.export, a.plane, a.layout),
+            "diagnose": lambda: diagnose_files(a.export, a.plane, a.layout)}
     times = {k: [] for k in jobs}
     for f in jobs.values():  # warm-up: imports, caches
         f()
