@@ -317,3 +317,11 @@ def _normalise(log, part, table, first_row):
         i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
         raise ValueError(f"{_row(log, part, first_row + i)}: hole_id is blank")
     return pa.table(cols)
+
+
+def time_seconds(col) -> np.ndarray:
+    """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results
+    file's: a number, timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``."""
+    display = "<results>"
+    log = HoleLog(display, "parquet", (), (), BATCH_ROWS, display)
+    return _time_seconds(log, Partition(display, display, {}), col, 0)
