@@ -1,6 +1,7 @@
 """Speed and memory of ``metro measure``, against baselines measured in the same run.
 
     python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
+                                       [--sections in-process,process,qif,dask]
 
 On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
 ``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
@@ -16,7 +17,10 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 3. **Dask**: a partitioned log of ``--dask-holes`` holes (40 partitions) with ``--workers 1`` and
    ``--workers 2`` (holes/s, the cluster's start included), against the single process on the
    same folder;
-4. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+4. **QIF**: the whole-process run of 2. with ``--qif results.qif`` added (a QIF 3.0 Results
+   document of every hole, streamed): wall time, CPU and peak RSS against the run without it
+   (goal: <= 3x the time; RSS bounded, not growing with the holes);
+5. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -172,26 +176,43 @@ def main(argv=None):
     ap.add_argument("--dask-holes", type=float, default=1e7, help="holes of the Dask comparison's log")
     ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--sections", default="in-process,process,qif,dask", help="which of in-process, process, qif, dask")
     args = ap.parse_args(argv)
+    sections = set(args.sections.split(","))
     work = Path(tempfile.mkdtemp(prefix="bench-measure-")) if args.workdir is None else args.workdir
     work.mkdir(parents=True, exist_ok=True)
-    metro = shutil.which("metro", path=os.path.dirname(sys.executable)) or "metro"
+    metro = shutil.which("metro", path=os.path.dirname(sys.executable))
+    metro = [metro] if metro else [sys.executable, "-m", "cli.main"]  # from a source tree: run from ROOT
+    os.chdir(ROOT)
     res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
     t0 = time.perf_counter()
     log, folder, layout = make_log(work, int(args.holes), 8)
     res["generate_s"] = time.perf_counter() - t0
-    res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
-    res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
+    if "in-process" in sections:
+        res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
+        res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
     out = work / "holes.parquet"
     cpu_m, cpu_b = [], []
-    res["metro_s"], res["metro_rss_mb"] = process([metro, "-q", "measure", str(log), "--layout", str(layout),
+    res["metro_s"], res["metro_rss_mb"] = process([*metro, "-q", "measure", str(log), "--layout", str(layout),
                                                    "--out", str(out)], args.repeat, cpu_m)
+    if "qif" in sections:
+        cpu_q = []
+        qif = work / "results.qif"
+        res["qif_s"], res["qif_rss_mb"] = process([*metro, "-q", "measure", str(log), "--layout", str(layout),
+                                                   "--out", str(out), "--qif", str(qif)], args.repeat, cpu_q)
+        res.update(qif_cpu_s=cpu_q[0], qif_mb=qif.stat().st_size / 2**20, qif_ratio_time=res["qif_s"] / res["metro_s"],
+                   qif_ratio_cpu=cpu_q[0] / cpu_m[0], qif_ratio_rss=res["qif_rss_mb"] / res["metro_rss_mb"])
+        qif.unlink()
+    if "process" not in sections and "dask" not in sections:
+        return _done(res, args, work)
     res["baseline_s"], res["baseline_rss_mb"] = process([sys.executable, "-c", BASELINE, str(log), str(layout),
                                                          str(work / "normals.parquet")], args.repeat, cpu_b)
     res["metro_cpu_s"], res["baseline_cpu_s"] = cpu_m[0], cpu_b[0]
     res["ratio_cpu"] = cpu_m[0] / cpu_b[0]
     res["ratio_time"] = res["metro_s"] / res["baseline_s"]
     res["ratio_rss"] = res["metro_rss_mb"] / res["baseline_rss_mb"]
+    if "dask" not in sections:
+        return _done(res, args, work)
     daskdir = work / "dask"
     shutil.rmtree(daskdir, ignore_errors=True)
     daskdir.mkdir()
@@ -200,7 +221,7 @@ def main(argv=None):
     for label, extra in (("one process", []), ("dask 1 worker", ["--workers", "1"]), ("dask 2 workers", ["--workers", "2"])):
         target = work / f"out-{label.replace(' ', '-')}"
         shutil.rmtree(target, ignore_errors=True)
-        t, rss = process([metro, "-q", "measure", str(dfolder), "--layout", str(dlayout), "--out", str(target), *extra],
+        t, rss = process([*metro, "-q", "measure", str(dfolder), "--layout", str(dlayout), "--out", str(target), *extra],
                          1)
         res.setdefault("partitioned_holes_per_s", {})[label] = args.dask_holes / t
         if label == "one process":
@@ -218,12 +239,16 @@ def main(argv=None):
         first = sorted(p for p in bigfolder.iterdir() if p.is_dir())[0]
         one = bigdir / "one"
         shutil.copytree(first, one / first.name)
-        _, rss1 = process([metro, "-q", "measure", str(one), "--layout", str(biglayout), "--out", str(bigdir / "out1")], 1)
-        t, rss = process([metro, "-q", "measure", str(bigfolder), "--layout", str(biglayout), "--out",
+        _, rss1 = process([*metro, "-q", "measure", str(one), "--layout", str(biglayout), "--out", str(bigdir / "out1")], 1)
+        t, rss = process([*metro, "-q", "measure", str(bigfolder), "--layout", str(biglayout), "--out",
                           str(bigdir / "out")], 1)
         res.update(big_holes=int(args.big), big_s=t, big_rss_mb=rss, big_reference_rss_mb=rss1,
                    big_rss_ratio=rss / rss1)
         shutil.rmtree(bigdir, ignore_errors=True)
+    _done(res, args, work)
+
+
+def _done(res, args, work):
     print(json.dumps(res, indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))

@@ -46,6 +46,8 @@ NS = "http://qifstandards.org/xsd/qif3"
 #: metro's hole status -> QIF CharacteristicStatusEnum (ISO 14253-1's three outcomes, and no outcome)
 QIF_STATUS = {"conforms": "PASS", "fails": "FAIL", "undecided": "INDETERMINATE", "not_measured": "NOT_ANALYZED"}
 _FIRST_HOLE_ID = 7
+#: holes formatted at once: their text (~600 bytes a hole) and its temporaries stay small
+SLICE_ROWS = 32768
 _DIGITS = 6  # decimals of an angle in deg (1e-6 deg: far below any U95)
 
 
@@ -150,6 +152,10 @@ class QifResults:
     def write(self, table) -> None:
         """Add the holes of a per-hole results table (``hole_id``, ``angle_deg``, ``U95_angle_deg``,
         ``angle_after_deg``, ``U95_after_deg``, ``status``, ``time``), in log order."""
+        for start in range(0, table.num_rows, SLICE_ROWS):  # the text of a slice: ~20 MB at most
+            self._write(table.slice(start, SLICE_ROWS))
+
+    def _write(self, table) -> None:
         import pyarrow as pa
         import pyarrow.compute as pc
 
