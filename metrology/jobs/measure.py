@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -169,7 +170,7 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     is called as holes are measured.
     """
     from metrology.io.holelog import BATCH_ROWS, open_log
-    from metrology.io.holeout import PartitionedOutput, TableSink, check_out
+    from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
     from metrology.measure.chart import chart_settings
@@ -212,10 +213,10 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         if warn is not None:
             warn(w)
     output = None
-    if target is not None and (target.is_dir() or target.suffix == ""):
+    if target is not None and not is_file_out(out):
         output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
                                             "chart_by_panel": chart_by_panel,
-                                            "layout_sha256": _digest(layout), "log": str(log_path)})
+                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
     total = None
     done = [0]
 
@@ -228,30 +229,38 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if qif is not None:
         sources["qif"] = str(qif)
     qif_doc = _qif_doc(qif, tolerance_deg, layout_path, layout, log.display)
-    if distributed:
-        from metrology.measure.fleet import connect, measure_log_dask
+    def run(sink):
+        """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
+        if distributed:
+            from metrology.measure.fleet import connect, measure_log_dask
 
-        client = connect(workers, scheduler)
-        try:
-            engine = (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
-            result = measure_log_dask(client, log, layout, settings, output, progress=tick, by_panel=chart_by_panel)
-        finally:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None and scheduler is None:
-                cluster.close()
-    else:
+            client = connect(workers, scheduler)
+            try:
+                # a single Parquet file: its row groups are the tasks (a CSV file is one task)
+                result = measure_log_dask(client, log if output is not None else log.by_row_group(), layout, settings,
+                                          output, progress=tick, by_panel=chart_by_panel, sink=sink)
+            finally:
+                cluster = getattr(client, "cluster", None)
+                client.close()
+                if cluster is not None and scheduler is None:
+                    cluster.close()
+            return result, (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
         from metrology.measure.run import measure_log, tune_allocator
 
         tune_allocator()
-        engine = "one process"
-        if output is not None:
-            result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)
-        else:
-            with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
-                result = measure_log(log, layout, settings, sink=sink if q is None else _Tee(sink, q), progress=tick,
-                                     by_panel=chart_by_panel)
-                _check_fit(result, shown_layout, min_radius_mm)  # before the files appear
+        return measure_log(log, layout, settings, sink=sink, output=output, progress=tick,
+                           by_panel=chart_by_panel), "one process"
+
+    if output is not None:
+        try:
+            result, engine = run(None)
+        except BaseException:
+            output.abort()  # nothing written by any run: no manifest, no folder left
+            raise
+    else:
+        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
+            result, engine = run(sink if q is None else _Tee(sink, q))
+            _check_fit(result, shown_layout, min_radius_mm)  # before the files appear
     if output is not None:
         _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them

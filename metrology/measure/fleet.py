@@ -39,22 +39,47 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     return Client(cluster)
 
 
+class _Rows:
+    """A task's per-hole results kept to be sent back (an output that is one file)."""
+
+    def __init__(self):
+        self.tables = []
+
+    def write(self, table) -> None:
+        self.tables.append(table)
+
+    def table(self):
+        import pyarrow as pa
+
+        return pa.concat_tables(self.tables) if self.tables else None
+
+
 def _task(log, part, layout, settings, output):
+    """One partition measured on a worker: its result, and its per-hole results when the output is
+    one file (written by the client, in order) rather than a folder (written here)."""
     tune_allocator()  # a worker started by Dask's nanny maps every batch array otherwise (run.tune_allocator)
-    return measure_partition(log, part, layout, settings, output=output)
+    if output is not None:
+        return measure_partition(log, part, layout, settings, output=output), None
+    rows = _Rows()
+    return measure_partition(log, part, layout, settings, sink=rows), rows.table()
 
 
 def measure_log_dask(client, log: HoleLog, layout: SensorLayout, settings: Settings, output,
-                     progress=None, by_panel: bool = False) -> MeasureResult:
-    """Measure ``log`` on ``client``'s workers, one task per partition, results into ``output``."""
-    output.begin()
+                     progress=None, by_panel: bool = False, sink=None) -> MeasureResult:
+    """Measure ``log`` on ``client``'s workers, one task per partition, results into ``output`` (a
+    folder: each task writes its partition's file) or ``sink`` (one file: the client writes each
+    task's rows, in the log's order)."""
+    if output is not None:
+        output.begin()
     futures = [client.submit(_task, log, part, layout, settings, output, pure=False, key=f"metro-measure-{i}-{part.relative}")
                for i, part in enumerate(log.partitions)]
     summary = FleetSummary(float(np.degrees(settings.tolerance)))
     watch = Watch(layout.names, by_panel)
     rows = written = 0
     for fut in futures:  # in the log's order: the watch needs it; later tasks run meanwhile
-        r = fut.result()
+        r, table = fut.result()
+        if table is not None and sink is not None:
+            sink.write(table)
         summary.merge(r.summary)
         watch.feed(r.feed)
         rows += r.rows
