@@ -50,6 +50,18 @@ def _run(fleet, out, *extra):
     return s
 
 
+def _run_relative(fleet, out, *extra):
+    """As :func:`_run`, from ``fleet``'s folder with every path relative."""
+    r = runner.invoke(app, ["measure", "log", "--layout", "calibrated.toml", "--out", out, "--json", *extra])
+    assert r.exit_code in (0, 1), r.output
+    s = json.loads(r.stdout)
+    s.pop("engine")
+    s["sources"].pop("out")
+    s["sources"]["log"] = str(fleet / "log")
+    s["sources"]["layout"] = str(fleet / "calibrated.toml")
+    return s
+
+
 def _same_files(a, b):
     fa = sorted(p.relative_to(a) for p in a.rglob("*.parquet"))
     assert fa == sorted(p.relative_to(b) for p in b.rglob("*.parquet")) and len(fa) == 6
@@ -78,6 +90,9 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    cwd = os.getcwd()
     procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
     try:
@@ -91,17 +106,21 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
         for _ in range(2):
             procs.append(subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1",
                                            "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                          env=env))
+                                          env=env, cwd=elsewhere))
         from distributed import Client
 
         with Client(address, timeout="30s") as c:
             c.wait_for_workers(2, timeout=60)
             assert len(c.scheduler_info()["workers"]) == 2
-        two = _run(fleet, tmp_path / "cluster", "--scheduler", address)
+        # paths given relative to the client's folder, workers started in another: resolved before they go
+        os.chdir(fleet)
+        two = _run_relative(fleet, "cluster", "--scheduler", address)
         one = _run(fleet, tmp_path / "one")
         assert one == two
-        _same_files(tmp_path / "one", tmp_path / "cluster")
+        _same_files(tmp_path / "one", fleet / "cluster")
     finally:
+        os.chdir(cwd)
+        shutil.rmtree(fleet / "cluster", ignore_errors=True)
         for p in procs[::-1]:
             p.terminate()
         for p in procs:
@@ -109,3 +128,35 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def test_one_parquet_file_on_dask_into_one_file_with_its_qif(fleet, tmp_path):
+    """A single Parquet log on --workers: its row groups are the tasks, the results one file (and one
+    QIF document), the same as one process's, byte for byte."""
+    log = tmp_path / "log.parquet"
+    parts = sorted((fleet / "log").rglob("*.parquet"))
+    with pq.ParquetWriter(log, pq.read_table(parts[0]).append_column("cell", pa.array([""] * 700)).schema) as w:
+        for p in parts:  # one row group per partition: 6 tasks
+            w.write_table(pq.read_table(p).append_column("cell", pa.array([p.parent.parent.name[5:]] * 700)))
+    assert pq.ParquetFile(log).num_row_groups == 6
+    out = {}
+    for name, extra in (("one", []), ("dask", ["--workers", "2"])):
+        r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
+                                str(tmp_path / f"{name}.parquet"), "--qif", str(tmp_path / f"{name}.qif"), "--json",
+                                *extra])
+        assert r.exit_code in (0, 1), r.output
+        out[name] = json.loads(r.stdout)
+    for k in ("counts", "fleet", "cells", "groups", "drift", "worst", "holes"):
+        assert out["one"][k] == out["dask"][k], k
+    assert out["dask"]["partitions"] == 6 and out["dask"]["holes"] == 4200
+    assert [a["cell"] for a in out["one"]["drift"]["alarms"]] == ["C2"]
+    assert pq.read_table(tmp_path / "one.parquet").equals(pq.read_table(tmp_path / "dask.parquet"))
+    assert (tmp_path / "one.qif").read_bytes() == (tmp_path / "dask.qif").read_bytes()
+
+
+def test_a_scheduler_that_cannot_be_reached_leaves_nothing(fleet, tmp_path):
+    r = runner.invoke(app, ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"), "--out",
+                            str(tmp_path / "out"), "--scheduler", f"tcp://127.0.0.1:{_free_port()}"])
+    assert r.exit_code == 2, r.output
+    assert "cannot reach the Dask scheduler" in r.output
+    assert not (tmp_path / "out").exists()
