@@ -91,8 +91,9 @@ writer.close()
 '''
 
 
-def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True):
-    """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions; the layout."""
+def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True, cells: int = 1):
+    """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions (with
+    ``cells`` > 1: ``cell=C<k>/part=<n>``, the key in the folder names only); the layout."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -117,13 +118,13 @@ def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool 
     per = -(-holes // parts)
     folder = workdir / "log"
     k = 0
-    for chunk in simulate_log(spec, seed, holes, 1, chunk_holes=per):
+    for chunk in simulate_log(spec, seed, holes, cells, chunk_holes=per):
         t = log_table(chunk)
         if single is not None:
             single.write_table(t)
-        d = folder / f"part={k:04d}"
+        d = folder / f"part={k:04d}" if cells == 1 else folder / f"cell={chunk.cell}" / f"part={k:04d}"
         d.mkdir(parents=True, exist_ok=True)
-        pq.write_table(t, d / "part-0.parquet")
+        pq.write_table(t if cells == 1 else t.drop_columns(["cell"]), d / "part-0.parquet")
         k += 1
     if single is not None:
         single.close()

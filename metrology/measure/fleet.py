@@ -1,10 +1,11 @@
 """The same measurement on a Dask cluster: one task per partition of a partitioned log.
 
 Each task runs :func:`metrology.measure.run.measure_partition` on one partition (reading it,
-measuring it, writing its result file atomically beside the others) and returns its summary
-and its drift-watch :class:`~metrology.measure.run.Feed`. The client merges the summaries and
-feeds the watch in the log's order as the tasks finish, so per-hole results, summary and alarms
-are those of the single-process run. ``dask.distributed`` is imported only here.
+measuring it, writing its result file atomically beside the others); its drift-watch
+:class:`~metrology.measure.run.Feed` goes, on the workers, to a chain of watch tasks per cell in the
+log's order, and only its summary to the client, which merges the summaries and the chains' final
+watches. Per-hole results, summary and alarms are those of the single-process run.
+``dask.distributed`` is imported only here.
 """
 
 from __future__ import annotations
@@ -64,28 +65,77 @@ def _task(log, part, layout, settings, output):
     return measure_partition(log, part, layout, settings, sink=rows), rows.table()
 
 
+def _small(measured):
+    """What the client needs of a measured partition: its result without the feed (the holes the
+    watch needs stay on the workers), and its rows when the output is one file."""
+    import dataclasses
+
+    r, table = measured
+    return dataclasses.replace(r, feed=None), table
+
+
+def _watch_step(prev, measured, sensors, by_panel):
+    """One link of a chain of partitions: the drift watch ``prev`` (None: a new one) fed this
+    partition's holes, in the log's order; runs on a worker, where the partition's feed is."""
+    import copy
+
+    # a copy: the previous link's result stays as it was (a link re-run after a lost worker starts from it)
+    watch = Watch(tuple(sensors), by_panel) if prev is None else copy.deepcopy(prev)
+    watch.feed(measured[0].feed)
+    return watch
+
+
+def _chains(log: HoleLog) -> dict:
+    """The partitions' indices by drift-watch chain: one chain per ``cell=`` key when every
+    partition has one (each cell's chart is its own time series: the chains run in parallel),
+    else one chain of all the partitions in the log's order."""
+    if log.partitions and all("cell" in p.keys for p in log.partitions):
+        chains = {}
+        for i, p in enumerate(log.partitions):
+            chains.setdefault(p.keys["cell"], []).append(i)
+        return chains
+    return {None: list(range(len(log.partitions)))}
+
+
 def measure_log_dask(client, log: HoleLog, layout: SensorLayout, settings: Settings, output,
                      progress=None, by_panel: bool = False, sink=None) -> MeasureResult:
     """Measure ``log`` on ``client``'s workers, one task per partition, results into ``output`` (a
     folder: each task writes its partition's file) or ``sink`` (one file: the client writes each
-    task's rows, in the log's order)."""
+    task's rows, in the log's order).
+
+    The drift watch runs on the workers too: a chain of tasks per cell (:func:`_chains`) feeds a
+    cell's partitions to its watch in the log's order, each link where its partition was measured;
+    the client merges the small summaries and, at the end, the chains' watches (a few numbers a
+    cell), so its work does not grow with the holes but with the partitions."""
     if output is not None:
         output.begin()
-    futures = [client.submit(_task, log, part, layout, settings, output, pure=False, key=f"metro-measure-{i}-{part.relative}")
-               for i, part in enumerate(log.partitions)]
+    names = [f"{i}-{part.relative}" for i, part in enumerate(log.partitions)]
+    measured = [client.submit(_task, log, part, layout, settings, output, pure=False, key=f"metro-measure-{n}")
+                for n, part in zip(names, log.partitions)]
+    small = [client.submit(_small, m, pure=False, key=f"metro-small-{n}") for n, m in zip(names, measured)]
+    watches = []
+    for chain in _chains(log).values():
+        w = None
+        for i in chain:
+            w = client.submit(_watch_step, w, measured[i], layout.names, by_panel, pure=False,
+                              key=f"metro-watch-{names[i]}")
+        watches.append(w)
+    del measured  # the scheduler keeps each until its small result and its watch link have it
     summary = FleetSummary(float(np.degrees(settings.tolerance)))
-    watch = Watch(layout.names, by_panel)
     rows = written = 0
-    for fut in futures:  # in the log's order: the watch needs it; later tasks run meanwhile
+    for fut in small:  # in the log's order: the rows of a one-file output are written so
         r, table = fut.result()
         if table is not None and sink is not None:
             sink.write(table)
         summary.merge(r.summary)
-        watch.feed(r.feed)
         rows += r.rows
         written += r.written
         if progress is not None:
             progress(r.rows)
         fut.release()
+    watch = Watch(layout.names, by_panel)
+    for w in client.gather(watches):  # each chain's cells are its own
+        watch.charts.update(w.charts)
+        watch.last.update(w.last)
     watch.finish()
     return MeasureResult(summary, watch, rows, len(log.partitions), written)
