@@ -40,7 +40,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-__all__ = ["QifResults", "QIF_STATUS", "check_qif_path"]
+__all__ = ["QifResults", "QIF_STATUS", "check_qif_path", "write_device_document"]
 
 NS = "http://qifstandards.org/xsd/qif3"
 #: metro's hole status -> QIF CharacteristicStatusEnum (ISO 14253-1's three outcomes, and no outcome)
@@ -308,3 +308,63 @@ class QifResults:
         finally:
             shutil.rmtree(self._dir, ignore_errors=True)
         return False
+
+
+def _d(x) -> str:
+    return repr(float(x))
+
+
+def write_device_document(path, layout, sha256: str, file_name: str | None, version: str = "",
+                          method: str = "", poses: int | None = None) -> None:
+    """``metro calibrate --qif``: the calibrated head as a QIF 3.0 measurement resource (atomically).
+
+    One ``MeasurementDevice`` (id 1) whose attributes carry the calibration's SHA-256 (of the
+    calibrated layout's TOML text: the bytes ``--out`` writes), its file name, the method and the
+    poses, and per sensor its zero point (mm, TCS), beam direction (unit, TCS), their 1-sigma
+    standard errors (mm; deg about the chart axes), its reading noise and range (mm): the device
+    that ``metro measure --qif`` names by the same SHA-256."""
+    from metrology.io.atomic import write_text
+
+    attrs = [f'<AttributeStr name="calibration_sha256" value="{sha256}"/>']
+    if file_name:
+        attrs.append(f"<AttributeStr name=\"calibration_file\" value={quoteattr(file_name)}/>")
+    if method:
+        attrs.append(f"<AttributeStr name=\"method\" value={quoteattr(method)}/>")
+    if poses is not None:
+        attrs.append(f'<AttributeI1 name="poses" value="{int(poses)}"/>')
+    attrs.append(f"<AttributeStr name=\"sensors\" value={quoteattr(' '.join(layout.names))}/>")
+    for j, nm in enumerate(layout.names):
+        attrs.append(f'<AttributeD3 name="{escape(nm)}.zero_mm" value="{" ".join(_d(v) for v in layout.zero[j])}"/>')
+        attrs.append(f'<AttributeD3 name="{escape(nm)}.direction" value="{" ".join(_d(v) for v in layout.direction[j])}"/>')
+        if layout.zero_stderr_mm is not None:
+            attrs.append(f'<AttributeD3 name="{escape(nm)}.zero_stderr_mm" '
+                         f'value="{" ".join(_d(v) for v in layout.zero_stderr_mm[j])}"/>')
+        if layout.direction_stderr_deg is not None:
+            attrs.append(f'<AttributeD2 name="{escape(nm)}.direction_stderr_deg" '
+                         f'value="{" ".join(_d(v) for v in layout.direction_stderr_deg[j])}"/>')
+        if layout.noise_mm is not None and np.isfinite(layout.noise_mm[j]):
+            attrs.append(f'<AttributeD1 name="{escape(nm)}.noise_mm" value="{_d(layout.noise_mm[j])}"/>')
+        if layout.range_mm is not None and np.all(np.isfinite(layout.range_mm[j])):
+            attrs.append(f'<AttributeD2 name="{escape(nm)}.range_mm" value="{" ".join(_d(v) for v in layout.range_mm[j])}"/>')
+    cert = dict(layout.certificate or {})
+    attrs += [f"<AttributeStr name={quoteattr('certificate.' + k)} value={quoteattr(str(v))}/>"
+              for k, v in sorted(cert.items())]
+    name = cert.get("part") or cert.get("head") or "drilling end-effector normal-sensor head"
+    serial = f"<SerialNumber>{escape(str(cert['serial']))}</SerialNumber>" if "serial" in cert else ""
+    qpid = uuid.uuid5(uuid.NAMESPACE_URL, f"metro:device:{sha256}")
+    write_text(path, (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        f'<QIFDocument xmlns="{NS}" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" versionQIF="3.0.0" '
+        f'idMax="1" xsi:schemaLocation="{NS} ../QIFApplications/QIFDocument.xsd">\n'
+        f"<QPId>{qpid}</QPId>\n"
+        "<Header><Application><Name>metro</Name><Organization>metro (open source)</Organization></Application>"
+        "<Description>A drilling end-effector's laser normal sensors, calibrated by metro calibrate</Description>"
+        "</Header>\n"
+        "<FileUnits><PrimaryUnits><AngularUnit><UnitName>degree</UnitName></AngularUnit>"
+        "<LinearUnit><UnitName>mm</UnitName></LinearUnit></PrimaryUnits></FileUnits>\n"
+        '<MeasurementResources><MeasurementDevices n="1"><MeasurementDevice id="1">'
+        f"<Name>{escape(str(name))}</Name><Description>laser displacement sensors on the pressure foot "
+        f"({escape(' '.join(layout.names))}), calibrated by metro calibrate {escape(version)}; zero points and beam "
+        "directions in the tool frame (TCS), standard errors 1 sigma</Description>"
+        f'{serial}<Attributes n="{len(attrs)}">{"".join(attrs)}</Attributes>'
+        "</MeasurementDevice></MeasurementDevices></MeasurementResources>\n</QIFDocument>\n"))

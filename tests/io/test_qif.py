@@ -159,3 +159,32 @@ def test_decimal_formatting_has_no_exponent():
 
     got = _decimal(np.array([1e-7, 2.6e-6, 0.5, 12.3456789, math.nan, 0.0])).to_pylist()
     assert got == ["0.000000", "0.000003", "0.500000", "12.345679", None, "0.000000"]
+
+
+def test_calibrate_qif_is_the_device_measure_qif_names(tmp_path, schema):
+    """calibrate --qif: the calibrated head as a QIF measurement device, valid, whose SHA-256 is the
+    calibrated layout's, the one measure --qif names."""
+    from metrology.io.data import data_path
+
+    d = data_path("measured", "calibration.csv").parent
+    r = runner.invoke(app, ["calibrate", str(d / "calibration.csv"), "--plane", str(d / "plane.json"), "--layout",
+                            str(d / "nominal.toml"), "--out", str(tmp_path / "cal.toml"), "--qif",
+                            str(tmp_path / "cal.qif"), "--meta", "part=EE-7 foot", "--meta", "serial=SN42"])
+    assert r.exit_code in (0, 1), r.output
+    schema.validate(str(tmp_path / "cal.qif"))
+    dev = ET.parse(tmp_path / "cal.qif").getroot().find(f".//{Q}MeasurementDevice")
+    attrs = {a.get("name"): a.get("value") for a in dev.find(f"{Q}Attributes")}
+    sha = hashlib.sha256((tmp_path / "cal.toml").read_bytes()).hexdigest()
+    assert attrs["calibration_sha256"] == sha and attrs["method"] == "lsq"
+    assert dev.findtext(f"{Q}Name") == "EE-7 foot" and dev.findtext(f"{Q}SerialNumber") == "SN42"
+    from metrology.io.layout import load_layout
+
+    lay = load_layout(tmp_path / "cal.toml")
+    assert [float(v) for v in attrs["L2.zero_mm"].split()] == pytest.approx(lay.zero[1], abs=1e-6)
+    cols, _, _ = hole_log(lay, n=50, seed=2, angle_deg=(0.1, 0.3))
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(tmp_path / "cal.toml"), "--out",
+                            str(tmp_path / "h.csv"), "--qif", str(tmp_path / "r.qif")])
+    assert r.exit_code in (0, 1), r.output
+    dev = ET.parse(tmp_path / "r.qif").getroot().find(f".//{Q}MeasurementDevice")
+    assert {a.get("name"): a.get("value") for a in dev.find(f"{Q}Attributes")}["calibration_sha256"] == sha
