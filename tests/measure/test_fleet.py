@@ -160,3 +160,22 @@ def test_a_scheduler_that_cannot_be_reached_leaves_nothing(fleet, tmp_path):
     assert r.exit_code == 2, r.output
     assert "cannot reach the Dask scheduler" in r.output
     assert not (tmp_path / "out").exists()
+
+
+def test_time_out_of_order_across_a_cells_partitions_is_the_same_error_on_dask(fleet, tmp_path):
+    """The drift watch's chain on the workers checks each cell's time order across partitions as
+    one process does: the same one-line error, exit 2."""
+    log = tmp_path / "log"
+    shutil.copytree(fleet / "log", log)
+    late = log / "cell=C3" / "date=2026-11-25" / "part-0.parquet"  # C3's first day now after its second
+    t = pq.read_table(late)
+    t = t.set_column(t.column_names.index("time"), "time",
+                     pa.array([v.replace("2026-11-25", "2026-11-27") for v in t.column("time").to_pylist()]))
+    pq.write_table(t, late)
+    lines = []
+    for name, extra in (("one", []), ("dask", ["--workers", "2"])):
+        r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
+                                str(tmp_path / name), *extra])
+        assert r.exit_code == 2, r.output
+        lines.append([ln for ln in r.stderr.splitlines() if "is before the previous hole of cell 'C3'" in ln])
+    assert len(lines[0]) == 1 and lines[0] == lines[1], lines
