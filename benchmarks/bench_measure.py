@@ -275,6 +275,8 @@ def main(argv=None):
         res.update(qif_cpu_s=cpu_q[0], qif_mb=qif.stat().st_size / 2**20, qif_ratio_time=res["qif_s"] / res["metro_s"],
                    qif_ratio_cpu=cpu_q[0] / cpu_m[0], qif_ratio_rss=res["qif_rss_mb"] / res["metro_rss_mb"])
         qif.unlink()
+    if "cluster" in sections:
+        res["cluster"] = cluster(work, int(args.cluster_holes), metro)
     if "process" not in sections and "dask" not in sections:
         return _done(res, args, work)
     res["baseline_s"], res["baseline_rss_mb"] = process([sys.executable, "-c", BASELINE, str(log), str(layout),
@@ -283,8 +285,6 @@ def main(argv=None):
     res["ratio_cpu"] = cpu_m[0] / cpu_b[0]
     res["ratio_time"] = res["metro_s"] / res["baseline_s"]
     res["ratio_rss"] = res["metro_rss_mb"] / res["baseline_rss_mb"]
-    if "cluster" in sections:
-        res["cluster"] = cluster(work, int(args.cluster_holes), metro)
     if "dask" not in sections:
         return _done(res, args, work)
     daskdir = work / "dask"

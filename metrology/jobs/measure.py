@@ -229,6 +229,7 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if qif is not None:
         sources["qif"] = str(qif)
     qif_doc = _qif_doc(qif, tolerance_deg, layout_path, layout, log.display)
+
     def run(sink):
         """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
         if distributed:
