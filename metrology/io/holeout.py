@@ -20,6 +20,8 @@ __all__ = ["OUT_SUFFIXES", "TableSink", "PartitionedOutput", "check_out", "is_fi
 
 OUT_SUFFIXES = (".csv", ".parquet")
 MANIFEST = "_metro_measure.json"
+#: held by the run writing into a folder (created exclusively): two runs at once are refused
+LOCK = "_metro_measure.lock"
 
 
 def is_file_out(out) -> bool:
@@ -135,11 +137,35 @@ class PartitionedOutput:
 
         made_folder = not self.folder.exists()
         self.folder.mkdir(parents=True, exist_ok=True)
+        self._lock()
         manifest = self.folder / MANIFEST
         made_manifest = not manifest.exists()
         if made_manifest:
             write_text(manifest, json.dumps(self.settings, indent=1, sort_keys=True))
         self._created = (made_folder, made_manifest)
+
+    def _lock(self) -> None:
+        import socket
+
+        lock = self.folder / LOCK
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                who = lock.read_text(encoding="utf-8").strip()
+            except OSError:
+                who = "?"
+            raise ValueError(f"--out {self.folder}: another run is writing into it ({who}; if none is, remove "
+                             f"{lock})") from None
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"pid {os.getpid()} on {socket.gethostname()}")
+        self._locked = True
+
+    def release(self) -> None:
+        """The run has ended (well or not): let another run write into the folder."""
+        if getattr(self, "_locked", False):
+            (self.folder / LOCK).unlink(missing_ok=True)
+            self._locked = False
 
     def abort(self) -> None:
         """A run failed: when no partition's file is there (this run wrote none, and no earlier run

@@ -256,8 +256,10 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         try:
             result, engine = run(None)
         except BaseException:
+            output.release()
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
+        output.release()
     else:
         with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
             result, engine = run(sink if q is None else _Tee(sink, q))

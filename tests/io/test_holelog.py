@@ -140,3 +140,15 @@ def test_check_out(tmp_path):
     (tmp_path / "dir.parquet").mkdir()
     assert not is_file_out(tmp_path / "dir.parquet")
     assert INTERNAL
+
+
+def test_two_runs_into_one_folder_at_once_are_refused(tmp_path):
+    first = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
+    first.begin()
+    second = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
+    with pytest.raises(ValueError, match=r"another run is writing into it \(pid \d+ on .*; if none is, remove"):
+        second.begin()
+    first.release()
+    second.begin()  # the first has ended: the folder is free
+    second.release()
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["_metro_measure.json"]
