@@ -121,6 +121,26 @@ def measure_log_dask(client, log: HoleLog, layout: SensorLayout, settings: Setti
                               key=f"metro-watch-{names[i]}")
         watches.append(w)
     del measured  # the scheduler keeps each until its small result and its watch link have it
+    try:
+        return _collect(client, log, layout, settings, small, watches, progress, by_panel, sink)
+    except _lost() as exc:  # a one-line error; the partitions written so far are kept for a resume
+        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else "no detail"
+        raise ValueError(f"the Dask cluster stopped the run ({type(exc).__name__}: {detail}): partitions already "
+                         f"written are kept; a re-run with the same --out resumes") from None
+
+
+def _lost():
+    """The exceptions of a cluster that lost the run (a worker killed repeatedly, the scheduler gone)."""
+    import asyncio
+    import concurrent.futures
+
+    from distributed import KilledWorker
+
+    return (KilledWorker, concurrent.futures.CancelledError, asyncio.CancelledError, TimeoutError)
+
+
+def _collect(client, log, layout, settings, small, watches, progress, by_panel, sink) -> MeasureResult:
+    """The client's part: the partitions' small results in the log's order, then the chains' watches."""
     summary = FleetSummary(float(np.degrees(settings.tolerance)))
     rows = written = 0
     for fut in small:  # in the log's order: the rows of a one-file output are written so

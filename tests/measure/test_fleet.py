@@ -179,3 +179,44 @@ def test_time_out_of_order_across_a_cells_partitions_is_the_same_error_on_dask(f
         assert r.exit_code == 2, r.output
         lines.append([ln for ln in r.stderr.splitlines() if "is before the previous hole of cell 'C3'" in ln])
     assert len(lines[0]) == 1 and lines[0] == lines[1], lines
+
+
+def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
+    """A task whose workers keep dying (KilledWorker) or a scheduler gone (cancelled futures): a
+    ValueError (one line at the CLI, exit 2), not a traceback."""
+    from distributed import KilledWorker
+
+    from metrology.io.holelog import open_log
+    from metrology.io.layout import load_layout
+    from metrology.measure.fleet import measure_log_dask
+    from metrology.measure.holes import Settings
+    from concurrent.futures import CancelledError
+
+    lay = load_layout(fleet / "calibrated.toml")
+    log = open_log(fleet / "log", lay.names)
+
+    class Killed(KilledWorker):  # its constructor's arguments vary across distributed's versions
+        def __init__(self):
+            Exception.__init__(self, "metro-measure-0")
+
+        def __str__(self):
+            return "metro-measure-0 killed 3 workers"
+
+    for exc in (Killed(), CancelledError("metro-measure-0")):
+        class Future:
+            def result(self):
+                raise exc
+
+            def release(self):
+                pass
+
+        class Client:
+            def submit(self, *args, **kwargs):
+                return Future()
+
+            def gather(self, futures):
+                raise exc
+
+        with pytest.raises(ValueError, match=r"the Dask cluster stopped the run \((Killed|CancelledError): .*a re-run "
+                                             r"with the same --out resumes"):
+            measure_log_dask(Client(), log, lay, Settings(), None)
