@@ -182,6 +182,8 @@ class QifResults:
         name = table.column("hole_id").combine_chunks().cast(pa.string())
         for a, b in (("&", "&amp;"), ("<", "&lt;"), (">", "&gt;")):
             name = pc.replace_substring(name, a, b)
+        # control characters are not allowed in XML 1.0: shown as U+FFFD (the per-hole results keep the id)
+        name = pc.replace_substring_regex(name, "[\\x00-\\x08\\x0b\\x0c\\x0e-\\x1f]", "\ufffd")
         times, seconds = _times(table.column("time"))
         lo, hi = float(seconds.min()), float(seconds.max())
         self.t_first = lo if self.t_first is None else min(self.t_first, lo)

@@ -188,3 +188,22 @@ def test_calibrate_qif_is_the_device_measure_qif_names(tmp_path, schema):
     assert r.exit_code in (0, 1), r.output
     dev = ET.parse(tmp_path / "r.qif").getroot().find(f".//{Q}MeasurementDevice")
     assert {a.get("name"): a.get("value") for a in dev.find(f"{Q}Attributes")}["calibration_sha256"] == sha
+
+
+def test_an_id_with_a_control_character_still_makes_well_formed_xml(tmp_path, schema):
+    from metrology.io.qif import QifResults
+
+    t = pa.table({"hole_id": ["A\x01B", "C"], "angle_deg": [0.1, 0.2], "U95_angle_deg": [0.01, 0.01],
+                  "angle_after_deg": [None, None], "U95_after_deg": [None, None],
+                  "status": ["conforms", "conforms"], "time": [1.7e9, 1.7e9 + 1]},
+                 schema=pa.schema([("hole_id", pa.string()), ("angle_deg", pa.float64()),
+                                   ("U95_angle_deg", pa.float64()), ("angle_after_deg", pa.float64()),
+                                   ("U95_after_deg", pa.float64()), ("status", pa.string()), ("time", pa.float64())]))
+    lay = tmp_path / "l.toml"
+    save_layout(calibrated_layout(), lay)
+    with QifResults(tmp_path / "r.qif", tolerance_deg=0.5, layout_path=lay, sensors=("L1", "L2", "L3", "L4"),
+                    log="log.csv") as q:
+        q.write(t)
+    schema.validate(str(tmp_path / "r.qif"))
+    items = ET.parse(tmp_path / "r.qif").getroot().findall(f".//{Q}AngleCharacteristicItem/{Q}Name")
+    assert [e.text for e in items] == ["A\ufffdB", "C"]
