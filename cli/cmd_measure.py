@@ -38,6 +38,10 @@ def register(app: typer.Typer) -> None:
                                             "misses a drift slower than a panel."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
+        qif: Optional[Path] = typer.Option(None, "--qif", help="Also write the per-hole results as a QIF 3.0 "
+                                           "Results document (.qif): each hole an angle characteristic with its "
+                                           "value, U95 and ISO 14253-1 status; the head and its calibration's "
+                                           "SHA-256 as the measurement device."),
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
@@ -63,12 +67,12 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>", chart_by_panel)
+                           report, "<stdin>", chart_by_panel, qif)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None, chart_by_panel)
+                       report, None, chart_by_panel, qif)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -79,11 +83,11 @@ def register(app: typer.Typer) -> None:
         finish(rep.verdict)
 
     def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
-             chart_by_panel):
+             chart_by_panel, qif=None):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
             return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
                                  workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
                                  warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
-                                 chart_by_panel=chart_by_panel)
+                                 chart_by_panel=chart_by_panel, qif=qif)

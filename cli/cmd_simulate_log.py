@@ -14,14 +14,15 @@ def register(app: typer.Typer) -> None:
     @app.command("simulate-log")
     @guarded
     def simulate_log(
-        out: Path = typer.Option(..., "--out", help="The log: a .csv file, or a new folder for partitioned Parquet "
-                                 "(cell=C1/date=YYYY-MM-DD/)."),
+        out: Path = typer.Option(..., "--out", help="The log: a .csv or .parquet file, or a new folder for "
+                                 "partitioned Parquet (cell=C1/date=YYYY-MM-DD/, a hive dataset)."),
         layout: Optional[Path] = typer.Option(None, "--layout", help="The cell's calibrated layout TOML (default: "
                                               "the bundled Table 6 head, measured/nominal.toml)."),
         true_layout: Optional[Path] = typer.Option(None, "--true-layout", help="The head as it is (TOML); default: "
                                                    "one drawn from --layout's covariance (or moved by --layout-error-mm, -deg), from the seed."),
         truth: Optional[Path] = typer.Option(None, "--truth", help="Truth per hole_id (.csv or .parquet); default "
-                                             "LOG.truth.csv beside a CSV, FOLDER.truth.parquet beside a folder."),
+                                             "LOG.truth.csv (.parquet) beside a file, FOLDER.truth.parquet beside a "
+                                             "folder."),
         no_truth: bool = typer.Option(False, "--no-truth", help="Write no truth file (a throughput run)."),
         holes: int = typer.Option(10_000, "--holes", help="Holes in all, split evenly over the cells."),
         cells: int = typer.Option(1, "--cells", help="Cells C1..CK (the same head), each its own time line."),

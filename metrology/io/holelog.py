@@ -48,11 +48,15 @@ class Partition:
     relative : str, its path below the log's folder (the file name for a single file): where a
         partitioned output writes its results
     keys : dict, hive partition keys (``{"cell": "C1", "date": "2026-11-25"}``), {} for none
+    row_group : int or None, only this row group of a Parquet file (a task of a Dask run on one file)
+    first_row : int, the file's row (0-based) at which the partition starts
     """
 
     path: str
     relative: str
     keys: dict = field(default_factory=dict)
+    row_group: int | None = None
+    first_row: int = 0
 
 
 @dataclass(frozen=True)
@@ -74,11 +78,28 @@ class HoleLog:
         """The columns the partition's file itself holds (not its hive keys)."""
         return _column_names(self, part, with_keys=False)
 
+    def by_row_group(self) -> "HoleLog":
+        """The same log with each row group of a single Parquet file as its own partition (the
+        tasks of a Dask run); a CSV file or a folder as it is."""
+        import dataclasses
+
+        import pyarrow.parquet as pq
+
+        if self.kind != "parquet" or self.partitioned or len(self.partitions) != 1:
+            return self
+        part = self.partitions[0]
+        meta = pq.ParquetFile(part.path).metadata
+        parts, row = [], 0
+        for g in range(meta.num_row_groups):
+            parts.append(Partition(part.path, f"{part.relative}#row-group-{g}", {}, g, row))
+            row += meta.row_group(g).num_rows
+        return dataclasses.replace(self, partitions=tuple(parts)) if parts else self
+
     def batches(self, part: Partition):
         """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
         ``first_row`` is the 0-based row of the partition at which the batch starts."""
         reader = _csv_batches if self.kind == "csv" else _parquet_batches
-        row = 0
+        row = part.first_row
         for table in reader(self, part):
             yield _normalise(self, part, table, row), row
             row += table.num_rows
@@ -87,10 +108,10 @@ class HoleLog:
 def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = None) -> HoleLog:
     """A hole log at ``path`` (a ``.csv`` or ``.parquet`` file, or a folder of Parquet files)
     for a layout with ``sensors``; its columns are checked against them (ValueError)."""
-    p = Path(path)
     name = display or str(path)
-    if not p.exists():
+    if not Path(path).exists():
         raise ValueError(f"{name}: no such file or folder")
+    p = Path(path).resolve()  # workers started in another folder read the same files
     if p.is_dir():
         files = sorted(q for q in p.rglob("*.parquet") if not any(part.startswith((".", "_")) for part in q.relative_to(p).parts))
         if not files:
@@ -237,17 +258,34 @@ def _parquet_batches(log, part):
         # one row group at a time, without read-ahead: memory is bounded by the larger of a batch and
         # a row group (pyarrow's iter_batches reads ahead: 260 MB against 135 MB on a 1e6-hole file)
         pf = pq.ParquetFile(part.path, pre_buffer=False)
-        for g in range(pf.num_row_groups):
+        first = part.first_row
+        for g in (range(pf.num_row_groups) if part.row_group is None else (part.row_group,)):
             group = pf.read_row_group(g, use_threads=False)
             for start in range(0, group.num_rows, log.batch_rows):
                 table = group.slice(start, log.batch_rows)
                 for k, v in part.keys.items():
-                    if k not in table.column_names:
+                    if k in table.column_names:
+                        _check_key(log, part, table, k, v, first + start)
+                    else:
                         table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
                 yield table
+            first += group.num_rows
             del group
     except (pa.ArrowInvalid, OSError) as exc:
         raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
+
+
+def _check_key(log, part, table, key, value, first_row) -> None:
+    """A column that is also the partition's hive key must hold the folder's value on every row."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    col = table.column(key).cast(pa.string())
+    bad = pc.fill_null(pc.not_equal(col, value), True).to_numpy(zero_copy_only=False)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{_row(log, part, first_row + i)}: {key} = {col[i].as_py()!r} disagrees with its folder's "
+                         f"{key}={value} (a partition's file must hold its folder's key, or leave the column out)")
 
 
 def _time_seconds(log, part, col, first_row):
@@ -317,3 +355,11 @@ def _normalise(log, part, table, first_row):
         i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
         raise ValueError(f"{_row(log, part, first_row + i)}: hole_id is blank")
     return pa.table(cols)
+
+
+def time_seconds(col) -> np.ndarray:
+    """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results
+    file's: a number, timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``."""
+    display = "<results>"
+    log = HoleLog(display, "parquet", (), (), BATCH_ROWS, display)
+    return _time_seconds(log, Partition(display, display, {}), col, 0)

@@ -3,7 +3,9 @@ summary, drift alarms and the report out."""
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -116,21 +118,59 @@ def _digest(layout) -> str:
     return hashlib.sha256(layout_to_toml(layout).encode()).hexdigest()
 
 
+class _Tee:
+    """Batches of results into several sinks (the results file and the QIF document)."""
+
+    def __init__(self, *sinks):
+        self.sinks = sinks
+
+    def write(self, table) -> None:
+        for s in self.sinks:
+            s.write(table)
+
+
+def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display):
+    """The QIF 3.0 Results writer for ``--qif`` (None without it)."""
+    if qif is None:
+        return None
+    from metrology import __version__
+    from metrology.io.qif import QifResults
+
+    return QifResults(qif, tolerance_deg=tolerance_deg, layout_path=layout_path, sensors=layout.names,
+                      log=log_display, certificate=layout.certificate, version=__version__)
+
+
+def _qif_from_output(doc, output, log) -> None:
+    """Write ``doc`` from a partitioned output's files, row group by row group, in the log's order."""
+    import pyarrow.parquet as pq
+
+    with doc:
+        for part in log.partitions:
+            pf = pq.ParquetFile(output.target(part.relative), pre_buffer=False)
+            for g in range(pf.num_row_groups):
+                doc.write(pf.read_row_group(g, columns=list(QIF_COLUMNS), use_threads=False))
+
+
+#: the per-hole result columns a QIF document is made from
+QIF_COLUMNS = ("hole_id", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg", "status", "time")
+
+
 def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float = 500.0,
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False) -> MeasureReport:
+                  chart_by_panel: bool = False, qif=None) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
-    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask.
+    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask. ``qif``:
+    the per-hole results also as a QIF 3.0 Results document (:mod:`metrology.io.qif`).
 
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
     is called as holes are measured.
     """
     from metrology.io.holelog import BATCH_ROWS, open_log
-    from metrology.io.holeout import PartitionedOutput, TableSink, check_out
+    from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
     from metrology.measure.chart import chart_settings
@@ -144,6 +184,10 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         from metrology.report.html import check_report_path
 
         check_report_path(report_html)
+    if qif is not None:
+        from metrology.io.qif import check_qif_path
+
+        check_qif_path(qif)
     layout = load_layout(layout_path)
     shown_layout = display_name(layout_path)
     warnings = []
@@ -169,10 +213,10 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         if warn is not None:
             warn(w)
     output = None
-    if target is not None and (target.is_dir() or target.suffix == ""):
+    if target is not None and not is_file_out(out):
         output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
                                             "chart_by_panel": chart_by_panel,
-                                            "layout_sha256": _digest(layout), "log": str(log_path)})
+                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
     total = None
     done = [0]
 
@@ -182,31 +226,48 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
             progress(done[0], total, f"{done[0]:,} holes measured")
 
     sources = {"log": log.display, "layout": shown_layout, "out": None if out is None else str(out)}
-    if distributed:
-        from metrology.measure.fleet import connect, measure_log_dask
+    if qif is not None:
+        sources["qif"] = str(qif)
+    qif_doc = _qif_doc(qif, tolerance_deg, layout_path, layout, log.display)
 
-        client = connect(workers, scheduler)
-        try:
-            engine = (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
-            result = measure_log_dask(client, log, layout, settings, output, progress=tick, by_panel=chart_by_panel)
-        finally:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None and scheduler is None:
-                cluster.close()
-    else:
+    def run(sink):
+        """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
+        if distributed:
+            from metrology.measure.fleet import connect, measure_log_dask
+
+            client = connect(workers, scheduler)
+            try:
+                # a single Parquet file: its row groups are the tasks (a CSV file is one task)
+                result = measure_log_dask(client, log if output is not None else log.by_row_group(), layout, settings,
+                                          output, progress=tick, by_panel=chart_by_panel, sink=sink)
+            finally:
+                cluster = getattr(client, "cluster", None)
+                client.close()
+                if cluster is not None and scheduler is None:
+                    cluster.close()
+            return result, (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
         from metrology.measure.run import measure_log, tune_allocator
 
         tune_allocator()
-        engine = "one process"
-        if output is not None:
-            result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)
-        else:
-            with TableSink(target) as sink:
-                result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
-                _check_fit(result, shown_layout, min_radius_mm)  # before the file appears
+        return measure_log(log, layout, settings, sink=sink, output=output, progress=tick,
+                           by_panel=chart_by_panel), "one process"
+
+    if output is not None:
+        try:
+            result, engine = run(None)
+        except BaseException:
+            output.release()
+            output.abort()  # nothing written by any run: no manifest, no folder left
+            raise
+        output.release()
+    else:
+        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
+            result, engine = run(sink if q is None else _Tee(sink, q))
+            _check_fit(result, shown_layout, min_radius_mm)  # before the files appear
     if output is not None:
         _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
+        if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
+            _qif_from_output(qif_doc, output, log)
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
                            engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel})
     if report_html is not None:
