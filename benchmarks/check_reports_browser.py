@@ -23,7 +23,12 @@ report and width it checks, and prints one line:
   exceeds its ``clientWidth``, and a page no wider than the window; and at widths of 1280 px
   and more, no figure whose smallest text shows below ``--min-figure-pt`` (9 pt): the report
   states each figure's smallest text in image pixels (``data-min-font-px``), shown at
-  ``clientWidth / naturalWidth`` of that, 0.75 pt per CSS px.
+  ``clientWidth / naturalWidth`` of that, 0.75 pt per CSS px;
+* what a figure must show, read from its pixels in Chromium (a canvas): a figure may state boxes
+  (``data-expect``: x0, y0, x1, y1 in image pixels, a colour, present or not) where ink of that
+  colour must show or must not (the drift chart: its line reaches h at each alarm, and no line
+  joins an alarm to the next baseline's first hole). A pixel is that colour's ink within 0.3 of
+  it in RGB (0-1) distance.
 
 Screenshots go next to each report (``<report>.png``, or ``--shots DIR``). Exit status 1 when
 any check fails.
@@ -147,6 +152,30 @@ window.addEventListener("load", () => {
     const px = parseFloat(img.dataset.minFontPx) * img.clientWidth / img.naturalWidth;
     out.figures.push({alt: img.alt.slice(0, 60), pt: 0.75 * px});
   }
+  out.ink = [];
+  for (const img of document.querySelectorAll("img[data-expect]")) {
+    const c = document.createElement("canvas");
+    c.width = img.naturalWidth; c.height = img.naturalHeight;
+    const g = c.getContext("2d");
+    g.drawImage(img, 0, 0);
+    for (const [x0, y0, x1, y1, colour, present] of JSON.parse(img.dataset.expect)) {
+      const want = [1, 3, 5].map(i => parseInt(colour.slice(i, i + 2), 16));
+      const X0 = Math.max(0, Math.floor(x0)), Y0 = Math.max(0, Math.floor(y0));
+      const w = Math.min(c.width, Math.ceil(x1) + 1) - X0, h = Math.min(c.height, Math.ceil(y1) + 1) - Y0;
+      let found = false;
+      if (w > 0 && h > 0) {
+        const d = g.getImageData(X0, Y0, w, h).data;
+        for (let i = 0; i < d.length && !found; i += 4) {
+          const e = Math.hypot(d[i] - want[0], d[i + 1] - want[1], d[i + 2] - want[2]) / 255;
+          found = e < 0.3;
+        }
+      }
+      if (found !== present) {
+        out.ink.push((present ? "no " : "") + colour + " ink in [" + [x0, y0, x1, y1].join(", ") + "] of "
+                     + img.alt.slice(0, 50));
+      }
+    }
+  }
   const pre = document.createElement("pre");
   pre.id = "metro-check";
   pre.textContent = JSON.stringify(out);
@@ -172,6 +201,7 @@ def measure(report: Path, width: int, height: int, chromium: str, min_pt: float)
         return [f"layout not measured (chromium exit {r.returncode})"]
     d = json.loads(html_lib.unescape(m.group(1)))
     out = [f"clipped: {c}" for c in d["clipped"]]
+    out += [f"figure: {c}" for c in d.get("ink", [])]
     if d["window"] != width:
         out.append(f"the page was drawn {d['window']} px wide, not {width} px")
     if d["page"] > d["window"]:

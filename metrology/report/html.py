@@ -25,7 +25,7 @@ from pathlib import Path
 from metrology.io.names import display_name
 
 __all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
-           "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
+           "figure_from_matplotlib", "figure_from_png", "expect_ink", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
 
@@ -48,12 +48,16 @@ MIN_FIGURE_PT = 9.0
 class Figure:
     """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption;
     ``min_font_px``: its smallest text's height in the image's pixels (0: not known), which
-    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it."""
+    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it;
+    ``expect``: tuple of (x0, y0, x1, y1, colour, present), boxes in the image's pixels (y down)
+    where ink of ``colour`` must show (``present``) or must not, which the browser check reads
+    from the image (:func:`expect_ink`)."""
 
     caption: str
     data_uri: str
     alt: str = ""
     min_font_px: float = 0.0
+    expect: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -212,10 +216,31 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
     return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
 
 
-def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0) -> Figure:
+def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0, expect: tuple = ()) -> Figure:
     """Embed PNG bytes as a :class:`Figure`."""
     return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption,
-                  min_font_px)
+                  min_font_px, tuple(expect))
+
+
+def expect_ink(ax, xs, ys, colour, present: bool, pad_px=(0, 0)) -> None:
+    """State that ``ax``'s figure shows (``present``) or does not show ink of ``colour`` within
+    the box ``xs`` x ``ys`` (data coordinates), grown by ``pad_px`` (x, y; image pixels; negative
+    shrinks it). :func:`figure_from_matplotlib` turns it into image pixels once the figure is
+    laid out (:attr:`Figure.expect`)."""
+    ax.figure.__dict__.setdefault("_metro_expect", []).append((ax, tuple(xs), tuple(ys), colour, bool(present),
+                                                              tuple(pad_px)))
+
+
+def _expected_boxes(fig, dpi) -> tuple:
+    """The figure's :func:`expect_ink` boxes in the pixels of its image at ``dpi``."""
+    fig.set_dpi(dpi)
+    height = fig.get_size_inches()[1] * dpi
+    out = []
+    for ax, xs, ys, colour, present, (px, py) in fig.__dict__.get("_metro_expect", []):
+        (x0, y0), (x1, y1) = ax.transData.transform([(min(xs), min(ys)), (max(xs), max(ys))])
+        out.append((round(x0 - px, 1), round(height - y1 - py, 1), round(x1 + px, 1), round(height - y0 + py, 1),
+                    colour, present))
+    return tuple(out)
 
 
 def fit_to_column(fig) -> float:
@@ -248,10 +273,11 @@ def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> F
     buf = io.BytesIO()
     try:
         pt = fit_to_column(fig)
+        expect = _expected_boxes(fig, dpi)
         fig.savefig(buf, format="png", dpi=dpi)
     finally:
         close(fig)
-    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0)
+    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0, expect)
 
 
 def check_report_path(path) -> None:

@@ -108,19 +108,44 @@ def _hist_figure(report):
     return fig
 
 
+#: colour of the drift chart's CUSUM line (the browser check looks for it)
+CUSUM_COLOUR = "#1f77b4"
+
+
 def _chart_figure(chart, alarms):
+    """The CUSUM of one cell against hours since its first charted hole: the chart's series
+    (every peak and crossing kept, :class:`metrology.measure.chart.CusumChart`), broken where
+    the chart took a new baseline; the alarms as red lines. The figure states where its line must
+    show (near h at each alarm) and must not (over each new baseline's holes), in image pixels,
+    for the browser check (:func:`metrology.report.html.expect_ink`)."""
+    from metrology.report.html import expect_ink
     from metrology.report.style import pyplot
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 2.6))
     if chart.series:
-        t, s = np.array(chart.series).T
-        ax.plot((t - t[0]) / 3600.0, s, lw=0.8)
+        t, s = np.array(chart.series, float).T
+        hours = (t - t[0]) / 3600.0
         for a in alarms:
             ax.axvline((a.time_s - t[0]) / 3600.0, color="C3", lw=1)
         ax.axhline(chart.h, color="k", ls="--", lw=1, label=f"h = {chart.h:g}")
-        ax.set_xlabel(f"hours since {utc(t[0])}")
+        ax.plot(hours, s, lw=1.0, color=CUSUM_COLOUR, label="CUSUM", zorder=3)
+        ax.set_xlabel(f"hours since the first charted hole, {utc(t[0])} (after the cell's "
+                      f"{chart.baseline_holes} baseline holes)")
         ax.legend(loc="upper left")
+        ax.set_ylim(bottom=min(-0.5, np.nanmin(s)), top=max(np.nanmax(s), chart.h) * 1.08)
+        ax.set_xlim(hours[0], hours[-1])
+        gaps = np.flatnonzero(np.isnan(s))
+        for a in alarms:
+            x = (a.time_s - t[0]) / 3600.0
+            i = np.flatnonzero((hours == x) & ~np.isnan(s))
+            top = float(s[i].max()) if i.size else chart.h
+            expect_ink(ax, (x, x), (chart.h - 1.0, top), CUSUM_COLOUR, True, pad_px=(3, 2))
+        for g in gaps:
+            nxt = np.flatnonzero(~np.isnan(s[g + 1:]))
+            if nxt.size:
+                expect_ink(ax, (hours[g], hours[g + 1 + nxt[0]]), ax.get_ylim(), CUSUM_COLOUR, False,
+                           pad_px=(-4, 0))
     ax.set_ylabel("CUSUM [scales]")
     ax.set_title(f"cell {chart.cell}")
     fig.tight_layout()
