@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "NARROW_IN", "NARROW_MEDIA", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "expect_ink", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -42,6 +42,14 @@ _VERSIONED = (("metro",), ("numpy",), ("scipy",), ("open3d-cpu", "open3d"), ("tr
 COLUMN_IN = 960 / 96
 #: the smallest text in a report's figure, pt, at the figure's own size (as it shows at 1280 px)
 MIN_FIGURE_PT = 9.0
+#: a phone's column (a 412 px window less the narrow page's padding and the image's border, with
+#: room for a 360 px phone to show it at 90 %), in inches at 96 px per inch: each figure is drawn
+#: again this wide for windows up to :data:`NARROW_MEDIA`, so its text keeps 9 pt (12 px), not
+#: the 40 % of it a 960 px figure would show at
+NARROW_IN = 380 / 96
+#: the windows that get the narrow figure: up to 50 rem, where the column figure would show at
+#: less than 80 % (9.6 px for 12 px text)
+NARROW_MEDIA = "(max-width: 50rem)"
 
 
 @dataclass(frozen=True)
@@ -51,13 +59,15 @@ class Figure:
     ``benchmarks/check_reports_browser.py`` turns into points as the page shows it;
     ``expect``: tuple of (x0, y0, x1, y1, colour, present), boxes in the image's pixels (y down)
     where ink of ``colour`` must show (``present``) or must not, which the browser check reads
-    from the image (:func:`expect_ink`)."""
+    from the image (:func:`expect_ink`); ``narrow_uri``: the same figure drawn :data:`NARROW_IN`
+    wide for a phone (empty: none), its text as large in its pixels as the column figure's."""
 
     caption: str
     data_uri: str
     alt: str = ""
     min_font_px: float = 0.0
     expect: tuple = ()
+    narrow_uri: str = ""
 
 
 @dataclass(frozen=True)
@@ -216,10 +226,15 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
     return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
 
 
-def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0, expect: tuple = ()) -> Figure:
-    """Embed PNG bytes as a :class:`Figure`."""
-    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption,
-                  min_font_px, tuple(expect))
+def _png_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0, expect: tuple = (),
+                    narrow_png: bytes = b"") -> Figure:
+    """Embed PNG bytes as a :class:`Figure` (``narrow_png``: its phone version, optional)."""
+    return Figure(caption, _png_uri(png), alt or caption, min_font_px, tuple(expect),
+                  _png_uri(narrow_png) if narrow_png else "")
 
 
 def expect_ink(ax, xs, ys, colour, present: bool, pad_px=(0, 0)) -> None:
@@ -255,12 +270,7 @@ def fit_to_column(fig) -> float:
     for t in texts:
         if t.get_fontsize() < MIN_FIGURE_PT:
             t.set_fontsize(MIN_FIGURE_PT)
-    if fig.get_layout_engine() is None:
-        import warnings
-
-        with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
-            warnings.simplefilter("ignore")
-            fig.tight_layout()
+    _relayout(fig)
     return min((t.get_fontsize() for t in texts), default=MIN_FIGURE_PT)
 
 
@@ -270,14 +280,61 @@ def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> F
 
     from metrology.report.style import close
 
-    buf = io.BytesIO()
+    buf, narrow = io.BytesIO(), io.BytesIO()
     try:
         pt = fit_to_column(fig)
         expect = _expected_boxes(fig, dpi)
         fig.savefig(buf, format="png", dpi=dpi)
+        _narrow(fig)
+        fig.savefig(narrow, format="png", dpi=dpi)
     finally:
         close(fig)
-    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0, expect)
+    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0, expect, narrow.getvalue())
+
+
+def _narrow(fig) -> None:
+    """Lay ``fig`` out again :data:`NARROW_IN` wide, its text as it is: taller by the square root
+    of the narrowing (a row of panels gets room to breathe), no more than twice; an axis label or
+    title longer than its axes is wrapped onto more lines."""
+    w, h = fig.get_size_inches()
+    fig.set_size_inches(NARROW_IN, h * min(2.0, max(1.0, (w / NARROW_IN) ** 0.5)))
+    _relayout(fig)
+    if _wrap_long_labels(fig):
+        _relayout(fig)
+
+
+def _relayout(fig) -> None:
+    """Lay ``fig`` out for its size: its own layout engine (constrained) does at each draw; else
+    ``tight_layout`` once more (one called earlier leaves only a placeholder engine)."""
+    import warnings
+
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine):
+        return
+    with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
+        warnings.simplefilter("ignore")
+        fig.tight_layout()
+
+
+def _wrap_long_labels(fig) -> bool:
+    """Wrap each axis label and title wider than its axes (a y label: taller) at spaces; True
+    when one was."""
+    import textwrap
+
+    renderer = fig.canvas.get_renderer()
+    changed = False
+    for ax in fig.axes:
+        box = ax.get_window_extent(renderer)
+        for text, room, along in ((ax.xaxis.label, box.width, "width"), (ax.title, box.width, "width"),
+                                  (ax.yaxis.label, box.height, "height")):
+            s = text.get_text()
+            size = getattr(text.get_window_extent(renderer), along)
+            if s and "\n" not in s and size > room > 0:
+                chars = max(8, int(len(s) * room / size * 0.95))
+                text.set_text(textwrap.fill(s, chars))
+                changed = True
+    return changed
 
 
 def check_report_path(path) -> None:
@@ -316,19 +373,49 @@ def render_html(title: str, run: RunInfo, sections) -> str:
                              autoescape=jinja2.select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters["ticks"] = _ticks
+    env.filters["words"] = _words
     overall = [s.verdict.ok for s in sections]
     ok = False if False in overall else (True if True in overall else None)
     return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok,
-                                                     words=WORDS)
+                                                     words=WORDS, narrow_media=NARROW_MEDIA)
+
+
+#: words of prose kept on one line: an option (``--out``, ``-n``) or an id with a number after
+#: a hyphen (``C1-00012006``); prose may break ``re-mounted`` at its hyphen, not these
+_WHOLE = r"(?<![\w-])(?:--?[A-Za-z][\w.-]*|[A-Za-z]\w*-\d[\w.:-]*)"
+
+
+def _keep_whole(escaped: str) -> str:
+    import re
+
+    return re.sub(_WHOLE, lambda m: f'<span class="nb">{m.group(0)}</span>', escaped)
 
 
 def _ticks(text):
-    """Escape ``text`` and show its `backticked` spans as code."""
+    """Escape ``text``, show its `backticked` spans as code and keep its options and ids whole
+    (:data:`_WHOLE`)."""
     import re
 
     import markupsafe
 
-    return markupsafe.Markup(re.sub(r"`([^`]+)`", r"<code>\1</code>", str(markupsafe.escape(text))))
+    out = re.sub(r"`([^`]+)`", r"<code>\1</code>", str(markupsafe.escape(text)))
+    return markupsafe.Markup(_keep_whole(out))
+
+
+#: the longest word a report never breaks across lines (an id, a time, an option such as
+#: ``--out``, a short path); a longer one (a long path) breaks where the line ends
+NOWRAP_CHARS = 20
+
+
+def _words(text):
+    """Escape ``text`` and keep each of its words of at most :data:`NOWRAP_CHARS` characters on
+    one line (``<span class="nb">``): a table cell or a command line breaks between words, never
+    inside a hole id or at the ``-`` of ``--out``. The text is unchanged (to copy)."""
+    import markupsafe
+
+    return markupsafe.Markup(" ").join(markupsafe.Markup('<span class="nb">{}</span>').format(w)
+                                      if 0 < len(w) <= NOWRAP_CHARS else markupsafe.escape(w)
+                                      for w in str(text).split(" "))
 
 
 def write_report(path, title: str, run: RunInfo, sections) -> Path:

@@ -16,6 +16,12 @@ def utc(t_s: float) -> str:
     return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def _when(t_s: float) -> str:
+    """UTC of seconds since the epoch as two words, date and time (a table's cell may break
+    between them on a phone; the header says UTC)."""
+    return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+
+
 def _judged(report) -> str:
     s = report.result.summary
     if s.judged_after and not s.judged_before:
@@ -183,13 +189,14 @@ def measure_section(report):
                     tuple(counts), note),
               Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Cpk",
                     ("cell", "p50 before", "p50 after", "p99 after", "Cpk"), tuple(angles))]
-    worst = tuple((w["hole_id"], w["cell"] or "-", w["panel"] or "-", utc(w["time_s"]), f"{w['angle_deg']:.4f}",
+    worst = tuple((w["hole_id"], f"{w['cell'] or '-'} {w['panel'] or '-'}", _when(w["time_s"]), f"{w['angle_deg']:.4f}",
                    f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
-    tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell", "panel", "time", "angle [deg]",
+    tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
-        tables.append(Table("Drift alarms", ("cell", "alarm at", "change from", "size [µm]", "one sensor alone [µm]"),
-                            tuple((a.cell, f"{a.hole_id} ({utc(a.time_s)})", f"{a.start_hole_id}", f"{a.size_um:+.1f}",
+        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "size [µm]",
+                                             "one sensor alone [µm]"),
+                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.size_um:+.1f}",
                                    ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
     limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
               "in the spots' spread over the radius (docs/measure.md gives its size)",

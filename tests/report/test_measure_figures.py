@@ -64,3 +64,61 @@ def test_the_figure_states_where_its_line_shows_and_the_png_agrees():
         box = img[int(y0):int(np.ceil(y1)) + 1, int(x0):int(np.ceil(x1)) + 1]
         near = np.linalg.norm(box - np.array(to_rgb(colour)), axis=-1) < 0.3
         assert near.any() == present, (x0, y0, x1, y1, colour, present)
+
+
+def _png_size(uri):
+    import struct
+
+    png = base64.b64decode(uri.split(",", 1)[1])
+    return struct.unpack(">II", png[16:24])
+
+
+def test_every_figure_has_a_phone_version_with_its_text_at_9_px_or_more():
+    """At a 412 px window the page's column is 394 px: a 960 px figure would show its 12 px text
+    at 5 px. Each figure is drawn again 380 px wide, its text as large in its pixels, and long
+    axis labels wrapped onto more lines so none runs off the figure."""
+    from metrology.report.html import NARROW_IN, figure_from_matplotlib
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    for ax in axes:
+        ax.plot([0, 1], [0, 1])
+        ax.set_xlabel("angle between the drill axis and the measured normal [deg]")
+        ax.set_ylabel("share of holes per bin [1]")
+    f = figure_from_matplotlib(fig, "three panels")
+    assert f.narrow_uri.startswith("data:image/png;base64,")
+    w, _ = _png_size(f.narrow_uri)
+    assert w == round(NARROW_IN * 96) <= 394
+    assert _png_size(f.data_uri)[0] == 960
+    assert f.min_font_px >= 12.0  # 9 pt at 96 px per inch, in both images: >= 9 px on a 360 px phone too
+
+
+def test_the_narrow_figure_wraps_a_label_longer_than_its_axes():
+    from metrology.report.html import _narrow
+    from metrology.report.style import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 2.6))
+    ax.plot([0, 1], [0, 1])
+    ax.set_xlabel("hours since the first charted hole, 2026-11-25T07:40:01Z (after the cell's 1000 baseline holes)")
+    _narrow(fig)
+    r = fig.canvas.get_renderer()
+    assert "\n" in ax.get_xlabel()
+    assert ax.xaxis.label.get_window_extent(r).width <= fig.get_size_inches()[0] * fig.dpi
+    plt.close(fig)
+
+
+def test_table_cells_and_the_command_line_break_between_words_only():
+    """A hole id, a time's date and an option such as ``--out`` are kept whole (a no-wrap span);
+    a path longer than a phone's line may still break."""
+    from metrology.report.html import RunInfo, Section, Table, Verdict, render_html
+
+    long_path = "/tmp/" + "x" * 40 + "/log.csv"
+    page = render_html("t", RunInfo(command=f"metro measure {long_path} --out r.parquet"),
+                       [Section("s", Verdict(True, "ok"), tables=(Table("worst", ("hole", "time [UTC]"),
+                                                                        (("C1-00018770", "2026-11-26 13:16:54"),)),))])
+    assert '<td><span class="nb">C1-00018770</span></td>' in page
+    assert '<span class="nb">2026-11-26</span> <span class="nb">13:16:54</span>' in page
+    assert page.count('<span class="nb">--out</span>') == 2  # the header and the "what was run" table
+    assert f" {long_path} " in page  # too long to keep whole
