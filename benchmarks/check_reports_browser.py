@@ -150,7 +150,7 @@ WORD_CHARS = 20
 
 #: added to a copy of the page: measures the layout once the page has loaded and writes the
 #: result, as JSON, into a <pre id="metro-check"> that --dump-dom prints
-MEASURE = """<script>
+MEASURE = r"""<script>
 window.addEventListener("load", () => {
   const out = {window: window.innerWidth, page: document.documentElement.scrollWidth, clipped: [], figures: []};
   for (const el of document.querySelectorAll("pre, p, li, td, th, caption, figcaption, h1, h2, h3, div, table")) {

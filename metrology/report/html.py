@@ -90,9 +90,9 @@ class Verdict:
     ok : True (within tolerance), False (not), None (no tolerance applies: information)
     headline : str, one sentence (the numbers against the tolerance)
     cause : str, the cause named (or why it passed); empty when there is nothing to add
-    label : str, the verdict's words when the default ones (from ``ok``) would say less or
-        something else: what was found where no tolerance was stated ("flat within the
-        noise"), or the cause named before the tolerance ("cause: drift on L3; ...")
+    label : str, the finding, shown beside the verdict's word (never instead of it): what was
+        found where no tolerance was stated ("flat within the noise"), the cause named ("cause:
+        drift on L3"), the drift alarms; the demo's overview gives it after the word
     checks : tuple of (tag, words), one line per judged quantity, each coloured by its tag:
         ``pass``, ``FAIL`` (a limit the user set), ``info`` or ``note`` (information within
         or beyond a limit the user did not set) (:func:`metrology.report.verdicts.check_words`)
@@ -106,7 +106,12 @@ class Verdict:
 
     @property
     def word(self) -> str:
-        return self.label or WORDS[self.ok]
+        """passed, FAILED or information: the terminal's word (:func:`metrology.report.verdicts.verdict_word`)."""
+        return WORDS[self.ok]
+
+    @property
+    def finding(self) -> str:
+        return self.label
 
 
 #: the verdict's words: passed (every gating check passed), FAILED, information (nothing gated)
@@ -114,13 +119,12 @@ WORDS = {True: "passed", False: "FAILED", None: "information"}
 
 
 def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
-    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`: passed or
-    FAILED when a check gates, information when none does; one line per check."""
-    from metrology.report.verdicts import check_words
+    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`, in the
+    terminal's words (:func:`metrology.report.verdicts.verdict_word`); one line per check."""
+    from metrology.report.verdicts import check_words, verdict_word
 
-    gated = any(c.gate for c in verdict.checks)
-    return Verdict(verdict.passed if gated else None, headline, cause, label,
-                   tuple(check_words(c) for c in verdict.checks))
+    ok = {"passed": True, "FAILED": False, "information": None}[verdict_word(verdict)]
+    return Verdict(ok, headline, cause, label, tuple(check_words(c) for c in verdict.checks))
 
 
 @dataclass(frozen=True)

@@ -48,10 +48,12 @@ def _sha(path) -> str:
 
 
 def verdict_word(html: str) -> str:
-    """The words of the page's first verdict box (the overall one when there are several sections)."""
-    m = re.search(r'<p class="word">(.*?)</p>', html, re.S)
+    """What the page's first verdict box (the overall one when there are several sections) says
+    first: its finding when it has one (beside the word passed, FAILED or information), else the
+    word."""
+    m = re.search(r'<p class="word">(.*?)</p>\s*(?:<p class="finding">(.*?)</p>)?', html, re.S)
     assert m, "no verdict"
-    return html_lib.unescape(m.group(1)).strip()
+    return html_lib.unescape(re.sub(r"<[^>]+>", "", m.group(2) or m.group(1))).strip()
 
 
 def check_page(path, inputs, n_figures, verdict):
