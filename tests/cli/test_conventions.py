@@ -296,3 +296,17 @@ def test_follow_on_a_planned_file_says_waiting_for_readings(tmp_path):
     lines = r.stdout.splitlines()
     assert len(lines) == 6 and all(": waiting for readings" in line for line in lines)
     assert r.stderr.startswith("error: ") and "none with a reading yet" in r.stderr
+
+
+@pytest.mark.parametrize("name", ["", *COMMANDS])
+def test_help_keeps_every_word_in_square_brackets(name):
+    """rich reads ``[certificate]`` as a style tag and drops it: every bracketed word of a help
+    text (an option's, the command's) shows in ``--help`` as written."""
+    r = runner.invoke(app, [name, "--help"] if name else ["--help"], env={"COLUMNS": "2000"})
+    assert r.exit_code == 0, r.output
+    shown = " ".join(r.output.replace("│", " ").split())
+    cmd = get_command(app).commands[name] if name else get_command(app)
+    texts = [p.help for p in cmd.params if getattr(p, "help", None)] + ([cmd.help] if name and cmd.help else [])
+    for text in texts:
+        for word in re.findall(r"\[[a-z#/@][^\[\]]*\]", text.replace("\\[", "[")):
+            assert word in shown, (name, word)
