@@ -322,22 +322,25 @@ def _relayout(fig) -> None:
 
 
 def _wrap_long_labels(fig) -> bool:
-    """Wrap each axis label and title wider than its axes (a y label: taller) at spaces; True
-    when one was."""
+    """Wrap each axis label and title wider than its axes (a y label: taller), and the figure's
+    title wider than the figure, at spaces; True when one was."""
     import textwrap
 
     renderer = fig.canvas.get_renderer()
     changed = False
+    width = fig.get_size_inches()[0] * fig.dpi * 0.96
+    boxes = [(fig._suptitle, width, "width")] if fig._suptitle is not None else []
     for ax in fig.axes:
         box = ax.get_window_extent(renderer)
-        for text, room, along in ((ax.xaxis.label, box.width, "width"), (ax.title, box.width, "width"),
-                                  (ax.yaxis.label, box.height, "height")):
-            s = text.get_text()
-            size = getattr(text.get_window_extent(renderer), along)
-            if s and "\n" not in s and size > room > 0:
-                chars = max(8, int(len(s) * room / size * 0.95))
-                text.set_text(textwrap.fill(s, chars))
-                changed = True
+        boxes += [(ax.xaxis.label, box.width, "width"), (ax.title, box.width, "width"),
+                  (ax.yaxis.label, box.height, "height")]
+    for text, room, along in boxes:
+        lines = text.get_text().split("\n")
+        size = getattr(text.get_window_extent(renderer), along)
+        if any(lines) and size > room > 0:
+            chars = max(8, int(max(map(len, lines)) * room / size * 0.95))
+            text.set_text("\n".join(textwrap.fill(line, chars) for line in lines))
+            changed = True
     return changed
 
 
