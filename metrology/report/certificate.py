@@ -180,8 +180,7 @@ def certificate_section(cert: Certificate):
                        " (the file has no covariance: its direction_stderr_deg)."),
     )
     return Section("Calibration certificate", Verdict(None, f"{cert.number}: calibrated layout "
-                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…",
-                                                            label="certificate"),
+                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…"),
                    tables=(Table("Certificate", ("field", "value"), tuple(head), wrap=True),
                            Table(f"Calibrated values, standard uncertainty u (1 σ) and expanded uncertainty U "
                                  f"(k = {COVERAGE_K:g})", ("sensor", "parameter", "value", "u", "U", "unit"), rows),
