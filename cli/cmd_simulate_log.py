@@ -38,8 +38,9 @@ def register(app: typer.Typer) -> None:
                                        "[-SPIN, SPIN], deg."),
         patch_mm: float = typer.Option(400.0, "--patch-mm", help="Side of the square the drilling points cover, mm."),
         holes_per_hour: float = typer.Option(600.0, "--holes-per-hour", help="Each cell's drilling rate."),
-        drift: Optional[List[str]] = typer.Option(None, "--drift", help="[CELL/]SENSOR:MM_PER_HOUR[@HOLE]: a slow "
-                                                  "zero drift from hole HOLE (counted from 1); repeatable."),
+        drift: Optional[List[str]] = typer.Option(None, "--drift", help="[CELL/]SENSOR:MM_PER_HOUR, then "
+                                                  "@HOLE or none (L2:0.002@5000): a slow zero drift from hole HOLE (counted from 1; "
+                                                  "none: from the first); repeatable."),
         shift: Optional[List[str]] = typer.Option(None, "--shift", help="[CELL/]SENSOR:MM@HOLE: a knocked sensor, "
                                                   "its zero jumps by MM at hole HOLE; repeatable."),
         gross_rate: float = typer.Option(0.0, "--gross-rate", help="Probability that a reading is gross "
