@@ -38,9 +38,9 @@ def test_all_conform_exits_0_with_a_passed_verdict(tmp_path, layout):
     assert s["judged"] == {"after_adjustment": 300, "before_adjustment": 0}
     assert {c["name"] for c in s["verdict"]["checks"]} >= {"drilling tolerance: holes that fail"}
     t = pq.read_table(tmp_path / "h.parquet")
-    assert t.column_names[:12] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
-                                   "angle_after_deg", "U95_after_deg", "fit_residual_um", "sensors_used", "status",
-                                   "reason"]
+    assert t.column_names[:13] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
+                                   "angle_after_deg", "U95_after_deg", "fit_residual_um", "fit_residual_after_um",
+                                   "sensors_used", "status", "reason"]
     assert t.num_rows == 300
 
 
