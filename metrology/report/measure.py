@@ -34,6 +34,17 @@ def _alarm_words(a) -> str:
             f"reading cannot tell which of the 4): {a.advice}")
 
 
+def _ppk(fig: dict, short: bool = False) -> str:
+    """The judged angle's Ppk with its 95 % interval, or why there is none."""
+    p = fig.get("ppk", float("nan"))
+    if not np.isfinite(p):
+        from metrology.measure.summary import MIN_PPK_HOLES
+
+        return "-" if short else f"Ppk - (fewer than {MIN_PPK_HOLES:,} holes)"
+    lo, hi = fig["ppk_ci95"]
+    return f"{p:.3g} [{lo:.3g}, {hi:.3g}]" if short else f"Ppk {p:.3g} (95 % CI {lo:.3g} to {hi:.3g})"
+
+
 def _q(fig: dict, which: str, key: str) -> str:
     v = fig[f"quantiles_{which}_deg"][key]
     return "-" if not np.isfinite(v) else f"{v:.4g}"
@@ -60,8 +71,9 @@ def measure_text(report) -> str:
               f"p99.9 {_q(fig, 'before', 'p99.9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
               f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg, Cpk {fig['cpk']:.3g} "
-              f"(one-sided, against {report.tolerance_deg:g} deg)",
+              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+              f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
+              f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " only (the layout has no calibration covariance)") + ", 95 %"]
     ch = report.chart
@@ -151,13 +163,14 @@ def measure_section(report):
         counts.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
                        f"{k['undecided']:,}", f"{k['not_measured']:,}"))
         angles.append((cell or "-", _q(f, "before", "p50"), _q(f, "after", "p50"), _q(f, "after", "p99"),
-                       "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
+                       _ppk(f, short=True)))
     note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
             f"per panel and day (UTC): {len(s.groups)} groups in --json")
     tables = [Table("Holes by status, per cell", ("cell", "holes", "conform", "fail", "undecided", "not measured"),
                     tuple(counts), note),
-              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Cpk",
-                    ("cell", "p50 before", "p50 after", "p99 after", "Cpk"), tuple(angles))]
+              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Ppk "
+                    "(ISO 22514-2 percentile method, one-sided upper) with its 95 % bootstrap interval",
+                    ("cell", "p50 before", "p50 after", "p99 after", "Ppk [95 % CI]"), tuple(angles))]
     worst = tuple((w["hole_id"], w["cell"] or "-", w["panel"] or "-", utc(w["time_s"]), f"{w['angle_deg']:.4f}",
                    f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell", "panel", "time", "angle [deg]",
