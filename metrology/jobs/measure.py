@@ -53,6 +53,9 @@ class MeasureReport:
         checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
                   Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
                         "holes", c["undecided"] == 0),
+                  Check("drilling tolerance: holes whose drilled angle is not known (a gross reading before or after "
+                        "the adjustment: re-inspect)", self.result.summary.unknown_after, 0, "holes",
+                        self.result.summary.unknown_after == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
         return Verdict(tuple(checks))
@@ -76,6 +79,7 @@ class MeasureReport:
             "partitions": self.result.partitions,
             "partitions_written": self.result.written,
             "counts": self.counts,
+            "counts_detail": {"unknown_after": s.unknown_after},
             "fleet": s.figures(s.total()),
             "cells": series,
             "groups": groups,

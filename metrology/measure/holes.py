@@ -100,6 +100,8 @@ class HoleBatch:
     judged_u95 : (N,) float, rad
     angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
     disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
+    unknown_after : (N,) bool, holes not measured after the adjustment for a gross reading (rules 2, 3):
+        their drilled angle is not known
     chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
         ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
     """
@@ -112,6 +114,7 @@ class HoleBatch:
     angle_after: np.ndarray
     chart: dict
     disagree: np.ndarray | None = None
+    unknown_after: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -356,5 +359,6 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
              "signature": before.signature[idx]}
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
+    unknown = (judge_after & (after.disagree | poses) & (code == 3)) if after is not None else np.zeros(N, bool)
     return HoleBatch(out, code, judged, judged_u, before.angle,
-                     after.angle if after is not None else np.full(N, np.nan), chart, disagree)
+                     after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)

@@ -151,6 +151,7 @@ class FleetSummary:
     series : dict, cell -> Group (with histograms)
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
+    unknown_after : int, holes not measured after the adjustment for a gross reading (drilled angle not known)
     """
 
     tolerance_deg: float
@@ -160,6 +161,7 @@ class FleetSummary:
     judged_after: int = 0
     judged_before: int = 0
     disagree: int = 0
+    unknown_after: int = 0
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
@@ -193,6 +195,7 @@ class FleetSummary:
         self.judged_after += int((ok & after).sum())
         self.judged_before += int((ok & ~after).sum())
         self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
+        self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -216,6 +219,7 @@ class FleetSummary:
         self.judged_after += other.judged_after
         self.judged_before += other.judged_before
         self.disagree += other.disagree
+        self.unknown_after += other.unknown_after
         self.worst = sorted(self.worst + other.worst,
                             key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
 

@@ -72,3 +72,24 @@ def test_no_gross_reading_no_hole_flagged_on_curved_panels(panel):
     """The before/after rule allows for what the panel's curvature does between the two poses."""
     chunk, b, status, reason = _measure(_spec(panel), 4000, 13)
     assert np.sum(status == "not_measured") == 0, reason[status == "not_measured"][:3]
+
+
+def test_holes_whose_drilled_angle_is_unknown_fail_the_verdict(tmp_path):
+    """Among the holes not measured after the adjustment are holes truly drilled out of tolerance
+    (a gross before-reading turned the cell the wrong way): the verdict does not hide them."""
+    import pyarrow.csv as pcsv
+
+    from metrology.io.layout import layout_to_toml
+    from metrology.jobs.measure import measure_files
+
+    spec = replace(_spec(make_panel("flat")), gross_rate=0.01)
+    (chunk,) = list(simulate_cell(spec, 14, 0, 3000, chunk_holes=3000))
+    pcsv.write_csv(log_table(chunk), tmp_path / "log.csv")
+    (tmp_path / "L.toml").write_text(layout_to_toml(spec.cell_layout))
+    rep = measure_files(tmp_path / "log.csv", tmp_path / "L.toml", out=tmp_path / "h.csv")
+    assert (chunk.true_after > TOL).sum() > 5
+    s = rep.result.summary
+    assert s.unknown_after > 0 and s.unknown_after <= rep.counts["not_measured"]
+    check = [c for c in rep.verdict.checks if "drilled angle is not known" in c.name]
+    assert len(check) == 1 and check[0].value == s.unknown_after and not rep.verdict.passed
+    assert "unknown_after" in str(rep.to_dict()["counts_detail"])
