@@ -106,7 +106,21 @@ def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = 
         log = HoleLog(str(p), suffix[1:], (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
     for part in log.partitions:
         _check_columns(log, part, _column_names(log, part))
+    if not any(_has_rows(log, part) for part in log.partitions):
+        raise ValueError(f"{name}: the log has no rows (a header only): no hole to measure")
     return log
+
+
+def _has_rows(log, part) -> bool:
+    """Whether the partition holds a row: a CSV a non-blank line after its header, a Parquet file
+    a row in its metadata (read before any work, so an empty log is refused before anything is written)."""
+    if log.kind == "csv":
+        with open(part.path, "rb") as fh:
+            fh.readline()
+            return any(line.strip() for line in fh)
+    import pyarrow.parquet as pq
+
+    return pq.ParquetFile(part.path).metadata.num_rows > 0
 
 
 def batch_of(table, sensors, name: str = "<memory>"):

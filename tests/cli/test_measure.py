@@ -151,3 +151,22 @@ def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):
     assert r.exit_code == 2
     assert "the readings of 100 of 100 holes disagree with one plane" in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["csv", "parquet"])
+@pytest.mark.parametrize("extra", [[], ["--out", "h.csv"], ["--out", "h.parquet", "--report", "r.html"], ["--json", "--out", "h.csv"]])
+def test_a_log_without_rows_is_one_line_naming_the_log(tmp_path, layout, kind, extra):
+    header = ["hole_id", "time", "d_L1", "d_L2", "d_L3", "d_L4"]
+    if kind == "csv":
+        log = tmp_path / "empty.csv"
+        log.write_text(",".join(header) + "\n")
+    else:
+        log = tmp_path / "empty.parquet"
+        pq.write_table(pa.table({c: pa.array([], pa.string() if c in ("hole_id", "time") else pa.float64())
+                                 for c in header}), log)
+    extra = [str(tmp_path / a) if a.endswith((".csv", ".parquet", ".html")) else a for a in extra]
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), *extra])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(log) in lines[0] and "no rows" in lines[0], r.stderr
+    assert "Traceback" not in r.output and not any(p.name.startswith(("h.", "r.")) for p in tmp_path.iterdir())
