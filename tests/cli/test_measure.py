@@ -170,3 +170,14 @@ def test_a_log_without_rows_is_one_line_naming_the_log(tmp_path, layout, kind, e
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and str(log) in lines[0] and "no rows" in lines[0], r.stderr
     assert "Traceback" not in r.output and not any(p.name.startswith(("h.", "r.")) for p in tmp_path.iterdir())
+
+
+def test_a_layout_that_is_not_text_names_the_file(tmp_path):
+    from pathlib import Path
+
+    log = _log(tmp_path, n=30)
+    ply = Path(__file__).resolve().parents[2] / "metrology" / "data" / "measured" / "datum.ply"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(ply), "--out", str(tmp_path / "h.csv")])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(ply) in lines[0] and "TOML" in lines[0] and "codec" not in lines[0], r.stderr
