@@ -100,8 +100,8 @@ class HoleBatch:
     judged_u95 : (N,) float, rad
     angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
     disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
-    unknown_after : (N,) bool, holes not measured after the adjustment for a gross reading (rules 2, 3):
-        their drilled angle is not known
+    unknown_after : (N,) bool, holes not measured after the adjustment by rule 3 alone (neither pose's
+        own misfit says which readings are gross): their drilled angle is not known, and may be out of tolerance
     chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
         ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
     """
@@ -359,6 +359,9 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
              "signature": before.signature[idx]}
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
-    unknown = (judge_after & (after.disagree | poses) & (code == 3)) if after is not None else np.zeros(N, bool)
+    # rule 3's holes, where no pose's own misfit (rule 2) tells which readings are gross: a gross
+    # before-reading (the cell turned the wrong way: a hole truly out of tolerance) cannot be ruled out
+    unknown = (judge_after & poses & ~after.disagree & ~before.disagree & (code == 3)) if after is not None \
+        else np.zeros(N, bool)
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)

@@ -181,3 +181,23 @@ def test_a_layout_that_is_not_text_names_the_file(tmp_path):
     assert r.exit_code == 2, r.output
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and str(ply) in lines[0] and "TOML" in lines[0] and "codec" not in lines[0], r.stderr
+
+
+def test_a_closed_pipe_is_quiet(tmp_path, layout):
+    """`metro measure log.csv --layout L | head -1`: the reader went away; not bad input."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    log = _log(tmp_path, n=3000)
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "-q", "measure", str(log), "--layout", str(layout)],
+                         cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "COLUMNS": "200"})
+    first = p.stdout.readline()
+    p.stdout.close()  # as head -1 does
+    err = p.stderr.read().decode()
+    code = p.wait(timeout=120)
+    assert first.startswith(b"\"hole_id\"")
+    assert "error" not in err and "Broken pipe" not in err and "Traceback" not in err, err
+    assert code == 128 + 13  # as a process killed by SIGPIPE, what a shell shows for a closed pipe
