@@ -201,3 +201,25 @@ def test_a_closed_pipe_is_quiet(tmp_path, layout):
     assert first.startswith(b"\"hole_id\"")
     assert "error" not in err and "Broken pipe" not in err and "Traceback" not in err, err
     assert code == 128 + 13  # as a process killed by SIGPIPE, what a shell shows for a closed pipe
+
+
+def test_a_run_killed_mid_write_leaves_nothing_the_next_run_keeps(tmp_path, layout):
+    """`kill -9` while --out k.parquet is being written leaves its temporary; the next run clears it."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    log = _log(tmp_path, n=200)
+    out = tmp_path / "k.parquet"
+    root = Path(__file__).resolve().parents[2]
+    killed = subprocess.run([sys.executable, "-c", (
+        "import os, signal, pyarrow as pa\n"
+        "from metrology.io.holeout import TableSink\n"
+        f"s = TableSink({str(out)!r}).__enter__()\n"
+        "s.write(pa.table({'a': list(range(1000))}))\n"
+        "os.kill(os.getpid(), signal.SIGKILL)\n")], cwd=root)
+    assert killed.returncode == -9
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".k.parquet.")]  # the temporary it left
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(out)])
+    assert r.exit_code in (0, 1), r.output
+    assert out.exists() and not [p.name for p in tmp_path.iterdir() if p.name.startswith(".k.parquet.")]
