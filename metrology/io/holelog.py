@@ -12,7 +12,8 @@ per file, with its hive keys such as ``cell=C1/date=2026-11-25``), each read in 
 ``hole_id`` as string, readings as float64 mm (NaN for blanks), and three columns added for
 metro's own use (:data:`INTERNAL`, dropped before results are written): ``_metro_time_s`` (float
 seconds since 1970-01-01 UTC), ``_metro_cell`` and ``_metro_panel`` (strings, "" when the log has
-none). Every column of the log stays as it was read.
+none). Every column of the log stays as it was read, but ``time`` read as text (a CSV's),
+which becomes a timestamp (UTC, to the microsecond).
 
 Errors are one line naming the file (and line or partition) and what was expected; pyarrow is
 imported only here, when a log is read.
@@ -324,6 +325,10 @@ def _normalise(log, part, table, first_row):
     if bad.size:
         raise ValueError(f"{_row(log, part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
     cols[TIME_S] = pa.array(time_s)
+    if not (pa.types.is_timestamp(table.column("time").type) or pa.types.is_integer(table.column("time").type)
+            or pa.types.is_floating(table.column("time").type)):
+        # text (a CSV's ISO 8601 or seconds): a timestamp, written back as one (UTC, to the microsecond)
+        cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
     for c, name in (("cell", CELL), ("panel", PANEL)):
         cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
     nulls = cols["hole_id"].null_count

@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
@@ -223,3 +225,26 @@ def test_a_run_killed_mid_write_leaves_nothing_the_next_run_keeps(tmp_path, layo
     r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(out)])
     assert r.exit_code in (0, 1), r.output
     assert out.exists() and not [p.name for p in tmp_path.iterdir() if p.name.startswith(".k.parquet.")]
+
+
+@pytest.mark.parametrize("times", ["iso", "seconds"])
+def test_time_from_a_csv_log_is_written_as_a_timestamp(tmp_path, layout, times):
+    import datetime as dt
+
+    import pyarrow.csv as pcsv
+
+    cols, _, _ = hole_log(calibrated_layout(), n=20)
+    t0 = 1795586401.25
+    cols["time"] = [(dt.datetime.fromtimestamp(t0 + 60 * i, dt.timezone.utc).isoformat() if times == "iso"
+                     else f"{t0 + 60 * i:.3f}") for i in range(20)]
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.parquet")])
+    assert r.exit_code in (0, 1), r.output
+    t = pq.read_table(tmp_path / "h.parquet").column("time")
+    assert pa.types.is_timestamp(t.type) and t.type.tz == "UTC"
+    got = t.cast(pa.int64()).to_numpy() / {"s": 1, "ms": 1e3, "us": 1e6, "ns": 1e9}[t.type.unit]
+    assert got == pytest.approx(t0 + 60 * np.arange(20), abs=1e-6)
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv")])
+    back = pcsv.read_csv(tmp_path / "h.csv").column("time")
+    assert pa.types.is_timestamp(back.type)  # written as a timestamp, read back as one (not quoted text)
+    assert '"2026-' not in (tmp_path / "h.csv").read_text()
