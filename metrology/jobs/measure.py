@@ -53,8 +53,8 @@ class MeasureReport:
         checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
                   Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
                         "holes", c["undecided"] == 0),
-                  Check("drilling tolerance: holes whose drilled angle is not known (the readings before and after "
-                        "the adjustment disagree, a gross reading in either: re-inspect)", self.result.summary.unknown_after, 0, "holes",
+                  Check("drilling tolerance: holes whose drilled angle is not known (not measured after the adjustment, "
+                        "the readings before it not sound: re-inspect)", self.result.summary.unknown_after, 0, "holes",
                         self.result.summary.unknown_after == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]

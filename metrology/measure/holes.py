@@ -16,7 +16,7 @@ threshold and reason:
    whose after-readings are sound is judged on the after-readings (the cell turned the wrong way:
    the after-readings measure what it drilled).
 3. ``NOT_MEASURED`` after the adjustment, the readings before and after it disagree (4 sensors,
-   both poses read on all 4): the same spot of the same panel gives both misfits, so they differ
+   both poses read on all 4, neither named gross by rule 2): the same spot of the same panel gives both misfits, so they differ
    only by what the panel's curvature does as the head tilts, at most
    ``|M_after - M_before|_* / (2 R) + TILT_ALLOWANCE alpha^2 max(|M|_*) / (2 R)`` (``alpha`` the
    larger angle of the two), and by their noise: more than :data:`GROSS_SIGMAS` sigmas beyond
@@ -100,8 +100,9 @@ class HoleBatch:
     judged_u95 : (N,) float, rad
     angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
     disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
-    unknown_after : (N,) bool, holes not measured after the adjustment by rule 3 alone (neither pose's
-        own misfit says which readings are gross): their drilled angle is not known, and may be out of tolerance
+    unknown_after : (N,) bool, holes not measured after the adjustment whose before-readings do not rule
+        out a wrong turn of the cell (rule 3's; before-readings gross or too few): their drilled angle is not
+        known, and may be out of tolerance
     chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
         ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
     """
@@ -303,7 +304,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         for i in np.flatnonzero((after.reason != "") & judge_after):
             reason[i] = (reason[i] + "; " if reason[i] else "") + "after the adjustment: " + after.reason[i]
         poses, diff = _poses_disagree(before, after, settings)
-        poses &= judge_after
+        poses &= judge_after & ~before.disagree & ~after.disagree  # rule 2 named the gross pose: no doubt left
         for i in np.flatnonzero(poses):
             reason[i] = (reason[i] + "; " if reason[i] else "") + (
                 f"not measured after the adjustment: the misfits before and after it differ by {diff[i] * 1e3:.1f} µm, "
@@ -359,9 +360,11 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
              "signature": before.signature[idx]}
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
-    # rule 3's holes, where no pose's own misfit (rule 2) tells which readings are gross: a gross
-    # before-reading (the cell turned the wrong way: a hole truly out of tolerance) cannot be ruled out
-    unknown = (judge_after & poses & ~after.disagree & ~before.disagree & (code == 3)) if after is not None \
-        else np.zeros(N, bool)
+    # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
+    # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
+    unknown = np.zeros(N, bool)
+    if after is not None:
+        unknown = (code == 3) & judge_after & (poses | ~np.isfinite(before.angle))
+        unknown[dup] = False
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)

@@ -151,7 +151,7 @@ class FleetSummary:
     series : dict, cell -> Group (with histograms)
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
-    unknown_after : int, holes not measured after the adjustment by rule 3 alone (drilled angle not known)
+    unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     """
 
     tolerance_deg: float
