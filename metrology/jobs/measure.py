@@ -124,10 +124,11 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False) -> MeasureReport:
+                  chart_by_panel: bool = False, per_hole: bool = True) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
-    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask.
+    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask. With
+    ``per_hole`` False and no ``out`` nothing per hole is written (``--json`` alone: the summary).
 
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
@@ -205,6 +206,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         engine = "one process"
         if output is not None:
             result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)
+        elif target is None and not per_hole:
+            result = measure_log(log, layout, settings, progress=tick, by_panel=chart_by_panel)
+            _check_fit(result, shown_layout, min_radius_mm)
         else:
             with TableSink(target) as sink:
                 result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
@@ -219,5 +223,6 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         from metrology.report.measure import measure_section
 
         paths = {"log": log_path, "layout": layout_path} if log_display is None else {"layout": layout_path}
-        write_text(report_html, render_html("Hole measurement", run_info(paths, command), [measure_section(report)]))
+        write_text(report_html, render_html("Hole measurement", run_info(paths, command, extra_versions=("pyarrow", "dask")),
+                                            [measure_section(report)]))
     return report

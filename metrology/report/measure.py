@@ -62,6 +62,9 @@ def measure_text(report) -> str:
              f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
+             *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
+                f"partition(s) kept as an earlier run wrote them, {report.result.written} written"]
+               if report.sources.get("out") and report.result.written < report.result.partitions else []),
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
     for k in ("conforms", "fails", "undecided", "not_measured"):
@@ -113,6 +116,10 @@ def _hist_figure(report):
             ax.step(centres, h / h.sum(), where="mid", label=label)
     ax.axvline(report.tolerance_deg, color="k", ls="--", lw=1, label=f"tolerance {report.tolerance_deg:g} deg")
     ax.set_xscale("log")
+    seen = np.flatnonzero(tot.hist_before[1:] + tot.hist_after[1:])  # the axis spans the angles measured
+    if seen.size:
+        ax.set_xlim(EDGES_DEG[1:][seen[0]] / 1.5, max(EDGES_DEG[1:][min(seen[-1] + 1, len(EDGES_DEG) - 2)] * 1.5,
+                                                         2 * report.tolerance_deg))
     ax.set_xlabel("angle between drill axis and measured normal [deg]")
     ax.set_ylabel("share of holes per bin [1]")
     ax.legend()

@@ -248,3 +248,43 @@ def test_time_from_a_csv_log_is_written_as_a_timestamp(tmp_path, layout, times):
     back = pcsv.read_csv(tmp_path / "h.csv").column("time")
     assert pa.types.is_timestamp(back.type)  # written as a timestamp, read back as one (not quoted text)
     assert '"2026-' not in (tmp_path / "h.csv").read_text()
+
+
+def test_json_without_out_prints_the_summary_only(tmp_path, layout):
+    log = _log(tmp_path, n=50, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)  # the summary alone: no per-hole CSV mixed in
+    assert s["holes"] == 50 and s["sources"]["out"] is None
+    assert not [p for p in tmp_path.iterdir() if p.suffix in (".csv", ".parquet") and p != log]
+
+
+def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
+    root = tmp_path / "fleet"
+    cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
+    t = pa.table(cols)
+    for cell in ("C1", "C2"):
+        (root / f"cell={cell}").mkdir(parents=True)
+        pq.write_table(t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"]),
+                       root / f"cell={cell}" / "part-0.parquet")
+    out = tmp_path / "out"
+    args = ["measure", str(root), "--layout", str(layout), "--out", str(out)]
+    assert runner.invoke(app, args).exit_code == 0
+    (out / "cell=C2" / "part-0.parquet").unlink()
+    r = runner.invoke(app, args)
+    assert "resumed: 1 of 2 partition(s) kept as an earlier run wrote them, 1 written" in r.output, r.output
+
+
+def test_report_histogram_axis_ends_near_the_largest_angle_and_versions_name_pyarrow_dask(tmp_path, layout):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from metrology.jobs.measure import measure_files
+    from metrology.report.measure import _hist_figure
+
+    log = _log(tmp_path, n=300, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    rep = measure_files(log, layout, out=tmp_path / "h.csv", report_html=tmp_path / "r.html")
+    hi = _hist_figure(rep).axes[0].get_xlim()[1]
+    assert 4 <= hi <= 12, hi  # the largest angle is 4 deg: not 100
+    html = (tmp_path / "r.html").read_text()
+    assert "pyarrow" in html and "dask" in html
