@@ -120,6 +120,22 @@ def _bin_quantiles(hists, q):
     return np.where(lo > 0, np.sqrt(lo * hi), hi / 2)
 
 
+def _interpolated_quantiles(hists, q):
+    """(B,) the ``q`` quantile (deg) of each histogram ``hists (B, len(EDGES_DEG))``, none empty,
+    interpolated within its bin (geometrically; linearly in the first bin, from 0): smooth in the
+    counts, so the bootstrap's interval is not the bins' steps."""
+    cum = np.cumsum(hists, axis=1)
+    target = q * cum[:, -1]
+    k = (cum < target[:, None]).sum(1)
+    rows = np.arange(len(hists))
+    below = np.where(k > 0, cum[rows, np.maximum(k - 1, 0)], 0)
+    frac = np.clip((target - below) / np.maximum(hists[rows, k], 1), 0.0, 1.0)
+    lo = EDGES_DEG[k]
+    hi = EDGES_DEG[np.minimum(k + 1, len(EDGES_DEG) - 1)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lo > 0, lo * (hi / np.where(lo > 0, lo, 1.0)) ** frac, hi * frac)
+
+
 def ppk(hist, tolerance_deg):
     """The percentile-based Ppk of a histogram on :data:`EDGES_DEG` against the upper limit
     ``tolerance_deg`` and its 95 % bootstrap interval: ``(ppk, (lo, hi))``, NaN with fewer than
@@ -130,7 +146,7 @@ def ppk(hist, tolerance_deg):
         return nan, (nan, nan)
 
     def index(h):
-        x50, x99 = _bin_quantiles(h, PPK_Q[0]), _bin_quantiles(h, PPK_Q[1])
+        x50, x99 = _interpolated_quantiles(h, PPK_Q[0]), _interpolated_quantiles(h, PPK_Q[1])
         with np.errstate(divide="ignore", invalid="ignore"):
             return (tolerance_deg - x50) / (x99 - x50)
 
