@@ -16,8 +16,9 @@ threshold and reason:
    whose after-readings are sound is judged on the after-readings (the cell turned the wrong way:
    the after-readings measure what it drilled).
 3. ``NOT_MEASURED`` after the adjustment, the readings before and after it disagree (4 sensors,
-   both poses read on all 4, neither named gross by rule 2): the same spot of the same panel gives both misfits, so they differ
-   only by what the panel's curvature does as the head tilts, at most
+   both poses read on all 4, neither named gross by rule 2): the same spot of the same panel
+   gives both misfits, so they differ only by what the panel's curvature does as the head
+   tilts, at most
    ``|M_after - M_before|_* / (2 R) + TILT_ALLOWANCE alpha^2 max(|M|_*) / (2 R)`` (``alpha`` the
    larger angle of the two), and by their noise: more than :data:`GROSS_SIGMAS` sigmas beyond
    that, one of the 8 readings is gross. Which one is not identifiable (a gross before-reading,
