@@ -92,14 +92,38 @@ def output_path(value, option: str):
         fail(str(exc))
 
 
+#: exit code when the reader of stdout went away (``| head``): a shell's for a process killed by SIGPIPE
+EXIT_CLOSED_PIPE = 128 + 13
+
+
+def closed_pipe() -> None:
+    """stdout's reader has gone (``metro ... | head -1``): not bad input. Quiet, as other tools:
+    no message, exit :data:`EXIT_CLOSED_PIPE`; stdout is pointed at /dev/null so the interpreter's
+    final flush does not complain."""
+    import os
+    import sys
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    raise typer.Exit(EXIT_CLOSED_PIPE)
+
+
 def guarded(fn):
-    """Turn ``ValueError``/``OSError`` from the library into a one-line error, exit 2."""
+    """Turn ``ValueError``/``OSError`` from the library into a one-line error, exit 2; a closed
+    stdout pipe into a quiet exit (:func:`closed_pipe`)."""
+    import errno
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
         except (ValueError, OSError) as exc:
+            if isinstance(exc, BrokenPipeError) or getattr(exc, "errno", None) == errno.EPIPE \
+                    or "[Errno 32] Broken pipe" in str(exc):  # pyarrow's writer re-raises it as an OSError
+                closed_pipe()
             fail(str(exc))
 
     return wrapper

@@ -120,3 +120,6 @@ def register(app: typer.Typer) -> None:
             typer.echo(format_reproduce(summary))
             if fig_dir is not None:
                 typer.echo(f"figures: {', '.join(summary['figures'])}")
+            from metrology.report.verdicts import NO_VERDICT_LINE
+
+            typer.echo(NO_VERDICT_LINE)

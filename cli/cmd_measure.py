@@ -21,7 +21,7 @@ def register(app: typer.Typer) -> None:
                                     "its \\[calibration] covariance is propagated into U95."),
         out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
                                            "partitioned log (one file per partition; a re-run resumes). Default: CSV "
-                                           "on stdout (not with --json)."),
+                                           "on stdout (with --json: none, the summary alone)."),
         tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Perpendicularity tolerance, deg: the "
                                             "largest angle between drill axis and surface normal."),
         min_radius_mm: float = typer.Option(500.0, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
@@ -36,7 +36,7 @@ def register(app: typer.Typer) -> None:
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
                                             "panel (for panels whose shape moves the redundant reading's misfit); "
                                             "misses a drift slower than a panel."),
-        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results only with --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
         qif: Optional[Path] = typer.Option(None, "--qif", help="Also write the per-hole results as a QIF 3.0 "
                                            "Results document (.qif): each hole an angle characteristic with its "
@@ -53,8 +53,6 @@ def register(app: typer.Typer) -> None:
 
         if workers is not None and scheduler is not None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
-        if json_out and out is None:
-            fail("--json prints the summary on stdout: give --out FILE for the per-hole results")
         if log == "-":
             import shutil
             import tempfile
@@ -67,12 +65,12 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>", chart_by_panel, qif)
+                           report, "<stdin>", chart_by_panel, qif, json_out)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None, chart_by_panel, qif)
+                       report, None, chart_by_panel, qif, json_out)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -83,11 +81,11 @@ def register(app: typer.Typer) -> None:
         finish(rep.verdict)
 
     def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
-             chart_by_panel, qif=None):
+             chart_by_panel, qif=None, json_out=False):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
             return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
                                  workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
                                  warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
-                                 chart_by_panel=chart_by_panel, qif=qif)
+                                 chart_by_panel=chart_by_panel, qif=qif, per_hole=not (json_out and out is None))

@@ -75,4 +75,6 @@ def register(app: typer.Typer) -> None:
 
             echo_json(with_verdict(summary, NO_VERDICT), "simulate-log")  # it judges nothing
         else:
-            echo(simulate_log_text(summary))
+            from metrology.report.verdicts import NO_VERDICT_LINE
+
+            echo(simulate_log_text(summary) + "\n" + NO_VERDICT_LINE)

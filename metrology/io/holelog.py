@@ -12,7 +12,8 @@ per file, with its hive keys such as ``cell=C1/date=2026-11-25``), each read in 
 ``hole_id`` as string, readings as float64 mm (NaN for blanks), and three columns added for
 metro's own use (:data:`INTERNAL`, dropped before results are written): ``_metro_time_s`` (float
 seconds since 1970-01-01 UTC), ``_metro_cell`` and ``_metro_panel`` (strings, "" when the log has
-none). Every column of the log stays as it was read.
+none). Every column of the log stays as it was read, but ``time`` read as text (a CSV's),
+which becomes a timestamp (UTC, to the microsecond).
 
 Errors are one line naming the file (and line or partition) and what was expected; pyarrow is
 imported only here, when a log is read.
@@ -127,7 +128,21 @@ def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = 
         log = HoleLog(str(p), suffix[1:], (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
     for part in log.partitions:
         _check_columns(log, part, _column_names(log, part))
+    if not any(_has_rows(log, part) for part in log.partitions):
+        raise ValueError(f"{name}: the log has no rows (a header only): no hole to measure")
     return log
+
+
+def _has_rows(log, part) -> bool:
+    """Whether the partition holds a row: a CSV a non-blank line after its header, a Parquet file
+    a row in its metadata (read before any work, so an empty log is refused before anything is written)."""
+    if log.kind == "csv":
+        with open(part.path, "rb") as fh:
+            fh.readline()
+            return any(line.strip() for line in fh)
+    import pyarrow.parquet as pq
+
+    return pq.ParquetFile(part.path).metadata.num_rows > 0
 
 
 def batch_of(table, sensors, name: str = "<memory>"):
@@ -348,6 +363,10 @@ def _normalise(log, part, table, first_row):
     if bad.size:
         raise ValueError(f"{_row(log, part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
     cols[TIME_S] = pa.array(time_s)
+    if not (pa.types.is_timestamp(table.column("time").type) or pa.types.is_integer(table.column("time").type)
+            or pa.types.is_floating(table.column("time").type)):
+        # text (a CSV's ISO 8601 or seconds): a timestamp, written back as one (UTC, to the microsecond)
+        cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
     for c, name in (("cell", CELL), ("panel", PANEL)):
         cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
     nulls = cols["hole_id"].null_count

@@ -52,10 +52,38 @@ def check_out(out, partitioned_input: bool, distributed: bool = False):
     return p
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # another user's process, or no pid: left alone
+    return True
+
+
+def clear_stale(path: Path) -> None:
+    """Remove the temporaries of ``path`` left by a run that was killed (``kill -9``, a power
+    cut) while writing it: ``.<name>.<pid>.<random><suffix>`` whose process is gone. A live run's
+    temporary is left alone."""
+    prefix = f".{path.name}."
+    import glob
+
+    for q in path.parent.glob(f"{glob.escape(prefix)}*{glob.escape(path.suffix)}"):
+        pid = q.name[len(prefix):].split(".", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            try:
+                q.unlink()
+            except OSError:
+                pass
+
+
 class TableSink:
     """Batches of one table into one file (``.csv`` or ``.parquet``), or CSV on stdout (``path`` None).
 
-    Use as a context manager: the file appears, whole, only when the block ends without error.
+    Use as a context manager: the file appears, whole, only when the block ends without error. Its
+    temporary (``.<name>.<pid>.<random><suffix>`` beside it) names the writing process, so the next
+    run clears the temporaries of a run that was killed (:func:`clear_stale`).
     """
 
     def __init__(self, path=None):
@@ -77,7 +105,9 @@ class TableSink:
             if self.path is None:
                 self._writer = pcsv.CSVWriter(pa.PythonFile(sys.stdout.buffer, mode="w"), table.schema)
             else:
-                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=self.path.suffix, dir=self.path.parent)
+                clear_stale(self.path)
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.{os.getpid()}.", suffix=self.path.suffix,
+                                           dir=self.path.parent)
                 os.close(fd)
                 self._tmp = tmp
                 # dictionaries for the text columns only (a float column of measurements has no repeats:

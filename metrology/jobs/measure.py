@@ -55,6 +55,9 @@ class MeasureReport:
         checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
                   Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
                         "holes", c["undecided"] == 0),
+                  Check("drilling tolerance: holes whose drilled angle is not known (not measured after the adjustment, "
+                        "the readings before it not sound: re-inspect)", self.result.summary.unknown_after, 0, "holes",
+                        self.result.summary.unknown_after == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
         return Verdict(tuple(checks))
@@ -78,6 +81,7 @@ class MeasureReport:
             "partitions": self.result.partitions,
             "partitions_written": self.result.written,
             "counts": self.counts,
+            "counts_detail": {"unknown_after": s.unknown_after},
             "fleet": s.figures(s.total()),
             "cells": series,
             "groups": groups,
@@ -159,11 +163,12 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False, qif=None) -> MeasureReport:
+                  chart_by_panel: bool = False, qif=None, per_hole: bool = True) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
     report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask. ``qif``:
-    the per-hole results also as a QIF 3.0 Results document (:mod:`metrology.io.qif`).
+    the per-hole results also as a QIF 3.0 Results document (:mod:`metrology.io.qif`). With
+    ``per_hole`` False and no ``out`` nothing per hole is written (``--json`` alone: the summary).
 
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
@@ -260,6 +265,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
         output.release()
+    elif target is None and not per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
+        result, engine = run(None)
+        _check_fit(result, shown_layout, min_radius_mm)
     else:
         with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
             result, engine = run(sink if q is None else _Tee(sink, q))
@@ -276,5 +284,6 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         from metrology.report.measure import measure_section
 
         paths = {"log": log_path, "layout": layout_path} if log_display is None else {"layout": layout_path}
-        write_text(report_html, render_html("Hole measurement", run_info(paths, command), [measure_section(report)]))
+        write_text(report_html, render_html("Hole measurement", run_info(paths, command, extra_versions=("pyarrow", "dask")),
+                                            [measure_section(report)]))
     return report

@@ -176,13 +176,14 @@ def sha256_file(path) -> str:
     return h.hexdigest()
 
 
-def versions() -> tuple:
+def versions(extra=()) -> tuple:
     """(name, version) of metro and the libraries its numbers depend on, from the installed
-    distributions' metadata (no import of the libraries themselves)."""
+    distributions' metadata (no import of the libraries themselves); ``extra``: more
+    distributions a command's numbers depend on (measure: pyarrow, dask)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = []
-    for group in _VERSIONED:
+    for group in (*_VERSIONED, *((e,) for e in extra)):
         for dist in group:
             try:
                 out.append((dist, version(dist)))
@@ -213,7 +214,7 @@ def command_line() -> str:
     return shlex.join(["metro", *sys.argv[1:]])
 
 
-def run_info(inputs: dict, command: str | None = None, seed: int | None = None) -> RunInfo:
+def run_info(inputs: dict, command: str | None = None, seed: int | None = None, extra_versions=()) -> RunInfo:
     """A :class:`RunInfo` for ``inputs`` (role -> path; None values are skipped; a path that is
     not a file, such as a generated grid, is listed without checksum). ``command`` None: this
     process's :func:`command_line`."""
@@ -227,7 +228,7 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
             rows.append((role, display_name(path), sha256_file(p), p.stat().st_size))
         else:
             rows.append((role, display_name(path), "", 0))
-    return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
+    return RunInfo(command=command, inputs=tuple(rows), versions=versions(extra_versions), seed=seed, written=_written())
 
 
 def _png_uri(png: bytes) -> str:

@@ -40,6 +40,17 @@ def _alarm_words(a) -> str:
             f"reading cannot tell which of the 4): {a.advice}")
 
 
+def _ppk(fig: dict, short: bool = False) -> str:
+    """The judged angle's Ppk with its 95 % interval, or why there is none."""
+    p = fig.get("ppk", float("nan"))
+    if not np.isfinite(p):
+        from metrology.measure.summary import MIN_PPK_HOLES
+
+        return "-" if short else f"Ppk - (fewer than {MIN_PPK_HOLES:,} holes)"
+    lo, hi = fig["ppk_ci95"]
+    return f"{p:.3g} [{lo:.3g}, {hi:.3g}]" if short else f"Ppk {p:.3g} (95 % CI {lo:.3g} to {hi:.3g})"
+
+
 def _q(fig: dict, which: str, key: str) -> str:
     v = fig[f"quantiles_{which}_deg"][key]
     return "-" if not np.isfinite(v) else f"{v:.4g}"
@@ -57,6 +68,9 @@ def measure_text(report) -> str:
              f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
+             *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
+                f"partition(s) kept as an earlier run wrote them, {report.result.written} written"]
+               if report.sources.get("out") and report.result.written < report.result.partitions else []),
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
     for k in ("conforms", "fails", "undecided", "not_measured"):
@@ -66,8 +80,9 @@ def measure_text(report) -> str:
               f"p99.9 {_q(fig, 'before', 'p99.9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
               f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg, Cpk {fig['cpk']:.3g} "
-              f"(one-sided, against {report.tolerance_deg:g} deg)",
+              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+              f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
+              f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " only (the layout has no calibration covariance)") + ", 95 %"]
     ch = report.chart
@@ -107,6 +122,10 @@ def _hist_figure(report):
             ax.step(centres, h / h.sum(), where="mid", label=label)
     ax.axvline(report.tolerance_deg, color="k", ls="--", lw=1, label=f"tolerance {report.tolerance_deg:g} deg")
     ax.set_xscale("log")
+    seen = np.flatnonzero(tot.hist_before[1:] + tot.hist_after[1:])  # the axis spans the angles measured
+    if seen.size:
+        ax.set_xlim(EDGES_DEG[1:][seen[0]] / 1.5, max(EDGES_DEG[1:][min(seen[-1] + 1, len(EDGES_DEG) - 2)] * 1.5,
+                                                         2 * report.tolerance_deg))
     ax.set_xlabel("angle between drill axis and measured normal [deg]")
     ax.set_ylabel("share of holes per bin [1]")
     ax.legend()
@@ -182,13 +201,14 @@ def measure_section(report):
         counts.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
                        f"{k['undecided']:,}", f"{k['not_measured']:,}"))
         angles.append((cell or "-", _q(f, "before", "p50"), _q(f, "after", "p50"), _q(f, "after", "p99"),
-                       "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
+                       _ppk(f, short=True)))
     note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
             f"per panel and day (UTC): {len(s.groups)} groups in --json")
     tables = [Table("Holes by status, per cell", ("cell", "holes", "conform", "fail", "undecided", "not measured"),
                     tuple(counts), note),
-              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Cpk",
-                    ("cell", "p50 before", "p50 after", "p99 after", "Cpk"), tuple(angles))]
+              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Ppk "
+                    "(ISO 22514-2 percentile method, one-sided upper) with its 95 % bootstrap interval",
+                    ("cell", "p50 before", "p50 after", "p99 after", "Ppk [95 % CI]"), tuple(angles))]
     worst = tuple((w["hole_id"], f"{w['cell'] or '-'} {w['panel'] or '-'}", _when(w["time_s"]), f"{w['angle_deg']:.4f}",
                    f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",

@@ -18,10 +18,12 @@ from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
 from metrology.core.verdict import Check, Verdict
 
 __all__ = ["plane_verdict", "validation_checks", "diagnosis_verdict", "normals_verdict", "steps_verdict",
-           "check_words", "verdict_text", "verdict_word", "NO_VERDICT"]
+           "check_words", "verdict_text", "verdict_word", "NO_VERDICT", "NO_VERDICT_LINE"]
 
 #: a command that judges nothing (version, simulate, reproduce, plan): passed, no checks
 NO_VERDICT = Verdict(())
+#: the verdict line of a command that judges nothing (it writes data: simulate, simulate-log, reproduce)
+NO_VERDICT_LINE = "verdict: passed (exit code 0): nothing judged (simulated data written)"
 
 #: fit-plane: below this share of inliers the scan holds more than the datum (information)
 SCAN_INLIER_SHARE = 0.9
