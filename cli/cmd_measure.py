@@ -36,6 +36,20 @@ def register(app: typer.Typer) -> None:
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
                                             "panel (for panels whose shape moves the redundant reading's misfit); "
                                             "misses a drift slower than a panel."),
+        panel: Optional[Path] = typer.Option(None, "--panel", help="The CAD panel the holes are drilled in (STL, OBJ, "
+                                             "PLY, GLB; STEP), mm, its frame; with --points: each hole's curvature from "
+                                             "it, the normal fitted with the surface known."),
+        points: Optional[Path] = typer.Option(None, "--points", help="The hole table (.csv or .parquet: hole_id,x,y,z,"
+                                              "i,j,k, mm, panel frame; i,j,k the feed into the panel), joined to the log "
+                                              "by hole_id. Alone (no --panel): curvature from the neighbours' normals."),
+        position_error_mm: float = typer.Option(0.5, "--position-error-mm", help="With --points: the drill point's "
+                                                "position error along the surface, mm (U95: the curvature's change "
+                                                "over it)."),
+        form_tolerance_mm: float = typer.Option(0.0, "--form-tolerance-mm", help="With --points: the panel's stated "
+                                                "form tolerance over the head's footprint, mm (0: the panel is its CAD)."),
+        spin_deg: float = typer.Option(2.0, "--spin-deg", help="With --points: the head's spin about the tool axis "
+                                       "relative to the panel is within +-SPIN of the cell's convention (TCS x, y near "
+                                       "the panel's x, y), deg; in U95."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
     ) -> None:
@@ -51,6 +65,8 @@ def register(app: typer.Typer) -> None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
         if json_out and out is None:
             fail("--json prints the summary on stdout: give --out FILE for the per-hole results")
+        panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
+                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
         if log == "-":
             import shutil
             import tempfile
@@ -63,12 +79,12 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>", chart_by_panel)
+                           report, "<stdin>", chart_by_panel, panel_kw)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None, chart_by_panel)
+                       report, None, chart_by_panel, panel_kw)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -79,11 +95,11 @@ def register(app: typer.Typer) -> None:
         finish(rep.verdict)
 
     def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
-             chart_by_panel):
+             chart_by_panel, panel_kw):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
             return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
                                  workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
                                  warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
-                                 chart_by_panel=chart_by_panel)
+                                 chart_by_panel=chart_by_panel, **panel_kw)

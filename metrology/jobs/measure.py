@@ -41,6 +41,7 @@ class MeasureReport:
     warnings: tuple = ()
     fail_on_drift: bool = False
     chart: dict = field(default_factory=dict)
+    curvature: dict = field(default_factory=dict)
 
     @property
     def counts(self) -> dict:
@@ -55,6 +56,17 @@ class MeasureReport:
                         "holes", c["undecided"] == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
+        cv = self.curvature or {}
+        if cv.get("assumed"):  # no panel known: the bound is an assumption, named
+            checks.append(Check(f"curvature ASSUMED (no --panel/--points): every panel's radius >= "
+                                f"{self.min_radius_mm:g} mm", self.min_radius_mm, None, "mm", True, gate=False))
+        elif cv:
+            checks.append(Check(f"curvature from {cv['source']}", cv.get("holes", 0), None, "holes", True, gate=False))
+            if cv.get("off_cad_holes"):
+                checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "
+                                    f"CAD's (|z| > {cv['off_cad_sigmas']:g}; mean size "
+                                    f"{cv['off_cad_mean_per_mm']:.2g} 1/mm)", cv["off_cad_holes"], None, "holes", True,
+                                    gate=False))
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:
@@ -71,6 +83,8 @@ class MeasureReport:
             "judged": {"after_adjustment": s.judged_after, "before_adjustment": s.judged_before},
             "uncertainty": {"reading_noise": True, "calibration_covariance": self.has_covariance, "coverage": 0.95},
             "min_radius_mm": self.min_radius_mm,
+            "curvature": dict(self.curvature) if self.curvature else {"assumed": True, "source": (
+                f"bound: every panel's radius >= {self.min_radius_mm:g} mm (an assumption: no --panel or --points)")},
             "engine": self.engine,
             "holes": self.result.rows,
             "partitions": self.result.partitions,
@@ -108,6 +122,39 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) ->
             warn(line)
 
 
+def _footprint(layout) -> float:
+    """The head's footprint radius (mm): the spots' largest distance from the tool axis at mid-range
+    readings (at the default stand-off where the range is not stated)."""
+    mid = layout.range_mm.mean(1)
+    if np.all(np.isfinite(mid)):
+        spots = layout.zero + mid[:, None] * layout.direction
+        return float(np.max(np.hypot(spots[:, 0], spots[:, 1])))
+    from metrology.panel.edges import footprint_radius
+    from metrology.panel.head import default_standoff
+
+    return footprint_radius(layout, default_standoff(layout))
+
+
+def _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg):
+    """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
+    from metrology.io.names import display_name
+    from metrology.measure.panel import read_hole_table, surfaces_from_panel, surfaces_from_table
+
+    for name, v in (("--position-error-mm", position_error_mm), ("--form-tolerance-mm", form_tolerance_mm),
+                    ("--spin-deg", spin_deg)):
+        if not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v:g}")
+    table = read_hole_table(points)
+    foot = _footprint(layout)
+    if panel is None:
+        return surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg)))
+    from metrology.panel.mesh import load_panel
+
+    mesh = load_panel(panel)
+    return surfaces_from_panel(mesh, table, foot, position_error_mm, form_tolerance_mm, float(np.radians(spin_deg)),
+                               display=display_name(panel))
+
+
 def _digest(layout) -> str:
     import hashlib
 
@@ -120,7 +167,8 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False) -> MeasureReport:
+                  chart_by_panel: bool = False, panel=None, points=None, position_error_mm: float = 0.5,
+                  form_tolerance_mm: float = 0.0, spin_deg: float = 2.0) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
     report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask.
@@ -128,6 +176,14 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
     is called as holes are measured.
+
+    ``panel`` (a mesh or STEP file) with ``points`` (the hole table ``hole_id,x,y,z,i,j,k``), or
+    ``points`` alone: each hole's local surface is known (:mod:`metrology.measure.panel`) and its
+    normal fitted with it (:mod:`metrology.measure.surface`); ``position_error_mm`` (the drill
+    point's error along the surface), ``form_tolerance_mm`` (the panel's stated form tolerance
+    over the footprint) and ``spin_deg`` (the head's spin about the tool axis relative to the
+    panel, beyond the cell's convention) enter U95. Without them ``min_radius_mm`` bounds the
+    micro-plane's curvature bias, named in the verdict as the assumption it is.
     """
     from metrology.io.holelog import BATCH_ROWS, open_log
     from metrology.io.holeout import PartitionedOutput, TableSink, check_out
@@ -161,10 +217,17 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if layout.n != 4:
         warnings.append(f"{shown_layout}: {layout.n} sensors: the drift watch needs exactly 4 (one redundant reading per "
                         f"hole)" + ("; 3 give no redundancy" if layout.n == 3 else ""))
+    surfaces = None
+    if panel is not None and points is None:
+        raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
+                         f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
+    if points is not None:
+        surfaces = _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
     log = open_log(log_path, layout.names, batch_rows=batch_rows or BATCH_ROWS, display=log_display)
     distributed = workers is not None or scheduler is not None
     target = check_out(out, log.partitioned, distributed)
-    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm))
+    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
+                        surfaces=surfaces)
     for w in warnings:
         if warn is not None:
             warn(w)
@@ -207,8 +270,16 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
                 _check_fit(result, shown_layout, min_radius_mm)  # before the file appears
     if output is not None:
         _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
+    curvature = {}
+    if surfaces is not None:
+        curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
+                     "position_error_mm": position_error_mm, "form_tolerance_mm": form_tolerance_mm,
+                     "spin_deg": spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
+                     "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
+                     **result.summary.off_cad_figures()}
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
-                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel})
+                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel},
+                           curvature)
     if report_html is not None:
         from metrology.io.atomic import write_text
         from metrology.report.html import render_html, run_info

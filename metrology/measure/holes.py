@@ -69,6 +69,9 @@ class Settings:
 
     tolerance: float = float(np.radians(0.5))
     min_radius_mm: float = DEFAULT_MIN_RADIUS_MM
+    #: each hole's local surface (:class:`metrology.measure.panel.HoleSurfaces`, joined by ``hole_id``):
+    #: the normal is fitted with the surface known (:mod:`metrology.measure.surface`), not the micro-plane
+    surfaces: object = None
 
 
 @dataclass(frozen=True)
@@ -112,6 +115,7 @@ class _Measured:
     used: np.ndarray  # (N, n) bool
     reason: np.ndarray  # (N,) object: "" or why
     disagree: np.ndarray  # (N,) bool: rule 2, the readings disagree
+    extra: dict | None = None  # with the panel known: correction, panel_misfit, panel_misfit_z (N,)
 
 
 #: rows per call of the per-hole maths: its temporaries stay in the processor's cache (measured:
@@ -130,8 +134,10 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
-    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range."""
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None) -> _Measured:
+    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
+    (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
+    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -139,6 +145,8 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
     out = _Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     np.full(N, "", dtype=object), np.zeros(N, bool))
+    if shape is not None:
+        out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -157,7 +165,14 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        h = _hole_normals(sub, dd, settings.min_radius_mm)
+        if shape is not None:
+            from metrology.measure.surface import PanelTerms, surface_hole_normals
+
+            h, ex = surface_hole_normals(sub, dd, shape[rows], PanelTerms(u_shape[rows], settings.surfaces.spin))
+            for k, v in ex.items():
+                out.extra[k][rows] = v
+        else:
+            h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
         out.residual[rows] = h.residual
         if h.signature is not None:
@@ -169,7 +184,11 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
                                  f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
-                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)")
+                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
+                                 if shape is None else
+                                 f"readings disagree: the redundant reading misses the panel's surface by "
+                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas (a gross reading, "
+                                 f"or the panel far off its CAD here)")
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan
                 out.U95[r] = np.nan
@@ -229,11 +248,23 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    before = _measure(layout, d, settings)
+    shape = u_shape = table_row = None
+    surf = settings.surfaces
+    if surf is not None:
+        from metrology.measure.normals import drill_axis
+
+        table_row = surf.rows(table.column("hole_id").cast(pa.string()))
+        have = table_row >= 0
+        shape = np.zeros((N, 3, 3))
+        u_shape = np.zeros(N)
+        if have.any():
+            shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
+            u_shape[have] = surf.u_shape[table_row[have]]
+    before = _measure(layout, d, settings, shape, u_shape)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
-        after = _measure(layout, da, settings)
+        after = _measure(layout, da, settings, shape, u_shape)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
@@ -250,6 +281,15 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         for i in np.flatnonzero((after.reason != "") & judge_after):
             reason[i] = (reason[i] + "; " if reason[i] else "") + "after the adjustment: " + after.reason[i]
     ids = table.column("hole_id").cast(pa.string())
+    if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
+        for i in np.flatnonzero(table_row < 0):
+            code[i] = 3
+            reason[i] = f"hole_id {ids[int(i)].as_py()!r} is not in the hole table: its local surface is unknown"
+        for i in np.flatnonzero(table_row >= 0):
+            why = surf.problem[table_row[i]]
+            if why:
+                code[i] = 3
+                reason[i] = why
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = 3
@@ -273,6 +313,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "status": _labels(code, [str(s) for s in Status]),
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
+    if surf is not None:  # the panel's columns
+        k = np.full((N, 2), np.nan)
+        k[table_row >= 0] = surf.k[table_row[table_row >= 0]]
+        cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
+        cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
+        cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
+        cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
     for k in table.column_names:
         if k not in cols and not k.startswith("d_"):
             cols[k] = table.column(k)
