@@ -56,7 +56,7 @@ class MeasureReport:
                         "holes", c["undecided"] == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
-        cv = self.curvature or {}
+        cv = self.curvature or {"assumed": True}
         if cv.get("assumed"):  # no panel known: the bound is an assumption, named
             checks.append(Check(f"curvature ASSUMED (no --panel/--points): every panel's radius >= "
                                 f"{self.min_radius_mm:g} mm", self.min_radius_mm, None, "mm", True, gate=False))
