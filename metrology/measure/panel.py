@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_panel", "surfaces_from_table",
-           "RING_SAMPLES", "FOOTPRINT_MARGIN", "NEIGHBOURS", "POINT_OFF_MM", "FEED_MIN_COS"]
+           "RING_SAMPLES", "FOOTPRINT_MARGIN", "NEIGHBOURS", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO"]
 
 #: rays per ring of the footprint sampled on the panel (3 rings and the centre: 37 samples)
 RING_SAMPLES = 12
@@ -53,6 +53,8 @@ FOOTPRINT_MARGIN = 1.25
 NEIGHBOURS = 6
 #: a drill point farther than this from the panel is not on it (mm): the table does not fit the panel
 POINT_OFF_MM = 0.5
+#: a hole table of 3+ holes spanning less than the panel's extent over this is not in mm (metres?)
+UNIT_RATIO = 300.0
 #: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
 FEED_MIN_COS = 0.5
 
@@ -243,14 +245,17 @@ def surfaces_from_panel(panel, table: HoleTable, footprint_mm: float, position_m
     import trimesh
 
     shown = display or panel.source
+    ext_t = float(np.ptp(table.point, axis=0).max()) if len(table.point) > 1 else 0.0
+    ext_p = float(np.ptp(np.asarray(panel.mesh.vertices), axis=0).max())
+    if len(table.point) >= 3 and ext_t * UNIT_RATIO < ext_p:
+        raise ValueError(f"{table.source}: its {len(table.point)} holes span {ext_t:.4g} and the panel {shown} "
+                         f"{ext_p:.4g}: the hole table is not in mm (metres?); x,y,z must be mm in the panel's frame")
     caster = RayCaster(panel.mesh)
     tri, snapped = caster.closest(table.point)
     dist = np.linalg.norm(snapped - table.point, axis=1)
     off = np.flatnonzero(dist > POINT_OFF_MM)
     if off.size:
         r = int(off[np.argmax(dist[off])])
-        ext_t = float(np.ptp(table.point, axis=0).max()) if len(table.point) > 1 else 0.0
-        ext_p = float(np.ptp(np.asarray(panel.mesh.vertices), axis=0).max())
         hint = ""
         if ext_t > 0 and (ext_p / ext_t > 100 or ext_t / ext_p > 100):
             hint = (f"; the table spans {ext_t:g} and the panel {ext_p:g}: one of them is not in mm (metres?)")

@@ -30,12 +30,14 @@ def panel_mesh(panel, half_mm: float = 260.0, step_mm: float = 4.0, shift=(0.0, 
 
 def write_hole_table(truth_csv, out_csv, panel, rows=None):
     """``hole_id,x,y,z,i,j,k`` of the holes in ``truth_csv`` (all, or the ``rows``): the drill point and
-    the feed ``-n`` (``n`` the panel's outward normal there)."""
+    the feed ``-n`` (``n`` the panel's outward normal there). ``panel`` is the CAD: the drill point's
+    ``z`` is its height at the truth's ``x, y`` (the truth's own where the CAD is the simulated panel)."""
     with open(truth_csv, newline="") as fh:
         rd = list(csv.DictReader(fh))
     if rows is not None:
         rd = [rd[r] for r in rows]
     P = np.array([[float(r["drill_x_mm"]), float(r["drill_y_mm"]), float(r["drill_z_mm"])] for r in rd])
+    P[:, 2] = panel.height(P[:, 0], P[:, 1])
     n = panel.normal_at(P)
     with open(out_csv, "w", newline="") as fh:
         w = csv.writer(fh)
