@@ -68,6 +68,7 @@ class SurfaceFit:
     g : (h, 2) float, the slopes ``(g_x, g_y)``; c : (h,) float, mm, the offset along the TCS z axis
     ok : (h,) bool, 3+ finite readings and a well-posed fit
     plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the start)
+    (the rest are None unless ``fit_surface(full=True)``)
     A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
     G : (h, n, 3) float, ``dh_i / dS_i``
     q : (h, n, 3) float, mm, ``S_i - c e_z``
@@ -81,14 +82,14 @@ class SurfaceFit:
     g: np.ndarray
     c: np.ndarray
     ok: np.ndarray
-    plane_normal: np.ndarray
-    A: np.ndarray
-    G: np.ndarray
-    q: np.ndarray
-    w: np.ndarray
+    plane_normal: np.ndarray | None
+    A: np.ndarray | None
+    G: np.ndarray | None
+    q: np.ndarray | None
+    w: np.ndarray | None
     null: np.ndarray | None
-    h_res: np.ndarray
-    Kt: np.ndarray
+    h_res: np.ndarray | None
+    Kt: np.ndarray | None
 
 
 def _solve3(M, b):
@@ -102,7 +103,19 @@ def _solve3(M, b):
     return x
 
 
-def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None) -> SurfaceFit:
+def _inv3(a00, a01, a02, a11, a12, a22):
+    """The inverse of symmetric 3 x 3 matrices given by their 6 entries (arrays): 6 arrays (NaN where singular)."""
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(np.abs(det) > 1e-300, 1.0 / det, np.nan)
+    return (c00 * f, c01 * f, c02 * f, (a00 * a22 - a02 * a02) * f, (a01 * a02 - a00 * a12) * f,
+            (a00 * a11 - a01 * a01) * f)
+
+
+def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
     """Fit the local surface's pose (see the module docstring) to each hole's readings.
 
     Parameters
@@ -112,61 +125,90 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     shape : (h, 3, 3) float, 1/mm, TCS, the shape operator at each hole (0: flat)
     steps : int, Gauss-Newton steps after the micro-plane
     sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
+    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None)
+
+    Sensor-major ``(n, h)`` arrays and explicit 3 x 3 algebra: a sum over the sensors is a sum of
+    contiguous rows (as :func:`metrology.measure.normals.hole_normals`).
     """
     n = layout.n
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
     K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
+    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in
+                                    ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
-    sig = np.where(np.isfinite(sig) & (sig > 0), sig, 1.0) if np.any(np.isfinite(sig) & (sig > 0)) else np.ones(n)
-    valid = np.isfinite(d)
-    dd = np.where(valid, d, 0.0)
-    S = layout.zero[None] + dd[..., None] * layout.direction[None]  # (h, n, 3)
-    x, y, z = S[..., 0], S[..., 1], S[..., 2]
-    w0 = valid / (sig[None] ** 2)
-    ok = valid.sum(1) >= 3
-    # the micro-plane (weighted): z = c + g_x x + g_y y
-    g = np.zeros((h, 2))
+    good = np.isfinite(sig) & (sig > 0)
+    sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
+    s2 = (sig * sig)[:, None]
+    dT = np.ascontiguousarray(d.T)
+    valid = np.isfinite(dT)
+    dT = np.where(valid, dT, 0.0)
+    E, u = layout.zero, layout.direction
+    x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
+    y = E[:, 1, None] + dT * u[:, 1, None]
+    z = E[:, 2, None] + dT * u[:, 2, None]
+    ok = valid.sum(0) >= 3
+    gx = np.zeros(h)
+    gy = np.zeros(h)
     c = np.zeros(h)
-    Kt = np.zeros((h, 3, 3))
-    w = w0
+    u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
     for it in range(steps + 1):
-        rho = np.sqrt(1.0 + g[:, 0] ** 2 + g[:, 1] ** 2)
-        m = sg * np.stack([-g[:, 0], -g[:, 1], np.ones(h)], axis=1) / rho[:, None]
-        T = np.eye(3)[None] - m[:, :, None] * m[:, None, :]
-        Kt = T @ K @ T if it > 0 else np.zeros((h, 3, 3))
-        q = S.copy()
-        q[..., 2] -= c[:, None]
-        Kq = np.einsum("hij,hnj->hni", Kt, q)  # K_t q_i (h, n, 3)
-        kappa = 0.5 * np.einsum("hni,hni->hn", q, Kq)  # T q is absorbed: K_t = T K T
-        hres = z - c[:, None] - g[:, 0, None] * x - g[:, 1, None] * y + (sg * rho)[:, None] * kappa
-        J = np.stack([-x, -y, -1.0 - (sg * rho)[:, None] * Kq[..., 2]], axis=-1)  # (h, n, 3)
-        if it > 0:  # weights with the spots' own slope along the beams: (G.u)^2 sigma^2
-            G = np.stack([-g[:, 0, None] + sg * rho[:, None] * Kq[..., 0], -g[:, 1, None] + sg * rho[:, None] * Kq[..., 1],
-                          1.0 + sg * rho[:, None] * Kq[..., 2]], axis=-1)
+        rho = np.sqrt(1.0 + gx * gx + gy * gy)
+        mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
+        zq = z - c
+        if it > 0:
+            mq = mx * x + my * y + mz * zq
+            px, py, pz = x - mx * mq, y - my * mq, zq - mz * mq  # T q
+            vx = k00 * px + k01 * py + k02 * pz  # K T q
+            vy = k01 * px + k11 * py + k12 * pz
+            vz = k02 * px + k12 * py + k22 * pz
+            mv = mx * vx + my * vy + mz * vz
+            Kx, Ky, Kz = vx - mx * mv, vy - my * mv, vz - mz * mv  # K_t q
+            kappa = 0.5 * (px * vx + py * vy + pz * vz)
+            sc = sg * rho
+            hres = zq - gx * x - gy * y + sc * kappa
+            jc = -1.0 - sc * Kz
+            Gx, Gy, Gz = -gx + sc * Kx, -gy + sc * Ky, 1.0 + sc * Kz
+            Gu = Gx * u0 + Gy * u1 + Gz * u2
         else:
-            G = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (h, n, 3))
-        Gu = np.einsum("hni,ni->hn", G, layout.direction)
+            hres = zq - gx * x - gy * y
+            jc = np.full_like(x, -1.0)
+            Gu = -gx * u0 - gy * u1 + u2 + 0.0 * x
         with np.errstate(divide="ignore"):
-            w = np.where(valid, 1.0 / (Gu * Gu * sig[None] ** 2), 0.0)
-        JW = J * w[..., None]
-        M = np.einsum("hni,hnj->hij", JW, J)
-        A = _solve3(M, JW.transpose(0, 2, 1))  # (h, 3, n)
+            w = np.where(valid, 1.0 / (Gu * Gu * s2), 0.0)
+        wx, wy, wc = w * x, w * y, w * jc
+        m00, m01, m02 = (wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0)
+        m11, m12, m22 = (wy * y).sum(0), -(wc * y).sum(0), (wc * jc).sum(0)
+        i00, i01, i02, i11, i12, i22 = _inv3(m00, m01, m02, m11, m12, m22)
         if it == steps:
             break
-        step = np.einsum("hin,hn->hi", A, hres)
-        g = g - step[:, :2]
-        c = c - step[:, 2]
-    ok = ok & np.all(np.isfinite(A), axis=(1, 2)) & np.all(np.isfinite(g), axis=1)
-    rho = np.sqrt(1.0 + g[:, 0] ** 2 + g[:, 1] ** 2)
-    normal = sg * np.stack([-g[:, 0], -g[:, 1], np.ones(h)], axis=1) / rho[:, None]
+        b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+        gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
+        gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
+        c = c - (i02 * b0 + i12 * b1 + i22 * b2)
+    ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    rho = np.sqrt(1.0 + gx * gx + gy * gy)
+    normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
     normal[~ok] = np.nan
-    null = None
-    if n == 4:
-        null = _null_vector(J)
-    return SurfaceFit(normal, g, c, ok, _plane_normal(S, w0, sg), A, G, q, w, null, hres, Kt)
+    g = np.stack([gx, gy], axis=1)
+    if not full:
+        return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
+    # A = M^-1 J^T W, J = (-x, -y, jc)
+    jx, jy = -x * w, -y * w
+    jz = jc * w
+    A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
+                  i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
+    G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
+    q = np.stack([x, y, z - c], axis=-1).transpose(1, 0, 2)
+    null = _null_vector(np.stack([-x, -y, jc], axis=-1).transpose(1, 0, 2)) if n == 4 else None
+    m = np.stack([mx, my, mz], axis=1)
+    T = np.eye(3)[None] - m[:, :, None] * m[:, None, :]
+    Kt = T @ K @ T
+    S = np.stack([x, y, z], axis=-1).transpose(1, 0, 2)
+    w0 = np.where(valid, 1.0 / s2, 0.0).T
+    return SurfaceFit(normal, g, c, ok, _plane_normal(S, w0, sg), A, G, q, w.T, null, hres.T, Kt)
 
 
 def _plane_normal(S, w, sg):
@@ -213,7 +255,7 @@ def surface_normal(layout, d, shape):
     """
     d = np.asarray(d, float)
     single = d.ndim == 1
-    fit = fit_surface(layout, np.atleast_2d(d), np.asarray(shape, float).reshape(-1, 3, 3))
+    fit = fit_surface(layout, np.atleast_2d(d), np.asarray(shape, float).reshape(-1, 3, 3), full=False)
     if single:
         return fit.normal[0], bool(fit.ok[0])
     return fit.normal, fit.ok
