@@ -13,7 +13,7 @@ import numpy as np
 def panel_mesh(panel, half_mm: float = 260.0, step_mm: float = 4.0, shift=(0.0, 0.0, 0.0)):
     """trimesh.Trimesh of ``panel`` (a :class:`metrology.sim.forward.panels.Panel`) over the square
     ``|x|, |y| <= half_mm``: its heights on a grid of ``step_mm``, two triangles a cell, faces
-    toward ``+z``; moved by ``shift`` (mm)."""
+    toward ``+z`` (none where the surface has no height: beyond a cylinder's side); moved by ``shift`` (mm)."""
     import trimesh
 
     g = np.arange(-half_mm, half_mm + 0.5 * step_mm, step_mm)
@@ -25,6 +25,9 @@ def panel_mesh(panel, half_mm: float = 260.0, step_mm: float = 4.0, shift=(0.0, 
     a = (i * m + j).ravel()
     b, c, d = a + m, a + m + 1, a + 1
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    off = ~np.all(np.isfinite(V), axis=1)  # beyond a cylinder's or sphere's side: no surface there
+    F = F[~np.any(off[F], axis=1)]
+    V[off] = 0.0
     return trimesh.Trimesh(V, F, process=False)
 
 
