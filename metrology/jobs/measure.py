@@ -235,6 +235,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if target is not None and (target.is_dir() or target.suffix == ""):
         output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
                                             "chart_by_panel": chart_by_panel,
+                                            "panel": None if panel is None else str(panel),
+                                            "points": None if points is None else str(points),
+                                            "panel_terms": [position_error_mm, form_tolerance_mm, spin_deg],
                                             "layout_sha256": _digest(layout), "log": str(log_path)})
     total = None
     done = [0]

@@ -349,6 +349,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     # the panel: delta K in an orthonormal basis of the tangent plane's symmetric tensors, and the spin
     C_pan = np.zeros((N, 2, 2))
     dh_basis = None
+    dh_spin = None
     if terms is not None:
         m = fit.normal
         t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
@@ -368,6 +369,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
             dK = W @ fit.Kt - fit.Kt @ W
             dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
+            dh_spin = dh
             v = np.einsum("hin,hn->hi", Ag, dh)
             C_pan += v[:, :, None] * v[:, None, :] * (terms.spin ** 2 / 3.0)
     C = C_noise + C_cal + C_pan
@@ -419,6 +421,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         s_b = np.stack([(qv * b).sum(1) for b in basis], axis=1)  # (N, 3) d rho / d x_b
         if terms is not None:
             var_pan_rho = (s_b ** 2).sum(1) * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
+            if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
+                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(1) ** 2 * terms.spin ** 2 / 3.0
         residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(1) + var_pan_rho)
         signature = sig_k
         twist = np.zeros(N)
