@@ -105,7 +105,7 @@ class MeasureReport:
 MISFIT_SHARE = 0.5
 
 
-def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) -> None:
+def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, surfaces=None) -> None:
     """Refuse (ValueError) results the data cannot support: most holes' readings disagreeing with
     one plane means the layout is not this head's (another head's file, a nominal layout on a head
     far from it, readings in other units). A partitioned output is already written: a warning."""
@@ -114,7 +114,12 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) ->
     if rows >= 20 and bad > MISFIT_SHARE * rows:
         line = (f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with one plane by more than a "
                 f"panel of radius >= {min_radius_mm:g} mm allows: this layout does not fit the head that made the "
-                f"log (another head's layout? readings not in mm? a more curved panel: --min-radius-mm)")
+                f"log (another head's layout? readings not in mm? a more curved panel: --min-radius-mm)"
+                if surfaces is None else
+                f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with the panel's surface "
+                f"({surfaces.source}): this layout does not fit the head that made the log (another head's layout? "
+                f"a nominal layout, not its calibration? readings not in mm?), or the panel is far off its CAD "
+                f"(--form-tolerance-mm states how far it may be)")
         if warnings is None:
             raise ValueError(line)
         warnings.append(line)
@@ -270,9 +275,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
         else:
             with TableSink(target) as sink:
                 result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
-                _check_fit(result, shown_layout, min_radius_mm)  # before the file appears
+                _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)  # before the file appears
     if output is not None:
-        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
+        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
     curvature = {}
     if surfaces is not None:
         curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
