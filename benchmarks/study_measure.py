@@ -148,7 +148,8 @@ def run_panel(args):
     from metrology.io.holelog import CELL, PANEL, TIME_S
     from metrology.jobs.measure import _footprint
     from metrology.measure.holes import Settings, measure_batch
-    from metrology.measure.panel import HoleTable, surfaces_from_panel
+    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
     from metrology.sim.forward import perturb_layout
     from metrology.sim.forward.log import simulate_cell
@@ -180,7 +181,7 @@ def run_panel(args):
                 ids = tuple(f"h{i}" for i in range(ch.n))
                 P = ch.drill_point
                 table = HoleTable(ids, P, -panel.normal_at(P), "holes")
-                surf = surfaces_from_panel(Panel(panel_mesh(panel, half_mm=400.0, step_mm=4.0)), table,
+                surf = panel_hole_surfaces(Panel(panel_mesh(panel, half_mm=400.0, step_mm=4.0)), table,
                                            _footprint(cal), 0.5, 0.0, np.radians(2.0))
                 cols = {"hole_id": list(ids), CELL: ["C1"] * ch.n, PANEL: ["P1"] * ch.n,
                         TIME_S: np.arange(ch.n, dtype=float)}

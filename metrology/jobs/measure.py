@@ -142,8 +142,7 @@ def _footprint(layout) -> float:
 
 def _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg):
     """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
-    from metrology.io.names import display_name
-    from metrology.measure.panel import read_hole_table, surfaces_from_panel, surfaces_from_table
+    from metrology.measure.panel import read_hole_table, surfaces_from_table
 
     for name, v in (("--position-error-mm", position_error_mm), ("--form-tolerance-mm", form_tolerance_mm),
                     ("--spin-deg", spin_deg)):
@@ -153,11 +152,21 @@ def _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_
     foot = _footprint(layout)
     if panel is None:
         return surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg)))
+    from metrology.io.names import display_name
     from metrology.panel.mesh import load_panel
 
-    mesh = load_panel(panel)
-    return surfaces_from_panel(mesh, table, foot, position_error_mm, form_tolerance_mm, float(np.radians(spin_deg)),
-                               display=display_name(panel))
+    return panel_hole_surfaces(load_panel(panel), table, foot, position_error_mm, form_tolerance_mm,
+                               float(np.radians(spin_deg)), display=display_name(panel))
+
+
+def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0, spin=0.0, display=None):
+    """:class:`metrology.measure.panel.HoleSurfaces` of a hole table on a loaded panel
+    (:func:`metrology.panel.holes.panel_surfaces`); ``spin`` rad."""
+    from metrology.measure.panel import HoleSurfaces
+    from metrology.panel.holes import panel_surfaces
+
+    f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
+    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin)
 
 
 def _digest(layout) -> str:

@@ -5,7 +5,8 @@ PANEL --points HOLES.csv``), or from the hole table alone (``--points``).
 drill point (mm, the panel's frame) and the drill's feed direction into the panel; joined to the
 log by ``hole_id``.
 
-**From the panel** (:func:`surfaces_from_panel`): the drill point is snapped onto the mesh (a STEP
+**From the panel** (:func:`metrology.panel.holes.panel_surfaces`, joined here by
+:func:`metrology.jobs.measure.panel_hole_surfaces`): the drill point is snapped onto the mesh (a STEP
 file is tessellated with 1 um chords, :func:`metrology.panel.mesh.load_panel`); the CAD's normal
 there (the mesh's reference normal, turned toward the head: against the feed) gives the local
 frame ``(e1, e2, n)``, ``e1`` the panel's ``x`` made square to ``n`` (the cell's convention, as
@@ -42,21 +43,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_panel", "surfaces_from_table",
-           "RING_SAMPLES", "FOOTPRINT_MARGIN", "NEIGHBOURS", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO"]
+__all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
 
-#: rays per ring of the footprint sampled on the panel (3 rings and the centre: 37 samples)
-RING_SAMPLES = 12
 #: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
 FOOTPRINT_MARGIN = 1.25
 #: neighbours whose nominal normals give a hole's curvature without a panel
 NEIGHBOURS = 6
-#: a drill point farther than this from the panel is not on it (mm): the table does not fit the panel
-POINT_OFF_MM = 0.5
-#: a hole table of 3+ holes spanning less than the panel's extent over this is not in mm (metres?)
-UNIT_RATIO = 300.0
-#: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
-FEED_MIN_COS = 0.5
 
 
 @dataclass(frozen=True)
@@ -231,94 +223,6 @@ def _embed(Kl, e1, e2):
     """(m, 3, 3): ``sum_ab Kl_ab e_a e_b^T``."""
     E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
     return np.einsum("mai,mab,mbj->mij", E, Kl, E)
-
-
-def surfaces_from_panel(panel, table: HoleTable, footprint_mm: float, position_mm: float = 0.5,
-                        form_mm: float = 0.0, spin: float = 0.0, display: str | None = None) -> HoleSurfaces:
-    """Each hole's local surface from a loaded :class:`metrology.panel.mesh.Panel` (module docstring).
-
-    Raises ValueError (one line, naming the table's row) when a drill point is off the panel or its
-    feed does not point into it. A hole whose sampled footprint runs off the panel gets a
-    ``problem`` (measured ``not_measured`` with it)."""
-    from metrology.panel.rays import RayCaster
-
-    import trimesh
-
-    shown = display or panel.source
-    ext_t = float(np.ptp(table.point, axis=0).max()) if len(table.point) > 1 else 0.0
-    ext_p = float(np.ptp(np.asarray(panel.mesh.vertices), axis=0).max())
-    if len(table.point) >= 3 and ext_t * UNIT_RATIO < ext_p:
-        raise ValueError(f"{table.source}: its {len(table.point)} holes span {ext_t:.4g} and the panel {shown} "
-                         f"{ext_p:.4g}: the hole table is not in mm (metres?); x,y,z must be mm in the panel's frame")
-    caster = RayCaster(panel.mesh)
-    tri, snapped = caster.closest(table.point)
-    dist = np.linalg.norm(snapped - table.point, axis=1)
-    off = np.flatnonzero(dist > POINT_OFF_MM)
-    if off.size:
-        r = int(off[np.argmax(dist[off])])
-        hint = ""
-        if ext_t > 0 and (ext_p / ext_t > 100 or ext_t / ext_p > 100):
-            hint = (f"; the table spans {ext_t:g} and the panel {ext_p:g}: one of them is not in mm (metres?)")
-        raise ValueError(f"{table.source}: {table.line(r)}: hole {table.ids[r]} at ({', '.join(f'{v:g}' for v in table.point[r])}) "
-                         f"is {dist[r]:.3g} mm off the panel {shown} (more than {POINT_OFF_MM:g} mm; {off.size} such "
-                         f"holes): the hole table does not fit this panel{hint}")
-    bary = trimesh.triangles.points_to_barycentric(np.asarray(panel.mesh.triangles)[tri], snapped)
-    bary = np.clip(bary, 0.0, 1.0)
-    bary /= bary.sum(1, keepdims=True)
-    nm, _, _ = panel.reference_normal_at(tri, bary)
-    cosf = -(nm * table.feed).sum(1)  # the feed into the panel: against the normal toward the head
-    side = np.sign(np.median(cosf))
-    if side == 0:
-        side = 1.0
-    n = nm * side  # toward the head, for the table's side
-    c = -(n * table.feed).sum(1)
-    bad = np.flatnonzero(c < FEED_MIN_COS)
-    if bad.size:
-        r = int(bad[0])
-        ang = math.degrees(math.acos(max(-1.0, min(1.0, float(c[r])))))
-        raise ValueError(f"{table.source}: {table.line(r)}: hole {table.ids[r]}: feed direction "
-                         f"({', '.join(f'{v:.4g}' for v in table.feed[r])}) is {ang:.1f} deg from the panel's inward "
-                         f"normal (at most {math.degrees(math.acos(FEED_MIN_COS)):.0f}): it does not point into the "
-                         f"panel{' (the other holes feed from the other side)' if ang > 90 else ''}")
-    e1, e2 = _frame(n)
-    rho = FOOTPRINT_MARGIN * footprint_mm
-    st = [(0.0, 0.0)] + [(rho * f * math.cos(a), rho * f * math.sin(a)) for f in (1 / 3, 2 / 3, 1.0)
-                          for a in (2 * math.pi * (np.arange(RING_SAMPLES) + 0.5 * (f != 1 / 3)) / RING_SAMPLES)]
-    st = np.array(st)  # (p, 2)
-    H = 4.0 * rho + 50.0  # rays start this far out along n
-    P = snapped
-    origins = (P[:, None, :] + st[None, :, 0, None] * e1[:, None, :] + st[None, :, 1, None] * e2[:, None, :]
-               + H * n[:, None, :])
-    dirs = np.broadcast_to(-n[:, None, :], origins.shape)
-    _, t, _ = caster.cast(origins.reshape(-1, 3), np.ascontiguousarray(dirs).reshape(-1, 3))
-    w = (H - t).reshape(len(P), len(st))  # heights along n over the tangent plane
-    miss = ~np.isfinite(w)
-    s_, t_ = st[:, 0], st[:, 1]
-    X = np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
-                  s_ * t_ * t_ / 2, t_ ** 3 / 6], axis=1)
-    XtX_inv = np.linalg.inv(X.T @ X)
-    pinv = XtX_inv @ X.T
-    coef = np.where(miss.any(1)[:, None], np.nan, np.nan_to_num(w) @ pinv.T)
-    res = np.nan_to_num(w) - coef @ X.T
-    dof = len(st) - X.shape[1]
-    s2 = (res * res).sum(1) / dof
-    var_h = s2[:, None] * np.diag(XtX_inv)[None, 3:6]
-    u_fit = np.sqrt(var_h.mean(1))
-    Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
-    Kl = -Hl
-    c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
-    grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
-    u_pos = grad * position_mm / 3.0
-    u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
-    u = np.sqrt(u_fit ** 2 + u_pos ** 2 + u_form ** 2)
-    problem = np.full(len(P), "", dtype=object)
-    for r in np.flatnonzero(miss.any(1)):
-        problem[r] = (f"the head's footprint (radius {rho:.0f} mm) runs off the panel's edge at this hole "
-                      f"({int(miss[r].sum())} of {len(st)} samples miss the panel)")
-    Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
-    k = _principal(Kl)
-    return HoleSurfaces(table.ids, n, _embed(Kl, e1, e2), k, np.where(np.isfinite(u), u, 0.0), problem,
-                        f"panel {shown} (mesh, cubic fit over the footprint)", spin)
 
 
 def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 0.0, spin: float = 0.0) -> HoleSurfaces:

@@ -202,7 +202,8 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, **kw):
     import pyarrow as pa
 
     from metrology.measure.holes import Settings, measure_batch
-    from metrology.measure.panel import HoleTable, surfaces_from_panel
+    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.measure.panel import HoleTable
     from metrology.measure.summary import FleetSummary
     from metrology.panel.mesh import Panel
 
@@ -212,7 +213,7 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, **kw):
     P = ch.drill_point.copy()
     P[:, 2] = cad.height(P[:, 0], P[:, 1])
     table = HoleTable(ids, P, -cad.normal_at(P), "holes.csv")
-    surf = surfaces_from_panel(Panel(panel_mesh(cad, half_mm=150.0, step_mm=3.0)), table, 55.0, **kw)
+    surf = panel_hole_surfaces(Panel(panel_mesh(cad, half_mm=150.0, step_mm=3.0)), table, 55.0, **kw)
     from metrology.io.holelog import CELL, PANEL, TIME_S
 
     cols = {"hole_id": list(ids), CELL: ["C1"] * holes, PANEL: ["P1"] * holes,
