@@ -188,6 +188,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
         gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
         c = c - (i02 * b0 + i12 * b1 + i22 * b2)
+        if it == 0:  # the first step from 0 with K left out is the weighted micro-plane
+            gx0, gy0 = gx.copy(), gy.copy()
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
     normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
@@ -202,13 +204,18 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
                   i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
     G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
     q = np.stack([x, y, z - c], axis=-1).transpose(1, 0, 2)
-    null = _null_vector(np.stack([-x, -y, jc], axis=-1).transpose(1, 0, 2)) if n == 4 else None
+    null = _null_vector_cols(-x, -y, jc) if n == 4 else None
     m = np.stack([mx, my, mz], axis=1)
-    T = np.eye(3)[None] - m[:, :, None] * m[:, None, :]
-    Kt = T @ K @ T
-    S = np.stack([x, y, z], axis=-1).transpose(1, 0, 2)
-    w0 = np.where(valid, 1.0 / s2, 0.0).T
-    return SurfaceFit(normal, g, c, ok, _plane_normal(S, w0, sg), A, G, q, w.T, null, hres.T, Kt)
+    Km = np.einsum("hij,hj->hi", K, m)
+    mKm = (m * Km).sum(1)
+    Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
+          + mKm[:, None, None] * m[:, :, None] * m[:, None, :])  # T K T
+    if steps > 0:
+        r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
+    else:
+        plane = normal.copy()
+    return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
 
 
 def _plane_normal(S, w, sg):
@@ -222,6 +229,17 @@ def _plane_normal(S, w, sg):
     g = p[:, :2]
     rho = np.sqrt(1 + (g * g).sum(1))
     return sg * np.stack([-g[:, 0], -g[:, 1], np.ones(len(g))], axis=1) / rho[:, None]
+
+
+def _null_vector_cols(a, b, c):
+    """(h, 4) unit vectors orthogonal to the columns ``a, b, c`` (each (4, h)) of a 4 x 3 matrix:
+    the signed 3 x 3 minors of the rows left after dropping each one."""
+    def det(i, j, k):
+        return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
+                + c[i] * (a[j] * b[k] - a[k] * b[j]))
+
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
+    return q / np.sqrt((q * q).sum(1))[:, None]
 
 
 def _null_vector(J):
