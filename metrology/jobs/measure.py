@@ -127,6 +127,39 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, su
             warn(line)
 
 
+def layout_panel(layout_path) -> dict:
+    """The cell's panel as its layout file states it: ``[panel]`` with ``file`` (a mesh or STEP) and
+    ``points`` (the hole table), paths relative to the layout file; or ``points`` alone; or
+    ``radius_mm`` (the smallest radius of the cell's panels, mm). {} when the file has none."""
+    import tomllib
+    from pathlib import Path
+
+    try:
+        with open(layout_path, "rb") as fh:
+            table = tomllib.load(fh).get("panel")
+    except (OSError, tomllib.TOMLDecodeError):
+        return {}  # load_layout names these
+    if table is None:
+        return {}
+    if not isinstance(table, dict) or set(table) - {"file", "points", "radius_mm"}:
+        raise ValueError(f"{layout_path}: [panel] takes file, points (paths) and radius_mm, got "
+                         f"{sorted(table) if isinstance(table, dict) else table!r}")
+    out = {}
+    base = Path(layout_path).parent
+    for k in ("file", "points"):
+        if k in table:
+            if not isinstance(table[k], str) or not table[k]:
+                raise ValueError(f"{layout_path}: [panel] {k} must be a path, got {table[k]!r}")
+            out[k] = base / table[k]
+    if "radius_mm" in table:
+        r = table["radius_mm"]
+        r = float("inf") if r == "inf" else r
+        if not isinstance(r, (int, float)) or not r > 0:
+            raise ValueError(f"{layout_path}: [panel] radius_mm must be a positive number of mm (or \"inf\"), got {r!r}")
+        out["radius_mm"] = float(r)
+    return out
+
+
 def _footprint(layout) -> float:
     """The head's footprint radius (mm): the spots' largest distance from the tool axis at mid-range
     readings (at the default stand-off where the range is not stated)."""
@@ -177,7 +210,7 @@ def _digest(layout) -> str:
     return hashlib.sha256(layout_to_toml(layout).encode()).hexdigest()
 
 
-def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float = 500.0,
+def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float | None = None,
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
@@ -197,7 +230,10 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     point's error along the surface), ``form_tolerance_mm`` (the panel's stated form tolerance
     over the footprint) and ``spin_deg`` (the head's spin about the tool axis relative to the
     panel, beyond the cell's convention) enter U95. Without them ``min_radius_mm`` bounds the
-    micro-plane's curvature bias, named in the verdict as the assumption it is.
+    micro-plane's curvature bias, named in the verdict as the assumption it is. The layout file may
+    state the cell's panel once (:func:`layout_panel`: ``[panel]`` with ``file`` and ``points``, or
+    ``points``, or ``radius_mm``), used where the arguments give none. ``min_radius_mm`` None: the
+    layout's ``[panel] radius_mm``, else 500 mm (assumed).
     """
     from metrology.io.holelog import BATCH_ROWS, open_log
     from metrology.io.holeout import PartitionedOutput, TableSink, check_out
@@ -208,6 +244,13 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
 
     if not (0 < tolerance_deg < 90):
         raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {tolerance_deg:g}")
+    stated = layout_panel(layout_path)
+    radius_source = "--min-radius-mm"
+    if panel is None and points is None:
+        panel, points = stated.get("file"), stated.get("points")
+    if min_radius_mm is None:
+        min_radius_mm = stated.get("radius_mm", 500.0)
+        radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
     if not min_radius_mm > 0:
         raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {min_radius_mm:g}")
     if report_html is not None:
@@ -288,6 +331,9 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if output is not None:
         _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
     curvature = {}
+    if surfaces is None and radius_source == "layout [panel] radius_mm":
+        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {min_radius_mm:g} mm stated in "
+                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": min_radius_mm}
     if surfaces is not None:
         curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
                      "position_error_mm": position_error_mm, "form_tolerance_mm": form_tolerance_mm,

@@ -322,3 +322,22 @@ def test_the_cells_convention_puts_the_panels_shape_into_the_tcs(flip, kind, axi
     err = np.abs(h.angle - ch.true_angle[ok])
     assert np.degrees(np.median(err)) < 0.004  # the micro-plane's bias here: 0.04-0.08 deg
     assert 0.93 <= np.mean(err <= h.U95) <= 0.97
+
+
+def test_the_layout_states_the_cells_panel_once(tmp_path):
+    log, truth = _simulate(tmp_path, "sphere", 500, holes=200)
+    stl, holes = _cad(tmp_path, "sphere", 500, truth)
+    text = open(TABLE6).read()
+    lay = tmp_path / "cell.toml"
+    lay.write_text(text + f'\n[panel]\nfile = "{stl.name}"\npoints = "{holes.name}"\n')
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(lay), "--out", str(tmp_path / "o.csv"), "--json"])
+    assert r.exit_code in (0, 1), r.output
+    cv = json.loads(r.stdout)["curvature"]
+    assert cv["assumed"] is False and stl.name in cv["source"]
+    lay.write_text(text + "\n[panel]\nradius_mm = 1500\n")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(lay), "--out", str(tmp_path / "o2.csv"), "--json"])
+    s = json.loads(r.stdout)
+    assert s["min_radius_mm"] == 1500 and s["curvature"]["assumed"] is False and "stated" in s["curvature"]["source"]
+    lay.write_text(text + "\n[panel]\nradius = 1500\n")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(lay), "--out", str(tmp_path / "o3.csv")])
+    assert r.exit_code == 2 and "[panel]" in r.output
