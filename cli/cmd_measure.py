@@ -51,6 +51,9 @@ def register(app: typer.Typer) -> None:
         spin_deg: float = typer.Option(2.0, "--spin-deg", help="With --points: the head's spin about the tool axis "
                                        "relative to the panel is within +-SPIN of the cell's convention (TCS x, y near "
                                        "the panel's x, y), deg; in U95."),
+        follow: bool = typer.Option(False, "--follow", help="A live log (LOG '-' for stdin, or a CSV file): each "
+                                    "hole measured as its line arrives; one JSON line per hole on stdout, "
+                                    "{\"alarm\": ...} lines for drift alarms, a final {\"summary\": ...}."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
     ) -> None:
@@ -68,6 +71,22 @@ def register(app: typer.Typer) -> None:
             fail("--json prints the summary on stdout: give --out FILE for the per-hole results")
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
                     "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
+        if follow:
+            if out is not None or report is not None or workers is not None or scheduler is not None:
+                fail("--follow answers each hole on stdout: no --out, --report, --workers or --scheduler")
+            import json as _json
+
+            from metrology.jobs.measure_follow import follow_log
+
+            def emit(obj):
+                sys.stdout.write(_json.dumps(obj) + "\n")
+                sys.stdout.flush()
+
+            summary = follow_log(log, layout, emit, lambda a: emit({"alarm": a}), tolerance_deg=tolerance_deg,
+                                 min_radius_mm=min_radius_mm, **panel_kw)
+            emit({"summary": summary.to_dict()})
+            bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
+            raise typer.Exit(1 if bad else 0)
         if log == "-":
             import shutil
             import tempfile

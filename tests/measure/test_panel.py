@@ -341,3 +341,22 @@ def test_the_layout_states_the_cells_panel_once(tmp_path):
     lay.write_text(text + "\n[panel]\nradius = 1500\n")
     r = runner.invoke(app, ["measure", str(log), "--layout", str(lay), "--out", str(tmp_path / "o3.csv")])
     assert r.exit_code == 2 and "[panel]" in r.output
+
+
+def test_follow_answers_each_line_and_raises_the_alarm_at_once(tmp_path):
+    log, _ = _simulate(tmp_path, "flat", holes=1150, extra=("--shift", "L3:0.03@1060"))
+    r = runner.invoke(app, ["measure", "-", "--layout", str(TABLE6), "--follow"], input=log.read_text())
+    assert r.exit_code == 0, r.output
+    lines = [json.loads(x) for x in r.stdout.splitlines()]
+    holes = [x for x in lines if "hole_id" in x and "line" in x]
+    assert len(holes) == 1150 and holes[0]["line"] == 2
+    raised = [i for i, x in enumerate(lines) if "alarm" in x and x["alarm"].get("raised")]
+    assert raised, "the knocked sensor raised no alarm"
+    # announced right after its own hole's line, within 40 holes of the shift
+    hole_at = int(lines[raised[0]]["alarm"]["hole_id"].split("-")[1])
+    assert 1060 <= hole_at <= 1100 and lines[raised[0] - 1]["hole_id"] == lines[raised[0]]["alarm"]["hole_id"]
+    assert "summary" in lines[-1] and lines[-1]["summary"]["alarms"]
+    # the same measurement as the batch run
+    _, out = _measure(tmp_path, log, "--min-radius-mm", "500", name="batch.csv")
+    batch = _read(out)
+    np.testing.assert_allclose([h["angle_deg"] for h in holes[:200]], _f(batch[:200], "angle_deg"), rtol=1e-9)
