@@ -142,5 +142,6 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
                       f"({int(miss[r].sum())} of {len(st)} samples miss the panel)")
     Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
     k = _principal(Kl)
+    k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
     return {"normal": n, "shape": _embed(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
             "problem": problem, "source": f"panel {shown} (mesh, cubic fit over the footprint)"}

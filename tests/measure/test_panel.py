@@ -197,7 +197,7 @@ def test_points_alone_curvature_from_neighbouring_normals(tmp_path):
     assert np.nanmedian(np.abs(_f(rows, "angle_deg") - tb)) < 0.01
 
 
-def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, **kw):
+def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, mesh_half=150.0, **kw):
     """A simulated batch on ``panel`` measured with the CAD ``cad`` (mesh and hole table from it)."""
     import pyarrow as pa
 
@@ -213,7 +213,7 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, **kw):
     P = ch.drill_point.copy()
     P[:, 2] = cad.height(P[:, 0], P[:, 1])
     table = HoleTable(ids, P, -cad.normal_at(P), "holes.csv")
-    surf = panel_hole_surfaces(Panel(panel_mesh(cad, half_mm=150.0, step_mm=3.0)), table, 55.0, **kw)
+    surf = panel_hole_surfaces(Panel(panel_mesh(cad, half_mm=mesh_half, step_mm=3.0)), table, 55.0, **kw)
     from metrology.io.holelog import CELL, PANEL, TIME_S
 
     cols = {"hole_id": list(ids), CELL: ["C1"] * holes, PANEL: ["P1"] * holes,
@@ -360,3 +360,37 @@ def test_follow_answers_each_line_and_raises_the_alarm_at_once(tmp_path):
     _, out = _measure(tmp_path, log, "--min-radius-mm", "500", name="batch.csv")
     batch = _read(out)
     np.testing.assert_allclose([h["angle_deg"] for h in holes[:200]], _f(batch[:200], "angle_deg"), rtol=1e-9)
+
+
+def test_a_step_panel(tmp_path):
+    """The bundled exact STEP cylinder R 800 (axis y), tessellated by OpenCASCADE: the forward
+    simulator drills the same cylinder; metro measures it with the STEP as its CAD."""
+    pytest.importorskip("cascadio")
+    step = data_path("panel_cyl800.step")
+    log, truth = _simulate(tmp_path, "cylinder", 800, holes=400, extra=("--patch-mm", "100"))  # the STEP is 200 mm square
+    holes = write_hole_table(truth, tmp_path / "holes.csv", make_panel("cylinder", 800.0))
+    r, out = _measure(tmp_path, log, "--panel", str(step), "--points", str(holes))
+    assert r.exit_code in (0, 1), r.output
+    rows = _read(out)
+    assert all(r["status"] != "not_measured" for r in rows)
+    np.testing.assert_allclose(np.nanmedian(_f(rows, "k1_per_mm")), 1 / 800, rtol=0.01)
+    assert abs(np.nanmedian(_f(rows, "k2_per_mm"))) < 2e-5
+    t = _truth(truth)
+    tb = np.array([float(t[r["hole_id"]]["true_angle_deg"]) for r in rows])
+    assert np.nanmedian(np.abs(_f(rows, "angle_deg") - tb)) < 0.01
+
+
+def test_a_hole_whose_footprint_runs_off_the_panel_is_not_measured():
+    lay = load_layout(TABLE6)
+    panel = make_panel("sphere", 500.0)
+    b, ch, _ = _batch_on(lay, panel, panel, holes=300, patch=90.0, mesh_half=100.0)
+    reason = np.array(b.columns.column("reason").to_pylist(), dtype=object)
+    status = np.array(b.columns.column("status").to_pylist(), dtype=object)
+    # the sampled disc is 1.25 x 55 mm: holes within 69 mm of the mesh's 100 mm edge run off it
+    near = np.max(np.abs(ch.drill_point[:, :2]), axis=1) > 100.0 - 1.25 * 55.0 + 3.0  # rays 15 deg off the axes
+    inner = np.max(np.abs(ch.drill_point[:, :2]), axis=1) < 100.0 - 1.25 * 55.0 - 1.0
+    assert near.any() and inner.any()
+    assert np.all(status[near] == "not_measured")
+    assert all("runs off the panel's edge" in r for r in reason[near])
+    assert np.all(status[inner] != "not_measured")
+    assert np.all(np.isnan(b.columns.column("k1_per_mm").to_numpy(zero_copy_only=False)[near]))
