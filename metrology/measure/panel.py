@@ -39,7 +39,7 @@ panel's ``x, y``); the head's spin about the tool axis beyond that is within ``+
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -168,6 +168,7 @@ class HoleSurfaces:
     problem: np.ndarray
     source: str
     spin: float = 0.0
+    _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):
         """Each log row's index into the table (``hole_ids`` a pyarrow string array), -1 where absent."""
@@ -180,8 +181,10 @@ class HoleSurfaces:
     def shape_tcs(self, rows, s: float):
         """(h, 3, 3) float, 1/mm, TCS: the shape operators of table rows ``rows`` under the cell's
         convention (module docstring); ``s`` the drill axis's sign (``s e_z``)."""
-        R = tcs2panel_nominal(self.normal[rows], s)  # (h, 3, 3)
-        return np.einsum("hji,hjk,hkl->hil", R, self.shape[rows], R)
+        if s not in self._tcs:  # once per table and axis sign: every batch of the log takes its rows
+            R = tcs2panel_nominal(self.normal, s)  # (m, 3, 3)
+            self._tcs[s] = np.einsum("hji,hjk,hkl->hil", R, self.shape, R)
+        return self._tcs[s][rows]
 
 
 def tcs2panel_nominal(n, s: float):
