@@ -168,9 +168,14 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         if shape is not None:
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
-            h, ex = surface_hole_normals(sub, dd, shape[rows], PanelTerms(u_shape[rows], settings.surfaces.spin))
-            for k, v in ex.items():
-                out.extra[k][rows] = v
+            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], settings.surfaces.spin))
+                     for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
+            h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
+                                     np.concatenate([getattr(p[0], f) for p in parts])
+                                     for f in parts[0][0].__dataclass_fields__})
+            for k in parts[0][1]:
+                out.extra[k][rows] = np.concatenate([p[1][k] for p in parts])
         else:
             h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95

@@ -28,6 +28,8 @@ FOOTPRINT_MARGIN = 1.25
 POINT_OFF_MM = 0.5
 #: a hole table of 3+ holes spanning less than the panel's extent over this is not in mm (metres?)
 UNIT_RATIO = 300.0
+#: holes whose rays are cast together (memory: about 37 x 200 bytes a hole)
+CHUNK_HOLES = 4096
 #: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
 FEED_MIN_COS = 0.5
 
@@ -112,11 +114,14 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     st = np.array(st)  # (p, 2)
     H = 4.0 * rho + 50.0  # rays start this far out along n
     P = snapped
-    origins = (P[:, None, :] + st[None, :, 0, None] * e1[:, None, :] + st[None, :, 1, None] * e2[:, None, :]
-               + H * n[:, None, :])
-    dirs = np.broadcast_to(-n[:, None, :], origins.shape)
-    _, t, _ = caster.cast(origins.reshape(-1, 3), np.ascontiguousarray(dirs).reshape(-1, 3))
-    w = (H - t).reshape(len(P), len(st))  # heights along n over the tangent plane
+    w = np.empty((len(P), len(st)))  # heights along n over the tangent plane
+    for a in range(0, len(P), CHUNK_HOLES):  # the rays of a few thousand holes at a time: bounded memory
+        b = slice(a, a + CHUNK_HOLES)
+        origins = (P[b, None, :] + st[None, :, 0, None] * e1[b, None, :] + st[None, :, 1, None] * e2[b, None, :]
+                   + H * n[b, None, :])
+        dirs = np.broadcast_to(-n[b, None, :], origins.shape)
+        _, t, _ = caster.cast(origins.reshape(-1, 3), np.ascontiguousarray(dirs).reshape(-1, 3))
+        w[b] = (H - t).reshape(-1, len(st))
     miss = ~np.isfinite(w)
     s_, t_ = st[:, 0], st[:, 1]
     X = np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
