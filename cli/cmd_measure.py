@@ -26,7 +26,7 @@ def register(app: typer.Typer) -> None:
                                             "largest angle between drill axis and surface normal."),
         min_radius_mm: Optional[float] = typer.Option(None, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
                                             "the micro-plane's curvature bias in U95 and sets what the gross-reading "
-                                            "check allows ('inf': flat panels). Default: the layout's \[panel] "
+                                            "check allows ('inf': flat panels). Default: the layout's \\[panel] "
                                             "radius_mm, else 500 (named in the verdict as an assumption)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Run on a new Dask LocalCluster of N worker "
                                               "processes, one task per partition (needs metro\\[fleet])."),

@@ -94,17 +94,6 @@ class SurfaceFit:
     Kt: np.ndarray | None
 
 
-def _solve3(M, b):
-    """Batched ``M^-1 b`` for symmetric (h, 3, 3) ``M`` and (h, 3, k) ``b`` (NaN where singular)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        det = np.linalg.det(M)
-        bad = ~(np.abs(det) > 1e-300)
-        Ms = np.where(bad[:, None, None], np.eye(3), M)
-        x = np.linalg.solve(Ms, b)
-    x[bad] = np.nan
-    return x
-
-
 def _inv3(a00, a01, a02, a11, a12, a22):
     """The inverse of symmetric 3 x 3 matrices given by their 6 entries (arrays): 6 arrays (NaN where singular)."""
     c00 = a11 * a22 - a12 * a12
@@ -220,19 +209,6 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
 
 
-def _plane_normal(S, w, sg):
-    """The weighted micro-plane's normal toward the head (h, 3): the start of the fit."""
-    x, y, z = S[..., 0], S[..., 1], S[..., 2]
-    ones = np.ones_like(x)
-    J = np.stack([-x, -y, -ones], axis=-1)
-    JW = J * w[..., None]
-    M = np.einsum("hni,hnj->hij", JW, J)
-    p = _solve3(M, np.einsum("hni,hn->hi", JW, -z)[..., None])[..., 0]
-    g = p[:, :2]
-    rho = np.sqrt(1 + (g * g).sum(1))
-    return sg * np.stack([-g[:, 0], -g[:, 1], np.ones(len(g))], axis=1) / rho[:, None]
-
-
 def _null_vector_cols(a, b, c):
     """(h, 4) unit vectors orthogonal to the columns ``a, b, c`` (each (4, h)) of a 4 x 3 matrix:
     the signed 3 x 3 minors of the rows left after dropping each one."""
@@ -241,15 +217,6 @@ def _null_vector_cols(a, b, c):
                 + c[i] * (a[j] * b[k] - a[k] * b[j]))
 
     q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
-    return q / np.sqrt((q * q).sum(1))[:, None]
-
-
-def _null_vector(J):
-    """(h, 4) unit vectors orthogonal to the three columns of ``J (h, 4, 3)``: signed 3 x 3 minors."""
-    def minor(a, b, c):
-        return np.linalg.det(J[:, [a, b, c], :])
-
-    q = np.stack([minor(1, 2, 3), -minor(0, 2, 3), minor(0, 1, 3), -minor(0, 1, 2)], axis=1)
     return q / np.sqrt((q * q).sum(1))[:, None]
 
 
