@@ -86,6 +86,9 @@ class Settings:
 
     tolerance: float = float(np.radians(0.5))
     min_radius_mm: float = DEFAULT_MIN_RADIUS_MM
+    #: each hole's local surface (:class:`metrology.measure.panel.HoleSurfaces`, joined by ``hole_id``):
+    #: the normal is fitted with the surface known (:mod:`metrology.measure.surface`), not the micro-plane
+    surfaces: object = None
 
 
 @dataclass(frozen=True)
@@ -136,6 +139,7 @@ class _Measured:
     residual_sd: np.ndarray  # (N,) float, mm: the misfit's sd (noise and calibration), 4 sensors
     twist: np.ndarray  # (N,) float, mm^2: |M|_*, 4 sensors
     moment: np.ndarray  # (N, 3) float, mm^2: M = sum_i q_i r_i r_i^T as (xx, yy, xy), 4 sensors
+    extra: dict | None = None  # with the panel known: correction, panel_misfit, panel_misfit_z (N,)
 
 
 #: rows per call of the per-hole maths: its temporaries stay in the processor's cache (measured:
@@ -154,8 +158,10 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
-    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range."""
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None) -> _Measured:
+    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
+    (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
+    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -164,6 +170,8 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     np.full(N, "", dtype=object), np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
                     np.full((N, 3), np.nan))
+    if shape is not None:
+        out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -182,7 +190,19 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        h = _hole_normals(sub, dd, settings.min_radius_mm)
+        if shape is not None:
+            from metrology.measure.surface import PanelTerms, surface_hole_normals
+
+            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], settings.surfaces.spin))
+                     for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
+            h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
+                                     np.concatenate([getattr(p[0], f) for p in parts])
+                                     for f in parts[0][0].__dataclass_fields__})
+            for k in parts[0][1]:
+                out.extra[k][rows] = np.concatenate([p[1][k] for p in parts])
+        else:
+            h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
         out.residual[rows] = h.residual
         if h.signature is not None:
@@ -196,7 +216,11 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
                                  f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
-                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)")
+                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
+                                 if shape is None else
+                                 f"readings disagree: the redundant reading misses the panel's surface by "
+                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas (a gross reading, "
+                                 f"or the panel far off its CAD here)")
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan
                 out.U95[r] = np.nan
@@ -289,11 +313,23 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    before = _measure(layout, d, settings)
+    shape = u_shape = table_row = None
+    surf = settings.surfaces
+    if surf is not None:
+        from metrology.measure.normals import drill_axis
+
+        table_row = surf.rows(table.column("hole_id").cast(pa.string()))
+        have = table_row >= 0
+        shape = np.zeros((N, 3, 3))
+        u_shape = np.zeros(N)
+        if have.any():
+            shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
+            u_shape[have] = surf.u_shape[table_row[have]]
+    before = _measure(layout, d, settings, shape, u_shape)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
-        after = _measure(layout, da, settings)
+        after = _measure(layout, da, settings, shape, u_shape)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
@@ -328,6 +364,15 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg "
             f"+- U95 {np.degrees(judged_u[i]):.4f} deg straddles the tolerance {np.degrees(tol):g} deg")
     ids = table.column("hole_id").cast(pa.string())
+    if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
+        for i in np.flatnonzero(table_row < 0):
+            code[i] = 3
+            reason[i] = f"hole_id {ids[int(i)].as_py()!r} is not in the hole table: its local surface is unknown"
+        for i in np.flatnonzero(table_row >= 0):
+            why = surf.problem[table_row[i]]
+            if why:
+                code[i] = 3
+                reason[i] = why
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = 3
@@ -352,6 +397,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "status": _labels(code, [str(s) for s in Status]),
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
+    if surf is not None:  # the panel's columns
+        k = np.full((N, 2), np.nan)
+        k[table_row >= 0] = surf.k[table_row[table_row >= 0]]
+        cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
+        cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
+        cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
+        cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
     for k in table.column_names:
         if k not in cols and not k.startswith("d_"):
             cols[k] = table.column(k)

@@ -29,6 +29,10 @@ __all__ = ["FleetSummary", "Group", "EDGES_DEG", "WORST"]
 EDGES_DEG = np.concatenate([[0.0], np.geomspace(1e-4, 90.0, 801)])
 #: the worst holes kept for the report
 WORST = 20
+#: with the panel known: a hole whose redundant reading misses the CAD's surface by more than this
+#: many sigmas (noise, calibration, the panel's stated uncertainty; two-sided p ~ 6e-5) counts as
+#: a panel off its CAD there
+OFF_CAD_SIGMAS = 4.0
 _STATUSES = tuple(str(s) for s in Status)
 #: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
 PPK_Q = (0.5, 0.99865)
@@ -178,6 +182,32 @@ class FleetSummary:
     judged_before: int = 0
     disagree: int = 0
     unknown_after: int = 0
+    off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
+                                                   "max_hole": None})
+
+    def _off_cad(self, t) -> None:
+        if "panel_misfit_z" not in t.column_names:
+            return
+        z = t.column("panel_misfit_z").to_numpy(zero_copy_only=False).astype(float)
+        size = t.column("panel_misfit_per_mm").to_numpy(zero_copy_only=False).astype(float)
+        f = np.isfinite(z)
+        off = f & (np.abs(np.nan_to_num(z)) > OFF_CAD_SIGMAS)
+        o = self.off_cad
+        o["checked"] += int(f.sum())
+        o["holes"] += int(off.sum())
+        o["sum_per_mm"] += float(size[off].sum())
+        if off.any():
+            i = int(np.flatnonzero(off)[np.argmax(size[off])])
+            if size[i] > o["max_per_mm"]:
+                o["max_per_mm"], o["max_hole"] = float(size[i]), t.column("hole_id")[i].as_py()
+
+    def off_cad_figures(self, sigmas=None) -> dict:
+        """The panel-off-CAD figures for the JSON: holes checked (4 sensors), holes off, mean and
+        largest size (1/mm: the shape change the redundant reading sees)."""
+        o = self.off_cad
+        return {"off_cad_sigmas": OFF_CAD_SIGMAS, "off_cad_checked": o["checked"], "off_cad_holes": o["holes"],
+                "off_cad_mean_per_mm": o["sum_per_mm"] / o["holes"] if o["holes"] else 0.0,
+                "off_cad_max_per_mm": o["max_per_mm"], "off_cad_max_hole": o["max_hole"]}
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
@@ -212,6 +242,7 @@ class FleetSummary:
         self.judged_before += int((ok & ~after).sum())
         self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
         self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
+        self._off_cad(t)
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -236,6 +267,12 @@ class FleetSummary:
         self.judged_before += other.judged_before
         self.disagree += other.disagree
         self.unknown_after += other.unknown_after
+        o, p = self.off_cad, other.off_cad
+        o["checked"] += p["checked"]
+        o["holes"] += p["holes"]
+        o["sum_per_mm"] += p["sum_per_mm"]
+        if p["max_per_mm"] > o["max_per_mm"]:
+            o["max_per_mm"], o["max_hole"] = p["max_per_mm"], p["max_hole"]
         self.worst = sorted(self.worst + other.worst,
                             key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
 
