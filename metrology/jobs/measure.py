@@ -143,7 +143,7 @@ def layout_panel(layout_path) -> dict:
     try:
         with open(layout_path, "rb") as fh:
             table = tomllib.load(fh).get("panel")
-    except (OSError, tomllib.TOMLDecodeError):
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return {}  # load_layout names these
     if table is None:
         return {}
