@@ -257,7 +257,10 @@ class OffCadPanel(HeightPanel):
 def parse_off_cad(value: str, cad: Panel) -> OffCadPanel:
     """``dent[:MM[@X,Y]]``, ``springback[:MM[@X]]`` or ``shift[:X,Y,Z]`` (mm) -> the true panel off ``cad``."""
     text = value.strip()
-    kind, _, rest = text.partition(":")
+    cut = min([i for i in (text.find(":"), text.find("@")) if i >= 0], default=len(text))
+    kind, rest = text[:cut], text[cut + 1:] if cut < len(text) and text[cut] == ":" else text[cut:]
+    if rest.startswith("@"):
+        rest = rest  # no size: "@X,Y" follows the kind
     if kind not in OFF_CAD_KINDS:
         raise ValueError(f"--off-cad {value}: expected dent[:MM[@X,Y]], springback[:MM[@X]] or shift[:X,Y,Z]")
     if not hasattr(cad, "height"):
