@@ -168,10 +168,40 @@ class MicroPlane:
 
 
 def rotation_vector(R):
-    """Rotation vectors ``(h, 3)`` rad (axis times angle) of rotations ``R (h, 3, 3)``."""
-    from scipy.spatial.transform import Rotation
+    """Rotation vectors ``(h, 3)`` rad (axis times angle, angle in [0, pi]) of rotations ``R (h, 3, 3)``.
 
-    return Rotation.from_matrix(R).as_rotvec()
+    Through the unit quaternion by Shepperd's method (the largest of ``1 + tr``, ``1 + 2 R_ii - tr`` is
+    the pivot, so rotations near pi, as a head facing down the panel's ``-z`` is, stay exact), then
+    ``2 atan2(|v|, w) v / |v|``.
+    """
+    R = np.asarray(R, float)
+    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
+    piv = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
+    q = np.empty((len(R), 4))  # w, x, y, z
+    for k in range(4):
+        m = piv == k
+        if not m.any():
+            continue
+        r = R[m]
+        if k == 0:
+            t = np.sqrt(1.0 + tr[m]) * 2
+            q[m] = np.stack([t / 4, (r[:, 2, 1] - r[:, 1, 2]) / t, (r[:, 0, 2] - r[:, 2, 0]) / t,
+                             (r[:, 1, 0] - r[:, 0, 1]) / t], axis=1)
+        else:
+            i, j, l = k - 1, k % 3, (k + 1) % 3
+            t = np.sqrt(1.0 + 2 * r[:, i, i] - tr[m]) * 2
+            qi = np.empty((len(r), 4))
+            qi[:, 0] = (r[:, l, j] - r[:, j, l]) / t
+            qi[:, 1 + i] = t / 4
+            qi[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / t
+            qi[:, 1 + l] = (r[:, l, i] + r[:, i, l]) / t
+            q[m] = qi
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)  # w >= 0: the angle in [0, pi]
+    v = np.sqrt(q[:, 1] ** 2 + q[:, 2] ** 2 + q[:, 3] ** 2)
+    angle = 2 * np.arctan2(v, q[:, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(v > 1e-12, angle / v, 2.0)  # small angles: angle / v -> 2 / w
+    return q[:, 1:] * scale[:, None]
 
 
 def _head(a, flip, psi):
