@@ -140,8 +140,9 @@ def _microplane():
 CONTROLLERS = {"microplane": _microplane, "metro": metro_controller}
 
 
-def make_log_panel(panel, radius_mm=None, azimuth_deg=None, off_cad=None):
-    """``(truth, cad)`` panels of ``--panel`` (a name or a file), ``--radius-mm``, ``--azimuth-deg``, ``--off-cad``."""
+def make_log_panel(panel, radius_mm=None, azimuth_deg=None, off_cad=None, table=None):
+    """``(truth, cad)`` panels of ``--panel`` (a name or a file), ``--radius-mm``, ``--azimuth-deg``, ``--off-cad``;
+    a mesh file is turned to face the head (the side ``table``'s feeds come from; without one, ``+z``)."""
     from metrology.sim.forward.panels import PANELS, make_panel
     from metrology.sim.forward.shapes import GENERATED, generated_panel, parse_off_cad
 
@@ -164,7 +165,11 @@ def make_log_panel(panel, radius_mm=None, azimuth_deg=None, off_cad=None):
 
         if radius_mm is not None:
             raise ValueError(f"--radius-mm: a panel file ({panel}) has its own shape")
+        from metrology.sim.forward.meshes import MeshPanel
+
         cad = load_sim_panel(panel)[1]
+        if isinstance(cad, MeshPanel):
+            cad = cad.oriented(*(() if table is None else (table.points, table.feed)))
     else:
         raise ValueError(f"--panel {panel}: expected one of {', '.join([*PANELS, *GENERATED])} or a panel file "
                          "(.stl, .obj, .ply, .glb, .step)")
@@ -230,7 +235,6 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
         raise ValueError(f"{true_layout_path or layout_path}: no range_mm for every sensor; give --standoff-mm")
     if controller not in CONTROLLERS:
         raise ValueError(f"--controller {controller}: expected one of {', '.join(CONTROLLERS)}")
-    truth_panel, cad_panel = make_log_panel(panel, radius_mm, azimuth_deg, off_cad)
     table = None
     if points is not None:
         from metrology.sim.forward.holes import read_hole_table
@@ -238,6 +242,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
         table = read_hole_table(points)
     elif off_cad is not None:
         raise ValueError("--off-cad needs --points: a panel off its CAD is seen at the table's nominal holes")
+    truth_panel, cad_panel = make_log_panel(panel, radius_mm, azimuth_deg, off_cad, table)
     control = CONTROLLERS[controller]()
     spec = LogSpec(true, cell, truth_panel, angle_rad=tuple(math.radians(a) for a in angle_deg),
                    noise_mm=noise_mm, standoff_mm=standoff_mm, spin_rad=math.radians(spin_deg),

@@ -181,3 +181,18 @@ def test_a_step_panel_needs_the_step_extra_or_is_ray_cast(tmp_path):
     else:
         assert r.exit_code == 0, r.output
         assert pcsv.read_csv(tmp_path / "log.csv").num_rows == 20
+
+
+def test_a_mesh_wound_the_other_way_is_turned_to_face_the_head(tmp_path):
+    from metrology.sim.forward.meshes import panel_mesh, write_stl
+    from metrology.sim.forward.shapes import generated_panel
+
+    V, F = panel_mesh(generated_panel("saddle"), 125.0, 10.0)
+    write_stl(tmp_path / "inside_out.stl", V, F[:, ::-1], "wound toward -z")
+    for extra in (["--points", str(PANELS / "saddle.holes.csv")], ["--patch-mm", "100"]):
+        r = run(tmp_path, "--panel", str(tmp_path / "inside_out.stl"), "--holes", "30", *extra)
+        assert r.exit_code == 0, r.output
+        d = np.column_stack([pcsv.read_csv(tmp_path / "log.csv")[f"d_L{i}"].to_numpy() for i in range(1, 5)])
+        assert np.all(np.isfinite(d)) and np.abs(d - 50).max() < 5
+        (tmp_path / "log.csv").unlink()
+        (tmp_path / "log.truth.csv").unlink()

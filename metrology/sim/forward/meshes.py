@@ -8,7 +8,9 @@ distance is then recomputed in float64 on that triangle's plane (``t = n.(v0 - e
 the hit is exact to the mesh and the same on every machine. A ray that misses, or meets a
 triangle from its back (the inside of the panel), is NaN. The outward normal at a point is the
 mesh's vertex normals interpolated over its nearest triangle (smooth shading, as the surface the
-mesh was made from); the faces are wound so their normals point to the head's side.
+mesh was made from); the faces are wound so their normals point to the head's side
+(:meth:`MeshPanel.oriented`: the side most of the hole table's feeds come from; without a table,
+``+z``).
 
 The shape operator the *cell* computes from a mesh CAD (``shape_at``): a quadric
 ``w = a s^2 + b s t + c t^2 + d s + e t + g`` fitted by least squares to the mesh's vertices within
@@ -173,6 +175,17 @@ class MeshPanel(Panel):
 
     def to_dict(self):
         return {"kind": self.kind, "source": self.source, "faces": int(len(self.F))}
+
+    def oriented(self, feed_points=None, feed=None):
+        """This panel facing the head: with a hole table (``feed_points (m, 3)`` mm, ``feed (m, 3)``), wound so
+        that most feeds enter it (``feed . n < 0``); without, so that its area-weighted mean normal has
+        ``z >= 0`` (the head works on ``+z``). Returns self or a copy with the winding reversed."""
+        if feed is not None:
+            into = np.sum(self.normal_at(feed_points) * feed, axis=1)
+            flip = np.mean(into > 0) > 0.5
+        else:
+            flip = float(np.sum(self.face_normal[:, 2] * np.asarray(self.mesh.area_faces))) < 0
+        return MeshPanel(self.V, self.F[:, ::-1], self.source) if flip else self
 
 
 def _check_diagonal(diag, source):
