@@ -59,8 +59,8 @@ class Panel:
 
     def shape_at(self, points):
         """Shape operators ``(m, 3, 3)`` 1/mm, panel frame, at surface ``points (m, 3)`` mm: positive where
-        the surface bends away from the head (:func:`metrology.sim.forward.shapes.shape_from_height`)."""
-        from metrology.sim.forward.shapes import shape_from_height
+        the surface bends away from the head (:func:`metrology.sim.forward.curvature.shape_from_height`)."""
+        from metrology.sim.forward.curvature import shape_from_height
 
         p = np.asarray(points, float).reshape(-1, 3)
         return shape_from_height(self.height, p[:, 0], p[:, 1])[1]

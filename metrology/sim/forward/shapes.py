@@ -13,9 +13,7 @@ with its outward unit normal ``+z`` there, and the head works on the ``+z`` side
   ``H = -hess f`` (embedded in 3 x 3) and ``P = I - n n^T``: positive where the surface bends away
   from the head (a sphere seen from outside ``+1/R``, a barrel seen from inside ``-1/R``).
 
-Derivatives are central differences of ``f`` (step :data:`GRAD_STEP_MM` for the gradient,
-:data:`HESS_STEP_MM` for the Hessian): truncation ``~ h^2 f''' / 6`` stays under 1e-9 of the slope
-and curvature of panels with radii above 100 mm.
+Derivatives are central differences of ``f`` (:mod:`.curvature`).
 
 The generated panels (:data:`GENERATED`; each also exported as a mesh, the CAD, by
 :mod:`.meshes`):
@@ -46,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from metrology.sim.forward.curvature import _grad, shape_from_height
 from metrology.sim.forward.panels import Panel
 
 __all__ = ["HeightPanel", "GeneratedPanel", "OffCadPanel", "GENERATED", "generated_panel", "shape_from_height",
@@ -54,35 +53,6 @@ __all__ = ["HeightPanel", "GeneratedPanel", "OffCadPanel", "GENERATED", "generat
 #: Newton stops when the step along the ray is under this (mm)
 NEWTON_TOL_MM = 1e-11
 NEWTON_STEPS = 40
-#: central-difference steps of the gradient and the Hessian (mm)
-GRAD_STEP_MM = 1e-3
-HESS_STEP_MM = 0.5
-
-
-def _grad(f, x, y, h=GRAD_STEP_MM):
-    return (f(x + h, y) - f(x - h, y)) / (2 * h), (f(x, y + h) - f(x, y - h)) / (2 * h)
-
-
-def shape_from_height(f, x, y):
-    """Outward unit normals ``(m, 3)`` and shape operators ``(m, 3, 3)`` (1/mm, panel frame) of the
-    surface ``z = f(x, y)`` at ``x, y (m,)`` mm (module docstring)."""
-    x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
-    fx, fy = _grad(f, x, y)
-    h = HESS_STEP_MM
-    f0 = f(x, y)
-    fxx = (f(x + h, y) - 2 * f0 + f(x - h, y)) / h ** 2
-    fyy = (f(x, y + h) - 2 * f0 + f(x, y - h)) / h ** 2
-    fxy = (f(x + h, y + h) - f(x + h, y - h) - f(x - h, y + h) + f(x - h, y - h)) / (4 * h * h)
-    g = np.stack([-fx, -fy, np.ones_like(fx)], axis=-1)
-    w = np.linalg.norm(g, axis=-1)
-    n = g / w[:, None]
-    H = np.zeros((len(x), 3, 3))
-    H[:, 0, 0], H[:, 1, 1], H[:, 0, 1], H[:, 1, 0] = -fxx, -fyy, -fxy, -fxy
-    P = np.eye(3) - n[:, :, None] * n[:, None, :]
-    S = P @ H @ P / w[:, None, None]
-    return n, S
-
-
 class HeightPanel(Panel):
     """A panel ``z = f(x, y)`` over ``|x|, |y| <= half_mm`` (module docstring); subclasses give :meth:`f`."""
 
