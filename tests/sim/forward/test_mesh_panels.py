@@ -133,20 +133,24 @@ def test_holes_are_drilled_at_the_table_cycled_with_unique_ids_and_the_commanded
     assert np.all(c.true_after < c.true_angle)
 
 
-def test_readings_lie_on_the_true_panel_seen_from_the_tcs():
-    panel = generated_panel("nacelle")
-    spec = LogSpec(TABLE6, TABLE6, panel, noise_mm=0.0, resolution_mm=0.0, table=table_of(panel))
-    c = one(spec, 25)
+@pytest.mark.parametrize("off", [None, "dent:0.2@10,-5", "shift:0.3,-0.2,0.5"])
+def test_readings_lie_on_the_true_panel_seen_from_the_logged_pose(off):
+    """No robot error: the head is at its commanded (logged) pose; each reading put on its beam and taken
+    into the panel frame with the logged pose lies on the true panel."""
     from scipy.spatial.transform import Rotation
 
-    # the pose before the adjustment is off the commanded one by the robot's error; rebuild the beams
-    # from the readings and the true pose: the commanded origin N - D f and the true one share N
-    Rc = Rotation.from_rotvec(c.pose_rotvec).as_matrix()
-    s = spec.axis_sign
-    normal_tcs_cmd = np.einsum("hji,hj->hi", Rc, panel.normal_at(c.nominal))
-    # angle between the commanded axis and the true normal is the truth's within the robot's error
-    assert np.all(np.degrees(np.arccos(np.clip(-s * normal_tcs_cmd[:, 2], -1, 1))) < 1e-3)  # the table's feed is the normal
-    assert np.all((np.degrees(c.true_angle) >= 0.5 - 1e-6) & (np.degrees(c.true_angle) <= 5 + 1e-6))
+    cad = generated_panel("nacelle")
+    truth = cad if off is None else parse_off_cad(off, cad)
+    spec = LogSpec(TABLE6, TABLE6, truth, cad_panel=None if off is None else cad, noise_mm=0.0, resolution_mm=0.0,
+                   angle_rad=(0.0, 0.0), spin_rad=math.radians(20), table=table_of(cad))
+    c = one(spec, 25)
+    R = Rotation.from_rotvec(c.pose_rotvec).as_matrix()
+    spots = TABLE6.zero + c.d[..., None] * TABLE6.direction  # (h, n, 3) TCS
+    p = np.einsum("hij,hnj->hni", R, spots) + c.pose_origin[:, None, :]
+    assert np.all(np.isfinite(p))
+    assert np.abs(p[..., 2] - truth.height(p[..., 0], p[..., 1])).max() < 1e-8
+    if off is None:  # commanded along the CAD's normal, which is the truth's
+        assert np.degrees(c.true_angle).max() < 1e-6
 
 
 @pytest.mark.parametrize("off, expect", [("shift:0,0,1", 1.0), ("dent", -0.2), ("springback@-50", 0.2)])
