@@ -29,7 +29,8 @@ Per hole (panel frame, mm; see :mod:`.panels`; TCS conventions in :mod:`.log_spe
    truth) at the nominal point and turned into the TCS with the commanded pose,
    ``R_c^T S R_c``; it returns the unit normal ``(h, 3)`` TCS toward the head and ``ok (h,)``.
    The default is :class:`MicroPlane` (the plane above). The cell turns the drill onto
-   ``-normal``; where ``ok`` is False it keeps its attitude. The controller is the thing under
+   ``-normal``; where ``ok`` is False, or the normal is not finite or does not face the head, it
+   keeps its attitude (``adjusted`` False). The controller is the thing under
    test: it may come from anywhere (``metro simulate-log --controller metro`` plugs in the
    measurement's own, from :mod:`metrology.jobs.simulate_log`); the physics here imports none.
 6. The readings after (same offset, fresh noise and gross errors), and the truth: the angles
@@ -246,7 +247,8 @@ class _Geometry:
         shape = shape_of() if getattr(self.controller, "wants_shape", True) else None
         nc, ok = self.controller(self.spec.cell_layout, d, shape)
         nc = np.asarray(nc, float)
-        ok = np.asarray(ok, bool) & np.all(np.isfinite(nc), axis=1)
+        # the cell refuses a normal that is not finite or does not face the head (n . k < 0): it keeps its attitude
+        ok = np.asarray(ok, bool) & np.all(np.isfinite(nc), axis=1) & (nc[:, 2] * self.s < 0)
         k_new = np.where(ok[:, None], -nc, np.array([0.0, 0.0, self.s]))
         if not isinstance(self.controller, MicroPlane):  # a foreign controller's normal, made unit
             k_new = k_new / np.linalg.norm(k_new, axis=1, keepdims=True)

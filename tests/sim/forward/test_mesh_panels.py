@@ -271,3 +271,11 @@ def test_rotation_vector_round_trips():
 
     R = Rotation.random(50, random_state=3).as_matrix()
     assert np.allclose(Rotation.from_rotvec(rotation_vector(R)).as_matrix(), R, atol=1e-12)
+
+
+def test_the_cell_keeps_its_attitude_where_the_controller_answers_nonsense():
+    panel = generated_panel("wing")
+    base = dict(noise_mm=0.0, resolution_mm=0.0, table=table_of(panel))
+    for answer in ([0, 0, 1.0], [np.nan, 0, -1.0]):  # facing away from the head; not finite
+        c = one(LogSpec(TABLE6, TABLE6, panel, controller=Spy(fixed=np.array(answer)), **base), 25)
+        assert not c.adjusted.any() and np.allclose(c.true_after, c.true_angle, atol=1e-9)
