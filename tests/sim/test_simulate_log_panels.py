@@ -196,3 +196,12 @@ def test_a_mesh_wound_the_other_way_is_turned_to_face_the_head(tmp_path):
         assert np.all(np.isfinite(d)) and np.abs(d - 50).max() < 5
         (tmp_path / "log.csv").unlink()
         (tmp_path / "log.truth.csv").unlink()
+
+
+def test_a_parquet_hole_table_drills_as_its_csv(tmp_path):
+    import pyarrow.parquet as pq
+
+    pq.write_table(pcsv.read_csv(WING_HOLES), tmp_path / "holes.parquet")
+    for name, table in (("a.csv", WING_HOLES), ("b.csv", str(tmp_path / "holes.parquet"))):
+        assert run(tmp_path, "--panel", WING, "--points", table, "--holes", "40", name=name).exit_code == 0
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
