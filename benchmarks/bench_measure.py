@@ -1,6 +1,7 @@
 """Speed and memory of ``metro measure``, against baselines measured in the same run.
 
     python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
+                                       [--sections in-process,process,qif,dask,cluster] [--cluster-holes 4e6]
 
 On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
 ``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
@@ -16,7 +17,15 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 3. **Dask**: a partitioned log of ``--dask-holes`` holes (40 partitions) with ``--workers 1`` and
    ``--workers 2`` (holes/s, the cluster's start included), against the single process on the
    same folder;
-4. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+4. **QIF**: the whole-process run of 2. with ``--qif results.qif`` added (a QIF 3.0 Results
+   document of every hole, streamed): wall time, CPU and peak RSS against the run without it
+   (goal: <= 3x the time; RSS bounded, not growing with the holes);
+5. **cluster** (``--sections cluster``): a log of ``--cluster-holes`` holes, 4 cells in 40 partitions
+   (``cell=C<k>/part=<n>``), measured by one process and on a localhost cluster (``dask scheduler``
+   and W = 1, 2 ``dask worker --nthreads 1``, ``--scheduler``): wall time, the speedup, and the
+   client's own CPU time as a share of the one-process run's CPU (the serial share ``f``), with
+   Amdahl's speedup ``1 / (f + (1 - f) / N)`` for N = 4 to 64 workers as the scaling model;
+6. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -87,8 +96,9 @@ writer.close()
 '''
 
 
-def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True):
-    """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions; the layout."""
+def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True, cells: int = 1):
+    """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions (with
+    ``cells`` > 1: ``cell=C<k>/part=<n>``, the key in the folder names only); the layout."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -113,13 +123,13 @@ def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool 
     per = -(-holes // parts)
     folder = workdir / "log"
     k = 0
-    for chunk in simulate_log(spec, seed, holes, 1, chunk_holes=per):
+    for chunk in simulate_log(spec, seed, holes, cells, chunk_holes=per):
         t = log_table(chunk)
         if single is not None:
             single.write_table(t)
-        d = folder / f"part={k:04d}"
+        d = folder / f"part={k:04d}" if cells == 1 else folder / f"cell={chunk.cell}" / f"part={k:04d}"
         d.mkdir(parents=True, exist_ok=True)
-        pq.write_table(t, d / "part-0.parquet")
+        pq.write_table(t if cells == 1 else t.drop_columns(["cell"]), d / "part-0.parquet")
         k += 1
     if single is not None:
         single.close()
@@ -164,6 +174,67 @@ def process(cmd, repeat, cpu=None):
     return best, rss / 1024.0
 
 
+def _free_port():
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cluster(work: Path, holes: int, metro) -> dict:
+    """Section 5: one process against a localhost scheduler with 1 and 2 workers (module docstring)."""
+    from distributed import Client
+
+    d = work / "cluster"
+    shutil.rmtree(d, ignore_errors=True)
+    d.mkdir()
+    _, folder, layout = make_log(d, holes, 40, seed=5, single=False, cells=4)
+    out = {"holes": holes, "partitions": 40, "cells": 4}
+    cpu = []
+    target = d / "out-one"
+    out["one_process_s"], _ = process([*metro, "-q", "measure", str(folder), "--layout", str(layout), "--out",
+                                       str(target)], 1, cpu)
+    out["one_process_cpu_s"] = cpu[0]
+    shutil.rmtree(target)
+    dask = shutil.which("dask", path=os.path.dirname(sys.executable)) or "dask"
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    for w in (1, 2):
+        port = _free_port()
+        address = f"tcp://127.0.0.1:{port}"
+        procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+        try:
+            time.sleep(2)
+            for _ in range(w):
+                procs.append(subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1",
+                                               "--no-dashboard"], stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, env=env))
+            with Client(address, timeout="60s") as c:
+                c.wait_for_workers(w, timeout=120)
+            cpu = []
+            target = d / f"out-{w}"
+            t, _ = process([*metro, "-q", "measure", str(folder), "--layout", str(layout), "--out", str(target),
+                            "--scheduler", address], 1, cpu)
+            shutil.rmtree(target)
+        finally:
+            for p in procs[::-1]:
+                p.terminate()
+            for p in procs:
+                try:
+                    p.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        out[f"workers_{w}"] = {"s": t, "client_cpu_s": cpu[0], "speedup_vs_one_process": out["one_process_s"] / t,
+                               "client_cpu_share": cpu[0] / out["one_process_cpu_s"]}
+    out["workers_2_vs_1"] = out["workers_1"]["s"] / out["workers_2"]["s"]
+    f = out["workers_2"]["client_cpu_share"]
+    out["amdahl_from_client_share"] = {n: 1.0 / (f + (1.0 - f) / n) for n in (4, 8, 16, 32, 64)}
+    shutil.rmtree(d, ignore_errors=True)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--holes", type=float, default=1e6)
@@ -172,26 +243,50 @@ def main(argv=None):
     ap.add_argument("--dask-holes", type=float, default=1e7, help="holes of the Dask comparison's log")
     ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--sections", default="in-process,process,qif,dask",
+                    help="which of in-process, process, qif, dask, cluster")
+    ap.add_argument("--cluster-holes", type=float, default=4e6, help="holes of the cluster section's log")
     args = ap.parse_args(argv)
+    sections = set(args.sections.split(","))
     work = Path(tempfile.mkdtemp(prefix="bench-measure-")) if args.workdir is None else args.workdir
     work.mkdir(parents=True, exist_ok=True)
-    metro = shutil.which("metro", path=os.path.dirname(sys.executable)) or "metro"
+    metro = shutil.which("metro", path=os.path.dirname(sys.executable))
+    metro = [metro] if metro else [sys.executable, "-m", "cli.main"]  # from a source tree: run from ROOT
+    os.chdir(ROOT)
     res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
+    if sections == {"cluster"}:
+        res["cluster"] = cluster(work, int(args.cluster_holes), metro)
+        return _done(res, args, work)
     t0 = time.perf_counter()
     log, folder, layout = make_log(work, int(args.holes), 8)
     res["generate_s"] = time.perf_counter() - t0
-    res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
-    res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
+    if "in-process" in sections:
+        res["in_process_holes_per_s"] = in_process(log, layout, args.repeat)
+        res["in_process_holes_per_cpu_s"] = in_process(log, layout, args.repeat, cpu=True)
     out = work / "holes.parquet"
     cpu_m, cpu_b = [], []
-    res["metro_s"], res["metro_rss_mb"] = process([metro, "-q", "measure", str(log), "--layout", str(layout),
+    res["metro_s"], res["metro_rss_mb"] = process([*metro, "-q", "measure", str(log), "--layout", str(layout),
                                                    "--out", str(out)], args.repeat, cpu_m)
+    if "qif" in sections:
+        cpu_q = []
+        qif = work / "results.qif"
+        res["qif_s"], res["qif_rss_mb"] = process([*metro, "-q", "measure", str(log), "--layout", str(layout),
+                                                   "--out", str(out), "--qif", str(qif)], args.repeat, cpu_q)
+        res.update(qif_cpu_s=cpu_q[0], qif_mb=qif.stat().st_size / 2**20, qif_ratio_time=res["qif_s"] / res["metro_s"],
+                   qif_ratio_cpu=cpu_q[0] / cpu_m[0], qif_ratio_rss=res["qif_rss_mb"] / res["metro_rss_mb"])
+        qif.unlink()
+    if "cluster" in sections:
+        res["cluster"] = cluster(work, int(args.cluster_holes), metro)
+    if "process" not in sections and "dask" not in sections:
+        return _done(res, args, work)
     res["baseline_s"], res["baseline_rss_mb"] = process([sys.executable, "-c", BASELINE, str(log), str(layout),
                                                          str(work / "normals.parquet")], args.repeat, cpu_b)
     res["metro_cpu_s"], res["baseline_cpu_s"] = cpu_m[0], cpu_b[0]
     res["ratio_cpu"] = cpu_m[0] / cpu_b[0]
     res["ratio_time"] = res["metro_s"] / res["baseline_s"]
     res["ratio_rss"] = res["metro_rss_mb"] / res["baseline_rss_mb"]
+    if "dask" not in sections:
+        return _done(res, args, work)
     daskdir = work / "dask"
     shutil.rmtree(daskdir, ignore_errors=True)
     daskdir.mkdir()
@@ -200,7 +295,7 @@ def main(argv=None):
     for label, extra in (("one process", []), ("dask 1 worker", ["--workers", "1"]), ("dask 2 workers", ["--workers", "2"])):
         target = work / f"out-{label.replace(' ', '-')}"
         shutil.rmtree(target, ignore_errors=True)
-        t, rss = process([metro, "-q", "measure", str(dfolder), "--layout", str(dlayout), "--out", str(target), *extra],
+        t, rss = process([*metro, "-q", "measure", str(dfolder), "--layout", str(dlayout), "--out", str(target), *extra],
                          1)
         res.setdefault("partitioned_holes_per_s", {})[label] = args.dask_holes / t
         if label == "one process":
@@ -218,12 +313,16 @@ def main(argv=None):
         first = sorted(p for p in bigfolder.iterdir() if p.is_dir())[0]
         one = bigdir / "one"
         shutil.copytree(first, one / first.name)
-        _, rss1 = process([metro, "-q", "measure", str(one), "--layout", str(biglayout), "--out", str(bigdir / "out1")], 1)
-        t, rss = process([metro, "-q", "measure", str(bigfolder), "--layout", str(biglayout), "--out",
+        _, rss1 = process([*metro, "-q", "measure", str(one), "--layout", str(biglayout), "--out", str(bigdir / "out1")], 1)
+        t, rss = process([*metro, "-q", "measure", str(bigfolder), "--layout", str(biglayout), "--out",
                           str(bigdir / "out")], 1)
         res.update(big_holes=int(args.big), big_s=t, big_rss_mb=rss, big_reference_rss_mb=rss1,
                    big_rss_ratio=rss / rss1)
         shutil.rmtree(bigdir, ignore_errors=True)
+    _done(res, args, work)
+
+
+def _done(res, args, work):
     print(json.dumps(res, indent=1))
     if args.json:
         args.json.write_text(json.dumps(res, indent=1))

@@ -21,9 +21,21 @@ report and width it checks, and prints one line:
   (``--dump-dom``; the report itself has none): no clipped text, i.e. no text block (``pre``,
   ``p``, ``li``, a table cell, a ``div`` such as a table's scroll box) whose ``scrollWidth``
   exceeds its ``clientWidth``, and a page no wider than the window; and at widths of 1280 px
-  and more, no figure whose smallest text shows below ``--min-figure-pt`` (9 pt): the report
-  states each figure's smallest text in image pixels (``data-min-font-px``), shown at
-  ``clientWidth / naturalWidth`` of that, 0.75 pt per CSS px.
+  and more, no figure whose smallest text shows below ``--min-figure-pt`` (9 pt), and at every
+  width none below ``--min-figure-px`` (9 CSS px, a phone's least legible): the report states
+  each figure's smallest text in image pixels (``data-min-font-px``), shown at ``clientWidth /
+  naturalWidth`` of that (of the image the browser chose: a report may offer a narrow one),
+  0.75 pt per CSS px; and no word broken across lines (its text's client rectangles on two
+  lines): in a table cell or the command line, no word of at most :data:`WORD_CHARS` characters
+  (a hole id, a time, an option such as ``--out``); in prose (paragraphs, list items,
+  captions), no option (``--out``) or id (``C1-00012006``), while ``re-mounted`` may break as
+  prose does;
+* what a figure must show, read from its pixels in Chromium (a canvas): a figure may state boxes
+  (``data-expect``: x0, y0, x1, y1 in image pixels, a colour, present or not) where ink of that
+  colour must show or must not (the drift chart: its line reaches h at each alarm, and no line
+  joins an alarm to the next baseline's first hole). A pixel is that colour's ink within 0.3 of
+  it in RGB (0-1) distance. The boxes are the column figure's: checked where the page shows it
+  (not the narrow figure a phone's window gets).
 
 Screenshots go next to each report (``<report>.png``, or ``--shots DIR``). Exit status 1 when
 any check fails.
@@ -132,9 +144,13 @@ def browse(report: Path, shot: Path, width: int, height: int, chromium: str) -> 
     return problems
 
 
+#: the longest word (characters between spaces) that must never break across lines: ids, times,
+#: numbers and options; longer ones (paths) may
+WORD_CHARS = 20
+
 #: added to a copy of the page: measures the layout once the page has loaded and writes the
 #: result, as JSON, into a <pre id="metro-check"> that --dump-dom prints
-MEASURE = """<script>
+MEASURE = r"""<script>
 window.addEventListener("load", () => {
   const out = {window: window.innerWidth, page: document.documentElement.scrollWidth, clipped: [], figures: []};
   for (const el of document.querySelectorAll("pre, p, li, td, th, caption, figcaption, h1, h2, h3, div, table")) {
@@ -145,7 +161,49 @@ window.addEventListener("load", () => {
   }
   for (const img of document.querySelectorAll("img[data-min-font-px]")) {
     const px = parseFloat(img.dataset.minFontPx) * img.clientWidth / img.naturalWidth;
-    out.figures.push({alt: img.alt.slice(0, 60), pt: 0.75 * px});
+    out.figures.push({alt: img.alt.slice(0, 60), pt: 0.75 * px, px: px});
+  }
+  out.broken = [];
+  for (const el of document.querySelectorAll("td, th, li, .command, p, figcaption, caption")) {
+    const cell = el.matches("td, th, .command");
+    const walker = document.createTreeWalker(el, NodeFilter.SHOW_TEXT);
+    for (let node = walker.nextNode(); node; node = walker.nextNode()) {
+      if (!cell && node.parentElement.closest("td, th, .command") !== el.closest("td, th, .command")) continue;
+      for (const m of node.data.matchAll(/\S+/g)) {
+        if (m[0].length > WORD_CHARS || m[0].length < 2) continue;
+        if (!cell && !/^[(\[]?(--?[A-Za-z]|[A-Za-z]\w*-\d)/.test(m[0])) continue;  // prose: options and ids only
+        const r = document.createRange();
+        r.setStart(node, m.index); r.setEnd(node, m.index + m[0].length);
+        const tops = new Set([...r.getClientRects()].filter(q => q.width > 0).map(q => Math.round(q.top)));
+        if (tops.size > 1) out.broken.push(el.tagName.toLowerCase() + ": " + m[0]);
+      }
+    }
+  }
+  out.broken = [...new Set(out.broken)];
+  out.ink = [];
+  for (const img of document.querySelectorAll("img[data-expect]")) {
+    if (img.currentSrc !== img.src) continue;  // the boxes are the column figure's, not the narrow one's
+    const c = document.createElement("canvas");
+    c.width = img.naturalWidth; c.height = img.naturalHeight;
+    const g = c.getContext("2d");
+    g.drawImage(img, 0, 0);
+    for (const [x0, y0, x1, y1, colour, present] of JSON.parse(img.dataset.expect)) {
+      const want = [1, 3, 5].map(i => parseInt(colour.slice(i, i + 2), 16));
+      const X0 = Math.max(0, Math.floor(x0)), Y0 = Math.max(0, Math.floor(y0));
+      const w = Math.min(c.width, Math.ceil(x1) + 1) - X0, h = Math.min(c.height, Math.ceil(y1) + 1) - Y0;
+      let found = false;
+      if (w > 0 && h > 0) {
+        const d = g.getImageData(X0, Y0, w, h).data;
+        for (let i = 0; i < d.length && !found; i += 4) {
+          const e = Math.hypot(d[i] - want[0], d[i + 1] - want[1], d[i + 2] - want[2]) / 255;
+          found = e < 0.3;
+        }
+      }
+      if (found !== present) {
+        out.ink.push((present ? "no " : "") + colour + " ink in [" + [x0, y0, x1, y1].join(", ") + "] of "
+                     + img.alt.slice(0, 50));
+      }
+    }
   }
   const pre = document.createElement("pre");
   pre.id = "metro-check";
@@ -155,7 +213,7 @@ window.addEventListener("load", () => {
 </script>"""
 
 
-def measure(report: Path, width: int, height: int, chromium: str, min_pt: float) -> list:
+def measure(report: Path, width: int, height: int, chromium: str, min_pt: float, min_px: float = 9.0) -> list:
     """Clipped text blocks and small figure text of ``report`` at ``width`` px (list of str)."""
     import html as html_lib
     import re
@@ -163,7 +221,8 @@ def measure(report: Path, width: int, height: int, chromium: str, min_pt: float)
     text = report.read_text(encoding="utf-8")
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / report.name
-        copy.write_text(drawn_at(text.replace("</body>", MEASURE + "\n</body>"), width, height), encoding="utf-8")
+        script = MEASURE.replace("WORD_CHARS", str(WORD_CHARS))
+        copy.write_text(drawn_at(text.replace("</body>", script + "\n</body>"), width, height), encoding="utf-8")
         cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp}/p", "--virtual-time-budget=10000",
                f"--window-size={max(width, MIN_WINDOW)},{height}", "--dump-dom", copy.as_uri()]
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
@@ -172,6 +231,9 @@ def measure(report: Path, width: int, height: int, chromium: str, min_pt: float)
         return [f"layout not measured (chromium exit {r.returncode})"]
     d = json.loads(html_lib.unescape(m.group(1)))
     out = [f"clipped: {c}" for c in d["clipped"]]
+    out += [f"figure: {c}" for c in d.get("ink", [])]
+    out += [f"word broken across lines: {w}" for w in d.get("broken", [])[:12]]
+    out += [f"figure text {f['px']:.1f} px < {min_px:g} px: {f['alt']}" for f in d["figures"] if f["px"] < min_px - 0.05]
     if d["window"] != width:
         out.append(f"the page was drawn {d['window']} px wide, not {width} px")
     if d["page"] > d["window"]:
@@ -198,6 +260,7 @@ def main(argv=None) -> int:
     ap.add_argument("--widths", default="1280,412", help="window widths, px, comma-separated (412: a phone)")
     ap.add_argument("--height", type=int, default=2400, help="window height, px (the screenshot's)")
     ap.add_argument("--min-figure-pt", type=float, default=9.0, help="smallest figure text at 1280 px and more, pt")
+    ap.add_argument("--min-figure-px", type=float, default=9.0, help="smallest figure text at every width, CSS px")
     ap.add_argument("--shots", type=Path, default=None, help="folder for the screenshots (default: beside each report)")
     ap.add_argument("--work", type=Path, default=None, help="folder for the demo's reports (default: a temporary one)")
     args = ap.parse_args(argv)
@@ -220,7 +283,7 @@ def main(argv=None) -> int:
                 args.shots.mkdir(parents=True, exist_ok=True)
             problems = (static_problems(rep.read_text(encoding="utf-8"))
                         + browse(rep, shot, width, args.height, chromium)
-                        + measure(rep, width, args.height, chromium, args.min_figure_pt))
+                        + measure(rep, width, args.height, chromium, args.min_figure_pt, args.min_figure_px))
             failed += bool(problems)
             print(f"{'FAIL' if problems else 'ok  '} {rep} at {width} px ({rep.stat().st_size // 1024} KiB) -> {shot}"
                   + "".join(f"\n      {p}" for p in problems))

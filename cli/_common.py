@@ -92,14 +92,38 @@ def output_path(value, option: str):
         fail(str(exc))
 
 
+#: exit code when the reader of stdout went away (``| head``): a shell's for a process killed by SIGPIPE
+EXIT_CLOSED_PIPE = 128 + 13
+
+
+def closed_pipe() -> None:
+    """stdout's reader has gone (``metro ... | head -1``): not bad input. Quiet, as other tools:
+    no message, exit :data:`EXIT_CLOSED_PIPE`; stdout is pointed at /dev/null so the interpreter's
+    final flush does not complain."""
+    import os
+    import sys
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    raise typer.Exit(EXIT_CLOSED_PIPE)
+
+
 def guarded(fn):
-    """Turn ``ValueError``/``OSError`` from the library into a one-line error, exit 2."""
+    """Turn ``ValueError``/``OSError`` from the library into a one-line error, exit 2; a closed
+    stdout pipe into a quiet exit (:func:`closed_pipe`)."""
+    import errno
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
         except (ValueError, OSError) as exc:
+            if isinstance(exc, BrokenPipeError) or getattr(exc, "errno", None) == errno.EPIPE \
+                    or "[Errno 32] Broken pipe" in str(exc):  # pyarrow's writer re-raises it as an OSError
+                closed_pipe()
             fail(str(exc))
 
     return wrapper
@@ -230,7 +254,8 @@ _LIVE = []  # the one rich Progress on screen (nested bars add a line to it)
 
 @contextlib.contextmanager
 def progress_bar(label: str):
-    """Yield a :data:`metrology.core.progress.ProgressFn` drawn as a rich bar on stderr.
+    """Yield a :data:`metrology.core.progress.ProgressFn` drawn as a rich bar on stderr: done/total,
+    or the count alone (a pulsing bar) while the total is None (not known).
 
     Silent when stderr is not a terminal and under ``-q``; under ``-v`` each step is also
     noted with its duration. A bar opened inside another (the demo's steps) is a second
@@ -251,25 +276,28 @@ def progress_bar(label: str):
         log(None)
         return
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     with contextlib.ExitStack() as stack:
         if _LIVE:
             bar = _LIVE[-1]
         else:
-            bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+            bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
                            TimeElapsedColumn(), TextColumn("{task.fields[what]}"),
                            console=Console(file=sys.stderr, force_terminal=True), transient=True,
                            redirect_stdout=sys.stdout.isatty(), redirect_stderr=True)
             stack.enter_context(bar)
             _LIVE.append(bar)
             stack.callback(_LIVE.pop)
-        task = bar.add_task(label, total=1, what="")
+        task = bar.add_task(label, total=None, what="", count="")  # no total yet: a pulsing bar
         stack.callback(bar.remove_task, task)
 
         def update(done, total, what):
             log(what)
-            bar.update(task, completed=done, total=total, what=shown(what), refresh=True)
+            # total None: not known (a log's holes before it is read): the count alone, the bar pulsing
+            count = f"{done:,}" if total is None else f"{done}/{total}"
+            bar.update(task, completed=done, what=shown(what), count=count, refresh=True,
+                       **({} if total is None else {"total": total}))
 
         yield update
         log(None)

@@ -8,7 +8,26 @@ optional) and no default where there is none.
 
 from __future__ import annotations
 
+import re
+
 import typer.core
+
+#: what rich's markup takes for a style tag (rich.markup's own pattern): ``[certificate]``,
+#: ``[tolerance]``; a help text's bracketed words are escaped so rich shows them as written
+_TAG = re.compile(r"(\\*)(\[[a-z#/@][^[]*?])")
+
+
+def escape_markup(text: str) -> str:
+    """``text`` with each bracketed word escaped for rich markup (as ``rich.markup.escape``,
+    without importing rich on every command line)."""
+    return _TAG.sub(lambda m: f"{m.group(1)}{m.group(1)}\\{m.group(2)}", text)
+
+
+def _escape_help(obj) -> None:
+    """Escape ``obj.help`` once (a command or a parameter)."""
+    if getattr(obj, "help", None) and not getattr(obj, "_metro_escaped", False):
+        obj.help = escape_markup(obj.help)
+        obj._metro_escaped = True
 
 
 def _fix(params) -> None:
@@ -27,6 +46,9 @@ class _Fixed:
     def get_params(self, ctx):
         params = super().get_params(ctx)  # with --help and the completion options added by typer
         _fix(params)
+        if typer.core.HAS_RICH and getattr(self, "rich_markup_mode", None) == "rich":
+            for obj in (self, *params):
+                _escape_help(obj)
         return params
 
 

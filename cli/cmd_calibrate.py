@@ -111,6 +111,9 @@ def register(app: typer.Typer) -> None:
         method: str = typer.Option("lsq", "--method", help=f"Estimator: {', '.join(METHODS)}."),
         json_out: bool = typer.Option(False, "--json", help=JSON_HELP),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the calibrated layout TOML here."),
+        qif: Optional[Path] = typer.Option(None, "--qif", help="Also write the calibrated head as a QIF 3.0 "
+                                           "measurement device (.qif): its sensors' calibrated values and the "
+                                           "SHA-256 of the calibrated layout, which metro measure --qif names."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Convergence and residual figures: a .pdf file (a "
                                             "page each) or a directory (PNGs)."),
         report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
@@ -151,8 +154,9 @@ def register(app: typer.Typer) -> None:
         import math
 
         if follow:
-            if plot is not None or report_html is not None:
-                fail("--follow writes no figures or report: run calibrate on the finished file for --plot/--report")
+            if plot is not None or report_html is not None or qif is not None:
+                fail("--follow writes no figures, report or QIF: run calibrate on the finished file for --plot/--report/"
+                     "--qif")
             return _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg,
                            idle_s, stop_when_met, quaternion_order, position_units, no_reading, target_set)
 
@@ -165,7 +169,7 @@ def register(app: typer.Typer) -> None:
                                      target_set=target_set,
                                      out=out, plot_dir=plot, quaternion_order=quaternion_order,
                                      position_units=position_units, no_reading=no_reading, warn=warn, progress=progress,
-                                     report_html=report_html, command=invocation(ctx), meta=fields)
+                                     report_html=report_html, command=invocation(ctx), meta=fields, qif=qif)
         for w in calibration_warnings(report):
             warn(w)
         if json_out:

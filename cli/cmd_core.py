@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
         report: Optional[Path] = typer.Option(None, "--report", help="One HTML report of every step (.html); each "
                                               "step's own report is written into the output folder too."),
     ) -> None:
-        """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals."""
+        """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals -> simulate-log -> measure."""
         import contextlib
         import io
         import json
@@ -120,3 +120,6 @@ def register(app: typer.Typer) -> None:
             typer.echo(format_reproduce(summary))
             if fig_dir is not None:
                 typer.echo(f"figures: {', '.join(summary['figures'])}")
+            from metrology.report.verdicts import NO_VERDICT_LINE
+
+            typer.echo(NO_VERDICT_LINE)

@@ -86,4 +86,6 @@ def register(app: typer.Typer) -> None:
         if json_out:
             echo_json(with_verdict(truth, NO_VERDICT), "simulation")
         else:
-            echo(simulate_text(out, poses, effect, sensor, size, cloud, n_points))
+            from metrology.report.verdicts import NO_VERDICT_LINE
+
+            echo(simulate_text(out, poses, effect, sensor, size, cloud, n_points) + "\n" + NO_VERDICT_LINE)

@@ -21,12 +21,13 @@ def register(app: typer.Typer) -> None:
                                     "its \\[calibration] covariance is propagated into U95."),
         out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
                                            "partitioned log (one file per partition; a re-run resumes). Default: CSV "
-                                           "on stdout (not with --json)."),
+                                           "on stdout (with --json: none, the summary alone)."),
         tolerance_deg: float = typer.Option(0.5, "--tolerance-deg", help="Perpendicularity tolerance, deg: the "
                                             "largest angle between drill axis and surface normal."),
-        min_radius_mm: float = typer.Option(500.0, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
+        min_radius_mm: Optional[float] = typer.Option(None, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
                                             "the micro-plane's curvature bias in U95 and sets what the gross-reading "
-                                            "check allows ('inf': flat panels)."),
+                                            "check allows ('inf': flat panels). Default: the layout's \\[panel] "
+                                            "radius_mm, else 500 (named in the verdict as an assumption)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Run on a new Dask LocalCluster of N worker "
                                               "processes, one task per partition (needs metro\\[fleet])."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run on a running Dask cluster "
@@ -36,8 +37,29 @@ def register(app: typer.Typer) -> None:
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
                                             "panel (for panels whose shape moves the redundant reading's misfit); "
                                             "misses a drift slower than a panel."),
-        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results need --out."),
+        panel: Optional[Path] = typer.Option(None, "--panel", help="The CAD panel the holes are drilled in (STL, OBJ, "
+                                             "PLY, GLB; STEP), mm, its frame; with --points: each hole's curvature from "
+                                             "it, the normal fitted with the surface known."),
+        points: Optional[Path] = typer.Option(None, "--points", help="The hole table (.csv or .parquet: hole_id,x,y,z,"
+                                              "i,j,k, mm, panel frame; i,j,k the feed into the panel), joined to the log "
+                                              "by hole_id. Alone (no --panel): curvature from the neighbours' normals."),
+        position_error_mm: float = typer.Option(0.5, "--position-error-mm", help="With --points: the drill point's "
+                                                "position error along the surface, mm (U95: the curvature's change "
+                                                "over it)."),
+        form_tolerance_mm: float = typer.Option(0.0, "--form-tolerance-mm", help="With --points: the panel's stated "
+                                                "form tolerance over the head's footprint, mm (0: the panel is its CAD)."),
+        spin_deg: float = typer.Option(2.0, "--spin-deg", help="With --points: the head's spin about the tool axis "
+                                       "relative to the panel is within +-SPIN of the cell's convention (TCS x, y near "
+                                       "the panel's x, y), deg; in U95."),
+        follow: bool = typer.Option(False, "--follow", help="A live log (LOG '-' for stdin, or a CSV file): each "
+                                    "hole measured as its line arrives; one JSON line per hole on stdout, "
+                                    "{\"alarm\": ...} lines for drift alarms, a final {\"summary\": ...}."),
+        json_out: bool = typer.Option(False, "--json", help=JSON_HELP + " The summary; per-hole results only with --out."),
         report: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
+        qif: Optional[Path] = typer.Option(None, "--qif", help="Also write the per-hole results as a QIF 3.0 "
+                                           "Results document (.qif): each hole an angle characteristic with its "
+                                           "value, U95 and ISO 14253-1 status; the head and its calibration's "
+                                           "SHA-256 as the measurement device."),
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
@@ -49,8 +71,24 @@ def register(app: typer.Typer) -> None:
 
         if workers is not None and scheduler is not None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
-        if json_out and out is None:
-            fail("--json prints the summary on stdout: give --out FILE for the per-hole results")
+        panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
+                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
+        if follow:
+            if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None:
+                fail("--follow answers each hole on stdout: no --out, --report, --qif, --workers or --scheduler")
+            import json as _json
+
+            from metrology.jobs.measure_follow import follow_log
+
+            def emit(obj):
+                sys.stdout.write(_json.dumps(obj) + "\n")
+                sys.stdout.flush()
+
+            summary = follow_log(log, layout, emit, lambda a: emit({"alarm": a}), tolerance_deg=tolerance_deg,
+                                 min_radius_mm=min_radius_mm, **panel_kw)
+            emit({"summary": summary.to_dict()})
+            bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
+            raise typer.Exit(1 if bad else 0)
         if log == "-":
             import shutil
             import tempfile
@@ -63,12 +101,12 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>", chart_by_panel)
+                           report, "<stdin>", chart_by_panel, qif, json_out, panel_kw)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None, chart_by_panel)
+                       report, None, chart_by_panel, qif, json_out, panel_kw)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -79,11 +117,12 @@ def register(app: typer.Typer) -> None:
         finish(rep.verdict)
 
     def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
-             chart_by_panel):
+             chart_by_panel, qif, json_out, panel_kw):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
             return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
                                  workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
                                  warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
-                                 chart_by_panel=chart_by_panel)
+                                 chart_by_panel=chart_by_panel, qif=qif, per_hole=not (json_out and out is None),
+                                 **panel_kw)

@@ -14,14 +14,15 @@ def register(app: typer.Typer) -> None:
     @app.command("simulate-log")
     @guarded
     def simulate_log(
-        out: Path = typer.Option(..., "--out", help="The log: a .csv file, or a new folder for partitioned Parquet "
-                                 "(cell=C1/date=YYYY-MM-DD/)."),
+        out: Path = typer.Option(..., "--out", help="The log: a .csv or .parquet file, or a new folder for "
+                                 "partitioned Parquet (cell=C1/date=YYYY-MM-DD/, a hive dataset)."),
         layout: Optional[Path] = typer.Option(None, "--layout", help="The cell's calibrated layout TOML (default: "
                                               "the bundled Table 6 head, measured/nominal.toml)."),
         true_layout: Optional[Path] = typer.Option(None, "--true-layout", help="The head as it is (TOML); default: "
                                                    "one drawn from --layout's covariance (or moved by --layout-error-mm, -deg), from the seed."),
         truth: Optional[Path] = typer.Option(None, "--truth", help="Truth per hole_id (.csv or .parquet); default "
-                                             "LOG.truth.csv beside a CSV, FOLDER.truth.parquet beside a folder."),
+                                             "LOG.truth.csv (.parquet) beside a file, FOLDER.truth.parquet beside a "
+                                             "folder."),
         no_truth: bool = typer.Option(False, "--no-truth", help="Write no truth file (a throughput run)."),
         holes: int = typer.Option(10_000, "--holes", help="Holes in all, split evenly over the cells."),
         cells: int = typer.Option(1, "--cells", help="Cells C1..CK (the same head), each its own time line."),
@@ -51,8 +52,9 @@ def register(app: typer.Typer) -> None:
                                        "[-SPIN, SPIN], deg."),
         patch_mm: float = typer.Option(400.0, "--patch-mm", help="Side of the square the drilling points cover, mm."),
         holes_per_hour: float = typer.Option(600.0, "--holes-per-hour", help="Each cell's drilling rate."),
-        drift: Optional[List[str]] = typer.Option(None, "--drift", help="[CELL/]SENSOR:MM_PER_HOUR[@HOLE]: a slow "
-                                                  "zero drift from hole HOLE (counted from 1); repeatable."),
+        drift: Optional[List[str]] = typer.Option(None, "--drift", help="[CELL/]SENSOR:MM_PER_HOUR, then "
+                                                  "@HOLE or none (L2:0.002@5000): a slow zero drift from hole HOLE (counted from 1; "
+                                                  "none: from the first); repeatable."),
         shift: Optional[List[str]] = typer.Option(None, "--shift", help="[CELL/]SENSOR:MM@HOLE: a knocked sensor, "
                                                   "its zero jumps by MM at hole HOLE; repeatable."),
         gross_rate: float = typer.Option(0.0, "--gross-rate", help="Probability that a reading is gross "
@@ -88,4 +90,6 @@ def register(app: typer.Typer) -> None:
 
             echo_json(with_verdict(summary, NO_VERDICT), "simulate-log")  # it judges nothing
         else:
-            echo(simulate_log_text(summary))
+            from metrology.report.verdicts import NO_VERDICT_LINE
+
+            echo(simulate_log_text(summary) + "\n" + NO_VERDICT_LINE)

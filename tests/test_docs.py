@@ -137,3 +137,35 @@ def test_every_json_schema_and_every_stdin_command_is_listed_in_cli_md():
         if "stdin_files(" in code:
             for command in re.findall(r"@app\.command\(\"([a-z-]+)\"", code) or [source.stem[4:].replace("_", "-")]:
                 assert re.search(f"`{command}[` ]", stdin_section), (source.name, command)
+
+
+def _report_commands():
+    from typer.main import get_command
+
+    from cli.main import app
+
+    return sorted(name for name, cmd in get_command(app).commands.items()
+                  if any("--report" in p.opts for p in cmd.params))
+
+
+@pytest.mark.parametrize("page, pattern", [("README.md", r"`--report FILE\.html` \(([^)]*)\)"),
+                                           ("docs/reports.md", r"\A# Reports\n\n(.*?)take\n")])
+def test_the_lists_of_commands_with_report_name_every_one(page, pattern):
+    """The README's and docs/reports.md's lists of the commands that take ``--report`` are the
+    commands that take it."""
+    m = re.search(pattern, (ROOT / page).read_text(), re.S)
+    assert m, page
+    listed = set(re.findall(r"[a-z][a-z-]+", m.group(1).replace("and", " ")))
+    assert listed == set(_report_commands()), (page, sorted(listed))
+
+
+def test_metro_help_describes_the_demo_by_its_steps():
+    """``metro --help``'s line for demo names each of the demo's steps' commands, in order."""
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from metrology.jobs.demo import DEMO_STEPS
+
+    r = CliRunner().invoke(app, ["demo", "--help"], env={"COLUMNS": "400"})
+    steps = [line.split()[0] for _, line in DEMO_STEPS]
+    assert " -> ".join(steps) in " ".join(r.output.replace("│", " ").split()), steps

@@ -12,7 +12,8 @@ per file, with its hive keys such as ``cell=C1/date=2026-11-25``), each read in 
 ``hole_id`` as string, readings as float64 mm (NaN for blanks), and three columns added for
 metro's own use (:data:`INTERNAL`, dropped before results are written): ``_metro_time_s`` (float
 seconds since 1970-01-01 UTC), ``_metro_cell`` and ``_metro_panel`` (strings, "" when the log has
-none). Every column of the log stays as it was read.
+none). Every column of the log stays as it was read, but ``time`` read as text (a CSV's),
+which becomes a timestamp (UTC, to the microsecond).
 
 Errors are one line naming the file (and line or partition) and what was expected; pyarrow is
 imported only here, when a log is read.
@@ -48,11 +49,15 @@ class Partition:
     relative : str, its path below the log's folder (the file name for a single file): where a
         partitioned output writes its results
     keys : dict, hive partition keys (``{"cell": "C1", "date": "2026-11-25"}``), {} for none
+    row_group : int or None, only this row group of a Parquet file (a task of a Dask run on one file)
+    first_row : int, the file's row (0-based) at which the partition starts
     """
 
     path: str
     relative: str
     keys: dict = field(default_factory=dict)
+    row_group: int | None = None
+    first_row: int = 0
 
 
 @dataclass(frozen=True)
@@ -74,11 +79,28 @@ class HoleLog:
         """The columns the partition's file itself holds (not its hive keys)."""
         return _column_names(self, part, with_keys=False)
 
+    def by_row_group(self) -> "HoleLog":
+        """The same log with each row group of a single Parquet file as its own partition (the
+        tasks of a Dask run); a CSV file or a folder as it is."""
+        import dataclasses
+
+        import pyarrow.parquet as pq
+
+        if self.kind != "parquet" or self.partitioned or len(self.partitions) != 1:
+            return self
+        part = self.partitions[0]
+        meta = pq.ParquetFile(part.path).metadata
+        parts, row = [], 0
+        for g in range(meta.num_row_groups):
+            parts.append(Partition(part.path, f"{part.relative}#row-group-{g}", {}, g, row))
+            row += meta.row_group(g).num_rows
+        return dataclasses.replace(self, partitions=tuple(parts)) if parts else self
+
     def batches(self, part: Partition):
         """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
         ``first_row`` is the 0-based row of the partition at which the batch starts."""
         reader = _csv_batches if self.kind == "csv" else _parquet_batches
-        row = 0
+        row = part.first_row
         for table in reader(self, part):
             yield _normalise(self, part, table, row), row
             row += table.num_rows
@@ -87,10 +109,10 @@ class HoleLog:
 def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = None) -> HoleLog:
     """A hole log at ``path`` (a ``.csv`` or ``.parquet`` file, or a folder of Parquet files)
     for a layout with ``sensors``; its columns are checked against them (ValueError)."""
-    p = Path(path)
     name = display or str(path)
-    if not p.exists():
+    if not Path(path).exists():
         raise ValueError(f"{name}: no such file or folder")
+    p = Path(path).resolve()  # workers started in another folder read the same files
     if p.is_dir():
         files = sorted(q for q in p.rglob("*.parquet") if not any(part.startswith((".", "_")) for part in q.relative_to(p).parts))
         if not files:
@@ -106,7 +128,21 @@ def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = 
         log = HoleLog(str(p), suffix[1:], (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
     for part in log.partitions:
         _check_columns(log, part, _column_names(log, part))
+    if not any(_has_rows(log, part) for part in log.partitions):
+        raise ValueError(f"{name}: the log has no rows (a header only): no hole to measure")
     return log
+
+
+def _has_rows(log, part) -> bool:
+    """Whether the partition holds a row: a CSV a non-blank line after its header, a Parquet file
+    a row in its metadata (read before any work, so an empty log is refused before anything is written)."""
+    if log.kind == "csv":
+        with open(part.path, "rb") as fh:
+            fh.readline()
+            return any(line.strip() for line in fh)
+    import pyarrow.parquet as pq
+
+    return pq.ParquetFile(part.path).metadata.num_rows > 0
 
 
 def batch_of(table, sensors, name: str = "<memory>"):
@@ -237,17 +273,34 @@ def _parquet_batches(log, part):
         # one row group at a time, without read-ahead: memory is bounded by the larger of a batch and
         # a row group (pyarrow's iter_batches reads ahead: 260 MB against 135 MB on a 1e6-hole file)
         pf = pq.ParquetFile(part.path, pre_buffer=False)
-        for g in range(pf.num_row_groups):
+        first = part.first_row
+        for g in (range(pf.num_row_groups) if part.row_group is None else (part.row_group,)):
             group = pf.read_row_group(g, use_threads=False)
             for start in range(0, group.num_rows, log.batch_rows):
                 table = group.slice(start, log.batch_rows)
                 for k, v in part.keys.items():
-                    if k not in table.column_names:
+                    if k in table.column_names:
+                        _check_key(log, part, table, k, v, first + start)
+                    else:
                         table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
                 yield table
+            first += group.num_rows
             del group
     except (pa.ArrowInvalid, OSError) as exc:
         raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
+
+
+def _check_key(log, part, table, key, value, first_row) -> None:
+    """A column that is also the partition's hive key must hold the folder's value on every row."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    col = table.column(key).cast(pa.string())
+    bad = pc.fill_null(pc.not_equal(col, value), True).to_numpy(zero_copy_only=False)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{_row(log, part, first_row + i)}: {key} = {col[i].as_py()!r} disagrees with its folder's "
+                         f"{key}={value} (a partition's file must hold its folder's key, or leave the column out)")
 
 
 def _time_seconds(log, part, col, first_row):
@@ -310,6 +363,10 @@ def _normalise(log, part, table, first_row):
     if bad.size:
         raise ValueError(f"{_row(log, part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
     cols[TIME_S] = pa.array(time_s)
+    if not (pa.types.is_timestamp(table.column("time").type) or pa.types.is_integer(table.column("time").type)
+            or pa.types.is_floating(table.column("time").type)):
+        # text (a CSV's ISO 8601 or seconds): a timestamp, written back as one (UTC, to the microsecond)
+        cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
     for c, name in (("cell", CELL), ("panel", PANEL)):
         cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
     nulls = cols["hole_id"].null_count
@@ -317,3 +374,11 @@ def _normalise(log, part, table, first_row):
         i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
         raise ValueError(f"{_row(log, part, first_row + i)}: hole_id is blank")
     return pa.table(cols)
+
+
+def time_seconds(col) -> np.ndarray:
+    """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results
+    file's: a number, timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``."""
+    display = "<results>"
+    log = HoleLog(display, "parquet", (), (), BATCH_ROWS, display)
+    return _time_seconds(log, Partition(display, display, {}), col, 0)

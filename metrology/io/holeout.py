@@ -16,28 +16,32 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["OUT_SUFFIXES", "TableSink", "PartitionedOutput", "check_out"]
+__all__ = ["OUT_SUFFIXES", "TableSink", "PartitionedOutput", "check_out", "is_file_out"]
 
 OUT_SUFFIXES = (".csv", ".parquet")
 MANIFEST = "_metro_measure.json"
+#: held by the run writing into a folder (created exclusively): two runs at once are refused
+LOCK = "_metro_measure.lock"
 
 
-def check_out(out, partitioned_input: bool, distributed: bool):
-    """Refuse, before any work, an output that cannot be written (ValueError, one line)."""
+def is_file_out(out) -> bool:
+    """Whether ``--out`` names one results file (``.csv``/``.parquet``, not an existing folder, not
+    ending in a separator); any other name is a folder, ``out.one`` too."""
+    p = Path(out)
+    return (p.suffix.lower() in OUT_SUFFIXES and not p.is_dir()
+            and not str(out).endswith((os.sep,) + ((os.altsep,) if os.altsep else ())))
+
+
+def check_out(out, partitioned_input: bool, distributed: bool = False):
+    """Refuse, before any work, an output that cannot be written (ValueError, one line). One
+    process or Dask alike: a log into one file (or stdout), a partitioned log into a folder."""
     if out is None:
-        if distributed:
-            raise ValueError("--workers/--scheduler write one result file per partition: give --out FOLDER")
         return None
     p = Path(out)
-    if p.suffix.lower() in OUT_SUFFIXES and not p.is_dir():
-        if distributed:
-            raise ValueError(f"--out {out}: --workers/--scheduler write one result file per partition: "
-                             f"--out must be a folder, not a {p.suffix} file")
+    if is_file_out(out):
         if not p.resolve().parent.is_dir():
             raise ValueError(f"--out {out}: folder {p.parent} does not exist")
         return p
-    if p.suffix and not p.is_dir():
-        raise ValueError(f"--out {out}: must be one of {', '.join(OUT_SUFFIXES)} (a file) or a folder")
     if not partitioned_input:
         raise ValueError(f"--out {out}: a folder output mirrors a partitioned Parquet log (a folder); for a single "
                          f"log give a file: {', '.join(OUT_SUFFIXES)}")
@@ -48,10 +52,38 @@ def check_out(out, partitioned_input: bool, distributed: bool):
     return p
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # another user's process, or no pid: left alone
+    return True
+
+
+def clear_stale(path: Path) -> None:
+    """Remove the temporaries of ``path`` left by a run that was killed (``kill -9``, a power
+    cut) while writing it: ``.<name>.<pid>.<random><suffix>`` whose process is gone. A live run's
+    temporary is left alone."""
+    prefix = f".{path.name}."
+    import glob
+
+    for q in path.parent.glob(f"{glob.escape(prefix)}*{glob.escape(path.suffix)}"):
+        pid = q.name[len(prefix):].split(".", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            try:
+                q.unlink()
+            except OSError:
+                pass
+
+
 class TableSink:
     """Batches of one table into one file (``.csv`` or ``.parquet``), or CSV on stdout (``path`` None).
 
-    Use as a context manager: the file appears, whole, only when the block ends without error.
+    Use as a context manager: the file appears, whole, only when the block ends without error. Its
+    temporary (``.<name>.<pid>.<random><suffix>`` beside it) names the writing process, so the next
+    run clears the temporaries of a run that was killed (:func:`clear_stale`).
     """
 
     def __init__(self, path=None):
@@ -73,7 +105,9 @@ class TableSink:
             if self.path is None:
                 self._writer = pcsv.CSVWriter(pa.PythonFile(sys.stdout.buffer, mode="w"), table.schema)
             else:
-                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=self.path.suffix, dir=self.path.parent)
+                clear_stale(self.path)
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.{os.getpid()}.", suffix=self.path.suffix,
+                                           dir=self.path.parent)
                 os.close(fd)
                 self._tmp = tmp
                 # dictionaries for the text columns only (a float column of measurements has no repeats:
@@ -114,8 +148,9 @@ class PartitionedOutput:
     """
 
     def __init__(self, folder, settings: dict):
-        self.folder = Path(folder)
+        self.folder = Path(folder).resolve()  # workers started in another folder write the same files
         self.settings = settings
+        self._created = None  # what begin() made: (folder made?, manifest made?)
         manifest = self.folder / MANIFEST
         if manifest.exists():
             old = json.loads(manifest.read_text(encoding="utf-8"))
@@ -130,10 +165,54 @@ class PartitionedOutput:
         """Create the folder and its manifest (atomically) before any partition is written."""
         from metrology.io.atomic import write_text
 
+        made_folder = not self.folder.exists()
         self.folder.mkdir(parents=True, exist_ok=True)
+        self._lock()
         manifest = self.folder / MANIFEST
-        if not manifest.exists():
+        made_manifest = not manifest.exists()
+        if made_manifest:
             write_text(manifest, json.dumps(self.settings, indent=1, sort_keys=True))
+        self._created = (made_folder, made_manifest)
+
+    def _lock(self) -> None:
+        import socket
+
+        lock = self.folder / LOCK
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                who = lock.read_text(encoding="utf-8").strip()
+            except OSError:
+                who = "?"
+            raise ValueError(f"--out {self.folder}: another run is writing into it ({who}; if none is, remove "
+                             f"{lock})") from None
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"pid {os.getpid()} on {socket.gethostname()}")
+        self._locked = True
+
+    def release(self) -> None:
+        """The run has ended (well or not): let another run write into the folder."""
+        if getattr(self, "_locked", False):
+            (self.folder / LOCK).unlink(missing_ok=True)
+            self._locked = False
+
+    def abort(self) -> None:
+        """A run failed: when no partition's file is there (this run wrote none, and no earlier run
+        did), remove what :meth:`begin` made (the manifest, the folder and its empty subfolders), so
+        a failed run leaves nothing; else leave all for a resume."""
+        if self._created is None or not self.folder.is_dir():
+            return
+        made_folder, made_manifest = self._created
+        if any(self.folder.rglob("*.parquet")):
+            return
+        if made_manifest:
+            (self.folder / MANIFEST).unlink(missing_ok=True)
+        for d in sorted((q for q in self.folder.rglob("*") if q.is_dir()), key=lambda q: len(q.parts), reverse=True):
+            if not any(d.iterdir()):
+                d.rmdir()
+        if made_folder and not any(self.folder.iterdir()):
+            self.folder.rmdir()
 
     def target(self, relative: str) -> Path:
         rel = Path(relative)

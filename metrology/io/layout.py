@@ -65,6 +65,9 @@ def load_layout(path) -> SensorLayout:
         raise ValueError(f"{path}: cannot read layout ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError as exc:  # a binary file (a .ply, a .parquet) given for a layout
+        raise ValueError(f"{path}: not a layout TOML file (not UTF-8 text: byte {exc.start}); expected the "
+                         f"layout .toml of metro calibrate --out or the bundled nominal.toml") from None
     units = data.get("units", "mm")
     if units != "mm":
         raise ValueError(f"{path}: units must be \"mm\", got {units!r}")

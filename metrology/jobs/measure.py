@@ -3,7 +3,9 @@ summary, drift alarms and the report out."""
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -41,6 +43,7 @@ class MeasureReport:
     warnings: tuple = ()
     fail_on_drift: bool = False
     chart: dict = field(default_factory=dict)
+    curvature: dict = field(default_factory=dict)
 
     @property
     def counts(self) -> dict:
@@ -53,8 +56,22 @@ class MeasureReport:
         checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
                   Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
                         "holes", c["undecided"] == 0),
+                  Check("drilling tolerance: holes whose drilled angle is not known (not measured after the adjustment, "
+                        "the readings before it not sound: re-inspect)", self.result.summary.unknown_after, 0, "holes",
+                        self.result.summary.unknown_after == 0),
                   Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
                   Check("drift watch: alarms (recalibrate)", alarms, 0, "alarms", alarms == 0, gate=self.fail_on_drift)]
+        cv = self.curvature or {"assumed": True}
+        if cv.get("assumed"):  # no panel known: the bound is an assumption, named
+            checks.append(Check(f"curvature ASSUMED (no --panel/--points): every panel's radius >= "
+                                f"{self.min_radius_mm:g} mm", self.min_radius_mm, None, "mm", True, gate=False))
+        elif cv:
+            checks.append(Check(f"curvature from {cv['source']}", cv.get("holes", 0), None, "holes", True, gate=False))
+            if cv.get("off_cad_holes"):
+                checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "
+                                    f"CAD's (|z| > {cv['off_cad_sigmas']:g}; mean size "
+                                    f"{cv['off_cad_mean_per_mm']:.2g} 1/mm)", cv["off_cad_holes"], None, "holes", True,
+                                    gate=False))
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:
@@ -71,11 +88,14 @@ class MeasureReport:
             "judged": {"after_adjustment": s.judged_after, "before_adjustment": s.judged_before},
             "uncertainty": {"reading_noise": True, "calibration_covariance": self.has_covariance, "coverage": 0.95},
             "min_radius_mm": self.min_radius_mm,
+            "curvature": dict(self.curvature) if self.curvature else {"assumed": True, "source": (
+                f"bound: every panel's radius >= {self.min_radius_mm:g} mm (an assumption: no --panel or --points)")},
             "engine": self.engine,
             "holes": self.result.rows,
             "partitions": self.result.partitions,
             "partitions_written": self.result.written,
             "counts": self.counts,
+            "counts_detail": {"unknown_after": s.unknown_after},
             "fleet": s.figures(s.total()),
             "cells": series,
             "groups": groups,
@@ -91,7 +111,7 @@ class MeasureReport:
 MISFIT_SHARE = 0.5
 
 
-def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) -> None:
+def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, surfaces=None) -> None:
     """Refuse (ValueError) results the data cannot support: most holes' readings disagreeing with
     one plane means the layout is not this head's (another head's file, a nominal layout on a head
     far from it, readings in other units). A partitioned output is already written: a warning."""
@@ -100,12 +120,92 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None) ->
     if rows >= 20 and bad > MISFIT_SHARE * rows:
         line = (f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with one plane by more than a "
                 f"panel of radius >= {min_radius_mm:g} mm allows: this layout does not fit the head that made the "
-                f"log (another head's layout? readings not in mm? a more curved panel: --min-radius-mm)")
+                f"log (another head's layout? readings not in mm? a more curved panel: --min-radius-mm)"
+                if surfaces is None else
+                f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with the panel's surface "
+                f"({surfaces.source}): this layout does not fit the head that made the log (another head's layout? "
+                f"a nominal layout, not its calibration? readings not in mm?), or the panel is far off its CAD "
+                f"(--form-tolerance-mm states how far it may be)")
         if warnings is None:
             raise ValueError(line)
         warnings.append(line)
         if warn is not None:
             warn(line)
+
+
+def layout_panel(layout_path) -> dict:
+    """The cell's panel as its layout file states it: ``[panel]`` with ``file`` (a mesh or STEP) and
+    ``points`` (the hole table), paths relative to the layout file; or ``points`` alone; or
+    ``radius_mm`` (the smallest radius of the cell's panels, mm). {} when the file has none."""
+    import tomllib
+    from pathlib import Path
+
+    try:
+        with open(layout_path, "rb") as fh:
+            table = tomllib.load(fh).get("panel")
+    except (OSError, tomllib.TOMLDecodeError):
+        return {}  # load_layout names these
+    if table is None:
+        return {}
+    if not isinstance(table, dict) or set(table) - {"file", "points", "radius_mm"}:
+        raise ValueError(f"{layout_path}: [panel] takes file, points (paths) and radius_mm, got "
+                         f"{sorted(table) if isinstance(table, dict) else table!r}")
+    out = {}
+    base = Path(layout_path).parent
+    for k in ("file", "points"):
+        if k in table:
+            if not isinstance(table[k], str) or not table[k]:
+                raise ValueError(f"{layout_path}: [panel] {k} must be a path, got {table[k]!r}")
+            out[k] = base / table[k]
+    if "radius_mm" in table:
+        r = table["radius_mm"]
+        r = float("inf") if r == "inf" else r
+        if not isinstance(r, (int, float)) or not r > 0:
+            raise ValueError(f"{layout_path}: [panel] radius_mm must be a positive number of mm (or \"inf\"), got {r!r}")
+        out["radius_mm"] = float(r)
+    return out
+
+
+def _footprint(layout) -> float:
+    """The head's footprint radius (mm): the spots' largest distance from the tool axis at mid-range
+    readings (at the default stand-off where the range is not stated)."""
+    mid = layout.range_mm.mean(1)
+    if np.all(np.isfinite(mid)):
+        spots = layout.zero + mid[:, None] * layout.direction
+        return float(np.max(np.hypot(spots[:, 0], spots[:, 1])))
+    from metrology.panel.edges import footprint_radius
+    from metrology.panel.head import default_standoff
+
+    return footprint_radius(layout, default_standoff(layout))
+
+
+def _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg):
+    """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
+    from metrology.measure.panel import read_hole_table, surfaces_from_table
+
+    for name, v in (("--position-error-mm", position_error_mm), ("--form-tolerance-mm", form_tolerance_mm),
+                    ("--spin-deg", spin_deg)):
+        if not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v:g}")
+    table = read_hole_table(points)
+    foot = _footprint(layout)
+    if panel is None:
+        return surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg)))
+    from metrology.io.names import display_name
+    from metrology.panel.mesh import load_panel
+
+    return panel_hole_surfaces(load_panel(panel), table, foot, position_error_mm, form_tolerance_mm,
+                               float(np.radians(spin_deg)), display=display_name(panel))
+
+
+def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0, spin=0.0, display=None):
+    """:class:`metrology.measure.panel.HoleSurfaces` of a hole table on a loaded panel
+    (:func:`metrology.panel.holes.panel_surfaces`); ``spin`` rad."""
+    from metrology.measure.panel import HoleSurfaces
+    from metrology.panel.holes import panel_surfaces
+
+    f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
+    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin)
 
 
 def _digest(layout) -> str:
@@ -116,21 +216,72 @@ def _digest(layout) -> str:
     return hashlib.sha256(layout_to_toml(layout).encode()).hexdigest()
 
 
-def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float = 500.0,
+class _Tee:
+    """Batches of results into several sinks (the results file and the QIF document)."""
+
+    def __init__(self, *sinks):
+        self.sinks = sinks
+
+    def write(self, table) -> None:
+        for s in self.sinks:
+            s.write(table)
+
+
+def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display):
+    """The QIF 3.0 Results writer for ``--qif`` (None without it)."""
+    if qif is None:
+        return None
+    from metrology import __version__
+    from metrology.io.qif import QifResults
+
+    return QifResults(qif, tolerance_deg=tolerance_deg, layout_path=layout_path, sensors=layout.names,
+                      log=log_display, certificate=layout.certificate, version=__version__)
+
+
+def _qif_from_output(doc, output, log) -> None:
+    """Write ``doc`` from a partitioned output's files, row group by row group, in the log's order."""
+    import pyarrow.parquet as pq
+
+    with doc:
+        for part in log.partitions:
+            pf = pq.ParquetFile(output.target(part.relative), pre_buffer=False)
+            for g in range(pf.num_row_groups):
+                doc.write(pf.read_row_group(g, columns=list(QIF_COLUMNS), use_threads=False))
+
+
+#: the per-hole result columns a QIF document is made from
+QIF_COLUMNS = ("hole_id", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg", "status", "time")
+
+
+def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float | None = None,
                   workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
                   warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
                   log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False) -> MeasureReport:
+                  chart_by_panel: bool = False, qif=None, per_hole: bool = True, panel=None, points=None,
+                  position_error_mm: float = 0.5, form_tolerance_mm: float = 0.0, spin_deg: float = 2.0) -> MeasureReport:
     """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
     ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
-    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask.
+    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask. ``qif``:
+    the per-hole results also as a QIF 3.0 Results document (:mod:`metrology.io.qif`). With
+    ``per_hole`` False and no ``out`` nothing per hole is written (``--json`` alone: the summary).
 
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
     is called as holes are measured.
+
+    ``panel`` (a mesh or STEP file) with ``points`` (the hole table ``hole_id,x,y,z,i,j,k``), or
+    ``points`` alone: each hole's local surface is known (:mod:`metrology.measure.panel`) and its
+    normal fitted with it (:mod:`metrology.measure.surface`); ``position_error_mm`` (the drill
+    point's error along the surface), ``form_tolerance_mm`` (the panel's stated form tolerance
+    over the footprint) and ``spin_deg`` (the head's spin about the tool axis relative to the
+    panel, beyond the cell's convention) enter U95. Without them ``min_radius_mm`` bounds the
+    micro-plane's curvature bias, named in the verdict as the assumption it is. The layout file may
+    state the cell's panel once (:func:`layout_panel`: ``[panel]`` with ``file`` and ``points``, or
+    ``points``, or ``radius_mm``), used where the arguments give none. ``min_radius_mm`` None: the
+    layout's ``[panel] radius_mm``, else 500 mm (assumed).
     """
     from metrology.io.holelog import BATCH_ROWS, open_log
-    from metrology.io.holeout import PartitionedOutput, TableSink, check_out
+    from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
     from metrology.measure.chart import chart_settings
@@ -138,12 +289,23 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
 
     if not (0 < tolerance_deg < 90):
         raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {tolerance_deg:g}")
+    stated = layout_panel(layout_path)
+    radius_source = "--min-radius-mm"
+    if panel is None and points is None:
+        panel, points = stated.get("file"), stated.get("points")
+    if min_radius_mm is None:
+        min_radius_mm = stated.get("radius_mm", 500.0)
+        radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
     if not min_radius_mm > 0:
         raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {min_radius_mm:g}")
     if report_html is not None:
         from metrology.report.html import check_report_path
 
         check_report_path(report_html)
+    if qif is not None:
+        from metrology.io.qif import check_qif_path
+
+        check_qif_path(qif)
     layout = load_layout(layout_path)
     shown_layout = display_name(layout_path)
     warnings = []
@@ -161,18 +323,28 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if layout.n != 4:
         warnings.append(f"{shown_layout}: {layout.n} sensors: the drift watch needs exactly 4 (one redundant reading per "
                         f"hole)" + ("; 3 give no redundancy" if layout.n == 3 else ""))
+    surfaces = None
+    if panel is not None and points is None:
+        raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
+                         f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
+    if points is not None:
+        surfaces = _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
     log = open_log(log_path, layout.names, batch_rows=batch_rows or BATCH_ROWS, display=log_display)
     distributed = workers is not None or scheduler is not None
     target = check_out(out, log.partitioned, distributed)
-    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm))
+    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
+                        surfaces=surfaces)
     for w in warnings:
         if warn is not None:
             warn(w)
     output = None
-    if target is not None and (target.is_dir() or target.suffix == ""):
+    if target is not None and not is_file_out(out):
         output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
                                             "chart_by_panel": chart_by_panel,
-                                            "layout_sha256": _digest(layout), "log": str(log_path)})
+                                            "panel": None if panel is None else str(Path(panel).resolve()),
+                                            "points": None if points is None else str(Path(points).resolve()),
+                                            "panel_terms": [position_error_mm, form_tolerance_mm, spin_deg],
+                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
     total = None
     done = [0]
 
@@ -182,38 +354,70 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
             progress(done[0], total, f"{done[0]:,} holes measured")
 
     sources = {"log": log.display, "layout": shown_layout, "out": None if out is None else str(out)}
-    if distributed:
-        from metrology.measure.fleet import connect, measure_log_dask
+    if qif is not None:
+        sources["qif"] = str(qif)
+    qif_doc = _qif_doc(qif, tolerance_deg, layout_path, layout, log.display)
 
-        client = connect(workers, scheduler)
-        try:
-            engine = (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
-            result = measure_log_dask(client, log, layout, settings, output, progress=tick, by_panel=chart_by_panel)
-        finally:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None and scheduler is None:
-                cluster.close()
-    else:
+    def run(sink):
+        """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
+        if distributed:
+            from metrology.measure.fleet import connect, measure_log_dask
+
+            client = connect(workers, scheduler)
+            try:
+                # a single Parquet file: its row groups are the tasks (a CSV file is one task)
+                result = measure_log_dask(client, log if output is not None else log.by_row_group(), layout, settings,
+                                          output, progress=tick, by_panel=chart_by_panel, sink=sink)
+            finally:
+                cluster = getattr(client, "cluster", None)
+                client.close()
+                if cluster is not None and scheduler is None:
+                    cluster.close()
+            return result, (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
         from metrology.measure.run import measure_log, tune_allocator
 
         tune_allocator()
-        engine = "one process"
-        if output is not None:
-            result = measure_log(log, layout, settings, output=output, progress=tick, by_panel=chart_by_panel)
-        else:
-            with TableSink(target) as sink:
-                result = measure_log(log, layout, settings, sink=sink, progress=tick, by_panel=chart_by_panel)
-                _check_fit(result, shown_layout, min_radius_mm)  # before the file appears
+        return measure_log(log, layout, settings, sink=sink, output=output, progress=tick,
+                           by_panel=chart_by_panel), "one process"
+
     if output is not None:
-        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings)
+        try:
+            result, engine = run(None)
+        except BaseException:
+            output.release()
+            output.abort()  # nothing written by any run: no manifest, no folder left
+            raise
+        output.release()
+    elif target is None and not per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
+        result, engine = run(None)
+        _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)
+    else:
+        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
+            result, engine = run(sink if q is None else _Tee(sink, q))
+            _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)  # before the files appear
+    if output is not None:
+        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
+        if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
+            _qif_from_output(qif_doc, output, log)
+    curvature = {}
+    if surfaces is None and radius_source == "layout [panel] radius_mm":
+        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {min_radius_mm:g} mm stated in "
+                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": min_radius_mm}
+    if surfaces is not None:
+        curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
+                     "position_error_mm": position_error_mm, "form_tolerance_mm": form_tolerance_mm,
+                     "spin_deg": spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
+                     "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
+                     **result.summary.off_cad_figures()}
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
-                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel})
+                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel},
+                           curvature)
     if report_html is not None:
         from metrology.io.atomic import write_text
         from metrology.report.html import render_html, run_info
         from metrology.report.measure import measure_section
 
         paths = {"log": log_path, "layout": layout_path} if log_display is None else {"layout": layout_path}
-        write_text(report_html, render_html("Hole measurement", run_info(paths, command), [measure_section(report)]))
+        write_text(report_html, render_html("Hole measurement", run_info(paths, command, extra_versions=("pyarrow", "dask")),
+                                            [measure_section(report)]))
     return report

@@ -92,9 +92,12 @@ def parse_range(value: str, option: str, lo_bound: float = -math.inf) -> tuple:
 
 
 def default_truth_path(out) -> Path:
-    """``log.csv`` -> ``log.truth.csv``; a folder ``logs`` -> ``logs.truth.parquet`` beside it."""
+    """``log.csv`` -> ``log.truth.csv``; ``log.parquet`` -> ``log.truth.parquet``; a folder ``logs``
+    -> ``logs.truth.parquet`` beside it."""
     p = Path(str(out).rstrip("/\\"))
-    return p.with_name(p.stem + ".truth.csv") if p.suffix.lower() == ".csv" else p.with_name(p.name + ".truth.parquet")
+    if p.suffix.lower() in (".csv", ".parquet") and not str(out).endswith(("/", "\\")):
+        return p.with_name(p.stem + ".truth" + p.suffix.lower())
+    return p.with_name(p.name + ".truth.parquet")
 
 
 class _MetroController:
@@ -211,7 +214,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
                        spin_deg=0.0, patch_mm=400.0, holes_per_hour=600.0, drifts=(), shifts=(), gross_rate=0.0,
                        layout_error_mm=None, layout_error_deg=None, seed=0, write_truth=True, progress=None,
                        points=None, controller="microplane", azimuth_deg=None, off_cad=None) -> dict:
-    """Write a simulated log at ``out`` (``.csv``: one file; else a new folder of partitioned Parquet)
+    """Write a simulated log at ``out`` (``.csv``, ``.parquet``: one file; else a new folder of partitioned Parquet)
     and its truth at ``truth`` (default :func:`default_truth_path`; none when ``write_truth`` is False,
     e.g. for a throughput run); returns the summary.
 
@@ -262,7 +265,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     t0 = time.perf_counter()
     written = LOG_FORMATS[kind](chunks(), out, truth)
     seconds = time.perf_counter() - t0
-    n, files = (written, [Path(out)]) if kind == "csv" else written
+    n, files = written if kind == "parquet" else (written, [Path(out)])
     return {"out": str(out), "format": kind, "truth": None if truth is None else str(truth), "holes": n,
             "cells": cells, "files": len(files), "seed": seed, "seconds": seconds, "holes_per_s": n / seconds if seconds > 0 else None,
             "true_layout": str(true_layout_path) if true_layout_path else "drawn from --layout and the seed",

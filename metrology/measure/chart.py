@@ -168,7 +168,11 @@ class CusumChart:
     sensors : tuple of str
     h : float, the decision interval (scales); k : float, the reference value (scales)
     alarms : list of Alarm
-    series : list of (time_s, statistic) pairs, thinned to at most ``2 keep`` points, for the plot
+    series : list of (time_s, statistic) pairs for the plot, in time order: the larger of the two
+        sums, thinned to at most about ``2 keep`` points by keeping each bin's minimum and maximum
+        (:meth:`_record`), so every peak, the alarm's crossing of ``h`` and every return to zero
+        stay drawn; a pair ``(time_s, nan)`` breaks the line where the chart took a new baseline
+        (after an alarm, or at a new panel with ``by_panel``): its baseline's holes are not charted
     charted : int, holes charted so far (the baselines' holes excluded)
     """
 
@@ -179,7 +183,6 @@ class CusumChart:
     baseline_holes: int = BASELINE_HOLES
     keep: int = 2000
     alarms: list = field(default_factory=list)
-    series: list = field(default_factory=list)
     charted: int = 0
     by_panel: bool = False
     panel: str | None = None
@@ -190,11 +193,14 @@ class CusumChart:
     _base: list = field(default_factory=list)
     _s: list = field(default_factory=lambda: [0.0, 0.0])  # the upper and lower sums
     _runs: list = field(default_factory=lambda: [_Run(), _Run()])
-    _stride: int = 1
+    _stride: int = 1  # holes per bin of the plotted series
+    _bins: list = field(default_factory=list)  # per bin: its points (1 or 2), or None for a break
     _pending: dict | None = None  # an alarm waiting for the new baseline to size the change
 
     def _restart(self, segment) -> None:
         self.finish()
+        if self._bins and self._bins[-1] is not None:
+            self._bins.append(None)  # the line breaks over the new baseline's holes
         self._segment = segment
         self._base = []
         self.level = self.scale = float("nan")
@@ -316,8 +322,54 @@ class CusumChart:
             self._s[side] = float(S[-1])
 
     def _record(self, t, stat) -> None:
-        pick = np.arange(0, len(stat), self._stride)
-        self.series.extend(zip(np.asarray(t, float)[pick].tolist(), stat[pick].tolist()))
-        while len(self.series) >= 2 * self.keep:
-            self.series = self.series[::2]
+        """Add charted holes to the plotted series: bins of ``_stride`` holes, each kept as its
+        first, minimum, maximum and last point (:func:`_extremes`); when there are more than
+        ``keep`` bins, neighbours within a run between breaks are merged pairwise and the stride
+        doubles. A bounded series that still shows every extreme: decimating it would
+        drop the peaks, the alarm among them."""
+        t = np.asarray(t, float)
+        stat = np.asarray(stat, float)
+        for i in range(0, len(stat), self._stride):
+            self._bins.append(_extremes(t[i:i + self._stride], stat[i:i + self._stride]))
+        while sum(b is not None for b in self._bins) > self.keep:
+            self._bins = _merge_pairs(self._bins)
             self._stride *= 2
+
+    @property
+    def series(self) -> list:
+        out = []
+        for b in self._bins:
+            if b is None:
+                out.append((out[-1][0], float("nan")))
+            else:
+                out.extend(b)
+        return out
+
+
+def _extremes(t, s) -> tuple:
+    """The points (time, value) of a bin of the series that draw it as its full data would: its
+    first, minimum, maximum and last, in time order, each once (the M4 aggregation of Jugel et
+    al., 2014, "M4: a visualization-oriented time series data aggregation", PVLDB 7(10))."""
+    keep = {0, int(np.argmin(s)), int(np.argmax(s)), len(s) - 1}
+    return tuple((float(t[i]), float(s[i])) for i in sorted(keep))
+
+
+def _merge_pairs(bins) -> list:
+    """Merge neighbouring bins two by two, never across a break (None): each merged bin keeps the
+    first, minimum, maximum and last point of both."""
+    out, run = [], []
+
+    def flush():
+        for i in range(0, len(run), 2):
+            pts = [p for q in run[i:i + 2] for p in q]
+            out.append(_extremes(np.array([p[0] for p in pts]), np.array([p[1] for p in pts])))
+        run.clear()
+
+    for b in bins:
+        if b is None:
+            flush()
+            out.append(None)
+        else:
+            run.append(b)
+    flush()
+    return out

@@ -12,8 +12,21 @@ threshold and reason:
    :data:`GROSS_SIGMAS` of its standard deviation (the reading noise and the calibration's
    uncertainty: a head within its calibration): one reading is gross (a chip, a burr, a spot on
    an edge), or a sensor has moved far beyond its calibration; no normal from these readings can
-   be trusted. (A smaller move is the drift watch's.)
-3. ISO 14253-1 (conformity with specifications, the supplier's proof): ``CONFORMS`` when
+   be trusted. (A smaller move is the drift watch's.) A hole whose before-readings disagree but
+   whose after-readings are sound is judged on the after-readings (the cell turned the wrong way:
+   the after-readings measure what it drilled).
+3. ``NOT_MEASURED`` after the adjustment, the readings before and after it disagree (4 sensors,
+   both poses read on all 4, neither named gross by rule 2): the same spot of the same panel
+   gives both misfits, so they differ only by what the panel's curvature does as the head
+   tilts, at most
+   ``|M_after - M_before|_* / (2 R) + TILT_ALLOWANCE alpha^2 max(|M|_*) / (2 R)`` (``alpha`` the
+   larger angle of the two), and by their noise: more than :data:`GROSS_SIGMAS` sigmas beyond
+   that, one of the 8 readings is gross. Which one is not identifiable (a gross before-reading,
+   the cell turned by it, and a gross after-reading give the same after-readings to first
+   order), so the drilled angle is not known: the hole is not measured after the adjustment,
+   with that reason, not failed. (A sensor's zero shift moves both misfits alike: the drift
+   watch's, not this rule's.)
+4. ISO 14253-1 (conformity with specifications, the supplier's proof): ``CONFORMS`` when
    ``angle + U95 <= tolerance``, ``FAILS`` when ``angle - U95 > tolerance``, ``UNDECIDED``
    otherwise. The angle judged is the drilled hole's: the one measured after the attitude
    adjustment where the log has after-readings, else the one measured before (a log without
@@ -41,6 +54,10 @@ MIN_SENSORS = 3
 #: a redundant misfit beyond the panel's possible shape by this many noise sigmas is a gross reading
 #: (two-sided p ~ 2e-9 per hole: about one false flag per 5e8 holes)
 GROSS_SIGMAS = 6.0
+#: rule 3: a panel seen from a head tilted by alpha has its height's curvature in the TCS changed by
+#: up to ``1 / cos(alpha)^3 - 1 ~ 1.5 alpha^2`` and its principal axes turned by alpha: twice that
+#: bounds both (checked on the forward simulator's spheres and cylinders of R = 500 mm)
+TILT_ALLOWANCE = 3.0
 #: the smallest panel radius the gross-reading rule allows for (mm): aircraft skins are >= 500 mm
 DEFAULT_MIN_RADIUS_MM = 500.0
 
@@ -54,7 +71,7 @@ class Status(StrEnum):
 
 #: the per-hole columns metro writes, in order (before the columns passed through)
 OUTPUT_COLUMNS = ("hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg", "angle_after_deg",
-                  "U95_after_deg", "fit_residual_um", "sensors_used", "status", "reason")
+                  "U95_after_deg", "fit_residual_um", "fit_residual_after_um", "sensors_used", "status", "reason")
 
 
 @dataclass(frozen=True)
@@ -69,6 +86,9 @@ class Settings:
 
     tolerance: float = float(np.radians(0.5))
     min_radius_mm: float = DEFAULT_MIN_RADIUS_MM
+    #: each hole's local surface (:class:`metrology.measure.panel.HoleSurfaces`, joined by ``hole_id``):
+    #: the normal is fitted with the surface known (:mod:`metrology.measure.surface`), not the micro-plane
+    surfaces: object = None
 
 
 @dataclass(frozen=True)
@@ -84,6 +104,9 @@ class HoleBatch:
     judged_u95 : (N,) float, rad
     angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
     disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
+    unknown_after : (N,) bool, holes not measured after the adjustment whose before-readings do not rule
+        out a wrong turn of the cell (rule 3's; before-readings gross or too few): their drilled angle is not
+        known, and may be out of tolerance
     chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
         ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
     """
@@ -96,6 +119,7 @@ class HoleBatch:
     angle_after: np.ndarray
     chart: dict
     disagree: np.ndarray | None = None
+    unknown_after: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -112,6 +136,10 @@ class _Measured:
     used: np.ndarray  # (N, n) bool
     reason: np.ndarray  # (N,) object: "" or why
     disagree: np.ndarray  # (N,) bool: rule 2, the readings disagree
+    residual_sd: np.ndarray  # (N,) float, mm: the misfit's sd (noise and calibration), 4 sensors
+    twist: np.ndarray  # (N,) float, mm^2: |M|_*, 4 sensors
+    moment: np.ndarray  # (N, 3) float, mm^2: M = sum_i q_i r_i r_i^T as (xx, yy, xy), 4 sensors
+    extra: dict | None = None  # with the panel known: correction, panel_misfit, panel_misfit_z (N,)
 
 
 #: rows per call of the per-hole maths: its temporaries stay in the processor's cache (measured:
@@ -130,15 +158,20 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
-    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range."""
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None) -> _Measured:
+    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
+    (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
+    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
     in_range = finite & (d >= lo[None]) & (d <= hi[None])
     out = _Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
-                    np.full(N, "", dtype=object), np.zeros(N, bool))
+                    np.full(N, "", dtype=object), np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
+                    np.full((N, 3), np.nan))
+    if shape is not None:
+        out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -157,23 +190,74 @@ def _measure(layout: SensorLayout, d, settings: Settings) -> _Measured:
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        h = _hole_normals(sub, dd, settings.min_radius_mm)
+        if shape is not None:
+            from metrology.measure.surface import PanelTerms, surface_hole_normals
+
+            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], settings.surfaces.spin))
+                     for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
+            h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
+                                     np.concatenate([getattr(p[0], f) for p in parts])
+                                     for f in parts[0][0].__dataclass_fields__})
+            for k in parts[0][1]:
+                out.extra[k][rows] = np.concatenate([p[1][k] for p in parts])
+        else:
+            h = _hole_normals(sub, dd, settings.min_radius_mm)
         out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
         out.residual[rows] = h.residual
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
             out.noise_sd[rows] = h.residual_noise_sd
+            out.residual_sd[rows], out.twist[rows] = h.residual_sd, h.twist
+            out.moment[rows] = _moment(sub, dd)
             bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
                                  f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
-                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)")
+                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
+                                 if shape is None else
+                                 f"readings disagree: the redundant reading misses the panel's surface by "
+                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas (a gross reading, "
+                                 f"or the panel far off its CAD here)")
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan
                 out.U95[r] = np.nan
     return out
+
+
+def _moment(layout, d):
+    """(N, 3) float, mm^2: ``M = sum_i q_i r_i r_i^T`` of 4 readings ``d (N, 4)`` as (xx, yy, xy):
+    a panel of curvature ``K`` moves the misfit by ``tr(K M) / 2``."""
+    from metrology.measure.normals import _null_vector_4
+
+    p = layout.zero[:, None, :] + d.T[:, :, None] * layout.direction[:, None, :]  # (4, N, 3), mm, TCS
+    xc, yc = p[..., 0] - p[..., 0].mean(0), p[..., 1] - p[..., 1].mean(0)
+    q = _null_vector_4(xc, yc)
+    return np.stack([(q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)], axis=1)
+
+
+def _nuclear2(m):
+    """(N,) the nuclear norm of the symmetric 2 x 2 matrices ``m (N, 3)`` as (xx, yy, xy)."""
+    a, b, c = m[:, 0], m[:, 1], m[:, 2]
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    return np.abs(0.5 * (a + b) + disc) + np.abs(0.5 * (a + b) - disc)
+
+
+def _poses_disagree(before, after, settings):
+    """(N,) bool, rule 3: the before- and after-readings' misfits differ by more than the panel's
+    curvature can make them as the head tilts, beyond :data:`GROSS_SIGMAS` sigmas; and the
+    difference (mm)."""
+    R = settings.min_radius_mm
+    diff = after.residual - before.residual
+    alpha = np.fmax(before.angle, after.angle)
+    curve = 0.0 if not np.isfinite(R) else (_nuclear2(after.moment - before.moment)
+                                             + TILT_ALLOWANCE * alpha ** 2 * np.fmax(before.twist, after.twist)) / (2 * R)
+    allowed = curve + GROSS_SIGMAS * np.hypot(before.residual_sd, after.residual_sd)
+    with np.errstate(invalid="ignore"):
+        out = np.abs(diff) > allowed
+    return out & np.isfinite(allowed) & np.isfinite(diff), diff
 
 
 def _readings(table, names, suffix=""):
@@ -229,27 +313,66 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    before = _measure(layout, d, settings)
+    shape = u_shape = table_row = None
+    surf = settings.surfaces
+    if surf is not None:
+        from metrology.measure.normals import drill_axis
+
+        table_row = surf.rows(table.column("hole_id").cast(pa.string()))
+        have = table_row >= 0
+        shape = np.zeros((N, 3, 3))
+        u_shape = np.zeros(N)
+        if have.any():
+            shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
+            u_shape[have] = surf.u_shape[table_row[have]]
+    before = _measure(layout, d, settings, shape, u_shape)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
-        after = _measure(layout, da, settings)
+        after = _measure(layout, da, settings, shape, u_shape)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
     judged = np.where(judge_after, after.angle, before.angle) if after is not None else before.angle.copy()
     judged_u = np.where(judge_after, after.U95, before.U95) if after is not None else before.U95.copy()
+    reason = before.reason
+    poses = np.zeros(N, bool)
+    if after is not None:
+        for i in np.flatnonzero((after.reason != "") & judge_after):
+            reason[i] = (reason[i] + "; " if reason[i] else "") + "after the adjustment: " + after.reason[i]
+        poses, diff = _poses_disagree(before, after, settings)
+        poses &= judge_after & ~before.disagree & ~after.disagree  # rule 2 named the gross pose: no doubt left
+        for i in np.flatnonzero(poses):
+            reason[i] = (reason[i] + "; " if reason[i] else "") + (
+                f"not measured after the adjustment: the misfits before and after it differ by {diff[i] * 1e3:.1f} µm, "
+                f"more than {GROSS_SIGMAS:g} sigmas beyond what a panel of radius >= {settings.min_radius_mm:g} mm "
+                f"gives as the head tilts: one reading is gross, the drilled angle is not known")
+        judged[poses] = np.nan
+        judged_u[poses] = np.nan
     tol = settings.tolerance
     code = np.full(N, 2, np.int8)  # the order of Status
     code[judged + judged_u <= tol] = 0
     code[judged - judged_u > tol] = 1
-    measured = np.isfinite(judged) & np.isfinite(before.angle)
+    measured = np.isfinite(judged) & (np.isfinite(before.angle) | judge_after)
     code[~measured] = 3
-    reason = before.reason
-    if after is not None:
-        for i in np.flatnonzero((after.reason != "") & judge_after):
-            reason[i] = (reason[i] + "; " if reason[i] else "") + "after the adjustment: " + after.reason[i]
+    for i in np.flatnonzero(code == 1):
+        reason[i] = (reason[i] + "; " if reason[i] else "") + (
+            f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg - "
+            f"U95 {np.degrees(judged_u[i]):.4f} deg > tolerance {np.degrees(tol):g} deg")
+    for i in np.flatnonzero(code == 2):
+        reason[i] = (reason[i] + "; " if reason[i] else "") + (
+            f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg "
+            f"+- U95 {np.degrees(judged_u[i]):.4f} deg straddles the tolerance {np.degrees(tol):g} deg")
     ids = table.column("hole_id").cast(pa.string())
+    if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
+        for i in np.flatnonzero(table_row < 0):
+            code[i] = 3
+            reason[i] = f"hole_id {ids[int(i)].as_py()!r} is not in the hole table: its local surface is unknown"
+        for i in np.flatnonzero(table_row >= 0):
+            why = surf.problem[table_row[i]]
+            if why:
+                code[i] = 3
+                reason[i] = why
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = 3
@@ -269,18 +392,32 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "angle_after_deg": num(np.degrees(after.angle) if after is not None else nan),
         "U95_after_deg": num(np.degrees(after.U95) if after is not None else nan),
         "fit_residual_um": num(before.residual * 1e3),
+        "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
         "sensors_used": _labels(patterns, pattern_names),
         "status": _labels(code, [str(s) for s in Status]),
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
+    if surf is not None:  # the panel's columns
+        k = np.full((N, 2), np.nan)
+        k[table_row >= 0] = surf.k[table_row[table_row >= 0]]
+        cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
+        cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
+        cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
+        cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
     for k in table.column_names:
         if k not in cols and not k.startswith("d_"):
             cols[k] = table.column(k)
     out = pa.table({k: v for k, v in cols.items()})
-    full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & measured
+    full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
     chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
              "signature": before.signature[idx]}
-    disagree = before.disagree | (after.disagree & judge_after if after is not None else False)
+    disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
+    # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
+    # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
+    unknown = np.zeros(N, bool)
+    if after is not None:
+        unknown = (code == 3) & judge_after & (poses | ~np.isfinite(before.angle))
+        unknown[dup] = False
     return HoleBatch(out, code, judged, judged_u, before.angle,
-                     after.angle if after is not None else np.full(N, np.nan), chart, disagree)
+                     after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)

@@ -206,7 +206,7 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
     feeds, rows = [], 0
     where = _where(log, part)
     write = output is not None and not output.done(part.relative)
-    keys_only = [k for k in part.keys if k not in log.file_columns(part)]
+    keys = list(part.keys)  # in the output's folder names, as in the log's: not in its files (a hive dataset)
     with (output.sink(part.relative) if write else contextlib.nullcontext()) as own:
         for table, first in log.batches(part):
             batch = measure_batch(layout, table, settings)
@@ -218,7 +218,7 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
                 _check_order(f)
                 feeds.append(f)
             if own is not None:  # the partition's keys are in its path, as in the log
-                own.write(_public(batch.columns, keys_only))
+                own.write(_public(batch.columns, keys))
             elif sink is not None:
                 sink.write(_public(batch.columns))
             rows += len(batch)

@@ -1,11 +1,17 @@
 """The fleet summary: per cell, panel and day, counts by status, perpendicularity quantiles and
-Cpk; mergeable, so a summary of partitions measured apart (Dask) equals the one measured in
+the capability Ppk; mergeable, so a summary of partitions measured apart (Dask) equals the one measured in
 one pass.
 
 Quantiles come from a histogram of the angle on :data:`EDGES_DEG` (geometric bins, 1.7 % wide):
-a quantile is the geometric middle of its bin, within 0.9 % of the exact one. Cpk is that of a
-one-sided upper limit (the tolerance; an angle has no lower limit): ``(tol - mean) / (3 s)`` of
-the judged angle over the measured holes.
+a quantile is the geometric middle of its bin, within 0.9 % of the exact one.
+
+Capability: the judged angle is bounded below by 0 (the length of a 2-D tilt: a folded, skewed
+distribution), so a normal-theory Cpk ``(tol - mean) / (3 s)`` describes no tail of it. metro
+gives the ISO 22514-2 percentile-based performance index against the one upper limit (the
+tolerance), ``Ppk = (tol - X50) / (X99.865 - X50)``, on the judged angle's histogram, with a 95 %
+percentile-bootstrap interval (:data:`BOOTSTRAP` multinomial resamplings of the histogram, a
+numpy Generator seeded with :data:`BOOTSTRAP_SEED`: same data, same interval). It needs at least
+:data:`MIN_PPK_HOLES` holes (else NaN): the 99.865th percentile of fewer holes is their largest.
 """
 
 from __future__ import annotations
@@ -23,7 +29,20 @@ __all__ = ["FleetSummary", "Group", "EDGES_DEG", "WORST"]
 EDGES_DEG = np.concatenate([[0.0], np.geomspace(1e-4, 90.0, 801)])
 #: the worst holes kept for the report
 WORST = 20
+#: with the panel known: a hole whose redundant reading misses the CAD's surface by more than this
+#: many sigmas (noise, calibration, the panel's stated uncertainty; two-sided p ~ 6e-5) counts as
+#: a panel off its CAD there
+OFF_CAD_SIGMAS = 4.0
 _STATUSES = tuple(str(s) for s in Status)
+#: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
+PPK_Q = (0.5, 0.99865)
+#: fewest holes for a Ppk: 1 / (1 - 0.99865) = 741 holes put one beyond X99.865; 1000 keep a few there
+MIN_PPK_HOLES = 1000
+#: bootstrap resamplings of the histogram for Ppk's 95 % interval, and the Generator's seed
+BOOTSTRAP = 400
+BOOTSTRAP_SEED = 20261126
+CAPABILITY = ("Ppk, ISO 22514-2 percentile method, one-sided upper: (tolerance - X50) / (X99.865 - X50) of the "
+              "judged angle (bounded below by 0, not normal); 95 % interval: percentile bootstrap")
 
 
 @dataclass
@@ -39,6 +58,7 @@ class Group:
     total_sq: float = 0.0
     hist_before: np.ndarray | None = None
     hist_after: np.ndarray | None = None
+    hist_judged: np.ndarray | None = None
 
     def merge(self, other: "Group") -> None:
         self.counts += other.counts
@@ -49,8 +69,10 @@ class Group:
             if self.hist_before is None:
                 self.hist_before = np.zeros(len(EDGES_DEG), np.int64)
                 self.hist_after = np.zeros(len(EDGES_DEG), np.int64)
+                self.hist_judged = np.zeros(len(EDGES_DEG), np.int64)
             self.hist_before += other.hist_before
             self.hist_after += other.hist_after
+            self.hist_judged += other.hist_judged
 
 
 def _bins(angle_deg):
@@ -90,10 +112,52 @@ def quantile_deg(hist, q):
     total = 0 if hist is None else hist.sum()
     if hist is None or total == 0:
         return float("nan")
-    k = int(np.searchsorted(np.cumsum(hist), q * total, side="left"))
+    return float(_bin_quantiles(np.asarray(hist)[None], q)[0])
+
+
+def _bin_quantiles(hists, q):
+    """(B,) the ``q`` quantile (deg) of each histogram ``hists (B, len(EDGES_DEG))``, none empty."""
+    cum = np.cumsum(hists, axis=1)
+    k = (cum < q * cum[:, -1:]).sum(1)
     lo = EDGES_DEG[k]
-    hi = EDGES_DEG[k + 1] if k + 1 < len(EDGES_DEG) else EDGES_DEG[k]
-    return float(np.sqrt(lo * hi)) if lo > 0 else float(hi / 2)
+    hi = EDGES_DEG[np.minimum(k + 1, len(EDGES_DEG) - 1)]
+    return np.where(lo > 0, np.sqrt(lo * hi), hi / 2)
+
+
+def _interpolated_quantiles(hists, q):
+    """(B,) the ``q`` quantile (deg) of each histogram ``hists (B, len(EDGES_DEG))``, none empty,
+    interpolated within its bin (geometrically; linearly in the first bin, from 0): smooth in the
+    counts, so the bootstrap's interval is not the bins' steps."""
+    cum = np.cumsum(hists, axis=1)
+    target = q * cum[:, -1]
+    k = (cum < target[:, None]).sum(1)
+    rows = np.arange(len(hists))
+    below = np.where(k > 0, cum[rows, np.maximum(k - 1, 0)], 0)
+    frac = np.clip((target - below) / np.maximum(hists[rows, k], 1), 0.0, 1.0)
+    lo = EDGES_DEG[k]
+    hi = EDGES_DEG[np.minimum(k + 1, len(EDGES_DEG) - 1)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lo > 0, lo * (hi / np.where(lo > 0, lo, 1.0)) ** frac, hi * frac)
+
+
+def ppk(hist, tolerance_deg):
+    """The percentile-based Ppk of a histogram on :data:`EDGES_DEG` against the upper limit
+    ``tolerance_deg`` and its 95 % bootstrap interval: ``(ppk, (lo, hi))``, NaN with fewer than
+    :data:`MIN_PPK_HOLES` holes (module docstring)."""
+    nan = float("nan")
+    n = 0 if hist is None else int(hist.sum())
+    if n < MIN_PPK_HOLES:
+        return nan, (nan, nan)
+
+    def index(h):
+        x50, x99 = _interpolated_quantiles(h, PPK_Q[0]), _interpolated_quantiles(h, PPK_Q[1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (tolerance_deg - x50) / (x99 - x50)
+
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    draws = index(rng.multinomial(n, hist / n, size=BOOTSTRAP))
+    lo, hi = np.quantile(draws, [0.025, 0.975])
+    return float(index(np.asarray(hist)[None])[0]), (float(lo), float(hi))
 
 
 @dataclass
@@ -107,6 +171,7 @@ class FleetSummary:
     series : dict, cell -> Group (with histograms)
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
+    unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     """
 
     tolerance_deg: float
@@ -116,6 +181,33 @@ class FleetSummary:
     judged_after: int = 0
     judged_before: int = 0
     disagree: int = 0
+    unknown_after: int = 0
+    off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
+                                                   "max_hole": None})
+
+    def _off_cad(self, t) -> None:
+        if "panel_misfit_z" not in t.column_names:
+            return
+        z = t.column("panel_misfit_z").to_numpy(zero_copy_only=False).astype(float)
+        size = t.column("panel_misfit_per_mm").to_numpy(zero_copy_only=False).astype(float)
+        f = np.isfinite(z)
+        off = f & (np.abs(np.nan_to_num(z)) > OFF_CAD_SIGMAS)
+        o = self.off_cad
+        o["checked"] += int(f.sum())
+        o["holes"] += int(off.sum())
+        o["sum_per_mm"] += float(size[off].sum())
+        if off.any():
+            i = int(np.flatnonzero(off)[np.argmax(size[off])])
+            if size[i] > o["max_per_mm"]:
+                o["max_per_mm"], o["max_hole"] = float(size[i]), t.column("hole_id")[i].as_py()
+
+    def off_cad_figures(self, sigmas=None) -> dict:
+        """The panel-off-CAD figures for the JSON: holes checked (4 sensors), holes off, mean and
+        largest size (1/mm: the shape change the redundant reading sees)."""
+        o = self.off_cad
+        return {"off_cad_sigmas": OFF_CAD_SIGMAS, "off_cad_checked": o["checked"], "off_cad_holes": o["holes"],
+                "off_cad_mean_per_mm": o["sum_per_mm"] / o["holes"] if o["holes"] else 0.0,
+                "off_cad_max_per_mm": o["max_per_mm"], "off_cad_max_hole": o["max_hole"]}
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
@@ -136,18 +228,21 @@ class FleetSummary:
         cp_of = np.array([cps.index(k[0]) for k in keys])[g] if len(g) else np.zeros(0, int)
         nb, C = len(EDGES_DEG), len(cps)
         hists = []
-        for ang in (batch.angle_before, batch.angle_after):
+        for ang in (batch.angle_before, batch.angle_after, np.where(ok, batch.judged, np.nan)):
             a = np.degrees(ang)
             f = np.isfinite(a)
             hists.append(np.bincount(cp_of[f] * nb + _bins(a[f]), minlength=C * nb).reshape(C, nb))
         for j, k in enumerate(cps):
             sel = [i for i, kk in enumerate(keys) if kk[0] == k]
             self.series.setdefault(k, Group()).merge(Group(counts[sel].sum(0), int(n[sel].sum()), float(s1[sel].sum()),
-                                                           float(s2[sel].sum()), hists[0][j], hists[1][j]))
+                                                           float(s2[sel].sum()), hists[0][j], hists[1][j],
+                                                           hists[2][j]))
         after = np.isfinite(batch.angle_after)
         self.judged_after += int((ok & after).sum())
         self.judged_before += int((ok & ~after).sum())
         self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
+        self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
+        self._off_cad(t)
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -171,6 +266,13 @@ class FleetSummary:
         self.judged_after += other.judged_after
         self.judged_before += other.judged_before
         self.disagree += other.disagree
+        self.unknown_after += other.unknown_after
+        o, p = self.off_cad, other.off_cad
+        o["checked"] += p["checked"]
+        o["holes"] += p["holes"]
+        o["sum_per_mm"] += p["sum_per_mm"]
+        if p["max_per_mm"] > o["max_per_mm"]:
+            o["max_per_mm"], o["max_hole"] = p["max_per_mm"], p["max_hole"]
         self.worst = sorted(self.worst + other.worst,
                             key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
 
@@ -186,13 +288,16 @@ class FleetSummary:
         return {s: int(c) for s, c in zip(_STATUSES, grp.counts)}
 
     def figures(self, grp: Group) -> dict:
-        """Quantiles (deg) of the angle before and after, and the judged angle's mean, s, Cpk."""
+        """Quantiles (deg) of the angle before and after; the judged angle's mean, s and (a cell, the
+        fleet: groups with a histogram) Ppk with its 95 % interval."""
         mean = grp.total / grp.n if grp.n else float("nan")
         var = (grp.total_sq - grp.n * mean * mean) / (grp.n - 1) if grp.n > 1 else float("nan")
         sd = float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else float("nan")
-        cpk = (self.tolerance_deg - mean) / (3 * sd) if sd and np.isfinite(sd) and sd > 0 else float("nan")
         qs = (0.5, 0.95, 0.99, 0.999)
-        out = {"measured": grp.n, "mean_deg": mean, "sd_deg": sd, "cpk": cpk}
+        out = {"measured": grp.n, "mean_deg": mean, "sd_deg": sd}
+        if grp.hist_judged is not None:
+            p, ci = ppk(grp.hist_judged, self.tolerance_deg)
+            out.update({"ppk": p, "ppk_ci95": list(ci), "capability": CAPABILITY})
         if grp.hist_before is not None:
             out["quantiles_before_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_before, q) for q in qs}
             out["quantiles_after_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_after, q) for q in qs}

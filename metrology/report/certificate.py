@@ -55,6 +55,9 @@ class Certificate:
     standoff_mm : (2,) float, the readings' range over the calibration, mm
     tilt_max_deg : float, the largest tilt of the tool axis from the datum normal, deg
     issued : str, the time the certificate was made (UTC)
+    tilt_chart : str, the direction whose chart axes e1, e2 the tilts' u and the correlations are
+        about: ``calibrated`` (the file's ``[calibration]`` covariance, as ``metro measure`` reads
+        it), or ``nominal`` (a file without covariance: its ``direction_stderr_deg``, the fit's chart)
     """
 
     header: tuple
@@ -67,6 +70,7 @@ class Certificate:
     standoff_mm: tuple
     tilt_max_deg: float
     issued: str
+    tilt_chart: str = "calibrated"
 
     @property
     def number(self) -> str:
@@ -79,6 +83,7 @@ class Certificate:
         return {"number": self.number, "file": self.file, "sha256": self.sha256, "coverage_factor": COVERAGE_K,
                 "header": {k: v for k, _, v in self.header}, "method": self.method, "n_poses": self.n_poses,
                 "standoff_mm": list(self.standoff_mm), "tilt_max_deg": self.tilt_max_deg, "issued": self.issued,
+                "tilt_chart": self.tilt_chart,
                 "parameters": [{"sensor": s, "parameter": p, "value": v, "u": u, "U": U, "unit": unit}
                                for s, p, v, u, U, unit in self.rows],
                 "correlations": [{"sensor": s, "a": a, "b": b, "r": r} for s, a, b, r in self.correlations]}
@@ -116,12 +121,18 @@ def certificate_from_toml(text: str, layout, file, method: str, n_poses: int, st
             rows.append((name, words, float(s["zero"][j]), u, None if u is None else COVERAGE_K * u, unit))
         for j, c in enumerate("ijk"):
             rows.append((name, f"direction {c} (unit vector)", float(s["direction"][j]), None, None, ""))
-        if "direction_stderr_deg" in s:
+        cov = None if layout.covariance is None else layout.covariance[5 * i:5 * i + 5, 5 * i:5 * i + 5]
+        if cov is not None:  # the calibrated direction's chart, as the correlations beneath
+            tilt_u = np.degrees(np.sqrt(np.maximum(np.diag(cov)[3:], 0.0)))
+        elif "direction_stderr_deg" in s:  # no covariance: the fit's own chart, the nominal direction's
+            tilt_u = [float(x) for x in s["direction_stderr_deg"]]
+        else:
+            tilt_u = None
+        if tilt_u is not None:
             for j, e in enumerate(("e1", "e2")):
-                u = float(s["direction_stderr_deg"][j])
+                u = float(tilt_u[j])
                 rows.append((name, f"beam tilt about {e}", 0.0, u, COVERAGE_K * u, "deg"))
-        if layout.covariance is not None:
-            cov = layout.covariance[5 * i:5 * i + 5, 5 * i:5 * i + 5]
+        if cov is not None:
             se = np.sqrt(np.maximum(np.diag(cov), 0.0))
             for a in range(5):
                 for b in range(a + 1, 5):
@@ -130,7 +141,8 @@ def certificate_from_toml(text: str, layout, file, method: str, n_poses: int, st
                         if abs(r) > CORRELATION_REPORT:
                             corr.append((name, names[a], names[b], r))
     return Certificate(_header(layout.certificate), tuple(rows), tuple(corr), None if file is None else str(file), sha,
-                       method, int(n_poses), tuple(float(x) for x in standoff_mm), float(tilt_max_deg), issued)
+                       method, int(n_poses), tuple(float(x) for x in standoff_mm), float(tilt_max_deg), issued,
+                       "nominal" if layout.covariance is None else "calibrated")
 
 
 def _v(x, unit) -> str:
@@ -163,15 +175,18 @@ def certificate_section(cert: Certificate):
                                                                                     cert.header) else
         "The calibration interval is the one agreed (valid until).",
         "Values are those of the calibrated layout file named, whose SHA-256 is given: zero points in mm (TCS), "
-        "directions as unit vectors (TCS), tilt uncertainties about the chart axes e1, e2 of the nominal direction.",
+        f"directions as unit vectors (TCS), tilt uncertainties about the chart axes e1, e2 of its {cert.tilt_chart} "
+        "direction" + (" (the file's [calibration] covariance)." if cert.tilt_chart == "calibrated" else
+                       " (the file has no covariance: its direction_stderr_deg)."),
     )
     return Section("Calibration certificate", Verdict(None, f"{cert.number}: calibrated layout "
-                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…",
-                                                            label="certificate"),
+                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…"),
                    tables=(Table("Certificate", ("field", "value"), tuple(head), wrap=True),
                            Table(f"Calibrated values, standard uncertainty u (1 σ) and expanded uncertainty U "
                                  f"(k = {COVERAGE_K:g})", ("sensor", "parameter", "value", "u", "U", "unit"), rows),
                            Table(f"Correlations of each sensor's parameters with |r| > {CORRELATION_REPORT:g}",
                                  ("sensor", "pair", "r"), corr, "x, y, z: the zero point; a, b: the beam's tilt about "
-                                 "the axes of its calibrated direction (the file's [calibration] covariance).")),
+                                 "the chart axes e1, e2 of its calibrated direction (the file's [calibration] "
+                                 "covariance)." if cert.tilt_chart == "calibrated" else
+                                 "None: the file has no [calibration] covariance.")),
                    statements=statements)

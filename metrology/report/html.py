@@ -24,8 +24,8 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
-           "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "NARROW_IN", "NARROW_MEDIA", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+           "figure_from_matplotlib", "figure_from_png", "expect_ink", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
 
@@ -42,18 +42,32 @@ _VERSIONED = (("metro",), ("numpy",), ("scipy",), ("open3d-cpu", "open3d"), ("tr
 COLUMN_IN = 960 / 96
 #: the smallest text in a report's figure, pt, at the figure's own size (as it shows at 1280 px)
 MIN_FIGURE_PT = 9.0
+#: a phone's column (a 412 px window less the narrow page's padding and the image's border, with
+#: room for a 360 px phone to show it at 90 %), in inches at 96 px per inch: each figure is drawn
+#: again this wide for windows up to :data:`NARROW_MEDIA`, so its text keeps 9 pt (12 px), not
+#: the 40 % of it a 960 px figure would show at
+NARROW_IN = 380 / 96
+#: the windows that get the narrow figure: up to 50 rem, where the column figure would show at
+#: less than 80 % (9.6 px for 12 px text)
+NARROW_MEDIA = "(max-width: 50rem)"
 
 
 @dataclass(frozen=True)
 class Figure:
     """A figure embedded in the page: ``data_uri`` (``data:image/png;base64,...``) with its caption;
     ``min_font_px``: its smallest text's height in the image's pixels (0: not known), which
-    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it."""
+    ``benchmarks/check_reports_browser.py`` turns into points as the page shows it;
+    ``expect``: tuple of (x0, y0, x1, y1, colour, present), boxes in the image's pixels (y down)
+    where ink of ``colour`` must show (``present``) or must not, which the browser check reads
+    from the image (:func:`expect_ink`); ``narrow_uri``: the same figure drawn :data:`NARROW_IN`
+    wide for a phone (empty: none), its text as large in its pixels as the column figure's."""
 
     caption: str
     data_uri: str
     alt: str = ""
     min_font_px: float = 0.0
+    expect: tuple = ()
+    narrow_uri: str = ""
 
 
 @dataclass(frozen=True)
@@ -76,9 +90,9 @@ class Verdict:
     ok : True (within tolerance), False (not), None (no tolerance applies: information)
     headline : str, one sentence (the numbers against the tolerance)
     cause : str, the cause named (or why it passed); empty when there is nothing to add
-    label : str, the verdict's words when the default ones (from ``ok``) would say less or
-        something else: what was found where no tolerance was stated ("flat within the
-        noise"), or the cause named before the tolerance ("cause: drift on L3; ...")
+    label : str, the finding, shown beside the verdict's word (never instead of it): what was
+        found where no tolerance was stated ("flat within the noise"), the cause named ("cause:
+        drift on L3"), the drift alarms; the demo's overview gives it after the word
     checks : tuple of (tag, words), one line per judged quantity, each coloured by its tag:
         ``pass``, ``FAIL`` (a limit the user set), ``info`` or ``note`` (information within
         or beyond a limit the user did not set) (:func:`metrology.report.verdicts.check_words`)
@@ -92,7 +106,12 @@ class Verdict:
 
     @property
     def word(self) -> str:
-        return self.label or WORDS[self.ok]
+        """passed, FAILED or information: the terminal's word (:func:`metrology.report.verdicts.verdict_word`)."""
+        return WORDS[self.ok]
+
+    @property
+    def finding(self) -> str:
+        return self.label
 
 
 #: the verdict's words: passed (every gating check passed), FAILED, information (nothing gated)
@@ -100,13 +119,12 @@ WORDS = {True: "passed", False: "FAILED", None: "information"}
 
 
 def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
-    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`: passed or
-    FAILED when a check gates, information when none does; one line per check."""
-    from metrology.report.verdicts import check_words
+    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`, in the
+    terminal's words (:func:`metrology.report.verdicts.verdict_word`); one line per check."""
+    from metrology.report.verdicts import check_words, verdict_word
 
-    gated = any(c.gate for c in verdict.checks)
-    return Verdict(verdict.passed if gated else None, headline, cause, label,
-                   tuple(check_words(c) for c in verdict.checks))
+    ok = {"passed": True, "FAILED": False, "information": None}[verdict_word(verdict)]
+    return Verdict(ok, headline, cause, label, tuple(check_words(c) for c in verdict.checks))
 
 
 @dataclass(frozen=True)
@@ -158,13 +176,14 @@ def sha256_file(path) -> str:
     return h.hexdigest()
 
 
-def versions() -> tuple:
+def versions(extra=()) -> tuple:
     """(name, version) of metro and the libraries its numbers depend on, from the installed
-    distributions' metadata (no import of the libraries themselves)."""
+    distributions' metadata (no import of the libraries themselves); ``extra``: more
+    distributions a command's numbers depend on (measure: pyarrow, dask)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = []
-    for group in _VERSIONED:
+    for group in (*_VERSIONED, *((e,) for e in extra)):
         for dist in group:
             try:
                 out.append((dist, version(dist)))
@@ -195,7 +214,7 @@ def command_line() -> str:
     return shlex.join(["metro", *sys.argv[1:]])
 
 
-def run_info(inputs: dict, command: str | None = None, seed: int | None = None) -> RunInfo:
+def run_info(inputs: dict, command: str | None = None, seed: int | None = None, extra_versions=()) -> RunInfo:
     """A :class:`RunInfo` for ``inputs`` (role -> path; None values are skipped; a path that is
     not a file, such as a generated grid, is listed without checksum). ``command`` None: this
     process's :func:`command_line`."""
@@ -209,13 +228,39 @@ def run_info(inputs: dict, command: str | None = None, seed: int | None = None) 
             rows.append((role, display_name(path), sha256_file(p), p.stat().st_size))
         else:
             rows.append((role, display_name(path), "", 0))
-    return RunInfo(command=command, inputs=tuple(rows), versions=versions(), seed=seed, written=_written())
+    return RunInfo(command=command, inputs=tuple(rows), versions=versions(extra_versions), seed=seed, written=_written())
 
 
-def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0) -> Figure:
-    """Embed PNG bytes as a :class:`Figure`."""
-    return Figure(caption, "data:image/png;base64," + base64.b64encode(png).decode("ascii"), alt or caption,
-                  min_font_px)
+def _png_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+def figure_from_png(png: bytes, caption: str, alt: str = "", min_font_px: float = 0.0, expect: tuple = (),
+                    narrow_png: bytes = b"") -> Figure:
+    """Embed PNG bytes as a :class:`Figure` (``narrow_png``: its phone version, optional)."""
+    return Figure(caption, _png_uri(png), alt or caption, min_font_px, tuple(expect),
+                  _png_uri(narrow_png) if narrow_png else "")
+
+
+def expect_ink(ax, xs, ys, colour, present: bool, pad_px=(0, 0)) -> None:
+    """State that ``ax``'s figure shows (``present``) or does not show ink of ``colour`` within
+    the box ``xs`` x ``ys`` (data coordinates), grown by ``pad_px`` (x, y; image pixels; negative
+    shrinks it). :func:`figure_from_matplotlib` turns it into image pixels once the figure is
+    laid out (:attr:`Figure.expect`)."""
+    ax.figure.__dict__.setdefault("_metro_expect", []).append((ax, tuple(xs), tuple(ys), colour, bool(present),
+                                                              tuple(pad_px)))
+
+
+def _expected_boxes(fig, dpi) -> tuple:
+    """The figure's :func:`expect_ink` boxes in the pixels of its image at ``dpi``."""
+    fig.set_dpi(dpi)
+    height = fig.get_size_inches()[1] * dpi
+    out = []
+    for ax, xs, ys, colour, present, (px, py) in fig.__dict__.get("_metro_expect", []):
+        (x0, y0), (x1, y1) = ax.transData.transform([(min(xs), min(ys)), (max(xs), max(ys))])
+        out.append((round(x0 - px, 1), round(height - y1 - py, 1), round(x1 + px, 1), round(height - y0 + py, 1),
+                    colour, present))
+    return tuple(out)
 
 
 def fit_to_column(fig) -> float:
@@ -230,12 +275,7 @@ def fit_to_column(fig) -> float:
     for t in texts:
         if t.get_fontsize() < MIN_FIGURE_PT:
             t.set_fontsize(MIN_FIGURE_PT)
-    if fig.get_layout_engine() is None:
-        import warnings
-
-        with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
-            warnings.simplefilter("ignore")
-            fig.tight_layout()
+    _relayout(fig)
     return min((t.get_fontsize() for t in texts), default=MIN_FIGURE_PT)
 
 
@@ -245,13 +285,64 @@ def figure_from_matplotlib(fig, caption: str, alt: str = "", dpi: int = 96) -> F
 
     from metrology.report.style import close
 
-    buf = io.BytesIO()
+    buf, narrow = io.BytesIO(), io.BytesIO()
     try:
         pt = fit_to_column(fig)
+        expect = _expected_boxes(fig, dpi)
         fig.savefig(buf, format="png", dpi=dpi)
+        _narrow(fig)
+        fig.savefig(narrow, format="png", dpi=dpi)
     finally:
         close(fig)
-    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0)
+    return figure_from_png(buf.getvalue(), caption, alt, pt * dpi / 72.0, expect, narrow.getvalue())
+
+
+def _narrow(fig) -> None:
+    """Lay ``fig`` out again :data:`NARROW_IN` wide, its text as it is: taller by the square root
+    of the narrowing (a row of panels gets room to breathe), no more than twice; an axis label or
+    title longer than its axes is wrapped onto more lines."""
+    w, h = fig.get_size_inches()
+    fig.set_size_inches(NARROW_IN, h * min(2.0, max(1.0, (w / NARROW_IN) ** 0.5)))
+    _relayout(fig)
+    if _wrap_long_labels(fig):
+        _relayout(fig)
+
+
+def _relayout(fig) -> None:
+    """Lay ``fig`` out for its size: its own layout engine (constrained) does at each draw; else
+    ``tight_layout`` once more (one called earlier leaves only a placeholder engine)."""
+    import warnings
+
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine):
+        return
+    with warnings.catch_warnings():  # a figure tight_layout cannot improve is drawn as it is
+        warnings.simplefilter("ignore")
+        fig.tight_layout()
+
+
+def _wrap_long_labels(fig) -> bool:
+    """Wrap each axis label and title wider than its axes (a y label: taller), and the figure's
+    title wider than the figure, at spaces; True when one was."""
+    import textwrap
+
+    renderer = fig.canvas.get_renderer()
+    changed = False
+    width = fig.get_size_inches()[0] * fig.dpi * 0.96
+    boxes = [(fig._suptitle, width, "width")] if fig._suptitle is not None else []
+    for ax in fig.axes:
+        box = ax.get_window_extent(renderer)
+        boxes += [(ax.xaxis.label, box.width, "width"), (ax.title, box.width, "width"),
+                  (ax.yaxis.label, box.height, "height")]
+    for text, room, along in boxes:
+        lines = text.get_text().split("\n")
+        size = getattr(text.get_window_extent(renderer), along)
+        if any(lines) and size > room > 0:
+            chars = max(8, int(max(map(len, lines)) * room / size * 0.95))
+            text.set_text("\n".join(textwrap.fill(line, chars) for line in lines))
+            changed = True
+    return changed
 
 
 def check_report_path(path) -> None:
@@ -290,19 +381,49 @@ def render_html(title: str, run: RunInfo, sections) -> str:
                              autoescape=jinja2.select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters["ticks"] = _ticks
+    env.filters["words"] = _words
     overall = [s.verdict.ok for s in sections]
     ok = False if False in overall else (True if True in overall else None)
     return env.get_template("report.html.j2").render(title=title, run=run, sections=list(sections), overall=ok,
-                                                     words=WORDS)
+                                                     words=WORDS, narrow_media=NARROW_MEDIA)
+
+
+#: words of prose kept on one line: an option (``--out``, ``-n``) or an id with a number after
+#: a hyphen (``C1-00012006``); prose may break ``re-mounted`` at its hyphen, not these
+_WHOLE = r"(?<![\w-])(?:--?[A-Za-z][\w.-]*|[A-Za-z]\w*-\d[\w.:-]*)"
+
+
+def _keep_whole(escaped: str) -> str:
+    import re
+
+    return re.sub(_WHOLE, lambda m: f'<span class="nb">{m.group(0)}</span>', escaped)
 
 
 def _ticks(text):
-    """Escape ``text`` and show its `backticked` spans as code."""
+    """Escape ``text``, show its `backticked` spans as code and keep its options and ids whole
+    (:data:`_WHOLE`)."""
     import re
 
     import markupsafe
 
-    return markupsafe.Markup(re.sub(r"`([^`]+)`", r"<code>\1</code>", str(markupsafe.escape(text))))
+    out = re.sub(r"`([^`]+)`", r"<code>\1</code>", str(markupsafe.escape(text)))
+    return markupsafe.Markup(_keep_whole(out))
+
+
+#: the longest word a report never breaks across lines (an id, a time, an option such as
+#: ``--out``, a short path); a longer one (a long path) breaks where the line ends
+NOWRAP_CHARS = 20
+
+
+def _words(text):
+    """Escape ``text`` and keep each of its words of at most :data:`NOWRAP_CHARS` characters on
+    one line (``<span class="nb">``): a table cell or a command line breaks between words, never
+    inside a hole id or at the ``-`` of ``--out``. The text is unchanged (to copy)."""
+    import markupsafe
+
+    return markupsafe.Markup(" ").join(markupsafe.Markup('<span class="nb">{}</span>').format(w)
+                                      if 0 < len(w) <= NOWRAP_CHARS else markupsafe.escape(w)
+                                      for w in str(text).split(" "))
 
 
 def write_report(path, title: str, run: RunInfo, sections) -> Path:

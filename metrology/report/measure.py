@@ -16,6 +16,12 @@ def utc(t_s: float) -> str:
     return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def _when(t_s: float) -> str:
+    """UTC of seconds since the epoch as two words, date and time (a table's cell may break
+    between them on a phone; the header says UTC)."""
+    return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+
+
 def _judged(report) -> str:
     s = report.result.summary
     if s.judged_after and not s.judged_before:
@@ -32,6 +38,17 @@ def _alarm_words(a) -> str:
             f"reading's misfit moved {a.size_um:+.1f} µm from hole {a.start_hole_id} ({utc(a.start_time_s)}, "
             f"{a.holes_since_start} holes before); a zero shift of one sensor alone: {shifts} (one redundant "
             f"reading cannot tell which of the 4): {a.advice}")
+
+
+def _ppk(fig: dict, short: bool = False) -> str:
+    """The judged angle's Ppk with its 95 % interval, or why there is none."""
+    p = fig.get("ppk", float("nan"))
+    if not np.isfinite(p):
+        from metrology.measure.summary import MIN_PPK_HOLES
+
+        return "-" if short else f"Ppk - (fewer than {MIN_PPK_HOLES:,} holes)"
+    lo, hi = fig["ppk_ci95"]
+    return f"{p:.3g} [{lo:.3g}, {hi:.3g}]" if short else f"Ppk {p:.3g} (95 % CI {lo:.3g} to {hi:.3g})"
 
 
 def _q(fig: dict, which: str, key: str) -> str:
@@ -51,6 +68,9 @@ def measure_text(report) -> str:
              f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
+             *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
+                f"partition(s) kept as an earlier run wrote them, {report.result.written} written"]
+               if report.sources.get("out") and report.result.written < report.result.partitions else []),
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
     for k in ("conforms", "fails", "undecided", "not_measured"):
@@ -60,8 +80,9 @@ def measure_text(report) -> str:
               f"p99.9 {_q(fig, 'before', 'p99.9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
               f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg, Cpk {fig['cpk']:.3g} "
-              f"(one-sided, against {report.tolerance_deg:g} deg)",
+              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+              f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
+              f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " only (the layout has no calibration covariance)") + ", 95 %"]
     ch = report.chart
@@ -101,6 +122,10 @@ def _hist_figure(report):
             ax.step(centres, h / h.sum(), where="mid", label=label)
     ax.axvline(report.tolerance_deg, color="k", ls="--", lw=1, label=f"tolerance {report.tolerance_deg:g} deg")
     ax.set_xscale("log")
+    seen = np.flatnonzero(tot.hist_before[1:] + tot.hist_after[1:])  # the axis spans the angles measured
+    if seen.size:
+        ax.set_xlim(EDGES_DEG[1:][seen[0]] / 1.5, max(EDGES_DEG[1:][min(seen[-1] + 1, len(EDGES_DEG) - 2)] * 1.5,
+                                                         2 * report.tolerance_deg))
     ax.set_xlabel("angle between drill axis and measured normal [deg]")
     ax.set_ylabel("share of holes per bin [1]")
     ax.legend()
@@ -108,19 +133,44 @@ def _hist_figure(report):
     return fig
 
 
+#: colour of the drift chart's CUSUM line (the browser check looks for it)
+CUSUM_COLOUR = "#1f77b4"
+
+
 def _chart_figure(chart, alarms):
+    """The CUSUM of one cell against hours since its first charted hole: the chart's series
+    (every peak and crossing kept, :class:`metrology.measure.chart.CusumChart`), broken where
+    the chart took a new baseline; the alarms as red lines. The figure states where its line must
+    show (near h at each alarm) and must not (over each new baseline's holes), in image pixels,
+    for the browser check (:func:`metrology.report.html.expect_ink`)."""
+    from metrology.report.html import expect_ink
     from metrology.report.style import pyplot
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 2.6))
     if chart.series:
-        t, s = np.array(chart.series).T
-        ax.plot((t - t[0]) / 3600.0, s, lw=0.8)
+        t, s = np.array(chart.series, float).T
+        hours = (t - t[0]) / 3600.0
         for a in alarms:
             ax.axvline((a.time_s - t[0]) / 3600.0, color="C3", lw=1)
         ax.axhline(chart.h, color="k", ls="--", lw=1, label=f"h = {chart.h:g}")
-        ax.set_xlabel(f"hours since {utc(t[0])}")
+        ax.plot(hours, s, lw=1.0, color=CUSUM_COLOUR, label="CUSUM", zorder=3)
+        ax.set_xlabel(f"hours since the first charted hole, {utc(t[0])} (after the cell's "
+                      f"{chart.baseline_holes} baseline holes)")
         ax.legend(loc="upper left")
+        ax.set_ylim(bottom=min(-0.5, np.nanmin(s)), top=max(np.nanmax(s), chart.h) * 1.08)
+        ax.set_xlim(hours[0], hours[-1])
+        gaps = np.flatnonzero(np.isnan(s))
+        for a in alarms:
+            x = (a.time_s - t[0]) / 3600.0
+            i = np.flatnonzero((hours == x) & ~np.isnan(s))
+            top = float(s[i].max()) if i.size else chart.h
+            expect_ink(ax, (x, x), (chart.h - 1.0, top), CUSUM_COLOUR, True, pad_px=(3, 2))
+        for g in gaps:
+            nxt = np.flatnonzero(~np.isnan(s[g + 1:]))
+            if nxt.size:
+                expect_ink(ax, (hours[g], hours[g + 1 + nxt[0]]), ax.get_ylim(), CUSUM_COLOUR, False,
+                           pad_px=(-4, 0))
     ax.set_ylabel("CUSUM [scales]")
     ax.set_title(f"cell {chart.cell}")
     fig.tight_layout()
@@ -129,7 +179,7 @@ def _chart_figure(chart, alarms):
 
 def measure_section(report):
     """The HTML section of ``metro measure``: verdict, histogram, one control chart per cell, tables."""
-    from metrology.report.html import Section, Table, Verdict, figure_from_matplotlib
+    from metrology.report.html import Section, Table, figure_from_matplotlib, verdict_box
 
     s = report.result.summary
     c = report.counts
@@ -151,20 +201,22 @@ def measure_section(report):
         counts.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
                        f"{k['undecided']:,}", f"{k['not_measured']:,}"))
         angles.append((cell or "-", _q(f, "before", "p50"), _q(f, "after", "p50"), _q(f, "after", "p99"),
-                       "-" if not np.isfinite(f["cpk"]) else f"{f['cpk']:.3g}"))
+                       _ppk(f, short=True)))
     note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
             f"per panel and day (UTC): {len(s.groups)} groups in --json")
     tables = [Table("Holes by status, per cell", ("cell", "holes", "conform", "fail", "undecided", "not measured"),
                     tuple(counts), note),
-              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Cpk",
-                    ("cell", "p50 before", "p50 after", "p99 after", "Cpk"), tuple(angles))]
-    worst = tuple((w["hole_id"], w["cell"] or "-", w["panel"] or "-", utc(w["time_s"]), f"{w['angle_deg']:.4f}",
+              Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Ppk "
+                    "(ISO 22514-2 percentile method, one-sided upper) with its 95 % bootstrap interval",
+                    ("cell", "p50 before", "p50 after", "p99 after", "Ppk [95 % CI]"), tuple(angles))]
+    worst = tuple((w["hole_id"], f"{w['cell'] or '-'} {w['panel'] or '-'}", _when(w["time_s"]), f"{w['angle_deg']:.4f}",
                    f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
-    tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell", "panel", "time", "angle [deg]",
+    tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
-        tables.append(Table("Drift alarms", ("cell", "alarm at", "change from", "size [µm]", "one sensor alone [µm]"),
-                            tuple((a.cell, f"{a.hole_id} ({utc(a.time_s)})", f"{a.start_hole_id}", f"{a.size_um:+.1f}",
+        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "size [µm]",
+                                             "one sensor alone [µm]"),
+                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.size_um:+.1f}",
                                    ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
     limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
               "in the spots' spread over the radius (docs/measure.md gives its size)",
@@ -174,6 +226,6 @@ def measure_section(report):
         nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "
                    "(a better calibration lowers its share).")
     return Section("Hole measurement (metro measure)",
-                   Verdict(v.passed, head, cause, label="PASSED" if v.passed else "FAILED"),
+                   verdict_box(v, head, label=cause),
                    figures=tuple(figs), tables=tuple(tables), text=(measure_text(report),), limits=tuple(limits),
                    next_steps=tuple(nxt))

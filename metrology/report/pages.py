@@ -200,8 +200,8 @@ def diagnosis_section(diag, tolerance_deg: float = DRILLING_TOLERANCE_DEG) -> Se
     verdict = diagnosis_verdict(diag, tolerance_deg)
     ok = verdict.passed
     who = f" on {', '.join(D['sensors'])}" if D["sensors"] else ""
-    head = (f"cause: {cause}{who} (confidence {D['confidence']}); held-out normal deviation {held:.5f} deg "
-            f"against a tolerance of {tolerance_deg:g} deg")
+    head = (f"held-out normal deviation {held:.5f} deg against a tolerance of {tolerance_deg:g} deg; "
+            f"confidence in the cause: {D['confidence']}")
     label = f"cause: {cause}{who}; normal {'within' if ok else 'NOT within'} tolerance ({held:.4f} vs {tolerance_deg:g} deg)"
     nxt, limits = [], []
     for c in D["causes"]:

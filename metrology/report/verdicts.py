@@ -18,10 +18,12 @@ from metrology.core.tolerances import DRILLING_TOLERANCE_DEG
 from metrology.core.verdict import Check, Verdict
 
 __all__ = ["plane_verdict", "validation_checks", "diagnosis_verdict", "normals_verdict", "steps_verdict",
-           "check_words", "verdict_text", "NO_VERDICT"]
+           "check_words", "verdict_text", "verdict_word", "NO_VERDICT", "NO_VERDICT_LINE"]
 
 #: a command that judges nothing (version, simulate, reproduce, plan): passed, no checks
 NO_VERDICT = Verdict(())
+#: the verdict line of a command that judges nothing (it writes data: simulate, simulate-log, reproduce)
+NO_VERDICT_LINE = "verdict: passed (exit code 0): nothing judged (simulated data written)"
 
 #: fit-plane: below this share of inliers the scan holds more than the datum (information)
 SCAN_INLIER_SHARE = 0.9
@@ -119,11 +121,21 @@ def check_words(c: Check) -> tuple[str, str]:
     return tag, f"{c.name}: {_num(c.value, c.unit)} {op} {_num(c.limit, c.unit)}{extra}"
 
 
+def verdict_word(verdict: Verdict) -> str:
+    """The verdict's one word, in the terminal and in the HTML alike: ``FAILED`` (a check that
+    gates failed: exit code 1), ``passed`` (every check that gates passed) or ``information``
+    (no check gates: nothing was judged against a limit the user set; exit code 0)."""
+    if not verdict.passed:
+        return "FAILED"
+    return "passed" if any(c.gate for c in verdict.checks) else "information"
+
+
 def verdict_text(verdict: Verdict) -> str:
-    """The verdict as lines: ``verdict: passed`` / ``verdict: FAILED``, then one line per check."""
+    """The verdict as lines: ``verdict: passed`` / ``FAILED`` / ``information``
+    (:func:`verdict_word`) with the exit code, then one line per check."""
     if not verdict.checks:
         return ""
-    lines = [f"verdict: {'passed' if verdict.passed else 'FAILED'} (exit code {0 if verdict.passed else 1})"]
+    lines = [f"verdict: {verdict_word(verdict)} (exit code {0 if verdict.passed else 1})"]
     for c in verdict.checks:
         tag, words = check_words(c)
         lines.append(f"  [{tag}] {words}")

@@ -103,6 +103,47 @@ def _component(effect: HiddenEffect, i):
     return REGISTRY[effect.name].hidden(i, effect.size)
 
 
+#: how many times :func:`synth_run` redraws the poses that read out of the sensors' range before it
+#: says it cannot keep them in range (each redraw takes the poses still out: a few suffice)
+MAX_REDRAWS = 50
+
+
+def _readings_of(rng, lt, plane, poses, time_s, temp_c, effects):
+    """The readings of ``poses`` with ``effects`` hidden and noise: ``(poses, d, trans, truth)``."""
+    n_poses = len(poses.tcs2tracker_rot)
+    N, D = poses.plane_in_tcs(plane.normal, plane.offset)
+    d0, valid = readings(lt.zero, lt.direction, N, D)
+    if not np.all(valid):
+        raise ValueError("simulated beams miss the datum: check the pose distribution")
+    centre = -plane.offset * plane.normal  # the centre of the spot spread (random_poses)
+    cov = Covariates.from_geometry(lt.zero, lt.direction, N, D, poses.tcs2tracker_rot, poses.tcs2tracker_trans,
+                                   plane.normal, centre, lt.range_mm, time_s, temp_c)
+    d = d0.copy()
+    trans = poses.tcs2tracker_trans.copy()
+    truth = {"effects": []}
+    for e in effects:
+        i = None if e.sensor is None else lt.names.index(e.sensor)
+        rec = {"name": e.name, "sensor": e.sensor, "size": e.size}
+        if e.name == "pose_error":
+            trans = trans + rng.normal(0.0, e.size, trans.shape)
+            rec["sigma_along_normal_mm"] = e.size
+        elif e.name == "outliers":
+            rows = rng.choice(n_poses, size=N_OUTLIERS, replace=False)
+            signs = rng.choice([-1.0, 1.0], size=N_OUTLIERS)
+            d[rows, i] += signs * e.size
+            rec["poses"] = sorted(int(r) for r in rows)
+        elif e.name == "periodic":
+            phase = rng.uniform(0, 2 * np.pi)
+            d[:, i] += e.size * np.sin(2 * np.pi * np.arange(n_poses) / PERIOD_POSES + phase)
+        else:
+            comp = _component(e, i)
+            d += comp.evaluate(comp.values, d0, cov)
+            rec["values"] = dict(zip(comp.param_names, comp.values.tolist()))
+        truth["effects"].append(rec)
+    d += rng.normal(0.0, 1.0, d.shape) * lt.noise_mm[None, :]
+    return poses, d, trans, truth
+
+
 def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane, n_poses: int,
               effects=(), spec: PoseSpec = PoseSpec()):
     """A synthetic run of ``n_poses`` poses hiding ``effects``.
@@ -134,37 +175,26 @@ def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane,
             raise ValueError(f"effect {e.name}: sensor {e.sensor!r} not in the layout ({', '.join(layout_true.names)})")
     poses = random_poses(rng, layout_true, plane.normal, plane.offset, n_poses, spec)
     time_s, temp_c = warmup(rng, n_poses)
-    N, D = poses.plane_in_tcs(plane.normal, plane.offset)
     lt = layout_true
-    d0, valid = readings(lt.zero, lt.direction, N, D)
-    if not np.all(valid):
-        raise ValueError("simulated beams miss the datum: check the pose distribution")
-    centre = -plane.offset * plane.normal  # the centre of the spot spread (random_poses)
-    cov = Covariates.from_geometry(lt.zero, lt.direction, N, D, poses.tcs2tracker_rot, poses.tcs2tracker_trans,
-                                   plane.normal, centre, lt.range_mm, time_s, temp_c)
-    d = d0.copy()
-    trans = poses.tcs2tracker_trans.copy()
-    truth = {"effects": []}
-    for e in effects:
-        i = None if e.sensor is None else lt.names.index(e.sensor)
-        rec = {"name": e.name, "sensor": e.sensor, "size": e.size}
-        if e.name == "pose_error":
-            trans = trans + rng.normal(0.0, e.size, trans.shape)
-            rec["sigma_along_normal_mm"] = e.size
-        elif e.name == "outliers":
-            rows = rng.choice(n_poses, size=N_OUTLIERS, replace=False)
-            signs = rng.choice([-1.0, 1.0], size=N_OUTLIERS)
-            d[rows, i] += signs * e.size
-            rec["poses"] = sorted(int(r) for r in rows)
-        elif e.name == "periodic":
-            phase = rng.uniform(0, 2 * np.pi)
-            d[:, i] += e.size * np.sin(2 * np.pi * np.arange(n_poses) / PERIOD_POSES + phase)
-        else:
-            comp = _component(e, i)
-            d += comp.evaluate(comp.values, d0, cov)
-            rec["values"] = dict(zip(comp.param_names, comp.values.tolist()))
-        truth["effects"].append(rec)
-    d += rng.normal(0.0, 1.0, d.shape) * lt.noise_mm[None, :]
+    lo, hi = lt.range_mm[:, 0], lt.range_mm[:, 1]
+    for attempt in range(MAX_REDRAWS + 1):
+        poses, d, trans, truth = _readings_of(rng, lt, plane, poses, time_s, temp_c, effects)
+        out = np.isfinite(d) & ((d < lo) | (d > hi))  # the sensors' own data are not valid there
+        bad = np.flatnonzero(out.any(1))
+        if not bad.size:
+            break
+        if attempt == MAX_REDRAWS:
+            p, i = bad[0], int(np.flatnonzero(out[bad[0]])[0])
+            hidden = ", ".join(f"{e.name} of size {e.size:g}" for e in effects) or "no effect"
+            raise ValueError(f"cannot keep the simulated poses in the sensors' range: after {MAX_REDRAWS} redraws "
+                             f"{bad.size} of {n_poses} poses still read out of range (pose P{p + 1:03d}: "
+                             f"d_{lt.names[i]} = {d[p, i]:.4f} mm, range [{lo[i]:g}, {hi[i]:g}] mm) with {hidden}: "
+                             f"a smaller --size, or a layout whose range_mm holds the stand-off")
+        # redraw the poses that read out of range: a run in range keeps its poses (same seed, same bytes)
+        new = random_poses(rng, lt, plane.normal, plane.offset, bad.size, spec)
+        rot, tr = poses.tcs2tracker_rot.copy(), poses.tcs2tracker_trans.copy()
+        rot[bad], tr[bad] = new.tcs2tracker_rot, new.tcs2tracker_trans
+        poses = type(poses)(rot, tr)
     quat = quaternion_from_matrix(poses.tcs2tracker_rot)
     export = TrackerExport(tuple(f"P{j + 1:03d}" for j in range(n_poses)), time_s, temp_c, quat, trans,
                            lt.names, d)

@@ -296,3 +296,38 @@ def test_follow_on_a_planned_file_says_waiting_for_readings(tmp_path):
     lines = r.stdout.splitlines()
     assert len(lines) == 6 and all(": waiting for readings" in line for line in lines)
     assert r.stderr.startswith("error: ") and "none with a reading yet" in r.stderr
+
+
+@pytest.mark.parametrize("name", ["", *COMMANDS])
+def test_help_keeps_every_word_in_square_brackets(name):
+    """rich reads ``[certificate]`` as a style tag and drops it: every bracketed word of a help
+    text (an option's, the command's) shows in ``--help`` as written."""
+    r = runner.invoke(app, [name, "--help"] if name else ["--help"], env={"COLUMNS": "2000"})
+    assert r.exit_code == 0, r.output
+    shown = " ".join(r.output.replace("│", " ").split())
+    cmd = get_command(app).commands[name] if name else get_command(app)
+    texts = [p.help for p in cmd.params if getattr(p, "help", None)] + ([cmd.help] if name and cmd.help else [])
+    for text in texts:
+        for word in re.findall(r"\[[a-z#/@][^\[\]]*\]", text.replace("\\[", "[")):
+            assert word in shown, (name, word)
+
+
+def test_a_progress_bar_of_unknown_total_counts_without_a_total(monkeypatch):
+    """``metro measure`` does not know a log's length before reading it: its bar shows the holes
+    counted so far, never "983040/1" (a total of 1 it was never given), and a known total shows
+    as done/total."""
+    import io
+
+    monkeypatch.setattr(common, "_stderr_is_tty", lambda: True)
+    monkeypatch.setattr(common.STATE, "quiet", False)  # an earlier test's -q
+    err = io.StringIO()
+    monkeypatch.setattr(common.sys, "stderr", err)
+    with common.progress_bar("measure") as progress:
+        progress(983040, None, "983,040 holes measured")
+    out = err.getvalue()
+    assert "983040/1" not in out and "/1 " not in out
+    assert "983,040" in out
+    err.seek(0), err.truncate()
+    with common.progress_bar("plan") as progress:
+        progress(3, 7, "step")
+    assert "3/7" in err.getvalue()

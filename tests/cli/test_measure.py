@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
@@ -38,9 +40,9 @@ def test_all_conform_exits_0_with_a_passed_verdict(tmp_path, layout):
     assert s["judged"] == {"after_adjustment": 300, "before_adjustment": 0}
     assert {c["name"] for c in s["verdict"]["checks"]} >= {"drilling tolerance: holes that fail"}
     t = pq.read_table(tmp_path / "h.parquet")
-    assert t.column_names[:12] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
-                                   "angle_after_deg", "U95_after_deg", "fit_residual_um", "sensors_used", "status",
-                                   "reason"]
+    assert t.column_names[:13] == ["hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg",
+                                   "angle_after_deg", "U95_after_deg", "fit_residual_um", "fit_residual_after_um",
+                                   "sensors_used", "status", "reason"]
     assert t.num_rows == 300
 
 
@@ -151,3 +153,138 @@ def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):
     assert r.exit_code == 2
     assert "the readings of 100 of 100 holes disagree with one plane" in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["csv", "parquet"])
+@pytest.mark.parametrize("extra", [[], ["--out", "h.csv"], ["--out", "h.parquet", "--report", "r.html"], ["--json", "--out", "h.csv"]])
+def test_a_log_without_rows_is_one_line_naming_the_log(tmp_path, layout, kind, extra):
+    header = ["hole_id", "time", "d_L1", "d_L2", "d_L3", "d_L4"]
+    if kind == "csv":
+        log = tmp_path / "empty.csv"
+        log.write_text(",".join(header) + "\n")
+    else:
+        log = tmp_path / "empty.parquet"
+        pq.write_table(pa.table({c: pa.array([], pa.string() if c in ("hole_id", "time") else pa.float64())
+                                 for c in header}), log)
+    extra = [str(tmp_path / a) if a.endswith((".csv", ".parquet", ".html")) else a for a in extra]
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), *extra])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(log) in lines[0] and "no rows" in lines[0], r.stderr
+    assert "Traceback" not in r.output and not any(p.name.startswith(("h.", "r.")) for p in tmp_path.iterdir())
+
+
+def test_a_layout_that_is_not_text_names_the_file(tmp_path):
+    from pathlib import Path
+
+    log = _log(tmp_path, n=30)
+    ply = Path(__file__).resolve().parents[2] / "metrology" / "data" / "measured" / "datum.ply"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(ply), "--out", str(tmp_path / "h.csv")])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(ply) in lines[0] and "TOML" in lines[0] and "codec" not in lines[0], r.stderr
+
+
+def test_a_closed_pipe_is_quiet(tmp_path, layout):
+    """`metro measure log.csv --layout L | head -1`: the reader went away; not bad input."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    log = _log(tmp_path, n=3000)
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "-q", "measure", str(log), "--layout", str(layout)],
+                         cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "COLUMNS": "200"})
+    first = p.stdout.readline()
+    p.stdout.close()  # as head -1 does
+    err = p.stderr.read().decode()
+    code = p.wait(timeout=120)
+    assert first.startswith(b"\"hole_id\"")
+    assert "error" not in err and "Broken pipe" not in err and "Traceback" not in err, err
+    assert code == 128 + 13  # as a process killed by SIGPIPE, what a shell shows for a closed pipe
+
+
+def test_a_run_killed_mid_write_leaves_nothing_the_next_run_keeps(tmp_path, layout):
+    """`kill -9` while --out k.parquet is being written leaves its temporary; the next run clears it."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    log = _log(tmp_path, n=200)
+    out = tmp_path / "k.parquet"
+    root = Path(__file__).resolve().parents[2]
+    killed = subprocess.run([sys.executable, "-c", (
+        "import os, signal, pyarrow as pa\n"
+        "from metrology.io.holeout import TableSink\n"
+        f"s = TableSink({str(out)!r}).__enter__()\n"
+        "s.write(pa.table({'a': list(range(1000))}))\n"
+        "os.kill(os.getpid(), signal.SIGKILL)\n")], cwd=root)
+    assert killed.returncode == -9
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".k.parquet.")]  # the temporary it left
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(out)])
+    assert r.exit_code in (0, 1), r.output
+    assert out.exists() and not [p.name for p in tmp_path.iterdir() if p.name.startswith(".k.parquet.")]
+
+
+@pytest.mark.parametrize("times", ["iso", "seconds"])
+def test_time_from_a_csv_log_is_written_as_a_timestamp(tmp_path, layout, times):
+    import datetime as dt
+
+    import pyarrow.csv as pcsv
+
+    cols, _, _ = hole_log(calibrated_layout(), n=20)
+    t0 = 1795586401.25
+    cols["time"] = [(dt.datetime.fromtimestamp(t0 + 60 * i, dt.timezone.utc).isoformat() if times == "iso"
+                     else f"{t0 + 60 * i:.3f}") for i in range(20)]
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.parquet")])
+    assert r.exit_code in (0, 1), r.output
+    t = pq.read_table(tmp_path / "h.parquet").column("time")
+    assert pa.types.is_timestamp(t.type) and t.type.tz == "UTC"
+    got = t.cast(pa.int64()).to_numpy() / {"s": 1, "ms": 1e3, "us": 1e6, "ns": 1e9}[t.type.unit]
+    assert got == pytest.approx(t0 + 60 * np.arange(20), abs=1e-6)
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv")])
+    back = pcsv.read_csv(tmp_path / "h.csv").column("time")
+    assert pa.types.is_timestamp(back.type)  # written as a timestamp, read back as one (not quoted text)
+    assert '"2026-' not in (tmp_path / "h.csv").read_text()
+
+
+def test_json_without_out_prints_the_summary_only(tmp_path, layout):
+    log = _log(tmp_path, n=50, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)  # the summary alone: no per-hole CSV mixed in
+    assert s["holes"] == 50 and s["sources"]["out"] is None
+    assert not [p for p in tmp_path.iterdir() if p.suffix in (".csv", ".parquet") and p != log]
+
+
+def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
+    root = tmp_path / "fleet"
+    cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
+    t = pa.table(cols)
+    for cell in ("C1", "C2"):
+        (root / f"cell={cell}").mkdir(parents=True)
+        pq.write_table(t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"]),
+                       root / f"cell={cell}" / "part-0.parquet")
+    out = tmp_path / "out"
+    args = ["measure", str(root), "--layout", str(layout), "--out", str(out)]
+    assert runner.invoke(app, args).exit_code == 0
+    (out / "cell=C2" / "part-0.parquet").unlink()
+    r = runner.invoke(app, args)
+    assert "resumed: 1 of 2 partition(s) kept as an earlier run wrote them, 1 written" in r.output, r.output
+
+
+def test_report_histogram_axis_ends_near_the_largest_angle_and_versions_name_pyarrow_dask(tmp_path, layout):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from metrology.jobs.measure import measure_files
+    from metrology.report.measure import _hist_figure
+
+    log = _log(tmp_path, n=300, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    rep = measure_files(log, layout, out=tmp_path / "h.csv", report_html=tmp_path / "r.html")
+    hi = _hist_figure(rep).axes[0].get_xlim()[1]
+    assert 4 <= hi <= 12, hi  # the largest angle is 4 deg: not 100
+    html = (tmp_path / "r.html").read_text()
+    assert "pyarrow" in html and "dask" in html

@@ -173,3 +173,14 @@ def test_bad_input_is_exit_2_one_error_line(args, tmp_path, monkeypatch):
     assert r.exit_code == 2 and r.stdout == ""
     lines = r.stderr.strip().splitlines()
     assert lines[0].startswith("error: ") and len(lines) <= 2, r.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--layout", TRUTH, "--plane", PLANE, "--out", "{tmp}/s.csv"],
+    ["simulate-log", "--holes", "200", "--out", "{tmp}/log.csv"],
+    ["reproduce", "--poses", "20", "--figures", "-"],
+])
+def test_commands_that_judge_nothing_print_their_verdict_line(tmp_path, args):
+    r = runner.invoke(app, [str(a).replace("{tmp}", str(tmp_path)) for a in args])
+    assert r.exit_code == 0, r.output
+    assert "verdict: passed (exit code 0)" in r.output, r.output

@@ -9,7 +9,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from metrology.io.holelog import INTERNAL, TIME_S, open_log
-from metrology.io.holeout import PartitionedOutput, TableSink, check_out
+from metrology.io.holeout import is_file_out, PartitionedOutput, TableSink, check_out
 
 SENSORS = ("L1", "L2", "L3", "L4")
 HEADER = "hole_id,time,d_L1,d_L2,d_L3,d_L4,extra\n"
@@ -126,13 +126,29 @@ def test_partitioned_output_refuses_other_settings(tmp_path):
 
 
 def test_check_out(tmp_path):
-    assert check_out(None, False, False) is None
-    with pytest.raises(ValueError, match="give --out FOLDER"):
-        check_out(None, True, True)
-    with pytest.raises(ValueError, match="must be a folder"):
-        check_out(tmp_path / "h.csv", True, True)
+    """One process or Dask alike: a log into one file or stdout, a partitioned log into a folder;
+    a folder is any name that is not a .csv/.parquet file (out.one too)."""
+    assert check_out(None, False, False) is None and check_out(None, True, True) is None
+    assert check_out(tmp_path / "h.csv", True, True) == tmp_path / "h.csv"
+    assert check_out(tmp_path / "h.parquet", False, True) == tmp_path / "h.parquet"
     with pytest.raises(ValueError, match="mirrors a partitioned Parquet log"):
         check_out(tmp_path / "folder", False, False)
-    with pytest.raises(ValueError, match=r"must be one of \.csv, \.parquet"):
+    with pytest.raises(ValueError, match=r"for a single log give a file: \.csv, \.parquet"):
         check_out(tmp_path / "h.txt", False, False)
+    assert check_out(tmp_path / "out.one", True, False) == tmp_path / "out.one"
+    assert not is_file_out(tmp_path / "out.one") and is_file_out(tmp_path / "h.CSV")
+    (tmp_path / "dir.parquet").mkdir()
+    assert not is_file_out(tmp_path / "dir.parquet")
     assert INTERNAL
+
+
+def test_two_runs_into_one_folder_at_once_are_refused(tmp_path):
+    first = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
+    first.begin()
+    second = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
+    with pytest.raises(ValueError, match=r"another run is writing into it \(pid \d+ on .*; if none is, remove"):
+        second.begin()
+    first.release()
+    second.begin()  # the first has ended: the folder is free
+    second.release()
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["_metro_measure.json"]

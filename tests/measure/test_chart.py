@@ -133,3 +133,35 @@ def test_the_chart_runs_on_across_panels_and_by_panel_takes_new_baselines():
         chart.update(np.array([f"{panel}{i}" for i in range(n)]), np.arange(n, dtype=float), np.full(n, panel), rho,
                      np.full(n, 0.003), np.tile(SIG, (n, 1)))
     assert not chart.alarms
+
+
+def _segments(series):
+    """The series' runs between breaks (NaN statistic): list of (m, 2) arrays."""
+    a = np.array(series, float)
+    cut = np.flatnonzero(np.isnan(a[:, 1]))
+    runs = [r[~np.isnan(r[:, 1])] for r in np.split(a, cut)]
+    return [r for r in runs if len(r)]
+
+
+@pytest.mark.parametrize("batch", [None, 777])
+def test_the_thinned_series_keeps_every_extreme_the_alarm_and_breaks_at_the_new_baseline(batch):
+    """The plotted series, thinned to a few hundred points, keeps the chart's maximum and minimum
+    between re-basings (the alarm point itself, above h) and their ends, and breaks (a NaN) where
+    the chart took a new baseline, so no line joins the alarm to the next baseline's first hole."""
+    rng = np.random.default_rng(5)
+    n, k = 20000, 12000
+    rho = rng.normal(0, 0.003, n)
+    rho[k:] += SIG[2] * 0.015
+    full = _feed(CusumChart("C1", SENSORS, keep=10 ** 9), rho, batch)
+    thin = _feed(CusumChart("C1", SENSORS, keep=150), rho, batch)
+    assert len(full.alarms) == len(thin.alarms) == 1
+    assert len(thin.series) <= 4 * 150 + 4
+    a = thin.alarms[0]
+    whole, shown = _segments(full.series), _segments(thin.series)
+    assert len(whole) == len(shown) == 2  # before the alarm, after the new baseline
+    for w, s in zip(whole, shown):
+        assert s[:, 1].max() == w[:, 1].max() and s[:, 1].min() == w[:, 1].min()
+        assert s[0, 0] == w[0, 0] and s[-1, 0] == w[-1, 0]  # the segment's ends
+        assert np.all(np.diff(s[:, 0]) > 0)
+    assert shown[0][-1, 0] == a.time_s and shown[0][-1, 1] > CUSUM_H  # the crossing is drawn
+    assert shown[1][0, 0] > a.time_s + (BASELINE_HOLES - 1) * 10.0  # after the baseline's holes

@@ -50,6 +50,18 @@ def _run(fleet, out, *extra):
     return s
 
 
+def _run_relative(fleet, out, *extra):
+    """As :func:`_run`, from ``fleet``'s folder with every path relative."""
+    r = runner.invoke(app, ["measure", "log", "--layout", "calibrated.toml", "--out", out, "--json", *extra])
+    assert r.exit_code in (0, 1), r.output
+    s = json.loads(r.stdout)
+    s.pop("engine")
+    s["sources"].pop("out")
+    s["sources"]["log"] = str(fleet / "log")
+    s["sources"]["layout"] = str(fleet / "calibrated.toml")
+    return s
+
+
 def _same_files(a, b):
     fa = sorted(p.relative_to(a) for p in a.rglob("*.parquet"))
     assert fa == sorted(p.relative_to(b) for p in b.rglob("*.parquet")) and len(fa) == 6
@@ -78,6 +90,9 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    cwd = os.getcwd()
     procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
     try:
@@ -91,17 +106,21 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
         for _ in range(2):
             procs.append(subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1",
                                            "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                          env=env))
+                                          env=env, cwd=elsewhere))
         from distributed import Client
 
         with Client(address, timeout="30s") as c:
             c.wait_for_workers(2, timeout=60)
             assert len(c.scheduler_info()["workers"]) == 2
-        two = _run(fleet, tmp_path / "cluster", "--scheduler", address)
+        # paths given relative to the client's folder, workers started in another: resolved before they go
+        os.chdir(fleet)
+        two = _run_relative(fleet, "cluster", "--scheduler", address)
         one = _run(fleet, tmp_path / "one")
         assert one == two
-        _same_files(tmp_path / "one", tmp_path / "cluster")
+        _same_files(tmp_path / "one", fleet / "cluster")
     finally:
+        os.chdir(cwd)
+        shutil.rmtree(fleet / "cluster", ignore_errors=True)
         for p in procs[::-1]:
             p.terminate()
         for p in procs:
@@ -109,3 +128,95 @@ def test_a_real_scheduler_and_two_workers(fleet, tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def test_one_parquet_file_on_dask_into_one_file_with_its_qif(fleet, tmp_path):
+    """A single Parquet log on --workers: its row groups are the tasks, the results one file (and one
+    QIF document), the same as one process's, byte for byte."""
+    log = tmp_path / "log.parquet"
+    parts = sorted((fleet / "log").rglob("*.parquet"))
+    with pq.ParquetWriter(log, pq.read_table(parts[0]).append_column("cell", pa.array([""] * 700)).schema) as w:
+        for p in parts:  # one row group per partition: 6 tasks
+            w.write_table(pq.read_table(p).append_column("cell", pa.array([p.parent.parent.name[5:]] * 700)))
+    assert pq.ParquetFile(log).num_row_groups == 6
+    out = {}
+    for name, extra in (("one", []), ("dask", ["--workers", "2"])):
+        r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
+                                str(tmp_path / f"{name}.parquet"), "--qif", str(tmp_path / f"{name}.qif"), "--json",
+                                *extra])
+        assert r.exit_code in (0, 1), r.output
+        out[name] = json.loads(r.stdout)
+    for k in ("counts", "fleet", "cells", "groups", "drift", "worst", "holes"):
+        assert out["one"][k] == out["dask"][k], k
+    assert out["dask"]["partitions"] == 6 and out["dask"]["holes"] == 4200
+    assert [a["cell"] for a in out["one"]["drift"]["alarms"]] == ["C2"]
+    assert pq.read_table(tmp_path / "one.parquet").equals(pq.read_table(tmp_path / "dask.parquet"))
+    assert (tmp_path / "one.qif").read_bytes() == (tmp_path / "dask.qif").read_bytes()
+
+
+def test_a_scheduler_that_cannot_be_reached_leaves_nothing(fleet, tmp_path):
+    r = runner.invoke(app, ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"), "--out",
+                            str(tmp_path / "out"), "--scheduler", f"tcp://127.0.0.1:{_free_port()}"])
+    assert r.exit_code == 2, r.output
+    assert "cannot reach the Dask scheduler" in r.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_time_out_of_order_across_a_cells_partitions_is_the_same_error_on_dask(fleet, tmp_path):
+    """The drift watch's chain on the workers checks each cell's time order across partitions as
+    one process does: the same one-line error, exit 2."""
+    log = tmp_path / "log"
+    shutil.copytree(fleet / "log", log)
+    late = log / "cell=C3" / "date=2026-11-25" / "part-0.parquet"  # C3's first day now after its second
+    t = pq.read_table(late)
+    t = t.set_column(t.column_names.index("time"), "time",
+                     pa.array([v.replace("2026-11-25", "2026-11-27") for v in t.column("time").to_pylist()]))
+    pq.write_table(t, late)
+    lines = []
+    for name, extra in (("one", []), ("dask", ["--workers", "2"])):
+        r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
+                                str(tmp_path / name), *extra])
+        assert r.exit_code == 2, r.output
+        lines.append([ln for ln in r.stderr.splitlines() if "is before the previous hole of cell 'C3'" in ln])
+    assert len(lines[0]) == 1 and lines[0] == lines[1], lines
+
+
+def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
+    """A task whose workers keep dying (KilledWorker) or a scheduler gone (cancelled futures): a
+    ValueError (one line at the CLI, exit 2), not a traceback."""
+    from distributed import KilledWorker
+
+    from metrology.io.holelog import open_log
+    from metrology.io.layout import load_layout
+    from metrology.measure.fleet import measure_log_dask
+    from metrology.measure.holes import Settings
+    from concurrent.futures import CancelledError
+
+    lay = load_layout(fleet / "calibrated.toml")
+    log = open_log(fleet / "log", lay.names)
+
+    class Killed(KilledWorker):  # its constructor's arguments vary across distributed's versions
+        def __init__(self):
+            Exception.__init__(self, "metro-measure-0")
+
+        def __str__(self):
+            return "metro-measure-0 killed 3 workers"
+
+    for exc in (Killed(), CancelledError("metro-measure-0")):
+        class Future:
+            def result(self):
+                raise exc
+
+            def release(self):
+                pass
+
+        class Client:
+            def submit(self, *args, **kwargs):
+                return Future()
+
+            def gather(self, futures):
+                raise exc
+
+        with pytest.raises(ValueError, match=r"the Dask cluster stopped the run \((Killed|CancelledError): .*a re-run "
+                                             r"with the same --out resumes"):
+            measure_log_dask(Client(), log, lay, Settings(), None)

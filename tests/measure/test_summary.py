@@ -1,4 +1,4 @@
-"""metrology.measure.summary: mergeable counts, quantiles within their bin, Cpk."""
+"""metrology.measure.summary: mergeable counts, quantiles within their bin, Ppk."""
 
 import numpy as np
 import pyarrow as pa
@@ -34,11 +34,12 @@ def test_merged_halves_equal_one_pass():
         halves.merge(other)
     assert whole.counts() == halves.counts()
     assert sorted(whole.groups) == sorted(halves.groups) and len(whole.groups) > 2  # cells x days
-    assert whole.figures(whole.total())["cpk"] == pytest.approx(halves.figures(halves.total())["cpk"], rel=1e-9)
+    assert whole.figures(whole.total())["mean_deg"] == pytest.approx(halves.figures(halves.total())["mean_deg"], rel=1e-9)
+    assert np.array_equal(whole.total().hist_judged, halves.total().hist_judged)
     assert whole.worst == halves.worst
 
 
-def test_quantiles_and_cpk_against_numpy():
+def test_quantiles_and_moments_against_numpy():
     b = _batch(3000, 2, cells=("C1",))
     s = FleetSummary(0.5)
     s.add(b)
@@ -47,5 +48,5 @@ def test_quantiles_and_cpk_against_numpy():
     for q in (0.5, 0.95):
         assert f["quantiles_before_deg"][f"p{q * 100:g}"] == pytest.approx(np.quantile(a, q), rel=0.02)
     j = np.degrees(b.judged)
-    assert f["cpk"] == pytest.approx((0.5 - j.mean()) / (3 * j.std(ddof=1)), rel=1e-9)
+    assert f["mean_deg"] == pytest.approx(j.mean(), rel=1e-9) and f["sd_deg"] == pytest.approx(j.std(ddof=1), rel=1e-9)
     assert quantile_deg(np.zeros(10, int), 0.5) != quantile_deg(np.zeros(10, int), 0.5)  # NaN when empty

@@ -9,12 +9,14 @@ import json
 import re
 import tomllib
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
 from metrology.io.layout import load_layout
 from tests.calibration.helpers import CAL, NOMINAL, PLANE, export_rows, write_rows
+from tests.report.test_html import plain
 
 runner = CliRunner()
 
@@ -30,7 +32,7 @@ def run(tmp_path_factory):
                             "--report", str(page), "--json", "--meta-file", str(tmp / "meta.toml"),
                             "--meta", "operator=J. Smith", "--meta", "instrument=Leica AT960 \"LT-2\""])
     assert r.exit_code == 0, r.output
-    return json.loads(r.stdout)["certificate"], out, page.read_text(encoding="utf-8")
+    return json.loads(r.stdout)["certificate"], out, plain(page.read_text(encoding="utf-8"))
 
 
 def test_the_certificates_values_are_the_calibrated_tomls(run):
@@ -38,7 +40,7 @@ def test_the_certificates_values_are_the_calibrated_tomls(run):
     raw = {s["name"]: s for s in tomllib.loads(out.read_text(encoding="utf-8"))["sensors"]}
     params = cert["parameters"]
     assert {p["sensor"] for p in params} == set(raw) == {"L1", "L2", "L3", "L4"}
-    cells = [html_lib.unescape(c) for c in re.findall(r"<td>(.*?)</td>", page)]
+    cells = [html_lib.unescape(re.sub(r"<[^>]+>", "", c)) for c in re.findall(r"<td>(.*?)</td>", page)]
     n = 0
     for p in params:
         s = raw[p["sensor"]]
@@ -50,8 +52,12 @@ def test_the_certificates_values_are_the_calibrated_tomls(run):
             assert p["value"] == s["direction"]["ijk".index(p["parameter"][10])]
             row = [p["sensor"], p["parameter"], f"{p['value']:.9f}", "—", "—", "1"]
         else:
+            # the tilts' u in the chart of the calibrated direction, as the file's covariance (one
+            # convention with the correlations beneath)
             j = ("e1", "e2").index(p["parameter"][-2:])
-            assert p["u"] == s["direction_stderr_deg"][j] and p["U"] == 2 * p["u"]
+            i = ["L1", "L2", "L3", "L4"].index(p["sensor"])
+            var = load_layout(out).covariance[5 * i + 3 + j, 5 * i + 3 + j]
+            assert p["u"] == pytest.approx(float(np.degrees(np.sqrt(var))), rel=1e-12) and p["U"] == 2 * p["u"]
             row = [p["sensor"], p["parameter"], "—", f"{p['u']:.6f}", f"{p['U']:.6f}", "deg"]
         # the page's row says the same numbers (the TOML's digits)
         assert any(cells[k:k + 6] == row for k in range(len(cells))), row
@@ -93,3 +99,14 @@ def test_bad_meta_is_one_line_exit_2(args, words, tmp_path, monkeypatch):
                             *args])
     assert r.exit_code == 2 and r.stderr.startswith("error: ") and words in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "c.toml").exists()
+
+
+def test_the_tilts_are_stated_in_one_chart_the_calibrated_directions(run):
+    """The statement under the certificate and the note under its correlation table name the same
+    axes: e1, e2 of each sensor's calibrated direction (the file's covariance), never the nominal's."""
+    cert, _, page = run
+    text = " ".join(html_lib.unescape(re.sub(r"<[^>]+>", " ", page)).split())
+    assert cert["tilt_chart"] == "calibrated"
+    assert "e1, e2 of its calibrated direction" in text
+    assert text.count("e1, e2 of its calibrated direction") == 2
+    assert "nominal direction" not in text

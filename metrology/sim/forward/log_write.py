@@ -29,9 +29,11 @@ normal at the drilled point against the CAD's at the nominal point) and ``cad_of
 surface over the CAD's at the nominal point, along the CAD's outward normal): a panel off its CAD
 shows there.
 
-Formats: one CSV file (all cells, cell after cell), or a hive-partitioned Parquet folder
-``cell=C1/date=2026-11-25/part-<k>.parquet`` (``date`` the UTC date of ``time``; ``k`` counts the
-files of that partition; each file also carries ``cell``, so a file read alone is a whole log).
+Formats: one CSV or Parquet file (all cells, cell after cell; a Parquet file's row groups are
+the simulator's chunks), or a hive-partitioned Parquet folder ``cell=C1/date=2026-11-25/part-<k>.parquet``
+(``date`` the UTC date of ``time``; ``k`` counts the files of that partition). A folder is a hive
+dataset: its keys are in the folder names only, not in the files (a key in both is a conflict for
+pyarrow.dataset, pandas and Dask), so any of them reads the folder as one table.
 The truth is one CSV or Parquet file. Every file is written to a temporary beside it and moved
 into place when complete (:func:`metrology.io.atomic.atomic_path`). pyarrow is imported inside
 the functions.
@@ -225,9 +227,15 @@ class _Partitions:
             k = self.count.get(part, 0)
             self.count[part] = k + 1
             target = part / f"part-{k}.parquet"
-            with atomic_path(target) as tmp:
-                pq.write_table(table.slice(lo, hi - lo), str(tmp))
+            with atomic_path(target) as tmp:  # the key cell is the folder's name: not a column of the file
+                pq.write_table(table.slice(lo, hi - lo).drop_columns(["cell"]), str(tmp))
             self.files.append(target)
+
+
+def write_log_parquet_file(chunks, path, truth_path=None) -> int:
+    """Write the holes of ``chunks`` as one Parquet log at ``path`` (a row group per chunk) and their
+    truth at ``truth_path``. Returns the holes."""
+    return _stream(chunks, [_Streamed(path, _ParquetSink, log_table), *_truth_writer(truth_path)])
 
 
 def write_log_parquet(chunks, folder, truth_path=None) -> tuple:
@@ -238,22 +246,23 @@ def write_log_parquet(chunks, folder, truth_path=None) -> tuple:
     return n, parts.files
 
 
-#: log writers by output kind: ``"csv"`` a file, ``"parquet"`` a partitioned folder
-LOG_FORMATS = {"csv": write_log_csv, "parquet": write_log_parquet}
+#: log writers by output kind: ``"csv"``, ``"parquet-file"`` a file, ``"parquet"`` a partitioned folder
+LOG_FORMATS = {"csv": write_log_csv, "parquet-file": write_log_parquet_file, "parquet": write_log_parquet}
+#: the suffixes of a log written as one file, and its kind
+FILE_KINDS = {".csv": "csv", ".parquet": "parquet-file"}
 
 
 def check_log_output(out, truth=None) -> str:
-    """The format of the output ``out`` (``"csv"`` for a ``.csv`` path, ``"parquet"`` for a folder),
-    checked before any work: ValueError naming the value when it cannot be written."""
+    """The format of the output ``out`` (``"csv"`` for a ``.csv`` path, ``"parquet-file"`` for a
+    ``.parquet`` path, ``"parquet"`` for a folder: any other name, ``out.one`` too), checked before
+    any work: ValueError naming the value when it cannot be written."""
     p = Path(str(out))
-    if p.suffix.lower() == ".csv":
+    if p.suffix.lower() in FILE_KINDS and not str(out).endswith(("/", "\\")):
         if p.is_dir():
-            raise ValueError(f"--out {out}: is a folder, expected a .csv file or a new folder for Parquet")
+            raise ValueError(f"--out {out}: is a folder, expected a {p.suffix} file or a new folder for Parquet")
         if not p.resolve().parent.is_dir():
             raise ValueError(f"--out {out}: folder {p.parent} does not exist")
-        kind = "csv"
-    elif p.suffix:
-        raise ValueError(f"--out {out}: expected a .csv file or a folder (partitioned Parquet), not {p.suffix}")
+        kind = FILE_KINDS[p.suffix.lower()]
     else:
         if p.exists() and (not p.is_dir() or any(p.iterdir())):
             raise ValueError(f"--out {out}: exists and is not an empty folder (a log is never written over another)")

@@ -1,0 +1,272 @@
+"""Each hole's local surface, from the CAD panel and its hole table (``metro measure --panel
+PANEL --points HOLES.csv``), or from the hole table alone (``--points``).
+
+**The hole table** (CSV or Parquet, as CAD/CAM exports it): ``hole_id,x,y,z,i,j,k``: the nominal
+drill point (mm, the panel's frame) and the drill's feed direction into the panel; joined to the
+log by ``hole_id``.
+
+**From the panel** (:func:`metrology.panel.holes.panel_surfaces`, joined here by
+:func:`metrology.jobs.measure.panel_hole_surfaces`): the drill point is snapped onto the mesh (a STEP
+file is tessellated with 1 um chords, :func:`metrology.panel.mesh.load_panel`); the CAD's normal
+there (the mesh's reference normal, turned toward the head: against the feed) gives the local
+frame ``(e1, e2, n)``, ``e1`` the panel's ``x`` made square to ``n`` (the cell's convention, as
+the forward simulator's step 3). :data:`RING_SAMPLES` rays along ``-n`` on rings of the head's
+footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x the footprint radius, and the
+centre) sample the surface's heights ``w(s, t)``; a full cubic fitted to them (10 terms, one
+design matrix for every hole) gives the Hessian ``H`` at the point and its gradient. The shape
+operator is ``K = -H`` (positive where the surface bends away from the head). Its standard
+uncertainty per component (``u_shape``, 1/mm) combines
+
+- the fit: the cubic's residual (mesh faceting; form beyond the cubic) through the fit's
+  covariance;
+- the drill point's position error along the surface ``delta_s`` (``--position-error-mm``): the
+  cubic's ``|grad K|`` times ``delta_s``, uniform over the disc (``/ 3``);
+- a stated form tolerance ``t`` (``--form-tolerance-mm``, default 0: the panel is its CAD): a
+  form error of ``+-t`` over the footprint is a curvature change of up to ``2 t / rho^2``, uniform.
+
+**From the hole table alone** (:func:`surfaces_from_table`): each hole's shape operator from the
+change of the nominal normals (``n = -feed``) to its :data:`NEIGHBOURS` nearest holes,
+``n_j - n_i = K (p_j - p_i)`` in the tangent plane (least squares, 3 unknowns); its residual gives
+``u_shape``.
+
+**Into the TCS** (:meth:`HoleSurfaces.shape_tcs`): the log carries no robot pose, so metro takes
+the cell's convention (the forward simulator's, metrology/sim/forward/log.py step 3): the head's
+``tcs2panel = Q(-e_z -> a) F`` with ``a = -n`` and ``F = diag(1, -s, -s)`` (TCS ``x, y`` near the
+panel's ``x, y``); the head's spin about the tool axis beyond that is within ``+-spin``
+(``--spin-deg``), carried into U95 (:class:`metrology.measure.surface.PanelTerms`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
+
+#: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
+FOOTPRINT_MARGIN = 1.25
+#: neighbours whose nominal normals give a hole's curvature without a panel
+NEIGHBOURS = 6
+
+
+@dataclass(frozen=True)
+class HoleTable:
+    """A hole table.
+
+    Attributes
+    ----------
+    ids : tuple of str; point : (m, 3) float, mm, panel frame; feed : (m, 3) float, unit, panel frame
+    source : str; line : callable, row -> how an error names it
+    """
+
+    ids: tuple
+    point: np.ndarray
+    feed: np.ndarray
+    source: str
+    csv: bool = True
+
+    def line(self, row: int) -> str:
+        return f"line {row + 2}" if self.csv else f"row {row + 1}"
+
+
+def read_hole_table(path) -> HoleTable:
+    """Read ``hole_id,x,y,z,i,j,k`` (CSV with a header, or Parquet). One-line ValueError naming the
+    file, row and value: missing columns, non-numbers, NaN, a zero-length feed, duplicate ids."""
+    path = str(path)
+    if path.lower().endswith((".parquet", ".pq")):
+        import pyarrow.parquet as pq
+
+        try:
+            t = pq.read_table(path)
+        except Exception as exc:  # noqa: BLE001 - pyarrow raises many kinds
+            raise ValueError(f"{path}: cannot read the hole table as Parquet ({exc})") from None
+        cols = {c.lower(): c for c in t.column_names}
+        missing = [c for c in ("hole_id", "x", "y", "z", "i", "j", "k") if c not in cols]
+        if missing:
+            raise ValueError(f"{path}: hole table lacks column(s) {', '.join(missing)} (expected hole_id,x,y,z,i,j,k)")
+        ids = [str(v) if v is not None else "" for v in t.column(cols["hole_id"]).to_pylist()]
+        vals = np.stack([t.column(cols[c]).to_numpy(zero_copy_only=False).astype(float) for c in "xyzijk"], axis=1)
+        return _checked(path, ids, vals, csv=False)
+    from metrology.io.export import read_csv_rows
+
+    rows = read_csv_rows(path, "hole table")
+    rows = [(n, r) for n, r in enumerate(rows, start=1) if r and not all(c.strip() == "" for c in r)
+            and not r[0].strip().startswith("#")]
+    if not rows:
+        raise ValueError(f"{path}: an empty hole table (expected a header hole_id,x,y,z,i,j,k and a row per hole)")
+    head = [c.strip().lower() for c in rows[0][1]]
+    missing = [c for c in ("hole_id", "x", "y", "z", "i", "j", "k") if c not in head]
+    if missing:
+        raise ValueError(f"{path}: line {rows[0][0]}: header lacks {', '.join(missing)} (expected hole_id,x,y,z,i,j,k)")
+    at = [head.index(c) for c in ("hole_id", "x", "y", "z", "i", "j", "k")]
+    ids, vals = [], []
+    for lineno, r in rows[1:]:
+        if len(r) < len(head):
+            raise ValueError(f"{path}: line {lineno}: {len(r)} columns, the header has {len(head)}")
+        ids.append(r[at[0]].strip())
+        v = []
+        for name, j in zip("xyzijk", at[1:]):
+            try:
+                v.append(float(r[j]))
+            except ValueError:
+                raise ValueError(f"{path}: line {lineno}: {name} = {r[j]!r} is not a number") from None
+        vals.append(v)
+    if not ids:
+        raise ValueError(f"{path}: no holes (a header only)")
+    return _checked(path, ids, np.array(vals, float), csv=True, lines=[n for n, _ in rows[1:]])
+
+
+def _checked(path, ids, vals, csv, lines=None) -> HoleTable:
+    def where(r):
+        return f"line {lines[r]}" if lines is not None else f"row {r + 1}"
+
+    for r, h in enumerate(ids):
+        if h == "":
+            raise ValueError(f"{path}: {where(r)}: hole_id is empty")
+    bad = np.flatnonzero(~np.all(np.isfinite(vals), axis=1))
+    if bad.size:
+        r = int(bad[0])
+        raise ValueError(f"{path}: {where(r)}: hole {ids[r]}: NaN or infinite value in x,y,z,i,j,k "
+                         f"({', '.join(f'{v:g}' for v in vals[r])})")
+    feed = vals[:, 3:]
+    norm = np.linalg.norm(feed, axis=1)
+    zero = np.flatnonzero(~(norm > 1e-9))
+    if zero.size:
+        r = int(zero[0])
+        raise ValueError(f"{path}: {where(r)}: hole {ids[r]}: feed direction i,j,k is zero-length")
+    seen = {}
+    for r, h in enumerate(ids):
+        if h in seen:
+            raise ValueError(f"{path}: {where(r)}: duplicate hole_id {h!r} (also {where(seen[h])})")
+        seen[h] = r
+    return HoleTable(tuple(ids), vals[:, :3].copy(), feed / norm[:, None], path, csv)
+
+
+@dataclass(frozen=True)
+class HoleSurfaces:
+    """Each hole's local surface (panel frame).
+
+    Attributes
+    ----------
+    ids : tuple of str
+    normal : (m, 3) float, unit, panel frame, the CAD's normal at the hole, toward the head
+    shape : (m, 3, 3) float, 1/mm, panel frame, the shape operator (positive bending away from the head)
+    k : (m, 2) float, 1/mm, the principal curvatures (k1 >= k2)
+    u_shape : (m,) float, 1/mm, standard uncertainty of each component of ``shape``
+    problem : (m,) object, "" or why the hole cannot be measured (its footprint runs off the panel)
+    source : str, where the curvature came from (named in the verdict and the JSON)
+    spin : float, rad, the head's spin about the tool axis relative to the panel is within +-spin
+    """
+
+    ids: tuple
+    normal: np.ndarray
+    shape: np.ndarray
+    k: np.ndarray
+    u_shape: np.ndarray
+    problem: np.ndarray
+    source: str
+    spin: float = 0.0
+    _tcs: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def rows(self, hole_ids):
+        """Each log row's index into the table (``hole_ids`` a pyarrow string array), -1 where absent."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        idx = pc.index_in(hole_ids, value_set=pa.array(self.ids, pa.string()))
+        return np.asarray(pc.fill_null(idx, -1).to_numpy(zero_copy_only=False), dtype=np.int64)
+
+    def shape_tcs(self, rows, s: float):
+        """(h, 3, 3) float, 1/mm, TCS: the shape operators of table rows ``rows`` under the cell's
+        convention (module docstring); ``s`` the drill axis's sign (``s e_z``)."""
+        if s not in self._tcs:  # once per table and axis sign: every batch of the log takes its rows
+            R = tcs2panel_nominal(self.normal, s)  # (m, 3, 3)
+            self._tcs[s] = np.einsum("hji,hjk,hkl->hil", R, self.shape, R)
+        return self._tcs[s][rows]
+
+
+def tcs2panel_nominal(n, s: float):
+    """(h, 3, 3): the head's rotation with its tool axis on ``a = -n`` (``n (h, 3)`` unit, toward the
+    head), no spin: ``Q(-e_z -> a) F``, ``F = diag(1, -s, -s)`` (columns)."""
+    a = -np.asarray(n, float)
+    wx, wy, wz = a[:, 0], a[:, 1], a[:, 2]
+    kx, ky, c = wy, -wx, -wz  # -e_z x a, and cos
+    f = 1.0 / (1.0 + c)
+    Q = np.empty((len(a), 3, 3))
+    Q[:, 0, 0] = 1.0 - ky * ky * f
+    Q[:, 0, 1] = kx * ky * f
+    Q[:, 0, 2] = ky
+    Q[:, 1, 0] = kx * ky * f
+    Q[:, 1, 1] = 1.0 - kx * kx * f
+    Q[:, 1, 2] = -kx
+    Q[:, 2, 0] = -ky
+    Q[:, 2, 1] = kx
+    Q[:, 2, 2] = 1.0 - (kx * kx + ky * ky) * f
+    return Q * np.array([1.0, -s, -s])
+
+
+def _frame(n):
+    """``e1`` (the panel's x made square to ``n``; y where n is near x) and ``e2 = n x e1``, (m, 3) each."""
+    ref = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    e1 = ref - (ref * n).sum(1, keepdims=True) * n
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(n, e1)
+
+
+def _principal(Kl):
+    """(m, 2) eigenvalues (descending) of the 2 x 2 symmetric ``Kl (m, 2, 2)``."""
+    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
+
+
+def _embed(Kl, e1, e2):
+    """(m, 3, 3): ``sum_ab Kl_ab e_a e_b^T``."""
+    E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
+    return np.einsum("mai,mab,mbj->mij", E, Kl, E)
+
+
+def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 0.0, spin: float = 0.0) -> HoleSurfaces:
+    """Each hole's local surface from the nominal normals of its neighbours in the table (no panel)."""
+    from scipy.spatial import cKDTree
+
+    m = len(table.ids)
+    n = -table.feed
+    e1, e2 = _frame(n)
+    Kl = np.zeros((m, 2, 2))
+    u = np.zeros(m)
+    problem = np.full(m, "", dtype=object)
+    if m < 4:
+        raise ValueError(f"{table.source}: {m} holes: the curvature from neighbouring normals needs at least 4 "
+                         f"(give --panel, or --min-radius-mm without --points)")
+    kk = min(NEIGHBOURS, m - 1)
+    _, nb = cKDTree(table.point).query(table.point, k=kk + 1)
+    nb = nb[:, 1:]
+    dp = table.point[nb] - table.point[:, None, :]  # (m, k, 3)
+    dn = n[nb] - n[:, None, :]
+    ds, dt = (dp * e1[:, None]).sum(2), (dp * e2[:, None]).sum(2)
+    ns, nt = (dn * e1[:, None]).sum(2), (dn * e2[:, None]).sum(2)
+    # unknowns (k11, k12, k22): ns = k11 ds + k12 dt; nt = k12 ds + k22 dt
+    A = np.zeros((m, 2 * kk, 3))
+    A[:, :kk, 0], A[:, :kk, 1] = ds, dt
+    A[:, kk:, 1], A[:, kk:, 2] = ds, dt
+    b = np.concatenate([ns, nt], axis=1)
+    M = np.einsum("mpi,mpj->mij", A, A)
+    ok = np.linalg.cond(M) < 1e8
+    Ms = np.where(ok[:, None, None], M, np.eye(3))
+    x = np.linalg.solve(Ms, np.einsum("mpi,mp->mi", A, b)[..., None])[..., 0]
+    r = b - np.einsum("mpi,mi->mp", A, x)
+    s2 = (r * r).sum(1) / max(2 * kk - 3, 1)
+    var = s2[:, None] * np.diagonal(np.linalg.inv(Ms), axis1=1, axis2=2)
+    u_fit = np.sqrt(var.mean(1))
+    rho = FOOTPRINT_MARGIN * footprint_mm
+    u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
+    Kl[:, 0, 0], Kl[:, 0, 1], Kl[:, 1, 0], Kl[:, 1, 1] = x[:, 0], x[:, 1], x[:, 1], x[:, 2]
+    for i in np.flatnonzero(~ok):
+        problem[i] = "its neighbours in the hole table lie on a line: no curvature from their normals"
+    Kl[~ok] = 0.0
+    u = np.sqrt(u_fit ** 2 + u_form ** 2)
+    return HoleSurfaces(table.ids, n, _embed(Kl, e1, e2), _principal(Kl), np.where(np.isfinite(u), u, 0.0), problem,
+                        f"hole table {table.source} (the nominal normals of each hole's {kk} nearest neighbours)", spin)

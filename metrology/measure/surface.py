@@ -1,0 +1,438 @@
+"""A hole's normal measured with its panel's local surface known: the spots lie on a curved
+surface, not on a plane.
+
+At a drilling point the projection points ``S_i = E_i + d_i u_i`` (mm, TCS) lie on the panel.
+Near the hole the panel is its tangent plane bent by its shape operator ``K`` (1/mm, TCS,
+``k1 e1 e1^T + k2 e2 e2^T``, the principal directions ``e1, e2`` tangent to the surface;
+curvature positive where the surface bends *away* from the head). metro fits the surface's pose,
+two tilts ``g = (g_x, g_y)`` and an offset ``c`` along the TCS ``z`` axis, with ``K`` known:
+
+    h_i(g, c) = z_i - c - g_x x_i - g_y y_i + sigma rho kappa_i,
+    kappa_i = 1/2 (T q_i)^T K (T q_i),   q_i = S_i - c e_z,   T = I - m m^T,
+    m = sigma (-g_x, -g_y, 1) / rho,     rho = sqrt(1 + |g|^2),
+
+``m`` the unit normal toward the head (``sigma = -s``, the drill axis ``s e_z``). ``h_i = 0`` is
+the surface ``m.(p - c e_z) = -1/2 (Tq)^T K (Tq)`` (to second order in the distance from the axis;
+``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
+micro-plane of :mod:`metrology.measure.normals`, which is the first of :data:`GN_STEPS` steps;
+the rest are Gauss-Newton steps with ``K`` (the Jacobian's ``c`` column carries the curvature's
+slope; what is left out of it is of order ``|K| |m.q|``), weighted by the readings' noise along
+the normal, vectorised over holes.
+
+With 3 sensors the three readings fix the three unknowns (the curvature comes from the panel
+only); with 4 the redundant reading is the check: its misfit ``rho_4 = q.h`` (``q`` the unit
+vector orthogonal to the Jacobian's columns), zero within noise while the panel is its CAD and
+the head its calibration.
+
+**Uncertainty** (first order, GUM). A change ``delta h_i`` of the heights moves the pose by
+``A delta h`` with ``A = (J^T W J)^-1 J^T W``. The heights move with
+
+- the readings: ``delta h_i = (G_i . u_i) delta d_i``, ``G_i = dh_i/dS_i = (-g_x, -g_y, 1) +
+  sigma rho K_t q_i`` (the spot's own surface slope);
+- the calibration: ``delta S_i = delta E_i + d_i delta u_i`` (the per-sensor 5 x 5 blocks of the
+  calibration's covariance, or the whole of it);
+- the panel: an error ``delta K`` of the shape operator (mesh faceting, the drill point's position
+  error along the surface, a stated form tolerance; a standard uncertainty ``u_K`` per component
+  of ``delta K`` in an orthonormal basis of the tangent plane's symmetric tensors) moves
+  ``h_i`` by ``sigma rho 1/2 (Tq)^T delta K (Tq)``; and the head's spin about the tool axis
+  relative to the panel (``K`` turned by ``delta psi``, uniform within ``+-spin``):
+  ``delta K = delta psi (W K - K W)``, ``W`` the cross matrix of ``m``.
+
+The angle ``alpha = atan(|g|)`` and its U95 as in :mod:`metrology.measure.normals` (the 2-D
+radius near ``alpha = 0``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from metrology.core.layout import SensorLayout
+from metrology.core.model import direction_basis
+from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis, radius95
+
+__all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
+
+#: steps from g = 0: the first is the micro-plane (K left out), then Gauss-Newton with K; each divides the
+#: error by >= 200 on panels of R >= 300 mm (sphere R 300, Table 6, noise-free: 0.23 deg after the
+#: micro-plane, 1e-3 deg after one more step, 5e-6 deg after two)
+GN_STEPS = 3
+
+
+@dataclass(frozen=True)
+class SurfaceFit:
+    """The local surface's pose fitted to the readings.
+
+    Attributes
+    ----------
+    normal : (h, 3) float, unit, TCS, toward the head (NaN where not ok)
+    g : (h, 2) float, the slopes ``(g_x, g_y)``; c : (h,) float, mm, the offset along the TCS z axis
+    ok : (h,) bool, 3+ finite readings and a well-posed fit
+    plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the start)
+    (the rest are None unless ``fit_surface(full=True)``)
+    A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
+    G : (h, n, 3) float, ``dh_i / dS_i``
+    q : (h, n, 3) float, mm, ``S_i - c e_z``
+    w : (h, n) float, the weights used (0 for a blank)
+    null : (h, n) float or None, n = 4: the unit vector orthogonal to the Jacobian's columns
+    h_res : (h, n) float, mm, the heights' misfit at the solution
+    Kt : (h, 3, 3) float, 1/mm, the shape operator projected onto the fitted tangent plane
+    """
+
+    normal: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+    ok: np.ndarray
+    plane_normal: np.ndarray | None
+    A: np.ndarray | None
+    G: np.ndarray | None
+    q: np.ndarray | None
+    w: np.ndarray | None
+    null: np.ndarray | None
+    h_res: np.ndarray | None
+    Kt: np.ndarray | None
+
+
+def _inv3(a00, a01, a02, a11, a12, a22):
+    """The inverse of symmetric 3 x 3 matrices given by their 6 entries (arrays): 6 arrays (NaN where singular)."""
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(np.abs(det) > 1e-300, 1.0 / det, np.nan)
+    return (c00 * f, c01 * f, c02 * f, (a00 * a22 - a02 * a02) * f, (a01 * a02 - a00 * a12) * f,
+            (a00 * a11 - a01 * a01) * f)
+
+
+def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
+    """Fit the local surface's pose (see the module docstring) to each hole's readings.
+
+    Parameters
+    ----------
+    layout : SensorLayout, n >= 3 sensors: zero (n, 3) mm TCS, direction (n, 3) unit TCS
+    d : (h, n) float, mm, readings; NaN for blanks (a hole needs 3)
+    shape : (h, 3, 3) float, 1/mm, TCS, the shape operator at each hole (0: flat)
+    steps : int, steps from g = 0 (the first gives the micro-plane, the rest are Gauss-Newton with ``K``)
+    sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
+    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None)
+
+    Sensor-major ``(n, h)`` arrays and explicit 3 x 3 algebra: a sum over the sensors is a sum of
+    contiguous rows (as :func:`metrology.measure.normals.hole_normals`).
+    """
+    n = layout.n
+    d = np.asarray(d, float).reshape(-1, n)
+    h = len(d)
+    K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
+    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in
+                                    ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    s = drill_axis(layout)[2]
+    sg = -s
+    sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
+    good = np.isfinite(sig) & (sig > 0)
+    sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
+    s2 = (sig * sig)[:, None]
+    dT = np.ascontiguousarray(d.T)
+    valid = np.isfinite(dT)
+    dT = np.where(valid, dT, 0.0)
+    E, u = layout.zero, layout.direction
+    x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
+    y = E[:, 1, None] + dT * u[:, 1, None]
+    z = E[:, 2, None] + dT * u[:, 2, None]
+    ok = valid.sum(0) >= 3
+    gx = np.zeros(h)
+    gy = np.zeros(h)
+    c = np.zeros(h)
+    u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
+    for it in range(steps + 1):
+        rho = np.sqrt(1.0 + gx * gx + gy * gy)
+        mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
+        zq = z - c
+        if it > 0:
+            mq = mx * x + my * y + mz * zq
+            px, py, pz = x - mx * mq, y - my * mq, zq - mz * mq  # T q
+            vx = k00 * px + k01 * py + k02 * pz  # K T q
+            vy = k01 * px + k11 * py + k12 * pz
+            vz = k02 * px + k12 * py + k22 * pz
+            mv = mx * vx + my * vy + mz * vz
+            Kx, Ky, Kz = vx - mx * mv, vy - my * mv, vz - mz * mv  # K_t q
+            kappa = 0.5 * (px * vx + py * vy + pz * vz)
+            sc = sg * rho
+            hres = zq - gx * x - gy * y + sc * kappa
+            jc = -1.0 - sc * Kz
+            Gx, Gy, Gz = -gx + sc * Kx, -gy + sc * Ky, 1.0 + sc * Kz
+            Gu = Gx * u0 + Gy * u1 + Gz * u2
+        else:
+            hres = zq - gx * x - gy * y
+            jc = np.full_like(x, -1.0)
+            Gu = -gx * u0 - gy * u1 + u2 + 0.0 * x
+        with np.errstate(divide="ignore"):
+            w = np.where(valid, 1.0 / (Gu * Gu * s2), 0.0)
+        wx, wy, wc = w * x, w * y, w * jc
+        m00, m01, m02 = (wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0)
+        m11, m12, m22 = (wy * y).sum(0), -(wc * y).sum(0), (wc * jc).sum(0)
+        i00, i01, i02, i11, i12, i22 = _inv3(m00, m01, m02, m11, m12, m22)
+        if it == steps:
+            break
+        b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+        gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
+        gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
+        c = c - (i02 * b0 + i12 * b1 + i22 * b2)
+        if it == 0:  # the first step from 0 with K left out is the weighted micro-plane
+            gx0, gy0 = gx.copy(), gy.copy()
+    ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    rho = np.sqrt(1.0 + gx * gx + gy * gy)
+    normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
+    normal[~ok] = np.nan
+    g = np.stack([gx, gy], axis=1)
+    if not full:
+        return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
+    # A = M^-1 J^T W, J = (-x, -y, jc)
+    jx, jy = -x * w, -y * w
+    jz = jc * w
+    A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
+                  i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
+    G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
+    q = np.stack([x, y, z - c], axis=-1).transpose(1, 0, 2)
+    null = _null_vector_cols(-x, -y, jc) if n == 4 else None
+    m = np.stack([mx, my, mz], axis=1)
+    Km = np.einsum("hij,hj->hi", K, m)
+    mKm = (m * Km).sum(1)
+    Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
+          + mKm[:, None, None] * m[:, :, None] * m[:, None, :])  # T K T
+    if steps > 0:
+        r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
+    else:
+        plane = normal.copy()
+    return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
+
+
+def _null_vector_cols(a, b, c):
+    """(h, 4) unit vectors orthogonal to the columns ``a, b, c`` (each (4, h)) of a 4 x 3 matrix:
+    the signed 3 x 3 minors of the rows left after dropping each one."""
+    def det(i, j, k):
+        return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
+                + c[i] * (a[j] * b[k] - a[k] * b[j]))
+
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
+    return q / np.sqrt((q * q).sum(1))[:, None]
+
+
+def surface_normal(layout, d, shape):
+    """The panel's outward normal at each hole with its local surface known.
+
+    Parameters
+    ----------
+    layout : SensorLayout (the cell's calibrated one): zero (n, 3) mm TCS, direction (n, 3) unit TCS
+    d : (h, n) float, mm, readings; NaN for blanks
+    shape : (h, 3, 3) float, 1/mm, TCS: the CAD surface's shape operator at the hole,
+        ``k1 e1 e1^T + k2 e2 e2^T`` (``e1, e2`` the unit principal directions, tangent to the surface);
+        curvature positive where the surface bends away from the head (a sphere drilled from
+        outside: +1/R; a barrel drilled from inside: -1/R)
+
+    Returns
+    -------
+    normal : (h, 3) float, unit, TCS, pointing from the surface toward the head (NaN where not ok)
+    ok : (h,) bool, 3+ readings and a well-posed fit
+
+    The cell turns the drill onto ``-normal``. This is the function a cell's controller calls per
+    hole (one hole or a batch: the same arrays).
+    """
+    d = np.asarray(d, float)
+    single = d.ndim == 1
+    fit = fit_surface(layout, np.atleast_2d(d), np.asarray(shape, float).reshape(-1, 3, 3), full=False)
+    if single:
+        return fit.normal[0], bool(fit.ok[0])
+    return fit.normal, fit.ok
+
+
+@dataclass(frozen=True)
+class PanelTerms:
+    """What the panel adds to the budget, per hole.
+
+    Attributes
+    ----------
+    u_shape : (h,) float, 1/mm, standard uncertainty of each component of the shape operator
+        (mesh fit, position error along the surface, form tolerance; combined)
+    spin : float, rad, the head's spin about the tool axis relative to the panel is within ``+-spin``
+        (uniform)
+    """
+
+    u_shape: np.ndarray
+    spin: float = 0.0
+
+
+def _tangent_basis(m):
+    """Two unit vectors (h, 3) spanning the plane square to unit ``m (h, 3)``."""
+    ref = np.where(np.abs(m[:, 0:1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    t1 = ref - (ref * m).sum(1, keepdims=True) * m
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(m, t1)
+
+
+def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
+                         covariance=None, sigma_mm=None):
+    """Normals, angles and uncertainties of holes (every reading present) with the surface known.
+
+    Parameters
+    ----------
+    layout : SensorLayout, n >= 3; d : (N, n) float, mm, finite readings
+    shape : (N, 3, 3) float, 1/mm, TCS (see :func:`surface_normal`)
+    terms : PanelTerms or None (the panel's own uncertainty; None: the shape is exact)
+    covariance, sigma_mm : as :func:`metrology.measure.normals.hole_normals`
+
+    Returns
+    -------
+    (HoleNormals, extra) : ``HoleNormals.normal`` along the drill axis (as the micro-plane's);
+        ``twist`` zeros (the panel's shape is known: its uncertainty is in ``residual_sd``);
+        ``curvature_bound`` the panel's share of ``u_angle`` (rad). ``extra`` a dict of (N,) arrays:
+        ``correction`` rad (the corrected normal's angle to the micro-plane's), ``panel_misfit``
+        1/mm (n = 4: the shape change along the direction the redundant reading sees, its size as
+        the largest eigenvalue; NaN otherwise), ``panel_misfit_z`` (that over its standard
+        uncertainty from noise, calibration and the panel's terms)
+    """
+    n = layout.n
+    d = np.asarray(d, float).reshape(-1, n)
+    N = len(d)
+    fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
+    cov = layout.covariance if covariance is None else np.asarray(covariance, float)
+    sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
+    sigma = np.where(np.isfinite(sigma), sigma, 0.0)
+    axis = drill_axis(layout)
+    g = fit.g
+    gx, gy = g[:, 0], g[:, 1]
+    g2 = gx * gx + gy * gy
+    gn = np.sqrt(g2)
+    angle = np.arctan(gn)
+    normal = -fit.normal  # along the drill axis
+    Ag = fit.A[:, :2, :]  # (N, 2, n)
+    # reading noise
+    Gu = np.einsum("hni,ni->hn", fit.G, layout.direction)
+    qn = (Gu * sigma[None]) ** 2
+    C_noise = np.einsum("hin,hjn->hij", Ag * qn[:, None, :], Ag)
+    # calibration
+    C_cal = np.zeros((N, 2, 2))
+    q_cal = np.zeros((N, n))
+    if cov is not None:
+        e = direction_basis(layout.direction)  # (n, 2, 3)
+        rows = np.empty((N, n, 5))
+        rows[..., :3] = fit.G
+        for k in range(2):
+            rows[..., 3 + k] = d * np.einsum("hni,ni->hn", fit.G, e[:, k, :])
+        blocks = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])
+        off = cov.copy()
+        for i in range(n):
+            off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
+        q_cal = np.einsum("hnk,nkl,hnl->hn", rows, blocks, rows)
+        if not np.any(off):
+            C_cal = np.einsum("hin,hjn->hij", Ag * q_cal[:, None, :], Ag)
+        else:  # the whole covariance
+            Sx = (rows * Ag[:, 0, :, None]).reshape(N, -1)
+            Sy = (rows * Ag[:, 1, :, None]).reshape(N, -1)
+            Sg = np.stack([Sx, Sy], axis=1)  # (N, 2, 5n)
+            C_cal = np.einsum("hik,kl,hjl->hij", Sg, cov, Sg)
+    # the panel: delta K in an orthonormal basis of the tangent plane's symmetric tensors, and the spin
+    C_pan = np.zeros((N, 2, 2))
+    dh_basis = None
+    dh_spin = None
+    if terms is not None:
+        m = fit.normal
+        t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
+        rho = np.sqrt(1.0 + g2)
+        sc = (-axis[2] * rho)[:, None]  # sigma rho
+        a1 = np.einsum("hni,hi->hn", fit.q, t1)
+        a2 = np.einsum("hni,hi->hn", fit.q, t2)
+        dh_basis = [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]  # (N, n) each
+        uK = np.asarray(terms.u_shape, float).reshape(-1)
+        uK = np.broadcast_to(uK, (N,))
+        for dh in dh_basis:
+            v = np.einsum("hin,hn->hi", Ag, dh)
+            C_pan += v[:, :, None] * v[:, None, :] * (uK ** 2)[:, None, None]
+        if terms.spin > 0:
+            W = np.zeros((N, 3, 3))
+            W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -m[:, 2], m[:, 1], -m[:, 0]
+            W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
+            dK = W @ fit.Kt - fit.Kt @ W
+            dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
+            dh_spin = dh
+            v = np.einsum("hin,hn->hi", Ag, dh)
+            C_pan += v[:, :, None] * v[:, None, :] * (terms.spin ** 2 / 3.0)
+    C = C_noise + C_cal + C_pan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = 1.0 / (gn * (1.0 + g2))
+    k = np.where(np.isfinite(k), k, 0.0)
+    cvec = np.stack([gx * k, gy * k], axis=1)
+
+    def quad(Cm):
+        return np.einsum("hi,hij,hj->h", cvec, Cm, cvec)
+
+    var_noise = quad(C_noise)
+    var = var_noise + quad(C_cal) + quad(C_pan)
+    u_angle = np.sqrt(var)
+    U95 = K95 * u_angle
+    small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
+    if np.any(small):
+        Cs = C[small] / ((1.0 + g2[small]) ** 2)[:, None, None]
+        disc = np.sqrt(0.25 * (Cs[:, 0, 0] - Cs[:, 1, 1]) ** 2 + Cs[:, 0, 1] ** 2)
+        l1 = 0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) + disc
+        l2 = np.maximum(0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) - disc, 0.0)
+        s2d = np.sqrt(l1)
+        still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
+        idx = np.flatnonzero(small)[still]
+        u_angle[idx] = s2d[still]
+        U95[idx] = radius95(l1[still], l2[still])
+    panel_share = np.sqrt(np.maximum(quad(C_pan), 0.0))
+    residual = np.full(N, np.nan)
+    residual_z = np.full(N, np.nan)
+    signature = twist = residual_sd = sd = None
+    misfit = np.full(N, np.nan)
+    misfit_z = np.full(N, np.nan)
+    if n == 4:
+        qv = fit.null
+        residual = (qv * fit.h_res).sum(1)
+        sig_k = qv * Gu
+        sd = np.sqrt(((sig_k * sigma[None]) ** 2).sum(1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            residual_z = residual / sd
+        var_pan_rho = np.zeros(N)
+        # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
+        m = fit.normal
+        t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
+        rho_g = np.sqrt(1.0 + g2)
+        sc = (-axis[2] * rho_g)[:, None]
+        a1 = np.einsum("hni,hi->hn", fit.q, t1)
+        a2 = np.einsum("hni,hi->hn", fit.q, t2)
+        basis = [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
+        s_b = np.stack([(qv * b).sum(1) for b in basis], axis=1)  # (N, 3) d rho / d x_b
+        if terms is not None:
+            var_pan_rho = (s_b ** 2).sum(1) * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
+            if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
+                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(1) ** 2 * terms.spin ** 2 / 3.0
+        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(1) + var_pan_rho)
+        signature = sig_k
+        twist = np.zeros(N)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nrm2 = (s_b ** 2).sum(1)
+            xb = s_b * (residual / nrm2)[:, None]  # the least-norm shape change giving rho
+            # its size: the largest |eigenvalue| of x1 t1t1 + x2 t2t2 + x3 (t1t2 + t2t1)/sqrt2
+            a, b, cc = xb[:, 0], xb[:, 1], xb[:, 2] / np.sqrt(2.0)
+            misfit = np.abs(0.5 * (a + b)) + np.sqrt(0.25 * (a - b) ** 2 + cc * cc)
+            misfit_z = residual / residual_sd
+    elif n > 4:
+        res = fit.h_res
+        residual = np.sqrt((res * res).sum(1) / n)
+        v = (Gu * sigma[None]) ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
+    with np.errstate(invalid="ignore"):
+        correction = np.arccos(np.clip((fit.normal * fit.plane_normal).sum(1), -1.0, 1.0))
+    bad = ~fit.ok
+    for arr in (angle, u_angle, U95, correction):
+        arr[bad] = np.nan
+    normal[bad] = np.nan
+    hn = HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z,
+                     None if signature is None else np.ascontiguousarray(signature), panel_share, twist,
+                     residual_sd, sd)
+    return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z}

@@ -1,0 +1,152 @@
+"""Each drill point's local surface on a CAD panel: its shape operator from the mesh, for
+``metro measure --panel`` (:mod:`metrology.measure.panel` has the method and the conventions).
+
+The drill point is snapped onto the mesh; the CAD's normal there (the mesh's reference normal,
+turned toward the head: against the feed) gives the local frame ``(e1, e2, n)``, ``e1`` the
+panel's ``x`` made square to ``n``. :data:`RING_SAMPLES` rays along ``-n`` on three rings of the
+head's footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x its radius) and the centre
+sample the heights ``w(s, t)``; a full cubic fitted to them (10 terms, one design matrix for every
+hole) gives the Hessian ``H`` and its gradient; the shape operator is ``K = -H`` (positive where
+the surface bends away from the head). ``u_shape`` (1/mm, per component) combines the fit's
+residual through its covariance (faceting), ``|grad K| position_mm / 3`` and a stated form
+tolerance ``2 t / rho^2 / sqrt(3)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["panel_surfaces", "RING_SAMPLES", "FOOTPRINT_MARGIN", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO"]
+
+#: rays per ring of the footprint sampled on the panel (3 rings and the centre: 37 samples)
+RING_SAMPLES = 12
+#: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
+FOOTPRINT_MARGIN = 1.25
+#: a drill point farther than this from the panel is not on it (mm): the table does not fit the panel
+POINT_OFF_MM = 0.5
+#: a hole table of 3+ holes spanning less than the panel's extent over this is not in mm (metres?)
+UNIT_RATIO = 300.0
+#: holes whose rays are cast together (memory: about 37 x 200 bytes a hole)
+CHUNK_HOLES = 4096
+#: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
+FEED_MIN_COS = 0.5
+
+
+def _frame(n):
+    """``e1`` (the panel's x made square to ``n``; y where n is near x) and ``e2 = n x e1``, (m, 3) each."""
+    ref = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    e1 = ref - (ref * n).sum(1, keepdims=True) * n
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(n, e1)
+
+
+def _principal(Kl):
+    """(m, 2) eigenvalues (descending) of the 2 x 2 symmetric ``Kl (m, 2, 2)``."""
+    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
+
+
+def _embed(Kl, e1, e2):
+    """(m, 3, 3): ``sum_ab Kl_ab e_a e_b^T``."""
+    E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
+    return np.einsum("mai,mab,mbj->mij", E, Kl, E)
+
+
+def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, form_mm: float = 0.0,
+                   display: str | None = None) -> dict:
+    """Each hole's local surface from a loaded :class:`metrology.panel.mesh.Panel` (module docstring).
+
+    ``table``: a hole table (``ids``, ``point (m, 3)`` mm, ``feed (m, 3)`` unit, ``source``,
+    ``line(row)``: :class:`metrology.measure.panel.HoleTable`). Returns a dict: ``normal (m, 3)``
+    unit toward the head, ``shape (m, 3, 3)`` 1/mm, ``k (m, 2)`` 1/mm, ``u_shape (m,)`` 1/mm,
+    ``problem (m,)`` object, ``source`` str (panel frame).
+
+    Raises ValueError (one line, naming the table's row) when a drill point is off the panel or its
+    feed does not point into it. A hole whose sampled footprint runs off the panel gets a
+    ``problem`` (measured ``not_measured`` with it)."""
+    from metrology.panel.rays import RayCaster
+
+    import trimesh
+
+    shown = display or panel.source
+    ext_t = float(np.ptp(table.point, axis=0).max()) if len(table.point) > 1 else 0.0
+    ext_p = float(np.ptp(np.asarray(panel.mesh.vertices), axis=0).max())
+    if len(table.point) >= 3 and ext_t * UNIT_RATIO < ext_p:
+        raise ValueError(f"{table.source}: its {len(table.point)} holes span {ext_t:.4g} and the panel {shown} "
+                         f"{ext_p:.4g}: the hole table is not in mm (metres?); x,y,z must be mm in the panel's frame")
+    caster = RayCaster(panel.mesh)
+    tri, snapped = caster.closest(table.point)
+    dist = np.linalg.norm(snapped - table.point, axis=1)
+    off = np.flatnonzero(dist > POINT_OFF_MM)
+    if off.size:
+        r = int(off[np.argmax(dist[off])])
+        hint = ""
+        if ext_t > 0 and (ext_p / ext_t > 100 or ext_t / ext_p > 100):
+            hint = (f"; the table spans {ext_t:g} and the panel {ext_p:g}: one of them is not in mm (metres?)")
+        raise ValueError(f"{table.source}: {table.line(r)}: hole {table.ids[r]} at ({', '.join(f'{v:g}' for v in table.point[r])}) "
+                         f"is {dist[r]:.3g} mm off the panel {shown} (more than {POINT_OFF_MM:g} mm; {off.size} such "
+                         f"holes): the hole table does not fit this panel{hint}")
+    bary = trimesh.triangles.points_to_barycentric(np.asarray(panel.mesh.triangles)[tri], snapped)
+    bary = np.clip(bary, 0.0, 1.0)
+    bary /= bary.sum(1, keepdims=True)
+    nm, _, _ = panel.reference_normal_at(tri, bary)
+    cosf = -(nm * table.feed).sum(1)  # the feed into the panel: against the normal toward the head
+    side = np.sign(np.median(cosf))
+    if side == 0:
+        side = 1.0
+    n = nm * side  # toward the head, for the table's side
+    c = -(n * table.feed).sum(1)
+    bad = np.flatnonzero(c < FEED_MIN_COS)
+    if bad.size:
+        r = int(bad[0])
+        ang = math.degrees(math.acos(max(-1.0, min(1.0, float(c[r])))))
+        raise ValueError(f"{table.source}: {table.line(r)}: hole {table.ids[r]}: feed direction "
+                         f"({', '.join(f'{v:.4g}' for v in table.feed[r])}) is {ang:.1f} deg from the panel's inward "
+                         f"normal (at most {math.degrees(math.acos(FEED_MIN_COS)):.0f}): it does not point into the "
+                         f"panel{' (the other holes feed from the other side)' if ang > 90 else ''}")
+    e1, e2 = _frame(n)
+    rho = FOOTPRINT_MARGIN * footprint_mm
+    st = [(0.0, 0.0)] + [(rho * f * math.cos(a), rho * f * math.sin(a)) for f in (1 / 3, 2 / 3, 1.0)
+                          for a in (2 * math.pi * (np.arange(RING_SAMPLES) + 0.5 * (f != 1 / 3)) / RING_SAMPLES)]
+    st = np.array(st)  # (p, 2)
+    H = 4.0 * rho + 50.0  # rays start this far out along n
+    P = snapped
+    w = np.empty((len(P), len(st)))  # heights along n over the tangent plane
+    for a in range(0, len(P), CHUNK_HOLES):  # the rays of a few thousand holes at a time: bounded memory
+        b = slice(a, a + CHUNK_HOLES)
+        origins = (P[b, None, :] + st[None, :, 0, None] * e1[b, None, :] + st[None, :, 1, None] * e2[b, None, :]
+                   + H * n[b, None, :])
+        dirs = np.broadcast_to(-n[b, None, :], origins.shape)
+        _, t, _ = caster.cast(origins.reshape(-1, 3), np.ascontiguousarray(dirs).reshape(-1, 3))
+        w[b] = (H - t).reshape(-1, len(st))
+    miss = ~np.isfinite(w)
+    s_, t_ = st[:, 0], st[:, 1]
+    X = np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
+                  s_ * t_ * t_ / 2, t_ ** 3 / 6], axis=1)
+    XtX_inv = np.linalg.inv(X.T @ X)
+    pinv = XtX_inv @ X.T
+    coef = np.where(miss.any(1)[:, None], np.nan, np.nan_to_num(w) @ pinv.T)
+    res = np.nan_to_num(w) - coef @ X.T
+    dof = len(st) - X.shape[1]
+    s2 = (res * res).sum(1) / dof
+    var_h = s2[:, None] * np.diag(XtX_inv)[None, 3:6]
+    u_fit = np.sqrt(var_h.mean(1))
+    Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
+    Kl = -Hl
+    c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
+    grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
+    u_pos = grad * position_mm / 3.0
+    u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
+    u = np.sqrt(u_fit ** 2 + u_pos ** 2 + u_form ** 2)
+    problem = np.full(len(P), "", dtype=object)
+    for r in np.flatnonzero(miss.any(1)):
+        problem[r] = (f"the head's footprint (radius {rho:.0f} mm) runs off the panel's edge at this hole "
+                      f"({int(miss[r].sum())} of {len(st)} samples miss the panel)")
+    Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
+    k = _principal(Kl)
+    k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
+    return {"normal": n, "shape": _embed(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
+            "problem": problem, "source": f"panel {shown} (mesh, cubic fit over the footprint)"}
