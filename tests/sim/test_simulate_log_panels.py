@@ -205,3 +205,18 @@ def test_a_parquet_hole_table_drills_as_its_csv(tmp_path):
     for name, table in (("a.csv", WING_HOLES), ("b.csv", str(tmp_path / "holes.parquet"))):
         assert run(tmp_path, "--panel", WING, "--points", table, "--holes", "40", name=name).exit_code == 0
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+def test_metros_normal_in_the_loop_drills_a_sphere_as_straight_as_a_flat_panel(tmp_path):
+    """The hook with the measurement's real surface_normal (issue 36): on sphere R 500 the micro-plane's
+    drilled holes are ~2x a flat panel's; with metro's normal they are within 1.2x (figures: docs/measure.md)."""
+    med = {}
+    for panel, extra in (("flat", []), ("sphere", ["--radius-mm", "500"])):
+        for controller in ("microplane", "metro"):
+            name = f"{panel}_{controller}.csv"
+            r = run(tmp_path, "--panel", panel, *extra, "--controller", controller, "--holes", "3000", name=name)
+            assert r.exit_code == 0, r.output
+            truth = pcsv.read_csv(tmp_path / name.replace(".csv", ".truth.csv"))
+            med[panel, controller] = np.median(truth["true_after_deg"].to_numpy())
+    assert med["sphere", "microplane"] > 1.6 * med["flat", "microplane"]
+    assert med["sphere", "metro"] < 1.2 * med["flat", "metro"]
