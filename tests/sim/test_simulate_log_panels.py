@@ -31,6 +31,7 @@ def test_a_bundled_panel_drilled_from_its_table(tmp_path):
     ids = log["hole_id"].to_pylist()
     assert ids[:2] == ["H0001", "H0002"] and ids[25] == "H0001#2" and ids[50] == "H0001#3" and len(set(ids)) == 60
     assert log["panel"].to_pylist()[24:26] == ["P000001", "P000002"]
+    assert log["point_id"].to_pylist()[24:27] == ["H0025", "H0001", "H0002"]
     for c in ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm"):
         assert c in log.column_names
     assert truth["hole_id"].equals(log["hole_id"])

@@ -350,15 +350,15 @@ class _Geometry:
         nc = self.cad_normal[row]
         lead = 20.0  # the true surface along the CAD's normal at the nominal point
         t = panel.intersect(N + lead * nc, -nc)
-        ids = np.asarray(tab.ids, dtype=object)[row]
-        ids = np.where(lap == 0, ids, ids + "#" + (lap + 1).astype(str).astype(object))
+        point_ids = np.asarray(tab.ids, dtype=object)[row]
+        ids = np.where(lap == 0, point_ids, point_ids + "#" + (lap + 1).astype(str).astype(object))
         return HoleChunk(
             cell=cell_name(cell_index), sensors=spec.sensors, hole=hole, time_s=time_s, temperature_c=temp,
             panel=lap.astype(np.int64), d=d, d_after=d2, drill_point=P2,
             true_angle=_angle(a, n1), true_after=_angle(a2, n2),
             normal_tcs=np.einsum("hji,hj->hi", R, n1), normal_after_tcs=np.einsum("hji,hj->hi", R2, n2),
             offset=offset, gross=gross, gross_after=gross2, adjusted=ok, pose_rotvec=rotation_vector(Rc),
-            pose_origin=Oc, ids=ids.astype(str), nominal=N, cad_angle=_angle(-nc, n2), cad_offset=lead - t)
+            pose_origin=Oc, ids=ids.astype(str), point_ids=point_ids.astype(str), nominal=N, cad_angle=_angle(-nc, n2), cad_offset=lead - t)
 
     def _offset(self, cell_index, hole, time_s):
         spec = self.spec

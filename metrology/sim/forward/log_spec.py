@@ -272,6 +272,7 @@ class HoleChunk:
         adjustment) as a rotation vector (axis times angle)
     pose_origin : (h, 3) float, mm, panel frame: the commanded TCS origin
     ids : (h,) str or None, the log's hole ids (a hole table's); None: :meth:`hole_ids`
+    point_ids : (h,) str or None, the hole table's own id of each hole (``ids`` without the pass suffix)
     nominal : (h, 3) float, mm, panel frame, the table's nominal drill point (NaN without a table)
     cad_angle : (h,) float, rad, angle between the true normal at the drilled point and the CAD's normal
         at the nominal point (off-CAD shows here); NaN without a table
@@ -299,6 +300,7 @@ class HoleChunk:
     pose_rotvec: np.ndarray = None
     pose_origin: np.ndarray = None
     ids: np.ndarray = None
+    point_ids: np.ndarray = None
     nominal: np.ndarray = None
     cad_angle: np.ndarray = None
     cad_offset: np.ndarray = None

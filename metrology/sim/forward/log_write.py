@@ -15,8 +15,9 @@ degrees=True)`` reads it), ``pose_{x,y,z}_mm`` the TCS origin in the panel frame
 
 Drilled from a hole table (``--points``), ``hole_id`` is the table's ``hole_id``; when the table is
 drilled more than once (``--holes`` beyond its rows, cycled), pass ``k >= 2`` is logged as
-``<hole_id>#<k>`` (the table's id is the text before the last ``#``) and ``panel`` is
-``P<k, 6 digits>``: each pass over the table is one panel.
+``<hole_id>#<k>`` and ``panel`` is ``P<k, 6 digits>``: each pass over the table is one panel; the
+column ``point_id`` (after the readings) holds the table's own ``hole_id`` of every row, the key
+to join the log to the table on every pass.
 
 The truth, keyed by ``hole_id``::
 
@@ -77,6 +78,8 @@ def log_table(chunk):
         cols[f"d_{name}"] = _floats(chunk.d[:, i])
     for i, name in enumerate(chunk.sensors):
         cols[f"d_{name}_after"] = _floats(chunk.d_after[:, i])
+    if chunk.point_ids is not None:
+        cols["point_id"] = pa.array(np.asarray(chunk.point_ids, dtype=object), type=pa.string())
     if chunk.pose_rotvec is not None:
         for j, axis in enumerate("xyz"):
             cols[f"pose_r{axis}_deg"] = _floats(np.degrees(chunk.pose_rotvec[:, j]))
