@@ -26,8 +26,22 @@ def register(app: typer.Typer) -> None:
         no_truth: bool = typer.Option(False, "--no-truth", help="Write no truth file (a throughput run)."),
         holes: int = typer.Option(10_000, "--holes", help="Holes in all, split evenly over the cells."),
         cells: int = typer.Option(1, "--cells", help="Cells C1..CK (the same head), each its own time line."),
-        panel: str = typer.Option("flat", "--panel", help="flat, sphere or cylinder (convex toward the head)."),
+        panel: str = typer.Option("flat", "--panel", help="flat, sphere or cylinder (convex toward the head); a "
+                                  "generated panel wing, barrel (concave, drilled from inside), nacelle, saddle; or a "
+                                  "panel FILE (.stl, .obj, .ply, .glb; .step with the step extra), mm."),
         radius_mm: Optional[float] = typer.Option(None, "--radius-mm", help="Radius of a sphere or cylinder, mm."),
+        azimuth_deg: Optional[float] = typer.Option(None, "--azimuth-deg", help="A cylinder's axis, deg from the "
+                                                    "panel's x in its xy plane (default: along y, 90)."),
+        points: Optional[Path] = typer.Option(None, "--points", help="Hole table hole_id,x,y,z,i,j,k (.csv or "
+                                              ".parquet; mm, panel frame; i,j,k the feed into the panel): the holes "
+                                              "are drilled at its points, in order, cycled; the log's hole_id is "
+                                              "the table's (pass k >= 2: ID#k)."),
+        controller: str = typer.Option("microplane", "--controller", help="The cell's attitude controller: "
+                                       "microplane (plane through the spots) or metro (metro's corrected normal, "
+                                       "with the CAD's curvature)."),
+        off_cad: Optional[str] = typer.Option(None, "--off-cad", help="The true panel off its CAD (with --points): "
+                                              "dent[:MM[@X,Y]] (0.2 mm over 100 mm), springback[:MM[@X]] (0.2 mm "
+                                              "over 100 mm), shift[:X,Y,Z] (default 0,0,1 mm)."),
         noise_mm: Optional[float] = typer.Option(None, "--noise-mm", help="Reading noise, 1 sigma, mm (default: "
                                                  "the layout's noise_mm)."),
         angle_deg: str = typer.Option("0.5,5", "--angle-deg", help="MIN,MAX of the true angle between tool axis and "
@@ -69,7 +83,8 @@ def register(app: typer.Typer) -> None:
                 radius_mm=radius_mm, noise_mm=noise_mm, angle_deg=angles, standoff_mm=standoff_mm, spin_deg=spin_deg,
                 patch_mm=patch_mm, holes_per_hour=holes_per_hour, drifts=drifts, shifts=shifts, gross_rate=gross_rate,
                 layout_error_mm=layout_error_mm, layout_error_deg=layout_error_deg, seed=seed,
-                write_truth=not no_truth, progress=progress)
+                write_truth=not no_truth, progress=progress, points=points, controller=controller,
+                azimuth_deg=azimuth_deg, off_cad=off_cad)
         if json_out:
             from metrology.report.verdicts import NO_VERDICT
 

@@ -7,6 +7,15 @@ head drawn from it, ``theta ~ N(0, C)`` added to its zero points and beam tilts:
 calibration says it may be; else, or with ``layout_error_mm``/``layout_error_deg`` given, the
 calibrated one with each zero point moved by ``U(0.5, 1) layout_error_mm`` mm and each beam turned
 by ``U(0.5, 1) layout_error_deg`` deg; drawn from the seed).
+
+The panel (``panel``): ``flat``, ``sphere``, ``cylinder`` (closed-form, :mod:`metrology.sim.forward.panels`;
+a cylinder's axis at ``azimuth_deg`` from the panel's ``x`` in its ``xy`` plane, default along ``y``),
+a generated panel ``wing``, ``barrel``, ``nacelle``, ``saddle`` (:mod:`metrology.sim.forward.shapes`),
+or a file (STL, OBJ, PLY, GLB, STEP; :func:`metrology.sim.forward.meshes.load_sim_panel`). ``points``:
+a hole table drilled in order, cycled. ``off_cad``: the true panel off the CAD one (a dent, a
+spring-back, a shift). ``controller``: ``microplane`` (the cell's plane fit) or ``metro``: the
+measurement's own corrected normal, :func:`metro_controller`, the only place the simulation
+reaches into :mod:`metrology.measure` (the forward package itself never does).
 """
 
 from __future__ import annotations
@@ -16,7 +25,8 @@ import re
 import time
 from pathlib import Path
 
-__all__ = ["simulate_log_files", "parse_drift", "parse_shift", "parse_range", "default_truth_path"]
+__all__ = ["simulate_log_files", "parse_drift", "parse_shift", "parse_range", "default_truth_path", "make_log_panel",
+           "metro_controller", "CONTROLLERS"]
 
 #: without a covariance in the layout: the drawn head's zero error (mm) and beam error (deg)
 DEFAULT_LAYOUT_ERROR = 0.03
@@ -90,6 +100,86 @@ def default_truth_path(out) -> Path:
     return p.with_name(p.name + ".truth.parquet")
 
 
+class _MetroController:
+    """``--controller metro``: ``metrology.measure.surface.surface_normal(layout, d, shape)``, imported
+    when first called (the measurement side's contract: ``layout`` the cell's SensorLayout, ``d (h, n)``
+    mm readings (NaN blank), ``shape (h, 3, 3)`` 1/mm TCS the CAD's shape operator, positive where the
+    surface bends away from the head; returns the unit normal ``(h, 3)`` TCS toward the head and ``ok (h,)``)."""
+
+    name = "metro"
+    wants_shape = True
+
+    def __init__(self):
+        self._fn = None
+
+    def load(self):
+        if self._fn is None:
+            try:
+                from metrology.measure.surface import surface_normal
+            except ImportError as exc:
+                raise ValueError(f"--controller metro: metrology.measure.surface.surface_normal is not available "
+                                 f"({exc})") from None
+            self._fn = surface_normal
+        return self._fn
+
+    def __call__(self, layout, d, shape):
+        return self.load()(layout, d, shape)
+
+
+def metro_controller():
+    """The ``metro`` controller (see :class:`_MetroController`), checked to be importable."""
+    c = _MetroController()
+    c.load()
+    return c
+
+
+def _microplane():
+    from metrology.sim.forward.log import MicroPlane
+
+    return MicroPlane()
+
+
+#: ``--controller`` names -> factories
+CONTROLLERS = {"microplane": _microplane, "metro": metro_controller}
+
+
+def make_log_panel(panel, radius_mm=None, azimuth_deg=None, off_cad=None, table=None):
+    """``(truth, cad)`` panels of ``--panel`` (a name or a file), ``--radius-mm``, ``--azimuth-deg``, ``--off-cad``;
+    a mesh file is turned to face the head (the side ``table``'s feeds come from; without one, ``+z``)."""
+    from metrology.sim.forward.panels import PANELS, make_panel
+    from metrology.sim.forward.shapes import GENERATED, generated_panel, parse_off_cad
+
+    if azimuth_deg is not None and panel != "cylinder":
+        raise ValueError(f"--azimuth-deg {azimuth_deg:g}: only a cylinder has an axis (got --panel {panel})")
+    if panel in PANELS:
+        axis = (0.0, 1.0, 0.0)
+        if azimuth_deg is not None:
+            if not math.isfinite(azimuth_deg):
+                raise ValueError(f"--azimuth-deg {azimuth_deg}: expected a finite angle")
+            az = math.radians(azimuth_deg)
+            axis = (math.cos(az), math.sin(az), 0.0)
+        cad = make_panel(panel, radius_mm, axis)
+    elif panel in GENERATED:
+        if radius_mm is not None:
+            raise ValueError(f"--radius-mm: the generated panel {panel} has its own radii")
+        cad = generated_panel(panel)
+    elif Path(panel).suffix:
+        from metrology.sim.forward.meshes import load_sim_panel
+
+        if radius_mm is not None:
+            raise ValueError(f"--radius-mm: a panel file ({panel}) has its own shape")
+        from metrology.sim.forward.meshes import MeshPanel
+
+        cad = load_sim_panel(panel)[1]
+        if isinstance(cad, MeshPanel):
+            cad = cad.oriented(*(() if table is None else (table.points, table.feed)))
+    else:
+        raise ValueError(f"--panel {panel}: expected one of {', '.join([*PANELS, *GENERATED])} or a panel file "
+                         "(.stl, .obj, .ply, .glb, .step)")
+    truth = cad if off_cad is None else parse_off_cad(off_cad, cad)
+    return truth, cad
+
+
 def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_deg):
     import numpy as np
 
@@ -122,19 +212,19 @@ def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_
 def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, holes=10_000, cells=1,
                        panel="flat", radius_mm=None, noise_mm=None, angle_deg=(0.5, 5.0), standoff_mm=None,
                        spin_deg=0.0, patch_mm=400.0, holes_per_hour=600.0, drifts=(), shifts=(), gross_rate=0.0,
-                       layout_error_mm=None, layout_error_deg=None, seed=0, write_truth=True, progress=None) -> dict:
+                       layout_error_mm=None, layout_error_deg=None, seed=0, write_truth=True, progress=None,
+                       points=None, controller="microplane", azimuth_deg=None, off_cad=None) -> dict:
     """Write a simulated log at ``out`` (``.csv``, ``.parquet``: one file; else a new folder of partitioned Parquet)
     and its truth at ``truth`` (default :func:`default_truth_path`; none when ``write_truth`` is False,
     e.g. for a throughput run); returns the summary.
 
     ``drifts``/``shifts`` are SensorDrift/SensorShift (:func:`parse_drift`, :func:`parse_shift`);
-    angles are in degrees (the edge), lengths in mm. Everything is checked before a file is written.
+    angles are in degrees (the edge), lengths in mm. ``points`` a hole table (``hole_id,x,y,z,i,j,k``);
+    ``controller`` a key of :data:`CONTROLLERS`. Everything is checked before a file is written.
     """
     from metrology.sim.forward.log import BLOCK_HOLES, simulate_log
     from metrology.sim.forward.log_spec import LogSpec
     from metrology.sim.forward.log_write import LOG_FORMATS, check_log_output
-    from metrology.sim.forward.panels import make_panel
-
     if not write_truth and truth is not None:
         raise ValueError("--truth and --no-truth exclude each other")
     truth = None if not write_truth else default_truth_path(out) if truth is None else Path(truth)
@@ -146,10 +236,23 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
         raise ValueError(f"{true_layout_path or layout_path}: no noise_mm for every sensor; give --noise-mm")
     if standoff_mm is None and not all(math.isfinite(x) for x in true.range_mm.ravel()):
         raise ValueError(f"{true_layout_path or layout_path}: no range_mm for every sensor; give --standoff-mm")
-    spec = LogSpec(true, cell, make_panel(panel, radius_mm), angle_rad=tuple(math.radians(a) for a in angle_deg),
+    if controller not in CONTROLLERS:
+        raise ValueError(f"--controller {controller}: expected one of {', '.join(CONTROLLERS)}")
+    table = None
+    if points is not None:
+        from metrology.sim.forward.holes import read_hole_table
+
+        table = read_hole_table(points)
+    elif off_cad is not None:
+        raise ValueError("--off-cad needs --points: a panel off its CAD is seen at the table's nominal holes")
+    truth_panel, cad_panel = make_log_panel(panel, radius_mm, azimuth_deg, off_cad, table)
+    control = CONTROLLERS[controller]()
+    spec = LogSpec(true, cell, truth_panel, angle_rad=tuple(math.radians(a) for a in angle_deg),
                    noise_mm=noise_mm, standoff_mm=standoff_mm, spin_rad=math.radians(spin_deg),
                    patch_half_mm=patch_mm / 2, holes_per_hour=holes_per_hour, drifts=tuple(drifts),
-                   shifts=tuple(shifts), gross_rate=gross_rate)
+                   shifts=tuple(shifts), gross_rate=gross_rate, table=table,
+                   cad_panel=None if cad_panel is truth_panel else cad_panel,
+                   controller=None if controller == "microplane" else control)
     done = {"n": 0}
 
     def chunks():

@@ -10,8 +10,11 @@ distance), :mod:`.drift` (time, temperature, drift), :mod:`.incidence` (incidenc
 :mod:`.errors` (noise, gross readings, blanks, periodic error, cross-talk), :mod:`.families`
 (the causes and their sizes), :mod:`.cases` (blind cases), :mod:`.write` (case files); the
 production hole log of ``metro simulate-log``: :mod:`.panels` (flat, sphere, cylinder with
-closed-form rays), :mod:`.log_spec` (set-up, faults, chunks), :mod:`.log` (generation, the cell's
-own attitude adjustment), :mod:`.log_write` (CSV, partitioned Parquet, truth).
+closed-form rays), :mod:`.shapes` (height-field panels: the generated wing skin, barrel, nacelle lip
+and saddle; panels off their CAD), :mod:`.meshes` (panel files ray-cast as meshes; the generated
+panels' exports), :mod:`.holes` (hole tables), :mod:`.log_spec` (set-up, faults, chunks), :mod:`.log`
+(generation, the cell's own attitude adjustment through a pluggable controller), :mod:`.log_write`
+(CSV, partitioned Parquet, truth).
 """
 
 from metrology.sim.forward.beams import BeamHits, cast_beams
@@ -21,11 +24,15 @@ from metrology.sim.forward.drift import Drift, TemperatureProfile, draw_drift, d
 from metrology.sim.forward.families import CATALOGUE, FAMILIES, OUT_OF_CATALOGUE, Effect, FamilySpec
 from metrology.sim.forward.head import Head, draw_head, perturb_layout
 from metrology.sim.forward.incidence import IncidenceBias, draw_incidence
-from metrology.sim.forward.log import simulate_cell, simulate_log
+from metrology.sim.forward.holes import HoleTable, read_hole_table
+from metrology.sim.forward.log import MicroPlane, simulate_cell, simulate_log
 from metrology.sim.forward.log_spec import HoleChunk, LogSpec, SensorDrift, SensorShift
 from metrology.sim.forward.log_write import write_log_csv, write_log_parquet
+from metrology.sim.forward.meshes import MeshPanel, load_sim_panel, write_generated
 from metrology.sim.forward.panels import PANELS, CylinderPanel, FlatPanel, Panel, SpherePanel, make_panel
 from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
+from metrology.sim.forward.shapes import GENERATED, GeneratedPanel, HeightPanel, OffCadPanel, generated_panel, \
+    parse_off_cad
 from metrology.sim.forward.surface import DatumSurface, draw_surface, flat_surface, sample_cloud
 from metrology.sim.forward.write import CASE_FILES, write_case
 
@@ -36,5 +43,6 @@ __all__ = [
     "draw_incidence", "draw_poses", "perturb_poses", "tilt_of", "DatumSurface", "draw_surface", "flat_surface",
     "sample_cloud", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
     "SensorDrift", "SensorShift", "write_log_csv", "write_log_parquet", "PANELS", "CylinderPanel", "FlatPanel",
-    "Panel", "SpherePanel", "make_panel",
+    "Panel", "SpherePanel", "make_panel", "HoleTable", "read_hole_table", "MicroPlane", "MeshPanel", "load_sim_panel",
+    "write_generated", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad",
 ]

@@ -22,8 +22,32 @@ Per hole (panel frame, mm; see :mod:`.panels`; TCS conventions in :mod:`.log_spe
    works as well), the normal ``n_c`` turned toward the head, and a rotation ``G = Q(k ->
    -n_c)`` of the head about the drill point: ``tcs2panel' = tcs2panel G``, ``O' = P - D a'``. A
    hole with fewer than 3 readings keeps its attitude (``adjusted`` False).
+   The controller is pluggable (:attr:`LogSpec.controller`): ``controller(layout, d, shape) ->
+   (normal, ok)`` with ``layout`` the cell's layout, ``d (h, n)`` mm its readings (NaN blank),
+   ``shape (h, 3, 3)`` 1/mm TCS the CAD surface's shape operator at the hole (positive where the
+   surface bends away from the head), computed from the CAD panel (:attr:`LogSpec.cad`, not the
+   truth) at the nominal point and turned into the TCS with the commanded pose,
+   ``R_c^T S R_c``; it returns the unit normal ``(h, 3)`` TCS toward the head and ``ok (h,)``.
+   The default is :class:`MicroPlane` (the plane above). The cell turns the drill onto
+   ``-normal``; where ``ok`` is False, or the normal is not finite or does not face the head, it
+   keeps its attitude (``adjusted`` False). The controller is the thing under
+   test: it may come from anywhere (``metro simulate-log --controller metro`` plugs in the
+   measurement's own, from :mod:`metrology.jobs.simulate_log`); the physics here imports none.
 6. The readings after (same offset, fresh noise and gross errors), and the truth: the angles
    before and after (``atan2(|a x n|, -a.n)``), the true normal in the TCS before and after.
+
+With a hole table (:attr:`LogSpec.table`, :mod:`.holes`), step 1-3 become: the fleet's hole ``g``
+(counted over the cells in order) is drilled at the table's row ``g mod m`` (pass ``g // m``, which
+is also the log's ``panel``); the commanded pose puts the tool axis on the table's feed ``f``
+through its nominal point ``N``: ``tcs2panel_c = Q(-e_z -> f) F Rz(psi)``, ``O_c = N - D f``. The
+robot is off that attitude by ``theta`` (``angle_rad``) at azimuth ``phi`` about ``f``: the axis
+is ``a = cos(theta) f + sin(theta) (cos(phi) e1 + sin(phi) e2)``, ``tcs2panel = Q(-e_z -> a) F
+Rz(psi)`` and ``O = N - D a`` (it turns about the commanded tool point). The readings see the true
+panel (which may lie off its CAD, :mod:`.shapes`); the adjusted head turns about ``N`` again,
+``O' = N - D a'``; the drilled point is where the axis meets the true panel. The true angles are
+taken at the points the axis meets before and after. The commanded pose ``(tcs2panel_c, O_c)``
+is logged (:mod:`.log_write`); without a table the commanded pose is the pose before the
+adjustment.
 
 Randomness: hole ``j`` of cell ``c`` is drawn in block ``b = j // BLOCK_HOLES`` from the stream
 ``SeedSequence(seed, spawn_key=(c, b))``; a block is always drawn whole, so a log is the same
@@ -40,7 +64,7 @@ import numpy as np
 from metrology.sim.forward.log_spec import HoleChunk, LogSpec
 
 __all__ = ["simulate_log", "simulate_cell", "plane_normal", "rotation_taking_axis", "cell_sizes", "cell_name",
-           "BLOCK_HOLES"]
+           "BLOCK_HOLES", "MicroPlane", "rotation_vector"]
 
 #: holes drawn from one random stream (fixed: changing it changes every log)
 BLOCK_HOLES = 8192
@@ -129,6 +153,75 @@ def plane_normal(points, valid, s: float):
     return np.where(ok[:, None], normal, np.nan), ok
 
 
+class MicroPlane:
+    """The cell's micro-plane controller: the least-squares plane through the spots it has
+    (:func:`plane_normal`); it needs no shape."""
+
+    name = "microplane"
+    wants_shape = False
+
+    def __call__(self, layout, d, shape=None):
+        from metrology.sim.forward.log_spec import tool_axis_sign
+
+        valid = np.isfinite(d)
+        S = layout.zero + np.where(valid, d, 0.0)[..., None] * layout.direction
+        return plane_normal(S, valid, tool_axis_sign(layout))
+
+
+def rotation_vector(R):
+    """Rotation vectors ``(h, 3)`` rad (axis times angle, angle in [0, pi]) of rotations ``R (h, 3, 3)``.
+
+    Through the unit quaternion by Shepperd's method (the largest of ``1 + tr``, ``1 + 2 R_ii - tr`` is
+    the pivot, so rotations near pi, as a head facing down the panel's ``-z`` is, stay exact), then
+    ``2 atan2(|v|, w) v / |v|``.
+    """
+    R = np.asarray(R, float)
+    tr = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
+    piv = np.argmax(np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1), axis=1)
+    q = np.empty((len(R), 4))  # w, x, y, z
+    for k in range(4):
+        m = piv == k
+        if not m.any():
+            continue
+        r = R[m]
+        if k == 0:
+            t = np.sqrt(1.0 + tr[m]) * 2
+            q[m] = np.stack([t / 4, (r[:, 2, 1] - r[:, 1, 2]) / t, (r[:, 0, 2] - r[:, 2, 0]) / t,
+                             (r[:, 1, 0] - r[:, 0, 1]) / t], axis=1)
+        else:
+            i, j, l = k - 1, k % 3, (k + 1) % 3
+            t = np.sqrt(1.0 + 2 * r[:, i, i] - tr[m]) * 2
+            qi = np.empty((len(r), 4))
+            qi[:, 0] = (r[:, l, j] - r[:, j, l]) / t
+            qi[:, 1 + i] = t / 4
+            qi[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / t
+            qi[:, 1 + l] = (r[:, l, i] + r[:, i, l]) / t
+            q[m] = qi
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)  # w >= 0: the angle in [0, pi]
+    v = np.sqrt(q[:, 1] ** 2 + q[:, 2] ** 2 + q[:, 3] ** 2)
+    angle = 2 * np.arctan2(v, q[:, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(v > 1e-12, angle / v, 2.0)  # small angles: angle / v -> 2 / w
+    return q[:, 1:] * scale[:, None]
+
+
+def _head(a, flip, psi):
+    """``tcs2panel = Q(-e_z -> a) F Rz(psi)`` for tool axes ``a (h, 3)`` (toward the panel)."""
+    R = rotation_taking_axis(-1.0, a) * flip
+    if np.any(psi != 0):
+        M, cp, sp = R.copy(), np.cos(psi)[:, None], np.sin(psi)[:, None]
+        R[:, :, 0] = cp * M[:, :, 0] + sp * M[:, :, 1]
+        R[:, :, 1] = -sp * M[:, :, 0] + cp * M[:, :, 1]
+    return R
+
+
+def _tangent_axes(n):
+    """``e1`` (the panel's ``x`` made square to unit ``n (h, 3)``) and ``e2 = n x e1``."""
+    e1 = np.stack([1.0 - n[:, 0] ** 2, -n[:, 0] * n[:, 1], -n[:, 0] * n[:, 2]], axis=-1)
+    e1 /= np.sqrt(e1[:, 0] ** 2 + e1[:, 1] ** 2 + e1[:, 2] ** 2)[:, None]
+    return e1, _cross(n, e1)
+
+
 class _Geometry:
     """What every hole of a spec shares: the layouts' arrays, the stand-off, the axis sign."""
 
@@ -142,6 +235,25 @@ class _Geometry:
         self.lo, self.hi = spec.true_layout.range_mm[:, 0], spec.true_layout.range_mm[:, 1]
         self.flip = np.array([1.0, -self.s, -self.s])  # F = diag(1, -s, -s) (as columns): F (s e_z) = -e_z
         self.hole_s = 3600.0 / spec.holes_per_hour
+        self.controller = spec.controller if spec.controller is not None else MicroPlane()
+        self.table = spec.table
+        if self.table is not None:  # the cell's CAD at each table row: normal and shape (panel frame)
+            self.cad_normal = spec.cad.normal_at(self.table.points)
+            self.cad_shape = spec.cad.shape_at(self.table.points)
+
+    def adjust(self, R, d, shape_of):
+        """Step 5: the controller's normal from the readings ``d``; the head turned onto ``-normal``.
+        ``shape_of()`` gives the CAD shape operators in the TCS (asked only when the controller wants them)."""
+        shape = shape_of() if getattr(self.controller, "wants_shape", True) else None
+        nc, ok = self.controller(self.spec.cell_layout, d, shape)
+        nc = np.asarray(nc, float)
+        # the cell refuses a normal that is not finite or does not face the head (n . k < 0): it keeps its attitude
+        ok = np.asarray(ok, bool) & np.all(np.isfinite(nc), axis=1) & (nc[:, 2] * self.s < 0)
+        k_new = np.where(ok[:, None], -nc, np.array([0.0, 0.0, self.s]))
+        if not isinstance(self.controller, MicroPlane):  # a foreign controller's normal, made unit
+            k_new = k_new / np.linalg.norm(k_new, axis=1, keepdims=True)
+        R2 = np.matmul(R, rotation_taking_axis(self.s, k_new))
+        return R2, ok
 
     def cast(self, R, O):
         """True distances ``(h, n)`` mm of the true beams of heads at ``tcs2panel`` ``R (h, 3, 3)``, ``O (h, 3)``."""
@@ -181,25 +293,15 @@ class _Geometry:
                 + t_sigma * rng.standard_normal(h))
         # the tool axis: outward m at angle theta from n; a = -m toward the panel
         n = spec.panel.normal_at(P)
-        e1 = np.stack([1.0 - n[:, 0] ** 2, -n[:, 0] * n[:, 1], -n[:, 0] * n[:, 2]], axis=-1)
-        e1 /= np.sqrt(e1[:, 0] ** 2 + e1[:, 1] ** 2 + e1[:, 2] ** 2)[:, None]
-        e2 = _cross(n, e1)
+        e1, e2 = _tangent_axes(n)
         ct, st = np.cos(theta)[:, None], np.sin(theta)[:, None]
         a = -(ct * n + st * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
-        R = rotation_taking_axis(-1.0, a) * self.flip  # Q(-e_z -> a) F
-        if spec.spin_rad > 0:  # ... Rz(psi)
-            M, cp, sp = R.copy(), np.cos(psi)[:, None], np.sin(psi)[:, None]
-            R[:, :, 0] = cp * M[:, :, 0] + sp * M[:, :, 1]
-            R[:, :, 1] = -sp * M[:, :, 0] + cp * M[:, :, 1]
+        R = _head(a, self.flip, psi)  # Q(-e_z -> a) F Rz(psi)
         O = P - self.D * a
         offset = self._offset(cell_index, hole, time_s)
         d, gross = self.read(rng, self.cast(R, O), offset)
-        # the cell's adjustment, with its own layout
-        valid = np.isfinite(d)
-        S = self.Ec + np.where(valid, d, 0.0)[..., None] * self.uc
-        nc, ok = plane_normal(S, valid, s)
-        k_new = np.where(ok[:, None], -nc, np.array([0.0, 0.0, s]))
-        R2 = np.matmul(R, rotation_taking_axis(s, k_new))
+        # the cell's adjustment, with its own layout (the commanded pose is the pose before it)
+        R2, ok = self.adjust(R, d, lambda: _to_tcs(R, spec.cad.shape_at(P)))
         a2 = R2[:, :, 2] * s
         O2 = P - self.D * a2
         d2, gross2 = self.read(rng, self.cast(R2, O2), offset)
@@ -208,7 +310,55 @@ class _Geometry:
             panel=hole // spec.holes_per_panel, d=d, d_after=d2, drill_point=P,
             true_angle=_angle(a, n), true_after=_angle(a2, n),
             normal_tcs=np.einsum("hji,hj->hi", R, n), normal_after_tcs=np.einsum("hji,hj->hi", R2, n),
-            offset=offset, gross=gross, gross_after=gross2, adjusted=ok)
+            offset=offset, gross=gross, gross_after=gross2, adjusted=ok, pose_rotvec=rotation_vector(R),
+            pose_origin=O, nominal=np.full((h, 3), np.nan), cad_angle=np.full(h, np.nan),
+            cad_offset=np.full(h, np.nan))
+
+    def table_block(self, seed: int, cell_index: int, b: int, first: int) -> HoleChunk:
+        """Block ``b`` of cell ``cell_index`` drilled at the hole table's points (module docstring);
+        ``first`` is the fleet index of the cell's first hole."""
+        spec, h, s, tab = self.spec, BLOCK_HOLES, self.s, self.table
+        rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(cell_index, b))))
+        hole = np.arange(b * h, (b + 1) * h, dtype=np.int64)
+        g = first + hole
+        row, lap = g % tab.m, g // tab.m
+        N, f = tab.points[row], tab.feed[row]
+        theta = rng.uniform(*spec.angle_rad, size=h)
+        phi = rng.uniform(0.0, 2 * math.pi, size=h)
+        psi = rng.uniform(-spec.spin_rad, spec.spin_rad, size=h) if spec.spin_rad > 0 else np.zeros(h)
+        time_s = np.round(spec.start_time_s + (hole + 0.4 * rng.random(h)) * self.hole_s, 3)
+        t_mean, t_swing, t_sigma = spec.temperature_c
+        temp = (t_mean + t_swing * np.sin(2 * math.pi * (time_s % 86400.0) / 86400.0 - 0.75 * math.pi)
+                + t_sigma * rng.standard_normal(h))
+        Rc = _head(f, self.flip, psi)  # the commanded pose
+        Oc = N - self.D * f
+        e1, e2 = _tangent_axes(f)
+        ct, st = np.cos(theta)[:, None], np.sin(theta)[:, None]
+        a = ct * f + st * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+        R = _head(a, self.flip, psi)
+        O = N - self.D * a
+        offset = self._offset(cell_index, hole, time_s)
+        d, gross = self.read(rng, self.cast(R, O), offset)
+        R2, ok = self.adjust(R, d, lambda: _to_tcs(Rc, self.cad_shape[row]))
+        a2 = R2[:, :, 2] * s
+        O2 = N - self.D * a2
+        d2, gross2 = self.read(rng, self.cast(R2, O2), offset)
+        panel = spec.panel
+        P1 = O + panel.intersect(O, a)[:, None] * a
+        P2 = O2 + panel.intersect(O2, a2)[:, None] * a2
+        n1, n2 = panel.normal_at(P1), panel.normal_at(P2)
+        nc = self.cad_normal[row]
+        lead = 20.0  # the true surface along the CAD's normal at the nominal point
+        t = panel.intersect(N + lead * nc, -nc)
+        point_ids = np.asarray(tab.ids, dtype=object)[row]
+        ids = np.where(lap == 0, point_ids, point_ids + "#" + (lap + 1).astype(str).astype(object))
+        return HoleChunk(
+            cell=cell_name(cell_index), sensors=spec.sensors, hole=hole, time_s=time_s, temperature_c=temp,
+            panel=lap.astype(np.int64), d=d, d_after=d2, drill_point=P2,
+            true_angle=_angle(a, n1), true_after=_angle(a2, n2),
+            normal_tcs=np.einsum("hji,hj->hi", R, n1), normal_after_tcs=np.einsum("hji,hj->hi", R2, n2),
+            offset=offset, gross=gross, gross_after=gross2, adjusted=ok, pose_rotvec=rotation_vector(Rc),
+            pose_origin=Oc, ids=ids.astype(str), point_ids=point_ids.astype(str), nominal=N, cad_angle=_angle(-nc, n2), cad_offset=lead - t)
 
     def _offset(self, cell_index, hole, time_s):
         spec = self.spec
@@ -220,6 +370,11 @@ class _Geometry:
             else:
                 off[:, i] += fault.offset(hole)
         return off
+
+
+def _to_tcs(R, S):
+    """Shape operators ``S (h, 3, 3)`` panel frame into the TCS of heads at ``tcs2panel`` ``R``: ``R^T S R``."""
+    return np.einsum("hji,hjk,hkl->hil", R, S, R)
 
 
 def _cross(a, b):
@@ -236,9 +391,10 @@ def _angle(a, n):
 
 
 def simulate_cell(spec: LogSpec, seed: int, cell_index: int, holes: int,
-                  chunk_holes: int = BLOCK_HOLES) -> Iterator[HoleChunk]:
+                  chunk_holes: int = BLOCK_HOLES, first: int = 0) -> Iterator[HoleChunk]:
     """The holes ``0 .. holes - 1`` of cell ``cell_index`` (0-based; named ``C<index + 1>``), in chunks
-    of ``chunk_holes`` (the last one shorter). The holes do not depend on ``chunk_holes``."""
+    of ``chunk_holes`` (the last one shorter). The holes do not depend on ``chunk_holes``. With a hole
+    table, ``first`` is the fleet index of the cell's first hole (its table row is ``first mod m``)."""
     if chunk_holes < 1:
         raise ValueError(f"chunk size must be at least 1 hole, got {chunk_holes}")
     geo = _Geometry(spec)
@@ -249,7 +405,8 @@ def simulate_cell(spec: LogSpec, seed: int, cell_index: int, holes: int,
         for b in range(start // BLOCK_HOLES, (stop - 1) // BLOCK_HOLES + 1):
             if b not in cache:
                 cache.clear()
-                cache[b] = geo.block(seed, cell_index, b)
+                cache[b] = (geo.block(seed, cell_index, b) if spec.table is None
+                            else geo.table_block(seed, cell_index, b, first))
             lo = max(start - b * BLOCK_HOLES, 0)
             hi = min(stop - b * BLOCK_HOLES, BLOCK_HOLES)
             parts.append(cache[b].slice(lo, hi))
@@ -264,5 +421,7 @@ def simulate_log(spec: LogSpec, seed: int, holes: int, cells: int = 1,
     Every cell has the same head (``spec``); faults act on the cells they name. Memory is bounded by
     the chunk and the block, whatever ``holes``.
     """
+    first = 0
     for c, n in enumerate(cell_sizes(holes, cells)):
-        yield from simulate_cell(spec, seed, c, n, chunk_holes)
+        yield from simulate_cell(spec, seed, c, n, chunk_holes, first)
+        first += n

@@ -122,6 +122,12 @@ class LogSpec:
     resolution_mm : float, mm, readings are rounded to this (the sensor's output step)
     temperature_c : (3,) float, deg C: mean, daily half-swing, 1 sigma noise of ``temperature_c``
         (logged metadata; it does not act on the readings)
+    table : HoleTable or None; given, the holes are drilled at its points, cycled (:mod:`.log`), and
+        ``angle_rad`` is the robot's attitude error from the table's feed; None: points uniform over the patch
+    cad_panel : Panel or None, the panel the cell knows (its CAD: hole table checks, the shape operator it
+        hands the controller); None: ``panel`` (the panel sits on its CAD)
+    controller : callable or None, ``controller(layout, d, shape) -> (normal, ok)`` (:mod:`.log`, step 5),
+        with an attribute ``wants_shape``; None: the micro-plane (:func:`.log.plane_normal`)
     """
 
     true_layout: SensorLayout
@@ -141,6 +147,14 @@ class LogSpec:
     gross_mm: tuple = (0.2, 2.0)
     resolution_mm: float = 1e-4
     temperature_c: tuple = (20.0, 2.0, 0.1)
+    table: object = None
+    cad_panel: Panel | None = None
+    controller: object = None
+
+    @property
+    def cad(self) -> Panel:
+        """The panel the cell knows: ``cad_panel``, else ``panel``."""
+        return self.panel if self.cad_panel is None else self.cad_panel
 
     def __post_init__(self):
         t, c = self.true_layout, self.cell_layout
@@ -158,7 +172,12 @@ class LogSpec:
                              "sensor; give a noise (mm)")
         if not math.isfinite(self.target_reading_mm) or self.target_reading_mm <= 0:
             raise ValueError("the layout states no range_mm for every sensor; give a stand-off (mm)")
-        self.panel.check_patch(self.patch_half_mm)
+        if self.table is None:
+            self.panel.check_patch(self.patch_half_mm)
+        else:
+            from metrology.sim.forward.holes import check_table
+
+            check_table(self.table, self.cad, "the CAD panel")
         if not (self.holes_per_hour > 0 and math.isfinite(self.holes_per_hour)):
             raise ValueError(f"holes per hour must be positive, got {self.holes_per_hour}")
         if self.holes_per_panel < 1:
@@ -220,6 +239,9 @@ class LogSpec:
                 "start_time_s": self.start_time_s, "holes_per_panel": self.holes_per_panel,
                 "drifts": [vars(d) for d in self.drifts], "shifts": [vars(s) for s in self.shifts],
                 "gross_rate": self.gross_rate, "resolution_mm": self.resolution_mm,
+                "table": None if self.table is None else {"source": self.table.source, "holes": self.table.m},
+                "cad_panel": self.cad.to_dict(),
+                "controller": getattr(self.controller, "name", "microplane"),
                 "true_zero_mm": self.true_layout.zero.tolist(),
                 "true_direction": self.true_layout.direction.tolist()}
 
@@ -245,6 +267,17 @@ class HoleChunk:
     offset : (h, n) float, mm, the drifts' and shifts' offset in each reading
     gross, gross_after : (h, n) bool, the readings made gross
     adjusted : (h,) bool, False where the cell had fewer than 3 readings and kept its attitude
+        (or its controller answered not ok)
+    pose_rotvec : (h, 3) float, rad, panel frame: the commanded ``tcs2panel`` rotation (before the
+        adjustment) as a rotation vector (axis times angle)
+    pose_origin : (h, 3) float, mm, panel frame: the commanded TCS origin
+    ids : (h,) str or None, the log's hole ids (a hole table's); None: :meth:`hole_ids`
+    point_ids : (h,) str or None, the hole table's own id of each hole (``ids`` without the pass suffix)
+    nominal : (h, 3) float, mm, panel frame, the table's nominal drill point (NaN without a table)
+    cad_angle : (h,) float, rad, angle between the true normal at the drilled point and the CAD's normal
+        at the nominal point (off-CAD shows here); NaN without a table
+    cad_offset : (h,) float, mm, the true surface's height over the CAD's at the nominal point, along the
+        CAD's outward normal; NaN without a table
     """
 
     cell: str
@@ -264,13 +297,22 @@ class HoleChunk:
     gross: np.ndarray
     gross_after: np.ndarray
     adjusted: np.ndarray
+    pose_rotvec: np.ndarray = None
+    pose_origin: np.ndarray = None
+    ids: np.ndarray = None
+    point_ids: np.ndarray = None
+    nominal: np.ndarray = None
+    cad_angle: np.ndarray = None
+    cad_offset: np.ndarray = None
 
     @property
     def n(self) -> int:
         return len(self.hole)
 
     def hole_ids(self) -> np.ndarray:
-        """``(h,)`` str, ``"<cell>-<hole+1, 8 digits>"``, e.g. ``"C1-00000001"``."""
+        """``(h,)`` str, ``"<cell>-<hole+1, 8 digits>"``, e.g. ``"C1-00000001"``; a hole table's ids when given."""
+        if self.ids is not None:
+            return self.ids
         return np.char.add(f"{self.cell}-", np.char.zfill((self.hole + 1).astype(str), 8))
 
     def slice(self, start: int, stop: int) -> "HoleChunk":

@@ -2,15 +2,33 @@
 
 The log (one row per hole, a cell's columns only)::
 
-    hole_id, time, cell, panel, temperature_c, d_<sensor>..., d_<sensor>_after...
+    hole_id, time, cell, panel, temperature_c, d_<sensor>..., d_<sensor>_after...,
+    pose_rx_deg, pose_ry_deg, pose_rz_deg, pose_x_mm, pose_y_mm, pose_z_mm
 
 ``hole_id`` is ``"<cell>-<8 digits>"`` (unique in the fleet), ``time`` s since the Unix epoch (UTC,
 to the ms), ``panel`` ``"P<6 digits>"`` (the cell's panel count), readings in mm, blank (null) where
-the sensor gave none. The truth, keyed by ``hole_id``::
+the sensor gave none. ``pose_*`` is the robot's commanded pose before the adjustment, known to a
+real cell: ``pose_r{x,y,z}_deg`` the ``tcs2panel`` rotation (TCS to panel frame) as a rotation
+vector (axis times angle, degrees; ``scipy.spatial.transform.Rotation.from_rotvec(...,
+degrees=True)`` reads it), ``pose_{x,y,z}_mm`` the TCS origin in the panel frame (mm). A vector
+``v_tcs`` is ``R v_tcs`` in the panel frame; a point ``p_tcs`` is ``R p_tcs + pose_xyz``.
 
-    hole_id, cell, drill_x_mm, drill_y_mm, drill_z_mm (panel frame),
+Drilled from a hole table (``--points``), ``hole_id`` is the table's ``hole_id``; when the table is
+drilled more than once (``--holes`` beyond its rows, cycled), pass ``k >= 2`` is logged as
+``<hole_id>#<k>`` and ``panel`` is ``P<k, 6 digits>``: each pass over the table is one panel; the
+column ``point_id`` (after the readings) holds the table's own ``hole_id`` of every row, the key
+to join the log to the table on every pass.
+
+The truth, keyed by ``hole_id``::
+
+    hole_id, cell, drill_x_mm, drill_y_mm, drill_z_mm (panel frame; the point drilled),
     true_angle_deg, true_after_deg, true_normal_{x,y,z}, true_normal_after_{x,y,z} (TCS, unit,
     pointing toward the head), adjusted, offset_<sensor> (mm), gross_<sensor>, gross_<sensor>_after
+
+and from a hole table also ``nominal_{x,y,z}_mm`` (the table's point), ``cad_angle_deg`` (the true
+normal at the drilled point against the CAD's at the nominal point) and ``cad_offset_mm`` (the true
+surface over the CAD's at the nominal point, along the CAD's outward normal): a panel off its CAD
+shows there.
 
 Formats: one CSV or Parquet file (all cells, cell after cell; a Parquet file's row groups are
 the simulator's chunks), or a hive-partitioned Parquet folder ``cell=C1/date=2026-11-25/part-<k>.parquet``
@@ -53,21 +71,36 @@ def log_table(chunk):
     """The cell's log of ``chunk`` (a :class:`HoleChunk`) as a pyarrow Table (module docstring)."""
     import pyarrow as pa
 
-    cols = {"hole_id": _ids(f"{chunk.cell}-", chunk.hole + 1, 8), "time": _floats(chunk.time_s),
+    cols = {"hole_id": _hole_ids(chunk), "time": _floats(chunk.time_s),
             "cell": pa.array(np.full(chunk.n, chunk.cell)), "panel": _ids("P", chunk.panel + 1, 6),
             "temperature_c": _floats(np.round(chunk.temperature_c, 2))}
     for i, name in enumerate(chunk.sensors):
         cols[f"d_{name}"] = _floats(chunk.d[:, i])
     for i, name in enumerate(chunk.sensors):
         cols[f"d_{name}_after"] = _floats(chunk.d_after[:, i])
+    if chunk.point_ids is not None:
+        cols["point_id"] = pa.array(np.asarray(chunk.point_ids, dtype=object), type=pa.string())
+    if chunk.pose_rotvec is not None:
+        for j, axis in enumerate("xyz"):
+            cols[f"pose_r{axis}_deg"] = _floats(np.degrees(chunk.pose_rotvec[:, j]))
+        for j, axis in enumerate("xyz"):
+            cols[f"pose_{axis}_mm"] = _floats(chunk.pose_origin[:, j])
     return pa.table(cols)
+
+
+def _hole_ids(chunk):
+    import pyarrow as pa
+
+    if chunk.ids is not None:
+        return pa.array(np.asarray(chunk.ids, dtype=object), type=pa.string())
+    return _ids(f"{chunk.cell}-", chunk.hole + 1, 8)
 
 
 def truth_table(chunk):
     """The truth of ``chunk`` as a pyarrow Table, keyed by ``hole_id`` (module docstring)."""
     import pyarrow as pa
 
-    cols = {"hole_id": _ids(f"{chunk.cell}-", chunk.hole + 1, 8), "cell": pa.array(np.full(chunk.n, chunk.cell))}
+    cols = {"hole_id": _hole_ids(chunk), "cell": pa.array(np.full(chunk.n, chunk.cell))}
     for j, axis in enumerate("xyz"):
         cols[f"drill_{axis}_mm"] = _floats(chunk.drill_point[:, j])
     cols["true_angle_deg"] = _floats(np.degrees(chunk.true_angle))
@@ -82,6 +115,11 @@ def truth_table(chunk):
     for i, name in enumerate(chunk.sensors):
         cols[f"gross_{name}"] = pa.array(chunk.gross[:, i])
         cols[f"gross_{name}_after"] = pa.array(chunk.gross_after[:, i])
+    if chunk.ids is not None:  # drilled from a hole table
+        for j, axis in enumerate("xyz"):
+            cols[f"nominal_{axis}_mm"] = _floats(chunk.nominal[:, j])
+        cols["cad_angle_deg"] = _floats(np.degrees(chunk.cad_angle))
+        cols["cad_offset_mm"] = _floats(chunk.cad_offset)
     return pa.table(cols)
 
 

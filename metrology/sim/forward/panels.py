@@ -57,6 +57,14 @@ class Panel:
         y = rng.uniform(-half_mm, half_mm, n)
         return np.stack([x, y, self.height(x, y)], axis=-1)
 
+    def shape_at(self, points):
+        """Shape operators ``(m, 3, 3)`` 1/mm, panel frame, at surface ``points (m, 3)`` mm: positive where
+        the surface bends away from the head (:func:`metrology.sim.forward.curvature.shape_from_height`)."""
+        from metrology.sim.forward.curvature import shape_from_height
+
+        p = np.asarray(points, float).reshape(-1, 3)
+        return shape_from_height(self.height, p[:, 0], p[:, 1])[1]
+
     def check_patch(self, half_mm: float) -> None:
         """Raise ValueError when the square patch of half side ``half_mm`` does not fit the panel."""
         if not (half_mm > 0 and math.isfinite(half_mm)):

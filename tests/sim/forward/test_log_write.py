@@ -33,7 +33,8 @@ def test_csv_log_holds_the_readings_and_the_truth_is_keyed_apart(tmp_path):
     assert write_log_csv(chunks(), log, truth) == 20000
     t = pcsv.read_csv(log)
     assert t.column_names == ["hole_id", "time", "cell", "panel", "temperature_c", *[f"d_{n}" for n in NAMES],
-                              *[f"d_{n}_after" for n in NAMES]]
+                              *[f"d_{n}_after" for n in NAMES], "pose_rx_deg", "pose_ry_deg", "pose_rz_deg",
+                              "pose_x_mm", "pose_y_mm", "pose_z_mm"]
     drawn = [HoleChunk.concat(list(simulate_log(SPEC, 0, 20000, 2, 20000))[i:i + 1]) for i in range(2)]
     d = np.vstack([c.d for c in drawn])
     got = np.column_stack([t[f"d_{n}"].to_numpy(zero_copy_only=False) for n in NAMES])
