@@ -318,7 +318,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if surf is not None:
         from metrology.measure.normals import drill_axis
 
-        table_row = surf.rows(table.column("hole_id").cast(pa.string()))
+        # the table's own id: ``point_id`` where the log has it (a hole table drilled more than once
+        # gives each pass its own hole_id, ``ID#k``: metrology/sim/forward/log_write.py), else hole_id
+        key = "point_id" if "point_id" in table.column_names else "hole_id"
+        table_row = surf.rows(table.column(key).cast(pa.string()))
         have = table_row >= 0
         shape = np.zeros((N, 3, 3))
         u_shape = np.zeros(N)
@@ -367,7 +370,8 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
         for i in np.flatnonzero(table_row < 0):
             code[i] = 3
-            reason[i] = f"hole_id {ids[int(i)].as_py()!r} is not in the hole table: its local surface is unknown"
+            reason[i] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
+                         f"unknown")
         for i in np.flatnonzero(table_row >= 0):
             why = surf.problem[table_row[i]]
             if why:
