@@ -33,7 +33,7 @@ from metrology.diagnosis.thresholds import ADVICE
 __all__ = ["Judgement", "Judge", "judge"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Judgement:
     """Steps 3-4 (the diagnosis' judgement of the causes chosen; ``metrology.core.verdict.Verdict``
     is a command's pass/fail): the first cause (a catalogue name, or :class:`Outcome` ``none`` or
