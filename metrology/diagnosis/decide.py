@@ -86,9 +86,10 @@ def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
-def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
+def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng):
     """The simulation of this data set under the base (and the extended) model beside the
     measurement, and the held-out gains. Returns (discrepancy dict, heldout dict)."""
+    ds, b, folds = problem.ds, problem.b, problem.folds
     nominal, obs, sigma, cov, theta0, ho_base = ds.layout, ds.obs, b.sigma, b.cov, b.theta0, b.heldout
     base_model = ExtendedModel(b.calibrated, ())
     sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(nominal, obs, cov, sigma, base_model, folds, theta0, rng,
@@ -206,7 +207,8 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
         progress, 1, 5, f"selection step {k}: candidate {i + 1}/{n} ({label})"))
     chosen = [st.chosen for st in steps if st.chosen is not None]
     notify(progress, 2, 5, "verdict and the causes' gains")
-    v = judge(Problem(ds, b, folds), steps, rng)
+    problem = Problem(ds, b, folds)
+    v = judge(problem, steps, rng)
     if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
         chosen = []
     rand = v.random_pose  # a random pose error predicts no reading: not in the model
@@ -215,7 +217,7 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
         replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)
     notify(progress, 3, 5, "side-by-side simulation")
-    discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)
+    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng)
     scored = steps[0].scored
     datum = b.datum
     if datum is not None:
