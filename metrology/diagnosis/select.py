@@ -99,7 +99,7 @@ def _lead(scored, n_cand):
     return in_only[0] if in_only else None
 
 
-def _parsimonious(sig, why: list | None = None):
+def _parsimonious(sig, why: list):
     """The candidate a step takes among the significant ones ``sig`` (largest held-out gain
     first): the first, unless it is a per-pose cause and the best cause that is not per-pose
     predicts held-out poses as well (the per-pose one not significantly better, ``alpha_order``).
@@ -112,7 +112,7 @@ def _parsimonious(sig, why: list | None = None):
         return first
     fixed = next((s for s in sig if not s.component.per_pose), None)
     if fixed is not None and rules.per_pose_imitates(p := p_better(first, fixed)):
-        (why if why is not None else []).append(Reason(4, "per_pose_imitates", Decision.IMITATION, (first.label, fixed.label), "p_per_pose_better",
+        why.append(Reason(4, "per_pose_imitates", Decision.IMITATION, (first.label, fixed.label), "p_per_pose_better",
                           p, rules.ALPHA_ORDER, outcome=fixed.label))
         return fixed
     return first
