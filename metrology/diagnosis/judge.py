@@ -23,10 +23,9 @@ from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult
 from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
-from metrology.diagnosis.fit import Fit, residual_battery
+from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
-from metrology.diagnosis.select import (Problem, drop_one_gains, family_of, joint_fit, needed, p_better,
-                                        weakly_supported)
+from metrology.diagnosis.select import Problem, drop_one_gains, family_of, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests
 from metrology.diagnosis.thresholds import ADVICE
 
@@ -62,9 +61,6 @@ class Judgement:
     rivals: tuple = ()
     random_pose: bool = False
     reasons: tuple = ()
-
-    def __post_init__(self):
-        object.__setattr__(self, "confidence", Confidence(self.confidence))
 
     @property
     def outcome(self) -> Outcome:
@@ -111,10 +107,14 @@ class Judge:
 
     # -- what both judgements read, computed once ---------------------------------------------
     def joint_fit(self, chosen) -> Fit:
-        """The causes ``chosen`` refitted jointly (:func:`~metrology.diagnosis.select.joint_fit`)."""
+        """The causes ``chosen`` refitted jointly with the base model (``scipy.optimize.least_squares``),
+        the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
+        it free and the directions of the geometry its per-pose values absorb held: see
+        :func:`metrology.calibration.engine._absorbed_modes`)."""
         key = tuple(s.label for s in chosen)
         if key not in self._fits:
-            self._fits[key] = joint_fit(self.problem, chosen)
+            comps, ds, b = tuple(s.component.for_joint_fit() for s in chosen), self.ds, self.b
+            self._fits[key] = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")
         return self._fits[key]
 
     def gains(self, chosen) -> list:

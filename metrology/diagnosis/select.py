@@ -510,12 +510,3 @@ def flags_of(chosen):
         if isinstance(s.component, Outliers):
             return s.component.flags
     return None
-
-
-def joint_fit(problem: Problem, chosen) -> Fit:
-    """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``),
-    the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
-    it free and the directions of the geometry its per-pose values absorb held: see
-    :func:`metrology.calibration.engine._absorbed_modes`)."""
-    comps = tuple(s.component.for_joint_fit() for s in chosen)
-    return problem.fit(comps, problem.b.theta0, "lsq")

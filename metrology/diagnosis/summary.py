@@ -48,20 +48,20 @@ def verdict_summary(v, tb) -> str:
         turned = (f"{dropped.concerns[0]} was selected (held-out p = {chose.value:.2g} at its step) but is not needed "
                   f"against the base model (held-out chi-square gain {dropped.gain:.3g}, p = {dropped.value:.2g}), so "
                   "it is not named")
-        if v.outcome == Outcome.NONE:
+        if v.cause == Outcome.NONE:
             return f"{consistent}; {turned}: {nothing_above}" + lead + tail
         return f"{inconsistent}; {turned}: no catalogued cause explains the structure" + lead + tail
-    if v.outcome == Outcome.NONE:
+    if v.cause == Outcome.NONE:
         return f"{consistent}; no candidate gives a significant held-out gain: {nothing_above}" + lead + tail
     if v.best is None:
         return (f"{inconsistent} and no catalogued effect gives a significant held-out gain: structure outside the "
                 "catalogue" + lead + tail)
     better = next((r for r in why if r.decided == Decision.CROSSTALK_BETTER), None)
-    if v.outcome == Outcome.UNEXPLAINED and better is not None:
+    if v.cause == Outcome.UNEXPLAINED and better is not None:
         return (f"{v.best.label} gives a significant held-out gain, but {better.outcome} (crosstalk: predicts held-out "
                 f"poses better than {better.concerns[0]}, p = {better.value:.2g}): the effect follows another "
                 "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)" + tail)
-    if v.outcome == Outcome.UNEXPLAINED:
+    if v.cause == Outcome.UNEXPLAINED:
         return (f"{v.best.label} gives a significant held-out gain (RMS ratio {v.best.heldout_rms_ratio:.3g}) but "
                 f"leaves the residuals of its sensors inconsistent with the noise model (battery p = "
                 f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains" + tail)

@@ -80,17 +80,21 @@ def test_the_summary_is_made_from_the_trail_not_re_derived():
         _judgement(why + [d], cause=Outcome.NONE, confidence=Confidence.LOW), _tests())
 
 
-def test_a_judgement_is_typed():
+def test_a_judgement_is_typed(hidden):
+    from metrology.diagnosis import rules
+    from metrology.diagnosis.judge import Judgement
     from metrology.diagnosis.results import Confidence, Outcome
 
-    v = _judgement((), cause="none", confidence="moderate")
-    assert v.confidence is Confidence.MODERATE and v.outcome is Outcome.NONE
-    with pytest.raises(ValueError):
-        _judgement((), cause="none", confidence="sure")
+    # the rules give the enums, not strings
+    assert rules.confidence_of(True, False, False) is Confidence.HIGH
+    assert rules.confidence_of(False, False, False) is Confidence.PARTIAL
+    assert rules.confidence_of_nothing(True, True) is Confidence.LOW
+    assert rules.confidence_given_datum(Confidence.HIGH, Outcome.NONE, False) is Confidence.LOW
+    assert hidden.confidence is Confidence.HIGH and hidden.reasons[-1].outcome is Confidence.HIGH
+    v = _judgement((), cause=Outcome.NONE, confidence=Confidence.MODERATE)
+    assert v.outcome is Outcome.NONE and _judgement((), cause="drift", confidence=Confidence.HIGH).outcome is Outcome.NAMED
     with pytest.raises(TypeError):  # by keyword only: no positional order to get wrong
-        from metrology.diagnosis.judge import Judgement
-
-        Judgement("none", [], "low")  # noqa
+        Judgement(Outcome.NONE, [], Confidence.LOW)  # noqa
 
 
 def test_explain_prints_the_trail_on_the_bundled_hidden_data():
