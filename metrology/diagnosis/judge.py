@@ -40,9 +40,9 @@ class Judgement:
     ``fit`` the joint model of every cause, refitted by ``lsq``; or None), the noise tests after
     the extension, the confounding notes, the first cause's description, every named cause's
     description (largest held-out gain given the others first), the lead (a candidate
-    significant in sample only, when the selection stopped) and ``dropped``: a sole cause the
-    selection chose that is not needed against the base model (its label, its step's held-out
-    p, and its held-out chi-square gain and p against the base model), so not named; ``rivals``:
+    significant in sample only, when the selection stopped) and ``dropped``: the Reason (rule 10,
+    ``dropped``) of a sole cause the selection chose that is not needed against the base model
+    (its label, its held-out chi-square gain and p against the base model), so not named; ``rivals``:
     the Rival explanations outside the catalogue said beside the causes; ``random_pose``: the
     pose error is named as a random effect (:mod:`metrology.diagnosis.posevar`); ``reasons``: the
     trail, every :class:`Reason` in the order its rule fired (the selection's, then the verdict's).
@@ -57,7 +57,7 @@ class Judgement:
     named: Cause | None = None
     causes: tuple = ()
     lead: CandidateResult | None = None
-    dropped: dict | None = None
+    dropped: Reason | None = None
     rivals: tuple = ()
     random_pose: bool = False
     reasons: tuple = ()
@@ -164,12 +164,10 @@ class Judge:
         need = needed(chosen, gains)
         if len(chosen) == 1 and not need[0]:
             # a sole cause whose held-out gain against the base model is not significant: not named
-            dropped = {"label": chosen[0].label, "p_step": chosen[0].p_heldout, "gain_chi2": gains[0][0],
-                       "p_base": gains[0][1]}
-            why = self.selected + (Reason(10, "needed_given_others", Decision.DROPPED, (chosen[0].label,),
-                                          "p_heldout_against_base", gains[0][1], rules.ALPHA_HELDOUT, gains[0][0],
-                                          step=1, outcome=Confidence.LOW),)
-            return Judgement(cause=nothing, confidence=Confidence.LOW, lead=self.lead, dropped=dropped, reasons=why)
+            dropped = Reason(10, "needed_given_others", Decision.DROPPED, (chosen[0].label,), "p_heldout_against_base",
+                             gains[0][1], rules.ALPHA_HELDOUT, gains[0][0], step=1, outcome=Confidence.LOW)
+            return Judgement(cause=nothing, confidence=Confidence.LOW, lead=self.lead, dropped=dropped,
+                             reasons=self.selected + (dropped,))
         return self.named(chosen, f, tests, gains, sole_exempt=False)
 
     def with_random_pose(self, r, f: Fit, exempt_sole: bool) -> Judgement | None:

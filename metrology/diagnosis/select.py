@@ -37,6 +37,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
+from metrology.calibration.dataset import Dataset
 from metrology.core.effects import REGISTRY, Outliers
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
 from metrology.diagnosis.fit import Fit, fit_any
@@ -48,6 +51,9 @@ from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
 
+if TYPE_CHECKING:  # decide imports this module
+    from metrology.diagnosis.decide import BaseAnalysis
+
 __all__ = ["Problem", "Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 
 
@@ -58,8 +64,8 @@ class Problem:
     its function and arguments): ``ds`` the Dataset, ``b`` the BaseAnalysis (the base model:
     its covariates, noise and calibration), ``folds`` the k of the k-fold by pose."""
 
-    ds: object
-    b: object
+    ds: Dataset
+    b: BaseAnalysis
     folds: int
 
     def fit(self, components, theta0, solver: str = "gn") -> Fit:

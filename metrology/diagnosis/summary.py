@@ -42,7 +42,7 @@ def verdict_summary(v, tb) -> str:
     nothing_above = "no effect above the detectable sizes (smaller ones are not ruled out)"
     datum = _last(why, Decision.DATUM_DISAGREES)
     tail = "" if datum is None else DATUM_DISAGREES.format(p=datum.value)
-    dropped = _last(why, Decision.DROPPED)
+    dropped = _last(why, Decision.DROPPED)  # rule 10 on a sole cause
     if dropped is not None:
         chose = next(r for r in why if r.decided == Decision.CHOSEN and r.step == dropped.step)
         turned = (f"{dropped.concerns[0]} was selected (held-out p = {chose.value:.2g} at its step) but is not needed "
