@@ -141,7 +141,7 @@ def _v(x, unit) -> str:
 
 def certificate_section(cert: Certificate):
     """The certificate as a report :class:`~metrology.report.html.Section` (placed first)."""
-    from metrology.report.html import Section, Table, Verdict
+    from metrology.report.html import Headline, Section, Table
 
     head = [("certificate number", cert.number)]
     head += [(words, value) for key, words, value in cert.header if key != "certificate"]
@@ -165,7 +165,7 @@ def certificate_section(cert: Certificate):
         "Values are those of the calibrated layout file named, whose SHA-256 is given: zero points in mm (TCS), "
         "directions as unit vectors (TCS), tilt uncertainties about the chart axes e1, e2 of the nominal direction.",
     )
-    return Section("Calibration certificate", Verdict(None, f"{cert.number}: calibrated layout "
+    return Section("Calibration certificate", Headline(None, f"{cert.number}: calibrated layout "
                                                             f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…",
                                                             label="certificate"),
                    tables=(Table("Certificate", ("field", "value"), tuple(head), wrap=True),

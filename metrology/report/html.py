@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "fit_to_column", "written", "Figure", "Table", "Headline", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -70,8 +70,9 @@ class Table:
 
 
 @dataclass(frozen=True)
-class Verdict:
-    """The first thing a report says.
+class Headline:
+    """The first thing a report says (drawn from a command's
+    :class:`metrology.core.verdict.Verdict` by :func:`verdict_box`).
 
     ok : True (within tolerance), False (not), None (no tolerance applies: information)
     headline : str, one sentence (the numbers against the tolerance)
@@ -99,13 +100,13 @@ class Verdict:
 WORDS = {True: "passed", False: "FAILED", None: "information"}
 
 
-def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
+def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Headline":
     """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`: passed or
     FAILED when a check gates, information when none does; one line per check."""
     from metrology.report.verdicts import check_words
 
     gated = any(c.gate for c in verdict.checks)
-    return Verdict(verdict.passed if gated else None, headline, cause, label,
+    return Headline(verdict.passed if gated else None, headline, cause, label,
                    tuple(check_words(c) for c in verdict.checks))
 
 
@@ -113,7 +114,7 @@ def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Ve
 class Section:
     """What one command found.
 
-    title : str; verdict : Verdict; figures : tuple of Figure; tables : tuple of Table;
+    title : str; verdict : Headline; figures : tuple of Figure; tables : tuple of Table;
     text : tuple of str, preformatted blocks (the command's text output, a fit report);
     limits : tuple of str, what the data could not determine; next_steps : tuple of str,
     what to do next (poses to add, a command to run, a datum to re-measure);
@@ -122,7 +123,7 @@ class Section:
     """
 
     title: str
-    verdict: Verdict
+    verdict: Headline
     figures: tuple = ()
     tables: tuple = ()
     text: tuple = ()

@@ -129,7 +129,7 @@ def _chart_figure(chart, alarms):
 
 def measure_section(report):
     """The HTML section of ``metro measure``: verdict, histogram, one control chart per cell, tables."""
-    from metrology.report.html import Section, Table, Verdict, figure_from_matplotlib
+    from metrology.report.html import Headline, Section, Table, figure_from_matplotlib
 
     s = report.result.summary
     c = report.counts
@@ -174,6 +174,6 @@ def measure_section(report):
         nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "
                    "(a better calibration lowers its share).")
     return Section("Hole measurement (metro measure)",
-                   Verdict(v.passed, head, cause, label="PASSED" if v.passed else "FAILED"),
+                   Headline(v.passed, head, cause, label="PASSED" if v.passed else "FAILED"),
                    figures=tuple(figs), tables=tuple(tables), text=(measure_text(report),), limits=tuple(limits),
                    next_steps=tuple(nxt))
