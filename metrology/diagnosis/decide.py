@@ -90,10 +90,9 @@ def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps
     """The simulation of this data set under the base (and the extended) model beside the
     measurement, and the held-out gains. Returns (discrepancy dict, heldout dict)."""
     ds, b, folds = problem.ds, problem.b, problem.folds
-    nominal, obs, sigma, cov, theta0, ho_base = ds.layout, ds.obs, b.sigma, b.cov, b.theta0, b.heldout
+    nominal, sigma, ho_base = ds.layout, b.sigma, b.heldout
     base_model = ExtendedModel(b.calibrated, ())
-    sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(nominal, obs, cov, sigma, base_model, folds, theta0, rng,
-                                                         sim_reps)
+    sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(problem, base_model, rng, sim_reps)
     meas_rms = np.sqrt(np.nanmean(b.fit.residual**2, axis=0))
     discrepancy = {
         "sensors": list(nominal.names),
@@ -110,7 +109,7 @@ def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps
     if best is None:
         return discrepancy, heldout
     fm = best.fit.model(nominal)
-    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(nominal, obs, cov, sigma, fm, folds, theta0, rng, sim_reps)
+    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(problem, fm, rng, sim_reps)
     discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
     discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
     discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))

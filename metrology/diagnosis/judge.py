@@ -139,7 +139,7 @@ class Judge:
             b, s = self.b, chosen[j]
             # the step that chose it (``chosen`` can leave a per-pose cause of an earlier step out)
             k = next((i for i, st in enumerate(self.steps) if st.chosen is not None and st.chosen.label == s.label), j)
-            d = describe_named(f, self.ds.layout, self.ds.obs, b.cov, b.sigma, self.rng, which=j, theta_ref=b.theta0)
+            d = describe_named(f, self.problem, self.rng, which=j, theta_ref=b.theta0)
             size = with_model_spread(size_of(f, j, b.cov, b.d0), s, self.steps[k].scored, b.cov, b.d0)
             d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                       "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
