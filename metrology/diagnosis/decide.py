@@ -25,11 +25,11 @@ from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, fit_any, geometry
-from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.heldout import HeldOut, Problem, kfold
 from metrology.diagnosis.judge import Judgement, judge
 from metrology.diagnosis.memo import clear_all
 from metrology.diagnosis.results import Decision, Diagnosis, PlotData, Reason, Rival
-from metrology.diagnosis.select import Problem, flags_of, forward_select
+from metrology.diagnosis.select import flags_of, forward_select
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests, structure
 from metrology.diagnosis.summary import verdict_summary
 from metrology.diagnosis.thresholds import THRESHOLDS

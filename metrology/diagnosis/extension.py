@@ -10,8 +10,7 @@ import numpy as np
 from metrology.core.effects import ExtendedModel
 from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, fit, fit_any
-from metrology.diagnosis.heldout import kfold
-from metrology.diagnosis.select import Problem
+from metrology.diagnosis.heldout import Problem, kfold
 
 __all__ = ["describe_named", "size_of", "simulated_figures", "POSE_FLOOR_REPS"]
 

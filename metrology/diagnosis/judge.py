@@ -25,7 +25,8 @@ from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, fit_any, residual_battery
 from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
-from metrology.diagnosis.select import Problem, drop_one_gains, family_of, needed, p_better, weakly_supported
+from metrology.diagnosis.heldout import Problem
+from metrology.diagnosis.select import drop_one_gains, family_of, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests
 from metrology.diagnosis.thresholds import ADVICE
 

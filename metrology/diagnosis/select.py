@@ -37,13 +37,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from typing import TYPE_CHECKING
-
-from metrology.calibration.dataset import Dataset
 from metrology.core.effects import REGISTRY, Outliers
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
-from metrology.diagnosis.fit import Fit, fit_any
-from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
+from metrology.diagnosis.fit import Fit
+from metrology.diagnosis.heldout import Problem, beyond_span
 from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
                                          score_step)
 from metrology.diagnosis.results import Decision, Reason
@@ -51,36 +48,8 @@ from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
 
-if TYPE_CHECKING:  # decide imports this module
-    from metrology.diagnosis.decide import BaseAnalysis
+__all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 
-__all__ = ["Problem", "Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
-
-
-
-@dataclass(frozen=True)
-class Problem:
-    """The problem the selection and the verdict refit, held once (as lmfit's ``Minimizer`` holds
-    its function and arguments): ``ds`` the Dataset, ``b`` the BaseAnalysis (the base model:
-    its covariates, noise and calibration), ``folds`` the k of the k-fold by pose."""
-
-    ds: Dataset
-    b: BaseAnalysis
-    folds: int
-
-    def fit(self, components, theta0, solver: str = "gn") -> Fit:
-        """The base model plus ``components`` fitted from ``theta0`` (:func:`fit_any`)."""
-        ds, b = self.ds, self.b
-        return fit_any(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), theta0, solver)
-
-    def heldout(self, components, theta0) -> HeldOut:
-        """Its k-fold-by-pose held-out figures (:func:`kfold`)."""
-        ds, b = self.ds, self.b
-        return kfold(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), self.folds, theta0)
-
-    def refit(self, components, theta0) -> tuple:
-        """``(fit, held-out figures)`` of the base model plus ``components`` from ``theta0``."""
-        return self.fit(components, theta0), self.heldout(components, theta0)
 
 
 @dataclass(frozen=True)
