@@ -263,8 +263,9 @@ class Judge:
             if x["better"] is not None:
                 kept.remove(j)
                 rivals.append(Rival(x["better"], "crosstalk", label, True, x["p"], separate))
+                # the level split over the other sensors, as crosstalk_check tests it
                 why.append(Reason(12, "crosstalk_better", Decision.CROSSTALK_BETTER, (label, x["better"]), "p_better",
-                                  x["p"], rules.ALPHA_HELDOUT, step=k, outcome=x["better"]))
+                                  x["p"], rules.ALPHA_HELDOUT / (self.n - 1), step=k, outcome=x["better"]))
             else:
                 rivals += [Rival(lab, "crosstalk", label, False, None, separate) for lab in x["indistinguishable"]]
                 if x["indistinguishable"]:
