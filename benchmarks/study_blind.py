@@ -209,6 +209,9 @@ def run_case(job) -> dict:
                      for c in res.get("causes") or []],
         # the datum check: the cloud's form against the readings' (p, and whether it says "disagrees")
         "datum": _datum_check(res),
+        # the verdict's trail (rule numbers, in order) and the summary made from it
+        "rules": [r["rule"] for r in res.get("reasons") or []],
+        "summary": res.get("summary"),
     }
 
 

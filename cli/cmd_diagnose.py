@@ -30,12 +30,15 @@ def register(app: typer.Typer) -> None:
         quaternion_order: str = typer.Option("wxyz", "--quaternion-order", help=QUATERNION_HELP),
         position_units: str = typer.Option("mm", "--position-units", help=POSITION_HELP),
         no_reading: float = typer.Option(None, "--no-reading", help=NO_READING_HELP),
+        explain: bool = typer.Option(False, "--explain", help="Print the verdict and the rules that made it, in the "
+                                     "order they fired (rule number and name, statistic, level, candidates), instead "
+                                     "of the full report (the --json output carries them as 'reasons')."),
         fail_on_cause: bool = typer.Option(False, "--fail-on-cause", help="Exit 1 when a cause is named (or the "
                                            "residuals stay unexplained), not only when the normal is out of tolerance."),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
         from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report
-        from metrology.report.diagnose import report_text
+        from metrology.report.diagnose import explain_text, report_text
         from metrology.report.verdicts import diagnosis_verdict, verdict_text
 
         if folds < 2:
@@ -48,7 +51,7 @@ def register(app: typer.Typer) -> None:
                                folds=folds, seed=seed, progress=progress)
             verdict = diagnosis_verdict(d, fail_on_cause=fail_on_cause)
             text = dumps(with_verdict(d.to_dict(), verdict), "diagnosis") if json_out else \
-                report_text(d) + "\n" + verdict_text(verdict)
+                (explain_text(d) if explain else report_text(d)) + "\n" + verdict_text(verdict)
             html = report is not None and str(report).lower().endswith((".html", ".htm"))
             if report is not None:  # inside: a report reads the inputs' checksums
                 progress(0, 1, "writing the report")

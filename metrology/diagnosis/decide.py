@@ -25,16 +25,16 @@ from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, fit_any, geometry
-from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.judge import Verdict, verdict
+from metrology.diagnosis.heldout import HeldOut, Problem, kfold
+from metrology.diagnosis.judge import Judgement, judge
 from metrology.diagnosis.memo import clear_all
-from metrology.diagnosis.results import Diagnosis, PlotData, Rival
+from metrology.diagnosis.results import Decision, Diagnosis, PlotData, Reason, Rival
 from metrology.diagnosis.select import flags_of, forward_select
 from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests, structure
-from metrology.diagnosis.summary import DATUM_DISAGREES, verdict_summary
+from metrology.diagnosis.summary import verdict_summary
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Verdict", "Rival", "diagnose", "base_analysis", "verdict",
+__all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Judgement", "Rival", "diagnose", "base_analysis", "judge",
            "side_by_side", "check_datum"]
 
 
@@ -86,13 +86,13 @@ def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
-def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds, sim_reps, rng):
+def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng):
     """The simulation of this data set under the base (and the extended) model beside the
     measurement, and the held-out gains. Returns (discrepancy dict, heldout dict)."""
-    nominal, obs, sigma, cov, theta0, ho_base = ds.layout, ds.obs, b.sigma, b.cov, b.theta0, b.heldout
+    ds, b, folds = problem.ds, problem.b, problem.folds
+    nominal, sigma, ho_base = ds.layout, b.sigma, b.heldout
     base_model = ExtendedModel(b.calibrated, ())
-    sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(nominal, obs, cov, sigma, base_model, folds, theta0, rng,
-                                                         sim_reps)
+    sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(problem, base_model, rng, sim_reps)
     meas_rms = np.sqrt(np.nanmean(b.fit.residual**2, axis=0))
     discrepancy = {
         "sensors": list(nominal.names),
@@ -109,7 +109,7 @@ def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds
     if best is None:
         return discrepancy, heldout
     fm = best.fit.model(nominal)
-    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(nominal, obs, cov, sigma, fm, folds, theta0, rng, sim_reps)
+    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(problem, fm, rng, sim_reps)
     discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
     discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
     discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
@@ -130,9 +130,10 @@ def side_by_side(ds, b: BaseAnalysis, best: CandidateResult | None, flags, folds
     return discrepancy, heldout
 
 
-def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, summary):
+def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
     """The readings' own form against the datum cloud's. Returns (datum check with
-    ``against_readings``, confidence, summary), lowered and extended when they disagree."""
+    ``against_readings``, the judgement ``v`` with its confidence lowered and its trail extended
+    where they disagree, rule 17)."""
     # plane_form fitted together with the named causes (a pose error, say, correlates the
     # sensors of a pose; a form fitted without it would carry standard errors too small for
     # the comparison)
@@ -158,13 +159,15 @@ def check_datum(ds, b: BaseAnalysis, v: Verdict, chosen, scored, confidence, sum
         p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
         ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": rules.datum_agrees(p_g),
                    "fitted_with": [c.label for c in v.best.fit.components]})
-    confidence = rules.confidence_given_datum(confidence, v.cause, ag["agree"])
     if not ag["agree"]:
-        summary += DATUM_DISAGREES.format(p=ag["p"])
-    return replace(b.datum, against_readings=ag), confidence, summary
+        confidence = rules.confidence_given_datum(v.confidence, v.cause, ag["agree"])
+        v = replace(v, confidence=confidence, reasons=v.reasons + (
+            Reason(17, "datum_agrees", Decision.DATUM_DISAGREES, tuple(ag["fitted_with"]), "p_form", ag["p"],
+                   rules.ALPHA_FORM, outcome=confidence),))
+    return replace(b.datum, against_readings=ag), v
 
 
-def _steps_table(b: BaseAnalysis, steps, v: Verdict) -> list:
+def _steps_table(b: BaseAnalysis, steps, v: Judgement) -> list:
     """The residuals after each step: per sensor in-sample RMS and held-out RMS (mm), and
     whether the cause it added is named in the verdict ``v`` (a step's cause can be turned down
     after the selection: not needed given the others, crosstalk, its sensors not explained)."""
@@ -203,7 +206,8 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
         progress, 1, 5, f"selection step {k}: candidate {i + 1}/{n} ({label})"))
     chosen = [st.chosen for st in steps if st.chosen is not None]
     notify(progress, 2, 5, "verdict and the causes' gains")
-    v = verdict(ds, b, steps, folds, rng)
+    problem = Problem(ds, b, folds)
+    v = judge(problem, steps, rng)
     if v.dropped is not None:  # nothing named: the sole cause chosen is not in the model
         chosen = []
     rand = v.random_pose  # a random pose error predicts no reading: not in the model
@@ -212,14 +216,13 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
         replace(v.best, heldout=b.heldout) if rand else None)
     named_flags = flags_of(chosen)
     notify(progress, 3, 5, "side-by-side simulation")
-    discrepancy, heldout = side_by_side(ds, b, joint, named_flags, folds, sim_reps, rng)
-    confidence = v.confidence
-    summary = verdict_summary(v, b.tests)
+    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng)
     scored = steps[0].scored
     datum = b.datum
     if datum is not None:
         notify(progress, 4, 5, "datum check")
-        datum, confidence, summary = check_datum(ds, b, v, chosen, scored, confidence, summary)
+        datum, v = check_datum(ds, b, v, chosen, scored)
+    summary = verdict_summary(v, b.tests)
     notify(progress, 5, 5, "done")
     gross = np.zeros(ds.obs.d.shape, bool) if named_flags is None else named_flags  # left out of the held-out RMS
 
@@ -228,7 +231,10 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
-                     b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
-                     dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps, v)),
-                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
+    return Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
+                     candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
+                     structure_base=b.structure, discrepancy=discrepancy, heldout=heldout, confounding=v.confounding,
+                     base_theta=b.fit.theta, base_stderr=b.fit.theta_stderr, thresholds=dict(THRESHOLDS),
+                     datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
+                     detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
+                     reasons=v.reasons)

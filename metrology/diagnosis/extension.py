@@ -10,7 +10,7 @@ import numpy as np
 from metrology.core.effects import ExtendedModel
 from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, fit, fit_any
-from metrology.diagnosis.heldout import kfold
+from metrology.diagnosis.heldout import Problem, kfold
 
 __all__ = ["describe_named", "size_of", "simulated_figures", "POSE_FLOOR_REPS"]
 
@@ -36,11 +36,13 @@ def size_of(f: Fit, which: int, cov, d0) -> dict | None:
     return comp.size(f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params], d0, cov)
 
 
-def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_ref=None):
-    """The public description of component ``which`` of ``f`` (default its first): parameters
-    with standard errors and their largest correlations with the base parameters; for a pose
-    error the noise-corrected sigma (parametric bootstrap, ``rng``; for a rigid one, of the fit
-    that holds the geometry at ``theta_ref``), for outliers the flagged readings."""
+def describe_named(f: Fit, problem: Problem, rng, which: int = 0, theta_ref=None):
+    """The public description of component ``which`` of ``f`` (default its first), a fit of
+    ``problem``: parameters with standard errors and their largest correlations with the base
+    parameters; for a pose error the noise-corrected sigma (parametric bootstrap, ``rng``; for a
+    rigid one, of the fit that holds the geometry at ``theta_ref``), for outliers the flagged
+    readings."""
+    nominal, obs, cov, sigma = problem.ds.layout, problem.ds.obs, problem.b.cov, problem.b.sigma
     comp = f.components[which]
     d = comp.describe()
     if comp.per_pose:
@@ -95,10 +97,12 @@ def describe_named(f: Fit, nominal, obs, cov, sigma, rng, which: int = 0, theta_
     return d
 
 
-def simulated_figures(nominal, obs, cov, sigma, model: ExtendedModel, k, theta0, rng, reps, per_pose_sigma=None):
-    """Simulation of this data set under ``model`` plus the stated noise, analysed with the
-    base model: in-sample residual RMS per sensor (n,) mm and held-out normal deviation mean
-    (rad), averaged over ``reps`` draws."""
+def simulated_figures(problem: Problem, model: ExtendedModel, rng, reps):
+    """Simulation of ``problem``'s data set under ``model`` plus the stated noise, analysed with
+    the base model from its calibration: in-sample residual RMS per sensor (n,) mm and held-out
+    normal deviation mean (rad; ``problem.folds``-fold), averaged over ``reps`` draws."""
+    nominal, obs, cov, sigma = problem.ds.layout, problem.ds.obs, problem.b.cov, problem.b.sigma
+    k, theta0 = problem.folds, problem.b.theta0
     d_model = model.predict(obs.normal, obs.offset, cov)
     rms, ndev = [], []
     for _ in range(reps):

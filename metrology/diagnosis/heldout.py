@@ -8,12 +8,13 @@ import numpy as np
 
 from metrology.core.effects import Outliers
 from metrology.core.model import readings
+from metrology.calibration.dataset import Dataset
 from metrology.calibration.engine import LeastSquares
 from metrology.diagnosis.fit import Fit, _fit_result, fit_any, geometry, with_base
 from metrology.diagnosis.foldfit import FoldBatch
 from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
-__all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span"]
+__all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span", "Problem"]
 
 
 def folds(p, k):
@@ -200,3 +201,27 @@ def _training_sets(obs, cov, k):
         _TRAINING[key] = freeze(sets)
     return _TRAINING[key]
 
+
+@dataclass(frozen=True)
+class Problem:
+    """The problem the selection and the verdict refit, held once (as lmfit's ``Minimizer`` holds
+    its function and arguments): ``ds`` the Dataset, ``b`` the BaseAnalysis (the base model:
+    its covariates, noise and calibration), ``folds`` the k of the k-fold by pose."""
+
+    ds: Dataset
+    b: "BaseAnalysis"  # metrology.diagnosis.decide's (which imports this module)
+    folds: int
+
+    def fit(self, components, theta0, solver: str = "gn") -> Fit:
+        """The base model plus ``components`` fitted from ``theta0`` (:func:`~metrology.diagnosis.fit.fit_any`)."""
+        ds, b = self.ds, self.b
+        return fit_any(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), theta0, solver)
+
+    def heldout(self, components, theta0) -> HeldOut:
+        """Its k-fold-by-pose held-out figures (:func:`kfold`)."""
+        ds, b = self.ds, self.b
+        return kfold(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), self.folds, theta0)
+
+    def refit(self, components, theta0) -> tuple:
+        """``(fit, held-out figures)`` of the base model plus ``components`` from ``theta0``."""
+        return self.fit(components, theta0), self.heldout(components, theta0)

@@ -352,19 +352,19 @@ def detectable_rms(ds, b, alpha, power=0.95, splits=5) -> float:
 TEST_TEXT = "within-pose covariance of the residuals against the stated noise"
 
 
-def random_pose_stage(ds, b, steps, rng: np.random.Generator, joint=None):
+def random_pose_stage(ds, b, steps, rng: np.random.Generator, joint):
     """``(RandomPoseError, the joint fit of the selected causes but a pose error)`` when the random
     pose error is significant at ``alpha_candidates`` split over the first step's candidates and
     itself; else None. With 4 sensors the rigid member is fitted pose by pose first; this is the
     fall-back where it was not named (its held-out prediction, from 3 other spots a few mm apart,
     is weak).
-    ``joint(chosen)``: the joint fit of causes (default :func:`~metrology.diagnosis.select.joint_fit`)."""
+    ``joint(chosen)``: the joint fit of causes (:meth:`metrology.diagnosis.judge.Judge.joint_fit`)."""
     from metrology.diagnosis import rules
-    from metrology.diagnosis.select import flags_of, joint_fit
+    from metrology.diagnosis.select import flags_of
 
     scored = steps[0].scored
     chosen = [s.chosen for s in steps if s.chosen is not None and not s.chosen.component.per_pose]
-    f = (joint(chosen) if joint is not None else joint_fit(ds, b, chosen)) if chosen else b.fit
+    f = joint(chosen) if chosen else b.fit
     r = random_pose_error(ds, b, f.residual, rng, f.components, flags_of(chosen))
     if not rules.random_pose_significant(r.p, len(scored)):
         return None

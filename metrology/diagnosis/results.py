@@ -12,7 +12,7 @@ from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["Outcome", "Confidence", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
+__all__ = ["Outcome", "Confidence", "Decision", "Reason", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
 
 
 class Outcome(StrEnum):
@@ -32,6 +32,66 @@ class Confidence(StrEnum):
     AMBIGUOUS = "ambiguous"
     PARTIAL = "partial"
     LOW = "low"
+
+
+class Decision(StrEnum):
+    """What a rule of :mod:`metrology.diagnosis.rules` decided when it fired (a :class:`Reason`)."""
+
+    CHOSEN = "chosen"  # 2-3: a step took the significant candidate with the largest held-out gain
+    MEMBER = "member"  # 3, 5: another member of the family was taken (better held out, or explains its sensors)
+    IMITATION = "imitation"  # 4: a per-pose cause set aside for a fixed one that predicts as well
+    NOTHING_SIGNIFICANT = "nothing significant"  # 2: no candidate passes both tests: the selection stops
+    LEAD = "lead"  # 2: a candidate fits in sample only
+    MAX_CAUSES = "max causes"  # 7: the selection stops at MAX_CAUSES
+    FIXED_SELECTION = "fixed selection"  # 8: the selection without per-pose causes is taken
+    PER_POSE_SELECTION = "per-pose selection"  # 8: the per-pose selection predicts significantly better: kept
+    NEEDED = "needed"  # 10: held-out gain given the others significant (or exempt)
+    NOT_NEEDED = "not needed"  # 10: not significant: not named
+    DROPPED = "dropped"  # 10: the sole cause chosen is not needed against the base model: nothing named
+    EXPLAINS = "explains its sensors"  # 11: the joint model leaves its sensors' residuals noise
+    NOT_EXPLAINED = "does not explain its sensors"  # 11: not named
+    CROSSTALK_BETTER = "crosstalk better"  # 12: another sensor's distance predicts better: not named
+    CROSSTALK_TIE = "crosstalk tie"  # 12: crosstalk predicts as well: named, its rival said
+    RANDOM_POSE = "random pose error"  # 13: a random pose error explains the structure left
+    WEAK = "weak evidence"  # 14: named, held-out p not below ALPHA_HIGH
+    CONFOUNDED = "confounded"  # 15: a runner-up or a base parameter the data cannot separate
+    CONFIDENCE = "confidence"  # 16: the verdict's confidence
+    DATUM_DISAGREES = "datum disagrees"  # 17: the datum cloud's form disagrees with the readings'
+
+
+@dataclass(frozen=True)
+class Reason:
+    """One rule that fired, recorded where the engine decided (the verdict's trail, in order).
+
+    rule : int, its number in :mod:`metrology.diagnosis.rules`; name : str, the rule's function
+    there; decided : Decision; concerns : tuple of str, the candidates' labels it concerned (the
+    first the one decided on); statistic : str, what was held against the threshold; value :
+    float or None, its value; threshold : float or None, the level (the rule's constant, split
+    where the rule splits it); gain : float or None, the held-out chi-square gain weighed;
+    step : int or None, the selection step (from 1); outcome : str or None, what it gave (a
+    confidence, a rival's label).
+    """
+
+    rule: int
+    name: str
+    decided: Decision
+    concerns: tuple = ()
+    statistic: str = ""
+    value: float | None = None
+    threshold: float | None = None
+    gain: float | None = None
+    step: int | None = None
+    outcome: str | None = None
+
+    def to_dict(self) -> dict:
+        return {"rule": self.rule, "name": self.name, "decided": str(self.decided), "concerns": list(self.concerns),
+                "statistic": self.statistic, "value": _num(self.value), "threshold": _num(self.threshold),
+                "gain": _num(self.gain), "step": self.step,
+                "outcome": None if self.outcome is None else str(self.outcome)}
+
+
+def _num(x):
+    return None if x is None else float(x)
 
 
 @dataclass(frozen=True)
@@ -180,7 +240,8 @@ class Diagnosis:
     ``tests_extended`` the noise-model battery before and after the extension;
     ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
     ``detectable`` the size of each family these poses detect at 95 % power
-    (:mod:`metrology.diagnosis.detectable`).
+    (:mod:`metrology.diagnosis.detectable`); ``reasons`` the rules that made the verdict, in the
+    order they fired (:class:`Reason`; the summary is made from them).
     """
 
     cause: str
@@ -203,6 +264,7 @@ class Diagnosis:
     causes: tuple = ()
     steps: tuple = ()
     detectable: dict = field(default_factory=dict)
+    reasons: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -226,4 +288,5 @@ class Diagnosis:
             "thresholds": self.thresholds,
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
             "detectable": self.detectable,
+            "reasons": [r.to_dict() for r in self.reasons],
         }

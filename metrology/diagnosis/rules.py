@@ -16,6 +16,8 @@ crosstalk (12), the random pose error (13), confidence (14-16), the datum cloud 
 
 from __future__ import annotations
 
+from metrology.diagnosis.results import Confidence, Outcome
+
 __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "ALPHA_ORDER", "ALPHA_BATTERY",
            "ALPHA_CONFOUND", "CORR_CONFOUND", "ALPHA_HIGH", "ALPHA_FORM", "LR_ONE_SENSOR", "MAX_CAUSES", "PRUNE_P",
            "MIN_POSES_COMPARED", "gross_level", "fits_in_sample", "significant", "in_sample_only", "better_held_out",
@@ -140,10 +142,10 @@ def crosstalk_as_good(p_worse: float) -> bool:
 LR_ONE_SENSOR = 3.84
 
 
-def random_pose_tried(cause: str, confidence: str) -> bool:
+def random_pose_tried(cause: str, confidence: Confidence) -> bool:
     """13. A random pose error is looked for only where the verdict is ``unexplained`` or ``partial``
     (structure left that no fixed cause took; with 3 sensors no rigid pose error can be fitted)."""
-    return cause != "none" and confidence not in ("high", "moderate", "ambiguous")
+    return cause != Outcome.NONE and confidence not in (Confidence.HIGH, Confidence.MODERATE, Confidence.AMBIGUOUS)
 
 
 def random_pose_significant(p: float, n_cand: int) -> bool:
@@ -180,18 +182,18 @@ def poorly_separated(correlation: float) -> bool:
     return correlation > CORR_CONFOUND
 
 
-def confidence_of_nothing(consistent: bool, has_lead: bool) -> str:
+def confidence_of_nothing(consistent: bool, has_lead: bool) -> Confidence:
     """16. Nothing named: ``moderate`` where the residuals are noise and nothing fits even in sample
     (no effect above the detectable sizes; smaller ones are not ruled out), else ``low``."""
-    return "moderate" if consistent and not has_lead else "low"
+    return Confidence.MODERATE if consistent and not has_lead else Confidence.LOW
 
 
-def confidence_of(consistent: bool, weak: bool, confounded: bool) -> str:
+def confidence_of(consistent: bool, weak: bool, confounded: bool) -> Confidence:
     """16. ``partial`` where structure remains, else ``moderate`` on weak evidence, else ``high``; either
     becomes ``ambiguous`` where something the data cannot separate is said."""
     if not consistent:
-        return "partial"
-    return "ambiguous" if confounded else ("moderate" if weak else "high")
+        return Confidence.PARTIAL
+    return Confidence.AMBIGUOUS if confounded else (Confidence.MODERATE if weak else Confidence.HIGH)
 
 
 # -- 17. the datum cloud ---------------------------------------------------------------------------------
@@ -204,10 +206,10 @@ def datum_agrees(p: float) -> bool:
     return p >= ALPHA_FORM
 
 
-def confidence_given_datum(confidence: str, cause: str, agrees: bool) -> str:
+def confidence_given_datum(confidence: Confidence, cause: str, agrees: bool) -> Confidence:
     """17. ``low`` where the datum cloud disagrees and the verdict rests on the datum (nothing named, or
     its form named): the inputs contradict each other there; a cause of the head keeps its confidence."""
-    return "low" if not agrees and cause in ("none", "plane_form") else confidence
+    return Confidence.LOW if not agrees and cause in (Outcome.NONE, "plane_form") else Confidence(confidence)
 
 
 #: the levels (the ``thresholds`` of the ``--json`` output; the keys and their order are its schema)

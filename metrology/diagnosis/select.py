@@ -39,10 +39,11 @@ import numpy as np
 
 from metrology.core.effects import REGISTRY, Outliers
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
-from metrology.diagnosis.fit import Fit, fit_any
-from metrology.diagnosis.heldout import beyond_span, kfold
+from metrology.diagnosis.fit import Fit
+from metrology.diagnosis.heldout import Problem, beyond_span
 from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
                                          score_step)
+from metrology.diagnosis.results import Decision, Reason
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
@@ -59,11 +60,13 @@ class Step:
     scored : tuple of CandidateResult, every candidate scored at this step (given the causes
         before it), largest held-out gain first
     lead : CandidateResult or None, the strongest candidate significant in sample only
+    reasons : tuple of Reason, the rules that fired at this step, in order
     """
 
     chosen: CandidateResult | None
     scored: tuple
     lead: CandidateResult | None
+    reasons: tuple = ()
 
 
 def _lead(scored, n_cand):
@@ -71,19 +74,21 @@ def _lead(scored, n_cand):
     return in_only[0] if in_only else None
 
 
-def _parsimonious(sig):
+def _parsimonious(sig, why: list):
     """The candidate a step takes among the significant ones ``sig`` (largest held-out gain
     first): the first, unless it is a per-pose cause and the best cause that is not per-pose
     predicts held-out poses as well (the per-pose one not significantly better, ``alpha_order``).
     An offset and two tilts a pose, as many values as readings nearly, follow any effect that
     is smooth over the few millimetres between a pose's spots: a datum form, seen by four
     spots, is locally an offset and two tilts. A fixed cause that explains as much held out
-    is the explanation, the per-pose one its imitation."""
+    is the explanation, the per-pose one its imitation (a :class:`Reason` appended to ``why``)."""
     first = sig[0]
     if not first.component.per_pose:
         return first
     fixed = next((s for s in sig if not s.component.per_pose), None)
-    if fixed is not None and rules.per_pose_imitates(p_better(first, fixed)):
+    if fixed is not None and rules.per_pose_imitates(p := p_better(first, fixed)):
+        why.append(Reason(4, "per_pose_imitates", Decision.IMITATION, (first.label, fixed.label), "p_per_pose_better",
+                          p, rules.ALPHA_ORDER, outcome=fixed.label))
         return fixed
     return first
 
@@ -100,12 +105,14 @@ def forward_select(ds, b, flags, p_out, folds, on_candidate=None) -> tuple:
     model, reused), and that selection is taken when the per-pose one does not predict held-out
     poses significantly better (:func:`_fixed_explains`).
     """
-    sel = Selection(ds, b, flags, p_out, folds, on_candidate=on_candidate)
+    sel = Selection(Problem(ds, b, folds), flags, p_out, on_candidate=on_candidate)
     steps = sel.run()
     if not any(st.chosen is not None and st.chosen.component.per_pose for st in steps):
         return steps
     alt = sel.without_per_pose().run(first=steps[0].scored)
-    return alt if _fixed_explains(b, steps, alt, flags) else steps
+    why = []
+    out = alt if _fixed_explains(b, steps, alt, flags, why) else steps
+    return out[:-1] + (replace(out[-1], reasons=out[-1].reasons + tuple(why)),)
 
 
 class Selection:
@@ -125,22 +132,25 @@ class Selection:
     against the same model).
     """
 
-    def __init__(self, ds, b, flags, p_out, folds, on_candidate=None):
+    def __init__(self, problem: Problem, flags, p_out, on_candidate=None):
+        ds, b, folds = problem.ds, problem.b, problem.folds
         pool = candidates_for(ds.layout, b.cov, flags)
-        self.ds, self.b, self.folds, self.per_pose, self.on_candidate = ds, b, folds, True, on_candidate
+        self.problem, self.per_pose, self.on_candidate = problem, True, on_candidate
+        self.ds, self.b, self.folds = ds, b, folds
         self.members = [c for c in pool if not isinstance(c, Outliers)]
         self.scoring = self.start = Scoring(ds, b, flags, p_out, folds, len(pool))
         self.pool = pool
         self.remaining, self.seen = list(self.pool), None
         self.given, self.fit, self.heldout = (), b.fit, b.heldout
         self.chosen, self.ranked, self.lead = [], [], None
+        self.why = []  # per step, the rules that fired (Reason)
         self.scores = {}
 
     def without_per_pose(self) -> "Selection":
         """A selection from the same start that neither scores nor chooses per-pose causes (the
         per-pose candidates' count still splits the in-sample level), sharing this one's scores."""
         st = self.start
-        alt = Selection(self.ds, self.b, st.flags, st.p_out, self.folds, self.on_candidate)
+        alt = Selection(self.problem, st.flags, st.p_out, self.on_candidate)
         alt.per_pose, alt.scores = False, self.scores
         alt.pool = [c for c in alt.pool if not c.per_pose]
         alt.remaining = list(alt.pool)
@@ -154,9 +164,9 @@ class Selection:
     @property
     def steps(self) -> tuple:
         """The selection so far as immutable :class:`Step`s."""
-        out = [Step(c, r, None) for c, r in zip(self.chosen, self.ranked)]
+        out = [Step(c, r, None, tuple(w)) for c, r, w in zip(self.chosen, self.ranked, self.why)]
         if len(self.ranked) > len(self.chosen):
-            out.append(Step(None, self.ranked[-1], self.lead))
+            out.append(Step(None, self.ranked[-1], self.lead, tuple(self.why[-1])))
         return tuple(out)
 
     def run(self, first=None) -> tuple:
@@ -164,7 +174,11 @@ class Selection:
         to score; ``first``: the first step's scored candidates, reused."""
         while True:
             scored = list(first) if first is not None and not self.ranked else self.score(self.pool)
-            if not self.take(scored) or not rules.room_for_another(len(self.given)) or not self.pool:
+            if not self.take(scored) or not self.pool:
+                return self.steps
+            if not rules.room_for_another(len(self.given)):
+                self.why[-1].append(Reason(7, "room_for_another", Decision.MAX_CAUSES, tuple(s.label for s in self.chosen),
+                                           "causes chosen", len(self.given), rules.MAX_CAUSES, step=len(self.ranked)))
                 return self.steps
 
     def score(self, pool, ref: Reference | None = None) -> list:
@@ -184,14 +198,31 @@ class Selection:
         """Rank a step's scored candidates and add the member chosen, if one is significant."""
         ranked = tuple(sorted(scored, key=lambda s: -s.heldout_chi2_reduction))
         self.ranked.append(ranked)
+        why, k = [], len(self.ranked)
+        self.why.append(why)
         sig = [s for s in ranked if s.significant and (self.per_pose or not s.component.per_pose)]
         if not sig:
-            self.lead = _lead(scored, self.scoring.n_cand)
+            self.lead = lead = _lead(scored, self.scoring.n_cand)
+            why.append(Reason(2, "significant", Decision.NOTHING_SIGNIFICANT, (), "candidates significant", 0,
+                              rules.ALPHA_HELDOUT, step=k))
+            if lead is not None:
+                why.append(Reason(2, "in_sample_only", Decision.LEAD, (lead.label,), "p_heldout", lead.p_heldout,
+                                  rules.ALPHA_HELDOUT, lead.heldout_chi2_reduction, k))
             return False
         ref = self.reference
-        chosen = refine_order(_parsimonious(sig), scored)
+        first = _parsimonious(sig, why)
+        chosen = refine_order(first, scored)
         chosen, ladder = richer_spline(self.scoring, ref, chosen)
-        self.add(adequate_member(self.scoring, ref, chosen, scored, ladder), ranked)
+        chosen = adequate_member(self.scoring, ref, chosen, scored, ladder)
+        # the step's choice first (the member taken, its held-out test), then what set the member
+        why.insert(0, Reason(2, "significant", Decision.CHOSEN, (chosen.label,), "p_heldout", chosen.p_heldout,
+                             rules.ALPHA_HELDOUT, chosen.heldout_chi2_reduction, k))
+        if chosen.label != first.label:
+            p = p_better(chosen, first)
+            rule, name = (3, "better_held_out") if rules.better_held_out(p) else (5, "explains_sensors")
+            why.append(Reason(rule, name, Decision.MEMBER, (chosen.label, first.label), "p_better", p,
+                              rules.ALPHA_ORDER, chosen.heldout_chi2_reduction, k, chosen.label))
+        self.add(chosen, ranked)
         return True
 
     def add(self, chosen, ranked):
@@ -237,8 +268,7 @@ class Selection:
                       values=None, stderr=None)
         self.given = self.given[:k] + (out,) + self.given[k + 1:]
         th0 = self.fit.theta if rigid else b.theta0  # a held geometry is held where the joint model is
-        self.fit = fit_any(ds.layout, ds.obs, b.cov, b.sigma, self.given, th0)
-        self.heldout = kfold(ds.layout, ds.obs, b.cov, b.sigma, self.given, self.folds, th0)
+        self.fit, self.heldout = self.problem.refit(self.given, th0)
         self.chosen[k] = replace(self.chosen[k], component=out, label=out.label,
                                  sensors=[ds.layout.names[i] for i in out.sensors])
         self.chosen[-1] = replace(self.chosen[-1], fit=self.fit, heldout=self.heldout)
@@ -252,8 +282,7 @@ class Selection:
         members are scored again given every other chosen cause (the same tests, the rule of
         :func:`refine_order` from the member held, then :func:`adequate_member` given the others).
         Where one changes, its step and the joint model are refitted."""
-        ds, b, folds = self.ds, self.b, self.folds
-        nominal, obs = ds.layout, ds.obs
+        b, pr = self.b, self.problem
         changed = False
         for j, g in enumerate(self.given[:-1]):
             mates = [c for c in self.members if family_of(c) == family_of(g)]
@@ -261,8 +290,7 @@ class Selection:
                 continue
             others = self.given[:j] + self.given[j + 1:]
             th0 = self.chosen[-1].fit.theta
-            ref = Reference(others, fit_any(nominal, obs, b.cov, b.sigma, others, th0),
-                            kfold(nominal, obs, b.cov, b.sigma, others, folds, th0))
+            ref = Reference(others, *pr.refit(others, th0))
             scored = self.score(mates, ref)
             held = next((s for s in scored if s.label == g.label), None)
             if held is None or not held.significant:
@@ -275,20 +303,18 @@ class Selection:
                 continue
             self.given = self.given[:j] + (new.component,) + self.given[j + 1:]
             th_j = b.theta0 if j == 0 else self.chosen[j - 1].fit.theta
-            self.chosen[j] = replace(new, fit=fit_any(nominal, obs, b.cov, b.sigma, self.given[:j + 1], th_j),
-                                     heldout=kfold(nominal, obs, b.cov, b.sigma, self.given[:j + 1], folds, th_j))
+            fit_j, heldout_j = pr.refit(self.given[:j + 1], th_j)
+            self.chosen[j] = replace(new, fit=fit_j, heldout=heldout_j)
             changed = True
         last = self.chosen[-1]
         if not changed:
             self.fit, self.heldout = last.fit, last.heldout
             return
-        th0 = last.fit.theta
-        self.fit = fit_any(nominal, obs, b.cov, b.sigma, self.given, th0)
-        self.heldout = kfold(nominal, obs, b.cov, b.sigma, self.given, folds, th0)
+        self.fit, self.heldout = pr.refit(self.given, last.fit.theta)
         self.chosen[-1] = replace(last, fit=self.fit, heldout=self.heldout)
 
 
-def _fixed_explains(b, steps, fixed, flags=None) -> bool:
+def _fixed_explains(b, steps, fixed, flags=None, why: list | None = None) -> bool:
     """Whether the causes of ``fixed`` (a selection without per-pose causes) predict held-out
     poses as well as those of ``steps`` (one with a per-pose cause): the latter's joint model
     not significantly better (``alpha_order``, the paired test of :func:`p_better` on every
@@ -303,7 +329,7 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     so where two sensors drift each on its own, the per-pose cause predicts held-out poses
     better than either drift alone and takes the first step; the drifts of both sensors, two
     values, explain it all (the case that motivated the rule is in
-    ``benchmarks/results/diagnose_history.md``)."""
+    ``benchmarks/results/diagnose_history.md``). The rule's :class:`Reason` is appended to ``why``."""
     main = [st.chosen for st in steps if st.chosen is not None]
     alt = [st.chosen for st in fixed if st.chosen is not None]
     if not alt or {s.label for s in alt} <= {s.label for s in main}:
@@ -315,7 +341,12 @@ def _fixed_explains(b, steps, fixed, flags=None) -> bool:
     d = (a.heldout.chi2_pose(b.sigma) - m.heldout.chi2_pose(b.sigma))[keep]
     if len(d) < rules.MIN_POSES_COMPARED:
         return False
-    return rules.fixed_explains_as_well(paired_gain_p(d), len(d))
+    p = paired_gain_p(d)
+    taken = rules.fixed_explains_as_well(p, len(d))
+    (why if why is not None else []).append(Reason(8, "fixed_explains_as_well", Decision.FIXED_SELECTION if taken else Decision.PER_POSE_SELECTION,
+                      (m.label, a.label), "p_per_pose_better", p, rules.ALPHA_ORDER, float(np.sum(d)),
+                      outcome=a.label if taken else m.label))
+    return taken
 
 
 def _seen_after(chosen, scored, seen):
@@ -398,12 +429,12 @@ def flag_given_rigid(f: Fit, cov, sigma, flags):
     return out, p_max
 
 
-def drop_one_gains(ds, b, chosen, folds):
+def drop_one_gains(problem: Problem, chosen):
     """Held-out chi-square gain of each chosen cause given the others: the joint model without
     it against the joint model (per-pose chi-square difference over all sensors, and its
     one-sided p-value on the cause's sensors; a characteristic on the readings inside its sensor's
     training span, as it was selected). Returns a list of (gain, p)."""
-    nominal, obs = ds.layout, ds.obs
+    b, obs, folds = problem.b, problem.ds.obs, problem.folds
     comps = tuple(s.component for s in chosen)
     full, full_theta = chosen[-1].heldout, chosen[-1].fit.theta
     excl = flags_of(chosen)
@@ -415,8 +446,8 @@ def drop_one_gains(ds, b, chosen, folds):
         # fit, :func:`~metrology.diagnosis.members.score_step`), not at the base calibration, which
         # the pose error itself biases (held there, a cause looked needed that was not)
         th = full_theta if any(c.holds_base for c in rest) else b.theta0
-        ho = kfold(nominal, obs, b.cov, b.sigma, rest, folds, th) if rest else b.heldout
-        S = list(s.component.sensors) or list(range(nominal.n))
+        ho = problem.heldout(rest, th) if rest else b.heldout
+        S = list(s.component.sensors) or list(range(problem.ds.layout.n))
         # a characteristic is judged where its fit saw readings, as when it was selected
         # (score_candidate): a held-out reading beyond its sensor's training span tests how the
         # curve extrapolates, and one such pose swamps the paired test
@@ -454,12 +485,3 @@ def flags_of(chosen):
         if isinstance(s.component, Outliers):
             return s.component.flags
     return None
-
-
-def joint_fit(ds, b, chosen) -> Fit:
-    """The chosen causes refitted jointly with the base model (``scipy.optimize.least_squares``),
-    the geometry free (a rigid pose error, scored with the base geometry held, is refitted with
-    it free and the directions of the geometry its per-pose values absorb held: see
-    :func:`metrology.calibration.engine._absorbed_modes`)."""
-    comps = tuple(s.component.for_joint_fit() for s in chosen)
-    return fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")

@@ -153,7 +153,7 @@ def _v(x, unit) -> str:
 
 def certificate_section(cert: Certificate):
     """The certificate as a report :class:`~metrology.report.html.Section` (placed first)."""
-    from metrology.report.html import Section, Table, Verdict
+    from metrology.report.html import Headline, Section, Table
 
     head = [("certificate number", cert.number)]
     head += [(words, value) for key, words, value in cert.header if key != "certificate"]
@@ -179,8 +179,8 @@ def certificate_section(cert: Certificate):
         "direction" + (" (the file's [calibration] covariance)." if cert.tilt_chart == "calibrated" else
                        " (the file has no covariance: its direction_stderr_deg)."),
     )
-    return Section("Calibration certificate", Verdict(None, f"{cert.number}: calibrated layout "
-                                                            f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…"),
+    return Section("Calibration certificate", Headline(None, f"{cert.number}: calibrated layout "
+                                                             f"{cert.file or '(not written)'}, SHA-256 {cert.sha256[:16]}…"),
                    tables=(Table("Certificate", ("field", "value"), tuple(head), wrap=True),
                            Table(f"Calibrated values, standard uncertainty u (1 σ) and expanded uncertainty U "
                                  f"(k = {COVERAGE_K:g})", ("sensor", "parameter", "value", "u", "U", "unit"), rows),

@@ -72,13 +72,49 @@ def discrepancy_lines(disc: dict) -> list:
     return lines
 
 
-def report_text(d: Diagnosis) -> str:
-    """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
+def reason_words(r: dict) -> str:
+    """One entry of the verdict's trail (a ``reasons`` entry of the ``--json`` output) in words:
+    the rule (its number and name in :mod:`metrology.diagnosis.rules`), what it decided on which
+    candidates, the statistic against its level, the held-out gain weighed, what it gave."""
+    head = f"rule {r['rule']:>2} {r['name']}" + (f", step {r['step']}" if r["step"] else "")
+    what = r["decided"] + (f": {', '.join(r['concerns'])}" if r["concerns"] else "")
+    figures = []
+    level = "" if r["threshold"] is None else f"level {r['threshold']:.3g}"
+    if r["value"] is not None:
+        figures.append(f"{r['statistic']} {r['value']:.3g}" + (f" against {level}" if level else ""))
+    elif level:
+        figures.append(level)
+    if r["gain"] is not None:
+        figures.append(f"held-out chi-square gain {r['gain']:.3g}")
+    if r["outcome"]:
+        figures.append(f"gives {r['outcome']}")
+    return f"{head}: {what}" + (f" ({'; '.join(figures)})" if figures else "")
+
+
+def why_lines(D: dict) -> list:
+    """The "why" of a diagnosis: the rules that made its verdict, in the order they fired."""
+    return ["why (the rules that made the verdict, in the order they fired)"] + [
+        f"  {reason_words(r)}" for r in D.get("reasons", ())]
+
+
+def explain_text(d: Diagnosis) -> str:
+    """What ``metro diagnose --explain`` prints: the verdict, its summary and its trail."""
     D = d.to_dict()
+    return "\n".join(_verdict_lines(D) + [""] + why_lines(D))
+
+
+def _verdict_lines(D: dict) -> list:
     lines = [f"cause: {D['cause']}" + (f" ({', '.join(D['sensors'])})" if D["sensors"] else "")
              + f"   confidence: {D['confidence']}", f"  {D['summary']}"]
     if D["cause"] == "unexplained":
         lines += ["  next: " + UNEXPLAINED_NEXT[0]] + ["        " + x for x in UNEXPLAINED_NEXT[1:]]
+    return lines
+
+
+def report_text(d: Diagnosis) -> str:
+    """The text report of ``metro diagnose`` (read from :meth:`Diagnosis.to_dict`)."""
+    D = d.to_dict()
+    lines = _verdict_lines(D) + [""] + why_lines(D)
     lines.append("")
     lines += discrepancy_lines(D["discrepancy"])
     lines.append("")

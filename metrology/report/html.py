@@ -24,7 +24,7 @@ from pathlib import Path
 
 from metrology.io.names import display_name
 
-__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "NARROW_IN", "NARROW_MEDIA", "fit_to_column", "written", "Figure", "Table", "Verdict", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
+__all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "NARROW_IN", "NARROW_MEDIA", "fit_to_column", "written", "Figure", "Table", "Headline", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "expect_ink", "render_html", "write_report", "check_report_path", "command_line",
            "collect",
            "REPORT_SUFFIXES"]
@@ -84,8 +84,9 @@ class Table:
 
 
 @dataclass(frozen=True)
-class Verdict:
-    """The first thing a report says.
+class Headline:
+    """The first thing a report says (drawn from a command's
+    :class:`metrology.core.verdict.Verdict` by :func:`verdict_box`).
 
     ok : True (within tolerance), False (not), None (no tolerance applies: information)
     headline : str, one sentence (the numbers against the tolerance)
@@ -118,20 +119,20 @@ class Verdict:
 WORDS = {True: "passed", False: "FAILED", None: "information"}
 
 
-def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Verdict":
-    """The report's :class:`Verdict` of a :class:`metrology.core.verdict.Verdict`, in the
+def verdict_box(verdict, headline: str, cause: str = "", label: str = "") -> "Headline":
+    """The report's :class:`Headline` of a :class:`metrology.core.verdict.Verdict`, in the
     terminal's words (:func:`metrology.report.verdicts.verdict_word`); one line per check."""
     from metrology.report.verdicts import check_words, verdict_word
 
     ok = {"passed": True, "FAILED": False, "information": None}[verdict_word(verdict)]
-    return Verdict(ok, headline, cause, label, tuple(check_words(c) for c in verdict.checks))
+    return Headline(ok, headline, cause, label, tuple(check_words(c) for c in verdict.checks))
 
 
 @dataclass(frozen=True)
 class Section:
     """What one command found.
 
-    title : str; verdict : Verdict; figures : tuple of Figure; tables : tuple of Table;
+    title : str; verdict : Headline; figures : tuple of Figure; tables : tuple of Table;
     text : tuple of str, preformatted blocks (the command's text output, a fit report);
     limits : tuple of str, what the data could not determine; next_steps : tuple of str,
     what to do next (poses to add, a command to run, a datum to re-measure);
@@ -140,7 +141,7 @@ class Section:
     """
 
     title: str
-    verdict: Verdict
+    verdict: Headline
     figures: tuple = ()
     tables: tuple = ()
     text: tuple = ()

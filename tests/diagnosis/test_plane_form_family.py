@@ -60,13 +60,22 @@ def test_a_per_pose_cause_yields_the_step_only_to_a_fixed_cause_as_good_held_out
     its per-pose held-out chi-square is significantly lower, and yields it when not."""
     from types import SimpleNamespace
 
+    from metrology.diagnosis import rules
     from metrology.diagnosis.select import _parsimonious
 
     rng = np.random.default_rng(3)
     base = rng.chisquare(4, 60)
-    pose = SimpleNamespace(component=SimpleNamespace(per_pose=True), chi2_pose=base)
-    same = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 0.5 * (-1.0) ** np.arange(60))  # no better, no worse
-    worse = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 3.0 + rng.normal(0, 0.5, 60))
-    assert _parsimonious([pose, same]) is same
-    assert _parsimonious([pose, worse]) is pose
-    assert _parsimonious([same, pose]) is same
+    pose = SimpleNamespace(component=SimpleNamespace(per_pose=True), chi2_pose=base, label="pose_error@offset")
+    same = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 0.5 * (-1.0) ** np.arange(60),
+                           label="plane_form@quadratic")  # no better, no worse
+    worse = SimpleNamespace(component=SimpleNamespace(per_pose=False), chi2_pose=base + 3.0 + rng.normal(0, 0.5, 60),
+                            label="drift.L1@temp")
+    why = []
+    assert _parsimonious([pose, same], why) is same
+    # the rule said where it fired: rule 4, the per-pose cause set aside for the fixed one
+    assert [(r.rule, r.name, r.decided, r.concerns, r.outcome) for r in why] == [
+        (4, "per_pose_imitates", "imitation", ("pose_error@offset", "plane_form@quadratic"), "plane_form@quadratic")]
+    assert why[0].value >= why[0].threshold == rules.ALPHA_ORDER
+    why = []
+    assert _parsimonious([pose, worse], why) is pose and why == []
+    assert _parsimonious([same, pose], why) is same and why == []

@@ -107,11 +107,12 @@ def _tests(p_sensor, n):
     """A noise battery whose only failing tests are the per-sensor ones given in ``p_sensor``."""
     pv = tuple((p_sensor.get(i, 0.5), {i}) for i in range(n)) + tuple((0.5, {i}) for i in range(n))
     p_all = min(1.0, min(p for p, _ in pv) * len(pv))
-    return NoiseTests({}, {}, len(pv), p_all, p_all >= THRESHOLDS["alpha_battery"], pv)
+    return NoiseTests({f"L{i + 1}": {} for i in range(n)}, {}, len(pv), p_all, p_all >= THRESHOLDS["alpha_battery"], pv)
 
 
 def _chosen(*sensors):
-    return [SimpleNamespace(component=SimpleNamespace(sensors=s, drops_readings=False)) for s in sensors]
+    return [SimpleNamespace(component=SimpleNamespace(sensors=s, drops_readings=False), label=f"c{k}")
+            for k, s in enumerate(sensors)]
 
 
 def test_an_all_sensor_cause_is_judged_beside_structure_that_belongs_elsewhere():
@@ -122,16 +123,18 @@ def test_an_all_sensor_cause_is_judged_beside_structure_that_belongs_elsewhere()
     # a form (every sensor) and a drift on sensor 2 that its member follows only in part
     form_drift = _chosen((), (2,))
     needed = [(500.0, 1e-6), (40.0, 1e-3)]
-    assert _judged_sensors(form_drift, _tests(bad, n), needed, n) == [[0, 1], []]
+    assert _judged_sensors(form_drift, _tests(bad, n), needed, n, []) == [[0, 1], []]
     # not needed given the others: not named
-    assert _judged_sensors(form_drift, _tests(bad, n), [(3.0, 0.3), (40.0, 1e-3)], n) == [[], []]
+    assert _judged_sensors(form_drift, _tests(bad, n), [(3.0, 0.3), (40.0, 1e-3)], n, []) == [[], []]
     # structure on one sensor and no other cause there: named beside it
-    assert _judged_sensors(_chosen(()), _tests(bad, n), needed[:1], n) == [[0, 1]]
+    assert _judged_sensors(_chosen(()), _tests(bad, n), needed[:1], n, []) == [[0, 1]]
     # structure on two sensors that no other cause explains: the cause itself is in doubt
-    assert _judged_sensors(_chosen(()), _tests({1: 1e-8, 2: 1e-8}, n), needed[:1], n) == [[]]
-    # a per-sensor cause is judged on its own sensors as before
-    assert _judged_sensors(_chosen((1,)), _tests(bad, n), needed[:1], n) == [[1]]
-    assert _judged_sensors(_chosen((2,)), _tests(bad, n), needed[:1], n) == [[]]
+    assert _judged_sensors(_chosen(()), _tests({1: 1e-8, 2: 1e-8}, n), needed[:1], n, []) == [[]]
+    # a per-sensor cause is judged on its own sensors as before, rule 11 said in the trail
+    why = []
+    assert _judged_sensors(_chosen((1,)), _tests(bad, n), needed[:1], n, why) == [[1]]
+    assert [(r.rule, r.decided, r.concerns) for r in why] == [(11, "explains its sensors", ("c0", "L2"))]
+    assert _judged_sensors(_chosen((2,)), _tests(bad, n), needed[:1], n, []) == [[]]
 
 
 def test_a_cause_is_named_only_while_needed_and_a_sole_cause_too():

@@ -200,14 +200,14 @@ def test_demo_report_gathers_each_step_and_links_its_own(tmp_path):
     """``run_demo(report=...)`` with steps that each write a report: one page of every step's
     section, each linked to the step's own report (the steps themselves are tested above)."""
     from metrology.jobs.demo import DEMO_STEPS, STEP_REPORTS, run_demo
-    from metrology.report.html import Section, Verdict, run_info, write_report
+    from metrology.report.html import Headline, Section, run_info, write_report
 
     def step(args):
         if "--report" not in args:  # a step that writes no report (simulate-log)
             return 0
         path = args[args.index("--report") + 1]
         write_report(path, args[0], run_info({"export": CAL}, "metro " + " ".join(args)),
-                     [Section(f"step {args[0]}", Verdict(args[0] != "validate", f"{args[0]} headline"))])
+                     [Section(f"step {args[0]}", Headline(args[0] != "validate", f"{args[0]} headline"))])
         return 0
 
     out = tmp_path / "demo.html"
@@ -240,9 +240,9 @@ def test_a_bad_output_is_refused_before_any_work(tmp_path, args):
 
 
 def test_escaping_and_backticks():
-    from metrology.report.html import Section, Verdict, render_html, run_info
+    from metrology.report.html import Headline, Section, render_html, run_info
 
-    html = render_html("t <x>", run_info({}, "metro x"), [Section("s", Verdict(None, "a < b & c", "run `metro diagnose`"))])
+    html = render_html("t <x>", run_info({}, "metro x"), [Section("s", Headline(None, "a < b & c", "run `metro diagnose`"))])
     assert "a &lt; b &amp; c" in html and "<code>metro diagnose</code>" in html and "t &lt;x&gt;" in html
 
 

@@ -116,11 +116,11 @@ def test_the_narrow_figure_wraps_a_label_longer_than_its_axes():
 def test_table_cells_and_the_command_line_break_between_words_only():
     """A hole id, a time's date and an option such as ``--out`` are kept whole (a no-wrap span);
     a path longer than a phone's line may still break."""
-    from metrology.report.html import RunInfo, Section, Table, Verdict, render_html
+    from metrology.report.html import Headline, RunInfo, Section, Table, render_html
 
     long_path = "/tmp/" + "x" * 40 + "/log.csv"
     page = render_html("t", RunInfo(command=f"metro measure {long_path} --out r.parquet"),
-                       [Section("s", Verdict(True, "ok"), tables=(Table("worst", ("hole", "time [UTC]"),
+                       [Section("s", Headline(True, "ok"), tables=(Table("worst", ("hole", "time [UTC]"),
                                                                         (("C1-00018770", "2026-11-26 13:16:54"),)),))])
     assert '<td><span class="nb">C1-00018770</span></td>' in page
     assert '<span class="nb">2026-11-26</span> <span class="nb">13:16:54</span>' in page

@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 
 from metrology.core.verdict import Check, Verdict
-from metrology.report.html import RunInfo, Section, Verdict as Box, render_html, verdict_box
+from metrology.report.html import Headline as Box, RunInfo, Section, render_html, verdict_box
 from metrology.report.verdicts import verdict_text, verdict_word
 
 GATED = Verdict((Check("drilling tolerance: x", 0.1, 0.5, "deg", True),))
