@@ -220,6 +220,8 @@ def run_case(job) -> dict:
                      for c in res.get("causes") or []],
         # the datum check: the cloud's form against the readings' (p, and whether it says "disagrees")
         "datum": _datum_check(res),
+        # the datum plane against its scan's covariance (issue 40; absent before it)
+        "datum_plane": res.get("datum_plane"),
     }
 
 

@@ -21,7 +21,7 @@ from metrology.core.model import readings
 from metrology.core.progress import ProgressFn, notify
 from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
-from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
+from metrology.diagnosis.datum import DatumFormCheck, datum_form, datum_plane, form_agreement, name_datum_plane
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, fit_any, geometry
@@ -195,6 +195,9 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     if p < 2 * folds:
         raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
     clear_all()  # the fits kept are this data set's: none of an earlier one can be asked for again
+    # the null includes the datum's uncertainty: the data set on the plane the readings place
+    # under the scan's covariance (issue 40; metrology.diagnosis.datum.datum_plane)
+    ds, plane_check = datum_plane(ds)
     rng = np.random.default_rng(seed)
     notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)
@@ -228,7 +231,7 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
+    return name_datum_plane(Diagnosis(v.cause, v.sensors, confidence, summary, v.named, tuple(scored), b.tests, v.tests_extended,
                      b.structure, discrepancy, heldout, v.confounding, b.fit.theta, b.fit.theta_stderr,
                      dict(THRESHOLDS), datum, plot, v.causes, tuple(_steps_table(b, steps, v)),
-                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
+                     detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds)), plane_check)

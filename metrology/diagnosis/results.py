@@ -203,6 +203,9 @@ class Diagnosis:
     causes: tuple = ()
     steps: tuple = ()
     detectable: dict = field(default_factory=dict)
+    #: the datum plane estimated with the sensors under its scan's covariance
+    #: (:class:`metrology.diagnosis.datum.DatumPlaneCheck`), None when not run
+    datum_plane: object = None
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -226,4 +229,5 @@ class Diagnosis:
             "thresholds": self.thresholds,
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
             "detectable": self.detectable,
+            "datum_plane": None if self.datum_plane is None else self.datum_plane.to_dict(),
         }
