@@ -213,9 +213,13 @@ def datum_plane(ds):
     z = (V[:, keep].T @ nuis.phi) / np.sqrt(w[keep])
     chi2, dof = float(z @ z), int(keep.sum())
     p = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
-    check = DatumPlaneCheck(True, nuis.phi, np.sqrt(np.diag(nuis.prior)), np.sqrt(np.maximum(np.diag(nuis.posterior), 0)),
-                            chi2, dof, p, rules.datum_plane_off(p), float(np.hypot(*nuis.phi[:2])),
-                            nuis.normal, nuis.offset)
+    off = rules.datum_plane_off(p)
+    prior = nuis.prior
+    if off:  # the scan is off: the plane the readings place, under a much wider prior
+        _, nuis = fit_with_datum(ds.layout, ds.export, ds.plane.normal, ds.plane.offset,
+                                 ds.plane_cov * rules.DATUM_OFF_PRIOR_WIDEN**2, cal.theta, cal.sigma_mm, move=True)
+    check = DatumPlaneCheck(True, nuis.phi, np.sqrt(np.diag(prior)), np.sqrt(np.maximum(np.diag(nuis.posterior), 0)),
+                            chi2, dof, p, off, float(np.hypot(*nuis.phi[:2])), nuis.normal, nuis.offset)
     return replace(ds, plane=Plane(nuis.normal, nuis.offset)), check
 
 

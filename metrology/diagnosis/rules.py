@@ -22,7 +22,8 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "per_pose_imitates", "explains_sensors", "shows_something", "room_for_another", "fixed_explains_as_well",
            "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
-           "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "datum_plane_off"]
+           "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
+           "datum_plane_off"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -231,6 +232,13 @@ THRESHOLDS = {
 #: below this. Reason: the null's budget of false causes (1 %) is left to the catalogued causes; a
 #: plane honestly scanned is named off once in 1000 runs.
 ALPHA_DATUM_PLANE = 1e-3
+
+
+#: a plane off its scan: the scan's covariance is not trusted, and the plane is placed by the readings
+#: under a prior this many times wider (1 sigma). Reason: held at the scan's prior, the plane comes
+#: back only part of the way and the rest is read as a pose error; without any prior the offset,
+#: which the zero points nearly absorb, is not bounded.
+DATUM_OFF_PRIOR_WIDEN = 100.0
 
 
 def datum_plane_off(p: float) -> bool:
