@@ -225,13 +225,15 @@ def datum_plane(ds):
 
 def name_datum_plane(diag, check: DatumPlaneCheck):
     """The diagnosis with the datum plane check attached; a plane off beyond its uncertainty is
-    named first, as ``datum_tilt`` (the datum's, not a pose error), the other causes after it."""
+    named first, as ``datum_tilt`` (the datum's, not a pose error), the other causes after it,
+    unless ``plane_form`` is named (the datum's form, of which the plane's move is a part)."""
     from dataclasses import replace
 
     from metrology.diagnosis.results import Cause, Confidence, Size
 
     diag = replace(diag, datum_plane=check)
-    if not check.off:
+    # a form named is the datum's already (plane_form): the plane's move is part of it
+    if not check.off or any(c.cause == "plane_form" for c in diag.causes):
         return diag
     cause = Cause("datum_tilt", "datum_tilt", [], Size(check.tilt_rad, None, "rad", "tilt of the datum plane the "
                                                        "readings place from the scan's"),
