@@ -40,7 +40,9 @@ def still_gross(flagged, gross_given_others):
     fitted with those readings in (at ``ALPHA_OUTLIER``, as flagged); both ``(p, n)`` bool. Reason:
     a reading the other causes explain (the first pose of a warm-up before a drift was named) is
     not an outlier (issue 40). When none stays, the flags are kept: the outliers cause was named
-    on them and is judged with the others by the verdict."""
+    on them and is judged with the others by the verdict. Not applied under a pose error
+    (its per-pose values absorb part of a gross reading of their pose: on a blind pair
+    pose_error + outliers a true gross reading was let go)."""
     import numpy as np
 
     kept = np.asarray(flagged, bool) & np.asarray(gross_given_others, bool)

@@ -230,12 +230,13 @@ class Selection:
         new = (flag_given_rigid(self.fit, b.cov, b.sigma, sc.flags) if rigid
                else flag_residuals(self.fit.residual, b.sigma))[0]
         # the readings flagged before are judged again on the residual after the other causes, with
-        # them in the fit (issue 40): a reading the others explain is not gross (rules.still_gross)
-        others = tuple(g for g in self.given if not isinstance(g, Outliers))
-        f_o = fit_any(ds.layout, ds.obs, b.cov, b.sigma, others, self.fit.theta if rigid else b.theta0)
-        gross_o = (flag_given_rigid(f_o, b.cov, b.sigma, np.zeros_like(sc.flags)) if rigid
-                   else flag_residuals(f_o.residual, b.sigma))[0]
-        flags = rules.still_gross(sc.flags, gross_o) | new
+        # them in the fit (issue 40): a reading the others explain is not gross (rules.still_gross);
+        # not under a pose error, whose per-pose values absorb part of a gross reading of their pose
+        flags = sc.flags | new
+        if not any(g.per_pose for g in self.given):
+            others = tuple(g for g in self.given if not isinstance(g, Outliers))
+            f_o = fit_any(ds.layout, ds.obs, b.cov, b.sigma, others, b.theta0)
+            flags = rules.still_gross(sc.flags, flag_residuals(f_o.residual, b.sigma)[0]) | new
         if np.array_equal(flags, sc.flags):
             return
         self.scoring = replace(sc, flags=flags)
