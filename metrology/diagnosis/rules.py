@@ -22,7 +22,7 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "per_pose_imitates", "explains_sensors", "shows_something", "room_for_another", "fixed_explains_as_well",
            "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
-           "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN", "still_gross",
+           "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
            "datum_plane_off"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
@@ -34,19 +34,6 @@ def gross_level(m: int) -> float:
     """The two-sided tail of one reading among ``m``: gross beyond ``norm.isf(gross_level(m))``."""
     return ALPHA_OUTLIER / (2 * m)
 
-
-def still_gross(flagged, gross_given_others):
-    """The readings flagged gross that stay gross on the residual after the other named causes,
-    fitted with those readings in (at ``ALPHA_OUTLIER``, as flagged); both ``(p, n)`` bool. Reason:
-    a reading the other causes explain (the first pose of a warm-up before a drift was named) is
-    not an outlier (issue 40). When none stays, the flags are kept: the outliers cause was named
-    on them and is judged with the others by the verdict. Not applied under a pose error
-    (its per-pose values absorb part of a gross reading of their pose: on a blind pair
-    pose_error + outliers a true gross reading was let go)."""
-    import numpy as np
-
-    kept = np.asarray(flagged, bool) & np.asarray(gross_given_others, bool)
-    return kept if kept.any() else np.asarray(flagged, bool)
 
 
 # -- 2. a candidate is significant ----------------------------------------------------------------

@@ -229,16 +229,9 @@ class Selection:
             return
         new = (flag_given_rigid(self.fit, b.cov, b.sigma, sc.flags) if rigid
                else flag_residuals(self.fit.residual, b.sigma))[0]
-        # the readings flagged before are judged again on the residual after the other causes, with
-        # them in the fit (issue 40): a reading the others explain is not gross (rules.still_gross);
-        # not under a pose error, whose per-pose values absorb part of a gross reading of their pose
-        flags = sc.flags | new
-        if not any(g.per_pose for g in self.given):
-            others = tuple(g for g in self.given if not isinstance(g, Outliers))
-            f_o = fit_any(ds.layout, ds.obs, b.cov, b.sigma, others, b.theta0)
-            flags = rules.still_gross(sc.flags, flag_residuals(f_o.residual, b.sigma)[0]) | new
-        if np.array_equal(flags, sc.flags):
+        if not np.any(new & ~sc.flags):
             return
+        flags = sc.flags | new
         self.scoring = replace(sc, flags=flags)
         out = replace(self.given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
                       values=None, stderr=None)
