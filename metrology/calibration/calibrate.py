@@ -24,6 +24,10 @@ DEFAULT_METHOD = "lsq"
 #: readings (dof = readings - 5) has a one-sided p below this (one false alarm in 1000 runs)
 MODEL_ADEQUACY_ALPHA = 1e-3
 
+#: coverage factor of the expanded uncertainty U = k u the datum's share is stated in (the certificate's,
+#: metrology.report.certificate.COVERAGE_K: GUM 6.2)
+COVERAGE_K = 2.0
+
 #: the paper's EKF runs with the experiment's settings (section 6) unless told otherwise
 _METHOD_DEFAULTS = {"ekf_paper": EKF_PRESETS["experiment"]}
 
@@ -130,15 +134,13 @@ class CalibrationReport:
         """The datum's part of the expanded uncertainty (k = 2) of every parameter, per sensor:
         ``U_datum`` (zero points mm, tilts deg) and ``U`` (total), and the share of the variance;
         ``{"exact": True}`` when the plane was taken as exact."""
-        from metrology.report.certificate import COVERAGE_K
-
         cal = self.calibration
         if cal.datum is None:
             return {"exact": True, "note": "no covariance given with the plane: taken as exact, not in U"}
         ud = cal.datum.stderr_datum.reshape(-1, 5)
         ut = np.sqrt(np.maximum(np.diag(cal.datum.cov_marginal), 0.0)).reshape(-1, 5)
         sh = cal.datum.share.reshape(-1, 5)
-        out = {"exact": False, "coverage_factor": COVERAGE_K, "sensors": []}
+        out = {"exact": False, "coverage_factor": COVERAGE_K, "sensors": []}  # k = 2, as the certificate
         for i, name in enumerate(cal.nominal.names):
             out["sensors"].append({"name": name,
                                    "U_zero_mm": (COVERAGE_K * ut[i, :3]).tolist(),

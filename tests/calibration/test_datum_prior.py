@@ -97,3 +97,10 @@ def test_plane_json_keeps_the_covariance_or_the_plane_is_exact(tmp_path):
     path.write_text(json.dumps({**bare, "covariance": [[1.0, 2.0], [3.0, 4.0]]}))
     with pytest.raises(ValueError, match="plane.json: 'covariance' must be"):
         load_plane(path, with_cov=True)
+
+
+def test_the_datum_share_is_stated_at_the_certificates_coverage_factor():
+    from metrology.calibration.calibrate import COVERAGE_K
+    from metrology.report.certificate import COVERAGE_K as CERT_K
+
+    assert COVERAGE_K == CERT_K
