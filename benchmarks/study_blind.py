@@ -22,7 +22,7 @@ both above their detectable sizes, and both in the upper two thirds, as issue 15
 wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
-        [--families scale,...] [--tilt-max-deg 14] [--size-range LO,HI]
+        [--families scale,...] [--tilt-max-deg 14] [--size-range LO,HI] [--scan hand] [--poses 30,45]
 """
 
 from __future__ import annotations
@@ -177,6 +177,12 @@ def _detectable_for(res: dict, effect) -> float | None:
     return vals.get(key)
 
 
+#: the datum scan of every case (``--scan``: ``tracker`` or ``hand``, a hand-held probe's noisy scan,
+#: :func:`metrology.sim.forward.surface.sample_hand_scan`) and the poses' count range (``--poses``;
+#: None: the simulator's 40-150); set by :func:`main` before the cases run
+CASE_OPTIONS = {"scan": "tracker", "poses": None}
+
+
 def run_case(job) -> dict:
     """Draw one case, write its files, diagnose them; the record of truth and verdict."""
     from metrology.jobs.diagnose import diagnose_files
@@ -184,6 +190,11 @@ def run_case(job) -> dict:
 
     kind, fams, entropy = job[:3]
     tilt = {"tilt_max_deg": float(job[3])} if len(job) > 3 else {}
+    if CASE_OPTIONS["scan"] != "tracker":
+        tilt["scan"] = CASE_OPTIONS["scan"]
+    if CASE_OPTIONS["poses"] is not None:  # its own stream: the case's is the same as without
+        lo, hi = CASE_OPTIONS["poses"]
+        tilt["n_poses"] = int(np.random.default_rng(list(entropy) + [7]).integers(lo, hi + 1))
     rng = np.random.default_rng(list(entropy))
     case = draw_pair(rng, *fams, **tilt) if kind == "pair" else draw_case(rng, fams[0], **tilt)
     with tempfile.TemporaryDirectory() as d:
@@ -212,6 +223,8 @@ def run_case(job) -> dict:
         # the verdict's trail (rule numbers, in order) and the summary made from it
         "rules": [r["rule"] for r in res.get("reasons") or []],
         "summary": res.get("summary"),
+        # the datum plane against its scan's covariance (issue 40; absent before it)
+        "datum_plane": res.get("datum_plane"),
     }
 
 
@@ -408,7 +421,14 @@ def main(argv=None):
     ap.add_argument("--size-range", default=None,
                     help="LO,HI: draw the --families' sizes in this range instead of the family's own (the same "
                          "draws of everything else; e.g. shift near its detectable size: 0.005,0.03)")
+    ap.add_argument("--scan", choices=("tracker", "hand"), default="tracker",
+                    help="the datum scan: the simulator's tracker cloud (2000 points, 10 um) or a hand-held probe's "
+                         "(40-80 um noise, 400-1500 points, 1-3 %% strays)")
+    ap.add_argument("--poses", default=None, help="LO,HI: draw each case's pose count in this range (default 40-150)")
     a = ap.parse_args(argv)
+    CASE_OPTIONS["scan"] = a.scan
+    if a.poses:
+        CASE_OPTIONS["poses"] = tuple(int(v) for v in a.poses.split(","))
     fams = tuple(filter(None, a.families.split(",")))
     if a.size_range:
         from dataclasses import replace

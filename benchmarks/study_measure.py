@@ -17,6 +17,7 @@ on flat, spherical and cylindrical panels, everything drawn by the independent f
    (what the micro-plane's curvature bias does to a U95 that ignores it).
 
     python benchmarks/study_measure.py --calibrations 40 --holes 500 --seed 1 --json out.json
+        [--scan exact|hand|hand-exact] [--panels flat,sphere,cylinder]
 
 With ``--panel-known`` (``metro measure --panel --points``): the same heads on flat, sphere R 500 and
 cylinders R 500 and R 1000 (axis at a random azimuth), the head's spin within +-2 deg of the cell's
@@ -61,23 +62,40 @@ def heads(rng):
     return {"table2": t2, "table6": t6, "ring3": SensorLayout(three.names, three.zero, three.direction)}
 
 
-def calibrate_head(rng, nominal, true, noise_mm, range_mm, n_poses, tilt_deg=14.0):
-    """The layout a calibration by metro gives (with covariance), from poses the forward simulator draws."""
-    from dataclasses import replace
+def calibrate_head(rng, nominal, true, noise_mm, range_mm, n_poses, tilt_deg=14.0, scan="exact"):
+    """The layout a calibration by metro gives (with covariance), from poses the forward simulator draws.
 
+    ``scan``: ``exact`` (the true datum plane given), ``hand`` (the plane fitted to a hand-probe
+    scan, forward.surface.sample_hand_scan, its covariance estimated with the sensors as
+    ``metro calibrate`` does) or ``hand-exact`` (the same scan's plane taken as exact)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from metrology.calibration.calibrate import with_datum
     from metrology.calibration.estimators import calibrate
     from metrology.core.frames import plane_in_tcs
     from metrology.core.observations import Observations
-    from metrology.sim.forward import draw_poses, flat_surface
+    from metrology.sim.forward import draw_poses, flat_surface, sample_hand_scan
 
     surface = flat_surface(np.zeros(3), np.array([0.0, 0.0, 1.0]))
     z0 = float(-np.mean(true.zero[:, 2]))
     rot, trans, hits = draw_poses(rng, surface, true.zero, true.direction, n_poses, tilt_max_rad=np.radians(tilt_deg),
                                   range_mm=range_mm, z0_mm=z0)
     d = hits.d + rng.normal(0.0, noise_mm, hits.d.shape)
-    normal, offset = plane_in_tcs(surface.normal, -float(surface.normal @ surface.origin), rot, trans)
+    n_dat, off_dat, cov4 = surface.normal, -float(surface.normal @ surface.origin), None
+    if scan != "exact":
+        from metrology.datum import fit_plane_robust
+
+        fit = fit_plane_robust(sample_hand_scan(surface, rng)[0])
+        n_dat, off_dat, cov4 = fit.plane.normal, fit.plane.offset, fit.covariance
+    normal, offset = plane_in_tcs(n_dat, off_dat, rot, trans)
     nominal = replace(nominal, noise_mm=np.full(nominal.n, noise_mm), range_mm=np.tile(range_mm, (nominal.n, 1)))
-    return calibrate(nominal, Observations(normal, offset, d), "lsq").layout
+    cal = calibrate(nominal, Observations(normal, offset, d), "lsq")
+    if scan == "hand":
+        export = SimpleNamespace(d=d, tcs2tracker_rot=rot, tcs2tracker_trans=trans)
+        ds = SimpleNamespace(export=export, plane=SimpleNamespace(normal=n_dat, offset=off_dat), plane_cov=cov4)
+        cal = with_datum(cal, ds)
+    return cal.layout
 
 
 def run(args):
@@ -93,7 +111,7 @@ def run(args):
     rng = np.random.default_rng(args.seed)
     out = {"args": vars(args), "rows": []}
     range_mm = np.array([30.0, 70.0])
-    panels = [("flat", None), ("sphere", args.radius), ("cylinder", args.radius)]
+    panels = [p for p in [("flat", None), ("sphere", args.radius), ("cylinder", args.radius)] if p[0] in args.panels]
     for hname, nominal in heads(rng).items():
         for kind, R in panels:
             t0 = time.perf_counter()
@@ -103,7 +121,7 @@ def run(args):
                 true = perturb_layout(rng, nominal)
                 true = true.with_params(true.zero, true.direction, noise_mm=np.full(true.n, args.noise),
                                         range_mm=np.tile(range_mm, (true.n, 1)))
-                cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
+                cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses, scan=args.scan)
                 axis = (np.cos(a := rng.uniform(0, np.pi)), np.sin(a), 0.0)
                 panel = make_panel(kind, R, axis=axis) if R else make_panel(kind)
                 spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, spin_rad=np.pi)
@@ -240,6 +258,10 @@ def main(argv=None):
     ap.add_argument("--radius", type=float, default=500.0, help="curved panels' radius, mm")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--scan", choices=("exact", "hand", "hand-exact"), default="exact",
+                    help="the calibration's datum: the true plane, a hand-probe scan's plane with its covariance "
+                         "carried (as metro calibrate), or the same scan's plane taken as exact")
+    ap.add_argument("--panels", default="flat,sphere,cylinder", help="comma-separated: flat, sphere, cylinder")
     ap.add_argument("--panel-known", action="store_true", help="measure with the panel's local surface known "
                     "(metro measure --panel --points)")
     args = ap.parse_args(argv)
@@ -248,6 +270,7 @@ def main(argv=None):
         if args.json:
             args.json.write_text(json.dumps(out, indent=1, default=str))
         return
+    args.panels = tuple(args.panels.split(","))
     print("| head | panel | before: coverage % | after | before, no curvature term | after, no term | "
           "median U95 before [deg] | after | holes |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -24,6 +24,10 @@ DEFAULT_METHOD = "lsq"
 #: readings (dof = readings - 5) has a one-sided p below this (one false alarm in 1000 runs)
 MODEL_ADEQUACY_ALPHA = 1e-3
 
+#: coverage factor of the expanded uncertainty U = k u the datum's share is stated in (the certificate's,
+#: metrology.report.certificate.COVERAGE_K: GUM 6.2)
+COVERAGE_K = 2.0
+
 #: the paper's EKF runs with the experiment's settings (section 6) unless told otherwise
 _METHOD_DEFAULTS = {"ekf_paper": EKF_PRESETS["experiment"]}
 
@@ -115,7 +119,51 @@ class CalibrationReport:
                              gate=self.target_set),
                        Check(f"precision target: beam tilts, largest 1σ{how}", t, tt, "deg", bool(t <= tt),
                              gate=self.target_set)]
+        cal = self.calibration
+        if cal.datum is None:
+            checks.append(Check("datum: the plane is taken as exact (no covariance given: a plane.json without "
+                                "'covariance'); the calibration's uncertainty is conditional on it", 0.0, None, "",
+                                True, gate=False))
+        else:
+            checks.append(Check("datum: its uncertainty (the scan's covariance) estimated with the sensors; "
+                                "largest share of a parameter's variance", float(np.max(cal.datum.share)), None, "",
+                                True, gate=False))
         return Verdict(tuple(checks))
+
+    def datum_share(self) -> dict:
+        """The datum's part of the expanded uncertainty (k = 2) of every parameter, per sensor:
+        ``U_datum`` (zero points mm, tilts deg) and ``U`` (total), and the share of the variance;
+        ``{"exact": True}`` when the plane was taken as exact."""
+        cal = self.calibration
+        if cal.datum is None:
+            return {"exact": True, "note": "no covariance given with the plane: taken as exact, not in U"}
+        ud = cal.datum.stderr_datum.reshape(-1, 5)
+        ut = np.sqrt(np.maximum(np.diag(cal.datum.cov_marginal), 0.0)).reshape(-1, 5)
+        sh = cal.datum.share.reshape(-1, 5)
+        out = {"exact": False, "coverage_factor": COVERAGE_K, "sensors": []}  # k = 2, as the certificate
+        for i, name in enumerate(cal.nominal.names):
+            out["sensors"].append({"name": name,
+                                   "U_zero_mm": (COVERAGE_K * ut[i, :3]).tolist(),
+                                   "U_datum_zero_mm": (COVERAGE_K * ud[i, :3]).tolist(),
+                                   "U_tilt_deg": np.rad2deg(COVERAGE_K * ut[i, 3:]).tolist(),
+                                   "U_datum_tilt_deg": np.rad2deg(COVERAGE_K * ud[i, 3:]).tolist(),
+                                   "share_of_variance": sh[i].tolist()})
+        return out
+
+    def datum_statement(self) -> str:
+        """One line for the certificate: the datum's share of U (k = 2), or that it was taken as exact."""
+        cal = self.calibration
+        if cal.datum is None:
+            return "datum plane taken as exact (no covariance given); its uncertainty is not in U"
+        d = cal.datum.to_dict()
+        ud = cal.datum.stderr_datum.reshape(-1, 5)
+        sh = cal.datum.share.reshape(-1, 5)
+        return (f"datum plane estimated with the sensors under the scan's covariance (tilt 1σ "
+                f"{d['prior_stderr']['tilt_urad'][0]:.1f}, {d['prior_stderr']['tilt_urad'][1]:.1f} µrad, offset "
+                f"{d['prior_stderr']['offset_um']:.2f} µm); its part of U (k = 2): zero points up to "
+                f"{2e3 * float(np.max(ud[:, :3])):.2f} µm ({100 * float(np.max(sh[:, :3])):.0f} % of the variance), "
+                f"tilts up to {np.rad2deg(2 * float(np.max(ud[:, 3:]))):.5f} deg "
+                f"({100 * float(np.max(sh[:, 3:])):.0f} %)")
 
     def to_dict(self) -> dict:
         """The report as plain data; ``no_reading`` (value, count, readings) only when codes were dropped."""
@@ -148,7 +196,10 @@ class CalibrationReport:
             "method": cal.method,
             "sources": self.sources,
             "n_poses": self.dataset.export.n_poses,
-            "datum": {"normal": self.dataset.plane.normal, "offset_mm": self.dataset.plane.offset},
+            "datum": {"normal": self.dataset.plane.normal, "offset_mm": self.dataset.plane.offset,
+                      "covariance_given": self.dataset.plane_cov is not None,
+                      "estimated": None if cal.datum is None else cal.datum.to_dict(),
+                      "share_of_U": self.datum_share()},
             "sensors": sensors,
             "unidentified": cal.unidentified,
             "identifiability": [ident.to_dict() for ident in self.identifiability],
@@ -160,6 +211,47 @@ class CalibrationReport:
         if self.dataset.dropped:
             out["no_reading"] = self.dataset.no_reading_dict()
         return out
+
+
+def cal_obs(cal, dataset):
+    """The observations on the plane the calibration was fitted on (the joint fit's, else the datum's)."""
+    if cal.datum is None or not cal.datum.moved:
+        return dataset.obs
+    from metrology.core.frames import plane_in_tcs
+    from metrology.core.observations import Observations
+
+    N, D = plane_in_tcs(cal.datum.normal, cal.datum.offset, dataset.export.tcs2tracker_rot,
+                        dataset.export.tcs2tracker_trans)
+    return Observations(N, D, dataset.export.d)
+
+
+def with_datum(cal, dataset):
+    """``cal`` with the datum plane estimated jointly as a nuisance under the scan's covariance
+    (:func:`metrology.calibration.datum_prior.fit_with_datum`): for ``lsq`` the joint estimate
+    and its covariance; for another estimator its own estimate with the datum's share added to
+    its covariance. The calibrated layout's ``covariance`` is the full (5n, 5n) one: the sensors
+    are correlated through the shared plane."""
+    from dataclasses import replace
+
+    from scipy.linalg import block_diag
+
+    from metrology.calibration.datum_prior import fit_with_datum
+    from metrology.calibration.estimators import _finish
+    from metrology.core.model import chart_cov_recentred
+
+    move = cal.method == "lsq"
+    theta, nuis = fit_with_datum(cal.nominal, dataset.export, dataset.plane.normal, dataset.plane.offset,
+                                 dataset.plane_cov, cal.theta, cal.sigma_mm, move=move)
+    full = nuis.cov_marginal if move else block_diag(*cal.cov) + (nuis.cov_marginal - nuis.cov_conditional)
+    full = 0.5 * (full + full.T)
+    n = cal.nominal.n
+    blocks = np.stack([full[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])
+    cal = replace(cal, datum=nuis)
+    obs = cal_obs(cal, dataset)
+    new = _finish(cal.method, cal.nominal, obs, theta, blocks, cal.sigma_mm, n_converged=cal.n_converged,
+                  history=cal.history, raw_cov=cal.raw_cov, datum=nuis)
+    layout = replace(new.layout, covariance=chart_cov_recentred(cal.nominal.direction, theta[:, 3:], full))
+    return replace(new, layout=layout)
 
 
 def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=None, target=None,
@@ -189,6 +281,9 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     obs = dataset.obs
     opts = {**_METHOD_DEFAULTS.get(method, {}), **kwargs}
     cal = calibrate(dataset.layout, obs, method, **opts)
+    if dataset.plane_cov is not None and np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov)):
+        cal = with_datum(cal, dataset)
+        obs = cal_obs(cal, dataset)
     if not (np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov))):
         raise ValueError(f"method {method}: the estimate is not finite (the data do not determine the parameters)")
     # the precision verdict uses the sigma the report shows: the residuals' scatter over m - 5

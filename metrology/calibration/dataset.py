@@ -26,7 +26,31 @@ MIN_READINGS = 6
 NO_READING = 0.0
 
 
-def load_plane(path, with_cloud=False):
+def plane_covariance_from_json(path):
+    """The ``covariance`` (4, 4) of ``(A, B, C, D)`` (unitless normal, mm) a ``fit-plane --out``
+    JSON keeps, or None when the file has none (the plane is then taken as exact).
+
+    Raises ValueError naming the file when the key is there but is not a finite, symmetric,
+    positive semi-definite 4 x 4 matrix."""
+    import json
+
+    with open(path, encoding="utf-8") as fh:
+        data = json.load(fh)
+    raw = data.get("covariance") if isinstance(data, dict) else None
+    if raw is None:
+        return None
+    try:
+        cov = np.asarray(raw, dtype=float)
+    except (TypeError, ValueError):
+        cov = np.full((1,), np.nan)
+    if cov.shape != (4, 4) or not np.all(np.isfinite(cov)) or np.min(np.linalg.eigvalsh(0.5 * (cov + cov.T))) < \
+            -1e-9 * max(float(np.max(np.abs(cov))), 1e-300):
+        raise ValueError(f"{path}: 'covariance' must be a finite, positive semi-definite 4 x 4 matrix of "
+                         "(A, B, C, D) (as metro fit-plane writes it), or absent")
+    return 0.5 * (cov + cov.T)
+
+
+def load_plane(path, with_cloud=False, with_cov=False):
     """The datum plane from a ``fit-plane --out`` JSON or from a tracker cloud (fitted robustly).
 
     Returns
@@ -36,10 +60,15 @@ def load_plane(path, with_cloud=False):
     cloud : (k, 3) float, mm, tracker frame, or None; only ``with_cloud``: every point of the
         cloud, the plane fit's outliers included (a datum with form beyond the plane fit's
         window has its highest and lowest regions among them)
+    cov : (4, 4) float or None; only ``with_cov``: the covariance of ``(A, B, C, D)`` (unitless
+        normal, mm), tracker frame: the robust fit's of a cloud, the JSON's ``covariance``, or
+        None (a JSON without one: the plane is taken as exact)
     """
     path = Path(path)
     if path.suffix.lower() == ".json":
-        return (Plane.from_json(path), None) + ((None,) if with_cloud else ())
+        plane = Plane.from_json(path)
+        cov = (plane_covariance_from_json(path),) if with_cov else ()
+        return (plane, None) + ((None,) if with_cloud else ()) + cov
     from metrology.io.clouds import read_cloud
     from metrology.datum import fit_plane_robust
 
@@ -48,7 +77,8 @@ def load_plane(path, with_cloud=False):
         fit = fit_plane_robust(points)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
-    return (fit.plane, points[fit.inliers(points)]) + ((points,) if with_cloud else ())
+    cov = (np.asarray(fit.covariance, float),) if with_cov else ()
+    return (fit.plane, points[fit.inliers(points)]) + ((points,) if with_cloud else ()) + cov
 
 
 @dataclass(frozen=True)
@@ -62,6 +92,8 @@ class Dataset:
     plane : Plane, tracker frame
     datum_points : (m, 3) float, mm, tracker frame, or None: the plane fit's inliers
     datum_cloud : (k, 3) float, mm, tracker frame, or None: every point of the datum cloud
+    plane_cov : (4, 4) float or None: covariance of the plane's ``(A, B, C, D)`` (unitless
+        normal, mm), tracker frame; None: the plane is taken as exact
     dropped : tuple of (pose_id, sensor name)
         Readings equal to the "no reading" code, dropped on loading (see :func:`drop_no_reading`).
     no_reading : float
@@ -75,6 +107,7 @@ class Dataset:
     dropped: tuple = ()
     no_reading: float = NO_READING
     datum_cloud: np.ndarray | None = None
+    plane_cov: np.ndarray | None = None
 
     @property
     def obs(self) -> Observations:
@@ -87,7 +120,7 @@ class Dataset:
 
     def select(self, idx) -> "Dataset":
         return Dataset(self.export.select(idx), self.layout, self.plane, self.datum_points, self.dropped,
-                       self.no_reading, self.datum_cloud)
+                       self.no_reading, self.datum_cloud, self.plane_cov)
 
     def no_reading_summary(self) -> str | None:
         """One line on the dropped "no reading" codes (for stderr), or None when none was."""
@@ -233,6 +266,6 @@ def load_dataset(export_path, plane_path, layout_path, quaternion_order: str = "
     else:
         dropped = ()
     export = check(export, layout, str(export_path))
-    plane, points, cloud = load_plane(plane_path, with_cloud=True)
+    plane, points, cloud, plane_cov = load_plane(plane_path, with_cloud=True, with_cov=True)
     return Dataset(export, layout, plane, points, dropped, NO_READING if no_reading is None else float(no_reading),
-                   cloud)
+                   cloud, plane_cov)

@@ -91,6 +91,9 @@ class Calibration:
         What the data cannot determine, in words (always the direction scale, the gauge).
     raw_cov : (n, 6, 6) float or None
         ``ekf_paper`` only: its ``P``, whose gauge direction ``(0, 0, 0, u)`` is never updated.
+    datum : DatumNuisance or None
+        The datum plane estimated with the sensors under the scan's covariance
+        (:mod:`metrology.calibration.datum_prior`); None: the plane was taken as exact.
     """
 
     method: str
@@ -106,6 +109,7 @@ class Calibration:
     history: list = field(default_factory=list)
     unidentified: str = "direction scale (gauge): readings do not depend on |u|; directions are unit vectors"
     raw_cov: np.ndarray | None = None
+    datum: object = None
 
     @property
     def stderr(self) -> np.ndarray:

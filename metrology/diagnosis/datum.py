@@ -11,7 +11,8 @@ from metrology.core.model import jacobian_raw
 from metrology.diagnosis.fit import Fit
 from metrology.diagnosis import rules
 
-__all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS"]
+__all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS", "DatumPlaneCheck",
+           "datum_plane", "name_datum_plane"]
 
 #: the datum form's quadratic coefficients (bow, saddle, twist), compared cloud against readings
 FORM_QUADRATIC = PlaneForm.key_params
@@ -130,3 +131,121 @@ def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> dict:
             "readings_stderr": dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
             "z": dict(zip(FORM_QUADRATIC, z.tolist())), "chi2": wald, "p": p,
             "agree": rules.datum_agrees(p)}
+
+
+# -- the datum plane's own uncertainty (issue 40) ----------------------------------------------------
+
+#: the summary's sentence when the readings place the plane off its scan beyond the scan's uncertainty
+DATUM_PLANE_OFF = (" The datum plane the readings place is {tilt:.0f} urad and {offset:.1f} um off the scan's, beyond "
+                   "the scan's stated uncertainty (p = {p:.1e}): the datum's (re-scan the plate), not the tracker's.")
+
+
+@dataclass(frozen=True)
+class DatumPlaneCheck:
+    """The datum plane estimated with the sensors under its scan's covariance, and whether it is
+    off the scan's plane by more than that covariance allows.
+
+    Attributes
+    ----------
+    given : bool, the plane came with a covariance (a cloud, or a ``plane.json`` keeping it);
+        False: taken as exact, nothing estimated
+    phi : (3,) float, rad, rad, mm: the plane's correction (two tilts, offset), tracker frame
+    prior_stderr, posterior_stderr : (3,) float, the same units: before and after the readings
+    chi2 : float, ``phi`` against its null covariance (prior - posterior), ``dof`` directions
+    p : float; off : bool, :func:`metrology.diagnosis.rules.datum_plane_off`
+    tilt_rad : float, the correction's tilt; normal, offset : the plane the diagnosis used
+    """
+
+    given: bool
+    phi: np.ndarray | None = None
+    prior_stderr: np.ndarray | None = None
+    posterior_stderr: np.ndarray | None = None
+    chi2: float = 0.0
+    dof: int = 0
+    p: float = 1.0
+    off: bool = False
+    tilt_rad: float = 0.0
+    normal: np.ndarray | None = None
+    offset: float | None = None
+
+    def to_dict(self) -> dict:
+        if not self.given:
+            return {"covariance_given": False,
+                    "note": "the plane came without a covariance: taken as exact (give the cloud, or a plane.json "
+                            "from metro fit-plane, which keeps it)"}
+        return {"covariance_given": True, "correction": {"tilt_urad": (1e6 * self.phi[:2]).tolist(),
+                                                         "offset_um": float(1e3 * self.phi[2])},
+                "prior_stderr": {"tilt_urad": (1e6 * self.prior_stderr[:2]).tolist(),
+                                 "offset_um": float(1e3 * self.prior_stderr[2])},
+                "posterior_stderr": {"tilt_urad": (1e6 * self.posterior_stderr[:2]).tolist(),
+                                     "offset_um": float(1e3 * self.posterior_stderr[2])},
+                "chi2": self.chi2, "dof": self.dof, "p": self.p, "off": self.off,
+                "used": "the plane the readings place (the base model's null includes the datum's uncertainty)"}
+
+
+def datum_plane(ds):
+    """The datum plane estimated with every sensor's base model under the scan's covariance
+    (:func:`metrology.calibration.datum_prior.fit_with_datum`, each sensor whitened by its own
+    scatter), and the data set on that plane: a residual pattern a plane within its stated
+    uncertainty explains is then no cause. The innovation test: the correction ``phi`` against its
+    null covariance ``prior - posterior`` (chi-square over the directions the readings inform).
+
+    Returns (Dataset on the plane the readings place, or ``ds`` itself; DatumPlaneCheck).
+    """
+    from dataclasses import replace
+
+    from scipy import stats
+
+    from metrology.calibration.datum_prior import fit_with_datum
+    from metrology.calibration.estimators import lsq
+    from metrology.core.plane import Plane
+
+    if ds.plane_cov is None:
+        return ds, DatumPlaneCheck(False)
+    cal = lsq(ds.layout, ds.obs)
+    if not (np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.sigma_mm)) and np.all(cal.sigma_mm > 0)):
+        return ds, DatumPlaneCheck(False)
+    _, nuis = fit_with_datum(ds.layout, ds.export, ds.plane.normal, ds.plane.offset, ds.plane_cov, cal.theta,
+                             cal.sigma_mm, move=True)
+    S = nuis.prior - nuis.posterior
+    w, V = np.linalg.eigh(0.5 * (S + S.T))
+    keep = w > 1e-6 * max(float(np.max(w)), 1e-300)
+    z = (V[:, keep].T @ nuis.phi) / np.sqrt(w[keep])
+    chi2, dof = float(z @ z), int(keep.sum())
+    p = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    off = rules.datum_plane_off(p)
+    prior = nuis.prior
+    if off:  # the scan is off: the plane the readings place, under a much wider prior
+        _, nuis = fit_with_datum(ds.layout, ds.export, ds.plane.normal, ds.plane.offset,
+                                 ds.plane_cov * rules.DATUM_OFF_PRIOR_WIDEN**2, cal.theta, cal.sigma_mm, move=True)
+    check = DatumPlaneCheck(True, nuis.phi, np.sqrt(np.diag(prior)), np.sqrt(np.maximum(np.diag(nuis.posterior), 0)),
+                            chi2, dof, p, off, float(np.hypot(*nuis.phi[:2])), nuis.normal, nuis.offset)
+    return replace(ds, plane=Plane(nuis.normal, nuis.offset)), check
+
+
+def name_datum_plane(diag, check: DatumPlaneCheck):
+    """The diagnosis with the datum plane check attached; a plane off beyond its uncertainty is
+    named first, as ``datum_tilt`` (the datum's, not a pose error), the other causes after it,
+    unless ``plane_form`` is named (the datum's form, of which the plane's move is a part)."""
+    from dataclasses import replace
+
+    from metrology.diagnosis.results import Cause, Confidence, Decision, Reason, Size
+
+    diag = replace(diag, datum_plane=check)
+    # a form named is the datum's already (plane_form): the plane's move is part of it
+    if not check.off or any(c.cause == "plane_form" for c in diag.causes):
+        return diag
+    cause = Cause("datum_tilt", "datum_tilt", [], Size(check.tilt_rad, None, "rad", "tilt of the datum plane the "
+                                                       "readings place from the scan's"),
+                  check.chi2, None, check.p, 0, test="the plane's correction against the scan's covariance (chi-square)",
+                  params={"tilt_1": {"value": float(check.phi[0]), "unit": "rad"},
+                          "tilt_2": {"value": float(check.phi[1]), "unit": "rad"},
+                          "offset": {"value": float(check.phi[2]), "unit": "mm"}})
+    summary = diag.summary + DATUM_PLANE_OFF.format(tilt=1e6 * check.tilt_rad, offset=1e3 * check.phi[2], p=check.p)
+    named = diag.cause not in ("none", "unexplained")
+    why = Reason(18, "datum_plane_off", Decision.DATUM_PLANE_OFF, ("datum_tilt",),
+                 "p of the plane's correction against the scan's covariance (chi-square)", check.p,
+                 rules.ALPHA_DATUM_PLANE, outcome="datum_tilt")
+    return replace(diag, cause="datum_tilt", sensors=[], summary=summary, named=cause, reasons=diag.reasons + (why,),
+                   confidence=diag.confidence if named else Confidence.HIGH if check.p < 1e-6 else Confidence.MODERATE,
+                   causes=(cause,) + tuple(diag.causes))

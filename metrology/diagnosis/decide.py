@@ -21,7 +21,7 @@ from metrology.core.model import readings
 from metrology.core.progress import ProgressFn, notify
 from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag_outliers
-from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
+from metrology.diagnosis.datum import DatumFormCheck, datum_form, datum_plane, form_agreement, name_datum_plane
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, fit_any, geometry
@@ -198,6 +198,9 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     if p < 2 * folds:
         raise ValueError(f"{p} poses: need at least {2 * folds} for {folds}-fold held-out figures")
     clear_all()  # the fits kept are this data set's: none of an earlier one can be asked for again
+    # the null includes the datum's uncertainty: the data set on the plane the readings place
+    # under the scan's covariance (issue 40; metrology.diagnosis.datum.datum_plane)
+    ds, plane_check = datum_plane(ds)
     rng = np.random.default_rng(seed)
     notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)
@@ -231,10 +234,10 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
+    return name_datum_plane(Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
                      candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
                      structure_base=b.structure, discrepancy=discrepancy, heldout=heldout, confounding=v.confounding,
                      base_theta=b.fit.theta, base_stderr=b.fit.theta_stderr, thresholds=dict(THRESHOLDS),
                      datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
                      detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
-                     reasons=v.reasons)
+                     reasons=v.reasons), plane_check)

@@ -57,6 +57,7 @@ class Decision(StrEnum):
     CONFOUNDED = "confounded"  # 15: a runner-up or a base parameter the data cannot separate
     CONFIDENCE = "confidence"  # 16: the verdict's confidence
     DATUM_DISAGREES = "datum disagrees"  # 17: the datum cloud's form disagrees with the readings'
+    DATUM_PLANE_OFF = "datum plane off"  # 18: the plane the readings place is off its scan's beyond its covariance
 
 
 @dataclass(frozen=True)
@@ -265,6 +266,9 @@ class Diagnosis:
     steps: tuple = ()
     detectable: dict = field(default_factory=dict)
     reasons: tuple = ()
+    #: the datum plane estimated with the sensors under its scan's covariance
+    #: (:class:`metrology.diagnosis.datum.DatumPlaneCheck`), None when not run
+    datum_plane: object = None
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -289,4 +293,5 @@ class Diagnosis:
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
             "detectable": self.detectable,
             "reasons": [r.to_dict() for r in self.reasons],
+            "datum_plane": None if self.datum_plane is None else self.datum_plane.to_dict(),
         }

@@ -62,7 +62,9 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
               + ", ".join(f"{n} {r * 1e3:.1f} µm" for n, r in zip(report.layout.names, report.calibration.residual_rms))
               + "\nzero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
               "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
-    text = layout_to_toml(replace(report.layout, certificate=dict(meta or {})), header)
+    # the certificate states the datum's share of U (or that the plane was taken as exact)
+    text = layout_to_toml(replace(report.layout, certificate={"datum": report.datum_statement(), **dict(meta or {})}),
+                          header)
     report = replace(report, certificate=_certificate(report, text, out))
     page = None
     if report_html is not None:  # rendered before anything is written: all or nothing

@@ -31,7 +31,7 @@ HEADER_FIELDS = (
     ("customer", "customer"), ("part", "item calibrated (part)"), ("instrument", "instrument (laser tracker)"),
     ("serial", "serial number"), ("traceability", "traceability (the instrument's own certificate)"),
     ("operator", "operator"), ("date", "date of calibration"), ("temperature", "temperature"),
-    ("approved_by", "authorised by"), ("valid_until", "valid until (as agreed)"), ("notes", "notes"),
+    ("datum", "datum plane's uncertainty (its part of U)"), ("approved_by", "authorised by"), ("valid_until", "valid until (as agreed)"), ("notes", "notes"),
 )
 
 #: (TOML key, parameter words, unit, digits the TOML holds) of each sensor's parameters

@@ -69,7 +69,7 @@ def test_calibrate_gates_on_targets_the_user_set_only(short_export):
     v = _run(base, 0)  # the default target and the model adequacy are information
     assert not any(c["gate"] for c in v["checks"])
     kinds = {c["name"].split(":")[0] for c in v["checks"]}
-    assert kinds == {"model adequacy", "precision target"}
+    assert kinds == {"model adequacy", "precision target", "datum"}  # datum: the plane taken as exact (information)
     assert any(not c["passed"] for c in v["checks"])  # information beyond its limit does not fail
     v = _run([*base, "--target-mm", "1", "--target-deg", "1"], 0)
     assert [c["limit"] for c in v["checks"] if c["gate"]] == [1.0, 1.0]

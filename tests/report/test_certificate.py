@@ -76,9 +76,12 @@ def test_the_certificate_names_the_file_by_its_sha256_and_carries_the_header(run
     assert cert["sha256"] == sha and sha in page and cert["number"] == f"metro-{sha[:12]}"
     meta = {"part": "EE-7 pressure foot", "serial": "4711", "temperature": "20.3 °C", "operator": "J. Smith",
             "instrument": 'Leica AT960 "LT-2"'}
-    assert cert["header"] == meta
-    assert tomllib.loads(out.read_text(encoding="utf-8"))["certificate"] == meta
-    assert load_layout(out).certificate == meta  # read back into the layout
+    # the header states the datum's part of U, or that the plane was taken as exact (issue 40)
+    assert cert["header"]["datum"].startswith("datum plane")
+    full = {"datum": cert["header"]["datum"], **meta}
+    assert cert["header"] == full
+    assert tomllib.loads(out.read_text(encoding="utf-8"))["certificate"] == full
+    assert load_layout(out).certificate == full  # read back into the layout
     for words in ("item calibrated (part)", "serial number", "operator", "temperature", "date of issue",
                   "k = 2", "coverage probability of about 95 %", "relate only to the sensor head calibrated"):
         assert words in html_lib.unescape(page), words

@@ -33,7 +33,7 @@ from metrology.sim.forward.panels import PANELS, CylinderPanel, FlatPanel, Panel
 from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
 from metrology.sim.forward.shapes import GENERATED, GeneratedPanel, HeightPanel, OffCadPanel, generated_panel, \
     parse_off_cad
-from metrology.sim.forward.surface import DatumSurface, draw_surface, flat_surface, sample_cloud
+from metrology.sim.forward.surface import HAND_SCAN, DatumSurface, draw_surface, flat_surface, sample_cloud, sample_hand_scan
 from metrology.sim.forward.write import CASE_FILES, write_case
 
 __all__ = [
@@ -41,7 +41,7 @@ __all__ = [
     "Drift", "TemperatureProfile", "draw_drift", "draw_temperature", "draw_times", "CATALOGUE", "FAMILIES",
     "OUT_OF_CATALOGUE", "Effect", "FamilySpec", "Head", "draw_head", "perturb_layout", "IncidenceBias",
     "draw_incidence", "draw_poses", "perturb_poses", "tilt_of", "DatumSurface", "draw_surface", "flat_surface",
-    "sample_cloud", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
+    "sample_cloud", "sample_hand_scan", "HAND_SCAN", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
     "SensorDrift", "SensorShift", "write_log_csv", "write_log_parquet", "PANELS", "CylinderPanel", "FlatPanel",
     "Panel", "SpherePanel", "make_panel", "HoleTable", "read_hole_table", "MicroPlane", "MeshPanel", "load_sim_panel",
     "write_generated", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad",

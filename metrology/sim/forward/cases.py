@@ -23,7 +23,7 @@ from metrology.sim.forward.errors import add_blanks, add_gross, add_noise
 from metrology.sim.forward.families import FAMILIES, Effect, Scene, draw_effect
 from metrology.sim.forward.head import Head, draw_head
 from metrology.sim.forward.poses import draw_poses
-from metrology.sim.forward.surface import DatumSurface, draw_surface, sample_cloud
+from metrology.sim.forward.surface import DatumSurface, draw_surface, sample_cloud, sample_hand_scan
 
 __all__ = ["Case", "draw_case", "draw_pair", "draw_cases"]
 
@@ -97,7 +97,7 @@ def _choose(rng, value, choices):
 
 
 def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, range_mm, n_cloud,
-          cloud_noise_mm, blanks) -> Case:
+          cloud_noise_mm, blanks, scan="tracker") -> Case:
     for f in families:
         if f not in FAMILIES:
             raise ValueError(f"family must be one of {tuple(FAMILIES)}, got {f!r}")
@@ -145,7 +145,12 @@ def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, r
     export = TrackerExport(
         tuple(f"P{i + 1:03d}" for i in range(n_poses)), t, np.round(temp, 3), quaternion_from_matrix(rot_rep),
         trans_rep, head.nominal.names, d)
-    cloud = sample_cloud(surface, rng, n_cloud, cloud_noise_mm)
+    if scan == "hand":  # a hand-held probe: 40-80 um noise, 400-1500 points, 1-3 % strays (sample_hand_scan)
+        cloud, _ = sample_hand_scan(surface, rng)
+    elif scan == "tracker":
+        cloud = sample_cloud(surface, rng, n_cloud, cloud_noise_mm)
+    else:
+        raise ValueError(f"scan must be 'tracker' or 'hand', got {scan!r}")
     family = "+".join(families) if families else "none"
     return Case(family, tuple(effects), head.nominal, head.true, export, cloud, surface, head, rot, trans,
                 hits.d, hits.incidence, noise_mm, profile.to_dict(), tuple(blank_cells), tilt)
@@ -154,7 +159,7 @@ def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, r
 def draw_case(rng: np.random.Generator, family: str, *, n_sensors: int | None = None, noise_mm: float | None = None,
               n_poses: int | None = None, size: float | None = None, tilt_max_deg: float = 14.0,
               range_mm=(30.0, 70.0), n_cloud: int = 2000, cloud_noise_mm: float = 0.010,
-              blanks: int | None = None) -> Case:
+              blanks: int | None = None, scan: str = "tracker") -> Case:
     """A random case carrying one effect of ``family`` (or none).
 
     Parameters
@@ -168,16 +173,19 @@ def draw_case(rng: np.random.Generator, family: str, *, n_sensors: int | None = 
     tilt_max_deg : float, deg, largest tilt of the tool axis from the datum normal
     range_mm : (2,) float, mm, sensor range
     blanks : int, number of PLC blanks (default: drawn 0-2)
+    scan : ``"tracker"`` (``n_cloud`` points, ``cloud_noise_mm``, no strays) or ``"hand"`` (a
+        hand-probe scan, :func:`~metrology.sim.forward.surface.sample_hand_scan`; drawn after
+        everything else, so the readings are those of the same seed's ``"tracker"`` case)
     """
     return _draw(rng, [family], [size], n_sensors=n_sensors, noise_mm=noise_mm, n_poses=n_poses,
                  tilt_max_deg=tilt_max_deg, range_mm=range_mm, n_cloud=n_cloud, cloud_noise_mm=cloud_noise_mm,
-                 blanks=blanks)
+                 blanks=blanks, scan=scan)
 
 
 def draw_pair(rng: np.random.Generator, family_a: str, family_b: str, *, n_sensors: int | None = None,
               noise_mm: float | None = None, n_poses: int | None = None, sizes=(None, None),
               tilt_max_deg: float = 14.0, range_mm=(30.0, 70.0), n_cloud: int = 2000,
-              cloud_noise_mm: float = 0.010, blanks: int | None = None) -> Case:
+              cloud_noise_mm: float = 0.010, blanks: int | None = None, scan: str = "tracker") -> Case:
     """A random case carrying two causes at once (issue 15); per-sensor causes act on different
     sensors. Parameters as :func:`draw_case`, ``sizes`` one per family."""
     if family_a == family_b and not FAMILIES[family_a].per_sensor:
@@ -186,7 +194,7 @@ def draw_pair(rng: np.random.Generator, family_a: str, family_b: str, *, n_senso
         raise ValueError("a pair needs two causes; use draw_case for one")
     return _draw(rng, [family_a, family_b], list(sizes), n_sensors=n_sensors, noise_mm=noise_mm, n_poses=n_poses,
                  tilt_max_deg=tilt_max_deg, range_mm=range_mm, n_cloud=n_cloud, cloud_noise_mm=cloud_noise_mm,
-                 blanks=blanks)
+                 blanks=blanks, scan=scan)
 
 
 def draw_cases(rng: np.random.Generator, family: str, count: int, **kw) -> list:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.polynomial import legendre as L
 
-__all__ = ["DatumSurface", "flat_surface", "draw_surface", "sample_cloud"]
+__all__ = ["DatumSurface", "flat_surface", "draw_surface", "sample_cloud", "sample_hand_scan", "HAND_SCAN"]
 
 
 def _unit(v):
@@ -192,3 +192,41 @@ def sample_cloud(surface: DatumSurface, rng: np.random.Generator, n_points: int 
     s = rng.uniform(-1, 1, n_points) * surface.half_extent[0] * fill
     t = rng.uniform(-1, 1, n_points) * surface.half_extent[1] * fill
     return surface.point(s, t) + rng.normal(scale=noise_mm, size=(n_points, 3))
+
+
+#: a datum scanned with a hand-held tracker probe: point noise (1 sigma per axis, mm), point count,
+#: share of stray points, the share of the extent covered, and how far a stray lies off the surface
+#: (mm; a probe lifted, touching an edge or a clamp)
+HAND_SCAN = {"noise_mm": (0.040, 0.080), "n_points": (400, 1500), "stray_share": (0.01, 0.03), "fill": (0.6, 0.95),
+             "stray_mm": (0.3, 3.0)}
+
+
+def sample_hand_scan(surface: DatumSurface, rng: np.random.Generator, noise_mm: float | None = None,
+                     n_points: int | None = None, stray_share: float | None = None, fill: float | None = None):
+    """A hand-probe scan of the datum: points ``(m, 3)`` mm, tracker frame, and what was drawn.
+
+    Uniform over a centred patch of ``fill`` of the extent (drawn per axis in ``HAND_SCAN``),
+    on the height field plus isotropic Gaussian noise of ``noise_mm``; a share ``stray_share``
+    of them are strays, lifted off the surface along its normal by ``HAND_SCAN["stray_mm"]``
+    (either side). Unset arguments are drawn uniformly in :data:`HAND_SCAN`'s ranges, so the
+    plane fitted to it is off the true one by its own uncertainty (tens of urad).
+
+    Returns
+    -------
+    points : (m, 3) float, mm, tracker frame
+    drawn : dict, the scan's noise_mm, n_points, stray_share, fill, n_strays
+    """
+    H = HAND_SCAN
+    noise_mm = float(rng.uniform(*H["noise_mm"])) if noise_mm is None else float(noise_mm)
+    n_points = int(rng.integers(H["n_points"][0], H["n_points"][1] + 1)) if n_points is None else int(n_points)
+    stray_share = float(rng.uniform(*H["stray_share"])) if stray_share is None else float(stray_share)
+    fill = rng.uniform(*H["fill"], size=2) if fill is None else np.broadcast_to(float(fill), (2,))
+    s = rng.uniform(-1, 1, n_points) * surface.half_extent[0] * fill[0]
+    t = rng.uniform(-1, 1, n_points) * surface.half_extent[1] * fill[1]
+    w = surface.height(s, t)
+    n_strays = int(round(stray_share * n_points))
+    idx = rng.choice(n_points, n_strays, replace=False)
+    w[idx] += rng.choice((-1.0, 1.0), n_strays) * rng.uniform(*H["stray_mm"], size=n_strays)
+    pts = surface.point(s, t, w) + rng.normal(scale=noise_mm, size=(n_points, 3))
+    return pts, {"noise_mm": noise_mm, "n_points": n_points, "stray_share": stray_share,
+                 "fill": [float(f) for f in fill], "n_strays": n_strays}
