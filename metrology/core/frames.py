@@ -10,6 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "tangent_frame",
+    "principal_curvatures",
+    "embed_shape",
     "matrix_from_quaternion",
     "quaternion_from_matrix",
     "plane_in_tcs",
@@ -83,3 +86,27 @@ def random_rotation(rng: np.random.Generator, size=None):
 
     R = Rotation.random(1 if size is None else size, random_state=rng).as_matrix()
     return R[0] if size is None else R
+
+
+def tangent_frame(n):
+    """A surface's tangent frame at unit normals ``n (m, 3)``: ``e1`` (the frame's x made square to
+    ``n``; its y where ``n`` is near x) and ``e2 = n x e1``, ``(m, 3)`` unit each, in ``n``'s frame."""
+    ref = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    e1 = ref - (ref * n).sum(1, keepdims=True) * n
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(n, e1)
+
+
+def principal_curvatures(Kl):
+    """``(m, 2)`` 1/mm: the eigenvalues (descending) of the symmetric 2 x 2 curvature tensors
+    ``Kl (m, 2, 2)`` 1/mm written in a tangent frame."""
+    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
+    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
+    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
+
+
+def embed_shape(Kl, e1, e2):
+    """``(m, 3, 3)`` 1/mm: the shape operator ``sum_ab Kl_ab e_a e_b^T`` of the tangent-frame tensors
+    ``Kl (m, 2, 2)`` on the tangent frame ``e1, e2 (m, 3)`` (:func:`tangent_frame`), in its frame."""
+    E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
+    return np.einsum("mai,mab,mbj->mij", E, Kl, E)

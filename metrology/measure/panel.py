@@ -43,6 +43,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from metrology.core.frames import embed_shape, principal_curvatures, tangent_frame
+
 __all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
 
 #: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
@@ -207,34 +209,13 @@ def tcs2panel_nominal(n, s: float):
     return Q * np.array([1.0, -s, -s])
 
 
-def _frame(n):
-    """``e1`` (the panel's x made square to ``n``; y where n is near x) and ``e2 = n x e1``, (m, 3) each."""
-    ref = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
-    e1 = ref - (ref * n).sum(1, keepdims=True) * n
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(n, e1)
-
-
-def _principal(Kl):
-    """(m, 2) eigenvalues (descending) of the 2 x 2 symmetric ``Kl (m, 2, 2)``."""
-    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
-    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
-
-
-def _embed(Kl, e1, e2):
-    """(m, 3, 3): ``sum_ab Kl_ab e_a e_b^T``."""
-    E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
-    return np.einsum("mai,mab,mbj->mij", E, Kl, E)
-
-
 def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 0.0, spin: float = 0.0) -> HoleSurfaces:
     """Each hole's local surface from the nominal normals of its neighbours in the table (no panel)."""
     from scipy.spatial import cKDTree
 
     m = len(table.ids)
     n = -table.feed
-    e1, e2 = _frame(n)
+    e1, e2 = tangent_frame(n)
     Kl = np.zeros((m, 2, 2))
     u = np.zeros(m)
     problem = np.full(m, "", dtype=object)
@@ -268,5 +249,6 @@ def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 
         problem[i] = "its neighbours in the hole table lie on a line: no curvature from their normals"
     Kl[~ok] = 0.0
     u = np.sqrt(u_fit ** 2 + u_form ** 2)
-    return HoleSurfaces(table.ids, n, _embed(Kl, e1, e2), _principal(Kl), np.where(np.isfinite(u), u, 0.0), problem,
+    return HoleSurfaces(table.ids, n, embed_shape(Kl, e1, e2), principal_curvatures(Kl),
+                        np.where(np.isfinite(u), u, 0.0), problem,
                         f"hole table {table.source} (the nominal normals of each hole's {kk} nearest neighbours)", spin)

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from metrology.core.frames import embed_shape, principal_curvatures, tangent_frame
+
 __all__ = ["panel_surfaces", "RING_SAMPLES", "FOOTPRINT_MARGIN", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO"]
 
 #: rays per ring of the footprint sampled on the panel (3 rings and the centre: 37 samples)
@@ -32,27 +34,6 @@ UNIT_RATIO = 300.0
 CHUNK_HOLES = 4096
 #: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
 FEED_MIN_COS = 0.5
-
-
-def _frame(n):
-    """``e1`` (the panel's x made square to ``n``; y where n is near x) and ``e2 = n x e1``, (m, 3) each."""
-    ref = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
-    e1 = ref - (ref * n).sum(1, keepdims=True) * n
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(n, e1)
-
-
-def _principal(Kl):
-    """(m, 2) eigenvalues (descending) of the 2 x 2 symmetric ``Kl (m, 2, 2)``."""
-    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
-    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
-
-
-def _embed(Kl, e1, e2):
-    """(m, 3, 3): ``sum_ab Kl_ab e_a e_b^T``."""
-    E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
-    return np.einsum("mai,mab,mbj->mij", E, Kl, E)
 
 
 def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, form_mm: float = 0.0,
@@ -107,7 +88,7 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
                          f"({', '.join(f'{v:.4g}' for v in table.feed[r])}) is {ang:.1f} deg from the panel's inward "
                          f"normal (at most {math.degrees(math.acos(FEED_MIN_COS)):.0f}): it does not point into the "
                          f"panel{' (the other holes feed from the other side)' if ang > 90 else ''}")
-    e1, e2 = _frame(n)
+    e1, e2 = tangent_frame(n)
     rho = FOOTPRINT_MARGIN * footprint_mm
     st = [(0.0, 0.0)] + [(rho * f * math.cos(a), rho * f * math.sin(a)) for f in (1 / 3, 2 / 3, 1.0)
                           for a in (2 * math.pi * (np.arange(RING_SAMPLES) + 0.5 * (f != 1 / 3)) / RING_SAMPLES)]
@@ -146,7 +127,7 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         problem[r] = (f"the head's footprint (radius {rho:.0f} mm) runs off the panel's edge at this hole "
                       f"({int(miss[r].sum())} of {len(st)} samples miss the panel)")
     Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
-    k = _principal(Kl)
+    k = principal_curvatures(Kl)
     k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
-    return {"normal": n, "shape": _embed(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
+    return {"normal": n, "shape": embed_shape(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
             "problem": problem, "source": f"panel {shown} (mesh, cubic fit over the footprint)"}
