@@ -40,13 +40,20 @@ def _fix(params) -> None:
             p.show_default = False
 
 
+def _rich_help() -> bool:
+    """typer draws help with rich, parsing its markup: ``typer.core.HAS_RICH`` in newer typer (it
+    reads TYPER_USE_RICH); older typer (the floor pyproject.toml allows) uses rich where it imports."""
+    core = typer.core
+    return bool(getattr(core, "HAS_RICH", getattr(core, "rich", None) is not None))
+
+
 class _Fixed:
     """The metavar fix, shared by the command and the group (the root) classes."""
 
     def get_params(self, ctx):
         params = super().get_params(ctx)  # with --help and the completion options added by typer
         _fix(params)
-        if typer.core.HAS_RICH and getattr(self, "rich_markup_mode", None) == "rich":
+        if _rich_help() and getattr(self, "rich_markup_mode", None) == "rich":
             for obj in (self, *params):
                 _escape_help(obj)
         return params
