@@ -71,7 +71,8 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
     counts = {str(s): 0 for s in Status}
     alarms, raised = [], set()
     try:
-        reader = csv.reader(fh)
+        # line by line to the stream's end (readline: click 8.2's test stdin raises EOFError from __next__)
+        reader = csv.reader(iter(fh.readline, ""))
         header = next(reader, None)
         if not header:
             raise ValueError(f"{name}: no header line (hole_id, time, d_<sensor>...)")
