@@ -205,7 +205,7 @@ def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0
     from metrology.panel.holes import panel_surfaces
 
     f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
-    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin)
+    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin, point=table.point)
 
 
 def _digest(layout) -> str:
