@@ -76,8 +76,9 @@ def _off_cad(tmp_path, off_cad, kind="wing"):
     """A log drilled on KIND off its CAD by ``off_cad``, the robot's orientation error small (0-0.02 deg:
     the commanded pose is then the head's to within it), measured with the CAD panel."""
     extra = ["--angle-deg", "0,0.02"] + (["--off-cad", off_cad] if off_cad else [])
-    rows, truth, _ = _drill_and_measure(tmp_path, kind, 50, extra)
+    rows, truth, js = _drill_and_measure(tmp_path, kind, 50, extra)
     t = [truth[r["hole_id"]] for r in rows]
+    _off_cad.json = js
     return rows, t
 
 
@@ -90,6 +91,12 @@ def test_a_panel_shifted_1mm_along_its_normal_shows_in_cad_offset(tmp_path, kind
     # measured 1.0002 / 1.0019 median against the truth's 0.9997 / 0.9972, worst hole 0.009 mm off
     assert np.max(np.abs(off[ok] - true[ok])) < 0.03
     assert abs(np.median(off[ok]) - 1.0) < 0.02
+    # the summary and the verdict name it with its size (information, not a gate)
+    cv = _off_cad.json["curvature"]
+    assert cv["cad_off_holes"] >= 0.9 * cv["cad_checked"] > 0
+    assert abs(cv["cad_offset_mean_abs_mm"] - 1.0) < 0.02 and abs(cv["cad_offset_max_mm"] - 1.0) < 0.03
+    named = [c for c in _off_cad.json["verdict"]["checks"] if c["name"].startswith("panel against its CAD")]
+    assert len(named) == 1 and "+1.00" in named[0]["name"]
 
 
 def test_on_its_cad_the_offset_and_angle_are_nothing(tmp_path):
@@ -99,6 +106,7 @@ def test_on_its_cad_the_offset_and_angle_are_nothing(tmp_path):
     assert np.max(np.abs(off)) < 0.01
     # the robot's orientation error (0-0.02 deg) is all the angle holds
     assert np.max(ang) < 0.05
+    assert _off_cad.json["curvature"]["cad_off_holes"] == 0
 
 
 def test_a_dent_shows_in_cad_offset_and_normal_vs_cad(tmp_path):
