@@ -72,6 +72,13 @@ class MeasureReport:
                                     f"CAD's (|z| > {cv['off_cad_sigmas']:g}; mean size "
                                     f"{cv['off_cad_mean_per_mm']:.2g} 1/mm)", cv["off_cad_holes"], None, "holes", True,
                                     gate=False))
+            if cv.get("cad_checked"):
+                checks.append(Check(f"panel against its CAD (the log's commanded pose): holes off it (|offset| > "
+                                    f"{cv['cad_offset_limit_mm']:g} mm or angle > {cv['cad_angle_limit_deg']:g} deg; "
+                                    f"mean |offset| {cv['cad_offset_mean_abs_mm']:.3f} mm, largest "
+                                    f"{cv['cad_offset_max_mm']:+.3f} mm at {cv['cad_offset_max_hole']}, largest angle "
+                                    f"{cv['normal_vs_cad_max_deg']:.3f} deg at {cv['normal_vs_cad_max_hole']})",
+                                    cv["cad_off_holes"], None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:
@@ -205,7 +212,7 @@ def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0
     from metrology.panel.holes import panel_surfaces
 
     f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
-    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin)
+    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin, point=table.point)
 
 
 def _digest(layout) -> str:
@@ -408,7 +415,7 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
                      "position_error_mm": position_error_mm, "form_tolerance_mm": form_tolerance_mm,
                      "spin_deg": spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
                      "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
-                     **result.summary.off_cad_figures()}
+                     **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
     report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
                            engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel},
                            curvature)

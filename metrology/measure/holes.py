@@ -293,6 +293,60 @@ def _duplicates(ids):
     return np.array(dup, int), np.array(orig, int)
 
 
+POSE_COLUMNS = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")
+
+
+def _pose(table):
+    """The log's commanded pose, or None without its columns: ``(tcs2panel (N, 3, 3), origin (N, 3) mm,
+    panel frame)``; a row with no pose gets NaN."""
+    if not all(c in table.column_names for c in POSE_COLUMNS):
+        return None
+    from scipy.spatial.transform import Rotation
+
+    v = np.column_stack([np.asarray(table.column(c).cast("float64").to_numpy(zero_copy_only=False), float)
+                         for c in POSE_COLUMNS])
+    ok = np.all(np.isfinite(v), axis=1)
+    R = np.full((len(v), 3, 3), np.nan)
+    if ok.any():
+        R[ok] = Rotation.from_rotvec(np.radians(v[ok, :3])).as_matrix()
+    return R, v[:, 3:]
+
+
+def _against_cad(layout, d, normal, shape, surf, table_row, pose):
+    """Each hole against its CAD: ``(angle (N,) rad, offset (N,) mm)``.
+
+    ``angle``: between the measured normal (TCS, turned into the panel frame by the commanded pose)
+    and the CAD's normal at the hole. ``offset``: where the readings put the surface on the drill
+    axis (the spots, their height from the CAD's curvature taken off, fitted by a plane, met by the
+    axis), against the table's nominal point, along the CAD's outward normal: a panel standing 1 mm
+    proud of its CAD reads +1. NaN where a reading, the pose or the table row is missing."""
+    from metrology.measure.normals import drill_axis
+
+    R, origin = pose
+    N = len(d)
+    ang, off = np.full(N, np.nan), np.full(N, np.nan)
+    rows = np.flatnonzero((table_row >= 0) & np.all(np.isfinite(d), axis=1) & np.all(np.isfinite(origin), axis=1)
+                          & np.all(np.isfinite(normal), axis=1))
+    if rows.size == 0:
+        return ang, off
+    r = table_row[rows]
+    ncad = surf.normal[r]  # outward (toward the head), panel frame
+    n_panel = np.einsum("hij,hj->hi", R[rows], normal[rows])  # along the drill axis: into the panel
+    ang[rows] = np.arccos(np.clip(-np.sum(n_panel * ncad, axis=1), -1.0, 1.0))
+    a = drill_axis(layout)
+    spots = layout.zero[None] + d[rows][:, :, None] * layout.direction[None]  # (h, n, 3) mm, TCS
+    lat = spots - np.einsum("hni,i->hn", spots, a)[:, :, None] * a
+    sag = 0.5 * np.einsum("hni,hij,hnj->hn", lat, shape[rows], lat)  # away from the head
+    spots = spots - sag[:, :, None] * a
+    c = spots.mean(1)
+    _, _, vt = np.linalg.svd(spots - c[:, None], full_matrices=False)
+    m = vt[:, 2]
+    t = np.sum(c * m, axis=1) / (m @ a)
+    hit = origin[rows] + np.einsum("hij,hj->hi", R[rows], t[:, None] * a[None])
+    off[rows] = np.sum((hit - surf.point[r]) * ncad, axis=1)
+    return ang, off
+
+
 def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     """Measure one batch of a hole log.
 
@@ -325,8 +379,12 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         have = table_row >= 0
         shape = np.zeros((N, 3, 3))
         u_shape = np.zeros(N)
+        pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
-            shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
+            if pose is not None:
+                shape[have] = surf.shape_pose(table_row[have], pose[0][have])
+            else:  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
+                shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
             u_shape[have] = surf.u_shape[table_row[have]]
     before = _measure(layout, d, settings, shape, u_shape)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
@@ -408,6 +466,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
         cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
         cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
+        if pose is not None and surf.point is not None:
+            vs_cad, offset = _against_cad(layout, d, before.normal, shape, surf, table_row, pose)
+            cols["normal_vs_cad_deg"] = num(np.degrees(vs_cad))
+            cols["cad_offset_mm"] = num(offset)
     for k in table.column_names:
         if k not in cols and not k.startswith("d_"):
             cols[k] = table.column(k)

@@ -160,6 +160,7 @@ class HoleSurfaces:
     problem : (m,) object, "" or why the hole cannot be measured (its footprint runs off the panel)
     source : str, where the curvature came from (named in the verdict and the JSON)
     spin : float, rad, the head's spin about the tool axis relative to the panel is within +-spin
+    point : (m, 3) float, mm, panel frame, the table's nominal drill point, or None
     """
 
     ids: tuple
@@ -170,6 +171,7 @@ class HoleSurfaces:
     problem: np.ndarray
     source: str
     spin: float = 0.0
+    point: np.ndarray | None = None
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):
@@ -187,6 +189,11 @@ class HoleSurfaces:
             R = tcs2panel_nominal(self.normal, s)  # (m, 3, 3)
             self._tcs[s] = np.einsum("hji,hjk,hkl->hil", R, self.shape, R)
         return self._tcs[s][rows]
+
+    def shape_pose(self, rows, tcs2panel):
+        """(h, 3, 3) float, 1/mm, TCS: the shape operators of table rows ``rows`` under the robot's
+        commanded pose ``tcs2panel`` ((h, 3, 3), columns the TCS axes in the panel frame)."""
+        return np.einsum("hji,hjk,hkl->hil", tcs2panel, self.shape[rows], tcs2panel)
 
 
 def tcs2panel_nominal(n, s: float):

@@ -33,6 +33,13 @@ WORST = 20
 #: many sigmas (noise, calibration, the panel's stated uncertainty; two-sided p ~ 6e-5) counts as
 #: a panel off its CAD there
 OFF_CAD_SIGMAS = 4.0
+#: with the robot's commanded pose in the log: a hole whose readings put the surface this far off the
+#: CAD's along its normal (mm) counts as off its CAD there (on its CAD the bundled panels read within
+#: 0.01 mm: tests/measure/test_panel_bundled.py)
+CAD_OFFSET_MM = 0.05
+#: ... or whose measured normal (turned by the commanded pose) is this far from the CAD's (deg); it
+#: holds the robot's own orientation error as well, so it is information, never a gate
+CAD_ANGLE_DEG = 0.1
 _STATUSES = tuple(str(s) for s in Status)
 #: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
 PPK_Q = (0.5, 0.99865)
@@ -184,6 +191,40 @@ class FleetSummary:
     unknown_after: int = 0
     off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
                                                    "max_hole": None})
+    vs_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_abs_mm": 0.0, "max_mm": 0.0,
+                                                  "max_mm_hole": None, "sum_deg": 0.0, "max_deg": 0.0,
+                                                  "max_deg_hole": None})
+
+    def _vs_cad(self, t) -> None:
+        if "cad_offset_mm" not in t.column_names:
+            return
+        off = t.column("cad_offset_mm").to_numpy(zero_copy_only=False).astype(float)
+        ang = t.column("normal_vs_cad_deg").to_numpy(zero_copy_only=False).astype(float)
+        f = np.isfinite(off) & np.isfinite(ang)
+        o = self.vs_cad
+        o["checked"] += int(f.sum())
+        o["holes"] += int((f & ((np.abs(np.nan_to_num(off)) > CAD_OFFSET_MM) | (np.nan_to_num(ang) > CAD_ANGLE_DEG))).sum())
+        o["sum_abs_mm"] += float(np.abs(off[f]).sum())
+        o["sum_deg"] += float(ang[f].sum())
+        if f.any():
+            i = int(np.flatnonzero(f)[np.argmax(np.abs(off[f]))])
+            if abs(off[i]) > abs(o["max_mm"]):
+                o["max_mm"], o["max_mm_hole"] = float(off[i]), t.column("hole_id")[i].as_py()
+            i = int(np.flatnonzero(f)[np.argmax(ang[f])])
+            if ang[i] > o["max_deg"]:
+                o["max_deg"], o["max_deg_hole"] = float(ang[i]), t.column("hole_id")[i].as_py()
+
+    def vs_cad_figures(self) -> dict:
+        """The against-the-CAD figures for the JSON (with the log's commanded pose): holes checked,
+        holes off (|cad_offset| > CAD_OFFSET_MM or normal_vs_cad > CAD_ANGLE_DEG), mean |offset| (mm),
+        largest offset (signed, mm) and angle (deg) with their holes."""
+        o = self.vs_cad
+        n = o["checked"]
+        return {"cad_checked": n, "cad_off_holes": o["holes"], "cad_offset_limit_mm": CAD_OFFSET_MM,
+                "cad_angle_limit_deg": CAD_ANGLE_DEG, "cad_offset_mean_abs_mm": o["sum_abs_mm"] / n if n else 0.0,
+                "cad_offset_max_mm": o["max_mm"], "cad_offset_max_hole": o["max_mm_hole"],
+                "normal_vs_cad_mean_deg": o["sum_deg"] / n if n else 0.0, "normal_vs_cad_max_deg": o["max_deg"],
+                "normal_vs_cad_max_hole": o["max_deg_hole"]}
 
     def _off_cad(self, t) -> None:
         if "panel_misfit_z" not in t.column_names:
@@ -243,6 +284,7 @@ class FleetSummary:
         self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
         self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
         self._off_cad(t)
+        self._vs_cad(t)
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -273,6 +315,13 @@ class FleetSummary:
         o["sum_per_mm"] += p["sum_per_mm"]
         if p["max_per_mm"] > o["max_per_mm"]:
             o["max_per_mm"], o["max_hole"] = p["max_per_mm"], p["max_hole"]
+        o, p = self.vs_cad, other.vs_cad
+        for k in ("checked", "holes", "sum_abs_mm", "sum_deg"):
+            o[k] += p[k]
+        if abs(p["max_mm"]) > abs(o["max_mm"]):
+            o["max_mm"], o["max_mm_hole"] = p["max_mm"], p["max_mm_hole"]
+        if p["max_deg"] > o["max_deg"]:
+            o["max_deg"], o["max_deg_hole"] = p["max_deg"], p["max_deg_hole"]
         self.worst = sorted(self.worst + other.worst,
                             key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
 
