@@ -74,10 +74,11 @@ class MeasureReport:
                                     gate=False))
             if cv.get("cad_checked"):
                 checks.append(Check(f"panel against its CAD (the log's commanded pose): holes off it (|offset| > "
-                                    f"{cv['cad_offset_limit_mm']:g} mm or angle > {cv['cad_angle_limit_deg']:g} deg; "
-                                    f"mean |offset| {cv['cad_offset_mean_abs_mm']:.3f} mm, largest "
-                                    f"{cv['cad_offset_max_mm']:+.3f} mm at {cv['cad_offset_max_hole']}, largest angle "
-                                    f"{cv['normal_vs_cad_max_deg']:.3f} deg at {cv['normal_vs_cad_max_hole']})",
+                                    f"{cv['cad_offset_limit_mm']:g} mm; mean |offset| {cv['cad_offset_mean_abs_mm']:.3f} mm, "
+                                    f"largest {cv['cad_offset_max_mm']:+.3f} mm at {cv['cad_offset_max_hole']}; the "
+                                    f"measured normal against the CAD's, with the robot's own orientation error: mean "
+                                    f"{cv['normal_vs_cad_mean_deg']:.3f} deg, largest {cv['normal_vs_cad_max_deg']:.3f} "
+                                    f"deg at {cv['normal_vs_cad_max_hole']})",
                                     cv["cad_off_holes"], None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 

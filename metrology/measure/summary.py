@@ -37,9 +37,9 @@ OFF_CAD_SIGMAS = 4.0
 #: CAD's along its normal (mm) counts as off its CAD there (on its CAD the bundled panels read within
 #: 0.01 mm: tests/measure/test_panel_bundled.py)
 CAD_OFFSET_MM = 0.05
-#: ... or whose measured normal (turned by the commanded pose) is this far from the CAD's (deg); it
-#: holds the robot's own orientation error as well, so it is information, never a gate
-CAD_ANGLE_DEG = 0.1
+#: the measured normal (turned by the commanded pose) against the CAD's is reported (mean, largest) but
+#: counts no hole off its CAD: it holds the robot's own orientation error as well, which on the forward
+#: simulator's default logs (true angles 0.5-5 deg before the adjustment) is every hole's 0.5-5 deg
 _STATUSES = tuple(str(s) for s in Status)
 #: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
 PPK_Q = (0.5, 0.99865)
@@ -203,7 +203,7 @@ class FleetSummary:
         f = np.isfinite(off) & np.isfinite(ang)
         o = self.vs_cad
         o["checked"] += int(f.sum())
-        o["holes"] += int((f & ((np.abs(np.nan_to_num(off)) > CAD_OFFSET_MM) | (np.nan_to_num(ang) > CAD_ANGLE_DEG))).sum())
+        o["holes"] += int((f & (np.abs(np.nan_to_num(off)) > CAD_OFFSET_MM)).sum())
         o["sum_abs_mm"] += float(np.abs(off[f]).sum())
         o["sum_deg"] += float(ang[f].sum())
         if f.any():
@@ -216,12 +216,12 @@ class FleetSummary:
 
     def vs_cad_figures(self) -> dict:
         """The against-the-CAD figures for the JSON (with the log's commanded pose): holes checked,
-        holes off (|cad_offset| > CAD_OFFSET_MM or normal_vs_cad > CAD_ANGLE_DEG), mean |offset| (mm),
+        holes off (|cad_offset| > CAD_OFFSET_MM), mean |offset| (mm),
         largest offset (signed, mm) and angle (deg) with their holes."""
         o = self.vs_cad
         n = o["checked"]
         return {"cad_checked": n, "cad_off_holes": o["holes"], "cad_offset_limit_mm": CAD_OFFSET_MM,
-                "cad_angle_limit_deg": CAD_ANGLE_DEG, "cad_offset_mean_abs_mm": o["sum_abs_mm"] / n if n else 0.0,
+                "cad_offset_mean_abs_mm": o["sum_abs_mm"] / n if n else 0.0,
                 "cad_offset_max_mm": o["max_mm"], "cad_offset_max_hole": o["max_mm_hole"],
                 "normal_vs_cad_mean_deg": o["sum_deg"] / n if n else 0.0, "normal_vs_cad_max_deg": o["max_deg"],
                 "normal_vs_cad_max_hole": o["max_deg_hole"]}

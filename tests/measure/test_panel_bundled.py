@@ -162,3 +162,25 @@ def test_the_panels_study_runs_and_metros_normal_drills_the_nacelle_as_flat(tmp_
     assert rows["nacelle", "microplane"]["drilled_median_deg"] > 5 * flat
     for r in rows.values():
         assert 0.85 <= r["coverage_before"] <= 1.0
+
+
+def test_the_robots_own_tilt_counts_no_hole_off_its_cad(tmp_path):
+    """A default log (true angles 0.5-5 deg before the adjustment: the robot's orientation error) on
+    a panel that is its CAD: the angle against the CAD is large, yet no hole is counted off it."""
+    from cli.main import app
+    from typer.testing import CliRunner
+
+    from metrology.io.data import data_path
+
+    runner = CliRunner()
+    panels = data_path("panels")
+    log = tmp_path / "w.csv"
+    r = runner.invoke(app, ["simulate-log", "--layout", str(data_path("measured", "nominal.toml")), "--panel", "wing",
+                            "--points", str(panels / "wing.holes.csv"), "--holes", "200", "--out", str(log)])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(data_path("measured", "nominal.toml")), "--panel",
+                            str(panels / "wing.stl"), "--points", str(panels / "wing.holes.csv"), "--json"])
+    assert r.exit_code in (0, 1), r.output
+    cv = json.loads(r.stdout)["curvature"]
+    assert cv["cad_checked"] == 200 and cv["normal_vs_cad_max_deg"] > 0.5
+    assert cv["cad_off_holes"] == 0 and abs(cv["cad_offset_max_mm"]) < 0.05
