@@ -1,4 +1,5 @@
-"""What outputs call an input file: its path, unless the caller named it otherwise.
+"""What outputs call an input file: its path, unless the caller named it otherwise; and its
+SHA-256, by which reports and QIF documents name its content (:func:`sha256_file`).
 
 The library reads inputs from paths (Open3D and trimesh need one), so a stream the CLI
 reads from stdin reaches it as a temporary file. Every path that goes into an output the
@@ -11,10 +12,11 @@ name lives exactly as long as the ``with`` block that set it.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 from contextvars import ContextVar
 from pathlib import Path
 
-__all__ = ["display_name", "named_inputs"]
+__all__ = ["display_name", "named_inputs", "sha256_file"]
 
 _NAMES: ContextVar[dict] = ContextVar("metro_input_names", default={})
 
@@ -55,3 +57,12 @@ def display_name(path) -> str:
         if key in names:
             return names[key]
     return str(path)
+
+
+def sha256_file(path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -30,7 +30,6 @@ order) item ``7 + 2k``, measurement ``8 + 2k``.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 import tempfile
@@ -39,6 +38,8 @@ from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
+
+from metrology.io.names import sha256_file
 
 __all__ = ["QifResults", "QIF_STATUS", "check_qif_path", "write_device_document"]
 
@@ -56,14 +57,6 @@ def check_qif_path(path) -> Path:
     from metrology.io.atomic import check_output_file
 
     return check_output_file(path, "--qif", {".qif", ".xml"})
-
-
-def _sha256_file(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _decimal(x: np.ndarray):
@@ -133,7 +126,7 @@ class QifResults:
         self.path = Path(path)
         self.tolerance_deg = float(tolerance_deg)
         self.layout_path = Path(layout_path)
-        self.layout_sha256 = _sha256_file(layout_path)
+        self.layout_sha256 = sha256_file(layout_path)
         self.sensors = tuple(sensors)
         self.log = str(log)
         self.certificate = dict(certificate or {})

@@ -14,7 +14,6 @@ step) under one :class:`RunInfo`.
 from __future__ import annotations
 
 import base64
-import hashlib
 import os
 import platform
 from contextlib import contextmanager
@@ -22,7 +21,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from metrology.io.names import display_name
+from metrology.io.names import display_name, sha256_file
 
 __all__ = ["COLUMN_IN", "MIN_FIGURE_PT", "NARROW_IN", "NARROW_MEDIA", "fit_to_column", "written", "Figure", "Table", "Headline", "verdict_box", "Section", "RunInfo", "run_info", "sha256_file", "versions",
            "figure_from_matplotlib", "figure_from_png", "expect_ink", "render_html", "write_report", "check_report_path", "command_line",
@@ -166,15 +165,6 @@ class RunInfo:
     seed: int | None = None
     written: str = ""
     python: str = field(default_factory=platform.python_version)
-
-
-def sha256_file(path) -> str:
-    """SHA-256 (hex) of a file's bytes, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def versions(extra=()) -> tuple:
