@@ -158,10 +158,11 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None) -> _Measured:
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None) -> _Measured:
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
-    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``)."""
+    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
+    (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -194,7 +195,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
             parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
-                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], settings.surfaces.spin))
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
             h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
                                      np.concatenate([getattr(p[0], f) for p in parts])
@@ -367,7 +368,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    shape = u_shape = table_row = None
+    shape = u_shape = spin = table_row = None
     surf = settings.surfaces
     if surf is not None:
         from metrology.measure.normals import drill_axis
@@ -379,18 +380,21 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         have = table_row >= 0
         shape = np.zeros((N, 3, 3))
         u_shape = np.zeros(N)
+        spin = np.full(N, float(surf.spin))
         pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
-            if pose is not None:
-                shape[have] = surf.shape_pose(table_row[have], pose[0][have])
-            else:  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
-                shape[have] = surf.shape_tcs(table_row[have], drill_axis(layout)[2])
+            posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
+            if (have & posed).any():  # the pose gives the spin: no doubt about it left in U95
+                shape[have & posed] = surf.shape_pose(table_row[have & posed], pose[0][have & posed])
+                spin[posed] = 0.0
+            if (have & ~posed).any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
+                shape[have & ~posed] = surf.shape_tcs(table_row[have & ~posed], drill_axis(layout)[2])
             u_shape[have] = surf.u_shape[table_row[have]]
-    before = _measure(layout, d, settings, shape, u_shape)
+    before = _measure(layout, d, settings, shape, u_shape, spin)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
-        after = _measure(layout, da, settings, shape, u_shape)
+        after = _measure(layout, da, settings, shape, u_shape, spin)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)

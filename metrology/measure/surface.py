@@ -38,8 +38,9 @@ the head its calibration.
   relative to the panel (``K`` turned by ``delta psi``, uniform within ``+-spin``):
   ``delta K = delta psi (W K - K W)``, ``W`` the cross matrix of ``m``.
 
-The angle ``alpha = atan(|g|)`` and its U95 as in :mod:`metrology.measure.normals` (the 2-D
-radius near ``alpha = 0``).
+The angle ``alpha = atan(|g|)``; its U95 the half-width that holds 95 % of the length of the
+tilt, ``g``'s covariance known (:mod:`metrology.measure.magnitude`: near ``alpha = 0`` the
+length's error is not normal), the linear rule ``K95 u`` far from 0.
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis, radius95
+from metrology.measure.magnitude import X_MAX, magnitude_u95
+from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
 
@@ -256,12 +258,12 @@ class PanelTerms:
     ----------
     u_shape : (h,) float, 1/mm, standard uncertainty of each component of the shape operator
         (mesh fit, position error along the surface, form tolerance; combined)
-    spin : float, rad, the head's spin about the tool axis relative to the panel is within ``+-spin``
-        (uniform)
+    spin : float or (h,) float, rad, the head's spin about the tool axis relative to the panel is
+        within ``+-spin`` (uniform); 0 where the robot's commanded pose gives it
     """
 
     u_shape: np.ndarray
-    spin: float = 0.0
+    spin: float | np.ndarray = 0.0
 
 
 def _tangent_basis(m):
@@ -350,7 +352,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         for dh in dh_basis:
             v = np.einsum("hin,hn->hi", Ag, dh)
             C_pan += v[:, :, None] * v[:, None, :] * (uK ** 2)[:, None, None]
-        if terms.spin > 0:
+        spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
+        if np.any(spin > 0):
             W = np.zeros((N, 3, 3))
             W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -m[:, 2], m[:, 1], -m[:, 0]
             W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
@@ -358,7 +361,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
             dh_spin = dh
             v = np.einsum("hin,hn->hi", Ag, dh)
-            C_pan += v[:, :, None] * v[:, None, :] * (terms.spin ** 2 / 3.0)
+            C_pan += v[:, :, None] * v[:, None, :] * (spin ** 2 / 3.0)[:, None, None]
     C = C_noise + C_cal + C_pan
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
@@ -373,16 +376,21 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     u_angle = np.sqrt(var)
     U95 = K95 * u_angle
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
-    if np.any(small):
+    if np.any(small):  # u: the 2-D spread's major axis
         Cs = C[small] / ((1.0 + g2[small]) ** 2)[:, None, None]
         disc = np.sqrt(0.25 * (Cs[:, 0, 0] - Cs[:, 1, 1]) ** 2 + Cs[:, 0, 1] ** 2)
-        l1 = 0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) + disc
-        l2 = np.maximum(0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) - disc, 0.0)
-        s2d = np.sqrt(l1)
+        s2d = np.sqrt(0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) + disc)
         still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
-        idx = np.flatnonzero(small)[still]
-        u_angle[idx] = s2d[still]
-        U95[idx] = radius95(l1[still], l2[still])
+        u_angle[np.flatnonzero(small)[still]] = s2d[still]
+    # U95: the half-width holding 95 % of the length of the tilt (metrology.measure.magnitude); the
+    # linear rule beyond X_MAX major-axis standard deviations
+    Ca = C / ((1.0 + g2) ** 2)[:, None, None]  # rad^2: the tilt's covariance in angle
+    near = angle < X_MAX * np.sqrt(0.5 * (Ca[:, 0, 0] + Ca[:, 1, 1])
+                                   + np.sqrt(0.25 * (Ca[:, 0, 0] - Ca[:, 1, 1]) ** 2 + Ca[:, 0, 1] ** 2))
+    if np.any(near):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
+        U95[near] = magnitude_u95(tilt, Ca[near])
     panel_share = np.sqrt(np.maximum(quad(C_pan), 0.0))
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
@@ -409,7 +417,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         if terms is not None:
             var_pan_rho = (s_b ** 2).sum(1) * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
             if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
-                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(1) ** 2 * terms.spin ** 2 / 3.0
+                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(1) ** 2 * spin ** 2 / 3.0
         residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(1) + var_pan_rho)
         signature = sig_k
         twist = np.zeros(N)

@@ -1,0 +1,165 @@
+"""The expanded uncertainty of an angle that is the length of a 2-D tilt.
+
+A hole's angle to the drill axis is the length of its tilt, a 2-D vector ``g`` (rad, the TCS
+``x, y``) measured with a Gaussian error of covariance ``C`` (2 x 2, rad^2). Far from zero
+(``|g|`` many standard deviations) the length's error is the error along ``g``, normal, and
+``U95 = K95 sqrt(g^T C g) / |g|``. After the cell's adjustment the true angle is of the order of
+that standard deviation itself, and the length's error is not normal: with the tilt's true
+value ``t``, ``|g| - |t|`` has a Rice distribution (isotropic ``C``), or its anisotropic
+generalisation. A constant factor cannot fit both ends: the 2-D radius (``K95_2D``, 2.45 sigma)
+holds the whole 2-D error and over-covers the length (about 98 % when the true angle is of the
+order of sigma), the 1-D factor (1.96) under-covers near zero.
+
+**U95 here** is the half-width ``q`` of the interval ``|g| +- q`` that holds 95 % of the length
+``|t|`` of a tilt ``t ~ N(g, C)`` (the measured tilt and its covariance: the distribution of the
+true tilt given the measurement, uniform prior over the plane):
+
+    P( | |t| - |g| | <= q ) = 0.95,    t ~ N(g, C).
+
+For isotropic ``C = sigma^2 I`` this is ``P(|R - nu| <= q) = 0.95`` with ``R ~ Rice(nu, sigma)``
+and ``nu = |g|``. It is 2.45 sigma at ``|g| = 0`` (the 2-D radius), falls below 1.96 sigma near
+``|g| = 1.5 sigma`` (the length is compressed there) and tends to ``K95 sigma`` far out. Its
+frequentist coverage over the true length (tests/measure/test_magnitude.py, on the forward
+simulator in benchmarks/study_measure.py): 95 % for a true angle of a few sigma or more, near
+95 % when the true angle is itself a 2-D normal of the measurement's spread (a cell's adjustment),
+lower (about 82 %) if the true angle is exactly 0.
+
+**Computation.** In the frame of ``C``'s eigenvectors (``l1 >= l2``) the answer, in units of
+``sqrt(l1)``, depends on ``x = |g| / sqrt(l1)``, ``s = sqrt(l2 / l1)`` and the direction of ``g``,
+given as ``w = (u - s) / (1 - s)`` with ``u = sqrt(g^T C g / l1) / |g|`` the radial standard
+deviation (``w = 1``: ``g`` along the major axis, 0: along the minor; far out
+``q = K95 sqrt(l1) u``, bilinear in ``s, w``). ``q / sqrt(l1)`` is tabulated on a grid of ``x, s,
+w`` and interpolated linearly (within 2 % everywhere, 0.7 % at the 99th percentile of random
+``x, s, w``; the table ships as ``metrology/data/magnitude_u95.npy``, written by
+:func:`compute_table`: the major axis's integral exactly with the normal CDF, the minor axis's on
+:data:`NODES` points, bisection in ``q``; tests/measure/test_magnitude.py recomputes grid
+points). Beyond ``x = X_MAX`` the linear rule is used.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["magnitude_u95", "compute_table", "X_MAX", "TABLE_FILE"]
+
+#: beyond this many major-axis standard deviations the length's error is the radial one (normal):
+#: the tabulated q is within 0.5 % of ``K95 sqrt(g^T C g) / |g|`` there on the grid's ratios
+X_MAX = 24.0
+#: the grid of x = |g| / sqrt(l1), of s = sqrt(l2 / l1) and of w (the module docstring)
+GRID_X = np.concatenate([np.arange(0.0, 4.0, 0.125), np.arange(4.0, 8.0, 0.25), np.arange(8.0, X_MAX + 0.5, 1.0)])
+GRID_S = np.linspace(0.0, 1.0, 16)
+GRID_W = np.linspace(0.0, 1.0, 16)
+#: points of the minor axis's integral (uniform over +-8 standard deviations, trapezoidal; 961
+#: points: q within 1e-3 sqrt(l1) of 3841 points on random x, r, phi)
+NODES = 961
+#: the stored table, ``metrology/data/<TABLE_FILE>``
+TABLE_FILE = "magnitude_u95.npy"
+
+
+def _annulus(m1, m2, r, a, b):
+    """P(a <= |m + e| <= b), ``e ~ N(0, diag(1, r))``; arrays of one shape (a <= b)."""
+    from scipy.special import ndtr
+
+    z = np.linspace(-8.0, 8.0, NODES)
+    w = np.exp(-0.5 * z * z)
+    w /= w.sum()
+    y = m2[..., None] + np.sqrt(r)[..., None] * z  # the minor coordinate of m + e
+    y2 = y * y
+
+    def inside(rho):
+        h = np.sqrt(np.clip(rho[..., None] ** 2 - y2, 0.0, None))
+        m = m1[..., None]
+        return ((ndtr(h - m) - ndtr(-h - m)) * w).sum(-1)
+
+    return inside(b) - inside(np.maximum(a, 0.0))
+
+
+def _solve(x, r, phi, p=0.95, iterations=40):
+    """``q`` (unit: the major axis's standard deviation) with ``P(| |t| - x | <= q) = p``,
+    ``t ~ N(x (cos phi, sin phi), diag(1, r))``: bisection, arrays of one shape."""
+    m1, m2 = x * np.cos(phi), x * np.sin(phi)
+    lo, hi = np.zeros_like(x), np.full_like(x, 4.0)
+    for _ in range(iterations):
+        q = 0.5 * (lo + hi)
+        low = _annulus(m1, m2, r, x - q, x + q) < p
+        lo, hi = np.where(low, q, lo), np.where(low, hi, q)
+    return 0.5 * (lo + hi)
+
+
+def _phi(s, w):
+    """The angle (rad) between ``g`` and the major axis for ``s = sqrt(l2 / l1)`` and ``w``."""
+    r = s * s
+    u = s + w * (1.0 - s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c2 = np.where(r < 1.0, (u * u - r) / (1.0 - r), 1.0)
+    return np.arccos(np.sqrt(np.clip(c2, 0.0, 1.0)))
+
+
+def compute_table():
+    """(len(GRID_X), len(GRID_S), len(GRID_W)) float: ``q / sqrt(l1)`` on the grid (about a minute;
+    ``python -m metrology.measure.magnitude`` writes it to the package's data)."""
+    X, S, W = np.meshgrid(GRID_X, GRID_S, GRID_W, indexing="ij")
+    return _solve(X, S * S, _phi(S, W))
+
+
+@functools.lru_cache(maxsize=1)
+def _table():
+    from metrology.io.data import data_path
+
+    t = np.load(data_path(TABLE_FILE))
+    if t.shape != (len(GRID_X), len(GRID_S), len(GRID_W)):
+        raise RuntimeError(f"{data_path(TABLE_FILE)}: shape {t.shape}, the grid needs "
+                           f"{(len(GRID_X), len(GRID_S), len(GRID_W))}: run python -m metrology.measure.magnitude")
+    return t
+
+
+def magnitude_u95(g, C):
+    """U95 of the length of 2-D tilts (see the module docstring).
+
+    Parameters
+    ----------
+    g : (N, 2) float, rad, the measured tilts (their lengths are the angles)
+    C : (N, 2, 2) float, rad^2, the tilts' covariances
+
+    Returns
+    -------
+    (N,) float, rad: the half-width of ``|g| +- U95`` holding 95 % of the true length
+    (NaN where ``C`` or ``g`` is not finite)
+    """
+    from scipy.interpolate import RegularGridInterpolator
+
+    g = np.asarray(g, float).reshape(-1, 2)
+    C = np.asarray(C, float).reshape(-1, 2, 2)
+    a, b, c = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+    disc = np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    l1 = 0.5 * (a + c) + disc
+    l2 = np.maximum(0.5 * (a + c) - disc, 0.0)
+    gn = np.hypot(g[:, 0], g[:, 1])
+    s1 = np.sqrt(l1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x = gn / s1
+        sr = np.sqrt(np.clip(l2 / l1, 0.0, 1.0))
+        radial = np.sqrt(np.maximum(g[:, 0] * g[:, 0] * a + 2 * g[:, 0] * g[:, 1] * b + g[:, 1] * g[:, 1] * c,
+                                    0.0)) / gn  # rad: the standard deviation along g
+        w = np.where(sr < 1.0, (radial / s1 - sr) / (1.0 - sr), 1.0)
+    w = np.where(np.isfinite(w), np.clip(w, 0.0, 1.0), 1.0)  # |g| = 0: any direction (q does not depend on it)
+    out = np.full(len(g), np.nan)
+    ok = np.isfinite(x) & np.isfinite(sr) & (l1 > 0)
+    near = ok & (x < X_MAX)
+    if near.any():
+        f = RegularGridInterpolator((GRID_X, GRID_S, GRID_W), _table())
+        out[near] = s1[near] * f(np.stack([x[near], sr[near], w[near]], axis=1))
+    far = ok & ~near
+    from metrology.measure.normals import K95
+
+    out[far] = K95 * radial[far]
+    out[np.isfinite(gn) & (l1 == 0)] = 0.0
+    return out
+
+
+if __name__ == "__main__":
+    from metrology.io.data import DATA_DIR
+
+    np.save(DATA_DIR / TABLE_FILE, compute_table())
