@@ -30,6 +30,9 @@ and the true one: the adjustment is a rotation about the drill point).
 
     nice -n 10 python benchmarks/study_measure.py --panel-known --calibrations 10 --holes 500 --seed 1
 
+With ``--pose`` the log carries the robot's commanded pose (``pose_*`` columns, as ``metro
+simulate-log`` writes them): the head's spin about the tool axis is then known, not a +-2 deg doubt.
+
 The Table 2 head's beams point -z; it is studied in the frame turned 180 deg about x (beams +z), where
 the forward simulator's poses face the datum: the geometry, and every angle, is the same.
 """
@@ -206,6 +209,10 @@ def run_panel(args):
                 for j, s in enumerate(cal.names):
                     cols[f"d_{s}"] = ch.d[:, j]
                     cols[f"d_{s}_after"] = ch.d_after[:, j]
+                if args.pose:  # the commanded pose, as metrology/sim/forward/log_write.py logs it
+                    for j, ax in enumerate("xyz"):
+                        cols[f"pose_r{ax}_deg"] = np.degrees(ch.pose_rotvec[:, j])
+                        cols[f"pose_{ax}_mm"] = ch.pose_origin[:, j]
                 b = measure_batch(cal, pa.table(cols), Settings(surfaces=surf))
                 t = b.columns
                 ub = np.radians(t.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
@@ -264,6 +271,8 @@ def main(argv=None):
     ap.add_argument("--panels", default="flat,sphere,cylinder", help="comma-separated: flat, sphere, cylinder")
     ap.add_argument("--panel-known", action="store_true", help="measure with the panel's local surface known "
                     "(metro measure --panel --points)")
+    ap.add_argument("--pose", action="store_true", help="with --panel-known: the log carries the commanded pose "
+                    "(pose_* columns): the head's spin is known")
     args = ap.parse_args(argv)
     if args.panel_known:
         out = run_panel(args)
