@@ -42,7 +42,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["magnitude_u95", "compute_table", "X_MAX", "TABLE_FILE"]
+__all__ = ["magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
 
 #: beyond this many major-axis standard deviations the length's error is the radial one (normal):
 #: the tabulated q is within 0.5 % of ``K95 sqrt(g^T C g) / |g|`` there on the grid's ratios
@@ -157,6 +157,57 @@ def magnitude_u95(g, C):
     out[far] = K95 * radial[far]
     out[np.isfinite(gn) & (l1 == 0)] = 0.0
     return out
+
+
+def _normal_uniform_p(q, s, a):
+    """P(|X + Y| <= q), X ~ N(0, s^2), Y uniform on [-a, a] (a > 0): the mean over Y of the normal's
+    probability, with the integral of the normal CDF in closed form (``int Phi = x Phi(x) + phi(x)``)."""
+    from scipy.special import ndtr
+
+    def F(x):  # int_0^x Phi(t) dt + const
+        return x * ndtr(x) + np.exp(-0.5 * x * x) / np.sqrt(2.0 * np.pi)
+
+    return s / (2.0 * a) * (F((q + a) / s) - F((q - a) / s) - F((-q + a) / s) + F((-q - a) / s))
+
+
+@functools.lru_cache(maxsize=1)
+def _normal_uniform_table():
+    """``k(t)`` on 201 points of ``t = a / sqrt(s^2 + a^2)`` in [0, 1]: ``q = k sqrt(s^2 + a^2 / 3)``."""
+    t = np.linspace(0.0, 1.0, 201)
+    a = np.where(t < 1.0, t, 1.0)
+    s = np.where(t < 1.0, np.sqrt(1.0 - t * t), 0.0)
+    u = np.sqrt(s * s + a * a / 3.0)
+    lo, hi = np.zeros_like(t), np.full_like(t, 4.0)
+    for _ in range(60):
+        q = 0.5 * (lo + hi) * u
+        with np.errstate(invalid="ignore", divide="ignore"):
+            p = np.where(t == 0.0, 2.0 * _ndtr(q) - 1.0,
+                         np.where(t == 1.0, np.clip(q / np.where(a > 0, a, 1.0), 0.0, 1.0),
+                                  _normal_uniform_p(q, np.where(s > 0, s, 1.0), np.where(a > 0, a, 1.0))))
+        low = p < 0.95
+        lo, hi = np.where(low, 0.5 * (lo + hi), lo), np.where(low, hi, 0.5 * (lo + hi))
+    return t, 0.5 * (lo + hi)
+
+
+def _ndtr(x):
+    from scipy.special import ndtr
+
+    return ndtr(x)
+
+
+def normal_uniform_u95(sigma, a):
+    """U95 of the sum of a normal error (standard deviation ``sigma``) and a uniform one on
+    ``[-a, a]`` (arrays, one unit): the half-width ``q`` with ``P(|X + Y| <= q) = 0.95``. From
+    ``K95 sigma`` (``a = 0``) to ``0.95 a`` (``sigma = 0``); the linear rule ``K95 sqrt(sigma^2 +
+    a^2 / 3)`` would over-cover where the uniform term dominates (GUM 4.3.7's rectangular
+    distribution is not normal: 1.96 / 1.65 of what it needs)."""
+    sigma = np.asarray(sigma, float)
+    a = np.abs(np.asarray(a, float))
+    t_grid, k = _normal_uniform_table()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = a / np.sqrt(sigma * sigma + a * a)
+    t = np.where(np.isfinite(t), t, 0.0)
+    return np.interp(t, t_grid, k) * np.sqrt(sigma * sigma + a * a / 3.0)
 
 
 if __name__ == "__main__":

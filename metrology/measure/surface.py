@@ -40,7 +40,9 @@ the head its calibration.
 
 The angle ``alpha = atan(|g|)``; its U95 the half-width that holds 95 % of the length of the
 tilt, ``g``'s covariance known (:mod:`metrology.measure.magnitude`: near ``alpha = 0`` the
-length's error is not normal), the linear rule ``K95 u`` far from 0.
+length's error is not normal); far from 0 the linear rule, ``K95 u``, or with the spin's uniform
+share ``a`` the 95 % half-width of a normal plus a uniform on ``+-a``
+(:func:`metrology.measure.magnitude.normal_uniform_u95`).
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.measure.magnitude import X_MAX, magnitude_u95
+from metrology.measure.magnitude import X_MAX, magnitude_u95, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
@@ -339,6 +341,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     C_pan = np.zeros((N, 2, 2))
     dh_basis = None
     dh_spin = None
+    v_spin = None
     if terms is not None:
         m = fit.normal
         t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
@@ -361,6 +364,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
             dh_spin = dh
             v = np.einsum("hin,hn->hi", Ag, dh)
+            v_spin = v * spin[:, None]  # the tilt at the spin's end, +-spin
             C_pan += v[:, :, None] * v[:, None, :] * (spin ** 2 / 3.0)[:, None, None]
     C = C_noise + C_cal + C_pan
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -374,7 +378,11 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     var_noise = quad(C_noise)
     var = var_noise + quad(C_cal) + quad(C_pan)
     u_angle = np.sqrt(var)
-    U95 = K95 * u_angle
+    if v_spin is None:
+        U95 = K95 * u_angle
+    else:  # the spin's share is uniform, not normal: the 95 % half-width of their sum
+        a_spin = np.abs((cvec * v_spin).sum(1))  # rad, the angle at the spin's end
+        U95 = normal_uniform_u95(np.sqrt(np.maximum(var - a_spin ** 2 / 3.0, 0.0)), a_spin)
     small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
     if np.any(small):  # u: the 2-D spread's major axis
         Cs = C[small] / ((1.0 + g2[small]) ** 2)[:, None, None]

@@ -81,6 +81,18 @@ def test_anisotropic_u95_holds_95_percent_of_the_length_given_the_tilt():
         assert share == pytest.approx(0.95, abs=0.005), (x, r, w, share)
 
 
+@pytest.mark.parametrize("sigma,a", [(1.0, 0.0), (1.0, 1.0), (1.0, 3.0), (0.3, 2.0), (0.0, 1.0)])
+def test_normal_plus_uniform_u95_holds_95_percent(sigma, a):
+    rng = np.random.default_rng(3)
+    q = M.normal_uniform_u95(np.array([sigma]), np.array([a]))[0]
+    x = rng.normal(0.0, 1.0, 1_000_000) * sigma + rng.uniform(-a, a, 1_000_000)
+    assert np.mean(np.abs(x) <= q) == pytest.approx(0.95, abs=0.002)
+    if a == 0:
+        assert q == pytest.approx(K95 * sigma, rel=1e-6)
+    if sigma == 0:
+        assert q == pytest.approx(0.95 * a, rel=1e-6)
+
+
 def _adjusted(layout, kind="flat", R=None, n=6000, seed=5):
     """Holes the forward simulator drills and adjusts (its own micro-plane controller, the head's
     true layout as the cell's): the after-readings and the true angle after."""
@@ -154,8 +166,8 @@ def test_with_the_commanded_pose_the_heads_spin_leaves_u95():
     posed = ok & (np.arange(len(ok)) >= 100)
     cover0 = np.mean(np.abs(a0 - t0)[ok] <= U0[ok])
     cover1 = np.mean(np.abs(a1 - t1)[posed] <= U1[posed])
-    # without the pose the uniform spin dominates U95 (K95 over-covers a uniform term: 97.6 % here)
-    assert 0.935 <= cover0 <= 0.98, cover0
+    # without the pose the uniform spin dominates U95 (94.4 % here; K95 on the combined u gave 97.6 %)
+    assert 0.935 <= cover0 <= 0.965, cover0
     # with it: 93.7 % here (2900 holes, +-0.4 %; the same head unspun 94.5 %: the ring's 3 spots 50 mm
     # out on R 500 see the surface's 4th-order term, which the fit leaves out)
     assert 0.925 <= cover1 <= 0.965, cover1
