@@ -385,7 +385,8 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
             if (have & posed).any():  # the pose gives the spin: no doubt about it left in U95
-                shape[have & posed] = surf.shape_pose(table_row[have & posed], pose[0][have & posed])
+                shape[have & posed] = surf.shape_pose(table_row[have & posed], pose[0][have & posed],
+                                                       drill_axis(layout)[2])
                 spin[posed] = 0.0
             if (have & ~posed).any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
                 shape[have & ~posed] = surf.shape_tcs(table_row[have & ~posed], drill_axis(layout)[2])

@@ -29,8 +29,9 @@ change of the nominal normals (``n = -feed``) to its :data:`NEIGHBOURS` nearest 
 ``n_j - n_i = K (p_j - p_i)`` in the tangent plane (least squares, 3 unknowns); its residual gives
 ``u_shape``.
 
-**Into the TCS** (:meth:`HoleSurfaces.shape_tcs`): the log carries no robot pose, so metro takes
-the cell's convention (the forward simulator's, metrology/sim/forward/log.py step 3): the head's
+**Into the TCS**: where the log carries the robot's commanded pose (``pose_*`` columns), by that
+pose (:meth:`HoleSurfaces.shape_pose`), the head's spin known (no spin term in U95). Without it
+(:meth:`HoleSurfaces.shape_tcs`) metro takes the cell's convention (the forward simulator's, metrology/sim/forward/log.py step 3): the head's
 ``tcs2panel = Q(-e_z -> a) F`` with ``a = -n`` and ``F = diag(1, -s, -s)`` (TCS ``x, y`` near the
 panel's ``x, y``); the head's spin about the tool axis beyond that is within ``+-spin``
 (``--spin-deg``), carried into U95 (:class:`metrology.measure.surface.PanelTerms`).
@@ -190,10 +191,21 @@ class HoleSurfaces:
             self._tcs[s] = np.einsum("hji,hjk,hkl->hil", R, self.shape, R)
         return self._tcs[s][rows]
 
-    def shape_pose(self, rows, tcs2panel):
+    def shape_pose(self, rows, tcs2panel, s: float):
         """(h, 3, 3) float, 1/mm, TCS: the shape operators of table rows ``rows`` under the robot's
-        commanded pose ``tcs2panel`` ((h, 3, 3), columns the TCS axes in the panel frame)."""
-        return np.einsum("hji,hjk,hkl->hil", tcs2panel, self.shape[rows], tcs2panel)
+        commanded pose ``tcs2panel`` ((h, 3, 3), columns the TCS axes in the panel frame), turned
+        square to the drill axis ``s e_z`` by the smallest rotation taking the CAD's normal there
+        (as :func:`metrology.measure.surface.fit_surface` takes it: it turns it onto the fitted
+        tangent plane; the pose's spin about the tool axis is kept)."""
+        from metrology.measure.surface import _turned
+
+        K = np.einsum("hji,hjk,hkl->hil", tcs2panel, self.shape[rows], tcs2panel)
+        nt = np.einsum("hji,hj->hi", tcs2panel, self.normal[rows])  # the CAD's normal, toward the head, TCS
+        sg = -s
+        ok = sg * nt[:, 2] > 1e-6
+        # the smallest rotation taking nt onto sg e_z is that taking sg e_z onto nt mirrored about the axis
+        K[ok] = _turned(K[ok], -nt[ok, 0], -nt[ok, 1], nt[ok, 2], sg)
+        return K
 
 
 def tcs2panel_nominal(n, s: float):
