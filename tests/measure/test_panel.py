@@ -394,3 +394,38 @@ def test_a_hole_whose_footprint_runs_off_the_panel_is_not_measured():
     assert all("runs off the panel's edge" in r for r in reason[near])
     assert np.all(status[inner] != "not_measured")
     assert np.all(np.isnan(b.columns.column("k1_per_mm").to_numpy(zero_copy_only=False)[near]))
+
+
+def test_the_shape_is_turned_onto_the_tilted_head_not_projected():
+    """A 3-sensor ring, noise-free, sphere R 500, heads tilted 0.5-5 deg: its curvature correction is
+    of the order of 1 deg, so the shape operator must follow the tilt (projecting it onto the tilted
+    plane instead shrank the curvature across the tilt by cos^2: p95 0.0045 deg here)."""
+    lay = ring_layout(3, radius=50.0, z0=-35.0, inclination_deg=30.0, noise=0.003)
+    lay = lay.with_params(lay.zero, lay.direction, range_mm=np.tile([20.0, 90.0], (3, 1)))
+    ch, ok = _holes(lay, "sphere", 500.0, n=2000, noise=0.0)
+    n, good = surface_normal(lay, ch.d[ok], _shape_tcs("sphere", 500.0, ok.sum()))
+    assert good.all()
+    assert np.percentile(_err_deg(n, ch.normal_tcs[ok]), 95) < 5e-4
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_the_commanded_pose_gives_the_shape_square_to_the_axis_with_its_spin(flip):
+    """HoleSurfaces.shape_pose: a barrel's shape under a pose tilted 4 deg and spun 30 deg comes back
+    square to the drill axis (null along it), its curvature whole, its direction the pose's."""
+    from scipy.spatial.transform import Rotation
+
+    from metrology.measure.panel import HoleSurfaces, tcs2panel_nominal
+
+    s = -1.0 if flip else 1.0
+    n = np.array([[0.0, 0.0, 1.0]])  # the CAD's normal, toward the head; the barrel's axis along x
+    Kp = np.diag([0.0, 1.0, 0.0])[None] / 500.0
+    hs = HoleSurfaces(("a",), n, Kp, np.zeros((1, 2)), np.zeros(1), np.full(1, ""), "analytic")
+    spin = Rotation.from_rotvec([0.0, 0.0, np.radians(30.0)]).as_matrix()
+    tilt = Rotation.from_rotvec([np.radians(4.0), 0.0, 0.0]).as_matrix()
+    R0 = tcs2panel_nominal(n, s)[0] @ spin  # square to the panel, spun 30 deg
+    K0 = hs.shape_pose(np.array([0]), R0[None], s)[0]
+    np.testing.assert_allclose(K0, R0.T @ Kp[0] @ R0, atol=1e-15)  # square: the plain change of frame
+    K = hs.shape_pose(np.array([0]), (tilt @ R0)[None], s)[0]  # the same head tilted 4 deg
+    np.testing.assert_allclose(K[:, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.eigvalsh(K), [0.0, 0.0, 1.0 / 500.0], atol=1e-12)
+    np.testing.assert_allclose(K, K0, atol=2e-6 / 500.0)  # the spin kept (the tilt's twist is second order)
