@@ -197,14 +197,15 @@ class HoleSurfaces:
         square to the drill axis ``s e_z`` by the smallest rotation taking the CAD's normal there
         (as :func:`metrology.measure.surface.fit_surface` takes it: it turns it onto the fitted
         tangent plane; the pose's spin about the tool axis is kept)."""
-        from metrology.measure.surface import _turned
+        from metrology.measure.surface import _full, _turned
 
         K = np.einsum("hji,hjk,hkl->hil", tcs2panel, self.shape[rows], tcs2panel)
         nt = np.einsum("hji,hj->hi", tcs2panel, self.normal[rows])  # the CAD's normal, toward the head, TCS
         sg = -s
         ok = sg * nt[:, 2] > 1e-6
         # the smallest rotation taking nt onto sg e_z is that taking sg e_z onto nt mirrored about the axis
-        K[ok] = _turned(K[ok], -nt[ok, 0], -nt[ok, 1], nt[ok, 2], sg)
+        k6 = tuple(K[ok][:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+        K[ok] = _full(_turned(k6, -nt[ok, 0], -nt[ok, 1], nt[ok, 2], sg))
         return K
 
 

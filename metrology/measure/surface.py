@@ -130,6 +130,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
     K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
+    K6 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
@@ -153,9 +154,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
         zq = z - c
         if it > 0:
-            Kr = _turned(K, mx, my, mz, sg)  # K on the fitted tangent plane
-            k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(Kr[:, i, j]) for i, j in
-                                            ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+            k00, k01, k02, k11, k12, k22 = _turned(K6, mx, my, mz, sg)  # K on the fitted tangent plane
             mq = mx * x + my * y + mz * zq
             px, py, pz = x - mx * mq, y - my * mq, zq - mz * mq  # T q
             vx = k00 * px + k01 * py + k02 * pz  # K T q
@@ -204,7 +203,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     null = _null_vector_cols(-x, -y, jc) if n == 4 else None
     m = np.stack([mx, my, mz], axis=1)
     if steps > 0:
-        K = Kr
+        K = _full((k00, k01, k02, k11, k12, k22))
     Km = np.einsum("hij,hj->hi", K, m)
     mKm = (m * Km).sum(1)
     Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
@@ -218,24 +217,36 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
 
 
 def _turned(K, mx, my, mz, sg):
-    """(h, 3, 3): ``Q K Q^T``, ``Q`` the smallest rotation taking ``sg e_z`` onto the unit normal
-    ``m = (mx, my, mz)`` (arrays (h,), ``sg mz > 0``): the shape operator given square to the drill
+    """The 6 entries ``(00, 01, 02, 11, 12, 22)`` ((h,) arrays) of ``Q K Q^T``, ``Q`` the smallest
+    rotation taking ``sg e_z`` onto the unit normal ``m = (mx, my, mz)`` (arrays (h,), ``sg mz > 0``);
+    ``K`` the 6 entries of symmetric 3 x 3 matrices: the shape operator given square to the drill
     axis (as for a head square to the panel) turned onto the fitted tangent plane. A projection
     ``T K T`` instead shrinks the curvature across the tilt by ``cos^2`` of it (0.8 % at 5 deg: on a
     3-sensor ring, whose curvature correction is of the order of 1 deg, about 0.01 deg of error)."""
+    k00, k01, k02, k11, k12, k22 = K
     vx, vy = -sg * my, sg * mx  # sg e_z x m
     f = 1.0 / (1.0 + sg * mz)
-    v2 = vx * vx + vy * vy
-    Q = np.empty((len(mx), 3, 3))
-    Q[:, 0, 0] = 1.0 + f * (vx * vx - v2)
-    Q[:, 0, 1] = Q[:, 1, 0] = f * vx * vy
-    Q[:, 0, 2] = vy
-    Q[:, 1, 1] = 1.0 + f * (vy * vy - v2)
-    Q[:, 1, 2] = -vx
-    Q[:, 2, 0] = -vy
-    Q[:, 2, 1] = vx
-    Q[:, 2, 2] = 1.0 - f * v2
-    return Q @ K @ Q.transpose(0, 2, 1)
+    fx, fy = f * vx, f * vy
+    # Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
+    q00, q01, q02 = 1.0 - fy * vy, fx * vy, vy
+    q10, q11, q12 = q01, 1.0 - fx * vx, -vx
+    q20, q21, q22 = -vy, vx, 1.0 - fx * vx - fy * vy
+    a = [[q00 * k00 + q01 * k01 + q02 * k02, q00 * k01 + q01 * k11 + q02 * k12, q00 * k02 + q01 * k12 + q02 * k22],
+         [q10 * k00 + q11 * k01 + q12 * k02, q10 * k01 + q11 * k11 + q12 * k12, q10 * k02 + q11 * k12 + q12 * k22],
+         [q20 * k00 + q21 * k01 + q22 * k02, q20 * k01 + q21 * k11 + q22 * k12, q20 * k02 + q21 * k12 + q22 * k22]]
+    q = [[q00, q01, q02], [q10, q11, q12], [q20, q21, q22]]
+
+    def e(i, j):  # (Q K Q^T)_ij = sum_l (Q K)_il Q_jl
+        return a[i][0] * q[j][0] + a[i][1] * q[j][1] + a[i][2] * q[j][2]
+
+    return e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)
+
+
+def _full(k):
+    """(h, 3, 3) from the 6 entries ``(00, 01, 02, 11, 12, 22)``."""
+    k00, k01, k02, k11, k12, k22 = k
+    return np.stack([np.stack([k00, k01, k02], -1), np.stack([k01, k11, k12], -1),
+                     np.stack([k02, k12, k22], -1)], -2)
 
 
 def _null_vector_cols(a, b, c):
