@@ -3,16 +3,19 @@ surface, not on a plane.
 
 At a drilling point the projection points ``S_i = E_i + d_i u_i`` (mm, TCS) lie on the panel.
 Near the hole the panel is its tangent plane bent by its shape operator ``K`` (1/mm, TCS,
-``k1 e1 e1^T + k2 e2 e2^T``, the principal directions ``e1, e2`` tangent to the surface;
-curvature positive where the surface bends *away* from the head). metro fits the surface's pose,
-two tilts ``g = (g_x, g_y)`` and an offset ``c`` along the TCS ``z`` axis, with ``K`` known:
+``k1 e1 e1^T + k2 e2 e2^T``, the principal directions ``e1, e2`` tangent to the surface, given
+as for the head square to it: in the TCS ``xy`` plane; curvature positive where the surface bends
+*away* from the head). metro fits the surface's pose, two tilts ``g = (g_x, g_y)`` and an offset
+``c`` along the TCS ``z`` axis, with ``K`` known:
 
     h_i(g, c) = z_i - c - g_x x_i - g_y y_i + sigma rho kappa_i,
-    kappa_i = 1/2 (T q_i)^T K (T q_i),   q_i = S_i - c e_z,   T = I - m m^T,
-    m = sigma (-g_x, -g_y, 1) / rho,     rho = sqrt(1 + |g|^2),
+    kappa_i = 1/2 (T q_i)^T K_m (T q_i),   q_i = S_i - c e_z,   T = I - m m^T,
+    m = sigma (-g_x, -g_y, 1) / rho,     rho = sqrt(1 + |g|^2),   K_m = Q K Q^T,
+
+``Q`` the smallest rotation taking ``sigma e_z`` onto ``m`` (the shape turned with the tilted head),
 
 ``m`` the unit normal toward the head (``sigma = -s``, the drill axis ``s e_z``). ``h_i = 0`` is
-the surface ``m.(p - c e_z) = -1/2 (Tq)^T K (Tq)`` (to second order in the distance from the axis;
+the surface ``m.(p - c e_z) = -1/2 (Tq)^T K_m (Tq)`` (to second order in the distance from the axis;
 ``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
 micro-plane of :mod:`metrology.measure.normals`, which is the first of :data:`GN_STEPS` steps;
 the rest are Gauss-Newton steps with ``K`` (the Jacobian's ``c`` column carries the curvature's
@@ -81,7 +84,7 @@ class SurfaceFit:
     w : (h, n) float, the weights used (0 for a blank)
     null : (h, n) float or None, n = 4: the unit vector orthogonal to the Jacobian's columns
     h_res : (h, n) float, mm, the heights' misfit at the solution
-    Kt : (h, 3, 3) float, 1/mm, the shape operator projected onto the fitted tangent plane
+    Kt : (h, 3, 3) float, 1/mm, the shape operator turned onto the fitted tangent plane (``K_m``)
     """
 
     normal: np.ndarray
