@@ -22,7 +22,10 @@ calibration error by ``dE_i + d_i (a e1_i + b e2_i)`` (the chart of
 with ``C`` the layout's ``covariance`` (5n, 5n) and ``J_theta`` row blocks
 ``P_i (m, d_i m.e1_i, d_i m.e2_i)``. The angle's standard uncertainty is
 ``sqrt(c^T Sigma_g c)`` with ``c = g / (|g| (1 + |g|^2))`` and its expanded uncertainty
-``U95 = K95 u`` (:data:`K95`, normal distribution).
+``U95 = K95 u`` (:data:`K95`, normal distribution). Near ``alpha = 0`` (after the cell's
+adjustment) the angle is the length of the 2-D tilt, not normal: U95 is then the half-width
+holding 95 % of that length (:func:`metrology.measure.magnitude.magnitude_u95`, the same rule as
+with the panel known), up to ``X_MAX`` of the tilt's major-axis standard deviations.
 
 **Curvature.** On a curved panel the spots do not lie on the tangent plane at the drill point
 (where the drill axis meets the panel): near it the panel is ``h = r^T K r / 2`` (``r`` the
@@ -37,6 +40,10 @@ concave: a cylinder, a sphere, a doubly-curved skin; ``K`` semidefinite with eig
     M = sum_i w_i r_i r_i^T                              (w_i = d alpha / d h_i)
 
 the exact worst case, entered as a rectangular distribution, ``u_b = b / sqrt(3)`` (GUM 4.3.7).
+Near ``alpha = 0`` (below :data:`SMALL_ANGLE_SIGMAS`) the bound enters the tilt's covariance as
+a round spread of the same variance per axis, and U95 is the length's half-width of the sum;
+beyond, ``K95 u`` as above. It stays a worst case: U95 with it over-covers every panel flatter
+than ``R_min`` (99-100 % on spheres and cylinders of exactly ``R_min``).
 On a flat panel (``min_radius_mm = inf``) ``b = 0``. A saddle (principal curvatures of both
 signs) can tilt the plane further, by up to the nuclear norm of ``M`` over ``2 R_min``.
 
@@ -58,6 +65,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
+from metrology.measure.magnitude import X_MAX, magnitude_u95
 
 __all__ = ["HoleNormals", "hole_normals", "drill_axis", "radius95", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
 
@@ -66,7 +74,8 @@ K95 = 1.959963984540054
 #: radius, in standard deviations, of the 95 % disc of an isotropic 2-D normal: sqrt(chi2_2(0.95))
 K95_2D = 2.447746830680816
 #: below this many standard uncertainties the angle's distribution is not close to normal (it is
-#: the length of a 2-D vector), and U95 is the 2-D radius instead of the linear rule
+#: the length of a 2-D vector): u is the 2-D spread's major axis (and, with the curvature bound,
+#: U95 the length's half-width instead of the linear rule)
 SMALL_ANGLE_SIGMAS = 4.0
 
 
@@ -185,21 +194,30 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     var = var + bound ** 2 / 3.0
     u_angle = np.sqrt(var)
     U95 = K95 * u_angle
-    # near alpha = 0: the 95 % radius of the slopes' 2-D distribution
-    small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
-    if np.any(small):
-        tot = [noise_g[j][small] + (cal_g[j][small] if cal_g is not None else 0.0) for j in range(3)]
-        disc = np.sqrt(0.25 * (tot[0] - tot[2]) ** 2 + tot[1] ** 2)
-        l1, l2 = 0.5 * (tot[0] + tot[2]) + disc, np.maximum(0.5 * (tot[0] + tot[2]) - disc, 0.0)
-        b2 = 0.0 if flat else (_one_sign(px[:, small], x[:, small], y[:, small]) ** 2
-                               + _one_sign(py[:, small], x[:, small], y[:, small]) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
-        scale = (1.0 + g2[small]) ** 2
-        l1, l2 = l1 / scale + b2, l2 / scale + b2  # the curvature term, as a round spread
-        s2d = np.sqrt(l1)
-        still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
-        idx = np.flatnonzero(small)[still]
-        u_angle[idx] = s2d[still]
-        U95[idx] = radius95(l1[still], l2[still])
+    # near alpha = 0 the angle is the length of the 2-D tilt: u is the 2-D spread's major axis, and
+    # U95 the half-width holding 95 % of the tilt's length (metrology.measure.magnitude); the linear
+    # rule beyond X_MAX major-axis standard deviations
+    tot = [noise_g[j] + (cal_g[j] if cal_g is not None else 0.0) for j in range(3)]
+    scale = (1.0 + g2) ** 2
+    Ca = np.empty((N, 2, 2))
+    Ca[:, 0, 0], Ca[:, 0, 1], Ca[:, 1, 1] = tot[0] / scale, tot[1] / scale, tot[2] / scale
+    Ca[:, 1, 0] = Ca[:, 0, 1]
+    if not flat:  # the curvature bound, as a round spread of the rectangular variance (a worst case)
+        b2 = (_one_sign(px, x, y) ** 2 + _one_sign(py, x, y) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
+        Ca[:, 0, 0] += b2
+        Ca[:, 1, 1] += b2
+    disc = np.sqrt(0.25 * (Ca[:, 0, 0] - Ca[:, 1, 1]) ** 2 + Ca[:, 0, 1] ** 2)
+    s2d = np.sqrt(0.5 * (Ca[:, 0, 0] + Ca[:, 1, 1]) + disc)  # rad: the major axis's standard deviation
+    still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle) & (angle < SMALL_ANGLE_SIGMAS * s2d)
+    u_angle[still] = s2d[still]
+    # with the curvature bound (a worst case, not a distribution) the half-width is taken only where
+    # the 2-D radius was (below SMALL_ANGLE_SIGMAS): beyond, the bound's exact worst case along the
+    # angle's gradient (rectangular, in u) stays as it is
+    near = angle < X_MAX * s2d if flat else still
+    if np.any(near):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tilt = np.stack([gx, gy], axis=1)[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]
+        U95[near] = magnitude_u95(tilt, Ca[near])
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
     signature = twist = residual_sd = sd = None

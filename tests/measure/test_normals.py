@@ -109,8 +109,10 @@ def test_residual_z_is_standard_normal_and_a_shift_moves_it_by_its_signature():
     assert np.allclose(h2.residual - h.residual, 0.02 * h.signature[:, 2], rtol=0.01, atol=1e-6)
 
 
-def test_near_zero_angle_uses_the_two_dimensional_radius():
-    """At angle 0 the linear rule gives u = 0 (c is undefined); the 2-D rule must cover."""
+def test_near_zero_angle_u95_is_the_half_width_of_the_length():
+    """At angle 0 the linear rule gives u = 0 (c is undefined); U95 is the half-width holding 95 % of
+    the tilt's length (metrology.measure.magnitude): positive, the 2-D radius at a measured 0, and
+    about 82 % coverage of a true angle of exactly 0 (the measured length is always above it)."""
     rng = np.random.default_rng(11)
     lay = SensorLayout(layout_table6().names, layout_table6().zero, layout_table6().direction, np.full(4, 0.003))
     p, axis = standoff_point(lay, 50.0, 4000)
@@ -119,7 +121,32 @@ def test_near_zero_angle_uses_the_two_dimensional_radius():
     h = hole_normals(lay, d)
     assert np.all(h.U95 > 0)
     cover = np.mean(h.angle <= h.U95)  # the true angle is 0
-    assert 0.93 < cover < 0.99
+    assert 0.76 < cover < 0.88, cover
+
+
+@pytest.mark.parametrize("head", ["table6", "ring3"])
+def test_flat_u95_after_the_adjustment_covers_95_percent(head):
+    """Flat holes the forward simulator drills and adjusts (its micro-plane controller, the head's
+    true layout as the cell's), measured without the panel: after the adjustment the true angle is
+    of the order of the reading noise's spread; the 2-D radius (the rule before) held 98 % of the
+    true angles here, the length's half-width holds 95 %. Before (0.5-5 deg): the linear rule, 95 %."""
+    from metrology.io.data import data_path
+    from metrology.io.layout import load_layout
+    from metrology.sim.forward.log import simulate_cell
+    from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.forward.panels import make_panel
+
+    lay = load_layout(data_path("measured", "nominal.toml")) if head == "table6" else ring_layout(3, noise=0.003)
+    if head == "ring3":  # an elliptic ring: the tilt's covariance is elongated
+        lay = lay.with_params(lay.zero * np.array([1.0, 0.8, 1.0]), lay.direction, range_mm=np.tile([20.0, 90.0], (3, 1)))
+    ch = next(simulate_cell(LogSpec(lay, lay, make_panel("flat"), resolution_mm=0.0), 5, 0, 6000, 6000))
+    ok = np.all(np.isfinite(ch.d_after), axis=1) & ch.adjusted
+    h = hole_normals(lay, ch.d_after[ok])
+    assert np.median(ch.true_after[ok]) < 4 * np.median(h.u_angle)  # the regime this is about
+    cover = np.mean(np.abs(h.angle - ch.true_after[ok]) <= h.U95)
+    assert 0.935 <= cover <= 0.965, cover
+    hb = hole_normals(lay, ch.d[ok])
+    assert np.mean(np.abs(hb.angle - ch.true_angle[ok]) <= hb.U95) == pytest.approx(0.95, abs=0.012)
 
 
 @pytest.mark.parametrize("head", ["table2", "table6", "three"])
