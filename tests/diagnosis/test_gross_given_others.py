@@ -103,3 +103,47 @@ def test_a_blind_datum_tilt_is_named_datum_tilt(i, tmp_path):
     assert res["cause"] == "datum_tilt" and "pose_error" not in named, res["summary"]
     assert res["datum_plane"]["off"]
     assert _diagnose(case, tmp_path / "as_drawn")["cause"] == "none"
+
+
+def test_a_reading_beside_a_knock_placed_one_pose_early_is_no_outlier(tmp_path):
+    """The knock of L3 (pose 24 of the pair above) placed one pose early by the change-point
+    search: the last reading before the knock then sits after the step and looks gross given it.
+    Judged with the step re-placed with its pose on either side (``select._steps_beside``), its
+    deleted residual is noise, while the truly gross readings stay gross under every placement."""
+    from metrology.calibration.sanity import load_checked
+    from metrology.core.effects import Outliers, Shift
+    from metrology.diagnosis.decide import base_analysis
+    from metrology.diagnosis.fit import fit_any
+    from metrology.diagnosis.select import _deleted_t, _steps_beside
+
+    case = _triple([4040, 40, 2, 2], ("shift", "outliers"))
+    knock = next(e for e in case.effects if e.family == "shift")
+    paths = write_case(case, tmp_path)
+    ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
+    b = base_analysis(ds, 5)
+    names, t = ds.layout.names, np.asarray(b.cov.time_h, float)
+    i, at = names.index(knock.sensors[0]), int(knock.shape["at_pose"])
+    order = np.argsort(t, kind="stable")
+    r = int(np.flatnonzero(order == at)[0])
+    early, before = int(order[r - 1]), int(order[r - 2])  # the step placed between these: one pose early
+    step = Shift((i,), names=names, at_h=0.5 * (t[before] + t[early]), at_pose=early, before_pose=before,
+                 gap_h=(float(t[before]), float(t[early])))
+    flags = np.zeros(ds.obs.d.shape, bool)
+    for p, s, _ in (c for e in case.effects if e.family == "outliers" for c in e.shape["cells"]):
+        flags[int(p), names.index(s)] = True
+    flags[early, i] = True  # the reading before the knock, flagged against the misplaced step
+    out = Outliers(tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), names=names, flags=flags)
+    cells = [tuple(c) for c in out.cells.tolist()]
+    q = cells.index((early, i))
+    m = int(np.isfinite(ds.obs.d).sum())
+
+    def t_del(shift):
+        return _deleted_t(fit_any(ds.layout, ds.obs, b.cov, b.sigma, (out, shift), b.theta0), 0)
+
+    t0 = t_del(step)
+    assert rules.gross_given_others(t0[q], m)  # given the misplaced step, the reading looks gross
+    moved = _steps_beside(step, t, np.isfinite(ds.obs.d[:, i]), early)
+    assert {s.at_pose for s in moved} == {at}  # the placement with the pose before the step
+    t1 = np.minimum(t0, *[t_del(s) for s in moved])
+    assert not rules.gross_given_others(t1[q], m)
+    assert all(rules.gross_given_others(v, m) for k, v in enumerate(t1) if k != q)
