@@ -360,7 +360,7 @@ def summarize(records: list, det: dict) -> dict:
     out["datum_tilt"] = {"n": len(dt), "right": int(sum(_right(r["truth"][0], [tuple(x) for x in r["named"]]) for r in dt)),
                          "right_alone": int(sum(r["cause"] == "datum_tilt" and len(r["named"]) == 1 for r in dt)),
                          "pose_error": int(sum(any(c == "pose_error" for c, _ in r["named"]) for r in dt)),
-                         "by_cause": dict(Counter(r["cause"] for r in dt))}
+                         "by_cause": dict(Counter(str(getattr(r["cause"], "value", r["cause"])) for r in dt))}
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
