@@ -63,6 +63,8 @@ def test_a_warm_up_start_the_drift_explains_is_no_outlier(tmp_path):
     assert named.get("drift") == set(drift.sensors), res["summary"]
     assert not named["outliers"] & set(drift.sensors), res["summary"]
     assert _cells(res) == _true_cells(case)  # every gross reading still found, and only those
+    # the readings as first flagged are not a rival of the same readings judged given the drift
+    assert res["confidence"] == "high", res["confounding"]
 
 
 def test_readings_a_knock_explains_are_no_outliers(tmp_path):
