@@ -23,6 +23,7 @@ wrong-cause-added rates.
 
     python benchmarks/study_blind.py [--draws 20] [--nulls 200] [--pairs 20] [--jobs 1] [--seed 0] [--json out.json]
         [--families scale,...] [--tilt-max-deg 14] [--size-range LO,HI] [--scan hand] [--poses 30,45]
+        [--datum-tilts 20]
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ OOC = ("periodic", "crosstalk")
 PAIRS = (("drift", "outliers"), ("scale", "drift"), ("pose_error", "drift"), ("nonlinearity", "outliers"),
          ("plane_form", "drift"), ("scale", "incidence"), ("drift", "drift"), ("pose_error", "outliers"))
 #: families acting on every sensor (the sensor list is not scored)
-ALL_SENSORS = ("pose_error", "plane_form")
+ALL_SENSORS = ("pose_error", "plane_form", "datum_tilt")
 
 
 def detectable_ranges() -> dict:
@@ -68,10 +69,11 @@ def clopper_pearson(k: int, n: int, alpha: float = 0.05) -> tuple:
     return lo, hi
 
 
-def jobs_for(draws: int, nulls: int, pairs: int, seed: int, families=None) -> list:
+def jobs_for(draws: int, nulls: int, pairs: int, seed: int, families=None, tilts: int = 0) -> list:
     """The study's cases as (kind, families, seed entropy) tuples, in a fixed order; ``families``
     (optional) keeps the single and out-of-catalogue draws of those families only (each case
-    keeps the seed it has in the full study)."""
+    keeps the seed it has in the full study); ``tilts`` nulls whose datum scan is tilted off the
+    true datum by more than its uncertainty (:func:`tilt_scan`), last (the others keep their seeds)."""
     keep = (lambda f: True) if not families else (lambda f: f in families)
     jobs = [("null", ("none",), (seed, 0, 0, i)) for i in range(nulls)]
     for k, f in enumerate(FAMILY_ORDER):
@@ -80,6 +82,7 @@ def jobs_for(draws: int, nulls: int, pairs: int, seed: int, families=None) -> li
         jobs += [("ooc", (f,), (seed, 2, k, i)) for i in range(draws) if keep(f)]
     for i in range(pairs):
         jobs.append(("pair", PAIRS[i % len(PAIRS)], (seed, 3, i % len(PAIRS), i)))
+    jobs += [("datum", ("datum_tilt",), (seed, 4, 0, i)) for i in range(tilts)]
     return jobs
 
 
@@ -183,6 +186,43 @@ def _detectable_for(res: dict, effect) -> float | None:
 CASE_OPTIONS = {"scan": "tracker", "poses": None}
 
 
+#: a datum-tilt case's scan is tilted off the true datum by this many of its own stated 1-sigma
+#: tilts (drawn uniformly): beyond what the scan's covariance allows
+TILT_SIGMAS = (5.0, 10.0)
+
+
+def tilt_scan(case, rng):
+    """``case`` with its datum scan turned about its centroid, about an in-plane axis drawn at
+    random, by ``TILT_SIGMAS`` of the scan's 1-sigma tilt about that axis (as the plate moved, or
+    the scan's registration slipped, after it was scanned; the readings see the true datum).
+
+    The 1-sigma tilt is from the physics of the scan, not from metro's fit: the points' noise
+    normal to the true surface (1.4826 MAD of their true heights' errors, so strays do not count)
+    over the root sum of squares of their lever arms along the axis. Returns ``(case, truth)``,
+    ``truth`` the record's entry ``{"family": "datum_tilt", "size": rad, "sigmas": k, ...}``."""
+    from dataclasses import replace
+
+    surf = case.surface
+    pts = np.asarray(case.cloud, float)
+    c = pts.mean(axis=0)
+    rel = pts - c
+    n = surf.normal
+    a = rng.uniform(0.0, 2.0 * np.pi)
+    axis = np.cos(a) * surf.axis_s + np.sin(a) * surf.axis_t
+    lever = rel @ np.cross(n, axis)  # distance along the in-plane direction the tilt lifts
+    err = (pts - surf.origin) @ n - surf.height((pts - surf.origin) @ surf.axis_s, (pts - surf.origin) @ surf.axis_t)
+    noise = 1.4826 * float(np.median(np.abs(err - np.median(err))))
+    sigma_rad = noise / float(np.sqrt(np.sum((lever - lever.mean()) ** 2)))
+    k = float(rng.uniform(*TILT_SIGMAS))
+    ang = k * sigma_rad
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K  # Rodrigues
+    cloud = c + rel @ R.T
+    truth = {"family": "datum_tilt", "sensors": [], "size": ang, "sigmas": k, "sigma_rad": sigma_rad,
+             "seen_size": None, "detect_size": None, "detectable": None, "inside": None}
+    return replace(case, cloud=cloud), truth
+
+
 def run_case(job) -> dict:
     """Draw one case, write its files, diagnose them; the record of truth and verdict."""
     from metrology.jobs.diagnose import diagnose_files
@@ -196,7 +236,11 @@ def run_case(job) -> dict:
         lo, hi = CASE_OPTIONS["poses"]
         tilt["n_poses"] = int(np.random.default_rng(list(entropy) + [7]).integers(lo, hi + 1))
     rng = np.random.default_rng(list(entropy))
-    case = draw_pair(rng, *fams, **tilt) if kind == "pair" else draw_case(rng, fams[0], **tilt)
+    if kind == "datum":
+        case = draw_case(rng, "none", **tilt)
+        case, hidden = tilt_scan(case, rng)
+    else:
+        case = draw_pair(rng, *fams, **tilt) if kind == "pair" else draw_case(rng, fams[0], **tilt)
     with tempfile.TemporaryDirectory() as d:
         paths = write_case(case, d)
         try:
@@ -206,12 +250,15 @@ def run_case(job) -> dict:
     named = _named(res)
     seen = [_seen_size(case, e) for e in case.effects]
     det = [(_detect_size(case, e), _detectable_for(res, e)) for e in case.effects]
+    truth = [{"family": e.family, "sensors": list(e.sensors), "size": e.size, "seen_size": z,
+              "detect_size": dz, "detectable": dd, "inside": None if dd is None else bool(dz >= dd)}
+             for e, z, (dz, dd) in zip(case.effects, seen, det)]
+    if kind == "datum":
+        truth.append(hidden)
     return {
         "kind": kind, "family": case.family, "seed": list(entropy), "n_sensors": case.nominal.n,
         "n_poses": case.export.n_poses, "noise_mm": case.noise_mm,
-        "truth": [{"family": e.family, "sensors": list(e.sensors), "size": e.size, "seen_size": z,
-                   "detect_size": dz, "detectable": dd, "inside": None if dd is None else bool(dz >= dd)}
-                  for e, z, (dz, dd) in zip(case.effects, seen, det)],
+        "truth": truth,
         "cause": res["cause"], "sensors": list(res.get("sensors") or []), "confidence": res["confidence"],
         "named": [[c, list(s)] for c, s in named],
         "sizes": {e.family: _size(res, e.family) for e in case.effects},
@@ -308,6 +355,12 @@ def summarize(records: list, det: dict) -> dict:
     out["false_shift"] = {"n": len(no_shift), "named": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift)),
                           "nulls": int(sum(any(c == "shift" for c, _ in r["named"]) for r in no_shift
                                            if r["kind"] == "null")), "n_nulls": len(nulls)}
+    # nulls whose datum scan is tilted beyond its uncertainty: to be named datum_tilt, and nothing else
+    dt = [r for r in records if r["kind"] == "datum"]
+    out["datum_tilt"] = {"n": len(dt), "right": int(sum(_right(r["truth"][0], [tuple(x) for x in r["named"]]) for r in dt)),
+                         "right_alone": int(sum(r["cause"] == "datum_tilt" and len(r["named"]) == 1 for r in dt)),
+                         "pose_error": int(sum(any(c == "pose_error" for c, _ in r["named"]) for r in dt)),
+                         "by_cause": dict(Counter(str(getattr(r["cause"], "value", r["cause"])) for r in dt))}
     pairs = [r for r in records if r["kind"] == "pair"]
     both = [all(_right(e, [tuple(x) for x in r["named"]]) for e in r["truth"]) for r in pairs]
     added = [any(c not in {e["family"] for e in r["truth"]} for c, _ in r["named"]) for r in pairs]
@@ -362,6 +415,10 @@ def report(s: dict) -> str:
     lines.append(f"confidence high precision (nulls and singles): {_pct(h['right'], h['n'])}")
     m = s.get("moderate_named", {"n": 0, "right": 0})
     lines.append(f"a cause named with confidence moderate (weak held-out evidence), right: {_pct(m['right'], m['n'])}")
+    dt = s.get("datum_tilt")
+    if dt and dt["n"]:
+        lines.append(f"datum tilted beyond its uncertainty: datum_tilt named {_pct(dt['right'], dt['n'])}, alone "
+                     f"{_pct(dt['right_alone'], dt['n'])}, pose_error named {dt['pose_error']}; {dt['by_cause']}")
     p = s["pairs"]
     lines.append(f"pairs: both right {_pct(p['both_right'], p['n'])} (both above the case's detectable size: "
                  f"{_pct(p.get('both_right_detectable', 0), p.get('n_detectable', 0))}; both in the upper 2/3 of the "
@@ -372,10 +429,11 @@ def report(s: dict) -> str:
     return "\n".join(lines)
 
 
-def run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=True, families=None, tilt_max_deg=None) -> tuple:
+def run_study(draws=20, nulls=200, pairs=20, seed=0, jobs=1, progress=True, families=None, tilt_max_deg=None,
+              tilts=0) -> tuple:
     """Run every case (``families``: only those single draws, :func:`jobs_for`; ``tilt_max_deg``:
-    the poses' largest tilt, default the simulator's 14 deg); (records, summary)."""
-    todo = jobs_for(draws, nulls, pairs, seed, families)
+    the poses' largest tilt, default the simulator's 14 deg; ``tilts`` datum-tilt cases); (records, summary)."""
+    todo = jobs_for(draws, nulls, pairs, seed, families, tilts)
     if tilt_max_deg is not None:
         todo = [j + (float(tilt_max_deg),) for j in todo]
     try:
@@ -424,6 +482,8 @@ def main(argv=None):
     ap.add_argument("--scan", choices=("tracker", "hand"), default="tracker",
                     help="the datum scan: the simulator's tracker cloud (2000 points, 10 um) or a hand-held probe's "
                          "(40-80 um noise, 400-1500 points, 1-3 %% strays)")
+    ap.add_argument("--datum-tilts", type=int, default=0,
+                    help="nulls whose datum scan is tilted 5-10 of its own sigmas (to be named datum_tilt)")
     ap.add_argument("--poses", default=None, help="LO,HI: draw each case's pose count in this range (default 40-150)")
     a = ap.parse_args(argv)
     CASE_OPTIONS["scan"] = a.scan
@@ -443,7 +503,7 @@ def main(argv=None):
         ap.error(f"--families {','.join(unknown)}: expected some of {','.join(FAMILY_ORDER + OOC)}")
     t0 = time.time()
     records, summary = run_study(a.draws, a.nulls, a.pairs, a.seed, a.jobs, families=fams or None,
-                                 tilt_max_deg=a.tilt_max_deg)
+                                 tilt_max_deg=a.tilt_max_deg, tilts=a.datum_tilts)
     wall = time.time() - t0
     print(report(summary))
     print(f"\nwall time {wall:.0f} s for {len(records)} cases ({a.jobs} job(s))")

@@ -282,6 +282,8 @@ def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
     for other in sig_list:
         if other is best or family_of(other.component) == family_of(best.component):
             continue
+        if other.cause == "outliers" and best.cause == "outliers":
+            continue  # the step's own gross readings as first flagged, before they were judged given the others
         p_sep = p_better(best, other)
         if rules.indistinguishable(p_sep):
             why.append(Reason(15, "indistinguishable", Decision.CONFOUNDED, (best.label, other.label), "p_separation",

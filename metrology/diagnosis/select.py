@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects import REGISTRY, Outliers
+from metrology.core.effects import REGISTRY, Outliers, Shift
 from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
 from metrology.diagnosis.fit import Fit
 from metrology.diagnosis.heldout import Problem, beyond_span
@@ -260,9 +260,13 @@ class Selection:
             return
         new = (flag_given_rigid(self.fit, b.cov, b.sigma, sc.flags) if rigid
                else flag_residuals(self.fit.residual, b.sigma))[0]
-        if not np.any(new & ~sc.flags):
+        # the readings flagged before are judged again given the other causes, on their deleted
+        # residuals (rules.gross_given_others); where none stays the cause named on them is kept
+        # (judged with the others by the verdict)
+        kept = self.gross_given_others(self.fit.theta if rigid else b.theta0)
+        flags = (kept if kept.any() else sc.flags) | new
+        if np.array_equal(flags, sc.flags):
             return
-        flags = sc.flags | new
         self.scoring = replace(sc, flags=flags)
         out = replace(self.given[k], sensors=tuple(sorted(set(np.argwhere(flags)[:, 1].tolist()))), flags=flags,
                       values=None, stderr=None)
@@ -272,6 +276,31 @@ class Selection:
         self.chosen[k] = replace(self.chosen[k], component=out, label=out.label,
                                  sensors=[ds.layout.names[i] for i in out.sensors])
         self.chosen[-1] = replace(self.chosen[-1], fit=self.fit, heldout=self.heldout)
+
+    def gross_given_others(self, theta0):
+        """The readings flagged gross ``(p, n)`` bool that stay gross given the other causes chosen
+        (:func:`~metrology.diagnosis.rules.gross_given_others`): the joint fit's gross term of each
+        (the reading left out, the others fitted on the rest) over its standard error; for a reading
+        of a knocked sensor next to its located step, the step is also re-placed with the reading's
+        pose on either side and the smaller taken."""
+        ds, b, flags = self.ds, self.b, self.scoring.flags
+        k = next(j for j, g in enumerate(self.given) if isinstance(g, Outliers))
+        m = int(np.isfinite(ds.obs.d).sum())
+        t = _deleted_t(self.fit, k)
+        cells = self.fit.components[k].cells  # the fit holds the chosen causes in their order
+        for j, g in enumerate(self.given):
+            if not isinstance(g, Shift) or g.at_pose < 0:
+                continue
+            for q, (pp, i) in enumerate(cells):
+                if i not in g.sensors or not rules.gross_given_others(t[q], m):
+                    continue
+                for moved in _steps_beside(g, np.asarray(b.cov.time_h, float), np.isfinite(ds.obs.d[:, i]), int(pp)):
+                    f = self.problem.fit(self.given[:j] + (moved,) + self.given[j + 1:], theta0)
+                    t[q] = min(t[q], _deleted_t(f, k)[q])
+        keep = np.array([rules.gross_given_others(v, m) for v in t], bool)
+        out = np.zeros_like(flags)
+        out[cells[keep, 0], cells[keep, 1]] = True
+        return out
 
     def rechoose(self):
         """Re-choose the member of each earlier cause's family given the causes chosen after it.
@@ -380,6 +409,39 @@ def _prune(remaining, given, seen) -> list:
     near = {i for g in given for i in g.sensors}
     return [c for c in remaining if not c.sensors or isinstance(c, Outliers) or family_of(c) in seen
             or set(c.sensors) & near]
+
+
+def _deleted_t(f: Fit, k: int) -> np.ndarray:
+    """|gross term| / its standard error of each reading of the ``outliers`` component ``k`` of the
+    joint fit ``f`` (the reading's deleted residual, externally studentised), in its cells' order."""
+    out = f.components[k]
+    v = np.abs(np.asarray(out.values, float))
+    se = np.asarray(out.stderr if out.stderr is not None else np.full(len(v), np.nan), float)
+    return np.where(se > 0, v / np.where(se > 0, se, 1.0), np.inf)
+
+
+def _steps_beside(step: Shift, time_h, fin, pose: int) -> list:
+    """The located ``step`` re-placed with ``pose`` on either side of it (the poses with a reading
+    ``fin (p,)`` in the order of ``time_h (p,)``), where ``pose`` is within one pose of where it was
+    located; the placements it is not at already."""
+    order = np.flatnonzero(fin)
+    order = order[np.argsort(time_h[order], kind="stable")]
+    rank = {int(o): r for r, o in enumerate(order)}
+    if pose not in rank or step.at_pose not in rank:
+        return []
+    r, ra = rank[pose], rank[step.at_pose]
+    if not ra - 2 <= r <= ra + 1:
+        return []
+    out = []
+    for first_after in (r, r + 1):  # the pose after the step, then before it
+        if first_after == ra or first_after < 1 or first_after >= len(order):
+            continue
+        lo, hi = float(time_h[order[first_after - 1]]), float(time_h[order[first_after]])
+        if not hi > lo:
+            continue
+        out.append(replace(step, at_h=0.5 * (lo + hi), gap_h=(lo, hi), at_pose=int(order[first_after]),
+                           before_pose=int(order[first_after - 1]), located_in=None, values=None, stderr=None))
+    return out
 
 
 def flag_given_rigid(f: Fit, cov, sigma, flags):
