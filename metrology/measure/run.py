@@ -223,13 +223,12 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
     With ``output`` (a folder output) the partition's results go to its own file, written
     atomically (skipped when an earlier run wrote it: :meth:`PartitionedOutput.done`); with ``rows``
     each piece carries its results (a one-file output, written by the caller in the log's order).
-    The last piece comes after the partition's file is complete."""
+    A last, empty piece says the partition has ended and its file is complete."""
     import contextlib
 
     tolerance_deg = float(np.degrees(settings.tolerance))
     write = output is not None and not output.done(part.relative)
     keys = list(part.keys)  # in the output's folder names, as in the log's: not in its files (a hive dataset)
-    held = None
     with (output.sink(part.relative) if write else contextlib.nullcontext()) as own:
         for table, first in log.batches(part):
             batch = measure_batch(layout, table, settings)
@@ -238,13 +237,9 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
             public = _public(batch.columns, keys if own is not None else ())
             if own is not None:
                 own.write(public)
-            if held is not None:
-                yield held
-            held = Piece(summary, len(batch), Feed.of(batch, log, part, first), public if rows else None, last=False)
-    if held is None:
-        yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write)
-    else:
-        yield Piece(held.summary, held.rows, held.feed, held.table, True, write)
+            yield Piece(summary, len(batch), Feed.of(batch, log, part, first), public if rows else None, last=False)
+    # the partition's end, once its file is complete (an empty summary: merging it changes no sum)
+    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write)
 
 
 def _public(table, drop=()):
