@@ -58,7 +58,7 @@ def watch_log(spec, seed, holes, chunk=1 << 16):
     for c in simulate_cell(spec, seed, 0, holes, chunk_holes=chunk):
         t = batch_of(log_table(c), spec.cell_layout.names)
         b = measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf))
-        watch.feed(Feed.of(b, "sim", int(c.hole[0])))
+        watch.feed(Feed.of(b, "sim", first_row=int(c.hole[0])))
     watch.finish()
     return watch
 

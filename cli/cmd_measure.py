@@ -89,6 +89,14 @@ def register(app: typer.Typer) -> None:
             emit({"summary": summary.to_dict()})
             bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
             raise typer.Exit(1 if bad else 0)
+        import dataclasses
+
+        from metrology.jobs.measure import MeasureOptions
+
+        options = MeasureOptions(out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm, workers=workers,
+                                 scheduler=scheduler, report_html=report, command=invocation(ctx),
+                                 fail_on_drift=fail_on_drift, chart_by_panel=chart_by_panel, qif=qif,
+                                 per_hole=not (json_out and out is None), **panel_kw)
         if log == "-":
             import shutil
             import tempfile
@@ -100,13 +108,11 @@ def register(app: typer.Typer) -> None:
                     shutil.copyfileobj(sys.stdin.buffer, fh)
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
-                rep = _run(ctx, path, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                           report, "<stdin>", chart_by_panel, qif, json_out, panel_kw)
+                rep = _run(path, layout, dataclasses.replace(options, log_display="<stdin>"))
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
-            rep = _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift,
-                       report, None, chart_by_panel, qif, json_out, panel_kw)
+            rep = _run(log, layout, options)
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -116,13 +122,8 @@ def register(app: typer.Typer) -> None:
         reported(report)
         finish(rep.verdict)
 
-    def _run(ctx, log, layout, out, tolerance_deg, min_radius_mm, workers, scheduler, fail_on_drift, report, display,
-             chart_by_panel, qif, json_out, panel_kw):
+    def _run(log, layout, options):
         from metrology.jobs.measure import measure_files
 
         with progress_bar("measure") as progress:
-            return measure_files(log, layout, out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
-                                 workers=workers, scheduler=scheduler, report_html=report, command=invocation(ctx),
-                                 warn=warn, progress=progress, fail_on_drift=fail_on_drift, log_display=display,
-                                 chart_by_panel=chart_by_panel, qif=qif, per_hole=not (json_out and out is None),
-                                 **panel_kw)
+            return measure_files(log, layout, options, warn=warn, progress=progress)

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["HoleLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
-           "CELL", "PANEL"]
+__all__ = ["HoleLog", "CsvLog", "ParquetLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
+           "CELL", "PANEL", "text_codes", "time_seconds"]
 
 #: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
 BATCH_ROWS = 1 << 18
@@ -62,10 +62,21 @@ class Partition:
 
 @dataclass(frozen=True)
 class HoleLog:
-    """A log to read: its partitions, its format and the sensors it must carry."""
+    """A log to read: its partitions and the sensors it must carry. A format is a reader
+    (:class:`CsvLog`, :class:`ParquetLog`): what its files hold (:meth:`columns`), their rows in
+    batches (:meth:`batches`), and how an error names a partition (:meth:`where`) and a row
+    (:meth:`locate`).
+
+    Attributes
+    ----------
+    source : str, the file or folder (resolved)
+    partitions : tuple of Partition, in the log's order
+    sensors : tuple of str, the layout's
+    batch_rows : int, rows per batch at most
+    display : str, how outputs and errors name the log
+    """
 
     source: str
-    kind: str  # "csv" or "parquet"
     partitions: tuple
     sensors: tuple
     batch_rows: int = BATCH_ROWS
@@ -73,20 +84,105 @@ class HoleLog:
 
     @property
     def partitioned(self) -> bool:
-        return self.kind == "parquet" and Path(self.source).is_dir()
+        """A folder of files (one partition each), mirrored by a folder output."""
+        return False
+
+    def where(self, part: Partition) -> str:
+        """How an error names a partition: the log, and the partition's file in a folder."""
+        return f"{self.display}: partition {part.relative}" if self.partitioned else self.display
+
+    def line(self, row: int) -> str:
+        """How an error names a row (0-based) of a partition's file."""
+        return f"row {row + 1}"
+
+    def locate(self, part: Partition, row: int) -> str:
+        """How an error names row ``row`` (0-based) of ``part``'s file: the partition and the row."""
+        return f"{self.where(part)} {self.line(row)}"
+
+    def columns(self, part: Partition, with_keys: bool = True) -> list:
+        """The partition's column names (with its hive keys unless ``with_keys`` is False)."""
+        raise NotImplementedError
 
     def file_columns(self, part: Partition) -> list:
         """The columns the partition's file itself holds (not its hive keys)."""
-        return _column_names(self, part, with_keys=False)
+        return self.columns(part, with_keys=False)
+
+    def has_rows(self, part: Partition) -> bool:
+        """Whether the partition holds a row (read before any work: an empty log is refused first)."""
+        raise NotImplementedError
 
     def by_row_group(self) -> "HoleLog":
         """The same log with each row group of a single Parquet file as its own partition (the
-        tasks of a Dask run); a CSV file or a folder as it is."""
+        tasks of a Dask run); any other log as it is."""
+        return self
+
+    def _tables(self, part: Partition):
+        """The partition's rows as read, in tables of at most ``batch_rows`` rows."""
+        raise NotImplementedError
+
+    def batches(self, part: Partition):
+        """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
+        ``first_row`` is the 0-based row of the partition at which the batch starts."""
+        row = part.first_row
+        for table in self._tables(part):
+            yield _normalise(self, part, table, row), row
+            row += table.num_rows
+
+
+@dataclass(frozen=True)
+class CsvLog(HoleLog):
+    """A CSV hole log (one file, one partition): readings read as numbers, other columns as text."""
+
+    def line(self, row: int) -> str:
+        return f"line {row + 2}"  # the header is line 1
+
+    def columns(self, part: Partition, with_keys: bool = True) -> list:
+        with open(part.path, "rb") as fh:
+            head = fh.readline().decode("utf-8-sig", errors="replace").strip()
+        if not head:
+            raise ValueError(f"{self.display}: empty file, expected a header line with hole_id, time and d_<sensor> "
+                             f"columns")
+        import csv
+
+        return [c.strip() for c in next(csv.reader([head]))]
+
+    def has_rows(self, part: Partition) -> bool:
+        with open(part.path, "rb") as fh:
+            fh.readline()
+            return any(line.strip() for line in fh)
+
+    def _tables(self, part: Partition):
+        return _csv_batches(self, part)
+
+
+@dataclass(frozen=True)
+class ParquetLog(HoleLog):
+    """A Parquet hole log: one file, or a folder of files with hive keys (one partition each)."""
+
+    @property
+    def partitioned(self) -> bool:
+        return Path(self.source).is_dir()
+
+    def columns(self, part: Partition, with_keys: bool = True) -> list:
+        import pyarrow.parquet as pq
+
+        try:
+            names = pq.read_schema(part.path).names
+        except Exception as exc:  # pyarrow raises ArrowInvalid, OSError ... on a corrupt or truncated file
+            raise ValueError(f"{self.where(part)}: not a readable Parquet file ({_short(exc)})") from None
+        return names + [k for k in part.keys if k not in names] if with_keys else names
+
+    def has_rows(self, part: Partition) -> bool:
+        import pyarrow.parquet as pq
+
+        return pq.ParquetFile(part.path).metadata.num_rows > 0
+
+    def by_row_group(self) -> "HoleLog":
         import dataclasses
 
         import pyarrow.parquet as pq
 
-        if self.kind != "parquet" or self.partitioned or len(self.partitions) != 1:
+        if self.partitioned or len(self.partitions) != 1:
             return self
         part = self.partitions[0]
         meta = pq.ParquetFile(part.path).metadata
@@ -96,14 +192,12 @@ class HoleLog:
             row += meta.row_group(g).num_rows
         return dataclasses.replace(self, partitions=tuple(parts)) if parts else self
 
-    def batches(self, part: Partition):
-        """Yield ``(table, first_row)``: normalised pyarrow Tables of ``part`` in file order;
-        ``first_row`` is the 0-based row of the partition at which the batch starts."""
-        reader = _csv_batches if self.kind == "csv" else _parquet_batches
-        row = part.first_row
-        for table in reader(self, part):
-            yield _normalise(self, part, table, row), row
-            row += table.num_rows
+    def _tables(self, part: Partition):
+        return _parquet_batches(self, part)
+
+
+#: the reader of each file suffix
+READERS = {".csv": CsvLog, ".parquet": ParquetLog}
 
 
 def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = None) -> HoleLog:
@@ -119,43 +213,27 @@ def open_log(path, sensors, batch_rows: int = BATCH_ROWS, display: str | None = 
             raise ValueError(f"{name}: a folder of hole logs must hold .parquet files (hive-partitioned, e.g. "
                              f"cell=C1/date=2026-11-25/part-0.parquet); found none")
         parts = tuple(Partition(str(q), str(q.relative_to(p)), _hive_keys(q.relative_to(p))) for q in files)
-        log = HoleLog(str(p), "parquet", parts, tuple(sensors), batch_rows, name)
+        log = ParquetLog(str(p), parts, tuple(sensors), batch_rows, name)
     else:
         suffix = p.suffix.lower()
         if suffix not in LOG_SUFFIXES:
             raise ValueError(f"{name}: a hole log must be one of {', '.join(LOG_SUFFIXES)} (or a folder of .parquet), "
                              f"got '{p.suffix}'")
-        log = HoleLog(str(p), suffix[1:], (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
+        log = READERS[suffix](str(p), (Partition(str(p), p.name, {}),), tuple(sensors), batch_rows, name)
     for part in log.partitions:
-        _check_columns(log, part, _column_names(log, part))
-    if not any(_has_rows(log, part) for part in log.partitions):
+        _check_columns(log, part, log.columns(part))
+    if not any(log.has_rows(part) for part in log.partitions):
         raise ValueError(f"{name}: the log has no rows (a header only): no hole to measure")
     return log
-
-
-def _has_rows(log, part) -> bool:
-    """Whether the partition holds a row: a CSV a non-blank line after its header, a Parquet file
-    a row in its metadata (read before any work, so an empty log is refused before anything is written)."""
-    if log.kind == "csv":
-        with open(part.path, "rb") as fh:
-            fh.readline()
-            return any(line.strip() for line in fh)
-    import pyarrow.parquet as pq
-
-    return pq.ParquetFile(part.path).metadata.num_rows > 0
 
 
 def batch_of(table, sensors, name: str = "<memory>"):
     """A pyarrow Table of log rows already in memory (a simulator's, a test's) made into the batch a
     read gives (the same checks, the columns :data:`INTERNAL` added), as if read from a file ``name``."""
-    log = HoleLog(name, "parquet", (), tuple(sensors), max(table.num_rows, 1), name)
+    log = ParquetLog(name, (), tuple(sensors), max(table.num_rows, 1), name)
     part = Partition(name, name, {})
     _check_columns(log, part, table.column_names)
     return _normalise(log, part, table, 0)
-
-
-def _where(log, part):
-    return log.display if not log.partitioned else f"{log.display}: partition {part.relative}"
 
 
 def _hive_keys(rel: Path) -> dict:
@@ -167,30 +245,12 @@ def _hive_keys(rel: Path) -> dict:
     return keys
 
 
-def _column_names(log, part, with_keys=True) -> list:
-    if log.kind == "csv":
-        with open(part.path, "rb") as fh:
-            head = fh.readline().decode("utf-8-sig", errors="replace").strip()
-        if not head:
-            raise ValueError(f"{log.display}: empty file, expected a header line with hole_id, time and d_<sensor> columns")
-        import csv
-
-        return [c.strip() for c in next(csv.reader([head]))]
-    import pyarrow.parquet as pq
-
-    try:
-        names = pq.read_schema(part.path).names
-    except Exception as exc:  # pyarrow raises ArrowInvalid, OSError ... on a corrupt or truncated file
-        raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
-    return names + [k for k in part.keys if k not in names] if with_keys else names
-
-
 def _short(exc) -> str:
     return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
 
 
 def _check_columns(log, part, names) -> None:
-    where = _where(log, part)
+    where = log.where(part)
     for need in ("hole_id", "time"):
         if need not in names:
             raise ValueError(f"{where}: no '{need}' column (a hole log needs hole_id, time and d_<sensor> for each "
@@ -226,7 +286,7 @@ def _csv_batches(log, part):
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    names = _column_names(log, part)
+    names = log.columns(part)
     opts = pcsv.ConvertOptions(column_types=_csv_types(log, names), strings_can_be_null=False,
                                null_values=["", "NaN", "nan", "NA"])
     read = pcsv.ReadOptions(block_size=max(1 << 20, log.batch_rows * 64))
@@ -250,16 +310,16 @@ def _locate_csv_error(log, part, names, exc) -> str:
     try:
         reader = pcsv.open_csv(part.path, convert_options=pcsv.ConvertOptions(
             column_types={c: pa.string() for c in names}, strings_can_be_null=False))
-        line = 2
+        row = 0
         for batch in reader:
             for c in numeric:
                 ok = pc.match_substring_regex(batch.column(c), READING_RE).to_numpy(zero_copy_only=False)
                 bad = np.flatnonzero(~ok)
                 if bad.size:
                     value = batch.column(c)[int(bad[0])].as_py()
-                    return (f"{log.display} line {line + int(bad[0])}: {c} = {value!r} is not a number "
+                    return (f"{log.locate(part, row + int(bad[0]))}: {c} = {value!r} is not a number "
                             f"({'a reading in mm, or blank for no reading' if c.startswith('d_') else 'deg C'})")
-            line += batch.num_rows
+            row += batch.num_rows
     except pa.ArrowInvalid as exc2:
         return f"{log.display}: not a readable CSV hole log ({_short(exc2)})"
     return f"{log.display}: not a readable CSV hole log ({_short(exc)})"
@@ -287,7 +347,7 @@ def _parquet_batches(log, part):
             first += group.num_rows
             del group
     except (pa.ArrowInvalid, OSError) as exc:
-        raise ValueError(f"{_where(log, part)}: not a readable Parquet file ({_short(exc)})") from None
+        raise ValueError(f"{log.where(part)}: not a readable Parquet file ({_short(exc)})") from None
 
 
 def _check_key(log, part, table, key, value, first_row) -> None:
@@ -299,7 +359,7 @@ def _check_key(log, part, table, key, value, first_row) -> None:
     bad = pc.fill_null(pc.not_equal(col, value), True).to_numpy(zero_copy_only=False)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"{_row(log, part, first_row + i)}: {key} = {col[i].as_py()!r} disagrees with its folder's "
+        raise ValueError(f"{log.locate(part, first_row + i)}: {key} = {col[i].as_py()!r} disagrees with its folder's "
                          f"{key}={value} (a partition's file must hold its folder's key, or leave the column out)")
 
 
@@ -332,17 +392,10 @@ def _time_seconds(log, part, col, first_row):
                 except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
                     pass
             if not ok:
-                raise ValueError(f"{_row(log, part, first_row + i)}: time {v!r} is neither ISO 8601 "
+                raise ValueError(f"{log.locate(part, first_row + i)}: time {v!r} is neither ISO 8601 "
                                  f"(2026-11-25T08:00:00Z) nor seconds")
-        raise ValueError(f"{_where(log, part)}: the time column mixes formats (ISO 8601 with a zone offset, without one, seconds): expected one")
-    raise ValueError(f"{_where(log, part)}: time column of type {t}, expected ISO 8601 text, a timestamp or seconds")
-
-
-def _row(log, part, row) -> str:
-    """How an error names a row: a CSV's line (the header is line 1), a Parquet file's row."""
-    if log.kind == "csv":
-        return f"{log.display} line {row + 2}"
-    return f"{_where(log, part)} row {row + 1}"
+        raise ValueError(f"{log.where(part)}: the time column mixes formats (ISO 8601 with a zone offset, without one, seconds): expected one")
+    raise ValueError(f"{log.where(part)}: time column of type {t}, expected ISO 8601 text, a timestamp or seconds")
 
 
 def _normalise(log, part, table, first_row):
@@ -353,7 +406,7 @@ def _normalise(log, part, table, first_row):
         col = table.column(c)
         if c.startswith("d_") or c == "temperature_c":
             if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type)):
-                raise ValueError(f"{_where(log, part)}: column {c} is {col.type}, expected numbers (mm)")
+                raise ValueError(f"{log.where(part)}: column {c} is {col.type}, expected numbers (mm)")
             col = col.cast(pa.float64())
         elif c in ("hole_id", "cell", "panel"):
             col = col.cast(pa.string())
@@ -361,7 +414,7 @@ def _normalise(log, part, table, first_row):
     time_s = _time_seconds(log, part, table.column("time"), first_row)
     bad = np.flatnonzero(~np.isfinite(time_s))
     if bad.size:
-        raise ValueError(f"{_row(log, part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
+        raise ValueError(f"{log.locate(part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
     cols[TIME_S] = pa.array(time_s)
     if not (pa.types.is_timestamp(table.column("time").type) or pa.types.is_integer(table.column("time").type)
             or pa.types.is_floating(table.column("time").type)):
@@ -372,13 +425,21 @@ def _normalise(log, part, table, first_row):
     nulls = cols["hole_id"].null_count
     if nulls:
         i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
-        raise ValueError(f"{_row(log, part, first_row + i)}: hole_id is blank")
+        raise ValueError(f"{log.locate(part, first_row + i)}: hole_id is blank")
     return pa.table(cols)
+
+
+def text_codes(col):
+    """A string column with few values (cell, panel) by its dictionary: ``(codes (N,) int64, values list)``."""
+    import pyarrow.compute as pc
+
+    enc = pc.dictionary_encode(col).combine_chunks()
+    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
 
 
 def time_seconds(col) -> np.ndarray:
     """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results
     file's: a number, timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``."""
     display = "<results>"
-    log = HoleLog(display, "parquet", (), (), BATCH_ROWS, display)
+    log = ParquetLog(display, (), (), BATCH_ROWS, display)
     return _time_seconds(log, Partition(display, display, {}), col, 0)

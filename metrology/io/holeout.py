@@ -22,6 +22,8 @@ OUT_SUFFIXES = (".csv", ".parquet")
 MANIFEST = "_metro_measure.json"
 #: held by the run writing into a folder (created exclusively): two runs at once are refused
 LOCK = "_metro_measure.lock"
+#: how long a run waits for another run's lock on its output folder before it is refused, s
+LOCK_WAIT_S = 5.0
 
 
 def is_file_out(out) -> bool:
@@ -158,7 +160,7 @@ class PartitionedOutput:
                 diff = sorted(k for k in set(old) | set(settings) if old.get(k) != settings.get(k))
                 raise ValueError(f"--out {folder}: holds the results of a run with other settings ({', '.join(diff)} "
                                  f"differ): choose another folder or remove it")
-        elif self.folder.exists() and any(self.folder.iterdir()):
+        elif self.folder.exists() and any(q.name != LOCK for q in self.folder.iterdir()):  # a run starting: its lock
             raise ValueError(f"--out {folder}: folder is not empty and is not a metro measure output")
 
     def begin(self) -> None:
@@ -175,20 +177,34 @@ class PartitionedOutput:
         self._created = (made_folder, made_manifest)
 
     def _lock(self) -> None:
+        """Hold the folder's lock (created exclusively): another run's is waited for up to
+        :data:`LOCK_WAIT_S`, then refused in one line; a lock left by a run killed on this host
+        (its process gone) is taken over."""
         import socket
+        import time
 
         lock = self.folder / LOCK
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
+        me = f"pid {os.getpid()} on {socket.gethostname()}"
+        deadline = time.monotonic() + LOCK_WAIT_S
+        while True:
             try:
-                who = lock.read_text(encoding="utf-8").strip()
-            except OSError:
-                who = "?"
-            raise ValueError(f"--out {self.folder}: another run is writing into it ({who}; if none is, remove "
-                             f"{lock})") from None
+                fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+                break
+            except FileExistsError:
+                try:
+                    who = lock.read_text(encoding="utf-8").strip()
+                except OSError:
+                    who = "?"
+                pid, _, host = who.removeprefix("pid ").partition(" on ")
+                if host == socket.gethostname() and pid.isdigit() and not _alive(int(pid)):
+                    lock.unlink(missing_ok=True)  # a killed run's: nobody holds it
+                    continue
+                if time.monotonic() >= deadline:
+                    raise ValueError(f"--out {self.folder}: another run is writing into it ({who}; waited "
+                                     f"{LOCK_WAIT_S:g} s; if none is, remove {lock})") from None
+                time.sleep(0.2)
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(f"pid {os.getpid()} on {socket.gethostname()}")
+            fh.write(me)
         self._locked = True
 
     def release(self) -> None:

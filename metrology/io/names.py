@@ -16,7 +16,7 @@ import hashlib
 from contextvars import ContextVar
 from pathlib import Path
 
-__all__ = ["display_name", "named_inputs", "sha256_file"]
+__all__ = ["display_name", "named_inputs", "sha256_file", "utc"]
 
 _NAMES: ContextVar[dict] = ContextVar("metro_input_names", default={})
 
@@ -66,3 +66,10 @@ def sha256_file(path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def utc(t_s: float) -> str:
+    """ISO 8601 UTC, to the second, of ``t_s`` seconds since 1970-01-01: how outputs and errors name a time."""
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(float(t_s), dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")

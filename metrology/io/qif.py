@@ -39,7 +39,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from metrology.io.names import sha256_file
+from metrology.io.names import sha256_file, utc
 
 __all__ = ["QifResults", "QIF_STATUS", "check_qif_path", "write_device_document"]
 
@@ -203,11 +203,6 @@ class QifResults:
         key = f"metro:{what}:{self.log}:{self.layout_sha256}:{self.tolerance_deg!r}:{self.n}:{sorted(self.counts.items())}"
         return str(uuid.uuid5(uuid.NAMESPACE_URL, key))
 
-    def _iso(self, t):
-        import datetime as dt
-
-        return dt.datetime.fromtimestamp(int(t), dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-
     def _head(self) -> str:
         c = self.counts
         inspection = "FAIL" if c["fails"] else "UNKNOWN" if (c["undecided"] or c["not_measured"]) else "PASS"
@@ -220,8 +215,8 @@ class QifResults:
         serial = f"<SerialNumber>{escape(str(cert['serial']))}</SerialNumber>" if "serial" in cert else ""
         trace = ""
         if self.t_first is not None:
-            trace = (f"<InspectionStart>{self._iso(self.t_first)}</InspectionStart>"
-                     f"<InspectionEnd>{self._iso(self.t_last)}</InspectionEnd>")
+            trace = (f"<InspectionStart>{utc(self.t_first)}</InspectionStart>"
+                     f"<InspectionEnd>{utc(self.t_last)}</InspectionEnd>")
         refs = [(Path(self.log).resolve().as_uri() if self.log not in ("-", "<stdin>") else "urn:metro:stdin",
                  "metro hole log (CSV, Parquet or a folder of hive-partitioned Parquet)", "the hole log measured"),
                 (self.layout_path.resolve().as_uri(), "metro calibrated layout (TOML)",

@@ -6,13 +6,17 @@ from __future__ import annotations
 import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.core.verdict import Check, Verdict
 
-__all__ = ["MeasureReport", "measure_files", "SCHEMA"]
+if TYPE_CHECKING:
+    from metrology.measure.run import MeasureResult
+
+__all__ = ["MeasureReport", "MeasureOptions", "measure_files", "SCHEMA"]
 
 SCHEMA = "metro.measure/1"
 
@@ -23,17 +27,19 @@ class MeasureReport:
 
     Attributes
     ----------
-    result : metrology.measure.run.MeasureResult
-    sources : dict, role -> display name (log, layout, out)
-    tolerance_deg : float; min_radius_mm : float
+    result : MeasureResult, the holes measured: summary, drift watch, counts
+    sources : dict, role -> display name (log, layout, out, qif)
+    tolerance_deg : float, deg; min_radius_mm : float, mm
     layout_names : tuple of str
     has_covariance : bool, the layout carried the calibration's covariance (propagated)
     engine : str, "one process" or the Dask cluster used
     warnings : tuple of str
     fail_on_drift : bool, whether a drift alarm fails the verdict
+    chart : dict, the drift chart's settings (:func:`metrology.measure.chart.chart_settings`, by_panel)
+    curvature : dict, where each hole's curvature came from ({} : the assumed bound)
     """
 
-    result: object
+    result: "MeasureResult"
     sources: dict
     tolerance_deg: float
     min_radius_mm: float
@@ -261,17 +267,78 @@ def _qif_from_output(doc, output, log) -> None:
 QIF_COLUMNS = ("hole_id", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg", "status", "time")
 
 
-def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, min_radius_mm: float | None = None,
-                  workers: int | None = None, scheduler: str | None = None, report_html=None, command=None,
-                  warn=None, progress: ProgressFn | None = None, fail_on_drift: bool = False,
-                  log_display: str | None = None, batch_rows: int | None = None,
-                  chart_by_panel: bool = False, qif=None, per_hole: bool = True, panel=None, points=None,
-                  position_error_mm: float = 0.5, form_tolerance_mm: float = 0.0, spin_deg: float = 2.0) -> MeasureReport:
-    """Measure every hole of ``log_path`` with ``layout_path``; write ``out`` (a ``.csv`` or
-    ``.parquet`` file, a folder for a partitioned log, or None: CSV on stdout) and the HTML
-    report ``report_html``. With ``workers`` or ``scheduler`` the partitions run on Dask. ``qif``:
-    the per-hole results also as a QIF 3.0 Results document (:mod:`metrology.io.qif`). With
-    ``per_hole`` False and no ``out`` nothing per hole is written (``--json`` alone: the summary).
+@dataclass(frozen=True)
+class MeasureOptions:
+    """How ``metro measure`` runs (the CLI builds it by keyword; every field has the CLI's default).
+
+    Attributes
+    ----------
+    out : path or None, per-hole results: a ``.csv``/``.parquet`` file, a folder for a partitioned
+        log, or None (CSV on stdout; nothing with ``per_hole`` False)
+    tolerance_deg : float, deg, the perpendicularity tolerance
+    min_radius_mm : float or None, mm, the smallest panel radius (None: the layout's ``[panel]
+        radius_mm``, else 500, named as an assumption)
+    workers : int or None, a new Dask LocalCluster of this many worker processes
+    scheduler : str or None, a running Dask scheduler (``tcp://host:port``)
+    report_html : path or None, the HTML report; command : str or None, the command line it shows
+    fail_on_drift : bool, a drift alarm fails the verdict
+    log_display : str or None, how outputs name the log (``<stdin>``)
+    batch_rows : int or None, rows per batch (None: :data:`metrology.io.holelog.BATCH_ROWS`)
+    chart_by_panel : bool, a new drift-chart baseline at each panel
+    qif : path or None, the per-hole results also as a QIF 3.0 Results document
+    per_hole : bool, False with no ``out``: nothing per hole written (``--json`` alone)
+    panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
+    position_error_mm, form_tolerance_mm : float, mm; spin_deg : float, deg (with ``points``)
+    """
+
+    out: Path | None = None
+    tolerance_deg: float = 0.5
+    min_radius_mm: float | None = None
+    workers: int | None = None
+    scheduler: str | None = None
+    report_html: Path | None = None
+    command: str | None = None
+    fail_on_drift: bool = False
+    log_display: str | None = None
+    batch_rows: int | None = None
+    chart_by_panel: bool = False
+    qif: Path | None = None
+    per_hole: bool = True
+    panel: Path | None = None
+    points: Path | None = None
+    position_error_mm: float = 0.5
+    form_tolerance_mm: float = 0.0
+    spin_deg: float = 2.0
+
+    @property
+    def distributed(self) -> bool:
+        return self.workers is not None or self.scheduler is not None
+
+
+@contextlib.contextmanager
+def _engine(opts: MeasureOptions):
+    """The engine the options ask for, for a ``with`` block: one process, or Dask (the cluster
+    closed at the block's end when this run started it)."""
+    if not opts.distributed:
+        from metrology.measure.run import OneProcess
+
+        yield OneProcess()
+        return
+    from metrology.measure.fleet import DaskEngine, connect
+
+    with connect(opts.workers, opts.scheduler) as client:
+        yield DaskEngine(client, f"Dask scheduler {opts.scheduler}" if opts.scheduler else
+                         f"Dask LocalCluster, {opts.workers} worker(s)")
+
+
+def measure_files(log_path, layout_path, options: MeasureOptions | None = None, warn=None,
+                  progress: ProgressFn | None = None) -> MeasureReport:
+    """Measure every hole of ``log_path`` with ``layout_path`` as ``options`` say
+    (:class:`MeasureOptions`): write ``out`` (a ``.csv`` or ``.parquet`` file, a folder for a
+    partitioned log, or None: CSV on stdout) and the HTML report ``report_html``. With ``workers``
+    or ``scheduler`` the partitions run on Dask. ``qif``: the per-hole results also as a QIF 3.0
+    Results document (:mod:`metrology.io.qif`). With ``per_hole`` False and no ``out`` nothing per
+    hole is written (``--json`` alone: the summary).
 
     Everything is checked before anything is written; each output file is written atomically.
     ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
@@ -285,37 +352,128 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     panel, beyond the cell's convention) enter U95. Without them ``min_radius_mm`` bounds the
     micro-plane's curvature bias, named in the verdict as the assumption it is. The layout file may
     state the cell's panel once (:func:`layout_panel`: ``[panel]`` with ``file`` and ``points``, or
-    ``points``, or ``radius_mm``), used where the arguments give none. ``min_radius_mm`` None: the
+    ``points``, or ``radius_mm``), used where the options give none. ``min_radius_mm`` None: the
     layout's ``[panel] radius_mm``, else 500 mm (assumed).
     """
+    import dataclasses
+
     from metrology.io.holelog import BATCH_ROWS, open_log
     from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
     from metrology.measure.chart import chart_settings
     from metrology.measure.holes import Settings
+    from metrology.measure.run import measure_log
 
-    if not (0 < tolerance_deg < 90):
-        raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {tolerance_deg:g}")
+    o = MeasureOptions() if options is None else options
+    if not (0 < o.tolerance_deg < 90):
+        raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {o.tolerance_deg:g}")
     stated = layout_panel(layout_path)
     radius_source = "--min-radius-mm"
-    if panel is None and points is None:
-        panel, points = stated.get("file"), stated.get("points")
-    if min_radius_mm is None:
-        min_radius_mm = stated.get("radius_mm", 500.0)
+    if o.panel is None and o.points is None:
+        o = dataclasses.replace(o, panel=stated.get("file"), points=stated.get("points"))
+    if o.min_radius_mm is None:
+        o = dataclasses.replace(o, min_radius_mm=stated.get("radius_mm", 500.0))
         radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
+    min_radius_mm, panel, points = o.min_radius_mm, o.panel, o.points
     if not min_radius_mm > 0:
         raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {min_radius_mm:g}")
-    if report_html is not None:
+    if o.report_html is not None:
         from metrology.report.html import check_report_path
 
-        check_report_path(report_html)
-    if qif is not None:
+        check_report_path(o.report_html)
+    if o.qif is not None:
         from metrology.io.qif import check_qif_path
 
-        check_qif_path(qif)
+        check_qif_path(o.qif)
     layout = load_layout(layout_path)
     shown_layout = display_name(layout_path)
+    warnings = _layout_warnings(layout, shown_layout)
+    surfaces = None
+    if panel is not None and points is None:
+        raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
+                         f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
+    if points is not None:
+        surfaces = _surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg)
+    log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
+    target = check_out(o.out, log.partitioned, o.distributed)
+    settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(min_radius_mm),
+                        surfaces=surfaces)
+    for w in warnings:
+        if warn is not None:
+            warn(w)
+    output = None
+    if target is not None and not is_file_out(o.out):
+        output = PartitionedOutput(target, {"tolerance_deg": o.tolerance_deg, "min_radius_mm": min_radius_mm,
+                                            "chart_by_panel": o.chart_by_panel,
+                                            "panel": None if panel is None else str(Path(panel).resolve()),
+                                            "points": None if points is None else str(Path(points).resolve()),
+                                            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg],
+                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
+    done = [0]
+
+    def tick(n):
+        done[0] += n
+        if progress is not None:
+            progress(done[0], None, f"{done[0]:,} holes measured")
+
+    sources = {"log": log.display, "layout": shown_layout, "out": None if o.out is None else str(o.out)}
+    if o.qif is not None:
+        sources["qif"] = str(o.qif)
+    qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display)
+
+    def run(sink):
+        """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
+        with _engine(o) as engine:
+            return measure_log(log, layout, settings, engine, sink=sink, output=output, progress=tick,
+                               by_panel=o.chart_by_panel)
+
+    if output is not None:
+        try:
+            result = run(None)
+        except BaseException:
+            output.release()
+            output.abort()  # nothing written by any run: no manifest, no folder left
+            raise
+        output.release()
+    elif target is None and not o.per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
+        result = run(None)
+        _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)
+    else:
+        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
+            result = run(sink if q is None else _Tee(sink, q))
+            _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)  # before the files appear
+    if output is not None:
+        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
+        if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
+            _qif_from_output(qif_doc, output, log)
+    curvature = {}
+    if surfaces is None and radius_source == "layout [panel] radius_mm":
+        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {min_radius_mm:g} mm stated in "
+                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": min_radius_mm}
+    if surfaces is not None:
+        curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
+                     "position_error_mm": o.position_error_mm, "form_tolerance_mm": o.form_tolerance_mm,
+                     "spin_deg": o.spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
+                     "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
+                     **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
+    report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
+                           layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
+                           {**chart_settings(), "by_panel": o.chart_by_panel}, curvature)
+    if o.report_html is not None:
+        from metrology.io.atomic import write_text
+        from metrology.report.html import render_html, run_info
+        from metrology.report.measure import measure_section
+
+        paths = {"log": log_path, "layout": layout_path} if o.log_display is None else {"layout": layout_path}
+        write_text(o.report_html, render_html("Hole measurement", run_info(paths, o.command,
+                                                                           extra_versions=("pyarrow", "dask")),
+                                              [measure_section(report)]))
+    return report
+
+
+def _layout_warnings(layout, shown_layout) -> list:
+    """What the layout lacks for a full uncertainty or drift watch (ValueError: no uncertainty at all)."""
     warnings = []
     no_noise = not np.all(np.isfinite(layout.noise_mm))
     if no_noise and layout.covariance is None:
@@ -331,101 +489,4 @@ def measure_files(log_path, layout_path, out=None, tolerance_deg: float = 0.5, m
     if layout.n != 4:
         warnings.append(f"{shown_layout}: {layout.n} sensors: the drift watch needs exactly 4 (one redundant reading per "
                         f"hole)" + ("; 3 give no redundancy" if layout.n == 3 else ""))
-    surfaces = None
-    if panel is not None and points is None:
-        raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
-                         f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
-    if points is not None:
-        surfaces = _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
-    log = open_log(log_path, layout.names, batch_rows=batch_rows or BATCH_ROWS, display=log_display)
-    distributed = workers is not None or scheduler is not None
-    target = check_out(out, log.partitioned, distributed)
-    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
-                        surfaces=surfaces)
-    for w in warnings:
-        if warn is not None:
-            warn(w)
-    output = None
-    if target is not None and not is_file_out(out):
-        output = PartitionedOutput(target, {"tolerance_deg": tolerance_deg, "min_radius_mm": min_radius_mm,
-                                            "chart_by_panel": chart_by_panel,
-                                            "panel": None if panel is None else str(Path(panel).resolve()),
-                                            "points": None if points is None else str(Path(points).resolve()),
-                                            "panel_terms": [position_error_mm, form_tolerance_mm, spin_deg],
-                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
-    total = None
-    done = [0]
-
-    def tick(n):
-        done[0] += n
-        if progress is not None:
-            progress(done[0], total, f"{done[0]:,} holes measured")
-
-    sources = {"log": log.display, "layout": shown_layout, "out": None if out is None else str(out)}
-    if qif is not None:
-        sources["qif"] = str(qif)
-    qif_doc = _qif_doc(qif, tolerance_deg, layout_path, layout, log.display)
-
-    def run(sink):
-        """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
-        if distributed:
-            from metrology.measure.fleet import connect, measure_log_dask
-
-            client = connect(workers, scheduler)
-            try:
-                # a single Parquet file: its row groups are the tasks (a CSV file is one task)
-                result = measure_log_dask(client, log if output is not None else log.by_row_group(), layout, settings,
-                                          output, progress=tick, by_panel=chart_by_panel, sink=sink)
-            finally:
-                cluster = getattr(client, "cluster", None)
-                client.close()
-                if cluster is not None and scheduler is None:
-                    cluster.close()
-            return result, (f"Dask scheduler {scheduler}" if scheduler else f"Dask LocalCluster, {workers} worker(s)")
-        from metrology.measure.run import measure_log, tune_allocator
-
-        tune_allocator()
-        return measure_log(log, layout, settings, sink=sink, output=output, progress=tick,
-                           by_panel=chart_by_panel), "one process"
-
-    if output is not None:
-        try:
-            result, engine = run(None)
-        except BaseException:
-            output.release()
-            output.abort()  # nothing written by any run: no manifest, no folder left
-            raise
-        output.release()
-    elif target is None and not per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
-        result, engine = run(None)
-        _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)
-    else:
-        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
-            result, engine = run(sink if q is None else _Tee(sink, q))
-            _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)  # before the files appear
-    if output is not None:
-        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
-        if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
-            _qif_from_output(qif_doc, output, log)
-    curvature = {}
-    if surfaces is None and radius_source == "layout [panel] radius_mm":
-        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {min_radius_mm:g} mm stated in "
-                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": min_radius_mm}
-    if surfaces is not None:
-        curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
-                     "position_error_mm": position_error_mm, "form_tolerance_mm": form_tolerance_mm,
-                     "spin_deg": spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
-                     "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
-                     **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
-    report = MeasureReport(result, sources, tolerance_deg, min_radius_mm, layout.names, layout.covariance is not None,
-                           engine, tuple(warnings), fail_on_drift, {**chart_settings(), "by_panel": chart_by_panel},
-                           curvature)
-    if report_html is not None:
-        from metrology.io.atomic import write_text
-        from metrology.report.html import render_html, run_info
-        from metrology.report.measure import measure_section
-
-        paths = {"log": log_path, "layout": layout_path} if log_display is None else {"layout": layout_path}
-        write_text(report_html, render_html("Hole measurement", run_info(paths, command, extra_versions=("pyarrow", "dask")),
-                                            [measure_section(report)]))
-    return report
+    return warnings

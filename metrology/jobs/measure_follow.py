@@ -46,10 +46,10 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
     missing column); the holes before it have been answered."""
     import pyarrow as pa
 
-    from metrology.io.holelog import batch_of
+    from metrology.io.holelog import CsvLog, batch_of
     from metrology.io.layout import load_layout
     from metrology.jobs.measure import _surfaces, layout_panel
-    from metrology.measure.holes import Settings, Status, measure_batch
+    from metrology.measure.holes import STATUSES, Settings, Status, measure_batch
     from metrology.measure.run import Feed, Watch
 
     layout = load_layout(layout_path)
@@ -68,6 +68,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
     name = "<stdin>" if str(source) == "-" else str(source)
     fh = (stream or sys.stdin) if str(source) == "-" else open(source, newline="")
     watch = Watch(layout.names)
+    log = CsvLog(name, (), layout.names, display=name)  # how errors name a line
     counts = {str(s): 0 for s in Status}
     alarms, raised = [], set()
     try:
@@ -103,7 +104,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
                 raise ValueError(f"{name}: line {lineno}: {exc}") from None
             batch = measure_batch(layout, table, settings)
             t = batch.columns
-            status = str(list(Status)[int(batch.status[0])])
+            status = str(STATUSES[int(batch.status[0])])
             counts[status] += 1
 
             def f(col):
@@ -117,7 +118,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
                      **({"k1_per_mm": f("k1_per_mm"), "k2_per_mm": f("k2_per_mm"),
                          "correction_deg": f("correction_deg")} if surfaces is not None else {}),
                      "reason": f("reason")})
-            watch.feed(Feed.of(batch, name, lineno - 2, csv=True))
+            watch.feed(Feed.of(batch, log, first_row=lineno - 2))
             _report_alarms(watch, alarms, raised, on_alarm)
     finally:
         if fh is not sys.stdin and fh is not stream:
@@ -131,13 +132,13 @@ def _report_alarms(watch, alarms, raised, on_alarm) -> None:
     """Each alarm as it is raised (``{"raised": True, ...}``: the hole and direction, at once) and
     again when sized on its new baseline (the full alarm, as ``metro measure`` reports it)."""
     for ch in watch.charts.values():
-        p = getattr(ch, "_pending", None)
+        p = ch.pending
         if p is not None:
-            key = (p["alarm"]["cell"], p["alarm"]["hole_id"])
+            key = (p.raised["cell"], p.raised["hole_id"])
             if key not in raised:
                 raised.add(key)
                 if on_alarm is not None:
-                    on_alarm({"raised": True, **p["alarm"]})
+                    on_alarm({"raised": True, **p.raised})
     filed = sorted((a for ch in watch.charts.values() for a in ch.alarms), key=lambda a: (a.time_s, a.cell))
     for a in filed[len(alarms):]:
         alarms.append(a.to_dict())

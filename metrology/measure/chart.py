@@ -44,7 +44,7 @@ import numpy as np
 
 from metrology.core.stats import robust_sigma
 
-__all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HOLES", "CLIP", "cusum_h", "cusum_arl", "Alarm", "CusumChart",
+__all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HOLES", "CLIP", "cusum_h", "cusum_arl", "Alarm", "PendingAlarm", "CusumChart",
            "chart_settings"]
 
 #: reference value of the CUSUM, in scales: the chart is tuned to a shift of 2 k = 1 scale
@@ -147,6 +147,25 @@ class Alarm:
                 "sensor_shift_um": dict(self.sensor_shift_um), "direction": self.direction, "advice": self.advice}
 
 
+@dataclass(frozen=True)
+class PendingAlarm:
+    """An alarm raised and waiting for the new baseline that sizes its change (:meth:`CusumChart._size_pending`).
+
+    Attributes
+    ----------
+    level : float, mm, the chart's level before the change
+    signature : (4,) float, mm per mm, the baseline's signature before the change
+    fallback_mm : float, mm, the change's size from the alarm's window (when the log ends before a new level)
+    raised : dict, the alarm as raised: cell, panel, hole_id, time_s, start_hole_id, start_time_s,
+        holes_since_start, direction (:class:`Alarm`'s fields but its size)
+    """
+
+    level: float
+    signature: np.ndarray
+    fallback_mm: float
+    raised: dict
+
+
 @dataclass
 class _Run:
     """Where one one-sided sum was last zero, and the residuals summed since then."""
@@ -195,7 +214,7 @@ class CusumChart:
     _runs: list = field(default_factory=lambda: [_Run(), _Run()])
     _stride: int = 1  # holes per bin of the plotted series
     _bins: list = field(default_factory=list)  # per bin: its points (1 or 2), or None for a break
-    _pending: dict | None = None  # an alarm waiting for the new baseline to size the change
+    _pending: PendingAlarm | None = None  # an alarm waiting for the new baseline to size the change
 
     def _restart(self, segment) -> None:
         self.finish()
@@ -250,15 +269,20 @@ class CusumChart:
         self._base = []
         self._size_pending()
 
+    @property
+    def pending(self) -> PendingAlarm | None:
+        """The alarm raised and not yet sized (its new baseline not complete), or None."""
+        return self._pending
+
     def _size_pending(self) -> None:
         """Size the pending alarm's change as the new level minus the old, and file the alarm."""
         if self._pending is None:
             return
         p, self._pending = self._pending, None
-        size_mm = (self.level - p["level"]) if np.isfinite(self.level) else p["fallback_mm"]
-        sig = self.signature if self.signature is not None else p["signature"]
+        size_mm = (self.level - p.level) if np.isfinite(self.level) else p.fallback_mm
+        sig = self.signature if self.signature is not None else p.signature
         shifts = {s: float(size_mm / g * 1e3) for s, g in zip(self.sensors, sig)}
-        self.alarms.append(Alarm(**p["alarm"], size_um=float(size_mm * 1e3), sensor_shift_um=shifts))
+        self.alarms.append(Alarm(**p.raised, size_um=float(size_mm * 1e3), sensor_shift_um=shifts))
 
     def finish(self) -> None:
         """End of the log: size a pending alarm on the holes taken since (or on the alarm's window)."""
@@ -291,11 +315,10 @@ class CusumChart:
             return None
         up = sums[0][first] > self.h
         run = self._runs[0 if up else 1]
-        pending = {"level": self.level, "signature": self.signature,
-                   "fallback_mm": run.total / max(run.count, 1) * self.scale,
-                   "alarm": dict(cell=self.cell, panel=str(panel[first]), hole_id=str(hole_id[first]),
-                                 time_s=float(time_s[first]), start_hole_id=run.hole_id, start_time_s=run.time_s,
-                                 holes_since_start=self.charted - run.index, direction="up" if up else "down")}
+        pending = PendingAlarm(self.level, self.signature, run.total / max(run.count, 1) * self.scale,
+                               dict(cell=self.cell, panel=str(panel[first]), hole_id=str(hole_id[first]),
+                                    time_s=float(time_s[first]), start_hole_id=run.hole_id, start_time_s=run.time_s,
+                                    holes_since_start=self.charted - run.index, direction="up" if up else "down"))
         self._restart(self._segment)  # a new baseline: one alarm per change, sized by the new level
         self._pending = pending
         return first

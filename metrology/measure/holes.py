@@ -39,14 +39,14 @@ split into batches or partitions (the Dask path relies on it).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
 from metrology.core.layout import SensorLayout
+from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
 from metrology.measure.normals import hole_normals
 
-__all__ = ["Status", "Settings", "HoleBatch", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
+__all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
            "DEFAULT_MIN_RADIUS_MM"]
 
 #: fewest readings that give a plane
@@ -60,13 +60,6 @@ GROSS_SIGMAS = 6.0
 TILT_ALLOWANCE = 3.0
 #: the smallest panel radius the gross-reading rule allows for (mm): aircraft skins are >= 500 mm
 DEFAULT_MIN_RADIUS_MM = 500.0
-
-
-class Status(StrEnum):
-    CONFORMS = "conforms"
-    FAILS = "fails"
-    UNDECIDED = "undecided"
-    NOT_MEASURED = "not_measured"
 
 
 #: the per-hole columns metro writes, in order (before the columns passed through)
@@ -89,40 +82,6 @@ class Settings:
     #: each hole's local surface (:class:`metrology.measure.panel.HoleSurfaces`, joined by ``hole_id``):
     #: the normal is fitted with the surface known (:mod:`metrology.measure.surface`), not the micro-plane
     surfaces: object = None
-
-
-@dataclass(frozen=True)
-class HoleBatch:
-    """A batch measured.
-
-    Attributes
-    ----------
-    columns : pyarrow.Table: :data:`OUTPUT_COLUMNS` (angles in deg, the residual in µm: the
-        file's units) then the log's other columns (not the readings), in the log's row order
-    status : (N,) int8, the index of each hole's :class:`Status` in ``list(Status)``
-    judged : (N,) float, rad, the angle the verdict judged (NaN where not measured)
-    judged_u95 : (N,) float, rad
-    angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
-    disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
-    unknown_after : (N,) bool, holes not measured after the adjustment whose before-readings do not rule
-        out a wrong turn of the cell (rule 3's; before-readings gross or too few): their drilled angle is not
-        known, and may be out of tolerance
-    chart : dict of arrays for the drift chart (holes measured on all 4 of a 4-sensor head):
-        ``index`` (m,) int rows, ``rho_mm``, ``noise_sd_mm`` (m,), ``signature`` (m, 4)
-    """
-
-    columns: dict
-    status: np.ndarray
-    judged: np.ndarray
-    judged_u95: np.ndarray
-    angle_before: np.ndarray
-    angle_after: np.ndarray
-    chart: dict
-    disagree: np.ndarray | None = None
-    unknown_after: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.status)
 
 
 @dataclass
@@ -416,33 +375,33 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         judged[poses] = np.nan
         judged_u[poses] = np.nan
     tol = settings.tolerance
-    code = np.full(N, 2, np.int8)  # the order of Status
-    code[judged + judged_u <= tol] = 0
-    code[judged - judged_u > tol] = 1
+    code = np.full(N, CODE[Status.UNDECIDED], np.int8)
+    code[judged + judged_u <= tol] = CODE[Status.CONFORMS]
+    code[judged - judged_u > tol] = CODE[Status.FAILS]
     measured = np.isfinite(judged) & (np.isfinite(before.angle) | judge_after)
-    code[~measured] = 3
-    for i in np.flatnonzero(code == 1):
+    code[~measured] = CODE[Status.NOT_MEASURED]
+    for i in np.flatnonzero(code == CODE[Status.FAILS]):
         reason[i] = (reason[i] + "; " if reason[i] else "") + (
             f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg - "
             f"U95 {np.degrees(judged_u[i]):.4f} deg > tolerance {np.degrees(tol):g} deg")
-    for i in np.flatnonzero(code == 2):
+    for i in np.flatnonzero(code == CODE[Status.UNDECIDED]):
         reason[i] = (reason[i] + "; " if reason[i] else "") + (
             f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg "
             f"+- U95 {np.degrees(judged_u[i]):.4f} deg straddles the tolerance {np.degrees(tol):g} deg")
     ids = table.column("hole_id").cast(pa.string())
     if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
         for i in np.flatnonzero(table_row < 0):
-            code[i] = 3
+            code[i] = CODE[Status.NOT_MEASURED]
             reason[i] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
                          f"unknown")
         for i in np.flatnonzero(table_row >= 0):
             why = surf.problem[table_row[i]]
             if why:
-                code[i] = 3
+                code[i] = CODE[Status.NOT_MEASURED]
                 reason[i] = why
     dup, orig = _duplicates(ids)
     if dup.size:
-        code[dup] = 3
+        code[dup] = CODE[Status.NOT_MEASURED]
         for r, o in zip(dup, orig):
             reason[r] = f"duplicate hole_id (row {o + 1} of this batch has it too)"
     patterns = before.used @ (1 << np.arange(layout.n))
@@ -461,7 +420,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "fit_residual_um": num(before.residual * 1e3),
         "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
         "sensors_used": _labels(patterns, pattern_names),
-        "status": _labels(code, [str(s) for s in Status]),
+        "status": _labels(code, [str(s) for s in STATUSES]),
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
     if surf is not None:  # the panel's columns
@@ -481,14 +440,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     out = pa.table({k: v for k, v in cols.items()})
     full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
-    chart = {"index": idx, "rho_mm": before.residual[idx], "noise_sd_mm": before.noise_sd[idx],
-             "signature": before.signature[idx]}
+    chart = ChartRows(idx, before.residual[idx], before.noise_sd[idx], before.signature[idx])
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
     # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
     # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
     unknown = np.zeros(N, bool)
     if after is not None:
-        unknown = (code == 3) & judge_after & (poses | ~np.isfinite(before.angle))
+        unknown = (code == CODE[Status.NOT_MEASURED]) & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)

@@ -1,27 +1,36 @@
 """A hole log measured: every partition's holes, the fleet summary and the drift watch.
 
-The unit of work is one partition (:func:`measure_partition`): its batches measured, written
-and summed up, and what the drift chart needs kept as a :class:`Feed`. The single-process run
-(:func:`measure_log`) and the Dask run (:mod:`metrology.measure.fleet`) call the same function
-per partition and feed the :class:`Watch` in the log's order, so their results are the same.
-A partition is read in batches; the single-process run feeds the watch batch by batch, so its
-memory is bounded by one batch whatever the log's size.
+One driver, :func:`measure_log`, merges the summaries, feeds the drift watch, counts the holes
+and reports progress, whatever the engine: it takes an in-order iterator of :class:`Piece`
+(partition results) that the engine supplies (as xarray's ``open_mfdataset`` has one loop and
+``parallel=True`` only wraps the per-file call in ``dask.delayed``). The unit of work is one
+partition (:func:`measure_partition`: its batches measured, written and summed up, each batch a
+piece). :class:`OneProcess` runs it here, partition after partition, piece by piece (memory
+bounded by one batch); :class:`metrology.measure.fleet.DaskEngine` runs it on Dask, one task per
+partition, and hands back one piece per partition in the log's order. The results are the same.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
 from metrology.core.layout import SensorLayout
-from metrology.io.holelog import HoleLog, Partition
+from metrology.io.holelog import CELL, INTERNAL, PANEL, TIME_S, HoleLog, Partition, text_codes
+from metrology.io.names import utc
 from metrology.measure.chart import CusumChart
-from metrology.io.holelog import CELL, INTERNAL, PANEL, TIME_S
 from metrology.measure.holes import HoleBatch, Settings, measure_batch
 from metrology.measure.summary import FleetSummary
 
-__all__ = ["Feed", "Watch", "PartResult", "MeasureResult", "measure_partition", "measure_log", "tune_allocator"]
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from metrology.io.holeout import PartitionedOutput
+
+__all__ = ["Feed", "Watch", "Piece", "MeasureResult", "OneProcess", "measure_partition", "measure_log",
+           "tune_allocator"]
 
 _TUNED = False
 
@@ -51,76 +60,78 @@ def tune_allocator() -> None:
 
 @dataclass(frozen=True)
 class Feed:
-    """What the drift watch needs of some holes, in log order.
+    """What the drift watch needs of some holes of one partition, in log order.
 
     Attributes
     ----------
-    where : str, the partition (for errors)
-    first_row : (m,) int, each hole's row in the partition (0-based)
+    log : HoleLog; part : Partition, where the holes are (errors name them by :meth:`HoleLog.locate`)
+    row : (m,) int, each hole's row in the partition's file (0-based)
     cell, panel : (m,) str
     hole_id : pyarrow.StringArray, length m (kept as Arrow: only the alarms' holes become Python strings)
-    time_s : (m,) float, s
+    time_s : (m,) float, s since 1970-01-01 UTC
     charted : (m,) bool, measured on all 4 sensors (the chart takes those)
-    rho_mm, noise_sd_mm : (m,) float, mm; signature : (m, 4) float
+    rho_mm, noise_sd_mm : (m,) float, mm (NaN where not charted); signature : (m, 4) float, mm per mm
     """
 
-    where: str
+    log: HoleLog
+    part: Partition
     row: np.ndarray
     cell: np.ndarray
     panel: np.ndarray
-    hole_id: np.ndarray
+    hole_id: "pa.StringArray"
     time_s: np.ndarray
     charted: np.ndarray
     rho_mm: np.ndarray
     noise_sd_mm: np.ndarray
     signature: np.ndarray
-    csv: bool = False
 
-    def line(self, row: int) -> str:
-        """How an error names a row: a CSV's line (the header is line 1), a Parquet file's row."""
-        return f"line {row + 2}" if self.csv else f"row {row + 1}"
+    def locate(self, row: int) -> str:
+        """How an error names the hole at ``row`` of the partition's file."""
+        return self.log.locate(self.part, row)
 
     @classmethod
-    def of(cls, batch: HoleBatch, where: str, first_row: int, csv: bool = False) -> "Feed":
+    def of(cls, batch: HoleBatch, log: HoleLog | str, part: Partition | None = None, first_row: int = 0) -> "Feed":
+        """The feed of ``batch``, whose first hole is row ``first_row`` of ``part``'s file (``log`` a
+        name: holes in memory, errors name their rows in it as in a Parquet file's)."""
+        if isinstance(log, str):
+            from metrology.io.holelog import ParquetLog
+
+            log = ParquetLog(log, (), (), display=log)
+        if part is None:
+            part = Partition(log.display, log.display, {})
         t = batch.columns
         n = len(batch)
+        ch = batch.chart
         charted = np.zeros(n, bool)
-        charted[batch.chart["index"]] = True
+        charted[ch.index] = True
         rho = np.full(n, np.nan)
         sd = np.full(n, np.nan)
-        sig = np.full((n, batch.chart["signature"].shape[1] if batch.chart["signature"].ndim == 2 else 4), np.nan)
-        rho[batch.chart["index"]] = batch.chart["rho_mm"]
-        sd[batch.chart["index"]] = batch.chart["noise_sd_mm"]
-        if batch.chart["index"].size:
-            sig[batch.chart["index"]] = batch.chart["signature"]
-        return cls(where, first_row + np.arange(n), _str(t.column(CELL)), _str(t.column(PANEL)),
-                   t.column("hole_id").combine_chunks(), t.column(TIME_S).to_numpy(), charted, rho, sd, sig, csv)
+        sig = np.full((n, ch.signature.shape[1] if ch.signature.ndim == 2 else 4), np.nan)
+        rho[ch.index] = ch.rho_mm
+        sd[ch.index] = ch.noise_sd_mm
+        if ch.index.size:
+            sig[ch.index] = ch.signature
+        return cls(log, part, first_row + np.arange(n), _str(t.column(CELL)), _str(t.column(PANEL)),
+                   t.column("hole_id").combine_chunks(), t.column(TIME_S).to_numpy(), charted, rho, sd, sig)
 
     @classmethod
-    def concat(cls, feeds) -> "Feed":
+    def concat(cls, feeds) -> "Feed | None":
+        """One feed of a partition's feeds, in order (None for none)."""
         feeds = list(feeds)
         if not feeds:
             return None
         import pyarrow as pa
 
-        row, cell, panel = (np.concatenate([getattr(f, k) for f in feeds]) for k in ("row", "cell", "panel"))
+        arrays = (np.concatenate([getattr(f, k) for f in feeds]) for k in ("row", "cell", "panel"))
         rest = (np.concatenate([getattr(f, k) for f in feeds]) for k in
                 ("time_s", "charted", "rho_mm", "noise_sd_mm", "signature"))
-        return cls(feeds[0].where, row, cell, panel, pa.concat_arrays([f.hole_id for f in feeds]), *rest, feeds[0].csv)
-
-
-def _iso(t_s: float) -> str:
-    import datetime as dt
-
-    return dt.datetime.fromtimestamp(float(t_s), dt.timezone.utc).isoformat().replace("+00:00", "Z")
+        return cls(feeds[0].log, feeds[0].part, *arrays, pa.concat_arrays([f.hole_id for f in feeds]), *rest)
 
 
 def _str(col) -> np.ndarray:
     """A string column with few values (cell, panel) as a numpy array, through its dictionary."""
-    import pyarrow.compute as pc
-
-    enc = pc.dictionary_encode(col).combine_chunks()
-    return np.array(enc.dictionary.to_pylist() or [""], dtype=str)[enc.indices.to_numpy(zero_copy_only=False)]
+    codes, values = text_codes(col)
+    return np.array(values or [""], dtype=str)[codes]
 
 
 @dataclass
@@ -129,7 +140,10 @@ class Watch:
 
     Attributes
     ----------
-    sensors : tuple of str; charts : dict, cell -> CusumChart; last : dict, cell -> (time_s, where, row)
+    sensors : tuple of str
+    by_panel : bool, a new baseline at each panel (:class:`CusumChart`)
+    charts : dict, cell -> CusumChart
+    last : dict, cell -> (time_s, where): the cell's last hole so far (s, and how an error names it)
     """
 
     sensors: tuple
@@ -137,7 +151,7 @@ class Watch:
     charts: dict = field(default_factory=dict)
     last: dict = field(default_factory=dict)
 
-    def feed(self, f: Feed) -> None:
+    def feed(self, f: Feed | None) -> None:
         """Take the next holes of the log, in order; ValueError when a cell's time goes back."""
         if f is None or not len(f.row):
             return
@@ -148,15 +162,15 @@ class Watch:
             back = np.flatnonzero(np.diff(t) < 0)
             prev = self.last.get(cell)
             if prev is not None and t[0] < prev[0]:
-                raise ValueError(f"{f.where} {f.line(rows[0])}: time {_iso(t[0])} is before the previous hole of cell "
-                                 f"'{cell}' ({prev[1]} {prev[2]}, {_iso(prev[0])}): a log must be in time order "
+                raise ValueError(f"{f.locate(rows[0])}: time {utc(t[0])} is before the previous hole of cell "
+                                 f"'{cell}' ({prev[1]}, {utc(prev[0])}): a log must be in time order "
                                  f"within each cell")
             if back.size:
                 i = int(back[0])
-                raise ValueError(f"{f.where} {f.line(rows[i + 1])}: time {_iso(t[i + 1])} is before the previous hole "
-                                 f"of cell '{cell}' ({f.line(rows[i])}, {_iso(t[i])}): a log must be in time order "
-                                 f"within each cell")
-            self.last[cell] = (float(t[-1]), f.where, f.line(rows[-1]))
+                raise ValueError(f"{f.locate(rows[i + 1])}: time {utc(t[i + 1])} is before the previous hole "
+                                 f"of cell '{cell}' ({f.log.line(rows[i])}, {utc(t[i])}): a log must be in time "
+                                 f"order within each cell")
+            self.last[cell] = (float(t[-1]), f.locate(rows[-1]))
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
                 chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors, by_panel=self.by_panel))
@@ -164,6 +178,11 @@ class Watch:
 
                 chart.update(f.hole_id.filter(pa.array(c)), f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c],
                              f.signature[c])
+
+    def join(self, other: "Watch") -> None:
+        """Take the charts of ``other``, a watch of other cells (a chain of a Dask run)."""
+        self.charts.update(other.charts)
+        self.last.update(other.last)
 
     def finish(self) -> None:
         """The log has ended: size the alarms still waiting for their new baseline."""
@@ -175,57 +194,52 @@ class Watch:
         return sorted((a for ch in self.charts.values() for a in ch.alarms), key=lambda a: (a.time_s, a.cell))
 
 
-@dataclass
-class PartResult:
-    """One partition measured: its summary, its feed (None when fed batch by batch), its rows."""
+@dataclass(frozen=True)
+class Piece:
+    """A part of a partition's result, as an engine hands it to :func:`measure_log`, in the log's order.
 
-    relative: str
-    summary: FleetSummary
-    feed: Feed | None
-    rows: int
-    written: bool
-
-
-def _where(log: HoleLog, part: Partition) -> str:
-    return log.display if not log.partitioned else f"{log.display}: partition {part.relative}"
-
-
-def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, settings: Settings, sink=None,
-                      output=None, watch: Watch | None = None, progress=None) -> PartResult:
-    """Measure one partition of ``log``.
-
-    ``sink`` (a :class:`~metrology.io.holeout.TableSink` open for the whole run) or ``output`` (a
-    :class:`~metrology.io.holeout.PartitionedOutput`: this partition's own file, skipped when an
-    earlier run wrote it) takes the per-hole results. With ``watch`` the drift watch is fed batch by
-    batch (bounded memory); without it the partition's :class:`Feed` is returned for the caller
-    to feed in log order. ``progress(rows)`` is called after each batch.
+    Attributes
+    ----------
+    summary : FleetSummary, its holes summed up
+    rows : int, its holes
+    feed : Feed or None, its holes for the drift watch (None: the engine runs the watch itself)
+    table : pyarrow.Table or None, its per-hole results to write (a one-file output), else None
+    last : bool, the partition's last piece (its file, for a folder output, is written)
+    written : bool, with ``last``: this run wrote the partition's results (not an earlier run)
     """
+
+    summary: FleetSummary
+    rows: int
+    feed: Feed | None = None
+    table: "pa.Table | None" = None
+    last: bool = True
+    written: bool = False
+
+
+def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, settings: Settings,
+                      output: "PartitionedOutput | None" = None, rows: bool = False) -> Iterator[Piece]:
+    """Measure one partition of ``log``: a :class:`Piece` per batch, in order.
+
+    With ``output`` (a folder output) the partition's results go to its own file, written
+    atomically (skipped when an earlier run wrote it: :meth:`PartitionedOutput.done`); with ``rows``
+    each piece carries its results (a one-file output, written by the caller in the log's order).
+    A last, empty piece says the partition has ended and its file is complete."""
     import contextlib
 
-    summary = FleetSummary(float(np.degrees(settings.tolerance)))
-    feeds, rows = [], 0
-    where = _where(log, part)
+    tolerance_deg = float(np.degrees(settings.tolerance))
     write = output is not None and not output.done(part.relative)
     keys = list(part.keys)  # in the output's folder names, as in the log's: not in its files (a hive dataset)
     with (output.sink(part.relative) if write else contextlib.nullcontext()) as own:
         for table, first in log.batches(part):
             batch = measure_batch(layout, table, settings)
+            summary = FleetSummary(tolerance_deg)
             summary.add(batch)
-            f = Feed.of(batch, where, first, csv=log.kind == "csv")
-            if watch is not None:
-                watch.feed(f)
-            else:
-                _check_order(f)
-                feeds.append(f)
-            if own is not None:  # the partition's keys are in its path, as in the log
-                own.write(_public(batch.columns, keys))
-            elif sink is not None:
-                sink.write(_public(batch.columns))
-            rows += len(batch)
-            if progress is not None:
-                progress(len(batch))
-    return PartResult(part.relative, summary, None if watch is not None else Feed.concat(feeds), rows,
-                      write or sink is not None)
+            public = _public(batch.columns, keys if own is not None else ())
+            if own is not None:
+                own.write(public)
+            yield Piece(summary, len(batch), Feed.of(batch, log, part, first), public if rows else None, last=False)
+    # the partition's end, once its file is complete (an empty summary: merging it changes no sum)
+    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write)
 
 
 def _public(table, drop=()):
@@ -233,9 +247,25 @@ def _public(table, drop=()):
     return table.drop_columns([c for c in (*INTERNAL, *drop) if c in table.column_names])
 
 
-def _check_order(f: Feed) -> None:
-    """The time order of each cell within a partition (the watch checks across partitions)."""
-    Watch(()).feed(f)
+class OneProcess:
+    """The engine of one process: each partition measured here, in the log's order, batch by batch
+    (memory bounded by one batch: the watch is fed each batch as it is measured)."""
+
+    name = "one process"
+
+    def plan(self, log: HoleLog, output=None) -> HoleLog:
+        """The log as this engine's tasks split it: as it is."""
+        return log
+
+    def pieces(self, log: HoleLog, layout: SensorLayout, settings: Settings, output=None, rows: bool = False,
+               by_panel: bool = False) -> Iterator[Piece]:
+        tune_allocator()
+        for part in log.partitions:
+            yield from measure_partition(log, part, layout, settings, output=output, rows=rows)
+
+    def watches(self) -> list:
+        """The watches the engine ran itself (None here: every piece carries its feed)."""
+        return []
 
 
 @dataclass
@@ -244,8 +274,12 @@ class MeasureResult:
 
     Attributes
     ----------
-    summary : FleetSummary; watch : Watch; rows : int; partitions : int
+    summary : FleetSummary
+    watch : Watch, the drift watch over the whole log (its alarms: :attr:`alarms`)
+    rows : int, holes measured
+    partitions : int, the log's partitions (the tasks of a Dask run)
     written : int, partitions written by this run (the rest were already there)
+    engine : str, what measured it: "one process" or the Dask cluster
     """
 
     summary: FleetSummary
@@ -253,24 +287,47 @@ class MeasureResult:
     rows: int
     partitions: int
     written: int
+    engine: str = "one process"
 
     @property
     def alarms(self) -> list:
         return self.watch.alarms
 
 
-def measure_log(log: HoleLog, layout: SensorLayout, settings: Settings, sink=None, output=None,
-                progress=None, by_panel: bool = False) -> MeasureResult:
-    """Measure every partition of ``log`` in one process, in order (see :func:`measure_partition`)."""
-    summary = FleetSummary(float(np.degrees(settings.tolerance)))
+def measure_log(log: HoleLog, layout: SensorLayout, settings: Settings, engine=None, sink=None,
+                output: "PartitionedOutput | None" = None, progress=None, by_panel: bool = False) -> MeasureResult:
+    """Measure every partition of ``log`` on ``engine`` (:class:`OneProcess` when None; or a
+    :class:`metrology.measure.fleet.DaskEngine`), results into ``output`` (a folder: each partition
+    its file) or ``sink`` (one file: written here, in the log's order, with ``.write(table)``).
+
+    The one loop of every engine: the pieces come in the log's order; a partition's pieces are
+    summed up, then merged into the log's summary (so the sums are the same whatever the engine);
+    their feeds go to the drift watch in order; ``progress(rows)`` is called after each piece."""
+    engine = OneProcess() if engine is None else engine
+    log = engine.plan(log, output)
+    tolerance_deg = float(np.degrees(settings.tolerance))
+    summary = FleetSummary(tolerance_deg)
     watch = Watch(layout.names, by_panel)
     rows = written = 0
     if output is not None:
         output.begin()
-    for part in log.partitions:
-        r = measure_partition(log, part, layout, settings, sink=sink, output=output, watch=watch, progress=progress)
-        summary.merge(r.summary)
-        rows += r.rows
-        written += r.written
+    part = None
+    for piece in engine.pieces(log, layout, settings, output=output, rows=sink is not None, by_panel=by_panel):
+        if piece.table is not None and sink is not None:
+            sink.write(piece.table)
+        watch.feed(piece.feed)
+        if part is None:
+            part = piece.summary
+        else:
+            part.merge(piece.summary)
+        if piece.last:
+            summary.merge(part)
+            part = None
+            written += piece.written
+        rows += piece.rows
+        if progress is not None:
+            progress(piece.rows)
+    for w in engine.watches():
+        watch.join(w)
     watch.finish()
-    return MeasureResult(summary, watch, rows, len(log.partitions), written)
+    return MeasureResult(summary, watch, rows, len(log.partitions), written, engine.name)

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from metrology.io.holelog import CELL, PANEL, TIME_S
-from metrology.measure.holes import HoleBatch, Status
+from metrology.io.holelog import CELL, PANEL, TIME_S, text_codes
+from metrology.measure.holes import CODE, STATUSES, HoleBatch, Status
 
 __all__ = ["FleetSummary", "Group", "EDGES_DEG", "WORST"]
 
@@ -40,7 +40,7 @@ CAD_OFFSET_MM = 0.05
 #: the measured normal (turned by the commanded pose) against the CAD's is reported (mean, largest) but
 #: counts no hole off its CAD: it holds the robot's own orientation error as well, which on the forward
 #: simulator's default logs (true angles 0.5-5 deg before the adjustment) is every hole's 0.5-5 deg
-_STATUSES = tuple(str(s) for s in Status)
+_STATUSES = tuple(str(s) for s in STATUSES)  # the codes' order (holes.CODE)
 #: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
 PPK_Q = (0.5, 0.99865)
 #: fewest holes for a Ppk: 1 / (1 - 0.99865) = 741 holes put one beyond X99.865; 1000 keep a few there
@@ -87,20 +87,12 @@ def _bins(angle_deg):
     return np.clip(np.searchsorted(EDGES_DEG, angle_deg, side="right") - 1, 0, len(EDGES_DEG) - 1)
 
 
-def _codes(col):
-    """Dictionary codes (N,) int64 and the values of a string column."""
-    import pyarrow.compute as pc
-
-    enc = pc.dictionary_encode(col).combine_chunks()
-    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
-
-
 def _groups(t):
     """Each row's group (N,) int and the groups' keys ``(cell, panel, day)`` (day: UTC date)."""
     import datetime as dt
 
-    ci, cells = _codes(t.column(CELL))
-    pi, panels = _codes(t.column(PANEL))
+    ci, cells = text_codes(t.column(CELL))
+    pi, panels = text_codes(t.column(PANEL))
     day = np.floor(t.column(TIME_S).to_numpy() / 86400.0).astype(np.int64)
     d0 = int(day.min()) if len(day) else 0
     nd = int(day.max()) - d0 + 1 if len(day) else 1
@@ -258,7 +250,7 @@ class FleetSummary:
         code = batch.status.astype(np.int64)
         counts = np.bincount(g * len(_STATUSES) + code, minlength=G * len(_STATUSES)).reshape(G, len(_STATUSES))
         judged = np.degrees(batch.judged)
-        ok = np.isfinite(judged) & (code != list(Status).index(Status.NOT_MEASURED))
+        ok = np.isfinite(judged) & (code != CODE[Status.NOT_MEASURED])
         n = np.bincount(g[ok], minlength=G)
         s1 = np.bincount(g[ok], weights=judged[ok], minlength=G)
         s2 = np.bincount(g[ok], weights=judged[ok] ** 2, minlength=G)

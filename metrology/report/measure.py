@@ -6,14 +6,11 @@ import datetime as _dt
 
 import numpy as np
 
+from metrology.io.names import utc  # its public name here stays
+
 __all__ = ["measure_text", "measure_section", "utc"]
 
 _MAX_GROUP_ROWS = 40
-
-
-def utc(t_s: float) -> str:
-    """ISO 8601 UTC of seconds since the epoch."""
-    return _dt.datetime.fromtimestamp(float(t_s), _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _when(t_s: float) -> str:

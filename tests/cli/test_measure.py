@@ -279,11 +279,11 @@ def test_report_histogram_axis_ends_near_the_largest_angle_and_versions_name_pya
     import matplotlib
 
     matplotlib.use("Agg")
-    from metrology.jobs.measure import measure_files
+    from metrology.jobs.measure import MeasureOptions, measure_files
     from metrology.report.measure import _hist_figure
 
     log = _log(tmp_path, n=300, angle_deg=(1, 4), after_deg=(0.0, 0.1))
-    rep = measure_files(log, layout, out=tmp_path / "h.csv", report_html=tmp_path / "r.html")
+    rep = measure_files(log, layout, MeasureOptions(out=tmp_path / "h.csv", report_html=tmp_path / "r.html"))
     hi = _hist_figure(rep).axes[0].get_xlim()[1]
     assert 4 <= hi <= 12, hi  # the largest angle is 4 deg: not 100
     html = (tmp_path / "r.html").read_text()

@@ -31,7 +31,7 @@ def _watch(spec, holes, seed):
     watch = Watch(spec.cell_layout.names)
     for c in simulate_cell(spec, seed, 0, holes, chunk_holes=1000):
         t = batch_of(log_table(c), spec.cell_layout.names)
-        watch.feed(Feed.of(measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf)), "sim", int(c.hole[0])))
+        watch.feed(Feed.of(measure_batch(spec.cell_layout, t, Settings(min_radius_mm=np.inf)), "sim", first_row=int(c.hole[0])))
     watch.finish()
     return watch
 

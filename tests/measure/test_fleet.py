@@ -19,7 +19,7 @@ from metrology.io.layout import save_layout
 
 from .helpers import calibrated_layout, hole_log
 
-pytest.importorskip("distributed")
+distributed = pytest.importorskip("distributed")
 runner = CliRunner()
 
 
@@ -188,7 +188,8 @@ def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
 
     from metrology.io.holelog import open_log
     from metrology.io.layout import load_layout
-    from metrology.measure.fleet import measure_log_dask
+    from metrology.measure.fleet import DaskEngine
+    from metrology.measure.run import measure_log
     from metrology.measure.holes import Settings
     from concurrent.futures import CancelledError
 
@@ -219,4 +220,108 @@ def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
 
         with pytest.raises(ValueError, match=r"the Dask cluster stopped the run \((Killed|CancelledError): .*a re-run "
                                              r"with the same --out resumes"):
-            measure_log_dask(Client(), log, lay, Settings(), None)
+            measure_log(log, lay, Settings(), DaskEngine(Client()))
+
+
+class _KillOnce(distributed.WorkerPlugin):
+    """A worker plugin that kills its worker's process (SIGKILL) a moment after the task of
+    partition 1 starts executing, once (a marker file says it has): a worker lost mid-partition."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def transition(self, key, start, finish, **kwargs):
+        import signal
+        import threading
+
+        if finish == "executing" and str(key).startswith("metro-measure-1-") and not os.path.exists(self.marker):
+            open(self.marker, "w").close()
+            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGKILL)).start()
+
+
+def test_a_worker_killed_mid_partition_is_re_run_and_the_results_are_the_same(fleet, tmp_path):
+    """A real LocalCluster worker process killed while it measures a partition: Dask re-runs the
+    partition on a new worker; every partition's file is written once, whole, the same as one
+    process's (no hole missing or twice), and no temporary is left."""
+    import cloudpickle
+
+    from metrology.io.holelog import open_log
+    from metrology.io.holeout import PartitionedOutput
+    from metrology.io.layout import load_layout
+    from metrology.measure.fleet import DaskEngine, connect
+    from metrology.measure.holes import Settings
+    from metrology.measure.run import measure_log
+
+    lay = load_layout(fleet / "calibrated.toml")
+    log = open_log(fleet / "log", lay.names, batch_rows=100)  # 7 batches a partition: killed between them
+    one = measure_log(log, lay, Settings(), output=PartitionedOutput(tmp_path / "one", {}))
+    marker = tmp_path / "killed"
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    try:
+        with connect(workers=2) as client:
+            client.register_plugin(_KillOnce(marker))
+            out = PartitionedOutput(tmp_path / "dask", {})
+            two = measure_log(log, lay, Settings(), DaskEngine(client), output=out)
+            out.release()
+    finally:
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    assert marker.exists()  # the worker was killed
+    assert two.rows == one.rows == 4200 and two.written == 6
+    assert two.summary.counts() == one.summary.counts()
+    assert [a.to_dict() for a in two.alarms] == [a.to_dict() for a in one.alarms]
+    _same_files(tmp_path / "one", tmp_path / "dask")
+    assert not [p for p in (tmp_path / "dask").rglob(".*") if p.is_file()]  # no temporary left
+
+
+def test_a_partition_that_disagrees_with_its_cell_key_is_the_same_error_on_dask(fleet, tmp_path):
+    log = tmp_path / "log"
+    shutil.copytree(fleet / "log", log)
+    bad = log / "cell=C2" / "date=2026-11-26" / "part-0.parquet"
+    t = pq.read_table(bad)
+    pq.write_table(t.append_column("cell", pa.array(["C9"] * t.num_rows)), bad)
+    lines = []
+    for name, extra in (("one", []), ("dask", ["--workers", "2"])):
+        r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
+                                str(tmp_path / name), *extra])
+        assert r.exit_code == 2, r.output
+        lines.append([ln for ln in r.stderr.splitlines() if "disagrees with its folder's cell=C2" in ln])
+        assert "Traceback" not in r.output
+    assert len(lines[0]) == 1 and lines[0] == lines[1], lines
+    assert not list((tmp_path / "dask").rglob("cell=C2/date=2026-11-26/*"))  # that partition: no file, no temporary
+
+
+def test_two_runs_into_one_folder_at_once_the_second_is_refused(fleet, tmp_path, monkeypatch):
+    """A live run's lock: the second run waits LOCK_WAIT_S, then a one-line error, exit 2; a lock
+    left by a killed run (its process gone) is taken over."""
+    import metrology.io.holeout as holeout
+
+    monkeypatch.setattr(holeout, "LOCK_WAIT_S", 0.5)
+    out = tmp_path / "out"
+    out.mkdir()
+    lock = out / holeout.LOCK
+    lock.write_text(f"pid {os.getpid()} on {socket.gethostname()}")  # this process: alive
+    args = ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"), "--out", str(out)]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2, r.output
+    assert "another run is writing into it" in r.output and "waited 0.5 s" in r.output
+    assert "Traceback" not in r.output and not list(out.rglob("*.parquet")) and lock.exists()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    lock.write_text(f"pid {dead.pid} on {socket.gethostname()}")  # a killed run's lock
+    r = runner.invoke(app, args)
+    assert r.exit_code in (0, 1), r.output
+    assert len(list(out.rglob("*.parquet"))) == 6 and not lock.exists()
+    lock.write_text(f"pid {os.getpid()} on {socket.gethostname()}")  # a live run resuming the whole folder
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and "another run is writing into it" in r.output, r.output
+
+
+def test_the_resume_manifest_names_the_log_by_its_resolved_path(fleet, tmp_path, monkeypatch):
+    """``./log`` and ``log`` are the same run: the second resumes (writes nothing), not refused."""
+    monkeypatch.chdir(fleet)
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["measure", "./log", "--layout", "calibrated.toml", "--out", str(out), "--json"])
+    assert r.exit_code in (0, 1), r.output
+    r = runner.invoke(app, ["measure", "log", "--layout", "./calibrated.toml", "--out", str(out), "--json"])
+    assert r.exit_code in (0, 1), r.output
+    assert json.loads(r.stdout)["partitions_written"] == 0

@@ -83,13 +83,13 @@ def test_holes_whose_drilled_angle_is_unknown_fail_the_verdict(tmp_path):
     import pyarrow.csv as pcsv
 
     from metrology.io.layout import layout_to_toml
-    from metrology.jobs.measure import measure_files
+    from metrology.jobs.measure import MeasureOptions, measure_files
 
     spec = replace(_spec(make_panel("flat")), gross_rate=0.01)
     (chunk,) = list(simulate_cell(spec, 14, 0, 3000, chunk_holes=3000))
     pcsv.write_csv(log_table(chunk), tmp_path / "log.csv")
     (tmp_path / "L.toml").write_text(layout_to_toml(spec.cell_layout))
-    rep = measure_files(tmp_path / "log.csv", tmp_path / "L.toml", out=tmp_path / "h.csv")
+    rep = measure_files(tmp_path / "log.csv", tmp_path / "L.toml", MeasureOptions(out=tmp_path / "h.csv"))
     assert (chunk.true_after > TOL).sum() > 5
     s = rep.result.summary
     assert s.unknown_after > 0 and s.unknown_after <= rep.counts["not_measured"]

@@ -1,0 +1,80 @@
+"""What a measured batch of holes is: the typed contract between :mod:`metrology.measure.holes`
+(which makes it), the summary, the drift watch and the writers (:class:`HoleBatch`,
+:class:`ChartRows`), and the one mapping between a hole's status and its code."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+__all__ = ["Status", "STATUSES", "CODE", "ChartRows", "HoleBatch"]
+
+
+class Status(StrEnum):
+    CONFORMS = "conforms"
+    FAILS = "fails"
+    UNDECIDED = "undecided"
+    NOT_MEASURED = "not_measured"
+
+
+#: the one mapping between a hole's status and its code (``HoleBatch.status``): code ``i`` is ``STATUSES[i]``
+STATUSES = tuple(Status)
+#: each status's code
+CODE = {s: i for i, s in enumerate(STATUSES)}
+
+
+@dataclass(frozen=True)
+class ChartRows:
+    """What the drift chart takes of a batch: its holes measured on all 4 sensors of a 4-sensor head.
+
+    Attributes
+    ----------
+    index : (m,) int, their rows in the batch
+    rho_mm : (m,) float, mm, the redundant reading's misfit
+    noise_sd_mm : (m,) float, mm, its sigma from the reading noise
+    signature : (m, 4) float, mm per mm, ``d rho / d delta_k`` of each sensor's zero
+    """
+
+    index: np.ndarray
+    rho_mm: np.ndarray
+    noise_sd_mm: np.ndarray
+    signature: np.ndarray
+
+
+@dataclass(frozen=True)
+class HoleBatch:
+    """A batch measured.
+
+    Attributes
+    ----------
+    columns : pyarrow.Table: :data:`OUTPUT_COLUMNS` (angles in deg, the residual in µm: the
+        file's units) then the log's other columns (not the readings), in the log's row order
+    status : (N,) int8, each hole's :class:`Status` as its code (:data:`CODE`, :data:`STATUSES`)
+    judged : (N,) float, rad, the angle the verdict judged (NaN where not measured)
+    judged_u95 : (N,) float, rad
+    angle_before, angle_after : (N,) float, rad (NaN where not measured / no after-readings)
+    disagree : (N,) bool, holes whose readings disagree (rule 2), before or after the adjustment
+    unknown_after : (N,) bool, holes not measured after the adjustment whose before-readings do not rule
+        out a wrong turn of the cell (rule 3's; before-readings gross or too few): their drilled angle is not
+        known, and may be out of tolerance
+    chart : ChartRows, what the drift chart takes of the batch
+    """
+
+    columns: "pa.Table"
+    status: np.ndarray
+    judged: np.ndarray
+    judged_u95: np.ndarray
+    angle_before: np.ndarray
+    angle_after: np.ndarray
+    chart: "ChartRows"
+    disagree: np.ndarray | None = None
+    unknown_after: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.status)
