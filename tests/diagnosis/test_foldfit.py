@@ -8,7 +8,7 @@ import pytest
 from metrology.calibration.engine import LeastSquares
 from metrology.core.effects import Drift, Nonlinearity, PoseError
 from metrology.diagnosis import covariates_for
-from metrology.diagnosis.fit import fit, fit_any
+from metrology.diagnosis.fit import FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.foldfit import FoldBatch
 from metrology.diagnosis.heldout import _training_sets
 from metrology.sim.synth import HiddenEffect
@@ -20,7 +20,7 @@ from .helpers import run
 def case():
     ds, _ = run([HiddenEffect("nonlinearity", "L3", 0.01), HiddenEffect("drift", "L2", 0.008)], 23, 40)
     cov = covariates_for(ds, ds.layout)
-    base = fit_any(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
+    base = fit_any(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), (), None, "lsq")
     return ds, cov, base.theta
 
 
