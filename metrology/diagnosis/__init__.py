@@ -28,7 +28,7 @@ The procedure (issue 6):
 4. **Gain.** k-fold by pose: held-out residual RMS (a per-pose value predicted from the
    other sensors of its pose) and normal angular deviation, base against extended, and their ratio.
 
-The modules: :mod:`~metrology.diagnosis.fit` (the extended fit and its solver),
+The modules: :mod:`~metrology.diagnosis.fit` (the extended fit, its solver and its kept results),
 :mod:`~metrology.diagnosis.stats` (the noise-model battery, the structure table),
 :mod:`~metrology.diagnosis.heldout` (k-fold by pose), :mod:`~metrology.diagnosis.candidates`
 (covariates, the registry's candidates, their scores), :mod:`~metrology.diagnosis.extension`
@@ -36,7 +36,7 @@ The modules: :mod:`~metrology.diagnosis.fit` (the extended fit and its solver),
 datum cloud's form against the readings'), :mod:`~metrology.diagnosis.select` (the forward
 selection, a ``Selection``), :mod:`~metrology.diagnosis.judge` (the verdict, a ``Judge``),
 :mod:`~metrology.diagnosis.rules` (the decision rules in the order they apply),
-:mod:`~metrology.diagnosis.decide` (the steps in sequence).
+:mod:`~metrology.diagnosis.decide` (the steps in sequence and the one-paragraph summary).
 Words and figures are in :mod:`metrology.report.diagnose`, the file job in
 :mod:`metrology.jobs.diagnose`.
 """

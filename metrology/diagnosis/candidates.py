@@ -193,8 +193,8 @@ class Scoring:
     test's level is Bonferroni-split over.
     """
 
-    ds: object
-    b: object
+    ds: Dataset
+    b: "BaseAnalysis"  # metrology.diagnosis.decide's (which imports this module)
     flags: np.ndarray
     p_out: float
     folds: int

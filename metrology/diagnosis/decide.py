@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from metrology.calibration.dataset import Dataset
-from metrology.core.effects import REGISTRY, ExtendedModel, PlaneForm
+from metrology.core.effects import REGISTRY, Covariates, ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.core.progress import ProgressFn, notify
@@ -50,7 +50,7 @@ class BaseAnalysis:
     """
 
     sigma: np.ndarray
-    cov: object
+    cov: Covariates
     calibrated: SensorLayout
     theta0: np.ndarray
     fit: Fit

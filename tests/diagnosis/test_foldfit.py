@@ -41,8 +41,8 @@ def test_the_batch_finds_each_folds_own_minimum(case, which, k):
     assert FoldBatch.applies(problems)
     X = FoldBatch(problems).solve()
     for (_, tr, o, c_t), x, p in zip(sets, X, problems):
-        own = fit.uncached(ds.layout, o, c_t, ds.layout.noise_mm, [c.select(tr) for c in comps], theta0=th0,
-                           solver="gn", covariance=False)
+        own = fit.uncached(FitData(ds.layout, o, c_t, ds.layout.noise_mm), [c.select(tr) for c in comps], theta0=th0,
+                           options=FitOptions(solver="gn", covariance=False))
         i = own.sensors[0]
         # the same minimum to the solver's tolerance (the cost to 1e-10 relative; parameters
         # along the weakly determined directions to ~1e-7 mm)

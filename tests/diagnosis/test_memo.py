@@ -45,7 +45,7 @@ def test_a_kept_fit_is_the_fit_and_read_only(case):
     f1 = fit(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     f2 = fit(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     assert f2 is f1  # kept
-    fresh = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, options=FitOptions(solver="gn"))
+    fresh = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     np.testing.assert_array_equal(fresh.theta, f1.theta)
     np.testing.assert_array_equal(fresh.residual, f1.residual)
     np.testing.assert_array_equal(fresh.components[0].values, f1.components[0].values)
@@ -60,8 +60,9 @@ def test_a_kept_fit_is_the_fit_and_read_only(case):
 def test_a_fit_without_covariance_has_the_same_minimum(case, comps):
     """The k-fold's fits skip the covariance: the same values, residuals, chi-square and dof."""
     ds, cov, th0 = case
-    a = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, options=FitOptions(solver="gn"))
-    b = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn", covariance=False)
+    a = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
+    b = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0,
+                       options=FitOptions(solver="gn", covariance=False))
     np.testing.assert_array_equal(a.theta, b.theta)
     np.testing.assert_array_equal(a.residual, b.residual)
     assert (a.chi2, a.dof) == (b.chi2, b.dof)
@@ -76,7 +77,7 @@ def test_kfold_kept_or_not_the_same(case):
     clear_all()
     h1 = kfold(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, FOLDS, th0)
     clear_all()
-    h2 = kfold.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, FOLDS, th0)
+    h2 = kfold.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, FOLDS, th0)
     np.testing.assert_array_equal(h1.residual, h2.residual)
     np.testing.assert_array_equal(h1.normal_dev, h2.normal_dev)
     assert np.isfinite(h1.residual).sum() > 0.9 * h1.residual.size
