@@ -7,7 +7,7 @@ its datum cloud as the plane). In this process, after one warm-up of each, the t
 turn ``--repeat`` times (so that load from other processes on the machine hits them alike):
 :func:`metrology.jobs.calibrate.calibrate_files` (what ``metro calibrate`` runs) and
 :func:`metrology.jobs.diagnose.diagnose_files` (what ``metro diagnose`` runs), both loading the
-files (the diagnosis' kept fits, :mod:`metrology.diagnosis.memo`, forgotten before each run, as a
+files (the diagnosis' kept fits, :func:`metrology.diagnosis.fit.memoised`, forgotten before each run, as a
 fresh process starts). Then the same as whole processes (``metro calibrate ... --json`` and ``metro diagnose ...
 --json``, imports included: what a user waits for). Printed: the best and median wall time of
 each and the ratio of the medians (the issue's goal: ``diagnose / calibrate <= 1.5``).

@@ -32,7 +32,7 @@ def main(argv=None):
     from metrology.core.effects import PlaneForm
     from metrology.diagnosis.datum import form_agreement
     from metrology.diagnosis.decide import base_analysis
-    from metrology.diagnosis.fit import fit_any
+    from metrology.diagnosis.fit import FitData, fit_any
     from metrology.diagnosis.thresholds import THRESHOLDS
     from metrology.calibration.sanity import load_checked
     from metrology.sim.forward import draw_case, write_case
@@ -45,7 +45,7 @@ def main(argv=None):
             paths = write_case(case, d)
             ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
         b = base_analysis(ds, 5)
-        pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, (PlaneForm((), names=ds.layout.names),), b.theta0)
+        pf = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), (PlaneForm((), names=ds.layout.names),), b.theta0)
         ps.append(form_agreement(b.datum, pf)["p"])
     ps = np.array(ps)
     for level in (THRESHOLDS["alpha_form"], 0.05):

@@ -28,7 +28,7 @@ The procedure (issue 6):
 4. **Gain.** k-fold by pose: held-out residual RMS (a per-pose value predicted from the
    other sensors of its pose) and normal angular deviation, base against extended, and their ratio.
 
-The modules: :mod:`~metrology.diagnosis.fit` (the extended fit and its solver),
+The modules: :mod:`~metrology.diagnosis.fit` (the extended fit, its solver and its kept results),
 :mod:`~metrology.diagnosis.stats` (the noise-model battery, the structure table),
 :mod:`~metrology.diagnosis.heldout` (k-fold by pose), :mod:`~metrology.diagnosis.candidates`
 (covariates, the registry's candidates, their scores), :mod:`~metrology.diagnosis.extension`
@@ -36,7 +36,7 @@ The modules: :mod:`~metrology.diagnosis.fit` (the extended fit and its solver),
 datum cloud's form against the readings'), :mod:`~metrology.diagnosis.select` (the forward
 selection, a ``Selection``), :mod:`~metrology.diagnosis.judge` (the verdict, a ``Judge``),
 :mod:`~metrology.diagnosis.rules` (the decision rules in the order they apply),
-:mod:`~metrology.diagnosis.decide` (the steps in sequence).
+:mod:`~metrology.diagnosis.decide` (the steps in sequence and the one-paragraph summary).
 Words and figures are in :mod:`metrology.report.diagnose`, the file job in
 :mod:`metrology.jobs.diagnose`.
 """
@@ -44,11 +44,11 @@ Words and figures are in :mod:`metrology.report.diagnose`, the file job in
 from metrology.diagnosis.candidates import CandidateResult, candidates_for, covariates_for, flag_outliers
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
 from metrology.diagnosis.decide import Diagnosis, diagnose
-from metrology.diagnosis.fit import Fit, fit, fit_any
+from metrology.diagnosis.fit import Fit, FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import NoiseTests, battery_on, ljung_box, noise_tests, structure
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
-__all__ = ["THRESHOLDS", "ADVICE", "Fit", "fit", "fit_any", "Diagnosis", "diagnose", "CandidateResult", "candidates_for",
+__all__ = ["THRESHOLDS", "ADVICE", "Fit", "FitData", "FitOptions", "fit", "fit_any", "Diagnosis", "diagnose", "CandidateResult", "candidates_for",
            "covariates_for", "flag_outliers", "DatumFormCheck", "datum_form", "form_agreement", "HeldOut", "kfold",
            "NoiseTests", "ljung_box", "noise_tests", "battery_on", "structure"]

@@ -11,14 +11,14 @@ from metrology.calibration.dataset import Dataset
 from metrology.core.effects import REGISTRY, Component, Covariates, Outliers
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
-from metrology.diagnosis.fit import Fit, fit, fit_any
+from metrology.diagnosis.fit import Fit, FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
-           "score_candidate"]
+           "score_candidate", "Reference"]
 
 
 def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -158,7 +158,7 @@ def flag_outliers(nominal, obs, cov, sigma, theta0):
     p, n = obs.d.shape
     res = np.full((p, n), np.nan)
     for i in range(n):
-        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, loss="soft_l1", solver="gn")
+        f = fit(FitData(nominal, obs, cov, sigma), (), sensors=[i], theta0=theta0, options=FitOptions(loss="soft_l1", solver="gn"))
         res[:, i] = f.residual[:, i]
     return flag_residuals(res, sigma)
 
@@ -193,12 +193,22 @@ class Scoring:
     test's level is Bonferroni-split over.
     """
 
-    ds: object
-    b: object
+    ds: Dataset
+    b: "BaseAnalysis"  # metrology.diagnosis.decide's (which imports this module)
     flags: np.ndarray
     p_out: float
     folds: int
     n_cand: int
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The model a step scores candidates against: the components ``given`` (the causes chosen
+    so far), their joint ``fit`` and its k-fold ``heldout`` figures."""
+
+    given: tuple
+    fit: Fit
+    heldout: HeldOut
 
 
 @dataclass(frozen=True)
@@ -249,14 +259,14 @@ class CandidateResult:
         }
 
 
-def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, theta0, given=(), k_ref=0,
+def score_candidate(c: Component, sc: Scoring, ref: Reference, theta0, k_ref=0,
                     ho_rank: HeldOut | None = None) -> CandidateResult:
-    """Score the candidate ``c`` in ``sc``: in-sample F-test of the nested models against ``base``
-    (for ``outliers`` the largest residual's own test ``sc.p_out``) and the k-fold held-out gain
-    against ``ho_base``; significant when both pass (``sc.n_cand``: the Bonferroni family).
-    ``theta0``: the geometry the fits start from (or hold).
+    """Score the candidate ``c`` in ``sc``: in-sample F-test of the nested models against
+    ``ref.fit`` (``base``; for ``outliers`` the largest residual's own test ``sc.p_out``) and the
+    k-fold held-out gain against ``ref.heldout`` (``ho_base``); significant when both pass
+    (``sc.n_cand``: the Bonferroni family). ``theta0``: the geometry the fits start from (or hold).
 
-    ``given``: components already in the model (fitted jointly with ``c``; ``base`` and
+    ``ref.given``: components already in the model (fitted jointly with ``c``; ``base`` and
     ``ho_base`` are then their fit and held-out figures); ``k_ref``: parameters of ``c`` that
     the reference ``base`` already has (the datum's tilt when form is tested beyond it);
     ``ho_rank``: the held-out figures the ranking gain ``heldout_chi2_reduction`` is taken
@@ -266,11 +276,12 @@ def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, thet
     """
     from scipy import stats
 
+    base, ho_base, given = ref.fit, ref.heldout, ref.given
     nominal, obs, cov, sigma = sc.ds.layout, sc.ds.obs, sc.b.cov, sc.b.sigma
     flags, p_out, folds, n_cand = sc.flags, sc.p_out, sc.folds, sc.n_cand
     names = nominal.names
     c = c.locate(base.residual, cov, sigma)  # an effect with a place in the run is put there first
-    f = fit_any(nominal, obs, cov, sigma, tuple(given) + (c,), theta0)
+    f = fit_any(FitData(nominal, obs, cov, sigma), tuple(given) + (c,), theta0)
     k = c.n_params - (c.gauge_dof if c.per_pose else len(c.constraint(c.values)[0])) - k_ref
     S = list(c.sensors) if c.sensors else list(range(nominal.n))
     k_given = sum(g.n_params * len(set(g.sensors) & set(S)) / max(len(g.sensors), 1) for g in given
@@ -285,7 +296,7 @@ def score_candidate(c: Component, sc: Scoring, base: Fit, ho_base: HeldOut, thet
         F = ((chi2_b - chi2_e) / k) / max(chi2_e / max(dof_e, 1), 1e-300)
         # Bonferroni over the positions a located candidate was chosen among
         p_in = min(1.0, float(stats.f.sf(F, k, max(dof_e, 1))) * c.searched)
-    ho = kfold(nominal, obs, cov, sigma, tuple(given) + (c,), folds, theta0)
+    ho = kfold(FitData(nominal, obs, cov, sigma), tuple(given) + (c,), folds, theta0)
     excl = None
     if isinstance(c, Outliers) or any(isinstance(g, Outliers) for g in given):
         # gross readings are left out of the held-out comparison: those flagged, and those that

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.effects import Component
+from metrology.diagnosis.fit import FitData
 from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
@@ -69,7 +70,7 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
     ref = named.heldout.chi2_pose(b.sigma, [i], excl)
     for j in others:
         c = OtherReading((i,), names=nominal.names, source=j)
-        ho = kfold(nominal, obs, b.cov, b.sigma, tuple(given) + (c,), folds, b.theta0)
+        ho = kfold(FitData(nominal, obs, b.cov, b.sigma), tuple(given) + (c,), folds, b.theta0)
         d = ref - ho.chi2_pose(b.sigma, [i], excl)  # > 0: crosstalk predicts better
         if np.allclose(d, 0):
             continue

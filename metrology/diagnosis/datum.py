@@ -8,7 +8,7 @@ import numpy as np
 
 from metrology.core.effects import Covariates, PlaneForm
 from metrology.core.model import jacobian_raw
-from metrology.diagnosis.fit import Fit
+from metrology.diagnosis.fit import Fit, FitData
 from metrology.diagnosis import rules
 
 __all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS", "DatumPlaneCheck",
@@ -58,7 +58,7 @@ class DatumFormCheck:
         return out
 
 
-def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> DatumFormCheck:
+def datum_form(ds, data: FitData, zero, u, d0) -> DatumFormCheck:
     """The datum's form measured by the tracker cloud, and what it would do to the readings.
 
     The cloud is an independent measurement of the surface the beams see:
@@ -71,9 +71,11 @@ def datum_form(ds, zero, u, obs, cov: Covariates, d0, sigma) -> DatumFormCheck:
     base geometry cannot absorb (per sensor, the residual of its least-squares projection on
     the base Jacobian), i.e. the misfit the form would leave in the base residuals.
 
-    zero : (n, 3) float, mm, TCS, u : (n, 3) float, unit, TCS: the base calibration;
-    d0 : (p, n) float, mm, its readings; sigma : (n,) float, mm.
+    data : FitData, the readings (``obs``), their covariates (``cov``) and noise (``sigma (n,)
+    float, mm``); zero : (n, 3) float, mm, TCS, u : (n, 3) float, unit, TCS: the base
+    calibration; d0 : (p, n) float, mm, its readings.
     """
+    obs, cov, sigma = data.obs, data.cov, data.sigma
     from scipy import stats
 
     from metrology.core.plane import plane_basis

@@ -4,7 +4,9 @@
 procedure): :func:`base_analysis`, the forward selection of causes
 (:func:`metrology.diagnosis.select.forward_select`, a :class:`~metrology.diagnosis.select.Selection`),
 the verdict (:func:`metrology.diagnosis.judge.verdict`, a :class:`~metrology.diagnosis.judge.Judge`),
-:func:`side_by_side`, :func:`check_datum`. The decision rules they apply are listed in order in
+:func:`side_by_side`, :func:`check_datum`, and the verdict in one paragraph (:func:`verdict_summary`:
+part of the result, the ``summary`` of the ``--json`` output, made from the judgement's trail of
+reasons, :class:`~metrology.diagnosis.results.Reason`, never re-derived). The decision rules they apply are listed in order in
 :mod:`metrology.diagnosis.rules`.
 """
 
@@ -15,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from metrology.calibration.dataset import Dataset
-from metrology.core.effects import ExtendedModel, PlaneForm
+from metrology.core.effects import REGISTRY, Covariates, ExtendedModel, PlaneForm
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.core.progress import ProgressFn, notify
@@ -24,18 +26,16 @@ from metrology.diagnosis.candidates import CandidateResult, covariates_for, flag
 from metrology.diagnosis.datum import DatumFormCheck, datum_form, datum_plane, form_agreement, name_datum_plane
 from metrology.diagnosis.detectable import detectable_sizes
 from metrology.diagnosis.extension import simulated_figures
-from metrology.diagnosis.fit import Fit, fit_any, geometry
+from metrology.diagnosis.fit import Fit, FitData, clear_all, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, Problem, kfold
 from metrology.diagnosis.judge import Judgement, judge
-from metrology.diagnosis.memo import clear_all
-from metrology.diagnosis.results import Decision, Diagnosis, PlotData, Reason, Rival
+from metrology.diagnosis.results import Confidence, Decision, Diagnosis, Outcome, PlotData, Reason, Rival
 from metrology.diagnosis.select import flags_of, forward_select
-from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests, structure
-from metrology.diagnosis.summary import verdict_summary
+from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Judgement", "Rival", "diagnose", "base_analysis", "judge",
-           "side_by_side", "check_datum"]
+           "side_by_side", "check_datum", "verdict_summary", "DATUM_DISAGREES"]
 
 
 
@@ -50,7 +50,7 @@ class BaseAnalysis:
     """
 
     sigma: np.ndarray
-    cov: object
+    cov: Covariates
     calibrated: SensorLayout
     theta0: np.ndarray
     fit: Fit
@@ -69,20 +69,21 @@ def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     sigma = nominal.noise_mm.copy()
     cov0 = covariates_for(ds, nominal)
     sig_fit = np.where(np.isfinite(sigma), sigma, 1.0)
-    base0 = fit_any(nominal, obs, cov0, sig_fit, (), None, "lsq")
+    base0 = fit_any(FitData(nominal, obs, cov0, sig_fit), (), None, "lsq")
     if not np.all(np.isfinite(sigma)):  # no stated noise: the base fit's own scatter
         sigma = np.where(np.isfinite(sigma), sigma, np.sqrt(np.nanmean(base0.residual**2, axis=0)))
     zero, u = geometry(nominal, base0.theta)
     calibrated = nominal.with_params(zero, u)
     cov = covariates_for(ds, calibrated)
     theta0 = base0.theta
-    base = fit_any(nominal, obs, cov, sigma, (), theta0, "lsq")
+    data = FitData(nominal, obs, cov, sigma)
+    base = fit_any(data, (), theta0, "lsq")
     d0 = readings(zero, u, obs.normal, obs.offset)[0]
     dof_base = np.isfinite(obs.d).sum(axis=0) - 5
     tests = noise_tests(base.residual, sigma, dof_base, names, rng=battery_rng())
     struct = structure(base.residual, d0, cov, names)
-    ho_base = kfold(nominal, obs, cov, sigma, (), folds, theta0)
-    datum = None if ds.datum_points is None else datum_form(ds, zero, u, obs, cov, d0, sigma)
+    ho_base = kfold(data, (), folds, theta0)
+    datum = None if ds.datum_points is None else datum_form(ds, data, zero, u, d0)
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
@@ -147,7 +148,7 @@ def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
         # quadratic coefficients of its own to compare)
         comps = [PlaneForm((), names=ds.layout.names)] + [replace(s.component, values=None, stderr=None)
                                                           for s in chosen if s.cause != "plane_form"]
-        pf = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0)
+        pf = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), comps, b.theta0)
     ag = form_agreement(b.datum, pf)
     ag["fitted_with"] = [c.label for c in pf.components]
     if named_forms and named_forms[0].order == 0 and any(c.cause == "plane_form" for c in v.causes):
@@ -241,3 +242,89 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
                      datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
                      detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
                      reasons=v.reasons), plane_check)
+
+
+# -- the verdict in one paragraph, made from the trail of reasons -----------------------------------
+
+#: appended to the summary when the datum cloud's form disagrees with the readings'
+DATUM_DISAGREES = ("; the datum cloud's form disagrees with the readings' (p = {p:.2g}): "
+                   "the datum changed between scan and run, or the cloud is not of the surface the beams saw")
+
+
+def _lead_text(in_only) -> str:
+    if in_only is None:
+        return ""
+    return (f"; {in_only.label} fits in sample (p = {in_only.p_insample:.2g}) but does not predict held-out "
+            f"poses significantly better (p = {in_only.p_heldout:.2g}, RMS ratio "
+            f"{in_only.heldout_rms_ratio:.3g}): too small, or too confounded, to name")
+
+
+def _last(reasons, decided: Decision) -> Reason | None:
+    return next((r for r in reversed(reasons) if r.decided == decided), None)
+
+
+def verdict_summary(v, tb) -> str:
+    """One paragraph of the judgement ``v`` (:class:`~metrology.diagnosis.judge.Judgement`), made
+    from its trail ``v.reasons`` (which rule decided, on what, with which figures) and the causes
+    it named; ``tb`` the noise tests on the base residuals. Several causes are named together,
+    and structure that remains beside them is said."""
+    why = v.reasons
+    worst = max(tb.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
+    lead = _lead_text(v.lead) if _last(why, Decision.LEAD) is not None else ""
+    te = v.tests_extended
+    consistent = f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g})"
+    inconsistent = (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
+                    f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm)")
+    nothing_above = "no effect above the detectable sizes (smaller ones are not ruled out)"
+    datum = _last(why, Decision.DATUM_DISAGREES)
+    tail = "" if datum is None else DATUM_DISAGREES.format(p=datum.value)
+    dropped = _last(why, Decision.DROPPED)  # rule 10 on a sole cause
+    if dropped is not None:
+        chose = next(r for r in why if r.decided == Decision.CHOSEN and r.step == dropped.step)
+        turned = (f"{dropped.concerns[0]} was selected (held-out p = {chose.value:.2g} at its step) but is not needed "
+                  f"against the base model (held-out chi-square gain {dropped.gain:.3g}, p = {dropped.value:.2g}), so "
+                  "it is not named")
+        if v.cause == Outcome.NONE:
+            return f"{consistent}; {turned}: {nothing_above}" + lead + tail
+        return f"{inconsistent}; {turned}: no catalogued cause explains the structure" + lead + tail
+    if v.cause == Outcome.NONE:
+        return f"{consistent}; no candidate gives a significant held-out gain: {nothing_above}" + lead + tail
+    if v.best is None:
+        return (f"{inconsistent} and no catalogued effect gives a significant held-out gain: structure outside the "
+                "catalogue" + lead + tail)
+    better = next((r for r in why if r.decided == Decision.CROSSTALK_BETTER), None)
+    if v.cause == Outcome.UNEXPLAINED and better is not None:
+        return (f"{v.best.label} gives a significant held-out gain, but {better.outcome} (crosstalk: predicts held-out "
+                f"poses better than {better.concerns[0]}, p = {better.value:.2g}): the effect follows another "
+                "sensor's distance, which is outside the catalogue (crosstalk between sensors, a shared supply)" + tail)
+    if v.cause == Outcome.UNEXPLAINED:
+        return (f"{v.best.label} gives a significant held-out gain (RMS ratio {v.best.heldout_rms_ratio:.3g}) but "
+                f"leaves the residuals of its sensors inconsistent with the noise model (battery p = "
+                f"{te.p_concerned:.2g}): a partial explanation at best; structure outside the catalogue remains" + tail)
+    parts = []
+    for c in v.causes:
+        where = f" on {', '.join(c.sensors)}" if c.sensors and not REGISTRY[c.cause].setup else ""
+        test = (f"{c.test}, p = {c.p_insample:.2g}" if c.test else
+                f"held-out chi-square gain {c.heldout_gain_chi2:.3g} given the others, p = {c.p_heldout_given_others:.2g}")
+        parts.append(f"{c.cause}{where} ({c.label}: {test})")
+    text = " and ".join(parts) + f" named; their sensors' residuals then consistent with noise (p = {te.p_concerned:.2g})"
+    if not te.consistent:
+        names = list(te.sensors)
+        where = [k for i, k in enumerate(names) if not rules.explains_sensors(battery_on(te, [i]))]
+        where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
+        text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
+                 "or a false alarm of the tests")
+    confidence = _last(why, Decision.CONFIDENCE).outcome  # rule 16's (before the datum's, rule 17)
+    named = {c.label for c in v.causes}
+    ties = [r for r in why if r.decided == Decision.CROSSTALK_TIE and r.concerns[0] in named]
+    if ties and confidence == Confidence.AMBIGUOUS:
+        return text + ("; confidence ambiguous: " + "; ".join(
+            f"{', '.join(r.concerns[1:])} (a shift in proportion to another sensor's distance, "
+            f"crosstalk, outside the catalogue) predicts held-out poses as well as {r.concerns[0]}" for r in ties)
+            + f"; poses that separate them: {', '.join(dict.fromkeys(r.outcome for r in ties))}") + tail
+    weak = [r for r in why if r.decided == Decision.WEAK] if confidence == Confidence.MODERATE else []
+    if weak:
+        return text + (f"; confidence moderate: weak held-out evidence for "
+                       f"{' and '.join(f'{r.concerns[0]} (p = {r.value:.2g})' for r in weak)}, not below "
+                       f"{weak[0].threshold:g}") + tail
+    return text + f"; confidence {confidence}" + tail

@@ -9,7 +9,7 @@ import numpy as np
 
 from metrology.core.effects import ExtendedModel
 from metrology.core.observations import Observations
-from metrology.diagnosis.fit import Fit, fit, fit_any
+from metrology.diagnosis.fit import Fit, FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import Problem, kfold
 
 __all__ = ["describe_named", "size_of", "simulated_figures", "POSE_FLOOR_REPS"]
@@ -57,7 +57,7 @@ def describe_named(f: Fit, problem: Problem, rng, which: int = 0, theta_ref=None
             # reading a pose leaves weak, and the values take it up
             comps = tuple(replace(c, values=None, stderr=None, **({"hold": True} if k == which else {}))
                           for k, c in enumerate(f.components))
-            fv = fit_any(nominal, obs, cov, sigma, comps, theta_ref, "lsq")
+            fv = fit_any(FitData(nominal, obs, cov, sigma), comps, theta_ref, "lsq")
             held = fv.components[which]
         e = np.asarray(held.values).reshape(-1, m)[:, 0]
         model = replace(fv.model(nominal), components=())
@@ -71,8 +71,8 @@ def describe_named(f: Fit, problem: Problem, rng, which: int = 0, theta_ref=None
                 if e_sim is not None:
                     dn = dn + rng.normal(0.0, e_sim, len(dn))[:, None] * cov.inv_nu
                 dn = np.where(np.isfinite(obs.d), dn, np.nan)
-                fn = fit(nominal, Observations(obs.normal, obs.offset, dn), cov, sigma, [replace(held, values=None)],
-                         theta0=fv.theta, solver="gn")
+                fn = fit(FitData(nominal, Observations(obs.normal, obs.offset, dn), cov, sigma), [replace(held, values=None)],
+                         theta0=fv.theta, options=FitOptions(solver="gn"))
                 vals.append(np.var(np.asarray(fn.components[0].values).reshape(-1, m)[:, 0], ddof=1))
             return np.array(vals)
 
@@ -109,9 +109,9 @@ def simulated_figures(problem: Problem, model: ExtendedModel, rng, reps):
         d = d_model + rng.normal(0.0, 1.0, d_model.shape) * sigma[None, :]
         d = np.where(np.isfinite(obs.d), d, np.nan)
         o = Observations(obs.normal, obs.offset, d)
-        b = fit_any(nominal, o, cov, sigma, (), theta0)
+        b = fit_any(FitData(nominal, o, cov, sigma), (), theta0)
         rms.append(np.sqrt(np.nanmean(b.residual**2, axis=0)))
-        ndev.append(np.nanmean(kfold(nominal, o, cov, sigma, (), k, theta0).normal_dev))
+        ndev.append(np.nanmean(kfold(FitData(nominal, o, cov, sigma), (), k, theta0).normal_dev))
     return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
 
 

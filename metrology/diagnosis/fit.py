@@ -5,10 +5,25 @@
 or Gauss-Newton (:func:`~metrology.calibration.engine.gauss_newton`, the same minimum, faster
 inside the k-fold loops) and reads its :class:`Fit`; :func:`fit_any` fits the sensors separately
 when no component couples them.
+
+No fit computed twice: the results of the diagnosis' fits are kept by the content of their inputs.
+
+A diagnosis fits the same model to the same poses many times over: every one-sensor candidate's
+k-fold refits the other sensors' base model on each fold, and a selection scores a candidate
+again given the same causes. :func:`memoised` keeps a function's results in a bounded store
+keyed by a digest of everything the result depends on (:func:`content_key`: the bytes and shape
+of every array, the class and fields of every dataclass, the ``repr`` of every other value), so
+a hit returns what the call would have computed. The arrays of a kept result are made read-only:
+a caller that wrote into a shared result would raise instead of changing another's.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import hashlib
+import inspect
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,11 +33,151 @@ from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
 from metrology.core.model import PARAMS_TANGENT, direction_from_tangent
 from metrology.core.observations import Observations
-from metrology.diagnosis.memo import memoised
-from metrology.diagnosis.stats import NoiseTests, battery_rng, noise_tests
+from metrology.diagnosis.stats import Battery, NoiseTests, battery_rng, noise_tests
 
-__all__ = ["Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals",
-           "residual_battery"]
+__all__ = ["FitData", "FitOptions", "Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals",
+           "residual_battery",
+           "content_key", "memoised", "freeze", "clear_all", "new_store", "MAX_KEPT"]
+
+
+# -- no fit computed twice: results kept by the content of their inputs ------------------------
+#: results kept per memoised function (least recently used dropped first)
+MAX_KEPT = 4096
+
+_STORES: list = []  # every memoised function's store (clear_all)
+
+
+def new_store() -> OrderedDict:
+    """An empty store of kept results that :func:`clear_all` clears too."""
+    store: OrderedDict = OrderedDict()
+    _STORES.append(store)
+    return store
+
+
+def clear_all() -> None:
+    """Forget every kept result (a benchmark timing one diagnosis as a fresh process runs it)."""
+    for store in _STORES:
+        store.clear()
+
+
+def content_key(*values) -> bytes:
+    """A digest of ``values``: arrays by dtype, shape and bytes; dataclasses by class and fields;
+    tuples, lists and dicts by their items; anything else by ``repr``."""
+    h = hashlib.blake2b(digest_size=20)
+    _feed(h, values)
+    return h.digest()
+
+
+def _feed(h, v):
+    if isinstance(v, np.ndarray):
+        h.update(f"a{v.dtype.str}{v.shape}".encode())
+        h.update(np.ascontiguousarray(v).tobytes())
+    elif dataclasses.is_dataclass(v) and not isinstance(v, type):
+        h.update(_dataclass_digest(v))
+    elif isinstance(v, (tuple, list)):
+        h.update(b"(")
+        for a in v:
+            _feed(h, a)
+        h.update(b")")
+    elif isinstance(v, dict):
+        h.update(b"{")
+        for k in sorted(v, key=repr):
+            _feed(h, k)
+            _feed(h, v[k])
+        h.update(b"}")
+    else:
+        h.update(f"{type(v).__qualname__}:{v!r};".encode())
+
+
+def _dataclass_digest(v) -> bytes:
+    """The digest of a dataclass instance by class and fields; a frozen one's is kept on the
+    instance (its fields cannot be rebound), so the covariates and fold subsets keyed again at
+    every fit are read once. The contract: an array inside a frozen instance passed to a
+    memoised function is not written to afterwards (the diagnosis writes into none; an
+    instance's digest read afresh at every call costs 16 % of a diagnosis)."""
+    frozen = type(v).__dataclass_params__.frozen and hasattr(v, "__dict__")
+    if frozen and _DIGEST in v.__dict__:
+        return v.__dict__[_DIGEST]
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"d{type(v).__module__}.{type(v).__qualname__}(".encode())
+    for f in dataclasses.fields(v):
+        _feed(h, getattr(v, f.name))
+    d = h.digest()
+    if frozen:
+        object.__setattr__(v, _DIGEST, d)
+    return d
+
+
+_DIGEST = "_memo_content_digest"
+
+
+def freeze(v):
+    """Make the arrays of ``v`` (a dataclass, tuple or array, nested) read-only; returns ``v``."""
+    if isinstance(v, np.ndarray):
+        v.flags.writeable = False
+    elif dataclasses.is_dataclass(v) and not isinstance(v, type):
+        for f in dataclasses.fields(v):
+            freeze(getattr(v, f.name))
+    elif isinstance(v, (tuple, list)):
+        for a in v:
+            freeze(a)
+    return v
+
+
+def memoised(fn):
+    """Decorator: keep the results of ``fn`` by the content of every argument it is called with
+    (bound to its signature, defaults applied, passed to :func:`content_key`), at most
+    :data:`MAX_KEPT` of them. An argument given as a list where an array was given before is a
+    different key (a miss, never a wrong hit)."""
+    sig = inspect.signature(fn)
+    store = new_store()
+
+    @functools.wraps(fn)
+    def inner(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        bound.apply_defaults()
+        key = content_key(tuple(bound.arguments.values()))
+        hit = store.get(key)
+        if hit is not None:
+            store.move_to_end(key)
+            return hit
+        out = freeze(fn(*args, **kwargs))
+        store[key] = out
+        if len(store) > MAX_KEPT:
+            store.popitem(last=False)
+        return out
+
+    inner.cache_clear = store.clear
+    inner.uncached = fn
+    return inner
+
+
+# -- the fit ---------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FitData:
+    """What every fit of the diagnosis is posed on, held once: ``nominal`` the SensorLayout (the
+    chart's centre), ``obs`` the Observations, ``cov`` the Covariates (same poses as ``obs``),
+    ``sigma (n,) float, mm`` the reading noise used as weights."""
+
+    nominal: SensorLayout
+    obs: Observations
+    cov: Covariates
+    sigma: np.ndarray
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How :func:`fit` solves: ``loss`` ``"linear"`` or ``"soft_l1"`` (robust, scale 1 sigma);
+    ``solver`` ``"lsq"`` (``scipy.optimize.least_squares``, trf) or ``"gn"`` (Gauss-Newton on the
+    same residual and Jacobian with step halving: the same minimum, several times faster; used
+    inside the k-fold loops); ``covariance`` compute the standard errors, correlations and
+    ``extra_cov`` (False: a fit whose residuals and values alone are wanted, as the k-fold's;
+    those are then zero, empty or None)."""
+
+    loss: str = "linear"
+    solver: str = "lsq"
+    covariance: bool = True
 
 
 @dataclass(frozen=True)
@@ -63,40 +218,30 @@ class Fit:
 
 
 @memoised
-def fit(nominal: SensorLayout, obs: Observations, cov: Covariates, sigma, components=(), sensors=None,
-        theta0=None, loss="linear", solver="lsq", covariance=True) -> Fit:
+def fit(data: FitData, components=(), sensors=None, theta0=None, options: FitOptions = FitOptions()) -> Fit:
     """Least squares of the base model plus ``components`` (analytic Jacobian).
 
     Parameters
     ----------
-    nominal : SensorLayout, the chart's centre
-    obs : Observations
-    cov : Covariates, same poses as ``obs``
-    sigma : (n,) float, mm, reading noise used as weights
+    data : FitData, the layout, observations, covariates and reading noise
     components : sequence of Component (values are the starting point)
     sensors : sequence of int or None, the sensors whose base parameters are free and whose
         readings are fitted (default: every sensor if a component is of the set-up, else the
         components' sensors, else all)
     theta0 : (n, 5) float or None, start (and the fixed values of the other sensors)
-    loss : ``"linear"`` or ``"soft_l1"`` (robust, scale 1 sigma)
-    solver : ``"lsq"`` (``scipy.optimize.least_squares``, trf) or ``"gn"`` (Gauss-Newton on
-        the same residual and Jacobian with step halving: the same minimum, several times
-        faster; used inside the k-fold loops)
-    covariance : bool, compute the standard errors, correlations and ``extra_cov`` (False: a
-        fit whose residuals and values alone are wanted, as the k-fold's; those are then zero,
-        empty or None)
+    options : FitOptions, the loss, the solver and whether the covariance is computed
 
     A per-pose component (:class:`~metrology.core.effects.PoseError`) is profiled out exactly:
     its basis does not depend on the parameters, so for any base parameters the optimal
     per-pose values are a fixed linear map of the residual (variable projection); its values
     are then recovered with standard errors ``s / ||b_p||`` (reading noise only).
 
-    Results are kept by the content of the inputs (:mod:`metrology.diagnosis.memo`): the same
+    Results are kept by the content of the inputs (:func:`memoised`): the same
     fit asked for again is not computed again, and its arrays are read-only.
     """
-    p = LeastSquares(nominal, obs, sigma, components, sensors, theta0, cov)
-    x = p.solve(solver, loss)
-    return _fit_result(p, x, covariance)
+    p = LeastSquares(data.nominal, data.obs, data.sigma, components, sensors, theta0, data.cov)
+    x = p.solve(options.solver, options.loss)
+    return _fit_result(p, x, options.covariance)
 
 
 def _fit_result(p: LeastSquares, x, covariance=True) -> Fit:
@@ -153,30 +298,32 @@ def _components_with_stderr(p: LeastSquares, vals, e, s2, C, se):
     return out, corr_b, corr_w
 
 
-def fit_any(nominal, obs, cov, sigma, comps, theta0, solver="gn", covariance=True) -> Fit:
+def fit_any(data: FitData, comps, theta0, solver="gn", covariance=True) -> Fit:
     """:func:`fit`, with the sensors fitted separately when no component couples them (faster,
-    identical); ``covariance`` as :func:`fit`'s."""
+    identical); ``solver`` and ``covariance`` as :class:`FitOptions`'."""
+    nominal, obs = data.nominal, data.obs
+    options = FitOptions(solver=solver, covariance=covariance)
     if comps:
-        f = fit(nominal, obs, cov, sigma, comps, theta0=theta0, solver=solver, covariance=covariance)
-        return with_base(f, nominal, obs, cov, sigma, theta0, solver, covariance)
+        f = fit(data, comps, theta0=theta0, options=options)
+        return with_base(f, data, theta0, solver, covariance)
     th = np.zeros((nominal.n, 5))
     se = np.zeros((nominal.n, 5))
     res = np.full(obs.d.shape, np.nan)
     chi2, dof = 0.0, 0
     for i in range(nominal.n):
-        f = fit(nominal, obs, cov, sigma, (), sensors=[i], theta0=theta0, solver=solver, covariance=covariance)
+        f = fit(data, (), sensors=[i], theta0=theta0, options=options)
         th[i], se[i], res[:, i] = f.theta[i], f.theta_stderr[i], f.residual[:, i]
         chi2 += f.chi2
         dof += f.dof
     return Fit(th, se, (), res, chi2, dof, tuple(range(nominal.n)))
 
 
-def with_base(f: Fit, nominal, obs, cov, sigma, theta0, solver="gn", covariance=True) -> Fit:
+def with_base(f: Fit, data: FitData, theta0, solver="gn", covariance=True) -> Fit:
     """The fit ``f`` of some sensors with the other sensors' base fit (:func:`fit_any`'s)."""
-    if len(f.sensors) == nominal.n:
+    if len(f.sensors) == data.nominal.n:
         return f
     # the other sensors keep the base fit of this subset
-    base = fit_any(nominal, obs, cov, sigma, (), theta0, solver, covariance)
+    base = fit_any(data, (), theta0, solver, covariance)
     th, se, res = base.theta.copy(), base.theta_stderr.copy(), base.residual.copy()
     S = list(f.sensors)
     th[S], se[S], res[:, S] = f.theta[S], f.theta_stderr[S], f.residual[:, S]
@@ -221,4 +368,4 @@ def residual_battery(f: Fit, obs, cov, sigma, names) -> NoiseTests:
     (:func:`judged_residuals`; the within-pose pairs tested unless a component is per pose):
     one place for the verdict and for the choice of a family's member."""
     r, dof = judged_residuals(f, obs, cov, sigma)
-    return noise_tests(r, sigma, dof, names, pairs=not any(c.per_pose for c in f.components), rng=battery_rng())
+    return noise_tests(r, sigma, dof, names, rng=battery_rng(), battery=Battery(pairs=not any(c.per_pose for c in f.components)))

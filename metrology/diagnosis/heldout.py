@@ -10,9 +10,8 @@ from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.calibration.dataset import Dataset
 from metrology.calibration.engine import LeastSquares
-from metrology.diagnosis.fit import Fit, _fit_result, fit_any, geometry, with_base
+from metrology.diagnosis.fit import Fit, FitData, _fit_result, content_key, fit_any, freeze, geometry, memoised, new_store, with_base
 from metrology.diagnosis.foldfit import FoldBatch
-from metrology.diagnosis.memo import content_key, freeze, memoised, new_store
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span", "Problem"]
 
@@ -35,8 +34,8 @@ def beyond_span(d, k):
     return out
 
 
-def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
-    """Residuals (h, n) mm and normals of a fit on the held-out poses ``test``.
+def heldout_eval(data: FitData, f: Fit, test, exclude=None):
+    """Residuals (h, n) mm and normals of a fit on the held-out poses ``test`` of ``data``.
 
     A per-pose component's value of a held-out pose is fitted, for each reading, to the other
     sensors of that pose (leave one sensor out), so every residual is a prediction. A reading
@@ -46,6 +45,7 @@ def heldout_eval(nominal, obs, cov, sigma, f: Fit, test, exclude=None):
     """
     from metrology.core.normals import angle_between, micro_plane_normal
 
+    nominal, obs, cov, sigma = data.nominal, data.obs, data.cov, data.sigma
     o, c = obs.select(test), cov.select(test)
     zero, u = geometry(nominal, f.theta)
     d0, _ = readings(zero, u, o.normal, o.offset)
@@ -153,16 +153,17 @@ class HeldOut:
 
 
 @memoised
-def kfold(nominal, obs, cov, sigma, components, k, theta0):
+def kfold(data: FitData, components, k, theta0):
     """k-fold-by-pose held-out figures of the base model plus ``components`` (kept by the
     content of the inputs: the same figures asked for again are not computed again)."""
+    nominal, obs, cov, sigma = data.nominal, data.obs, data.cov, data.sigma
     p = obs.n_poses
     res = np.full(obs.d.shape, np.nan)
     dev = np.full(p, np.nan)
     gross = [c.flags for c in components if isinstance(c, Outliers)]
     sets = _training_sets(obs, cov, k)
     for (test, _, _, _), f in zip(sets, _fold_fits(nominal, sigma, components, theta0, sets)):
-        res[test], dev[test] = heldout_eval(nominal, obs, cov, sigma, f, test, gross[0][test] if gross else None)
+        res[test], dev[test] = heldout_eval(data, f, test, gross[0][test] if gross else None)
     return HeldOut(res, dev)
 
 
@@ -177,9 +178,9 @@ def _fold_fits(nominal, sigma, components, theta0, sets):
                     for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
         if FoldBatch.applies(problems):
             X = FoldBatch(problems).solve()
-            return [with_base(_fit_result(p, x, covariance=False), nominal, p.obs, p.cov, sigma, theta0,
+            return [with_base(_fit_result(p, x, covariance=False), FitData(nominal, p.obs, p.cov, sigma), theta0,
                               covariance=False) for p, x in zip(problems, X)]
-    return [fit_any(nominal, obs_t, cov_t, sigma, cs, theta0, covariance=False)
+    return [fit_any(FitData(nominal, obs_t, cov_t, sigma), cs, theta0, covariance=False)
             for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
 
 
@@ -212,15 +213,19 @@ class Problem:
     b: "BaseAnalysis"  # metrology.diagnosis.decide's (which imports this module)
     folds: int
 
+    @property
+    def data(self) -> FitData:
+        """What its fits are posed on: the layout, observations, covariates and reading noise."""
+        ds, b = self.ds, self.b
+        return FitData(ds.layout, ds.obs, b.cov, b.sigma)
+
     def fit(self, components, theta0, solver: str = "gn") -> Fit:
         """The base model plus ``components`` fitted from ``theta0`` (:func:`~metrology.diagnosis.fit.fit_any`)."""
-        ds, b = self.ds, self.b
-        return fit_any(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), theta0, solver)
+        return fit_any(self.data, tuple(components), theta0, solver)
 
     def heldout(self, components, theta0) -> HeldOut:
         """Its k-fold-by-pose held-out figures (:func:`kfold`)."""
-        ds, b = self.ds, self.b
-        return kfold(ds.layout, ds.obs, b.cov, b.sigma, tuple(components), self.folds, theta0)
+        return kfold(self.data, tuple(components), self.folds, theta0)
 
     def refit(self, components, theta0) -> tuple:
         """``(fit, held-out figures)`` of the base model plus ``components`` from ``theta0``."""

@@ -23,11 +23,11 @@ from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult
 from metrology.diagnosis.crosstalk import crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
-from metrology.diagnosis.fit import Fit, fit_any, residual_battery
+from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
 from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
 from metrology.diagnosis.heldout import Problem
 from metrology.diagnosis.select import drop_one_gains, family_of, needed, p_better, weakly_supported
-from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests
+from metrology.diagnosis.stats import Battery, NoiseTests, battery_on, battery_rng, noise_tests
 from metrology.diagnosis.thresholds import ADVICE
 
 __all__ = ["Judgement", "Judge", "judge"]
@@ -115,7 +115,7 @@ class Judge:
         key = tuple(s.label for s in chosen)
         if key not in self._fits:
             comps, ds, b = tuple(s.component.for_joint_fit() for s in chosen), self.ds, self.b
-            self._fits[key] = fit_any(ds.layout, ds.obs, b.cov, b.sigma, comps, b.theta0, "lsq")
+            self._fits[key] = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), comps, b.theta0, "lsq")
         return self._fits[key]
 
     def gains(self, chosen) -> list:
@@ -181,7 +181,8 @@ class Judge:
         # a pose error need not be Gaussian: no normality test
         w = r.whitened
         tests = noise_tests(w, self.b.sigma, np.isfinite(w).sum(axis=0) - 5.0, self.ds.layout.names,
-                            pairs=not any(c.per_pose for c in f.components), rng=battery_rng(), normality=False)
+                            rng=battery_rng(),
+                            battery=Battery(pairs=not any(c.per_pose for c in f.components), normality=False))
         gains = self.gains(chosen)
         return self.named(chosen, f, tests, gains, sole_exempt=len(chosen) == 1 and exempt_sole, random_pose=r)
 

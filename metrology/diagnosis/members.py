@@ -16,23 +16,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.diagnosis.candidates import CandidateResult, Scoring, score_candidate
-from metrology.diagnosis.fit import Fit, fit_any, residual_battery
+from metrology.diagnosis.candidates import CandidateResult, Reference, Scoring, score_candidate
+from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
 from metrology.diagnosis.heldout import HeldOut, kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
 from metrology.diagnosis import rules
 
 __all__ = ["Reference", "family_of", "p_better", "refine_order", "richer_spline", "adequate_member", "score_step"]
-
-
-@dataclass(frozen=True)
-class Reference:
-    """The model a step scores candidates against: the components ``given`` (the causes chosen
-    so far), their joint ``fit`` and its k-fold ``heldout`` figures."""
-
-    given: tuple
-    fit: Fit
-    heldout: HeldOut
 
 
 def family_of(c) -> tuple:
@@ -195,15 +185,14 @@ def score_step(sc: Scoring, ref: Reference, pool, on_candidate=None):
             if th_offset is None:  # the offset member's fit, as scored just before if it was
                 member = c.geometry_member()
                 off = next((r for r in out if r.label == member.label), None)
-                th_offset = off.fit.theta if off is not None else fit_any(
-                    nominal, obs, b.cov, b.sigma, tuple(given) + (member,), th0).theta
+                th_offset = off.fit.theta if off is not None else fit_any(FitData(nominal, obs, b.cov, b.sigma), tuple(given) + (member,), th0).theta
             th_c = th_offset
         nuisance = c.nuisance()
         if nuisance is not None:
             if tilt is None:  # the datum plane's own tilt, a nuisance: form is what lies beyond it
                 comps = tuple(given) + (nuisance,)
-                tilt = (fit_any(nominal, obs, b.cov, b.sigma, comps, th0),
-                        kfold(nominal, obs, b.cov, b.sigma, comps, folds, th0))
+                tilt = (fit_any(FitData(nominal, obs, b.cov, b.sigma), comps, th0),
+                        kfold(FitData(nominal, obs, b.cov, b.sigma), comps, folds, th0))
             ref_f, ref_h, k_ref = tilt[0], tilt[1], nuisance.n_params
-        out.append(score_candidate(c, sc, ref_f, ref_h, th_c, given=given, k_ref=k_ref, ho_rank=ref_ho))
+        out.append(score_candidate(c, sc, Reference(tuple(given), ref_f, ref_h), th_c, k_ref=k_ref, ho_rank=ref_ho))
     return out

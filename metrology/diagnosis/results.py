@@ -1,6 +1,6 @@
 """The typed results of a diagnosis: outcome and confidence, each cause named, its size, its rivals.
 
-Text is made from these once, at the edge (:mod:`metrology.diagnosis.summary`, the report), and
+Text is made from these once, at the edge (:func:`metrology.diagnosis.decide.verdict_summary`, the report), and
 JSON by ``to_dict`` (the ``--json`` schema: every key as before; ``rivals`` and ``at`` appear only
 where there is one).
 """

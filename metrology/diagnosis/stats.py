@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Covariates
 from metrology.diagnosis import rules
 
-__all__ = ["NoiseTests", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
+__all__ = ["NoiseTests", "Battery", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
 
 
 @dataclass(frozen=True)
@@ -83,9 +83,19 @@ def ljung_box(x, lags, rng: np.random.Generator | None = None, n_perm: int = 999
     return (1 + count) / (n_perm + 1)
 
 
-def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
-                rng: np.random.Generator | None = None, normality: bool = True) -> NoiseTests:
-    """Tests of the residuals ``(p, n)`` mm against white Gaussian noise of ``sigma (n,)`` mm.
+@dataclass(frozen=True)
+class Battery:
+    """Which tests of :func:`noise_tests` run beside the chi-square and whiteness: ``pairs`` the
+    within-pose correlations of the sensors, ``normality`` Shapiro-Wilk."""
+
+    pairs: bool = True
+    normality: bool = True
+
+
+def noise_tests(residual, sigma, dof_per_sensor, names, rng: np.random.Generator | None = None,
+                battery: Battery = Battery()) -> NoiseTests:
+    """Tests of the residuals ``(p, n)`` mm against white Gaussian noise of ``sigma (n,)`` mm
+    (``battery``: which tests run beside the chi-square and whiteness).
 
     Returns a :class:`NoiseTests`: per-sensor chi-square (upper tail), Ljung-Box (a permutation
     test when ``rng`` is given, see :func:`ljung_box`) and Shapiro-Wilk p-values, pairwise within-pose correlations with p-values, the Bonferroni-combined
@@ -93,6 +103,7 @@ def noise_tests(residual, sigma, dof_per_sensor, names, pairs=True,
     """
     from scipy import stats
 
+    pairs, normality = battery.pairs, battery.normality
     n = residual.shape[1]
     per = {}
     pvals = []

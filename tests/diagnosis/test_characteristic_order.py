@@ -47,7 +47,7 @@ def test_crosstalk_check_judges_the_curve_inside_its_span(tmp_path):
     # P5 member extrapolates at the ends of the span; compared there, crosstalk from L4 "could
     # not be told" from it and the sensor's own characteristic was not named
     from metrology.core.effects import Nonlinearity
-    from metrology.diagnosis.candidates import Scoring, score_candidate
+    from metrology.diagnosis.candidates import Reference, Scoring, score_candidate
     from metrology.diagnosis.crosstalk import crosstalk_check
     from metrology.diagnosis.decide import base_analysis
 
@@ -58,7 +58,7 @@ def test_crosstalk_check_judges_the_curve_inside_its_span(tmp_path):
     i = list(ds.layout.names).index(case.effects[0].sensors[0])
     c = Nonlinearity((i,), names=ds.layout.names, with_gain=True, order=5)
     none = np.zeros(ds.obs.d.shape, bool)
-    s = score_candidate(c, Scoring(ds, b, none, 1.0, 5, 1), b.fit, b.heldout, b.theta0)
+    s = score_candidate(c, Scoring(ds, b, none, 1.0, 5, 1), Reference((), b.fit, b.heldout), b.theta0)
     assert s.significant
     check = crosstalk_check(ds, b, (), s, 5)
     assert check["better"] is None and check["indistinguishable"] == [], check

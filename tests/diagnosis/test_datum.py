@@ -8,7 +8,7 @@ import pytest
 from metrology.calibration.dataset import Dataset, check
 from metrology.core.effects import PlaneForm, PoseError
 from metrology.core.plane import plane_basis
-from metrology.diagnosis import covariates_for, diagnose, fit_any
+from metrology.diagnosis import FitData, covariates_for, diagnose, fit_any
 from metrology.sim.synth import HiddenEffect, synth_cloud, synth_run, typical_layouts
 
 from .helpers import FOLDS, K_SIGMA, N_POSES, PLANE
@@ -82,16 +82,16 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error, n_seeds
         export, _ = synth_run(rng, true, PLANE, N_POSES, [HiddenEffect("pose_error", None, 0.02)])
         ds = Dataset(check(export, nominal), nominal, PLANE, synth_cloud(rng, PLANE))
         sigma = nominal.noise_mm
-        base = fit_any(nominal, ds.obs, covariates_for(ds, nominal), sigma, (), None, "lsq")
+        base = fit_any(FitData(nominal, ds.obs, covariates_for(ds, nominal), sigma), (), None, "lsq")
         zero = nominal.zero + base.theta[:, :3]
         u = direction_from_tangent(nominal.direction, base.theta[:, 3:])
         cov = covariates_for(ds, nominal.with_params(zero, u))
         comps = [PlaneForm((), names=nominal.names)]
         if with_pose_error:
             comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
-        pf = fit_any(nominal, ds.obs, cov, sigma, comps, base.theta)
+        pf = fit_any(FitData(nominal, ds.obs, cov, sigma), comps, base.theta)
         d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
-        chi2.append(form_agreement(datum_form(ds, zero, u, ds.obs, cov, d0, sigma), pf)["chi2"])
+        chi2.append(form_agreement(datum_form(ds, FitData(ds.layout, ds.obs, cov, sigma), zero, u, d0), pf)["chi2"])
     if with_pose_error:
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause

@@ -8,7 +8,7 @@ import pytest
 from metrology.calibration.engine import LeastSquares
 from metrology.core.effects import Drift, Nonlinearity, PoseError
 from metrology.diagnosis import covariates_for
-from metrology.diagnosis.fit import fit, fit_any
+from metrology.diagnosis.fit import FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.foldfit import FoldBatch
 from metrology.diagnosis.heldout import _training_sets
 from metrology.sim.synth import HiddenEffect
@@ -20,7 +20,7 @@ from .helpers import run
 def case():
     ds, _ = run([HiddenEffect("nonlinearity", "L3", 0.01), HiddenEffect("drift", "L2", 0.008)], 23, 40)
     cov = covariates_for(ds, ds.layout)
-    base = fit_any(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
+    base = fit_any(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), (), None, "lsq")
     return ds, cov, base.theta
 
 
@@ -41,8 +41,8 @@ def test_the_batch_finds_each_folds_own_minimum(case, which, k):
     assert FoldBatch.applies(problems)
     X = FoldBatch(problems).solve()
     for (_, tr, o, c_t), x, p in zip(sets, X, problems):
-        own = fit.uncached(ds.layout, o, c_t, ds.layout.noise_mm, [c.select(tr) for c in comps], theta0=th0,
-                           solver="gn", covariance=False)
+        own = fit.uncached(FitData(ds.layout, o, c_t, ds.layout.noise_mm), [c.select(tr) for c in comps], theta0=th0,
+                           options=FitOptions(solver="gn", covariance=False))
         i = own.sensors[0]
         # the same minimum to the solver's tolerance (the cost to 1e-10 relative; parameters
         # along the weakly determined directions to ~1e-7 mm)

@@ -7,9 +7,9 @@ import pytest
 
 from metrology.core.effects import Drift, Nonlinearity, PoseError
 from metrology.diagnosis import covariates_for
-from metrology.diagnosis.fit import fit, fit_any
+from metrology.diagnosis.fit import FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import _solve_per_pose, kfold
-from metrology.diagnosis.memo import clear_all, content_key
+from metrology.diagnosis.fit import clear_all, content_key
 from metrology.sim.synth import HiddenEffect
 
 from .helpers import FOLDS, run
@@ -19,7 +19,7 @@ from .helpers import FOLDS, run
 def case():
     ds, _ = run([HiddenEffect("drift", "L2", 0.01), HiddenEffect("pose_error", None, 0.004)], 21, 40)
     cov = covariates_for(ds, ds.layout)
-    base = fit_any(ds.layout, ds.obs, cov, ds.layout.noise_mm, (), None, "lsq")
+    base = fit_any(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), (), None, "lsq")
     return ds, cov, base.theta
 
 
@@ -42,17 +42,17 @@ def test_a_kept_fit_is_the_fit_and_read_only(case):
     ds, cov, th0 = case
     comps = (Nonlinearity((2,), names=ds.layout.names),)
     clear_all()
-    f1 = fit(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn")
-    f2 = fit(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn")
+    f1 = fit(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
+    f2 = fit(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     assert f2 is f1  # kept
-    fresh = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn")
+    fresh = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     np.testing.assert_array_equal(fresh.theta, f1.theta)
     np.testing.assert_array_equal(fresh.residual, f1.residual)
     np.testing.assert_array_equal(fresh.components[0].values, f1.components[0].values)
     with pytest.raises(ValueError):
         f1.residual[0, 0] = 0.0  # a shared result cannot be changed by one of its readers
     # another input, another fit
-    f3 = fit(ds.layout, ds.obs, cov, 2 * ds.layout.noise_mm, comps, theta0=th0, solver="gn")
+    f3 = fit(FitData(ds.layout, ds.obs, cov, 2 * ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
     assert f3 is not f1 and f3.chi2 != f1.chi2
 
 
@@ -60,8 +60,9 @@ def test_a_kept_fit_is_the_fit_and_read_only(case):
 def test_a_fit_without_covariance_has_the_same_minimum(case, comps):
     """The k-fold's fits skip the covariance: the same values, residuals, chi-square and dof."""
     ds, cov, th0 = case
-    a = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn")
-    b = fit.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, theta0=th0, solver="gn", covariance=False)
+    a = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0, options=FitOptions(solver="gn"))
+    b = fit.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, theta0=th0,
+                       options=FitOptions(solver="gn", covariance=False))
     np.testing.assert_array_equal(a.theta, b.theta)
     np.testing.assert_array_equal(a.residual, b.residual)
     assert (a.chi2, a.dof) == (b.chi2, b.dof)
@@ -74,9 +75,9 @@ def test_kfold_kept_or_not_the_same(case):
     ds, cov, th0 = case
     comps = (PoseError((), n_poses=40), Drift((1,), names=ds.layout.names))
     clear_all()
-    h1 = kfold(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, FOLDS, th0)
+    h1 = kfold(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, FOLDS, th0)
     clear_all()
-    h2 = kfold.uncached(ds.layout, ds.obs, cov, ds.layout.noise_mm, comps, FOLDS, th0)
+    h2 = kfold.uncached(FitData(ds.layout, ds.obs, cov, ds.layout.noise_mm), comps, FOLDS, th0)
     np.testing.assert_array_equal(h1.residual, h2.residual)
     np.testing.assert_array_equal(h1.normal_dev, h2.normal_dev)
     assert np.isfinite(h1.residual).sum() > 0.9 * h1.residual.size

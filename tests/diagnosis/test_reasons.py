@@ -61,7 +61,7 @@ def test_the_summary_is_made_from_the_trail_not_re_derived():
     """A sole cause turned down: the summary's figures are those of its reasons (the step's
     held-out p of rule 2, the gain and p against the base model of rule 10)."""
     from metrology.diagnosis.results import Confidence, Decision, Outcome, Reason
-    from metrology.diagnosis.summary import verdict_summary
+    from metrology.diagnosis.decide import verdict_summary
 
     why = [Reason(2, "significant", Decision.CHOSEN, ("drift.L2@time",), "p_heldout", 0.031, 0.05, 7.5, 1),
            Reason(2, "significant", Decision.NOTHING_SIGNIFICANT, (), "candidates significant", 0, 0.05, step=2),

@@ -83,7 +83,7 @@ def test_gross_reading_under_a_rigid_pose_error_is_found_and_placed(tmp_path):
     from metrology.core.effects import Outliers, PoseError
     from metrology.diagnosis.candidates import flag_outliers
     from metrology.diagnosis.decide import base_analysis
-    from metrology.diagnosis.fit import fit_any
+    from metrology.diagnosis.fit import FitData, fit_any
     from metrology.diagnosis.select import flag_given_rigid
 
     case = draw_pair(np.random.default_rng([1, 3, 7, 15]), "pose_error", "outliers")
@@ -95,9 +95,9 @@ def test_gross_reading_under_a_rigid_pose_error_is_found_and_placed(tmp_path):
     first = {tuple(x) for x in np.argwhere(flags).tolist()}
     assert first < truth  # the first flagging misses one (else this case tests nothing)
     out = Outliers(tuple(sorted({i for _, i in first})), names=names, flags=flags)
-    f0 = fit_any(ds.layout, ds.obs, b.cov, b.sigma, (out,), b.theta0)
+    f0 = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), (out,), b.theta0)
     rigid = PoseError((), names=names, n_poses=ds.obs.n_poses, tilts=True)
-    f = fit_any(ds.layout, ds.obs, b.cov, b.sigma, (out, rigid), f0.theta)
+    f = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), (out, rigid), f0.theta)
     new, p = flag_given_rigid(f, b.cov, b.sigma, flags)
     assert {tuple(x) for x in np.argwhere(new).tolist()} == truth
     assert p < THRESHOLDS["alpha_outlier"]

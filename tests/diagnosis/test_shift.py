@@ -112,7 +112,7 @@ def test_a_located_step_on_nulls_costs_held_out_prediction():
 
     from metrology.calibration.dataset import load_dataset
     from metrology.diagnosis.candidates import covariates_for
-    from metrology.diagnosis.fit import fit_any
+    from metrology.diagnosis.fit import FitData, fit_any
     from metrology.diagnosis.heldout import kfold
     from metrology.diagnosis.stats import paired_gain_p
 
@@ -125,11 +125,11 @@ def test_a_located_step_on_nulls_costs_held_out_prediction():
         ds = replace(ds, datum_points=None, datum_cloud=None)  # a step needs no datum covariates
         nom, obs, sigma = ds.layout, ds.obs, ds.layout.noise_mm
         cov = covariates_for(ds, nom)
-        base = fit_any(nom, obs, cov, sigma, (), None, "lsq")
-        ho0 = kfold(nom, obs, cov, sigma, (), 5, base.theta)
+        base = fit_any(FitData(nom, obs, cov, sigma), (), None, "lsq")
+        ho0 = kfold(FitData(nom, obs, cov, sigma), (), 5, base.theta)
         for i in range(nom.n):
             c = Shift((i,), names=nom.names).locate(base.residual, cov, sigma)
-            ho = kfold(nom, obs, cov, sigma, (c,), 5, base.theta)
+            ho = kfold(FitData(nom, obs, cov, sigma), (c,), 5, base.theta)
             p = paired_gain_p(ho0.chi2_pose(sigma, [i]) - ho.chi2_pose(sigma, [i]))
             z.append(float(stats.norm.isf(np.clip(p, 1e-12, 1 - 1e-12))))
     assert len(z) >= 12

@@ -7,7 +7,7 @@ import numpy as np
 from scipy import stats
 
 from metrology.core.effects import Drift
-from metrology.diagnosis import fit_any
+from metrology.diagnosis import FitData, fit_any
 from tests.diagnosis.helpers import small_case
 
 
@@ -18,7 +18,7 @@ def test_extension_fit_chi2_and_dof_cover_the_same_readings():
     (it was about four when the other three sensors' chi-square was added to L3's dof)."""
     ds, cov = small_case(3, 40)
     sigma = ds.layout.noise_mm
-    f = fit_any(ds.layout, ds.obs, cov, sigma, (Drift((2,), [0.0], names=ds.layout.names, variable="temp"),), None)
+    f = fit_any(FitData(ds.layout, ds.obs, cov, sigma), (Drift((2,), [0.0], names=ds.layout.names, variable="temp"),), None)
     assert f.sensors == (2,)
     m = int(np.isfinite(ds.obs.d[:, 2]).sum())
     assert f.dof == m - 6
