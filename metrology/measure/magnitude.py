@@ -42,8 +42,10 @@ import functools
 
 import numpy as np
 
-__all__ = ["magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
+__all__ = ["K95", "magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
 
+#: the 95 % quantile of |N(0, 1)|, the coverage factor of a normal (re-exported by measure.normals)
+K95 = 1.959963984540054
 #: beyond this many major-axis standard deviations the length's error is the radial one (normal):
 #: the tabulated q is within 0.5 % of ``K95 sqrt(g^T C g) / |g|`` there on the grid's ratios
 X_MAX = 24.0
@@ -152,8 +154,6 @@ def magnitude_u95(g, C):
         f = RegularGridInterpolator((GRID_X, GRID_S, GRID_W), _table())
         out[near] = s1[near] * f(np.stack([x[near], sr[near], w[near]], axis=1))
     far = ok & ~near
-    from metrology.measure.normals import K95
-
     out[far] = K95 * radial[far]
     out[np.isfinite(gn) & (l1 == 0)] = 0.0
     return out

@@ -65,12 +65,10 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.measure.magnitude import X_MAX, magnitude_u95
+from metrology.measure.magnitude import K95, X_MAX, magnitude_u95
 
 __all__ = ["HoleNormals", "hole_normals", "drill_axis", "radius95", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
 
-#: coverage factor of a 95 % interval of a normal distribution
-K95 = 1.959963984540054
 #: radius, in standard deviations, of the 95 % disc of an isotropic 2-D normal: sqrt(chi2_2(0.95))
 K95_2D = 2.447746830680816
 #: below this many standard uncertainties the angle's distribution is not close to normal (it is
