@@ -38,8 +38,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from metrology.core.effects import REGISTRY, Outliers, Shift
-from metrology.diagnosis.candidates import CandidateResult, Scoring, candidates_for, flag_residuals
-from metrology.diagnosis.fit import Fit
+from metrology.diagnosis.candidates import (CandidateResult, Scoring, candidates_for, deleted_t, flag_given_rigid,
+                                           flag_residuals, steps_beside)
 from metrology.diagnosis.heldout import Problem, beyond_span
 from metrology.diagnosis.members import (Reference, adequate_member, family_of, p_better, refine_order, richer_spline,
                                          score_step)
@@ -286,7 +286,7 @@ class Selection:
         ds, b, flags = self.ds, self.b, self.scoring.flags
         k = next(j for j, g in enumerate(self.given) if isinstance(g, Outliers))
         m = int(np.isfinite(ds.obs.d).sum())
-        t = _deleted_t(self.fit, k)
+        t = deleted_t(self.fit, k)
         cells = self.fit.components[k].cells  # the fit holds the chosen causes in their order
         for j, g in enumerate(self.given):
             if not isinstance(g, Shift) or g.at_pose < 0:
@@ -294,9 +294,9 @@ class Selection:
             for q, (pp, i) in enumerate(cells):
                 if i not in g.sensors or not rules.gross_given_others(t[q], m):
                     continue
-                for moved in _steps_beside(g, np.asarray(b.cov.time_h, float), np.isfinite(ds.obs.d[:, i]), int(pp)):
+                for moved in steps_beside(g, np.asarray(b.cov.time_h, float), np.isfinite(ds.obs.d[:, i]), int(pp)):
                     f = self.problem.fit(self.given[:j] + (moved,) + self.given[j + 1:], theta0)
-                    t[q] = min(t[q], _deleted_t(f, k)[q])
+                    t[q] = min(t[q], deleted_t(f, k)[q])
         keep = np.array([rules.gross_given_others(v, m) for v in t], bool)
         out = np.zeros_like(flags)
         out[cells[keep, 0], cells[keep, 1]] = True
@@ -409,86 +409,6 @@ def _prune(remaining, given, seen) -> list:
     near = {i for g in given for i in g.sensors}
     return [c for c in remaining if not c.sensors or isinstance(c, Outliers) or family_of(c) in seen
             or set(c.sensors) & near]
-
-
-def _deleted_t(f: Fit, k: int) -> np.ndarray:
-    """|gross term| / its standard error of each reading of the ``outliers`` component ``k`` of the
-    joint fit ``f`` (the reading's deleted residual, externally studentised), in its cells' order."""
-    out = f.components[k]
-    v = np.abs(np.asarray(out.values, float))
-    se = np.asarray(out.stderr if out.stderr is not None else np.full(len(v), np.nan), float)
-    return np.where(se > 0, v / np.where(se > 0, se, 1.0), np.inf)
-
-
-def _steps_beside(step: Shift, time_h, fin, pose: int) -> list:
-    """The located ``step`` re-placed with ``pose`` on either side of it (the poses with a reading
-    ``fin (p,)`` in the order of ``time_h (p,)``), where ``pose`` is within one pose of where it was
-    located; the placements it is not at already."""
-    order = np.flatnonzero(fin)
-    order = order[np.argsort(time_h[order], kind="stable")]
-    rank = {int(o): r for r, o in enumerate(order)}
-    if pose not in rank or step.at_pose not in rank:
-        return []
-    r, ra = rank[pose], rank[step.at_pose]
-    if not ra - 2 <= r <= ra + 1:
-        return []
-    out = []
-    for first_after in (r, r + 1):  # the pose after the step, then before it
-        if first_after == ra or first_after < 1 or first_after >= len(order):
-            continue
-        lo, hi = float(time_h[order[first_after - 1]]), float(time_h[order[first_after]])
-        if not hi > lo:
-            continue
-        out.append(replace(step, at_h=0.5 * (lo + hi), gap_h=(lo, hi), at_pose=int(order[first_after]),
-                           before_pose=int(order[first_after - 1]), located_in=None, values=None, stderr=None))
-    return out
-
-
-def flag_given_rigid(f: Fit, cov, sigma, flags):
-    """Gross readings under a rigid pose error: ``(flags (p, n) bool, p-value of the largest)``.
-
-    An offset and two tilts a pose spread a gross reading over every sensor of its pose (with
-    4 sensors a pose keeps one degree of freedom). A pose is flagged where its
-    leverage-standardised residual is gross (``alpha_outlier`` family-wise over the readings,
-    as :func:`~metrology.diagnosis.candidates.flag_residuals`). The reading is the one whose
-    removal leaves the most plausible pose: the per-pose values solved from the other
-    readings, shrunk by the spread of the fitted values over the other poses, with the least
-    misfit plus prior (a gross reading read as a pose error needs a tilt far outside it).
-    ``flags`` the readings already flagged (left out); those returned include them.
-    """
-    from scipy import stats
-
-    rig = next(c for c in f.components if c.per_pose and c.per_pose_columns > 1)
-    B = rig.pose_columns(cov)  # (p, n, m)
-    e = np.asarray(rig.values, float).reshape(len(B), -1)
-    ok = np.isfinite(f.residual) & ~flags
-    Bw = np.where(ok[..., None], B / sigma[None, :, None], 0.0)
-    h = np.einsum("pnm,pmn->pn", Bw, np.linalg.pinv(Bw, rcond=1e-10))
-    ok_z = ok & (1.0 - h > 1e-3)
-    z = np.where(ok_z, f.residual / sigma[None, :] / np.sqrt(np.clip(1.0 - h, 1e-6, None)), 0.0)
-    m = int(ok_z.sum())
-    if m == 0:
-        return flags, 1.0
-    z = z / max(1.0, robust_sigma(z[ok_z], about=0.0))
-    zmax = float(np.max(np.abs(z)))
-    p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
-    bad = np.flatnonzero(np.max(np.abs(z), axis=1) > stats.norm.isf(rules.gross_level(m)))
-    if not len(bad):
-        return flags, p_max
-    good = np.setdiff1d(np.arange(len(B)), bad)
-    P = np.linalg.pinv(np.atleast_2d(np.cov(e[good], rowvar=False)), hermitian=True)
-    y = np.where(ok, f.residual + np.einsum("pnm,pm->pn", B, e), 0.0) / sigma[None, :]  # the pose before its error
-    out = flags.copy()
-    for q in bad:
-        score = {}
-        for i in np.flatnonzero(ok[q]):
-            keep = ok[q].copy()
-            keep[i] = False
-            A = B[q, keep] / sigma[keep, None]
-            e_i = np.linalg.pinv(A.T @ A + P, hermitian=True) @ (A.T @ y[q, keep])  # a blank may leave 2
-            score[i] = float(np.sum((y[q, keep] - A @ e_i) ** 2) + e_i @ P @ e_i)
-        out[q, min(score, key=score.get)] = True
-    return out, p_max
 
 
 def drop_one_gains(problem: Problem, chosen):

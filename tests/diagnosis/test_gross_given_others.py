@@ -110,13 +110,13 @@ def test_a_blind_datum_tilt_is_named_datum_tilt(i, tmp_path):
 def test_a_reading_beside_a_knock_placed_one_pose_early_is_no_outlier(tmp_path):
     """The knock of L3 (pose 24 of the pair above) placed one pose early by the change-point
     search: the last reading before the knock then sits after the step and looks gross given it.
-    Judged with the step re-placed with its pose on either side (``select._steps_beside``), its
+    Judged with the step re-placed with its pose on either side (``candidates.steps_beside``), its
     deleted residual is noise, while the truly gross readings stay gross under every placement."""
     from metrology.calibration.sanity import load_checked
     from metrology.core.effects import Outliers, Shift
     from metrology.diagnosis.decide import base_analysis
-    from metrology.diagnosis.fit import fit_any
-    from metrology.diagnosis.select import _deleted_t, _steps_beside
+    from metrology.diagnosis.fit import FitData, fit_any
+    from metrology.diagnosis.candidates import deleted_t, steps_beside
 
     case = _triple([4040, 40, 2, 2], ("shift", "outliers"))
     knock = next(e for e in case.effects if e.family == "shift")
@@ -140,11 +140,11 @@ def test_a_reading_beside_a_knock_placed_one_pose_early_is_no_outlier(tmp_path):
     m = int(np.isfinite(ds.obs.d).sum())
 
     def t_del(shift):
-        return _deleted_t(fit_any(ds.layout, ds.obs, b.cov, b.sigma, (out, shift), b.theta0), 0)
+        return deleted_t(fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), (out, shift), b.theta0), 0)
 
     t0 = t_del(step)
     assert rules.gross_given_others(t0[q], m)  # given the misplaced step, the reading looks gross
-    moved = _steps_beside(step, t, np.isfinite(ds.obs.d[:, i]), early)
+    moved = steps_beside(step, t, np.isfinite(ds.obs.d[:, i]), early)
     assert {s.at_pose for s in moved} == {at}  # the placement with the pose before the step
     t1 = np.minimum(t0, *[t_del(s) for s in moved])
     assert not rules.gross_given_others(t1[q], m)
