@@ -19,16 +19,24 @@ on flat, spherical and cylindrical panels, everything drawn by the independent f
     python benchmarks/study_measure.py --calibrations 40 --holes 500 --seed 1 --json out.json
         [--scan exact|hand|hand-exact] [--panels flat,sphere,cylinder]
 
-With ``--panel-known`` (``metro measure --panel --points``): the same heads on flat, sphere R 500 and
-cylinders R 500 and R 1000 (axis at a random azimuth), the head's spin within +-2 deg of the cell's
-convention; the CAD a grid mesh of the simulator's own surface (tests/measure/panel_fixtures.py),
-the hole table its drill points; each hole measured with the panel's local surface known
-(metrology.measure.surface). Per row: coverage before and after, median U95, the median error of
-the measured angle, and the drilled holes' true angle when the cell turns the drill onto the
-micro-plane's normal (the simulator's cell) and onto metro's (the angle between metro's normal
-and the true one: the adjustment is a rotation about the drill point).
+With ``--panel-known`` (``metro measure --panel --points``; issue 36 item 4, one study): the three
+heads on the panels of :data:`KNOWN_PANELS`: flat, sphere R 500, cylinders R 500 and R 1000 (each
+calibration's holes in ``--axis-groups`` groups, each group's axis at its own random azimuth: the
+barrel at any angle to the head), their CAD a 4 mm grid mesh of the simulator's own surface
+(tests/measure/panel_fixtures.py), the hole table their drill points, the head's spin within +-2 deg of
+the cell's convention; and the generated panels (metrology.sim.forward.shapes: saddle, the wing skin,
+the concave barrel, the nacelle lip) drilled from their bundled hole tables (cycled) and measured with
+their bundled CAD (metrology/data/panels): the wing once as its mesh (wing.stl) and once as its STEP
+B-rep (wing.step, fixtures/make_wing_step.py; needs the step-exact extra), the log as ``metro
+simulate-log`` writes it (``point_id``, the commanded pose). Per row: coverage of the true angle by
+angle +- U95 before and after the adjustment, median U95, the median error of the measured angle,
+and the drilled holes' true angle with the micro-plane controller in the loop and with metro's
+(``simulate-log --controller metro``: the same seed drilled again, the cell turning the drill onto
+``metrology.measure.surface.surface_normal`` with the CAD's shape operator). Everything from one
+seeded Generator: the same arguments give the same table.
 
-    nice -n 10 python benchmarks/study_measure.py --panel-known --calibrations 10 --holes 500 --seed 1
+    nice -n 10 python benchmarks/study_measure.py --panel-known --calibrations 40 --holes 500 --seed 11 \
+        --json benchmarks/results/measure_study_seed11.json [--heads table6] [--panels 'flat,wing (STEP)']
 
 The Table 2 head's beams point -z; it is studied in the frame turned 180 deg about x (beams +z), where
 the forward simulator's poses face the datum: the geometry, and every angle, is the same.
@@ -274,6 +282,8 @@ def run_panel(args):
     print(HEADER)
     print("|---|---|---|---|---|---|---|---|---|---|")
     for hname, nominal in heads(rng).items():
+        if hname not in args.heads.split(","):
+            continue
         for label, kind, R in KNOWN_PANELS:
             if label not in names:
                 continue
@@ -360,6 +370,7 @@ def main(argv=None):
                          "carried (as metro calibrate), or the same scan's plane taken as exact")
     ap.add_argument("--panels", default=None, help="comma-separated: flat, sphere, cylinder; with --panel-known "
                     "the row names of KNOWN_PANELS (e.g. 'flat,wing (STEP)') or 'all' (the default)")
+    ap.add_argument("--heads", default="table2,table6,ring3", help="--panel-known: comma-separated heads")
     ap.add_argument("--axis-groups", type=int, default=10, help="--panel-known: each calibration's holes on a "
                     "cylinder fall in this many groups, each with its axis at its own random azimuth")
     ap.add_argument("--panel-known", action="store_true", help="measure with the panel's local surface known "
