@@ -29,7 +29,13 @@ zero moves by ``delta``, ``rho`` moves by ``q_k (m.u_k) delta``. The chart:
    a new baseline (one alarm per change), and the change's size is the new level minus the old
    one (µm; when the log ends first, the level of the holes it has), with what it means at each
    sensor: a zero shift of ``size / signature_k``. One redundant reading cannot tell which of the
-   4 sensors moved; the alarm lists all four with their sizes.
+   4 sensors moved; the alarm lists all four with their sizes. The alarm also gives the run the
+   chart saw (``run_um``: the residual's mean from the change's start to the alarm, less the old
+   level: what the plotted sum climbed on) and whether the change **persisted**: the new level
+   differs from the old by more than :data:`PERSIST_Z` standard errors of the two medians. A run
+   that did not persist (a false alarm, at the rate the ARL states, or a transient knock) is sized
+   near 0 by the levels although the chart climbed on a run of ``run_um``; its advice is to check
+   the head, not to recalibrate.
 
 The state is a small object, so the chart runs over a log of any length in bounded memory, and
 over a fleet's partitions in time order (:meth:`CusumChart.update` on one batch after another).
@@ -44,7 +50,7 @@ import numpy as np
 
 from metrology.core.stats import robust_sigma
 
-__all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HOLES", "CLIP", "cusum_h", "cusum_arl", "Alarm", "PendingAlarm", "CusumChart",
+__all__ = ["CUSUM_K", "CUSUM_H", "ARL0_HOLES", "ARL_AT_DETECTABLE", "BASELINE_HOLES", "CLIP", "PERSIST_Z", "cusum_h", "cusum_arl", "Alarm", "PendingAlarm", "CusumChart",
            "chart_settings"]
 
 #: reference value of the CUSUM, in scales: the chart is tuned to a shift of 2 k = 1 scale
@@ -63,6 +69,11 @@ CUSUM_H = 12.667
 DETECTABLE_SCALES = 1.0
 #: ``cusum_arl(CUSUM_H, CUSUM_K, DETECTABLE_SCALES)``, holes (checked by the tests)
 ARL_AT_DETECTABLE = 25.7
+#: an alarm's change persisted when the new level minus the old exceeds this many standard errors of
+#: that difference (each level a median of ``n`` holes: ``sqrt(pi / 2) scale / sqrt(n)``); 3: a false
+#: alarm passes it in 0.3 % of cases, a change of one detectable size (1 scale) on 1000-hole baselines
+#: is 18 standard errors
+PERSIST_Z = 3.0
 
 
 def _arl_one_sided(h, k, shift, n_states=100):
@@ -119,10 +130,15 @@ class Alarm:
     start_hole_id : str, where the change began (the last hole with the alarming sum at zero);
         start_time_s : float, s
     holes_since_start : int
-    size_um : float, µm, the change of the redundant residual since ``start`` (signed)
+    size_um : float, µm, the change of the redundant residual since ``start`` (signed): the new level
+        minus the old
     sensor_shift_um : dict, sensor -> µm: the zero shift of that sensor alone that explains it
     direction : str, "up" or "down"
     panel : str
+    run_um : float, µm, the residual's mean over the alarm's run (``start`` to the alarm) less the old
+        level: what the chart climbed on
+    persisted : bool, the change held after the alarm (``|size| > PERSIST_Z`` standard errors); False: a
+        run that did not persist (a false alarm or a transient), ``size_um`` near 0
     """
 
     cell: str
@@ -135,16 +151,21 @@ class Alarm:
     size_um: float
     sensor_shift_um: dict
     direction: str
+    run_um: float = float("nan")
+    persisted: bool = True
 
     @property
     def advice(self) -> str:
-        return "recalibrate"
+        if self.persisted:
+            return "recalibrate"
+        return "check the head: the run did not persist (a false alarm or a transient knock)"
 
     def to_dict(self) -> dict:
         return {"cell": self.cell, "panel": self.panel, "hole_id": self.hole_id, "time_s": self.time_s,
                 "start_hole_id": self.start_hole_id, "start_time_s": self.start_time_s,
                 "holes_since_start": self.holes_since_start, "size_um": self.size_um,
-                "sensor_shift_um": dict(self.sensor_shift_um), "direction": self.direction, "advice": self.advice}
+                "sensor_shift_um": dict(self.sensor_shift_um), "direction": self.direction,
+                "run_um": self.run_um, "persisted": self.persisted, "advice": self.advice}
 
 
 @dataclass(frozen=True)
@@ -155,14 +176,19 @@ class PendingAlarm:
     ----------
     level : float, mm, the chart's level before the change
     signature : (4,) float, mm per mm, the baseline's signature before the change
-    fallback_mm : float, mm, the change's size from the alarm's window (when the log ends before a new level)
+    scale : float, mm, the chart's scale (sizes the level change's standard error, :data:`PERSIST_Z`)
+    level_holes : int, the holes the level before the change was taken on
+    run_mm : float, mm, the mean of the run the chart climbed on (the change's size when the log ends
+        before a new level)
     raised : dict, the alarm as raised: cell, panel, hole_id, time_s, start_hole_id, start_time_s,
         holes_since_start, direction (:class:`Alarm`'s fields but its size)
     """
 
     level: float
     signature: np.ndarray
-    fallback_mm: float
+    scale: float
+    level_holes: int
+    run_mm: float
     raised: dict
 
 
@@ -208,6 +234,7 @@ class CusumChart:
     _segment: str | None = None
     level: float = float("nan")
     scale: float = float("nan")
+    level_holes: int = 0  # holes whose median is ``level``
     signature: np.ndarray | None = None
     _base: list = field(default_factory=list)
     _s: list = field(default_factory=lambda: [0.0, 0.0])  # the upper and lower sums
@@ -223,6 +250,7 @@ class CusumChart:
         self._segment = segment
         self._base = []
         self.level = self.scale = float("nan")
+        self.level_holes = 0
         self.signature = None
         self._s = [0.0, 0.0]
         self._runs = [_Run(), _Run()]
@@ -261,6 +289,7 @@ class CusumChart:
         rho = np.concatenate([b[0] for b in self._base])
         sd = np.concatenate([b[1] for b in self._base])
         self.level = float(np.median(rho))
+        self.level_holes = len(rho)
         mad = robust_sigma(rho, about=self.level)
         kept = rho[np.abs(rho - self.level) <= 5.0 * max(mad, 1e-12)]
         sdev = float(np.std(kept, ddof=1)) if len(kept) > 1 else mad
@@ -279,16 +308,24 @@ class CusumChart:
         if self._pending is None:
             return
         p, self._pending = self._pending, None
-        size_mm = (self.level - p.level) if np.isfinite(self.level) else p.fallback_mm
+        persisted = True
+        if np.isfinite(self.level):
+            size_mm = self.level - p.level
+            se = np.sqrt(np.pi / 2) * p.scale * np.sqrt(1.0 / p.level_holes + 1.0 / max(self.level_holes, 1))
+            persisted = bool(abs(size_mm) > PERSIST_Z * se)
+        else:  # the log ended at the alarm: the run is all there is
+            size_mm = p.run_mm
         sig = self.signature if self.signature is not None else p.signature
         shifts = {s: float(size_mm / g * 1e3) for s, g in zip(self.sensors, sig)}
-        self.alarms.append(Alarm(**p.raised, size_um=float(size_mm * 1e3), sensor_shift_um=shifts))
+        self.alarms.append(Alarm(**p.raised, size_um=float(size_mm * 1e3), sensor_shift_um=shifts,
+                                 run_um=float(p.run_mm * 1e3), persisted=persisted))
 
     def finish(self) -> None:
         """End of the log: size a pending alarm on the holes taken since (or on the alarm's window)."""
         if self._pending is not None and self._base and np.isnan(self.level):
             rho = np.concatenate([b[0] for b in self._base])
             self.level = float(np.median(rho))
+            self.level_holes = len(rho)
             self.signature = np.median(np.concatenate([b[2] for b in self._base]), axis=0)
             self._base = []
         self._size_pending()
@@ -315,7 +352,8 @@ class CusumChart:
             return None
         up = sums[0][first] > self.h
         run = self._runs[0 if up else 1]
-        pending = PendingAlarm(self.level, self.signature, run.total / max(run.count, 1) * self.scale,
+        pending = PendingAlarm(self.level, self.signature, self.scale, self.level_holes,
+                               run.total / max(run.count, 1) * self.scale,
                                dict(cell=self.cell, panel=str(panel[first]), hole_id=str(hole_id[first]),
                                     time_s=float(time_s[first]), start_hole_id=run.hole_id, start_time_s=run.time_s,
                                     holes_since_start=self.charted - run.index, direction="up" if up else "down"))

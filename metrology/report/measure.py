@@ -32,9 +32,11 @@ def _judged(report) -> str:
 def _alarm_words(a) -> str:
     shifts = ", ".join(f"{k} {v:+.1f} µm" for k, v in a.sensor_shift_um.items())
     return (f"cell {a.cell!r}, panel {a.panel!r}: alarm at hole {a.hole_id} ({utc(a.time_s)}); the redundant "
-            f"reading's misfit moved {a.size_um:+.1f} µm from hole {a.start_hole_id} ({utc(a.start_time_s)}, "
-            f"{a.holes_since_start} holes before); a zero shift of one sensor alone: {shifts} (one redundant "
-            f"reading cannot tell which of the 4): {a.advice}")
+            f"reading's misfit ran {a.run_um:+.1f} µm off its level over the {a.holes_since_start} holes from hole "
+            f"{a.start_hole_id} ({utc(a.start_time_s)}); its level "
+            + (f"moved {a.size_um:+.1f} µm and stayed; a zero shift of one sensor alone: {shifts} (one redundant "
+               f"reading cannot tell which of the 4)" if a.persisted else
+               f"then returned ({a.size_um:+.2f} µm): the run did not persist") + f": {a.advice}")
 
 
 def _ppk(fig: dict, short: bool = False) -> str:
@@ -211,9 +213,10 @@ def measure_section(report):
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
-        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "size [µm]",
-                                             "one sensor alone [µm]"),
-                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.size_um:+.1f}",
+        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "run [µm]",
+                                             "level moved [µm]", "persisted", "one sensor alone [µm]"),
+                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.run_um:+.1f}",
+                                   f"{a.size_um:+.1f}", "yes" if a.persisted else "no",
                                    ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
     limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
               "in the spots' spread over the radius (docs/measure.md gives its size)",
