@@ -290,13 +290,16 @@ def run_panel(args):
     bundled = _bundled_panels(names)
     print(HEADER)
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for hname, nominal in heads(rng).items():
+    for hi, (hname, nominal) in enumerate(heads(rng).items()):
         if hname not in args.heads.split(","):
             continue
-        for label, kind, R in KNOWN_PANELS:
+        for pi, (label, kind, R) in enumerate(KNOWN_PANELS):
             if label not in names:
                 continue
             t0 = time.perf_counter()
+            # each row its own stream (seed, head, panel): a row is the same whichever rows run with it,
+            # so the study can be split over processes (--heads, --panels) and its rows joined
+            rng = np.random.default_rng([args.seed, hi, pi])
             acc = {k: [] for k in ("hit_b", "hit_a", "u_b", "u_a", "err", "drill_plane", "drill_metro",
                                     "normal_err", "loop_skipped")}
             for c in range(args.calibrations):
