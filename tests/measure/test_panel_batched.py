@@ -55,7 +55,8 @@ def _same(a, b, rtol=0.0):
 
 def test_the_batch_gives_each_hole_what_it_gets_on_its_own(wing):
     layout, table, settings = wing
-    assert "pose_rx_deg" in table.column_names and "cad_offset_mm" in measure_batch(layout, table[:2], settings).columns.column_names
+    assert "pose_rx_deg" in table.column_names
+    assert "cad_offset_mm" in measure_batch(layout, table[:2], settings).columns.column_names
     whole = _columns(measure_batch(layout, table, settings))
     one = [_columns(measure_batch(layout, table.slice(i, 1), settings)) for i in range(table.num_rows)]
     _same(whole, {k: [v for o in one for v in o[k]] for k in whole}, rtol=1e-12)
