@@ -199,8 +199,10 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     m = np.stack([mx, my, mz], axis=1)
     Km = np.einsum("hij,hj->hi", K, m)
     mKm = (m * Km).sum(1)
-    Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
-          + mKm[:, None, None] * m[:, :, None] * m[:, None, :])  # T K T
+    # T K T, entry by entry as K - m Km^T - Km m^T + (m.Km) m m^T, on (3, 3, h) arrays (long inner loops)
+    mT, KmT = np.ascontiguousarray(m.T), np.ascontiguousarray(Km.T)
+    Kt = np.ascontiguousarray((np.ascontiguousarray(K.transpose(1, 2, 0)) - mT[:, None] * KmT[None]
+                               - KmT[:, None] * mT[None] + mKm[None, None] * mT[:, None] * mT[None]).transpose(2, 0, 1))
     if steps > 0:
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
