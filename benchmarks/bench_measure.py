@@ -1,7 +1,8 @@
 """Speed and memory of ``metro measure``, against baselines measured in the same run.
 
     python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
-                                       [--sections in-process,process,qif,dask,cluster] [--cluster-holes 4e6]
+                                       [--sections in-process,process,qif,dask,cluster,panel] [--cluster-holes 4e6]
+                                       [--panel-holes 1e6]
 
 On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
 ``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
@@ -26,7 +27,12 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
    and W = 1, 2 ``dask worker --nthreads 1``, ``--scheduler``): wall time, the speedup, and the
    client's own CPU time as a share of the one-process run's CPU (the serial share ``f``), with
    Amdahl's speedup ``1 / (f + (1 - f) / N)`` for N = 4 to 64 workers as the scaling model;
-6. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+6. **panel** (``--sections panel``): a log of ``--panel-holes`` holes forward-simulated on a bundled
+   panel (``metro simulate-log --panel metrology/data/panels/wing.stl --points wing.holes.csv``,
+   the bundled Table 6 head), and ``metro measure LOG --layout L --panel P --points H`` against the
+   same command without ``--panel --points``, run in turn in the same run: wall time, CPU time and
+   peak RSS and their ratios (goal: <= 2x);
+7. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -236,6 +242,33 @@ def cluster(work: Path, holes: int, metro) -> dict:
     return out
 
 
+def panel(work: Path, holes: int, repeat: int, metro, name: str = "wing") -> dict:
+    """Section 6: ``measure --panel --points`` against the same run without (module docstring)."""
+    data = ROOT / "metrology" / "data"
+    mesh, points = data / "panels" / f"{name}.stl", data / "panels" / f"{name}.holes.csv"
+    layout = data / "measured" / "nominal.toml"
+    log = work / f"panel-{name}.parquet"
+    t0 = time.perf_counter()
+    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--panel", str(mesh), "--points", str(points),
+                    "--holes", str(holes), "--seed", "1", "--no-truth", "--out", str(log)], check=True,
+                   stdout=subprocess.DEVNULL)
+    out = {"holes": holes, "panel": f"{name}.stl", "table": f"{name}.holes.csv", "generate_s": time.perf_counter() - t0}
+    base = [*metro, "-q", "measure", str(log), "--layout", str(layout), "--out", str(work / "panel-out.parquet")]
+    cpu_p, cpu_b, best = [], [], {}
+    for _ in range(repeat):  # in turn: the machine's load falls on both alike
+        for key, cmd, cpu in (("plain", base, cpu_b), ("panel", [*base, "--panel", str(mesh), "--points", str(points)],
+                                                       cpu_p)):
+            t, rss = process(cmd, 1, cpu)
+            b = best.setdefault(key, [np.inf, 0.0])
+            b[0], b[1] = min(b[0], t), max(b[1], rss)
+    out.update(plain_s=best["plain"][0], plain_cpu_s=min(cpu_b), plain_rss_mb=best["plain"][1],
+               panel_s=best["panel"][0], panel_cpu_s=min(cpu_p), panel_rss_mb=best["panel"][1])
+    out.update(ratio_time=out["panel_s"] / out["plain_s"], ratio_cpu=out["panel_cpu_s"] / out["plain_cpu_s"],
+               ratio_rss=out["panel_rss_mb"] / out["plain_rss_mb"])
+    log.unlink()
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--holes", type=float, default=1e6)
@@ -245,7 +278,8 @@ def main(argv=None):
     ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--sections", default="in-process,process,qif,dask",
-                    help="which of in-process, process, qif, dask, cluster")
+                    help="which of in-process, process, qif, dask, cluster, panel")
+    ap.add_argument("--panel-holes", type=float, default=1e6, help="holes of the panel section's log")
     ap.add_argument("--cluster-holes", type=float, default=4e6, help="holes of the cluster section's log")
     args = ap.parse_args(argv)
     sections = set(args.sections.split(","))
@@ -255,8 +289,11 @@ def main(argv=None):
     metro = [metro] if metro else [sys.executable, "-m", "cli.main"]  # from a source tree: run from ROOT
     os.chdir(ROOT)
     res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
-    if sections == {"cluster"}:
-        res["cluster"] = cluster(work, int(args.cluster_holes), metro)
+    if "panel" in sections:
+        res["panel"] = panel(work, int(args.panel_holes), args.repeat, metro)
+    if sections <= {"cluster", "panel"}:
+        if "cluster" in sections:
+            res["cluster"] = cluster(work, int(args.cluster_holes), metro)
         return _done(res, args, work)
     if sections == {"dask"}:
         _dask(res, args, work, metro)

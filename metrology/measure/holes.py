@@ -394,11 +394,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             code[i] = CODE[Status.NOT_MEASURED]
             reason[i] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
                          f"unknown")
-        for i in np.flatnonzero(table_row >= 0):
-            why = surf.problem[table_row[i]]
-            if why:
-                code[i] = CODE[Status.NOT_MEASURED]
-                reason[i] = why
+        known = np.flatnonzero(table_row >= 0)
+        for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
+            code[i] = CODE[Status.NOT_MEASURED]
+            reason[i] = surf.problem[table_row[i]]
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = CODE[Status.NOT_MEASURED]

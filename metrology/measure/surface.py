@@ -209,8 +209,10 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         K = _full((k00, k01, k02, k11, k12, k22))
     Km = np.einsum("hij,hj->hi", K, m)
     mKm = (m * Km).sum(1)
-    Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
-          + mKm[:, None, None] * m[:, :, None] * m[:, None, :])  # T K T
+    # T K T, entry by entry as K - m Km^T - Km m^T + (m.Km) m m^T, on (3, 3, h) arrays (long inner loops)
+    mT, KmT = np.ascontiguousarray(m.T), np.ascontiguousarray(Km.T)
+    Kt = np.ascontiguousarray((np.ascontiguousarray(K.transpose(1, 2, 0)) - mT[:, None] * KmT[None]
+                               - KmT[:, None] * mT[None] + mKm[None, None] * mT[:, None] * mT[None]).transpose(2, 0, 1))
     if steps > 0:
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
@@ -316,6 +318,18 @@ def _tangent_basis(m):
     return t1, np.cross(m, t1)
 
 
+def _shape_basis(fit, g2, axis):
+    """The heights' change ``(N, n)`` per unit change of each of the three components of the shape
+    operator in an orthonormal basis of the tangent plane's symmetric tensors (``t1 t1``, ``t2 t2``,
+    ``(t1 t2 + t2 t1) / sqrt 2``), ``sigma rho 1/2 (Tq)^T delta K (Tq)``: a list of 3."""
+    m = fit.normal
+    t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
+    sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
+    a1 = np.einsum("hni,hi->hn", fit.q, t1)
+    a2 = np.einsum("hni,hi->hn", fit.q, t2)
+    return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
+
+
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
                          covariance=None, sigma_mm=None):
     """Normals, angles and uncertainties of holes (every reading present) with the surface known.
@@ -384,12 +398,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     v_spin = None
     if terms is not None:
         m = fit.normal
-        t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
-        rho = np.sqrt(1.0 + g2)
-        sc = (-axis[2] * rho)[:, None]  # sigma rho
-        a1 = np.einsum("hni,hi->hn", fit.q, t1)
-        a2 = np.einsum("hni,hi->hn", fit.q, t2)
-        dh_basis = [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]  # (N, n) each
+        sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
+        dh_basis = _shape_basis(fit, g2, axis)  # (N, n) each
         uK = np.asarray(terms.u_shape, float).reshape(-1)
         uK = np.broadcast_to(uK, (N,))
         for dh in dh_basis:
@@ -416,7 +426,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         return np.einsum("hi,hij,hj->h", cvec, Cm, cvec)
 
     var_noise = quad(C_noise)
-    var = var_noise + quad(C_cal) + quad(C_pan)
+    var_pan = quad(C_pan)
+    var = var_noise + quad(C_cal) + var_pan
     u_angle = np.sqrt(var)
     if v_spin is None:
         U95 = K95 * u_angle
@@ -439,7 +450,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         with np.errstate(invalid="ignore", divide="ignore"):
             tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
         U95[near] = magnitude_u95(tilt, Ca[near])
-    panel_share = np.sqrt(np.maximum(quad(C_pan), 0.0))
+    panel_share = np.sqrt(np.maximum(var_pan, 0.0))
     residual = np.full(N, np.nan)
     residual_z = np.full(N, np.nan)
     signature = twist = residual_sd = sd = None
@@ -454,13 +465,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             residual_z = residual / sd
         var_pan_rho = np.zeros(N)
         # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
-        m = fit.normal
-        t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
-        rho_g = np.sqrt(1.0 + g2)
-        sc = (-axis[2] * rho_g)[:, None]
-        a1 = np.einsum("hni,hi->hn", fit.q, t1)
-        a2 = np.einsum("hni,hi->hn", fit.q, t2)
-        basis = [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
+        basis = dh_basis if dh_basis is not None else _shape_basis(fit, g2, axis)
         s_b = np.stack([(qv * b).sum(1) for b in basis], axis=1)  # (N, 3) d rho / d x_b
         if terms is not None:
             var_pan_rho = (s_b ** 2).sum(1) * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
