@@ -32,8 +32,8 @@ def register(app: typer.Typer) -> None:
                                               "processes, one task per partition (needs metro\\[fleet])."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run on a running Dask cluster "
                                                 "(tcp://host:port), one task per partition (needs metro\\[fleet])."),
-        fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm too (by default "
-                                           "an alarm is reported, and the exit code judges the holes)."),
+        fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm whose change persisted too "
+                                           "(by default an alarm is reported, and the exit code judges the holes)."),
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
                                             "panel (for panels whose shape moves the redundant reading's misfit); "
                                             "misses a drift slower than a panel."),
@@ -63,7 +63,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
-        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided (or a drift alarm with --fail-on-drift), 2 on bad input.
+        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided (or a drift alarm whose change persisted, with --fail-on-drift), 2 on bad input.
         """
         import sys
 

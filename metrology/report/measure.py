@@ -186,7 +186,11 @@ def measure_section(report):
     head = (f"{c['conforms']:,} of {report.result.rows:,} holes conform, {c['fails']:,} fail, {c['undecided']:,} are "
             f"undecided and {c['not_measured']:,} were not measured, against {report.tolerance_deg:g} deg (ISO 14253-1, U95)")
     alarms = report.result.alarms
-    cause = (f"{len(alarms)} drift alarm(s): recalibrate" if alarms else "no drift alarm")
+    kept = sum(1 for a in alarms if a.persisted)
+    cause = ("no drift alarm" if not alarms else
+             f"{kept} drift alarm(s) whose change persisted: recalibrate" if kept == len(alarms) else
+             f"{kept} drift alarm(s) whose change persisted (recalibrate), {len(alarms) - kept} whose run did not "
+             f"(check the head)")
     figs = [figure_from_matplotlib(_hist_figure(report), "Angle between the drill axis and the measured normal, before "
                                    "and after the attitude adjustment (log axis); dashed: the tolerance.")]
     for cell, chart in sorted(report.result.watch.charts.items())[:12]:

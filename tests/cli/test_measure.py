@@ -141,6 +141,26 @@ def test_report_is_written_and_named(tmp_path, layout):
     assert f"report: {rep}" in r.stderr
 
 
+def test_a_transient_knock_is_shown_but_does_not_fail_the_drift_gate(tmp_path, layout):
+    """L3 knocked by 30 um for 40 holes, then back: the chart alarms on the run, the level after it is
+    the old one. The alarm is named as not persisted ("check the head") and --fail-on-drift does not
+    fail on it (it gates a change that persisted: a recalibration); the verdict lists it."""
+    cols, _, _ = hole_log(calibrated_layout(), n=2400, angle_deg=(1, 4), after_deg=(0.0, 0.1))
+    for key in ("d_L3", "d_L3_after"):
+        cols[key] = [v + 0.03 if 1150 <= i < 1190 else v for i, v in enumerate(cols[key])]
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv"),
+                            "--json", "--fail-on-drift"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    alarms = s["drift"]["alarms"]
+    assert len(alarms) == 1 and alarms[0]["persisted"] is False and alarms[0]["advice"].startswith("check the head")
+    assert 1150 <= int(alarms[0]["hole_id"].rsplit("-", 1)[1]) < 1190
+    checks = {c["name"]: c for c in s["verdict"]["checks"]}
+    assert checks["drift watch: alarms whose run did not persist (check the head)"]["value"] == 1
+    assert checks["drift watch: alarms whose change persisted (recalibrate)"]["value"] == 0
+
+
 def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):
     """Readings that disagree with one plane at most holes: another head's layout, exit 2, no file."""
     lay = calibrated_layout()
