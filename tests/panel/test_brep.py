@@ -36,6 +36,26 @@ def test_brep_normal_is_the_exact_cylinder_normal():
     assert np.degrees(np.max(angle_between(n, surf.normal(pts), oriented=True))) < 1e-6
 
 
+def test_brep_second_fundamental_form_is_the_exact_cylinders():
+    """On panel_cyl800.step (convex, axis along y, R 800 mm) the face's second fundamental form
+    along the outward normal is ``-c c^T / R`` (``c`` the circumferential direction): the surface
+    bends away from the outside by 1/R across the axis and not at all along it."""
+    from metrology.panel.brep import BRepSurface
+
+    brep = BRepSurface(DATA_DIR / "panel_cyl800.step")
+    surf = ParametricSurface("cylinder", 800.0)
+    xy = np.random.default_rng(5).uniform(-99.0, 99.0, (50, 2))
+    pts = np.column_stack([xy, surf.height(xy[:, 0], xy[:, 1])])
+    n, hess = brep.local_surface(pts)
+    s = np.sign(np.sum(n * surf.normal(pts), axis=1))
+    n, hess = n * s[:, None], hess * s[:, None, None]
+    c = np.cross(n, [0.0, 1.0, 0.0])
+    c /= np.linalg.norm(c, axis=1, keepdims=True)
+    np.testing.assert_allclose(hess, -np.einsum("mi,mj->mij", c, c) / 800.0, atol=1e-9)
+    off, _ = brep.local_surface([[500.0, 0.0, 0.0]])
+    assert np.isnan(off).all()  # a point off every face: no surface there
+
+
 def test_run_on_a_step_panel_uses_the_brep_reference():
     from metrology.panel.mesh import load_panel
 
