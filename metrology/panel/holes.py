@@ -89,7 +89,7 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     hess = None
     local = getattr(panel.surface, "local_surface", None)  # a STEP's B-rep (the step-exact extra)
     if local is not None:
-        nb, hess = local(table.point)
+        nb, hess = local(table.point, margin_mm=POINT_OFF_MM)
         gone = np.flatnonzero(~np.isfinite(nb).all(1))
         if gone.size:
             r = int(gone[0])
