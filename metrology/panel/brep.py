@@ -4,7 +4,8 @@ Optional (the ``step-exact`` extra). Where it is installed and the panel is a ST
 the reference normal at a point is the normal of the designed face there: the point is
 projected onto the surface of each face near it (``GeomAPI_ProjectPointOnSurf``), the face
 that holds it (``BRepClass_FaceClassifier``) and is nearest is kept, and its normal comes
-from ``BRepGProp_Face.Normal`` (face orientation included). No tessellation enters.
+from ``BRepGProp_Face.Normal`` (face orientation included), its second fundamental form from the
+face's derivatives (:meth:`BRepSurface.local_surface`). No tessellation enters.
 """
 
 from __future__ import annotations
@@ -70,6 +71,31 @@ class BRepSurface:
         self._lo, self._hi = np.array(lo, float), np.array(hi, float)
         self.n_faces = len(self._faces)
 
+    def _locate(self, p, m):
+        """The face holding ``p`` (OCC units), nearest first, and the point's ``(u, v)`` on its
+        surface; ``None`` where no face is near (module docstring)."""
+        from OCP.BRep import BRep_Tool
+        from OCP.BRepClass import BRepClass_FaceClassifier
+        from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
+        from OCP.TopAbs import TopAbs_OUT
+        from OCP.gp import gp_Pnt
+
+        cand = np.flatnonzero(np.all((p >= self._lo - m) & (p <= self._hi + m), axis=1))
+        best = (np.inf, None)
+        P = gp_Pnt(*p)
+        for k in cand:
+            face = self._faces[k]
+            proj = GeomAPI_ProjectPointOnSurf(P, BRep_Tool.Surface_s(face))
+            if not proj.NbPoints():
+                continue
+            d = proj.LowerDistance()
+            if d >= best[0]:
+                continue
+            inside = BRepClass_FaceClassifier(face, proj.NearestPoint(), 1e-6).State() != TopAbs_OUT
+            if inside or best[1] is None:
+                best = (d if inside else np.inf, (face, proj.LowerDistanceParameters()))
+        return best[1]
+
     def normal(self, points, margin_mm=0.05):
         """Exact unit normals of the designed faces at (or nearest to) ``points``.
 
@@ -83,35 +109,52 @@ class BRepSurface:
         n : (m, 3) float, unit, panel frame, the face's orientation (align it with the
             mesh's outside where a side matters); NaN where no face is near
         """
-        from OCP.BRep import BRep_Tool
-        from OCP.BRepClass import BRepClass_FaceClassifier
+        return self.local_surface(points, margin_mm)[0]
+
+    def local_surface(self, points, margin_mm=0.05):
+        """The designed face's normal and second fundamental form at (or nearest to) ``points``.
+
+        The point is located as by :meth:`normal`; at its ``(u, v)`` the face's adaptor gives the
+        derivatives ``S_u, S_v, S_uu, S_uv, S_vv`` (``BRepAdaptor_Surface.D2``), and the second
+        fundamental form ``II_ab = S_ab . n`` (``n`` the face's normal, orientation included) is
+        written as the 3 x 3 tangent tensor ``Hess = J+^T II J+`` (``J = [S_u S_v]``,
+        ``J+ = (J^T J)^-1 J^T``): the height of the surface along ``n`` over its tangent plane is
+        ``w(t) = t^T Hess t / 2`` to second order.
+
+        Parameters
+        ----------
+        points : (m, 3) float, mm, panel frame
+        margin_mm : float, mm, as in :meth:`normal`
+
+        Returns
+        -------
+        n : (m, 3) float, unit, panel frame, the face's orientation; NaN where no face is near
+        hess : (m, 3, 3) float, 1/mm, panel frame, the second fundamental form along ``n``
+            (flip its sign with ``n``); NaN where no face is near
+        """
+        from OCP.BRepAdaptor import BRepAdaptor_Surface
         from OCP.BRepGProp import BRepGProp_Face
-        from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
-        from OCP.TopAbs import TopAbs_OUT
         from OCP.gp import gp_Pnt, gp_Vec
 
         pts = np.asarray(points, float).reshape(-1, 3) / self.scale
         out = np.full(pts.shape, np.nan)
+        hess = np.full((len(pts), 3, 3), np.nan)
         m = margin_mm / self.scale
         for i, p in enumerate(pts):
-            cand = np.flatnonzero(np.all((p >= self._lo - m) & (p <= self._hi + m), axis=1))
-            best = (np.inf, None)
-            P = gp_Pnt(*p)
-            for k in cand:
-                face = self._faces[k]
-                proj = GeomAPI_ProjectPointOnSurf(P, BRep_Tool.Surface_s(face))
-                if not proj.NbPoints():
-                    continue
-                d = proj.LowerDistance()
-                if d >= best[0]:
-                    continue
-                inside = BRepClass_FaceClassifier(face, proj.NearestPoint(), 1e-6).State() != TopAbs_OUT
-                if inside or best[1] is None:
-                    best = (d if inside else np.inf, (face, proj.LowerDistanceParameters()))
-            if best[1] is None:
+            hit = self._locate(p, m)
+            if hit is None:
                 continue
-            face, (u, v) = best[1]
+            face, (u, v) = hit
             at, vec = gp_Pnt(), gp_Vec()
             BRepGProp_Face(face).Normal(u, v, at, vec)
-            out[i] = [vec.X(), vec.Y(), vec.Z()]
-        return out / np.linalg.norm(out, axis=1, keepdims=True)
+            n = np.array([vec.X(), vec.Y(), vec.Z()])
+            n /= np.linalg.norm(n)
+            d = [gp_Vec() for _ in range(5)]
+            BRepAdaptor_Surface(face).D2(u, v, gp_Pnt(), *d)
+            su, sv, suu, svv, suv = (np.array([w.X(), w.Y(), w.Z()]) for w in d)
+            J = np.stack([su, sv], axis=1)  # (3, 2)
+            II = np.array([[suu @ n, suv @ n], [suv @ n, svv @ n]])
+            Jp = np.linalg.solve(J.T @ J, J.T)  # (2, 3)
+            out[i] = n
+            hess[i] = Jp.T @ II @ Jp / self.scale
+        return out, hess

@@ -10,6 +10,13 @@ hole) gives the Hessian ``H`` and its gradient; the shape operator is ``K = -H``
 the surface bends away from the head). ``u_shape`` (1/mm, per component) combines the fit's
 residual through its covariance (faceting), ``|grad K| position_mm / 3`` and a stated form
 tolerance ``2 t / rho^2 / sqrt(3)``.
+
+Where the panel is a STEP read with its B-rep (the ``step-exact`` extra: ``panel.surface`` a
+:class:`metrology.panel.brep.BRepSurface`), the normal and the shape operator come from the exact
+face at the drill point instead (:meth:`~metrology.panel.brep.BRepSurface.local_surface`: the point
+projected on the face, its second fundamental form ``Hess`` along the normal turned toward the head,
+``K = -Hess`` in the same frame ``(e1, e2, n)``); the cubic fit still gives the curvature's gradient
+(the position term) and the footprint's edge check, and ``u_shape`` has no faceting term.
 """
 
 from __future__ import annotations
@@ -79,6 +86,18 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     if side == 0:
         side = 1.0
     n = nm * side  # toward the head, for the table's side
+    hess = None
+    local = getattr(panel.surface, "local_surface", None)  # a STEP's B-rep (the step-exact extra)
+    if local is not None:
+        nb, hess = local(table.point, margin_mm=POINT_OFF_MM)
+        gone = np.flatnonzero(~np.isfinite(nb).all(1))
+        if gone.size:
+            r = int(gone[0])
+            raise ValueError(f"{table.source}: {table.line(r)}: hole {table.ids[r]} at "
+                             f"({', '.join(f'{v:g}' for v in table.point[r])}) is on no face of the panel {shown}'s "
+                             f"B-rep ({gone.size} such holes): the hole table does not fit this panel")
+        flip = np.where((nb * n).sum(1) < 0, -1.0, 1.0)  # the face's orientation turned to the table's side
+        n, hess = nb * flip[:, None], hess * flip[:, None, None]
     c = -(n * table.feed).sum(1)
     bad = np.flatnonzero(c < FEED_MIN_COS)
     if bad.size:
@@ -121,6 +140,12 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0
     u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
+    src = f"panel {shown} (mesh, cubic fit over the footprint)"
+    if hess is not None:  # the exact surface: no faceting; the gradient (position term) from the cubic fit
+        E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
+        Kl = np.where(miss.any(1)[:, None, None], np.nan, -np.einsum("mai,mij,mbj->mab", E, hess, E))
+        u_fit = 0.0
+        src = f"panel {shown} (B-rep (exact STEP faces); the curvature's gradient from a cubic fit over the footprint)"
     u = np.sqrt(u_fit ** 2 + u_pos ** 2 + u_form ** 2)
     problem = np.full(len(P), "", dtype=object)
     for r in np.flatnonzero(miss.any(1)):
@@ -130,4 +155,4 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     k = principal_curvatures(Kl)
     k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
     return {"normal": n, "shape": embed_shape(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
-            "problem": problem, "source": f"panel {shown} (mesh, cubic fit over the footprint)"}
+            "problem": problem, "source": src}

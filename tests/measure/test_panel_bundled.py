@@ -172,8 +172,8 @@ def test_the_panels_study_runs_and_metros_normal_drills_the_nacelle_as_flat(tmp_
 @pytest.mark.slow  # reading the STEP (OpenCASCADE's 1 um tessellation): ~1 min on a loaded 2-core machine
 def test_the_bundled_step_wing_is_the_generated_wing():
     """metrology/data/panels/wing.step (fixtures/make_wing_step.py, a B-spline face) read as metro reads a
-    STEP panel: at the bundled holes its normals and curvatures are the generated wing's
-    (metrology.sim.forward.shapes), as the bundled mesh's are."""
+    STEP panel: at the bundled holes its normals and shape operators are the generated wing's
+    (metrology.sim.forward.shapes) from the exact B-rep, the bundled mesh's to its faceting."""
     pytest.importorskip("cascadio")
     from metrology.jobs.measure import panel_hole_surfaces
     from metrology.measure.panel import read_hole_table
@@ -184,13 +184,23 @@ def test_the_bundled_step_wing_is_the_generated_wing():
     wing = generated_panel("wing")
     k_true = np.linalg.eigvalsh(wing.shape_at(table.point))[:, [2, 1]]  # k1 >= k2 (the normal's 0 first)
     n_true = wing.normal_at(table.point)
-    # measured: the STEP's curvatures within 1.2e-7 /mm (the 10 mm STL's 1.8e-6), its normals within 0.012 deg
-    # (the STL's 7e-5 deg: the STEP is tessellated by OpenCASCADE and fitted over the footprint as a mesh)
-    for cad, tol_k, tol_deg in (("wing.step", 1e-6, 0.02), ("wing.stl", 5e-6, 0.001)):
-        s = panel_hole_surfaces(load_panel(str(data_path("panels", cad))), table, 55.0)
+    # measured: the STEP (its B-rep, the step-exact extra) within 2.3e-6 deg and 1.1e-8 /mm; its
+    # tessellation fitted as a mesh 0.012 deg and 1.1e-7 /mm; the 10 mm STL 7e-5 deg and 1.8e-6 /mm
+    step = load_panel(str(data_path("panels", "wing.step")))
+    assert step.surface is not None, "the step-exact extra reads the B-rep"
+    for panel, tol_k, tol_deg, src in ((step, 1e-6, 1e-4, "B-rep (exact STEP faces)"),
+                                       (load_panel(str(data_path("panels", "wing.stl"))), 5e-6, 0.001, "mesh")):
+        s = panel_hole_surfaces(panel, table, 55.0)
+        assert src in s.source
         assert all(p == "" for p in s.problem)
         assert np.degrees(np.arccos(np.clip(np.abs(np.sum(s.normal * n_true, 1)), -1, 1))).max() < tol_deg
         np.testing.assert_allclose(s.k, k_true, atol=tol_k)
+        np.testing.assert_allclose(s.shape, wing.shape_at(table.point), atol=tol_k)  # one sign convention
+    # without the B-rep the STEP's tessellation is fitted as a mesh: to its faceting only
+    step.surface = None
+    s = panel_hole_surfaces(step, table, 55.0)
+    assert "mesh" in s.source
+    assert np.degrees(np.arccos(np.clip(np.abs(np.sum(s.normal * n_true, 1)), -1, 1))).max() < 0.02
 
 
 def test_the_robots_own_tilt_counts_no_hole_off_its_cad(tmp_path):

@@ -36,6 +36,26 @@ def test_brep_normal_is_the_exact_cylinder_normal():
     assert np.degrees(np.max(angle_between(n, surf.normal(pts), oriented=True))) < 1e-6
 
 
+def test_brep_second_fundamental_form_is_the_exact_cylinders():
+    """On panel_cyl800.step (convex, axis along y, R 800 mm) the face's second fundamental form
+    along the outward normal is ``-c c^T / R`` (``c`` the circumferential direction): the surface
+    bends away from the outside by 1/R across the axis and not at all along it."""
+    from metrology.panel.brep import BRepSurface
+
+    brep = BRepSurface(DATA_DIR / "panel_cyl800.step")
+    surf = ParametricSurface("cylinder", 800.0)
+    xy = np.random.default_rng(5).uniform(-99.0, 99.0, (50, 2))
+    pts = np.column_stack([xy, surf.height(xy[:, 0], xy[:, 1])])
+    n, hess = brep.local_surface(pts)
+    s = np.sign(np.sum(n * surf.normal(pts), axis=1))
+    n, hess = n * s[:, None], hess * s[:, None, None]
+    c = np.cross(n, [0.0, 1.0, 0.0])
+    c /= np.linalg.norm(c, axis=1, keepdims=True)
+    np.testing.assert_allclose(hess, -np.einsum("mi,mj->mij", c, c) / 800.0, atol=1e-9)
+    off, _ = brep.local_surface([[500.0, 0.0, 0.0]])
+    assert np.isnan(off).all()  # a point off every face: no surface there
+
+
 def test_run_on_a_step_panel_uses_the_brep_reference():
     from metrology.panel.mesh import load_panel
 
@@ -53,3 +73,31 @@ def test_run_on_a_step_panel_uses_the_brep_reference():
     # are snapped onto the 1 um tessellation, whose nearest B-rep point is ~2e-5 mm aside:
     # 1.4e-6 deg on R 800; the direct test above is at 1e-6 deg)
     assert np.degrees(np.max(angle_between(run.n_ref[ok], surf.normal(run.points[ok]), oriented=True))) < 1e-5
+
+
+def test_hole_surfaces_on_a_step_come_from_its_brep_and_a_hole_off_its_faces_is_an_error():
+    """panel_surfaces with a B-rep (panel_cyl800.step, convex R 800, axis y): each hole's shape
+    operator is the exact cylinder's, ``c c^T / 800`` (the mesh path's sign: positive where the surface
+    bends away from the head) and its source names the B-rep; a hole on the mesh but off every face of
+    the B-rep (the mesh here reaches 120 mm, the STEP 100 mm) is the one-line error naming its row."""
+    from metrology.measure.panel import HoleTable
+    from metrology.panel.brep import BRepSurface
+    from metrology.panel.holes import panel_surfaces
+    from metrology.panel.mesh import Panel
+    from metrology.sim.forward.panels import make_panel
+    from tests.measure.panel_fixtures import panel_mesh
+
+    cad = make_panel("cylinder", 800.0)
+    panel = Panel(panel_mesh(cad, half_mm=120.0, step_mm=3.0), "cyl.stl", surface=BRepSurface(DATA_DIR / "panel_cyl800.step"))
+    xy = np.random.default_rng(6).uniform(-30.0, 30.0, (20, 2))
+    P = np.column_stack([xy, cad.height(xy[:, 0], xy[:, 1])])
+    f = panel_surfaces(panel, HoleTable(tuple(map(str, range(20))), P, -cad.normal_at(P), "holes.csv"), 20.0)
+    assert "B-rep (exact STEP faces)" in f["source"]
+    c = np.cross(f["normal"], [0.0, 1.0, 0.0])
+    c /= np.linalg.norm(c, axis=1, keepdims=True)
+    np.testing.assert_allclose(f["shape"], np.einsum("mi,mj->mij", c, c) / 800.0, atol=1e-9)
+    np.testing.assert_allclose(f["k"], np.tile([1 / 800.0, 0.0], (20, 1)), atol=1e-9)
+    assert np.degrees(np.max(angle_between(f["normal"], cad.normal_at(P), oriented=True))) < 1e-6
+    P[3] = [110.0, 0.0, float(cad.height(110.0, 0.0))]
+    with pytest.raises(ValueError, match=r"holes.csv: line 5: hole 3 at .* is on no face of the panel cyl.stl's B-rep"):
+        panel_surfaces(panel, HoleTable(tuple(map(str, range(20))), P, -cad.normal_at(P), "holes.csv"), 20.0)
