@@ -42,7 +42,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["K95", "magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
+__all__ = ["K95", "major_sd", "magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
 
 #: the 95 % quantile of |N(0, 1)|, the coverage factor of a normal (re-exported by measure.normals)
 K95 = 1.959963984540054
@@ -115,6 +115,21 @@ def _table():
         raise RuntimeError(f"{data_path(TABLE_FILE)}: shape {t.shape}, the grid needs "
                            f"{(len(GRID_X), len(GRID_S), len(GRID_W))}: run python -m metrology.measure.magnitude")
     return t
+
+
+def major_sd(C):
+    """The standard deviation along the major axis of 2-D spreads: ``sqrt`` of the larger eigenvalue.
+
+    Parameters
+    ----------
+    C : (N, 2, 2) float, rad^2, symmetric covariances
+
+    Returns
+    -------
+    (N,) float, rad
+    """
+    C = np.asarray(C, float).reshape(-1, 2, 2)
+    return np.sqrt(0.5 * (C[:, 0, 0] + C[:, 1, 1]) + np.sqrt(0.25 * (C[:, 0, 0] - C[:, 1, 1]) ** 2 + C[:, 0, 1] ** 2))
 
 
 def magnitude_u95(g, C):

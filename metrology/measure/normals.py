@@ -65,7 +65,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.measure.magnitude import K95, X_MAX, magnitude_u95
+from metrology.measure.magnitude import K95, X_MAX, magnitude_u95, major_sd
 
 __all__ = ["HoleNormals", "hole_normals", "drill_axis", "radius95", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
 
@@ -204,8 +204,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
         b2 = (_one_sign(px, x, y) ** 2 + _one_sign(py, x, y) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
         Ca[:, 0, 0] += b2
         Ca[:, 1, 1] += b2
-    disc = np.sqrt(0.25 * (Ca[:, 0, 0] - Ca[:, 1, 1]) ** 2 + Ca[:, 0, 1] ** 2)
-    s2d = np.sqrt(0.5 * (Ca[:, 0, 0] + Ca[:, 1, 1]) + disc)  # rad: the major axis's standard deviation
+    s2d = major_sd(Ca)  # rad: the major axis's standard deviation
     still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle) & (angle < SMALL_ANGLE_SIGMAS * s2d)
     u_angle[still] = s2d[still]
     # with the curvature bound (a worst case, not a distribution) the half-width is taken only where

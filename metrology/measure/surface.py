@@ -56,7 +56,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
-from metrology.measure.magnitude import X_MAX, magnitude_u95, normal_uniform_u95
+from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
@@ -434,18 +434,14 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     else:  # the spin's share is uniform, not normal: the 95 % half-width of their sum
         a_spin = np.abs((cvec * v_spin).sum(1))  # rad, the angle at the spin's end
         U95 = normal_uniform_u95(np.sqrt(np.maximum(var - a_spin ** 2 / 3.0, 0.0)), a_spin)
-    small = angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle
-    if np.any(small):  # u: the 2-D spread's major axis
-        Cs = C[small] / ((1.0 + g2[small]) ** 2)[:, None, None]
-        disc = np.sqrt(0.25 * (Cs[:, 0, 0] - Cs[:, 1, 1]) ** 2 + Cs[:, 0, 1] ** 2)
-        s2d = np.sqrt(0.5 * (Cs[:, 0, 0] + Cs[:, 1, 1]) + disc)
-        still = angle[small] < SMALL_ANGLE_SIGMAS * s2d
-        u_angle[np.flatnonzero(small)[still]] = s2d[still]
+    Ca = C / ((1.0 + g2) ** 2)[:, None, None]  # rad^2: the tilt's covariance in angle
+    s2d = major_sd(Ca)  # rad: its major axis's standard deviation
+    # near 0, u is the 2-D spread's major axis
+    still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle) & (angle < SMALL_ANGLE_SIGMAS * s2d)
+    u_angle[still] = s2d[still]
     # U95: the half-width holding 95 % of the length of the tilt (metrology.measure.magnitude); the
     # linear rule beyond X_MAX major-axis standard deviations
-    Ca = C / ((1.0 + g2) ** 2)[:, None, None]  # rad^2: the tilt's covariance in angle
-    near = angle < X_MAX * np.sqrt(0.5 * (Ca[:, 0, 0] + Ca[:, 1, 1])
-                                   + np.sqrt(0.25 * (Ca[:, 0, 0] - Ca[:, 1, 1]) ** 2 + Ca[:, 0, 1] ** 2))
+    near = angle < X_MAX * s2d
     if np.any(near):
         with np.errstate(invalid="ignore", divide="ignore"):
             tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
