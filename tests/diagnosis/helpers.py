@@ -82,3 +82,16 @@ def draw(effect, seed):
     size = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
     sensor = None if effect in SETUP_EFFECTS else ["L1", "L2", "L3", "L4"][int(rng.integers(4))]
     return HiddenEffect(effect, sensor, size)
+
+
+def study_blind():
+    """benchmarks/study_blind.py as a module (its catalogue and drawing of cases)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        import study_blind
+    finally:
+        sys.path.pop(0)
+    return study_blind

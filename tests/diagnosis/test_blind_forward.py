@@ -7,17 +7,14 @@ drawn range, 80 poses) and runs them through the public file contract (``write_c
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from metrology.jobs.diagnose import diagnose_files
 from metrology.report.diagnose import report_text
 from metrology.sim.forward import FAMILIES, draw_case, write_case
+from tests.diagnosis.helpers import study_blind
 
-ROOT = Path(__file__).resolve().parents[2]
 CLEAR = ("pose_error", "scale", "nonlinearity", "drift", "incidence", "plane_form", "outliers")
 ALL_SENSORS = ("pose_error", "plane_form")
 
@@ -81,19 +78,10 @@ def test_crosstalk_is_never_a_confident_gain_error(tmp_path):
         assert res["cause"] in ("none", "unexplained"), res["summary"]
 
 
-def _study():
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        import study_blind
-    finally:
-        sys.path.pop(0)
-    return study_blind
-
-
 def test_study_scores_a_cause_named_beside_the_right_one_as_wrong():
     """A single draw named with its cause *and* another (seed-105 drift 13: drift and incidence
     on L4, ``high``) is not a right ``high``, and the study counts the extra cause."""
-    mod = _study()
+    mod = study_blind()
     truth = [{"family": "drift", "sensors": ["L4"], "size": 0.05, "inside": True, "detectable": 0.01}]
     rec = {"kind": "single", "family": "drift", "truth": truth, "cause": "drift", "sensors": ["L4"],
            "confidence": "high", "sizes": {"drift": None}}
@@ -107,7 +95,7 @@ def test_study_scores_a_cause_named_beside_the_right_one_as_wrong():
 
 @pytest.fixture(scope="module")
 def study():
-    mod = _study()
+    mod = study_blind()
     _, summary = mod.run_study(draws=20, nulls=200, pairs=32, seed=0, jobs=1, progress=False)
     return summary
 

@@ -8,8 +8,6 @@ file contract (``write_case`` -> ``diagnose_files``, what ``metro diagnose`` cal
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +16,7 @@ from metrology.diagnosis import rules
 from metrology.jobs.diagnose import diagnose_files
 from metrology.sim.forward import draw_case, draw_pair, write_case
 from metrology.sim.forward.cases import _draw
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.diagnosis.helpers import study_blind
 
 
 def _diagnose(case, tmp_path) -> dict:
@@ -80,21 +77,12 @@ def test_readings_a_knock_explains_are_no_outliers(tmp_path):
     assert (72, "L3") in _cells(res)
 
 
-def _study():
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        import study_blind
-    finally:
-        sys.path.pop(0)
-    return study_blind
-
-
 @pytest.mark.parametrize("i", [0, 1])
 def test_a_blind_datum_tilt_is_named_datum_tilt(i, tmp_path):
     """The blind study's datum-tilt cases (``--datum-tilts``): a null whose hand-probe scan is turned
     5-10 of its own sigmas (from the scan's physics) is named ``datum_tilt``, never ``pose_error``;
     the same case with the scan as drawn names nothing."""
-    mod = _study()
+    mod = study_blind()
     rng = np.random.default_rng([4343, 4, 0, i])
     n_poses = int(np.random.default_rng([4343, 4, 0, i, 7]).integers(30, 151))
     case = draw_case(rng, "none", scan="hand", n_poses=n_poses)
