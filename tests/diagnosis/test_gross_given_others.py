@@ -8,7 +8,6 @@ file contract (``write_case`` -> ``diagnose_files``, what ``metro diagnose`` cal
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
