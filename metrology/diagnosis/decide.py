@@ -31,7 +31,7 @@ from metrology.diagnosis.heldout import HeldOut, Problem, kfold
 from metrology.diagnosis.judge import Judgement, judge
 from metrology.diagnosis.results import Confidence, Decision, Diagnosis, Outcome, PlotData, Reason, Rival
 from metrology.diagnosis.select import flags_of, forward_select
-from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
+from metrology.diagnosis.stats import NoiseTests, Trend, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Judgement", "Rival", "diagnose", "base_analysis", "judge",
@@ -46,7 +46,8 @@ class BaseAnalysis:
     sigma : (n,) float, mm, the stated noise (or the base fit's own scatter where none);
     cov : Covariates at the calibrated geometry; calibrated : SensorLayout; theta0 : (n, 5)
     float, the start of every later fit; fit : Fit; d0 : (p, n) float, mm; tests : NoiseTests;
-    structure : dict; heldout : HeldOut; datum : DatumFormCheck or None
+    structure : dict, covariate -> sensor name -> Trend (:func:`~metrology.diagnosis.stats.structure`);
+    heldout : HeldOut; datum : DatumFormCheck or None
     """
 
     sigma: np.ndarray
@@ -56,7 +57,7 @@ class BaseAnalysis:
     fit: Fit
     d0: np.ndarray
     tests: NoiseTests
-    structure: dict
+    structure: dict[str, dict[str, Trend]]
     heldout: HeldOut
     datum: DatumFormCheck | None
 
@@ -149,8 +150,7 @@ def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
         comps = [PlaneForm((), names=ds.layout.names)] + [replace(s.component, values=None, stderr=None)
                                                           for s in chosen if s.cause != "plane_form"]
         pf = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), comps, b.theta0)
-    ag = form_agreement(b.datum, pf)
-    ag["fitted_with"] = [c.label for c in pf.components]
+    ag = replace(form_agreement(b.datum, pf), fitted_with=tuple(c.label for c in pf.components))
     if named_forms and named_forms[0].order == 0 and any(c.cause == "plane_form" for c in v.causes):
         # the form named is the scan itself: the readings agree with the cloud when they see it
         # at gain 1 (a two-sided z-test of the gain's standard error)
@@ -158,12 +158,12 @@ def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
 
         g, se = float(named_forms[0].values[2]), float(named_forms[0].stderr[2])
         p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
-        ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": rules.datum_agrees(p_g),
-                   "fitted_with": [c.label for c in v.best.fit.components]})
-    if not ag["agree"]:
-        confidence = rules.confidence_given_datum(v.confidence, v.cause, ag["agree"])
+        ag = replace(ag, scan_gain=g, scan_gain_stderr=se, p=p_g, agree=rules.datum_agrees(p_g),
+                     fitted_with=tuple(c.label for c in v.best.fit.components))
+    if not ag.agree:
+        confidence = rules.confidence_given_datum(v.confidence, v.cause, ag.agree)
         v = replace(v, confidence=confidence, reasons=v.reasons + (
-            Reason(17, "datum_agrees", Decision.DATUM_DISAGREES, tuple(ag["fitted_with"]), "p_form", ag["p"],
+            Reason(17, "datum_agrees", Decision.DATUM_DISAGREES, ag.fitted_with, "p_form", ag.p,
                    rules.ALPHA_FORM, outcome=confidence),))
     return replace(b.datum, against_readings=ag), v
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult
-from metrology.diagnosis.crosstalk import crosstalk_check
+from metrology.diagnosis.crosstalk import CrosstalkCheck, crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
 from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
@@ -125,7 +125,7 @@ class Judge:
             self._gains[key] = drop_one_gains(self.problem, chosen) if chosen else []
         return self._gains[key]
 
-    def crosstalk(self, chosen, j) -> dict:
+    def crosstalk(self, chosen, j) -> CrosstalkCheck:
         """The crosstalk check of cause ``j`` given the causes before it."""
         key = (tuple(s.label for s in chosen[:j + 1]))
         if key not in self._xtalk:
@@ -133,8 +133,9 @@ class Judge:
                                                self.folds)
         return self._xtalk[key]
 
-    def described(self, chosen, f: Fit, j, gains) -> dict:
-        """Cause ``j`` of the joint fit ``f`` of ``chosen``: its parameters, size and held-out figures."""
+    def described(self, chosen, f: Fit, j, gains) -> Cause:
+        """Cause ``j`` of the joint fit ``f`` of ``chosen``: its parameters, size and held-out figures
+        (no rivals: :meth:`named` adds them)."""
         key = (tuple(s.label for s in chosen), j)
         if key not in self._described:
             b, s = self.b, chosen[j]
@@ -145,7 +146,7 @@ class Judge:
             d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                       "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                       "p_insample": s.p_insample, "step": k + 1})
-            self._described[key] = d
+            self._described[key] = Cause.from_description(d)
         return self._described[key]
 
     # -- the two judgements -----------------------------------------------------------------------
@@ -199,8 +200,8 @@ class Judge:
         causes = []
         for j in kept:
             label = chosen[j].label
-            causes.append(Cause.from_description(self.described(chosen, f, j, gains),
-                                                 [r for r in rivals if r.of == label and not r.better]))
+            causes.append(replace(self.described(chosen, f, j, gains),
+                                  rivals=tuple(r for r in rivals if r.of == label and not r.better)))
         if random_pose is not None:
             from metrology.diagnosis.posevar import random_pose_cause
 
@@ -261,17 +262,17 @@ class Judge:
             x = self.crosstalk(chosen, j)
             separate = f"metro plan --separate {chosen[j].cause}"
             label, k = chosen[j].label, self.step_of(chosen[j].label)
-            if x["better"] is not None:
+            if x.better is not None:
                 kept.remove(j)
-                rivals.append(Rival(x["better"], "crosstalk", label, True, x["p"], separate))
+                rivals.append(Rival(x.better, "crosstalk", label, True, x.p, separate))
                 # the level split over the other sensors, as crosstalk_check tests it
-                why.append(Reason(12, "crosstalk_better", Decision.CROSSTALK_BETTER, (label, x["better"]), "p_better",
-                                  x["p"], rules.ALPHA_HELDOUT / (self.n - 1), step=k, outcome=x["better"]))
+                why.append(Reason(12, "crosstalk_better", Decision.CROSSTALK_BETTER, (label, x.better), "p_better",
+                                  x.p, rules.ALPHA_HELDOUT / (self.n - 1), step=k, outcome=x.better))
             else:
-                rivals += [Rival(lab, "crosstalk", label, False, None, separate) for lab in x["indistinguishable"]]
-                if x["indistinguishable"]:
+                rivals += [Rival(lab, "crosstalk", label, False, None, separate) for lab in x.indistinguishable]
+                if x.indistinguishable:
                     why.append(Reason(12, "crosstalk_as_good", Decision.CROSSTALK_TIE,
-                                      (label, *x["indistinguishable"]), "p_worse", None, rules.ALPHA_CONFOUND, step=k,
+                                      (label, *x.indistinguishable), "p_worse", None, rules.ALPHA_CONFOUND, step=k,
                                       outcome=separate))
         return kept, rivals
 

@@ -9,10 +9,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["Outcome", "Confidence", "Decision", "Reason", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
+if TYPE_CHECKING:  # the annotations' types only: those modules import this one
+    from metrology.core.effects import Covariates
+    from metrology.diagnosis.candidates import CandidateResult
+    from metrology.diagnosis.datum import DatumFormCheck, DatumPlaneCheck
+    from metrology.diagnosis.detectable import Detectable
+    from metrology.diagnosis.fit import Fit
+    from metrology.diagnosis.stats import NoiseTests, Trend
+
+__all__ = ["Outcome", "Confidence", "Decision", "Reason", "Param", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
 
 
 class Outcome(StrEnum):
@@ -96,6 +105,21 @@ def _num(x):
 
 
 @dataclass(frozen=True)
+class Param:
+    """One parameter of a component as fitted (a component's ``describe()["params"]`` entry).
+
+    value : float, in ``unit``; unit : str; stderr : float or None (None: the component was not
+    fitted with a covariance)."""
+
+    value: float
+    unit: str
+    stderr: float | None
+
+    def to_dict(self) -> dict:
+        return {"value": self.value, "unit": self.unit, "stderr": self.stderr}
+
+
+@dataclass(frozen=True)
 class Size:
     """A cause's size in its family's unit.
 
@@ -109,12 +133,6 @@ class Size:
     meaning: str
     stderr_fit: float | None = None
     model_spread: float | None = None
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "Size | None":
-        if d is None:
-            return None
-        return cls(d["value"], d.get("stderr"), d["unit"], d["meaning"], d.get("stderr_fit"), d.get("model_spread"))
 
     def to_dict(self) -> dict:
         out = {"value": self.value, "stderr": self.stderr, "unit": self.unit, "meaning": self.meaning}
@@ -164,7 +182,8 @@ class Cause:
     the test that named it where that is not the held-out one; params : dict, its parameters
     (value, unit, stderr); rivals : tuple of Rival it cannot be told from;
     detail : dict, the rest of its description (component, reference, located pose, pose-error
-    figures...), JSON-ready, in the order ``to_dict`` writes it.
+    figures...), JSON-ready, in the order ``to_dict`` writes it (the typed keys there as None,
+    holding their place: their values are the attributes).
     """
 
     label: str
@@ -182,10 +201,11 @@ class Cause:
 
     @classmethod
     def from_description(cls, d: dict, rivals=()) -> "Cause":
-        """A cause from its description (a component's ``describe()`` with the verdict's figures)."""
-        return cls(d["label"], d["cause"], list(d["sensors"]), Size.from_dict(d.get("size")), d["heldout_gain_chi2"],
+        """A cause from its description (a component's ``describe()`` with the verdict's figures; its
+        ``size`` a :class:`Size` or None)."""
+        return cls(d["label"], d["cause"], list(d["sensors"]), d.get("size"), d["heldout_gain_chi2"],
                    d.get("p_heldout_given_others"), d["p_insample"], d["step"], d.get("test"), d.get("params", {}),
-                   tuple(rivals), dict(d))
+                   tuple(rivals), {k: None if k in _TYPED else v for k, v in d.items()})
 
     def to_dict(self) -> dict:
         out = dict(self.detail)
@@ -206,21 +226,22 @@ class PlotData:
 
     base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
     (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
-    flags : (p, n) bool, flagged readings; structure : dict, the base structure table;
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table (covariate
+    -> sensor name -> :class:`~metrology.diagnosis.stats.Trend`);
     heldout_base : (p, n) float, mm, or None, the base model's k-fold held-out residuals;
     heldout_after : (p, n) float, mm, or None, those of the model the ``heldout`` figures of
     :class:`Diagnosis` judge (base + the causes named; None when nothing is named). In both, a
     reading flagged gross by a named outliers cause is NaN, as it is left out of those figures.
     """
 
-    base: object
-    cov: object
+    base: Fit
+    cov: Covariates
     d0: np.ndarray
-    best: object
+    best: CandidateResult | None
     names: tuple
     sigma: np.ndarray
     flags: np.ndarray
-    structure: dict
+    structure: dict[str, dict[str, Trend]]
     heldout_base: np.ndarray | None = None
     heldout_after: np.ndarray | None = None
 
@@ -251,24 +272,24 @@ class Diagnosis:
     summary: str
     named: Cause | None
     candidates: tuple
-    tests_base: object
-    tests_extended: object
-    structure_base: dict
+    tests_base: NoiseTests
+    tests_extended: NoiseTests | None
+    structure_base: dict[str, dict[str, Trend]]
     discrepancy: dict
     heldout: dict
     confounding: list
     base_theta: np.ndarray
     base_stderr: np.ndarray
     thresholds: dict
-    datum_form: object = None
+    datum_form: DatumFormCheck | None = None
     plot_data: PlotData | None = None
     causes: tuple = ()
     steps: tuple = ()
-    detectable: dict = field(default_factory=dict)
+    detectable: dict[str, Detectable] = field(default_factory=dict)
     reasons: tuple = ()
     #: the datum plane estimated with the sensors under its scan's covariance
     #: (:class:`metrology.diagnosis.datum.DatumPlaneCheck`), None when not run
-    datum_plane: object = None
+    datum_plane: DatumPlaneCheck | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -286,12 +307,12 @@ class Diagnosis:
             "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
             "tests": {"base": self.tests_base.to_dict(),
                       "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
-            "structure": self.structure_base,
+            "structure": {key: {name: t.to_dict() for name, t in row.items()} for key, row in self.structure_base.items()},
             "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
                      "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
             "thresholds": self.thresholds,
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
-            "detectable": self.detectable,
+            "detectable": {family: d.to_dict() for family, d in self.detectable.items()},
             "reasons": [r.to_dict() for r in self.reasons],
             "datum_plane": None if self.datum_plane is None else self.datum_plane.to_dict(),
         }

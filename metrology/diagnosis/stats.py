@@ -9,7 +9,7 @@ import numpy as np
 from metrology.core.effects import Covariates
 from metrology.diagnosis import rules
 
-__all__ = ["NoiseTests", "Battery", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
+__all__ = ["NoiseTests", "Trend", "Battery", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
 
 
 @dataclass(frozen=True)
@@ -159,10 +159,27 @@ def battery_on(tests: NoiseTests, sensors) -> float:
     return min(1.0, min(ps) * tests.n_tests) if ps else 1.0
 
 
-def structure(residual, d0, cov: Covariates, names):
+@dataclass(frozen=True)
+class Trend:
+    """One cell of the structure table (:func:`structure`): a sensor's base residuals against one
+    covariate, fitted with a quadratic.
+
+    r2 : float, the quadratic fit's R^2 (unitless, 0-1); p : float, its F-test's p-value (2 and
+    m - 3 dof, m the sensor's finite readings)."""
+
+    r2: float
+    p: float
+
+    def to_dict(self) -> dict:
+        return {"r2": self.r2, "p": self.p}
+
+
+def structure(residual, d0, cov: Covariates, names) -> dict[str, dict[str, Trend]]:
     """Residuals against each covariate: per sensor, the quadratic-fit R^2 and F-test p-value.
 
-    Returns dict covariate -> sensor -> {"r2", "p"}.
+    Returns dict covariate (``d_mm``, ``incidence_deg``, ...) -> sensor name -> :class:`Trend`
+    (a covariate not finite everywhere, a sensor with a constant covariate or fewer than 6
+    readings, left out).
     """
     from scipy import stats
 
@@ -193,7 +210,7 @@ def structure(residual, d0, cov: Covariates, names):
             ss_tot = float(np.sum((y - y.mean()) ** 2))
             r2 = 1 - ss_res / ss_tot if ss_tot > 0 else 0.0
             F = (ss_tot - ss_res) / 2 / max(ss_res / (len(y) - 3), 1e-300)
-            row[names[i]] = {"r2": r2, "p": float(stats.f.sf(F, 2, len(y) - 3))}
+            row[names[i]] = Trend(r2, float(stats.f.sf(F, 2, len(y) - 3)))
         out[key] = row
     return out
 

@@ -60,7 +60,7 @@ def test_flat_readings_against_a_bowed_cloud_lower_the_confidence_of_none():
     pts = synth_cloud(rng, PLANE, [HiddenEffect("plane_form", None, 0.01)])
     d = diagnose(Dataset(check(export, nominal), nominal, PLANE, pts), folds=FOLDS, sim_reps=1)
     assert d.cause == "none" and d.confidence == "low" and "disagrees" in d.summary
-    assert not d.datum_form.against_readings["agree"]
+    assert not d.datum_form.against_readings.agree
 
 
 @pytest.mark.parametrize("with_pose_error, n_seeds", [
@@ -91,7 +91,7 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error, n_seeds
             comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
         pf = fit_any(FitData(nominal, ds.obs, cov, sigma), comps, base.theta)
         d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
-        chi2.append(form_agreement(datum_form(ds, FitData(ds.layout, ds.obs, cov, sigma), zero, u, d0), pf)["chi2"])
+        chi2.append(form_agreement(datum_form(ds, FitData(ds.layout, ds.obs, cov, sigma), zero, u, d0), pf).chi2)
     if with_pose_error:
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause
