@@ -24,7 +24,7 @@ from metrology.diagnosis.candidates import CandidateResult
 from metrology.diagnosis.crosstalk import CrosstalkCheck, crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
-from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
+from metrology.diagnosis.results import Cause, Confidence, Confounding, Decision, Outcome, Reason, Rival
 from metrology.diagnosis.heldout import Problem
 from metrology.diagnosis.select import drop_one_gains, family_of, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import Battery, NoiseTests, battery_on, battery_rng, noise_tests
@@ -54,7 +54,7 @@ class Judgement:
     sensors: list = field(default_factory=list)
     best: CandidateResult | None = None
     tests_extended: NoiseTests | None = None
-    confounding: list = field(default_factory=list)
+    confounding: list[Confounding] = field(default_factory=list)
     named: Cause | None = None
     causes: tuple = ()
     lead: CandidateResult | None = None
@@ -228,11 +228,11 @@ class Judge:
         for r in rivals:
             if not r.better and any(c.label == r.of for c in causes):
                 j = next(k for k in kept if chosen[k].label == r.of)
-                confounding.append({"between": [r.of, r.label], "p_separation": None,
-                                    "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
+                confounding.append(Confounding((r.of, r.label),
+                                               f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
                                                f"to another sensor's distance, crosstalk, outside the catalogue); "
                                                f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
-                                               f"({r.separate})"})
+                                               f"({r.separate})"))
         weak = weakly_supported([] if sole_exempt else causes)
         for c in causes:
             if c.label in weak:
@@ -277,7 +277,7 @@ class Judge:
         return kept, rivals
 
 
-def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
+def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list[Confounding]:
     """Runner-ups that explain as much (a different cause or sensor), and parameters of the
     named component too correlated with the base geometry (each a Reason appended to ``why``)."""
     out = []
@@ -290,12 +290,10 @@ def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
         if rules.indistinguishable(p_sep):
             why.append(Reason(15, "indistinguishable", Decision.CONFOUNDED, (best.label, other.label), "p_separation",
                               p_sep, rules.ALPHA_CONFOUND, step=step))
-            out.append({
-                "between": [best.label, other.label], "p_separation": p_sep,
-                "message": f"the data cannot tell {best.label} from {other.label} (held-out gains "
-                           f"indistinguishable, p = {p_sep:.2g}); to separate them: "
-                           f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
-            })
+            out.append(Confounding((best.label, other.label),
+                                   f"the data cannot tell {best.label} from {other.label} (held-out gains "
+                                   f"indistinguishable, p = {p_sep:.2g}); to separate them: "
+                                   f"{ADVICE[best.cause]}; {ADVICE[other.cause]}", p_separation=p_sep))
     f = best.fit
     fc = f.components[-1] if f.components else best.component  # as fitted (outliers re-flagged since)
     if not fc.per_pose:  # its parameters are the last of the fit's (the candidate is fitted last)
@@ -305,11 +303,10 @@ def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
             if rules.poorly_separated(cb_):
                 why.append(Reason(15, "poorly_separated", Decision.CONFOUNDED, (best.label, f"{fc.label}.{fc.param_names[q]}", w),
                                   "correlation", float(cb_), rules.CORR_CONFOUND, step=step))
-                out.append({
-                    "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
-                    "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
-                               f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
-                })
+                out.append(Confounding((f"{fc.label}.{fc.param_names[q]}", w),
+                                       f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
+                                       f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate "
+                                       f"them", correlation=float(cb_)))
     return out
 
 

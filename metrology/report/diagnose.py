@@ -250,7 +250,7 @@ def structure_rows(diag: Diagnosis) -> tuple:
     out = []
     for key, row in diag.structure_base.items():
         cells = []
-        for nm in diag.discrepancy["sensors"]:
+        for nm in diag.discrepancy.sensors:
             v = row.get(nm)
             cells.append("—" if v is None else f"{v.r2:.2f}" + ("*" if (key, nm) in marked else ""))
         out.append((AXIS_WORDS.get(key, key), *cells))
@@ -305,7 +305,7 @@ def diagnosis_figures(diag: Diagnosis) -> list:
         comp = best.fit.components[0]
         key = comp.plot_key  # from the effect registry
         cols = list(comp.sensors) if comp.sensors else list(range(n))
-        model = diag.heldout.get("model", comp.label)
+        model = comp.label if diag.heldout.model is None else diag.heldout.model
         fig, axes = plt.subplots(len(cols), 2, figsize=(COLUMN_IN, 0.6 + 2.5 * len(cols)), squeeze=False,
                                  sharey="row", layout="constrained")
         X = variables.get(key, variables["pose_index"])

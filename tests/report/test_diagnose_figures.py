@@ -120,7 +120,7 @@ def test_overview_grid_draws_only_the_structured_variables_and_sensors(drift):
     _close(figs)
     rows = structure_rows(drift)
     assert len(rows) == len(drift.structure_base)
-    starred = {(r[0], name) for r in rows for name, c in zip(drift.discrepancy["sensors"], r[1:]) if c.endswith("*")}
+    starred = {(r[0], name) for r in rows for name, c in zip(drift.discrepancy.sensors, r[1:]) if c.endswith("*")}
     assert len(starred) == len(cells) and {s for _, s in starred} == {"L3"}
 
 
