@@ -61,6 +61,21 @@ def test_flat_readings_against_a_bowed_cloud_lower_the_confidence_of_none():
     d = diagnose(Dataset(check(export, nominal), nominal, PLANE, pts), folds=FOLDS, sim_reps=1)
     assert d.cause == "none" and d.confidence == "low" and "disagrees" in d.summary
     assert not d.datum_form.against_readings.agree
+    # typed: the check, its window, its parameters and the agreement are attributes, the JSON made from them
+    from metrology.diagnosis.datum import DatumFormCheck, FormAgreement, SpotWindow
+    from metrology.diagnosis.results import Param
+
+    df, ag = d.datum_form, d.datum_form.against_readings
+    assert isinstance(df, DatumFormCheck) and isinstance(df.window_mm, SpotWindow) and isinstance(ag, FormAgreement)
+    assert df.window_mm.s[0] < df.window_mm.s[1] and df.window_mm.t[0] < df.window_mm.t[1]
+    assert all(isinstance(v, Param) and v.unit == "mm" and v.stderr > 0 for v in df.params.values())
+    assert ag.p < 0.01 and set(ag.z) == set(PlaneForm.key_params) and ag.fitted_with == ("plane_form",)
+    out = d.to_dict()["datum_form"]
+    assert list(out) == ["points", "points_used", "window", "window_mm", "radius_mm", "params", "p_quadratic",
+                         "visible_rms_mm", "visible_over_noise", "against_readings"]
+    assert out["window_mm"] == {"s": list(df.window_mm.s), "t": list(df.window_mm.t)}
+    assert all(list(v) == ["value", "unit", "stderr"] for v in out["params"].values())
+    assert list(out["against_readings"]) == ["readings", "readings_stderr", "z", "chi2", "p", "agree", "fitted_with"]
 
 
 @pytest.mark.parametrize("with_pose_error, n_seeds", [
