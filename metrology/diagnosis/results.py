@@ -9,17 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # the annotations' types only: those modules import this one
-    from metrology.core.effects import Covariates
-    from metrology.diagnosis.candidates import CandidateResult
-    from metrology.diagnosis.datum import DatumFormCheck, DatumPlaneCheck
-    from metrology.diagnosis.detectable import Detectable
-    from metrology.diagnosis.fit import Fit
-    from metrology.diagnosis.stats import NoiseTests, Trend
+# The annotations name types of modules that import this one, so they are not imported here (an
+# import cycle; annotations stay strings, ``from __future__ import annotations``): ``Fit``
+# (diagnosis/fit), ``Covariates`` (core/effects), ``CandidateResult`` (diagnosis/candidates),
+# ``NoiseTests`` and ``Trend`` (diagnosis/stats), ``DatumFormCheck`` and ``DatumPlaneCheck``
+# (diagnosis/datum), ``Detectable`` (diagnosis/detectable).
 
 __all__ = ["Outcome", "Confidence", "Decision", "Reason", "Param", "Size", "Rival", "Cause", "Confounding", "Discrepancy",
            "HeldOutFigures", "StepFigures", "Diagnosis", "PlotData"]
