@@ -111,3 +111,18 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error, n_seeds
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause
         assert np.mean(chi2) > 6.0, chi2
+
+
+def test_a_form_named_as_scanned_adds_its_gain_after_the_fit_labels_in_the_json():
+    # check_datum's scan branch: the readings see the scanned form at a gain; its p replaces the Wald one
+    from dataclasses import replace
+
+    from metrology.diagnosis.datum import FormAgreement
+
+    q = dict.fromkeys(PlaneForm.key_params, 0.0)
+    ag = FormAgreement(q, q, q, 1.2, 0.75, True, ("plane_form@scan",))
+    assert list(ag.to_dict()) == ["readings", "readings_stderr", "z", "chi2", "p", "agree", "fitted_with"]
+    scan = replace(ag, scan_gain=0.98, scan_gain_stderr=0.02, p=0.32)
+    out = scan.to_dict()
+    assert list(out)[-3:] == ["fitted_with", "scan_gain", "scan_gain_stderr"] and out["p"] == 0.32
+    assert out["fitted_with"] == ["plane_form@scan"] and (scan.scan_gain, scan.agree) == (0.98, True)
