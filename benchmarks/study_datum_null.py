@@ -46,7 +46,7 @@ def main(argv=None):
             ds = load_checked(paths["export.csv"], paths["cloud.ply"], paths["layout.toml"])
         b = base_analysis(ds, 5)
         pf = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), (PlaneForm((), names=ds.layout.names),), b.theta0)
-        ps.append(form_agreement(b.datum, pf)["p"])
+        ps.append(form_agreement(b.datum, pf).p)
     ps = np.array(ps)
     for level in (THRESHOLDS["alpha_form"], 0.05):
         k = int(np.sum(ps < level))

@@ -69,7 +69,7 @@ def trial(args):
     return {"effect": effect, "size": size, "seed": seed, "cause": d.cause, "sensors": d.sensors,
             "confidence": d.confidence, "right": bool(right) if effect != "null" else d.cause == "none",
             "catalogued_high": d.cause not in ("none", "unexplained") and d.confidence in ("high", "moderate"),
-            "cloud_agrees": None if d.datum_form is None else d.datum_form["against_readings"]["agree"]}
+            "cloud_agrees": None if d.datum_form is None else d.datum_form.against_readings.agree}
 
 
 def main(argv=None):

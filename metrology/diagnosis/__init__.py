@@ -42,13 +42,13 @@ Words and figures are in :mod:`metrology.report.diagnose`, the file job in
 """
 
 from metrology.diagnosis.candidates import CandidateResult, candidates_for, covariates_for, flag_outliers
-from metrology.diagnosis.datum import DatumFormCheck, datum_form, form_agreement
+from metrology.diagnosis.datum import DatumFormCheck, FormAgreement, datum_form, form_agreement
 from metrology.diagnosis.decide import Diagnosis, diagnose
 from metrology.diagnosis.fit import Fit, FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import HeldOut, kfold
-from metrology.diagnosis.stats import NoiseTests, battery_on, ljung_box, noise_tests, structure
+from metrology.diagnosis.stats import NoiseTests, Trend, battery_on, ljung_box, noise_tests, structure
 from metrology.diagnosis.thresholds import ADVICE, THRESHOLDS
 
 __all__ = ["THRESHOLDS", "ADVICE", "Fit", "FitData", "FitOptions", "fit", "fit_any", "Diagnosis", "diagnose", "CandidateResult", "candidates_for",
-           "covariates_for", "flag_outliers", "DatumFormCheck", "datum_form", "form_agreement", "HeldOut", "kfold",
-           "NoiseTests", "ljung_box", "noise_tests", "battery_on", "structure"]
+           "covariates_for", "flag_outliers", "DatumFormCheck", "FormAgreement", "datum_form", "form_agreement", "HeldOut",
+           "kfold", "NoiseTests", "Trend", "ljung_box", "noise_tests", "battery_on", "structure"]

@@ -27,7 +27,7 @@ from metrology.diagnosis.heldout import beyond_span, kfold
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
 
-__all__ = ["OtherReading", "crosstalk_check"]
+__all__ = ["OtherReading", "CrosstalkCheck", "crosstalk_check"]
 
 
 @dataclass(frozen=True)
@@ -52,17 +52,30 @@ class OtherReading(Component):
         return out
 
 
-def crosstalk_check(ds, b, given, named, folds) -> dict:
-    """Compare the characteristic ``named`` (a CandidateResult on one sensor, scored given the
-    components ``given``) with crosstalk from each other sensor, held out.
+@dataclass(frozen=True)
+class CrosstalkCheck:
+    """The crosstalk check of one characteristic (:func:`crosstalk_check`).
 
-    Returns ``{"better": label or None, "p": float, "indistinguishable": [labels]}``: the
-    crosstalk term that predicts significantly better, and those that cannot be told apart.
+    better : str or None, the label of the crosstalk term (``crosstalk.L2<-L1``) that predicts
+    held-out poses significantly better (rule 12; the smallest p of those that do), None where none
+    does; p : float, its one-sided paired p-value (1.0 where none is better);
+    indistinguishable : tuple of str, the labels of the crosstalk terms that predict as well
+    (not significantly worse), in the order of the other sensors.
+    """
+
+    better: str | None = None
+    p: float = 1.0
+    indistinguishable: tuple = ()
+
+
+def crosstalk_check(ds, b, given, named, folds) -> CrosstalkCheck:
+    """Compare the characteristic ``named`` (a CandidateResult on one sensor, scored given the
+    components ``given``) with crosstalk from each other sensor, held out (a :class:`CrosstalkCheck`).
     """
     nominal, obs = ds.layout, ds.obs
     i = named.component.sensors[0]
     others = [j for j in range(nominal.n) if j != i]
-    out = {"better": None, "p": 1.0, "indistinguishable": []}
+    better, p_best, tie = None, 1.0, []
     # the readings the selection judged a characteristic on (score_candidate): a held-out
     # reading beyond the training span tests the curve's extrapolation, where a P5 or a spline
     # diverges, and one such pose swamps the paired test either way
@@ -75,8 +88,8 @@ def crosstalk_check(ds, b, given, named, folds) -> dict:
         if np.allclose(d, 0):
             continue
         p_better, p_worse = paired_gain_p(d), paired_gain_p(-d)
-        if rules.crosstalk_better(p_better, len(others)) and p_better < out["p"]:
-            out.update(better=c.label, p=p_better)
+        if rules.crosstalk_better(p_better, len(others)) and p_better < p_best:
+            better, p_best = c.label, p_better
         elif rules.crosstalk_as_good(p_worse):
-            out["indistinguishable"].append(c.label)
-    return out
+            tie.append(c.label)
+    return CrosstalkCheck(better, p_best, tuple(tie))

@@ -10,8 +10,9 @@ from metrology.core.effects import Covariates, PlaneForm
 from metrology.core.model import jacobian_raw
 from metrology.diagnosis.fit import Fit, FitData
 from metrology.diagnosis import rules
+from metrology.diagnosis.results import Param
 
-__all__ = ["DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS", "DatumPlaneCheck",
+__all__ = ["SpotWindow", "FormAgreement", "DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS", "DatumPlaneCheck",
            "datum_plane", "name_datum_plane"]
 
 #: the datum form's quadratic coefficients (bow, saddle, twist), compared cloud against readings
@@ -21,40 +22,89 @@ MIN_FORM_POINTS = 50
 
 
 @dataclass(frozen=True)
+class SpotWindow:
+    """The box of the spots' in-plane positions, the datum plane's ``(s, t)`` axes about the
+    cloud's centre (:func:`~metrology.core.plane.plane_basis`).
+
+    s, t : (2,) tuple of float, mm, ``(lo, hi)`` along each axis."""
+
+    s: tuple
+    t: tuple
+
+    def to_dict(self) -> dict:
+        return {"s": list(self.s), "t": list(self.t)}
+
+
+@dataclass(frozen=True)
+class FormAgreement:
+    """The datum form's quadratic coefficients, the cloud's against the readings' (:func:`form_agreement`).
+
+    readings, readings_stderr : dict, coefficient (:data:`FORM_QUADRATIC`) -> float, mm, the
+    readings' ``plane_form`` and its standard error; z : dict, the same keys -> float, their
+    difference from the cloud's in combined standard errors; chi2 : float, the Wald statistic (3 dof,
+    both full covariances); p : float, its p-value, or, for a form named as scanned, the gain's
+    (``scan_gain``); agree : bool, at ``alpha_form`` (:func:`~metrology.diagnosis.rules.datum_agrees`);
+    fitted_with : tuple of str, the labels of the fit that gave the readings' form (set by
+    :func:`metrology.diagnosis.decide.check_datum`); scan_gain, scan_gain_stderr : float or None
+    (unitless), the gain at which the readings see the scanned form, where the form named is the
+    scan itself (its p is then the two-sided z-test of gain 1).
+    """
+
+    readings: dict
+    readings_stderr: dict
+    z: dict
+    chi2: float
+    p: float
+    agree: bool
+    fitted_with: tuple = ()
+    scan_gain: float | None = None
+    scan_gain_stderr: float | None = None
+
+    def to_dict(self) -> dict:
+        out = {"readings": self.readings, "readings_stderr": self.readings_stderr, "z": self.z, "chi2": self.chi2,
+               "p": self.p, "agree": self.agree, "fitted_with": list(self.fitted_with)}
+        if self.scan_gain is not None:
+            out.update(scan_gain=self.scan_gain, scan_gain_stderr=self.scan_gain_stderr)
+        return out
+
+
+@dataclass(frozen=True)
 class DatumFormCheck:
     """The datum's form measured by the tracker cloud (:func:`datum_form`).
 
     Attributes
     ----------
     points, points_used : int; window : str, ``"under the spots"`` or ``"whole cloud"``
-    window_mm : dict, the spots' box ``{"s": [lo, hi], "t": [lo, hi]}`` mm
-    radius_mm : float; params : dict, the form's parameters (value, unit, stderr)
+    window_mm : SpotWindow, the spots' box, mm
+    radius_mm : float; params : dict, parameter name -> :class:`~metrology.diagnosis.results.Param`,
+        the form's parameters (``PlaneForm``'s, in its order)
     p_quadratic : float, Wald test of the quadratic part against zero
     values : (5,) float, mm, the form's values; cov : (5, 5) float, mm^2, their covariance
     visible_rms_mm : list of float, per sensor; visible_over_noise : list of float
-    against_readings : dict or None, :func:`form_agreement` with ``fitted_with`` (after a diagnosis)
+    against_readings : FormAgreement or None, :func:`form_agreement` with ``fitted_with`` (after a diagnosis)
     """
 
     points: int
     points_used: int
     window: str
-    window_mm: dict
+    window_mm: SpotWindow
     radius_mm: float
-    params: dict
+    params: dict[str, Param]
     p_quadratic: float
     values: np.ndarray
     cov: np.ndarray
     visible_rms_mm: list
     visible_over_noise: list
-    against_readings: dict | None = None
+    against_readings: FormAgreement | None = None
 
     def to_dict(self) -> dict:
         out = {"points": self.points, "points_used": self.points_used, "window": self.window,
-               "window_mm": self.window_mm, "radius_mm": self.radius_mm, "params": self.params,
+               "window_mm": self.window_mm.to_dict(), "radius_mm": self.radius_mm,
+               "params": {k: v.to_dict() for k, v in self.params.items()},
                "p_quadratic": self.p_quadratic, "visible_rms_mm": self.visible_rms_mm,
                "visible_over_noise": self.visible_over_noise}
         if self.against_readings is not None:
-            out["against_readings"] = self.against_readings
+            out["against_readings"] = self.against_readings.to_dict()
         return out
 
 
@@ -101,18 +151,19 @@ def datum_form(ds, data: FitData, zero, u, d0) -> DatumFormCheck:
         ok = np.isfinite(obs.d[:, i]) & np.isfinite(term[:, i])
         r = term[ok, i] - J[ok, i] @ np.linalg.lstsq(J[ok, i], term[ok, i], rcond=None)[0]
         visible.append(float(np.sqrt(np.mean(r**2))) if ok.any() else float("nan"))
-    params = form.describe()["params"]
+    params = {k: Param(**v) for k, v in form.describe()["params"].items()}
     return DatumFormCheck(
         int(len(pts)), int(under.sum()), window,
-        {"s": [float(spots[:, 0].min()), float(spots[:, 0].max())], "t": [float(spots[:, 1].min()), float(spots[:, 1].max())]},
+        SpotWindow((float(spots[:, 0].min()), float(spots[:, 0].max())), (float(spots[:, 1].min()), float(spots[:, 1].max()))),
         form.radius_mm, params, float(stats.chi2.sf(wald, 3)), form.values, C,
         visible, [v / s for v, s in zip(visible, sigma)])
 
 
-def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> dict:
+def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> FormAgreement:
     """Quadratic coefficients of the cloud against those of the ``plane_form`` fitted to the
     readings: per coefficient the difference in combined standard errors, and the Wald
-    chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_form``."""
+    chi-square (3 dof, both full covariances) with its p-value; ``agree`` at ``alpha_form``
+    (``fitted_with`` left empty: the caller knows the fit's labels)."""
     from scipy import stats
 
     off = 0
@@ -129,10 +180,9 @@ def form_agreement(datum: DatumFormCheck, readings_fit: Fit) -> dict:
     z = diff / np.sqrt(np.diag(Cd))
     wald = float(diff @ np.linalg.solve(Cd, diff))
     p = float(stats.chi2.sf(wald, 3))
-    return {"readings": dict(zip(FORM_QUADRATIC, v_r.tolist())),
-            "readings_stderr": dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
-            "z": dict(zip(FORM_QUADRATIC, z.tolist())), "chi2": wald, "p": p,
-            "agree": rules.datum_agrees(p)}
+    return FormAgreement(dict(zip(FORM_QUADRATIC, v_r.tolist())),
+                         dict(zip(FORM_QUADRATIC, np.sqrt(np.diag(C_r)).tolist())),
+                         dict(zip(FORM_QUADRATIC, z.tolist())), wald, p, rules.datum_agrees(p))
 
 
 # -- the datum plane's own uncertainty (issue 40) ----------------------------------------------------

@@ -29,9 +29,10 @@ from metrology.diagnosis.extension import simulated_figures
 from metrology.diagnosis.fit import Fit, FitData, clear_all, fit_any, geometry
 from metrology.diagnosis.heldout import HeldOut, Problem, kfold
 from metrology.diagnosis.judge import Judgement, judge
-from metrology.diagnosis.results import Confidence, Decision, Diagnosis, Outcome, PlotData, Reason, Rival
+from metrology.diagnosis.results import (Confidence, Decision, Diagnosis, Discrepancy, HeldOutFigures, Outcome, PlotData,
+                                         Reason, Rival, StepFigures)
 from metrology.diagnosis.select import flags_of, forward_select
-from metrology.diagnosis.stats import NoiseTests, battery_on, battery_rng, noise_tests, structure
+from metrology.diagnosis.stats import NoiseTests, Trend, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.thresholds import THRESHOLDS
 
 __all__ = ["Diagnosis", "PlotData", "BaseAnalysis", "Judgement", "Rival", "diagnose", "base_analysis", "judge",
@@ -46,7 +47,8 @@ class BaseAnalysis:
     sigma : (n,) float, mm, the stated noise (or the base fit's own scatter where none);
     cov : Covariates at the calibrated geometry; calibrated : SensorLayout; theta0 : (n, 5)
     float, the start of every later fit; fit : Fit; d0 : (p, n) float, mm; tests : NoiseTests;
-    structure : dict; heldout : HeldOut; datum : DatumFormCheck or None
+    structure : dict, covariate -> sensor name -> Trend (:func:`~metrology.diagnosis.stats.structure`);
+    heldout : HeldOut; datum : DatumFormCheck or None
     """
 
     sigma: np.ndarray
@@ -56,7 +58,7 @@ class BaseAnalysis:
     fit: Fit
     d0: np.ndarray
     tests: NoiseTests
-    structure: dict
+    structure: dict[str, dict[str, Trend]]
     heldout: HeldOut
     datum: DatumFormCheck | None
 
@@ -87,47 +89,34 @@ def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
-def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng):
+def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng) -> tuple:
     """The simulation of this data set under the base (and the extended) model beside the
-    measurement, and the held-out gains. Returns (discrepancy dict, heldout dict)."""
+    measurement, and the held-out gains. Returns (Discrepancy, HeldOutFigures)."""
     ds, b, folds = problem.ds, problem.b, problem.folds
     nominal, sigma, ho_base = ds.layout, b.sigma, b.heldout
     base_model = ExtendedModel(b.calibrated, ())
     sim_rms_b, sim_nd_b, sim_nd_b_sd = simulated_figures(problem, base_model, rng, sim_reps)
     meas_rms = np.sqrt(np.nanmean(b.fit.residual**2, axis=0))
-    discrepancy = {
-        "sensors": list(nominal.names),
-        "stated_noise_mm": sigma.tolist(),
-        "measured_residual_rms_mm": meas_rms.tolist(),
-        "simulated_base_residual_rms_mm": sim_rms_b.tolist(),
-        "measured_heldout_normal_deg": float(np.rad2deg(np.nanmean(ho_base.normal_dev))),
-        "simulated_base_heldout_normal_deg": float(np.rad2deg(sim_nd_b)),
-        "simulated_base_heldout_normal_sd_deg": float(np.rad2deg(sim_nd_b_sd)),
-        "sim_reps": sim_reps,
-    }
-    heldout = {"folds": folds, "base_rms_mm": ho_base.rms(),
-               "base_normal_deg": float(np.rad2deg(np.nanmean(ho_base.normal_dev)))}
+    base_normal = float(np.nanmean(ho_base.normal_dev))
+    discrepancy = Discrepancy(list(nominal.names), sigma.tolist(), meas_rms.tolist(), sim_rms_b.tolist(), base_normal,
+                              float(sim_nd_b), float(sim_nd_b_sd), sim_reps)
     if best is None:
-        return discrepancy, heldout
+        return discrepancy, HeldOutFigures(folds, ho_base.rms(), base_normal)
     fm = best.fit.model(nominal)
     sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(problem, fm, rng, sim_reps)
-    discrepancy["simulated_extended_residual_rms_mm"] = sim_rms_e.tolist()
-    discrepancy["simulated_extended_heldout_normal_deg"] = float(np.rad2deg(sim_nd_e))
-    discrepancy["simulated_extended_heldout_normal_sd_deg"] = float(np.rad2deg(sim_nd_e_sd))
-    discrepancy["extended_model"] = best.label
+    discrepancy = replace(discrepancy, extended_model=best.label, simulated_extended_residual_rms_mm=sim_rms_e.tolist(),
+                          simulated_extended_heldout_normal_rad=float(sim_nd_e),
+                          simulated_extended_heldout_normal_sd_rad=float(sim_nd_e_sd))
     ho_e = best.heldout
     excl = flags  # the readings flagged gross by a named outliers cause (None if none is named)
     S = list(best.fit.sensors)
-    heldout.update({
-        "model": best.label,
-        "base_rms_mm": ho_base.rms(None, excl), "extended_rms_mm": ho_e.rms(None, excl),
-        "rms_ratio": ho_base.rms(None, excl) / ho_e.rms(None, excl),
-        "base_rms_concerned_mm": ho_base.rms(S, excl), "extended_rms_concerned_mm": ho_e.rms(S, excl),
-        "rms_ratio_concerned": ho_base.rms(S, excl) / ho_e.rms(S, excl),
-        "extended_normal_deg": float(np.rad2deg(np.nanmean(ho_e.normal_dev))),
-        "normal_ratio": float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)),
-        "p_heldout": best.p_heldout,
-    })
+    heldout = HeldOutFigures(
+        folds, ho_base.rms(None, excl), base_normal, model=best.label, extended_rms_mm=ho_e.rms(None, excl),
+        rms_ratio=ho_base.rms(None, excl) / ho_e.rms(None, excl),
+        base_rms_concerned_mm=ho_base.rms(S, excl), extended_rms_concerned_mm=ho_e.rms(S, excl),
+        rms_ratio_concerned=ho_base.rms(S, excl) / ho_e.rms(S, excl),
+        extended_normal_rad=float(np.nanmean(ho_e.normal_dev)),
+        normal_ratio=float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)), p_heldout=best.p_heldout)
     return discrepancy, heldout
 
 
@@ -149,8 +138,7 @@ def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
         comps = [PlaneForm((), names=ds.layout.names)] + [replace(s.component, values=None, stderr=None)
                                                           for s in chosen if s.cause != "plane_form"]
         pf = fit_any(FitData(ds.layout, ds.obs, b.cov, b.sigma), comps, b.theta0)
-    ag = form_agreement(b.datum, pf)
-    ag["fitted_with"] = [c.label for c in pf.components]
+    ag = replace(form_agreement(b.datum, pf), fitted_with=tuple(c.label for c in pf.components))
     if named_forms and named_forms[0].order == 0 and any(c.cause == "plane_form" for c in v.causes):
         # the form named is the scan itself: the readings agree with the cloud when they see it
         # at gain 1 (a two-sided z-test of the gain's standard error)
@@ -158,31 +146,29 @@ def check_datum(ds, b: BaseAnalysis, v: Judgement, chosen, scored) -> tuple:
 
         g, se = float(named_forms[0].values[2]), float(named_forms[0].stderr[2])
         p_g = float(2 * stats.norm.sf(abs(g - 1.0) / max(se, 1e-300)))
-        ag.update({"scan_gain": g, "scan_gain_stderr": se, "p": p_g, "agree": rules.datum_agrees(p_g),
-                   "fitted_with": [c.label for c in v.best.fit.components]})
-    if not ag["agree"]:
-        confidence = rules.confidence_given_datum(v.confidence, v.cause, ag["agree"])
+        ag = replace(ag, scan_gain=g, scan_gain_stderr=se, p=p_g, agree=rules.datum_agrees(p_g),
+                     fitted_with=tuple(c.label for c in v.best.fit.components))
+    if not ag.agree:
+        confidence = rules.confidence_given_datum(v.confidence, v.cause, ag.agree)
         v = replace(v, confidence=confidence, reasons=v.reasons + (
-            Reason(17, "datum_agrees", Decision.DATUM_DISAGREES, tuple(ag["fitted_with"]), "p_form", ag["p"],
+            Reason(17, "datum_agrees", Decision.DATUM_DISAGREES, ag.fitted_with, "p_form", ag.p,
                    rules.ALPHA_FORM, outcome=confidence),))
     return replace(b.datum, against_readings=ag), v
 
 
-def _steps_table(b: BaseAnalysis, steps, v: Judgement) -> list:
+def _steps_table(b: BaseAnalysis, steps, v: Judgement) -> list[StepFigures]:
     """The residuals after each step: per sensor in-sample RMS and held-out RMS (mm), and
     whether the cause it added is named in the verdict ``v`` (a step's cause can be turned down
     after the selection: not needed given the others, crosstalk, its sensors not explained)."""
-    out = [{"added": None, "model": "base", "residual_rms_mm": np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(),
-            "heldout_rms_mm": b.heldout.rms()}]
+    out = [StepFigures(None, "base", np.sqrt(np.nanmean(b.fit.residual**2, axis=0)).tolist(), b.heldout.rms())]
     labels, named = [], {c.label for c in v.causes}
     for st in steps:
         if st.chosen is None:
             break
         labels.append(st.chosen.label)
-        out.append({"added": st.chosen.label, "model": "base + " + " + ".join(labels),
-                    "residual_rms_mm": np.sqrt(np.nanmean(st.chosen.fit.residual**2, axis=0)).tolist(),
-                    "heldout_rms_mm": st.chosen.heldout.rms(), "p_heldout": st.chosen.p_heldout,
-                    "heldout_gain_chi2": st.chosen.heldout_chi2_reduction, "named": st.chosen.label in named})
+        out.append(StepFigures(st.chosen.label, "base + " + " + ".join(labels),
+                               np.sqrt(np.nanmean(st.chosen.fit.residual**2, axis=0)).tolist(), st.chosen.heldout.rms(),
+                               st.chosen.p_heldout, st.chosen.heldout_chi2_reduction, st.chosen.label in named))
     return out
 
 
@@ -269,12 +255,12 @@ def verdict_summary(v, tb) -> str:
     it named; ``tb`` the noise tests on the base residuals. Several causes are named together,
     and structure that remains beside them is said."""
     why = v.reasons
-    worst = max(tb.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])
+    worst = max(tb.sensors.items(), key=lambda kv: kv[1].chi2 / kv[1].dof)
     lead = _lead_text(v.lead) if _last(why, Decision.LEAD) is not None else ""
     te = v.tests_extended
     consistent = f"residuals consistent with the stated noise (battery p = {tb.p_bonferroni:.2g})"
     inconsistent = (f"residuals inconsistent with the noise model (battery p = {tb.p_bonferroni:.2g}, worst "
-                    f"{worst[0]}: sigma {worst[1]['sigma_est_mm']:.4g} mm)")
+                    f"{worst[0]}: sigma {worst[1].sigma_est_mm:.4g} mm)")
     nothing_above = "no effect above the detectable sizes (smaller ones are not ruled out)"
     datum = _last(why, Decision.DATUM_DISAGREES)
     tail = "" if datum is None else DATUM_DISAGREES.format(p=datum.value)
@@ -311,7 +297,7 @@ def verdict_summary(v, tb) -> str:
     if not te.consistent:
         names = list(te.sensors)
         where = [k for i, k in enumerate(names) if not rules.explains_sensors(battery_on(te, [i]))]
-        where = where or [max(te.sensors.items(), key=lambda kv: kv[1]["chi2"] / kv[1]["dof"])[0]]
+        where = where or [max(te.sensors.items(), key=lambda kv: kv[1].chi2 / kv[1].dof)[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
     confidence = _last(why, Decision.CONFIDENCE).outcome  # rule 16's (before the datum's, rule 17)

@@ -36,7 +36,7 @@ this is a lower bound.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,10 +46,31 @@ from metrology.diagnosis.posevar import base_jacobian
 from metrology.diagnosis import rules
 from metrology.diagnosis.thresholds import THRESHOLDS
 
-__all__ = ["detectable_sizes", "noncentrality_95", "family_detectable"]
+__all__ = ["Detectable", "detectable_sizes", "noncentrality_95", "family_detectable"]
 
 #: the power at which a size is called detectable
 POWER = 0.95
+
+
+@dataclass(frozen=True)
+class Detectable:
+    """The size of one family detectable at 95 % power on these poses (:func:`detectable_sizes`).
+
+    meaning : str, what the size measures (the family's ``detectable_meaning``);
+    sensors : dict, where -> float or None, in the family's size unit (mm): ``where`` a sensor's
+    name, the member's sensors joined by ``", "``, or ``"all"`` for a family of the set-up;
+    ``inf`` where some shape of the family is seen by no member;
+    member : dict, the same keys -> str, the label of the member sized there (``+``-joined where
+    the best of several members sizes it; ``{}`` for outliers, sized by the flagging threshold).
+    """
+
+    meaning: str
+    sensors: dict = field(default_factory=dict)
+    member: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """The ``--json``'s entry: ``{"sensors", "member", "meaning"}``."""
+        return {"sensors": dict(self.sensors), "member": dict(self.member), "meaning": self.meaning}
 
 
 def noncentrality_95(k: int, dof: int, alpha: float) -> float:
@@ -85,10 +106,10 @@ def _size_along(c, v, cov, d0):
     v = np.asarray(v, float)
     f_v = replace(f, components=f.components[:which] + (replace(comp, values=v),))
     s = size_of(f_v, which, cov, d0)
-    if s is None or not np.isfinite(s["value"]) or s["value"] <= 0:
+    if s is None or not np.isfinite(s.value) or s.value <= 0:
         return None
     info = float(v @ np.linalg.pinv(C, rcond=1e-12, hermitian=True) @ v)
-    return abs(s["value"]), info
+    return abs(s.value), info
 
 
 def _scale_against_crosstalk(b, ds, J, i) -> float:
@@ -152,19 +173,18 @@ def _worst_shape(cause, members, b, ds, J, alpha) -> float:
     return family_detectable(shapes, cols, J_i, float(b.sigma[i]), alpha)
 
 
-def detectable_sizes(scored, b, n_obs, ds) -> dict:
+def detectable_sizes(scored, b, n_obs, ds) -> dict[str, Detectable]:
     """Per family and sensor, the size detectable at 95 % power on these poses (see the module).
 
     scored : the first step's CandidateResults; b : the BaseAnalysis; n_obs : (n,) int, finite
-    readings per sensor; ds : the Dataset (the readings, poses and layout). Returns ``{family:
-    {"sensors": {name: mm}, "member": {name: labels}, "meaning": str}}`` (for set-up families the
-    one value under ``"all"``; ``inf`` where some shape of the family is seen by no member).
+    readings per sensor; ds : the Dataset (the readings, poses and layout). Returns family ->
+    :class:`Detectable`, in the order the families are first met.
     """
     from scipy import stats
 
     n_cand = max(len(scored), 1)
     alpha = THRESHOLDS["alpha_candidates"] / n_cand
-    out: dict = {}
+    out: dict[str, Detectable] = {}
     J = None  # the base Jacobian, computed once when the scale or a family's shapes need it
     worst_of = {}  # (family, sensors) -> its members, for the families sized by their worst shape
     for c in scored:
@@ -175,9 +195,9 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
             i = c.component.sensors[0]
             det = c.component.detectable_size(J[:, i, :], b.cov, np.isfinite(ds.obs.d[:, i]), float(b.sigma[i]), alpha)
             if det is not None:
-                fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.detectable_meaning})
-                fam["sensors"][c.sensors[0]] = float(det)
-                fam["member"][c.sensors[0]] = c.label
+                fam = out.setdefault(c.cause, Detectable(c.component.detectable_meaning))
+                fam.sensors[c.sensors[0]] = float(det)
+                fam.member[c.sensors[0]] = c.label
             continue
         if c.component.worst_shape:
             # any shape of the family, not the simplest member's alone, by the best of its
@@ -186,8 +206,7 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
             key = ", ".join(c.sensors)
             worst_of.setdefault((c.cause, key), []).append(c)
             if c.component.detectable_direction() is not None:
-                out.setdefault(c.cause, {"sensors": {}, "member": {},
-                                         "meaning": c.component.detectable_meaning})["sensors"][key] = None
+                out.setdefault(c.cause, Detectable(c.component.detectable_meaning)).sensors[key] = None
             continue
         v = c.component.detectable_direction()
         if v is not None:
@@ -211,18 +230,18 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
                 det = max(det, float(np.sqrt(lam)) * float(b.sigma[i]) * float(hi - lo) / max(r, 1e-300))
         else:
             continue
-        fam = out.setdefault(c.cause, {"sensors": {}, "member": {}, "meaning": c.component.detectable_meaning})
+        fam = out.setdefault(c.cause, Detectable(c.component.detectable_meaning))
         key = ", ".join(c.sensors) if c.sensors and not c.component.setup else "all"
-        if key not in fam["sensors"] or det < fam["sensors"][key]:
-            fam["sensors"][key] = det
-            fam["member"][key] = c.label
+        if key not in fam.sensors or det < fam.sensors[key]:
+            fam.sensors[key] = det
+            fam.member[key] = c.label
     if worst_of and J is None:
         J = base_jacobian(b, ds)
     for cause in [k for k in out if REGISTRY[k].worst_shape]:
-        for key in out[cause]["sensors"]:
+        for key in out[cause].sensors:
             members = worst_of[(cause, key)]
-            out[cause]["sensors"][key] = _worst_shape(cause, members, b, ds, J, alpha)
-            out[cause]["member"][key] = "+".join(c.label for c in members)
+            out[cause].sensors[key] = _worst_shape(cause, members, b, ds, J, alpha)
+            out[cause].member[key] = "+".join(c.label for c in members)
     pose = [c for c in scored if c.component.per_pose]
     if pose:
         # the RMS change of a reading by a rigid pose error, whatever its split between offset and
@@ -235,14 +254,13 @@ def detectable_sizes(scored, b, n_obs, ds) -> dict:
                                                 for c in pose], alpha)
         else:
             det = detectable_rms(ds, b, THRESHOLDS["alpha_candidates"] / (n_cand + 1))
-        out["pose_error"] = {"sensors": {"all": det}, "member": {"all": "+".join(c.label for c in pose)},
-                             "meaning": pose[0].component.detectable_meaning}
+        out["pose_error"] = Detectable(pose[0].component.detectable_meaning, {"all": det},
+                                       {"all": "+".join(c.label for c in pose)})
     # a gross reading: the flagging threshold (family-wise over the readings) plus 1.645 sigma
     m = int(np.sum(n_obs))
     t = float(stats.norm.isf(rules.gross_level(max(m, 1))))
-    out["outliers"] = {"sensors": {name: float((t + stats.norm.isf(1 - POWER)) * s)
-                                   for name, s in zip(b.calibrated.names, b.sigma)},
-                       "member": {}, "meaning": Outliers.detectable_meaning}
+    out["outliers"] = Detectable(Outliers.detectable_meaning, {name: float((t + stats.norm.isf(1 - POWER)) * s)
+                                                                for name, s in zip(b.calibrated.names, b.sigma)})
     return out
 
 

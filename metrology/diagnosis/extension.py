@@ -11,6 +11,7 @@ from metrology.core.effects import ExtendedModel
 from metrology.core.observations import Observations
 from metrology.diagnosis.fit import Fit, FitData, FitOptions, fit, fit_any
 from metrology.diagnosis.heldout import Problem, kfold
+from metrology.diagnosis.results import Size
 
 __all__ = ["describe_named", "size_of", "simulated_figures", "POSE_FLOOR_REPS"]
 
@@ -24,16 +25,18 @@ def _free_offset(f: Fit, which: int) -> int:
     return sum(c.n_params for c in f.components[:which] if not c.per_pose)
 
 
-def size_of(f: Fit, which: int, cov, d0) -> dict | None:
+def size_of(f: Fit, which: int, cov, d0) -> Size | None:
     """The size of component ``which`` of ``f`` in its family's unit, with a standard error
-    (delta method on the fit's covariance), or None where the family has none (the registry
-    entry's :meth:`~metrology.core.effects.Component.size`). cov : Covariates; d0 : (p, n) float,
-    mm, the base readings."""
+    (delta method on the fit's covariance): a :class:`~metrology.diagnosis.results.Size` (no
+    model spread: :func:`with_model_spread` adds it), or None where the family has none (the
+    registry entry's :meth:`~metrology.core.effects.Component.size`). cov : Covariates;
+    d0 : (p, n) float, mm, the base readings."""
     comp = f.components[which]
     if comp.per_pose:
         return None
     k0 = _free_offset(f, which)
-    return comp.size(f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params], d0, cov)
+    s = comp.size(f.extra_cov[k0:k0 + comp.n_params, k0:k0 + comp.n_params], d0, cov)
+    return None if s is None else Size(**s)
 
 
 def describe_named(f: Fit, problem: Problem, rng, which: int = 0, theta_ref=None):
@@ -115,7 +118,7 @@ def simulated_figures(problem: Problem, model: ExtendedModel, rng, reps):
     return np.mean(rms, axis=0), float(np.mean(ndev)), float(np.std(ndev))
 
 
-def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None:
+def with_model_spread(size: Size | None, chosen, scored, cov, d0) -> Size | None:
     """``size`` (of :func:`size_of`) with the spread of the family's other members added to its
     standard error: the members significant at the step where ``chosen`` was selected, on its
     sensors, that it does not predict held-out poses significantly better than (``alpha_order``).
@@ -128,7 +131,7 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
     from metrology.diagnosis.select import family_of, p_better
     from metrology.diagnosis import rules
 
-    if size is None or size.get("stderr") is None:
+    if size is None or size.stderr is None:
         return size
     spread = 0.0
     for m in scored:
@@ -139,7 +142,6 @@ def with_model_spread(size: dict | None, chosen, scored, cov, d0) -> dict | None
         if rules.better_held_out(p_better(chosen, m)):
             continue  # the named member predicts held-out poses better: not a rival
         s = size_of(m.fit, len(m.fit.components) - 1, cov, d0)
-        if s is not None and s.get("meaning") == size.get("meaning") and np.isfinite(s["value"]):
-            spread = max(spread, abs(abs(s["value"]) - abs(size["value"])))
-    return {**size, "stderr": float(np.hypot(size["stderr"], spread)), "stderr_fit": size["stderr"],
-            "model_spread": spread}
+        if s is not None and s.meaning == size.meaning and np.isfinite(s.value):
+            spread = max(spread, abs(abs(s.value) - abs(size.value)))
+    return replace(size, stderr=float(np.hypot(size.stderr, spread)), stderr_fit=size.stderr, model_spread=spread)

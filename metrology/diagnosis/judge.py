@@ -21,10 +21,10 @@ import numpy as np
 
 from metrology.diagnosis import rules
 from metrology.diagnosis.candidates import CandidateResult
-from metrology.diagnosis.crosstalk import crosstalk_check
+from metrology.diagnosis.crosstalk import CrosstalkCheck, crosstalk_check
 from metrology.diagnosis.extension import describe_named, size_of, with_model_spread
 from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
-from metrology.diagnosis.results import Cause, Confidence, Decision, Outcome, Reason, Rival
+from metrology.diagnosis.results import Cause, Confidence, Confounding, Decision, Outcome, Reason, Rival
 from metrology.diagnosis.heldout import Problem
 from metrology.diagnosis.select import drop_one_gains, family_of, needed, p_better, weakly_supported
 from metrology.diagnosis.stats import Battery, NoiseTests, battery_on, battery_rng, noise_tests
@@ -54,7 +54,7 @@ class Judgement:
     sensors: list = field(default_factory=list)
     best: CandidateResult | None = None
     tests_extended: NoiseTests | None = None
-    confounding: list = field(default_factory=list)
+    confounding: list[Confounding] = field(default_factory=list)
     named: Cause | None = None
     causes: tuple = ()
     lead: CandidateResult | None = None
@@ -125,7 +125,7 @@ class Judge:
             self._gains[key] = drop_one_gains(self.problem, chosen) if chosen else []
         return self._gains[key]
 
-    def crosstalk(self, chosen, j) -> dict:
+    def crosstalk(self, chosen, j) -> CrosstalkCheck:
         """The crosstalk check of cause ``j`` given the causes before it."""
         key = (tuple(s.label for s in chosen[:j + 1]))
         if key not in self._xtalk:
@@ -133,8 +133,9 @@ class Judge:
                                                self.folds)
         return self._xtalk[key]
 
-    def described(self, chosen, f: Fit, j, gains) -> dict:
-        """Cause ``j`` of the joint fit ``f`` of ``chosen``: its parameters, size and held-out figures."""
+    def described(self, chosen, f: Fit, j, gains) -> Cause:
+        """Cause ``j`` of the joint fit ``f`` of ``chosen``: its parameters, size and held-out figures
+        (no rivals: :meth:`named` adds them)."""
         key = (tuple(s.label for s in chosen), j)
         if key not in self._described:
             b, s = self.b, chosen[j]
@@ -145,7 +146,7 @@ class Judge:
             d.update({"cause": s.cause, "sensors": s.sensors, "size": size,
                       "heldout_gain_chi2": gains[j][0], "p_heldout_given_others": gains[j][1],
                       "p_insample": s.p_insample, "step": k + 1})
-            self._described[key] = d
+            self._described[key] = Cause.from_description(d)
         return self._described[key]
 
     # -- the two judgements -----------------------------------------------------------------------
@@ -199,8 +200,8 @@ class Judge:
         causes = []
         for j in kept:
             label = chosen[j].label
-            causes.append(Cause.from_description(self.described(chosen, f, j, gains),
-                                                 [r for r in rivals if r.of == label and not r.better]))
+            causes.append(replace(self.described(chosen, f, j, gains),
+                                  rivals=tuple(r for r in rivals if r.of == label and not r.better)))
         if random_pose is not None:
             from metrology.diagnosis.posevar import random_pose_cause
 
@@ -227,11 +228,11 @@ class Judge:
         for r in rivals:
             if not r.better and any(c.label == r.of for c in causes):
                 j = next(k for k in kept if chosen[k].label == r.of)
-                confounding.append({"between": [r.of, r.label], "p_separation": None,
-                                    "message": f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
+                confounding.append(Confounding((r.of, r.label),
+                                               f"the data cannot tell {r.of} from {r.label} (a shift in proportion "
                                                f"to another sensor's distance, crosstalk, outside the catalogue); "
                                                f"to separate them: {ADVICE[chosen[j].cause]} with more spread of tilt "
-                                               f"({r.separate})"})
+                                               f"({r.separate})"))
         weak = weakly_supported([] if sole_exempt else causes)
         for c in causes:
             if c.label in weak:
@@ -261,22 +262,22 @@ class Judge:
             x = self.crosstalk(chosen, j)
             separate = f"metro plan --separate {chosen[j].cause}"
             label, k = chosen[j].label, self.step_of(chosen[j].label)
-            if x["better"] is not None:
+            if x.better is not None:
                 kept.remove(j)
-                rivals.append(Rival(x["better"], "crosstalk", label, True, x["p"], separate))
+                rivals.append(Rival(x.better, "crosstalk", label, True, x.p, separate))
                 # the level split over the other sensors, as crosstalk_check tests it
-                why.append(Reason(12, "crosstalk_better", Decision.CROSSTALK_BETTER, (label, x["better"]), "p_better",
-                                  x["p"], rules.ALPHA_HELDOUT / (self.n - 1), step=k, outcome=x["better"]))
+                why.append(Reason(12, "crosstalk_better", Decision.CROSSTALK_BETTER, (label, x.better), "p_better",
+                                  x.p, rules.ALPHA_HELDOUT / (self.n - 1), step=k, outcome=x.better))
             else:
-                rivals += [Rival(lab, "crosstalk", label, False, None, separate) for lab in x["indistinguishable"]]
-                if x["indistinguishable"]:
+                rivals += [Rival(lab, "crosstalk", label, False, None, separate) for lab in x.indistinguishable]
+                if x.indistinguishable:
                     why.append(Reason(12, "crosstalk_as_good", Decision.CROSSTALK_TIE,
-                                      (label, *x["indistinguishable"]), "p_worse", None, rules.ALPHA_CONFOUND, step=k,
+                                      (label, *x.indistinguishable), "p_worse", None, rules.ALPHA_CONFOUND, step=k,
                                       outcome=separate))
         return kept, rivals
 
 
-def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
+def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list[Confounding]:
     """Runner-ups that explain as much (a different cause or sensor), and parameters of the
     named component too correlated with the base geometry (each a Reason appended to ``why``)."""
     out = []
@@ -289,12 +290,10 @@ def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
         if rules.indistinguishable(p_sep):
             why.append(Reason(15, "indistinguishable", Decision.CONFOUNDED, (best.label, other.label), "p_separation",
                               p_sep, rules.ALPHA_CONFOUND, step=step))
-            out.append({
-                "between": [best.label, other.label], "p_separation": p_sep,
-                "message": f"the data cannot tell {best.label} from {other.label} (held-out gains "
-                           f"indistinguishable, p = {p_sep:.2g}); to separate them: "
-                           f"{ADVICE[best.cause]}; {ADVICE[other.cause]}",
-            })
+            out.append(Confounding((best.label, other.label),
+                                   f"the data cannot tell {best.label} from {other.label} (held-out gains "
+                                   f"indistinguishable, p = {p_sep:.2g}); to separate them: "
+                                   f"{ADVICE[best.cause]}; {ADVICE[other.cause]}", p_separation=p_sep))
     f = best.fit
     fc = f.components[-1] if f.components else best.component  # as fitted (outliers re-flagged since)
     if not fc.per_pose:  # its parameters are the last of the fit's (the candidate is fitted last)
@@ -304,11 +303,10 @@ def _confounding(best: CandidateResult, sig_list, why: list, step: int) -> list:
             if rules.poorly_separated(cb_):
                 why.append(Reason(15, "poorly_separated", Decision.CONFOUNDED, (best.label, f"{fc.label}.{fc.param_names[q]}", w),
                                   "correlation", float(cb_), rules.CORR_CONFOUND, step=step))
-                out.append({
-                    "between": [f"{fc.label}.{fc.param_names[q]}", w], "correlation": float(cb_),
-                    "message": f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
-                               f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate them",
-                })
+                out.append(Confounding((f"{fc.label}.{fc.param_names[q]}", w),
+                                       f"{fc.label}.{fc.param_names[q]} is {cb_:.3f} correlated with the base parameter "
+                                       f"{w}: it is poorly separated from the geometry; {ADVICE[fc.name]} would separate "
+                                       f"them", correlation=float(cb_)))
     return out
 
 

@@ -380,7 +380,7 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
     from dataclasses import replace
 
     from metrology.diagnosis import rules
-    from metrology.diagnosis.results import Cause
+    from metrology.diagnosis.results import Cause, Size
 
     if not rules.random_pose_explains(tests.consistent, r.p_explained, r.lr_one_sensor):
         return None
@@ -390,8 +390,8 @@ def random_pose_cause(r: RandomPoseError, tests, step, scored, f):
     label = pe.cause + "@random"
     entry = {"component": pe.cause, "label": label, "cause": pe.cause, "sensors": [],
              "params": r.params(),
-             "size": {"value": r.rms_mm, "stderr": r.rms_se_mm, "unit": "mm",
-                      "meaning": "RMS change of a reading by the pose error (its offset and tilts)"},
+             "size": Size(r.rms_mm, r.rms_se_mm, "mm",
+                          "RMS change of a reading by the pose error (its offset and tilts)"),
              "test": TEST_TEXT, "p_offset": r.p_offset, "p_tilt": r.p_tilt, "p_explained": r.p_explained,
              "lr_over_one_sensor": r.lr_one_sensor,
              "heldout_gain_chi2": 0.0, "p_heldout_given_others": None, "p_insample": r.p, "step": step}

@@ -12,7 +12,14 @@ from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["Outcome", "Confidence", "Decision", "Reason", "Size", "Rival", "Cause", "Diagnosis", "PlotData"]
+# The annotations name types of modules that import this one, so they are not imported here (an
+# import cycle; annotations stay strings, ``from __future__ import annotations``): ``Fit``
+# (diagnosis/fit), ``Covariates`` (core/effects), ``CandidateResult`` (diagnosis/candidates),
+# ``NoiseTests`` and ``Trend`` (diagnosis/stats), ``DatumFormCheck`` and ``DatumPlaneCheck``
+# (diagnosis/datum), ``Detectable`` (diagnosis/detectable).
+
+__all__ = ["Outcome", "Confidence", "Decision", "Reason", "Param", "Size", "Rival", "Cause", "Confounding", "Discrepancy",
+           "HeldOutFigures", "StepFigures", "Diagnosis", "PlotData"]
 
 
 class Outcome(StrEnum):
@@ -96,6 +103,21 @@ def _num(x):
 
 
 @dataclass(frozen=True)
+class Param:
+    """One parameter of a component as fitted (a component's ``describe()["params"]`` entry).
+
+    value : float, in ``unit``; unit : str; stderr : float or None (None: the component was not
+    fitted with a covariance)."""
+
+    value: float
+    unit: str
+    stderr: float | None
+
+    def to_dict(self) -> dict:
+        return {"value": self.value, "unit": self.unit, "stderr": self.stderr}
+
+
+@dataclass(frozen=True)
 class Size:
     """A cause's size in its family's unit.
 
@@ -109,12 +131,6 @@ class Size:
     meaning: str
     stderr_fit: float | None = None
     model_spread: float | None = None
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "Size | None":
-        if d is None:
-            return None
-        return cls(d["value"], d.get("stderr"), d["unit"], d["meaning"], d.get("stderr_fit"), d.get("model_spread"))
 
     def to_dict(self) -> dict:
         out = {"value": self.value, "stderr": self.stderr, "unit": self.unit, "meaning": self.meaning}
@@ -164,7 +180,8 @@ class Cause:
     the test that named it where that is not the held-out one; params : dict, its parameters
     (value, unit, stderr); rivals : tuple of Rival it cannot be told from;
     detail : dict, the rest of its description (component, reference, located pose, pose-error
-    figures...), JSON-ready, in the order ``to_dict`` writes it.
+    figures...), JSON-ready, in the order ``to_dict`` writes it (the typed keys there as None,
+    holding their place: their values are the attributes).
     """
 
     label: str
@@ -182,10 +199,11 @@ class Cause:
 
     @classmethod
     def from_description(cls, d: dict, rivals=()) -> "Cause":
-        """A cause from its description (a component's ``describe()`` with the verdict's figures)."""
-        return cls(d["label"], d["cause"], list(d["sensors"]), Size.from_dict(d.get("size")), d["heldout_gain_chi2"],
+        """A cause from its description (a component's ``describe()`` with the verdict's figures; its
+        ``size`` a :class:`Size` or None)."""
+        return cls(d["label"], d["cause"], list(d["sensors"]), d.get("size"), d["heldout_gain_chi2"],
                    d.get("p_heldout_given_others"), d["p_insample"], d["step"], d.get("test"), d.get("params", {}),
-                   tuple(rivals), dict(d))
+                   tuple(rivals), {k: None if k in _TYPED else v for k, v in d.items()})
 
     def to_dict(self) -> dict:
         out = dict(self.detail)
@@ -201,26 +219,164 @@ class Cause:
 
 
 @dataclass(frozen=True)
+class Confounding:
+    """Two things the data cannot separate (rule 15, or a crosstalk tie of rule 12).
+
+    between : tuple of str, the two (candidates' labels; or a parameter ``label.name`` and the
+    base parameter it is correlated with); message : str, what to do about it;
+    p_separation : float or None, the p-value of one predicting held-out poses better than the
+    other (None for a crosstalk tie, tested the other way); correlation : float or None, the
+    parameter's largest absolute correlation with the base geometry (unitless; set for a
+    poorly separated parameter, then ``p_separation`` is not reported)."""
+
+    between: tuple
+    message: str
+    p_separation: float | None = None
+    correlation: float | None = None
+
+    def to_dict(self) -> dict:
+        figure = {"p_separation": self.p_separation} if self.correlation is None else {"correlation": self.correlation}
+        return {"between": list(self.between), **figure, "message": self.message}
+
+
+@dataclass(frozen=True)
+class Discrepancy:
+    """The measurement beside its simulation under the base model, and under the extended one
+    where a cause is named (:func:`metrology.diagnosis.decide.side_by_side`).
+
+    sensors : list of str; stated_noise_mm : list of float, mm, per sensor;
+    measured_residual_rms_mm, simulated_base_residual_rms_mm : list of float, mm, per sensor, in sample;
+    measured_heldout_normal_rad : float, rad, the base model's mean held-out normal deviation;
+    simulated_base_heldout_normal_rad, simulated_base_heldout_normal_sd_rad : float, rad, its mean
+    and standard deviation over the simulated copies; sim_reps : int, copies per figure;
+    extended_model : str or None, the label of the extended model simulated (None: none named,
+    and the three figures below None too); simulated_extended_residual_rms_mm : list of float, mm;
+    simulated_extended_heldout_normal_rad, simulated_extended_heldout_normal_sd_rad : float, rad.
+    ``to_dict`` gives the angles in degrees (``_deg``), as ``--json`` has them.
+    """
+
+    sensors: list
+    stated_noise_mm: list
+    measured_residual_rms_mm: list
+    simulated_base_residual_rms_mm: list
+    measured_heldout_normal_rad: float
+    simulated_base_heldout_normal_rad: float
+    simulated_base_heldout_normal_sd_rad: float
+    sim_reps: int
+    extended_model: str | None = None
+    simulated_extended_residual_rms_mm: list | None = None
+    simulated_extended_heldout_normal_rad: float | None = None
+    simulated_extended_heldout_normal_sd_rad: float | None = None
+
+    def to_dict(self) -> dict:
+        out = {"sensors": self.sensors, "stated_noise_mm": self.stated_noise_mm,
+               "measured_residual_rms_mm": self.measured_residual_rms_mm,
+               "simulated_base_residual_rms_mm": self.simulated_base_residual_rms_mm,
+               "measured_heldout_normal_deg": _deg(self.measured_heldout_normal_rad),
+               "simulated_base_heldout_normal_deg": _deg(self.simulated_base_heldout_normal_rad),
+               "simulated_base_heldout_normal_sd_deg": _deg(self.simulated_base_heldout_normal_sd_rad),
+               "sim_reps": self.sim_reps}
+        if self.extended_model is not None:
+            out.update(simulated_extended_residual_rms_mm=self.simulated_extended_residual_rms_mm,
+                       simulated_extended_heldout_normal_deg=_deg(self.simulated_extended_heldout_normal_rad),
+                       simulated_extended_heldout_normal_sd_deg=_deg(self.simulated_extended_heldout_normal_sd_rad),
+                       extended_model=self.extended_model)
+        return out
+
+
+@dataclass(frozen=True)
+class HeldOutFigures:
+    """The k-fold-by-pose held-out figures of the base model, and of the model the verdict judges
+    where a cause is named (:func:`metrology.diagnosis.decide.side_by_side`).
+
+    folds : int, k; base_rms_mm : float, mm, the base model's held-out residual RMS (where a model
+    is named, without the readings a named outliers cause flags gross); base_normal_rad : float,
+    rad, its mean held-out normal deviation; model : str or None, the label of the model judged
+    (None: nothing named, and the figures below None too); extended_rms_mm : float, mm;
+    rms_ratio : float, base over extended; base_rms_concerned_mm, extended_rms_concerned_mm,
+    rms_ratio_concerned : the same on the named causes' sensors; extended_normal_rad : float, rad;
+    normal_ratio : float, base over extended mean normal deviation; p_heldout : float, the
+    model's held-out test (its selection step's). ``to_dict`` gives the angles in degrees (``_deg``).
+    """
+
+    folds: int
+    base_rms_mm: float
+    base_normal_rad: float
+    model: str | None = None
+    extended_rms_mm: float | None = None
+    rms_ratio: float | None = None
+    base_rms_concerned_mm: float | None = None
+    extended_rms_concerned_mm: float | None = None
+    rms_ratio_concerned: float | None = None
+    extended_normal_rad: float | None = None
+    normal_ratio: float | None = None
+    p_heldout: float | None = None
+
+    def to_dict(self) -> dict:
+        out = {"folds": self.folds, "base_rms_mm": self.base_rms_mm, "base_normal_deg": _deg(self.base_normal_rad)}
+        if self.model is not None:
+            out.update(model=self.model, extended_rms_mm=self.extended_rms_mm, rms_ratio=self.rms_ratio,
+                       base_rms_concerned_mm=self.base_rms_concerned_mm,
+                       extended_rms_concerned_mm=self.extended_rms_concerned_mm,
+                       rms_ratio_concerned=self.rms_ratio_concerned, extended_normal_deg=_deg(self.extended_normal_rad),
+                       normal_ratio=self.normal_ratio, p_heldout=self.p_heldout)
+        return out
+
+
+def _deg(rad: float) -> float:
+    """Degrees at the JSON edge."""
+    return float(np.rad2deg(rad))
+
+
+@dataclass(frozen=True)
+class StepFigures:
+    """The residuals after one step of the selection (:func:`metrology.diagnosis.decide.diagnose`'s ``steps``).
+
+    added : str or None, the label of the cause the step added (None: the base model, the first
+    row); model : str, ``base + ...``; residual_rms_mm : list of float, mm, per sensor, in sample;
+    heldout_rms_mm : float, mm, held out; p_heldout : float or None, the cause's held-out test at
+    its step; heldout_gain_chi2 : float or None, its held-out chi-square gain there; named : bool
+    or None, whether the verdict names it (a step's cause can be turned down after the selection).
+    """
+
+    added: str | None
+    model: str
+    residual_rms_mm: list
+    heldout_rms_mm: float
+    p_heldout: float | None = None
+    heldout_gain_chi2: float | None = None
+    named: bool | None = None
+
+    def to_dict(self) -> dict:
+        out = {"added": self.added, "model": self.model, "residual_rms_mm": self.residual_rms_mm,
+               "heldout_rms_mm": self.heldout_rms_mm}
+        if self.added is not None:
+            out.update(p_heldout=self.p_heldout, heldout_gain_chi2=self.heldout_gain_chi2, named=self.named)
+        return out
+
+
+@dataclass(frozen=True)
 class PlotData:
     """What the residual plots of :func:`metrology.report.diagnose.plot_report` draw.
 
     base : Fit; cov : Covariates; d0 : (p, n) float, mm, the base readings; best : the named
     (or partial) CandidateResult or None; names : tuple of str; sigma : (n,) float, mm;
-    flags : (p, n) bool, flagged readings; structure : dict, the base structure table;
+    flags : (p, n) bool, flagged readings; structure : dict, the base structure table (covariate
+    -> sensor name -> :class:`~metrology.diagnosis.stats.Trend`);
     heldout_base : (p, n) float, mm, or None, the base model's k-fold held-out residuals;
     heldout_after : (p, n) float, mm, or None, those of the model the ``heldout`` figures of
     :class:`Diagnosis` judge (base + the causes named; None when nothing is named). In both, a
     reading flagged gross by a named outliers cause is NaN, as it is left out of those figures.
     """
 
-    base: object
-    cov: object
+    base: Fit
+    cov: Covariates
     d0: np.ndarray
-    best: object
+    best: CandidateResult | None
     names: tuple
     sigma: np.ndarray
     flags: np.ndarray
-    structure: dict
+    structure: dict[str, dict[str, Trend]]
     heldout_base: np.ndarray | None = None
     heldout_after: np.ndarray | None = None
 
@@ -236,12 +392,14 @@ class Diagnosis:
     a :class:`~metrology.diagnosis.results.Cause` with its parameters and standard errors, its
     size in the family's unit where one is defined, its held-out gain given the others and any
     rival outside the catalogue it cannot be told from, largest gain first (``cause`` is the first);
-    ``steps`` the residuals after each step of the selection;
+    ``steps`` the residuals after each step of the selection (:class:`StepFigures`); ``discrepancy``
+    the measurement beside its simulation (:class:`Discrepancy`); ``heldout`` the held-out figures
+    (:class:`HeldOutFigures`); ``confounding`` what the data cannot separate (:class:`Confounding`);
     ``candidates`` are the candidates scored at the first step, largest held-out gain first; ``tests_base`` and
     ``tests_extended`` the noise-model battery before and after the extension;
     ``datum_form`` the datum check (None without a datum cloud); ``plot_data`` what the plots draw;
-    ``detectable`` the size of each family these poses detect at 95 % power
-    (:mod:`metrology.diagnosis.detectable`); ``reasons`` the rules that made the verdict, in the
+    ``detectable`` the size of each family these poses detect at 95 % power (family ->
+    :class:`~metrology.diagnosis.detectable.Detectable`); ``reasons`` the rules that made the verdict, in the
     order they fired (:class:`Reason`; the summary is made from them).
     """
 
@@ -251,24 +409,24 @@ class Diagnosis:
     summary: str
     named: Cause | None
     candidates: tuple
-    tests_base: object
-    tests_extended: object
-    structure_base: dict
-    discrepancy: dict
-    heldout: dict
-    confounding: list
+    tests_base: NoiseTests
+    tests_extended: NoiseTests | None
+    structure_base: dict[str, dict[str, Trend]]
+    discrepancy: Discrepancy
+    heldout: HeldOutFigures
+    confounding: list[Confounding]
     base_theta: np.ndarray
     base_stderr: np.ndarray
     thresholds: dict
-    datum_form: object = None
+    datum_form: DatumFormCheck | None = None
     plot_data: PlotData | None = None
     causes: tuple = ()
     steps: tuple = ()
-    detectable: dict = field(default_factory=dict)
+    detectable: dict[str, Detectable] = field(default_factory=dict)
     reasons: tuple = ()
     #: the datum plane estimated with the sensors under its scan's covariance
     #: (:class:`metrology.diagnosis.datum.DatumPlaneCheck`), None when not run
-    datum_plane: object = None
+    datum_plane: DatumPlaneCheck | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -281,17 +439,18 @@ class Diagnosis:
     def to_dict(self):
         return {
             "cause": self.cause, "sensors": self.sensors, "confidence": self.confidence, "summary": self.summary,
-            "causes": [c.to_dict() for c in self.causes], "steps": list(self.steps),
-            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout, "discrepancy": self.discrepancy,
-            "candidates": [c.to_dict() for c in self.candidates], "confounding": self.confounding,
+            "causes": [c.to_dict() for c in self.causes], "steps": [st.to_dict() for st in self.steps],
+            "extended": None if self.named is None else self.named.to_dict(), "heldout": self.heldout.to_dict(),
+            "discrepancy": self.discrepancy.to_dict(),
+            "candidates": [c.to_dict() for c in self.candidates], "confounding": [c.to_dict() for c in self.confounding],
             "tests": {"base": self.tests_base.to_dict(),
                       "extended": None if self.tests_extended is None else self.tests_extended.to_dict()},
-            "structure": self.structure_base,
+            "structure": {key: {name: t.to_dict() for name, t in row.items()} for key, row in self.structure_base.items()},
             "base": {"theta": self.base_theta.tolist(), "stderr": self.base_stderr.tolist(),
                      "columns": ["dx_mm", "dy_mm", "dz_mm", "a_rad", "b_rad"]},
             "thresholds": self.thresholds,
             "datum_form": None if self.datum_form is None else self.datum_form.to_dict(),
-            "detectable": self.detectable,
+            "detectable": {family: d.to_dict() for family, d in self.detectable.items()},
             "reasons": [r.to_dict() for r in self.reasons],
             "datum_plane": None if self.datum_plane is None else self.datum_plane.to_dict(),
         }

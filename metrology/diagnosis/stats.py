@@ -9,7 +9,39 @@ import numpy as np
 from metrology.core.effects import Covariates
 from metrology.diagnosis import rules
 
-__all__ = ["NoiseTests", "Battery", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
+__all__ = ["NoiseTests", "SensorTests", "PairTest", "Trend", "Battery", "ljung_box", "noise_tests", "battery_on", "battery_rng", "paired_gain_p", "structure"]
+
+
+@dataclass(frozen=True)
+class SensorTests:
+    """The noise-model tests of one sensor's residuals (:func:`noise_tests`).
+
+    chi2 : float, the sum of the squared residuals over the stated noise (unitless); dof : int;
+    sigma_est_mm : float, mm, the noise the residuals show (``sigma sqrt(chi2 / dof)``);
+    p_chi2 : float, chi-square upper tail; p_whiteness : float, Ljung-Box (:func:`ljung_box`);
+    p_normality : float or None, Shapiro-Wilk (None: not run)."""
+
+    chi2: float
+    dof: int
+    sigma_est_mm: float
+    p_chi2: float
+    p_whiteness: float
+    p_normality: float | None
+
+    def to_dict(self) -> dict:
+        return {"chi2": self.chi2, "dof": self.dof, "sigma_est_mm": self.sigma_est_mm, "p_chi2": self.p_chi2,
+                "p_whiteness": self.p_whiteness, "p_normality": self.p_normality}
+
+
+@dataclass(frozen=True)
+class PairTest:
+    """Two sensors' residuals within a pose: r : float, Pearson's correlation (unitless); p : float, its p-value."""
+
+    r: float
+    p: float
+
+    def to_dict(self) -> dict:
+        return {"r": self.r, "p": self.p}
 
 
 @dataclass(frozen=True)
@@ -18,8 +50,8 @@ class NoiseTests:
 
     Attributes
     ----------
-    sensors : dict, sensor name -> chi2, dof, sigma_est_mm, p_chi2, p_whiteness, p_normality
-    pairs : dict, "A-B" -> within-pose correlation r and its p-value
+    sensors : dict, sensor name -> :class:`SensorTests`
+    pairs : dict, ``"A-B"`` (two sensors' names) -> :class:`PairTest`, their within-pose correlation
     n_tests : int, the size of the family
     p_bonferroni : float, Bonferroni-combined p-value
     consistent : bool, at ``alpha_battery``
@@ -27,8 +59,8 @@ class NoiseTests:
     p_concerned : float or None, :func:`battery_on` the sensors of an extension (after one)
     """
 
-    sensors: dict
-    pairs: dict
+    sensors: dict[str, SensorTests]
+    pairs: dict[str, PairTest]
     n_tests: int
     p_bonferroni: float
     consistent: bool
@@ -36,7 +68,8 @@ class NoiseTests:
     p_concerned: float | None = None
 
     def to_dict(self) -> dict:
-        out = {"sensors": self.sensors, "pairs": self.pairs, "n_tests": self.n_tests,
+        out = {"sensors": {k: t.to_dict() for k, t in self.sensors.items()},
+               "pairs": {k: t.to_dict() for k, t in self.pairs.items()}, "n_tests": self.n_tests,
                "p_bonferroni": self.p_bonferroni, "consistent": self.consistent}
         if self.p_concerned is not None:
             out["p_concerned"] = self.p_concerned
@@ -115,8 +148,7 @@ def noise_tests(residual, sigma, dof_per_sensor, names, rng: np.random.Generator
         p_chi = float(stats.chi2.sf(chi2, dof))
         p_lb = ljung_box(r, min(10, max(len(r) // 5, 1)), rng)
         p_sw = float(stats.shapiro(r).pvalue) if len(r) >= 3 and normality else None
-        per[names[i]] = {"chi2": chi2, "dof": dof, "sigma_est_mm": float(np.sqrt(chi2 / dof)) * sigma[i],
-                         "p_chi2": p_chi, "p_whiteness": p_lb, "p_normality": p_sw}
+        per[names[i]] = SensorTests(chi2, dof, float(np.sqrt(chi2 / dof)) * sigma[i], p_chi, p_lb, p_sw)
         pvals += [(p_chi, {i}), (p_lb, {i})] + ([(p_sw, {i})] if p_sw is not None else [])
     pair_out = {}
     for i in range(n if pairs else 0):
@@ -125,7 +157,7 @@ def noise_tests(residual, sigma, dof_per_sensor, names, rng: np.random.Generator
             if ok.sum() < 4:
                 continue
             rr, pp = stats.pearsonr(residual[ok, i], residual[ok, j])
-            pair_out[f"{names[i]}-{names[j]}"] = {"r": float(rr), "p": float(pp)}
+            pair_out[f"{names[i]}-{names[j]}"] = PairTest(float(rr), float(pp))
             pvals.append((float(pp), {i, j}))
     p_all = min(1.0, min(p for p, _ in pvals) * len(pvals))
     return NoiseTests(per, pair_out, len(pvals), p_all, rules.explains_sensors(p_all), tuple(pvals))
@@ -159,10 +191,27 @@ def battery_on(tests: NoiseTests, sensors) -> float:
     return min(1.0, min(ps) * tests.n_tests) if ps else 1.0
 
 
-def structure(residual, d0, cov: Covariates, names):
+@dataclass(frozen=True)
+class Trend:
+    """One cell of the structure table (:func:`structure`): a sensor's base residuals against one
+    covariate, fitted with a quadratic.
+
+    r2 : float, the quadratic fit's R^2 (unitless, 0-1); p : float, its F-test's p-value (2 and
+    m - 3 dof, m the sensor's finite readings)."""
+
+    r2: float
+    p: float
+
+    def to_dict(self) -> dict:
+        return {"r2": self.r2, "p": self.p}
+
+
+def structure(residual, d0, cov: Covariates, names) -> dict[str, dict[str, Trend]]:
     """Residuals against each covariate: per sensor, the quadratic-fit R^2 and F-test p-value.
 
-    Returns dict covariate -> sensor -> {"r2", "p"}.
+    Returns dict covariate (``d_mm``, ``incidence_deg``, ...) -> sensor name -> :class:`Trend`
+    (a covariate not finite everywhere, a sensor with a constant covariate or fewer than 6
+    readings, left out).
     """
     from scipy import stats
 
@@ -193,7 +242,7 @@ def structure(residual, d0, cov: Covariates, names):
             ss_tot = float(np.sum((y - y.mean()) ** 2))
             r2 = 1 - ss_res / ss_tot if ss_tot > 0 else 0.0
             F = (ss_tot - ss_res) / 2 / max(ss_res / (len(y) - 3), 1e-300)
-            row[names[i]] = {"r2": r2, "p": float(stats.f.sf(F, 2, len(y) - 3))}
+            row[names[i]] = Trend(r2, float(stats.f.sf(F, 2, len(y) - 3)))
         out[key] = row
     return out
 

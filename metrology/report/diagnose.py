@@ -217,9 +217,10 @@ GRID_MAX_VARIABLES = 3
 
 
 def structured_cells(structure: dict) -> list:
-    """The cells of a structure table (``variable -> sensor -> {"r2", "p"}``) that carry
-    structure (see :data:`GRID_MAX_VARIABLES`'s rule): (variable, sensor, r2, p), smallest p first."""
-    cells = [(k, s, v["r2"], v["p"]) for k, row in structure.items() for s, v in row.items()]
+    """The cells of a structure table (``variable -> sensor ->``
+    :class:`~metrology.diagnosis.stats.Trend`) that carry structure (see
+    :data:`GRID_MAX_VARIABLES`'s rule): (variable, sensor, r2, p), smallest p first."""
+    cells = [(k, s, v.r2, v.p) for k, row in structure.items() for s, v in row.items()]
     level = structure_level(structure)
     return sorted((c for c in cells if c[3] < level), key=lambda c: c[3])
 
@@ -249,9 +250,9 @@ def structure_rows(diag: Diagnosis) -> tuple:
     out = []
     for key, row in diag.structure_base.items():
         cells = []
-        for nm in diag.discrepancy["sensors"]:
+        for nm in diag.discrepancy.sensors:
             v = row.get(nm)
-            cells.append("—" if v is None else f"{v['r2']:.2f}" + ("*" if (key, nm) in marked else ""))
+            cells.append("—" if v is None else f"{v.r2:.2f}" + ("*" if (key, nm) in marked else ""))
         out.append((AXIS_WORDS.get(key, key), *cells))
     return tuple(out)
 
@@ -288,7 +289,7 @@ def diagnosis_figures(diag: Diagnosis) -> list:
                 ax.axhline(0, color="k", lw=0.5)
                 cell = P.structure.get(key, {}).get(names[i])
                 if cell is not None:
-                    ax.set_title(f"{names[i]}: R² {cell['r2']:.2f}, p {p_text(cell['p'])}", fontsize=9)
+                    ax.set_title(f"{names[i]}: R² {cell.r2:.2f}, p {p_text(cell.p)}", fontsize=9)
                 if r == len(rows) - 1:
                     ax.set_xlabel(AXIS_WORDS.get(key, key))
                 if j == 0:
@@ -304,7 +305,7 @@ def diagnosis_figures(diag: Diagnosis) -> list:
         comp = best.fit.components[0]
         key = comp.plot_key  # from the effect registry
         cols = list(comp.sensors) if comp.sensors else list(range(n))
-        model = diag.heldout.get("model", comp.label)
+        model = comp.label if diag.heldout.model is None else diag.heldout.model
         fig, axes = plt.subplots(len(cols), 2, figsize=(COLUMN_IN, 0.6 + 2.5 * len(cols)), squeeze=False,
                                  sharey="row", layout="constrained")
         X = variables.get(key, variables["pose_index"])

@@ -39,7 +39,7 @@ def test_noise_tests_pass_the_generator_to_the_whiteness_test():
     r = rng.normal(scale=0.005, size=(60, 3))
     r[:, 1] = np.convolve(rng.normal(size=64), np.ones(5) / np.sqrt(5), "valid")[:60] * 0.005
     t = noise_tests(r, np.full(3, 0.005), np.full(3, 55), ("A", "B", "C"), rng=np.random.default_rng(0))
-    assert t.sensors["B"]["p_whiteness"] < 0.01
-    assert t.sensors["A"]["p_whiteness"] > 0.01
+    assert t.sensors["B"].p_whiteness < 0.01
+    assert t.sensors["A"].p_whiteness > 0.01
     # the permutation p is a multiple of 1/(n_perm + 1)
-    assert (t.sensors["A"]["p_whiteness"] * 10000) == pytest.approx(round(t.sensors["A"]["p_whiteness"] * 10000))
+    assert (t.sensors["A"].p_whiteness * 10000) == pytest.approx(round(t.sensors["A"].p_whiteness * 10000))

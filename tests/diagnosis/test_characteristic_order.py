@@ -61,7 +61,7 @@ def test_crosstalk_check_judges_the_curve_inside_its_span(tmp_path):
     s = score_candidate(c, Scoring(ds, b, none, 1.0, 5, 1), Reference((), b.fit, b.heldout), b.theta0)
     assert s.significant
     check = crosstalk_check(ds, b, (), s, 5)
-    assert check["better"] is None and check["indistinguishable"] == [], check
+    assert check.better is None and check.indistinguishable == (), check
 
 
 def test_spline_knots_at_given_positions_span_the_b_splines_there():

@@ -36,13 +36,15 @@ def test_cli_simulate_then_diagnose(tmp_path):
     # embedded: the overview grid where a cell of the structure table carries structure (a
     # gross reading leaves none), the held-out residuals before and after the cause
     # (--report DIR, the PNGs, runs in the demo's test)
+    from metrology.diagnosis.stats import Trend
     from metrology.report.diagnose import structured_cells
     from tests.report.test_html import check_page
 
     held = out["discrepancy"]["measured_heldout_normal_deg"]
     assert held < 0.5  # the cause first, then the held-out normal against the tolerance
     text = check_page(tmp_path / "d.html", [tmp_path / "x.csv", tmp_path / "layout.toml"],
-                      1 + bool(structured_cells(out["structure"])),
+                      1 + bool(structured_cells({k: {s: Trend(**c) for s, c in row.items()}
+                                                 for k, row in out["structure"].items()})),
                       f"cause: outliers on L4; normal within tolerance ({held:.4f} vs 0.5 deg)")
     # the fit report's chi-square and dof are of the same readings (L4's): with the simulated
     # noise at the stated level, chi-square over dof lies in the chi-square distribution's band

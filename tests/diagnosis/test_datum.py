@@ -60,7 +60,22 @@ def test_flat_readings_against_a_bowed_cloud_lower_the_confidence_of_none():
     pts = synth_cloud(rng, PLANE, [HiddenEffect("plane_form", None, 0.01)])
     d = diagnose(Dataset(check(export, nominal), nominal, PLANE, pts), folds=FOLDS, sim_reps=1)
     assert d.cause == "none" and d.confidence == "low" and "disagrees" in d.summary
-    assert not d.datum_form.against_readings["agree"]
+    assert not d.datum_form.against_readings.agree
+    # typed: the check, its window, its parameters and the agreement are attributes, the JSON made from them
+    from metrology.diagnosis.datum import DatumFormCheck, FormAgreement, SpotWindow
+    from metrology.diagnosis.results import Param
+
+    df, ag = d.datum_form, d.datum_form.against_readings
+    assert isinstance(df, DatumFormCheck) and isinstance(df.window_mm, SpotWindow) and isinstance(ag, FormAgreement)
+    assert df.window_mm.s[0] < df.window_mm.s[1] and df.window_mm.t[0] < df.window_mm.t[1]
+    assert all(isinstance(v, Param) and v.unit == "mm" and v.stderr > 0 for v in df.params.values())
+    assert ag.p < 0.01 and set(ag.z) == set(PlaneForm.key_params) and ag.fitted_with == ("plane_form",)
+    out = d.to_dict()["datum_form"]
+    assert list(out) == ["points", "points_used", "window", "window_mm", "radius_mm", "params", "p_quadratic",
+                         "visible_rms_mm", "visible_over_noise", "against_readings"]
+    assert out["window_mm"] == {"s": list(df.window_mm.s), "t": list(df.window_mm.t)}
+    assert all(list(v) == ["value", "unit", "stderr"] for v in out["params"].values())
+    assert list(out["against_readings"]) == ["readings", "readings_stderr", "z", "chi2", "p", "agree", "fitted_with"]
 
 
 @pytest.mark.parametrize("with_pose_error, n_seeds", [
@@ -91,8 +106,23 @@ def test_form_agreement_is_calibrated_under_pose_errors(with_pose_error, n_seeds
             comps.append(PoseError((), names=nominal.names, n_poses=N_POSES))
         pf = fit_any(FitData(nominal, ds.obs, cov, sigma), comps, base.theta)
         d0 = readings(zero, u, ds.obs.normal, ds.obs.offset)[0]
-        chi2.append(form_agreement(datum_form(ds, FitData(ds.layout, ds.obs, cov, sigma), zero, u, d0), pf)["chi2"])
+        chi2.append(form_agreement(datum_form(ds, FitData(ds.layout, ds.obs, cov, sigma), zero, u, d0), pf).chi2)
     if with_pose_error:
         assert np.mean(chi2) < 6.0, chi2
     else:  # the reason the diagnosis fits the form together with the named cause
         assert np.mean(chi2) > 6.0, chi2
+
+
+def test_a_form_named_as_scanned_adds_its_gain_after_the_fit_labels_in_the_json():
+    # check_datum's scan branch: the readings see the scanned form at a gain; its p replaces the Wald one
+    from dataclasses import replace
+
+    from metrology.diagnosis.datum import FormAgreement
+
+    q = dict.fromkeys(PlaneForm.key_params, 0.0)
+    ag = FormAgreement(q, q, q, 1.2, 0.75, True, ("plane_form@scan",))
+    assert list(ag.to_dict()) == ["readings", "readings_stderr", "z", "chi2", "p", "agree", "fitted_with"]
+    scan = replace(ag, scan_gain=0.98, scan_gain_stderr=0.02, p=0.32)
+    out = scan.to_dict()
+    assert list(out)[-3:] == ["fitted_with", "scan_gain", "scan_gain_stderr"] and out["p"] == 0.32
+    assert out["fitted_with"] == ["plane_form@scan"] and (scan.scan_gain, scan.agree) == (0.98, True)

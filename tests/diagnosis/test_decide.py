@@ -21,7 +21,7 @@ def _check_named(d, effect, sensor, truth_rec):
     if effect not in SETUP_EFFECTS:
         assert d.sensors == [sensor]
     h = d.heldout
-    assert h["rms_ratio_concerned"] > 1.0 and h["p_heldout"] < 0.05
+    assert h.rms_ratio_concerned > 1.0 and h.p_heldout < 0.05
     params = d.named.params
     if effect == "scale":
         v = params["k"]
@@ -95,8 +95,8 @@ def test_extended_simulation_predicts_measured_rms():
     ds, _ = run([HiddenEffect("drift", "L2", 0.008)], 7)
     d = diagnose(ds, folds=FOLDS, sim_reps=2)
     disc = d.discrepancy
-    meas, sim_b, sim_e = (np.array(disc[k]) for k in ("measured_residual_rms_mm", "simulated_base_residual_rms_mm",
-                                                      "simulated_extended_residual_rms_mm"))
+    meas, sim_b, sim_e = (np.array(x) for x in (disc.measured_residual_rms_mm, disc.simulated_base_residual_rms_mm,
+                                                disc.simulated_extended_residual_rms_mm))
     assert d.cause == "drift" and d.sensors == ["L2"]
     # base simulation misses the excess on L2; the extended one predicts it (RMS of ~80 readings:
     # relative sampling error ~ 1/sqrt(2 * 75) = 8 %; 4 sigma)
@@ -156,4 +156,4 @@ def test_fixture_hidden_is_diagnosed():
     here = DATA_DIR / "hidden"
     d = diagnose_files(here / "export.csv", here / "plane.json", here / "layout.toml", folds=FOLDS, sim_reps=1)
     assert d.cause != "none"
-    assert d.named is not None and d.heldout["rms_ratio_concerned"] > 1.0
+    assert d.named is not None and d.heldout.rms_ratio_concerned > 1.0

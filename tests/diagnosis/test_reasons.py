@@ -51,9 +51,9 @@ def _judgement(reasons, **kw):
 
 
 def _tests(consistent=True):
-    from metrology.diagnosis.stats import NoiseTests
+    from metrology.diagnosis.stats import NoiseTests, SensorTests
 
-    sensors = {"L1": {"chi2": 10.0, "dof": 10.0, "sigma_est_mm": 0.003}}
+    sensors = {"L1": SensorTests(10.0, 10, 0.003, 0.44, 0.5, None)}
     return NoiseTests(sensors, {}, 1, 0.5 if consistent else 1e-6, consistent, ((0.5, {0}),))
 
 

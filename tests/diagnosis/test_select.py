@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from metrology.core.effects import Outliers
-from metrology.diagnosis.stats import NoiseTests
+from metrology.diagnosis.stats import NoiseTests, SensorTests
 from metrology.diagnosis.thresholds import THRESHOLDS
 from metrology.sim.forward import draw_case, draw_pair, write_case
 
@@ -107,7 +107,8 @@ def _tests(p_sensor, n):
     """A noise battery whose only failing tests are the per-sensor ones given in ``p_sensor``."""
     pv = tuple((p_sensor.get(i, 0.5), {i}) for i in range(n)) + tuple((0.5, {i}) for i in range(n))
     p_all = min(1.0, min(p for p, _ in pv) * len(pv))
-    return NoiseTests({f"L{i + 1}": {} for i in range(n)}, {}, len(pv), p_all, p_all >= THRESHOLDS["alpha_battery"], pv)
+    per = {f"L{i + 1}": SensorTests(float("nan"), 1, float("nan"), p_sensor.get(i, 0.5), 0.5, None) for i in range(n)}
+    return NoiseTests(per, {}, len(pv), p_all, p_all >= THRESHOLDS["alpha_battery"], pv)
 
 
 def _chosen(*sensors):

@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 
+from metrology.diagnosis.stats import Trend
 from metrology.io.data import DATA_DIR
 from metrology.report.diagnose import (GRID_MAX_VARIABLES, _grid, diagnosis_figures, discrepancy_lines, report_text,
                                        structure_rows, structured_cells)
@@ -65,18 +66,18 @@ def test_discrepancy_numbers_stay_under_their_sensor_with_a_long_model_name():
 
 def test_structured_cells_are_those_below_the_battery_level_split_over_the_table():
     # 2 variables x 2 sensors: 4 cells, the level 0.01 / 4 = 0.0025
-    s = {"d_mm": {"L1": {"r2": 0.2, "p": 0.002}, "L2": {"r2": 0.1, "p": 0.003}},
-         "time_h": {"L1": {"r2": 0.5, "p": 1e-9}, "L2": {"r2": 0.0, "p": 0.9}}}
+    s = {"d_mm": {"L1": Trend(0.2, 0.002), "L2": Trend(0.1, 0.003)},
+         "time_h": {"L1": Trend(0.5, 1e-9), "L2": Trend(0.0, 0.9)}}
     assert structured_cells(s) == [("time_h", "L1", 0.5, 1e-9), ("d_mm", "L1", 0.2, 0.002)]
     assert _grid(s, ("L1", "L2"), s) == (["time_h", "d_mm"], [0])
-    nothing = {"d_mm": {"L1": {"r2": 0.0, "p": 0.5}}}
+    nothing = {"d_mm": {"L1": Trend(0.0, 0.5)}}
     assert structured_cells(nothing) == [] and _grid(nothing, ("L1",), nothing) == ([], [])
 
 
 def test_grid_holds_at_most_the_most_structured_variables_and_only_their_sensors():
     keys = ["d_mm", "incidence_deg", "time_h", "temp_c", "spot_s_mm"]
-    s = {k: {"L1": {"r2": 0.5, "p": 10.0 ** -(3 + j)}, "L2": {"r2": 0.0, "p": 0.5},
-             "L3": {"r2": 0.3, "p": 1e-12 if k == "d_mm" else 0.5}} for j, k in enumerate(keys)}
+    s = {k: {"L1": Trend(0.5, 10.0 ** -(3 + j)), "L2": Trend(0.0, 0.5),
+             "L3": Trend(0.3, 1e-12 if k == "d_mm" else 0.5)} for j, k in enumerate(keys)}
     cols, rows = _grid(s, ("L1", "L2", "L3"), s)
     assert cols == ["d_mm", "spot_s_mm", "temp_c"][:GRID_MAX_VARIABLES] and rows == [0, 2]
 
@@ -120,7 +121,7 @@ def test_overview_grid_draws_only_the_structured_variables_and_sensors(drift):
     _close(figs)
     rows = structure_rows(drift)
     assert len(rows) == len(drift.structure_base)
-    starred = {(r[0], name) for r in rows for name, c in zip(drift.discrepancy["sensors"], r[1:]) if c.endswith("*")}
+    starred = {(r[0], name) for r in rows for name, c in zip(drift.discrepancy.sensors, r[1:]) if c.endswith("*")}
     assert len(starred) == len(cells) and {s for _, s in starred} == {"L3"}
 
 
