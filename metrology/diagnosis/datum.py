@@ -290,9 +290,9 @@ def name_datum_plane(diag, check: DatumPlaneCheck):
     cause = Cause("datum_tilt", "datum_tilt", [], Size(check.tilt_rad, None, "rad", "tilt of the datum plane the "
                                                        "readings place from the scan's"),
                   check.chi2, None, check.p, 0, test="the plane's correction against the scan's covariance (chi-square)",
-                  params={"tilt_1": {"value": float(check.phi[0]), "unit": "rad"},
-                          "tilt_2": {"value": float(check.phi[1]), "unit": "rad"},
-                          "offset": {"value": float(check.phi[2]), "unit": "mm"}})
+                  params={name: Param(float(check.phi[i]), unit,
+                                      None if check.posterior_stderr is None else float(check.posterior_stderr[i]))
+                          for i, (name, unit) in enumerate((("tilt_1", "rad"), ("tilt_2", "rad"), ("offset", "mm")))})
     summary = diag.summary + DATUM_PLANE_OFF.format(tilt=1e6 * check.tilt_rad, offset=1e3 * check.phi[2], p=check.p)
     named = diag.cause not in ("none", "unexplained")
     why = Reason(18, "datum_plane_off", Decision.DATUM_PLANE_OFF, ("datum_tilt",),

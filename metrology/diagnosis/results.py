@@ -111,7 +111,12 @@ class Param:
 
     value: float
     unit: str
-    stderr: float | None
+    stderr: float | None = None
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Param":
+        """From a ``describe()["params"]`` entry (``value``, ``unit``, and ``stderr`` where it has one)."""
+        return cls(d["value"], d["unit"], d.get("stderr"))
 
     def to_dict(self) -> dict:
         return {"value": self.value, "unit": self.unit, "stderr": self.stderr}
@@ -177,8 +182,8 @@ class Cause:
     heldout_gain_chi2 : float, its held-out chi-square gain given the other causes;
     p_heldout_given_others : float or None (None: a cause with no held-out test, the random pose
     error); p_insample : float; step : int, the selection step that chose it; test : str or None,
-    the test that named it where that is not the held-out one; params : dict, its parameters
-    (value, unit, stderr); rivals : tuple of Rival it cannot be told from;
+    the test that named it where that is not the held-out one; params : dict of str to Param, its
+    parameters by name; rivals : tuple of Rival it cannot be told from;
     detail : dict, the rest of its description (component, reference, located pose, pose-error
     figures...), JSON-ready, in the order ``to_dict`` writes it (the typed keys there as None,
     holding their place: their values are the attributes).
@@ -193,7 +198,7 @@ class Cause:
     p_insample: float
     step: int
     test: str | None = None
-    params: dict = field(default_factory=dict)
+    params: dict[str, Param] = field(default_factory=dict)
     rivals: tuple = ()
     detail: dict = field(default_factory=dict)
 
@@ -202,7 +207,8 @@ class Cause:
         """A cause from its description (a component's ``describe()`` with the verdict's figures; its
         ``size`` a :class:`Size` or None)."""
         return cls(d["label"], d["cause"], list(d["sensors"]), d.get("size"), d["heldout_gain_chi2"],
-                   d.get("p_heldout_given_others"), d["p_insample"], d["step"], d.get("test"), d.get("params", {}),
+                   d.get("p_heldout_given_others"), d["p_insample"], d["step"], d.get("test"),
+                   {k: v if isinstance(v, Param) else Param.from_dict(v) for k, v in d.get("params", {}).items()},
                    tuple(rivals), {k: None if k in _TYPED else v for k, v in d.items()})
 
     def to_dict(self) -> dict:
@@ -210,7 +216,7 @@ class Cause:
         out.update(label=self.label, cause=self.cause, sensors=list(self.sensors),
                    size=None if self.size is None else self.size.to_dict(), heldout_gain_chi2=self.heldout_gain_chi2,
                    p_heldout_given_others=self.p_heldout_given_others, p_insample=self.p_insample, step=self.step,
-                   params=self.params)
+                   params={k: v.to_dict() for k, v in self.params.items()})
         if self.test is not None:
             out["test"] = self.test
         if self.rivals:

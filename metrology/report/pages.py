@@ -260,7 +260,7 @@ def extension_fit_summary(diag):
     params, names = [], []
     for c in diag.causes:
         for k, v in c.params.items():
-            params.append((k, float(v["value"]), None if v["stderr"] is None else float(v["stderr"]), v["unit"]))
+            params.append((k, float(v.value), None if v.stderr is None else float(v.stderr), v.unit))
             names.append(k)
     # the readings of the fitted sensors, and what the fit's dof leaves of them (held base
     # parameters and per-pose values counted as the fit counted them)
