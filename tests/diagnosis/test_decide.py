@@ -25,20 +25,20 @@ def _check_named(d, effect, sensor, truth_rec):
     params = d.named.params
     if effect == "scale":
         v = params["k"]
-        assert abs(v["value"] - truth_rec["size"]) < K_SIGMA * v["stderr"]
+        assert abs(v.value - truth_rec["size"]) < K_SIGMA * v.stderr
     elif effect == "drift" and "rate_mm_per_K" in params:
         v = params["rate_mm_per_K"]
-        assert abs(v["value"] - truth_rec["size"]) < K_SIGMA * v["stderr"]
+        assert abs(v.value - truth_rec["size"]) < K_SIGMA * v.stderr
     elif effect == "nonlinearity":
         for key, true in (("c2_mm", 0.5 * truth_rec["size"]), ("c3_mm", truth_rec["size"])):
-            assert abs(params[key]["value"] - true) < K_SIGMA * params[key]["stderr"], key
+            assert abs(params[key].value - true) < K_SIGMA * params[key].stderr, key
     elif effect == "plane_form":
         for key in ("b_ss_mm", "b_st_mm", "b_tt_mm"):
             true = truth_rec["values"][key]
-            assert abs(params[key]["value"] - true) < K_SIGMA * params[key]["stderr"] + 0.02 * abs(truth_rec["size"]), key
+            assert abs(params[key].value - true) < K_SIGMA * params[key].stderr + 0.02 * abs(truth_rec["size"]), key
     elif effect == "pose_error":
         v = params["sigma_mm"]
-        assert abs(v["value"] - truth_rec["size"]) < K_SIGMA * v["stderr"]
+        assert abs(v.value - truth_rec["size"]) < K_SIGMA * v.stderr
     elif effect == "outliers":
         flagged = d.named.detail["flagged"]
         assert sorted(f["pose"] for f in flagged) == truth_rec["poses"]

@@ -54,6 +54,11 @@ def test_the_diagnosis_holds_typed_results_not_dicts(hidden):
     assert d.cause == "drift" and isinstance(d.named.size, Size)
     assert d.named.size.unit == "mm" and d.named.size.stderr_fit is not None and d.named.size.model_spread >= 0.0
     assert d.named.size.stderr >= d.named.size.stderr_fit  # the members' spread added in quadrature
+    from metrology.diagnosis.results import Param
+
+    rate = d.named.params["rate_mm_per_K"]  # the drift's parameters: Param, not dicts
+    assert all(isinstance(v, Param) for v in d.named.params.values()) and rate.unit == "mm/K" and rate.stderr > 0.0
+    assert d.to_dict()["causes"][0]["params"]["rate_mm_per_K"] == rate.to_dict()
     assert isinstance(d.heldout, HeldOutFigures) and d.heldout.model == "drift.L3@temp"
     assert d.heldout.rms_ratio_concerned > 1.0 and 0.0 < d.heldout.extended_normal_rad < d.heldout.base_normal_rad
     assert isinstance(d.discrepancy, Discrepancy) and d.discrepancy.extended_model == "drift.L3@temp"
