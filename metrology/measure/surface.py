@@ -133,62 +133,68 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
     K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
-    K6 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    # square to the drill axis (as given): its entries in the TCS xy plane; K_m = Q K Q^T then has
+    # K_m m = 0, so K_m T q = T K_m q = K_m q and (Tq)^T K_m (Tq) = q^T K_m q (no projections per step)
+    K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
     good = np.isfinite(sig) & (sig > 0)
-    sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
+    if not good.all():
+        sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
     s2 = (sig * sig)[:, None]
     dT = np.ascontiguousarray(d.T)
     valid = np.isfinite(dT)
-    dT = np.where(valid, dT, 0.0)
+    whole = bool(valid.all())
+    if not whole:
+        dT = np.where(valid, dT, 0.0)
     E, u = layout.zero, layout.direction
     x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
     y = E[:, 1, None] + dT * u[:, 1, None]
     z = E[:, 2, None] + dT * u[:, 2, None]
     ok = valid.sum(0) >= 3
-    gx = np.zeros(h)
-    gy = np.zeros(h)
-    c = np.zeros(h)
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
-    for it in range(steps + 1):
-        rho = np.sqrt(1.0 + gx * gx + gy * gy)
-        mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
-        zq = z - c
-        if it > 0:
-            k00, k01, k02, k11, k12, k22 = _turned(K6, mx, my, mz, sg)  # K on the fitted tangent plane
-            mq = mx * x + my * y + mz * zq
-            px, py, pz = x - mx * mq, y - my * mq, zq - mz * mq  # T q
-            vx = k00 * px + k01 * py + k02 * pz  # K T q
-            vy = k01 * px + k11 * py + k12 * pz
-            vz = k02 * px + k12 * py + k22 * pz
-            mv = mx * vx + my * vy + mz * vz
-            Kx, Ky, Kz = vx - mx * mv, vy - my * mv, vz - mz * mv  # K_t q
-            kappa = 0.5 * (px * vx + py * vy + pz * vz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
+        w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
+        wx, wy = w * x, w * y
+        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0),
+                                             w.sum(0))
+        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
+        gx = -(i00 * b0 + i01 * b1 + i02 * b2)
+        gy = -(i01 * b0 + i11 * b1 + i12 * b2)
+        c = -(i02 * b0 + i12 * b1 + i22 * b2)
+        gx0, gy0 = gx, gy
+        for it in range(1, steps + 1):  # Gauss-Newton with K; the last pass only evaluates at the solution
+            rho = np.sqrt(1.0 + gx * gx + gy * gy)
+            mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
+            zq = z - c
+            k00, k01, k02, k11, k12, k22 = _turned_tangent(K3, mx, my, mz, sg)  # K on the fitted tangent plane
+            Kx = k00 * x + k01 * y + k02 * zq  # K_m q = K_t q
+            Ky = k01 * x + k11 * y + k12 * zq
+            Kz = k02 * x + k12 * y + k22 * zq
             sc = sg * rho
-            hres = zq - gx * x - gy * y + sc * kappa
-            jc = -1.0 - sc * Kz
-            Gx, Gy, Gz = -gx + sc * Kx, -gy + sc * Ky, 1.0 + sc * Kz
+            hres = zq - gx * x - gy * y + (0.5 * sc) * (x * Kx + y * Ky + zq * Kz)
+            Gz = 1.0 + sc * Kz
+            jc = -Gz
+            Gx, Gy = sc * Kx - gx, sc * Ky - gy
             Gu = Gx * u0 + Gy * u1 + Gz * u2
-        else:
-            hres = zq - gx * x - gy * y
-            jc = np.full_like(x, -1.0)
-            Gu = -gx * u0 - gy * u1 + u2 + 0.0 * x
-        with np.errstate(divide="ignore"):
-            w = np.where(valid, 1.0 / (Gu * Gu * s2), 0.0)
-        wx, wy, wc = w * x, w * y, w * jc
-        m00, m01, m02 = (wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0)
-        m11, m12, m22 = (wy * y).sum(0), -(wc * y).sum(0), (wc * jc).sum(0)
-        i00, i01, i02, i11, i12, i22 = _inv3(m00, m01, m02, m11, m12, m22)
-        if it == steps:
-            break
-        b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
-        gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
-        gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
-        c = c - (i02 * b0 + i12 * b1 + i22 * b2)
-        if it == 0:  # the first step from 0 with K left out is the weighted micro-plane
-            gx0, gy0 = gx.copy(), gy.copy()
+            w = 1.0 / (Gu * Gu * s2)
+            if not whole:
+                w = np.where(valid, w, 0.0)
+            wx, wy, wc = w * x, w * y, w * jc
+            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0),
+                                                 -(wc * y).sum(0), (wc * jc).sum(0))
+            if it == steps:
+                break
+            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+            gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
+            gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
+            c = c - (i02 * b0 + i12 * b1 + i22 * b2)
+    if steps == 0:
+        rho = np.ones(h)
+        mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
+        zq, hres, jc = z, z, np.full_like(x, -1.0)
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
     normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
@@ -202,23 +208,38 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
                   i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
     G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
-    q = np.stack([x, y, z - c], axis=-1).transpose(1, 0, 2)
+    q = np.stack([x, y, zq], axis=-1).transpose(1, 0, 2)
     null = _null_vector_cols(-x, -y, jc) if n == 4 else None
-    m = np.stack([mx, my, mz], axis=1)
     if steps > 0:
-        K = _full((k00, k01, k02, k11, k12, k22))
-    Km = np.einsum("hij,hj->hi", K, m)
-    mKm = (m * Km).sum(1)
-    # T K T, entry by entry as K - m Km^T - Km m^T + (m.Km) m m^T, on (3, 3, h) arrays (long inner loops)
-    mT, KmT = np.ascontiguousarray(m.T), np.ascontiguousarray(Km.T)
-    Kt = np.ascontiguousarray((np.ascontiguousarray(K.transpose(1, 2, 0)) - mT[:, None] * KmT[None]
-                               - KmT[:, None] * mT[None] + mKm[None, None] * mT[:, None] * mT[None]).transpose(2, 0, 1))
-    if steps > 0:
+        Kt = _full((k00, k01, k02, k11, k12, k22))  # K_m, tangent to the fitted plane: T K_m T = K_m
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
-    else:
+    else:  # the micro-plane: K projected onto it, T K T
+        m = np.stack([mx, my, mz], axis=1)
+        Km = np.einsum("hij,hj->hi", K, m)
+        mKm = (m * Km).sum(1)
+        Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
+              + mKm[:, None, None] * m[:, :, None] * m[:, None, :])
         plane = normal.copy()
     return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
+
+
+def _turned_tangent(K, mx, my, mz, sg):
+    """:func:`_turned` of shape operators tangent to the TCS ``xy`` plane, given by their entries
+    ``K = (00, 01, 11)`` ((h,) arrays; the ``z`` row and column are 0): the 6 entries of ``Q K Q^T``."""
+    k00, k01, k11 = K
+    vx, vy = -sg * my, sg * mx  # sg e_z x m
+    f = 1.0 / (1.0 + sg * mz)
+    fx, fy = f * vx, f * vy
+    # the first two columns of Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
+    q00, q01 = 1.0 - fy * vy, fx * vy
+    q11 = 1.0 - fx * vx
+    q20, q21 = -vy, vx
+    a00, a01 = q00 * k00 + q01 * k01, q00 * k01 + q01 * k11  # (Q K)_i0, (Q K)_i1
+    a10, a11 = q01 * k00 + q11 * k01, q01 * k01 + q11 * k11
+    a20, a21 = q20 * k00 + q21 * k01, q20 * k01 + q21 * k11
+    return (a00 * q00 + a01 * q01, a00 * q01 + a01 * q11, a00 * q20 + a01 * q21, a10 * q01 + a11 * q11,
+            a10 * q20 + a11 * q21, a20 * q20 + a21 * q21)
 
 
 def _turned(K, mx, my, mz, sg):
