@@ -1,8 +1,8 @@
 """Speed and memory of ``metro measure``, against baselines measured in the same run.
 
     python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
-                                       [--sections in-process,process,qif,dask,cluster,panel] [--cluster-holes 4e6]
-                                       [--panel-holes 1e6]
+                                       [--sections in-process,process,qif,dask,cluster,panel,controller] [--cluster-holes 4e6]
+                                       [--panel-holes 1e6] [--controller-holes 2e5]
 
 On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
 ``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
@@ -32,7 +32,12 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
    the bundled Table 6 head), and ``metro measure LOG --layout L --panel P --points H`` against the
    same command without ``--panel --points``, run in turn in the same run: wall time, CPU time and
    peak RSS and their ratios (goal: <= 2x);
-7. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+7. **controller** (``--sections controller``): :func:`metrology.measure.surface_normal`, the call a
+   cell's controller makes per hole, in process, on the readings of a wing log of 2000 holes
+   (as 6., with the CAD's shape operator under the commanded pose) tiled to ``--controller-holes``
+   holes: batched (holes/s, best of ``--repeat``; goal: >= 2e5) and one hole a call (ms, the
+   median and the mean of 2000 calls, best of ``--repeat``; goal: <= 1 ms);
+8. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -269,6 +274,48 @@ def panel(work: Path, holes: int, repeat: int, metro, name: str = "wing") -> dic
     return out
 
 
+def controller(work: Path, holes: int, repeat: int, metro) -> dict:
+    """Section 7: ``surface_normal`` batched and one hole a call (module docstring)."""
+    import pyarrow.parquet as pq
+
+    from metrology.io.layout import load_layout
+    from metrology.jobs.measure import _surfaces
+    from metrology.measure import surface_normal
+    from metrology.measure.holes import _pose, _readings
+    from metrology.measure.normals import drill_axis
+
+    data = ROOT / "metrology" / "data"
+    mesh, points = data / "panels" / "wing.stl", data / "panels" / "wing.holes.csv"
+    layout = data / "measured" / "nominal.toml"
+    log = work / "controller-wing.parquet"
+    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--panel", str(mesh), "--points", str(points),
+                    "--holes", "2000", "--seed", "1", "--no-truth", "--out", str(log)], check=True,
+                   stdout=subprocess.DEVNULL)
+    lay = load_layout(layout)
+    surf = _surfaces(lay, str(mesh), str(points), 0.5, 0.0, 0.0)
+    table = pq.read_table(log)
+    d = _readings(table, lay.names)
+    shape = surf.shape_pose(surf.rows(table.column("point_id")), _pose(table)[0], drill_axis(lay)[2])
+    keep = np.all(np.isfinite(d), axis=1)
+    d, shape = d[keep], shape[keep]
+    reps = -(-holes // len(d))
+    db, kb = np.tile(d, (reps, 1))[:holes], np.tile(shape, (reps, 1, 1))[:holes]
+    best_batch, best_median, best_mean = np.inf, np.inf, np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        normal, ok = surface_normal(lay, db, kb)
+        best_batch = min(best_batch, time.perf_counter() - t0)
+        times = np.empty(2000)
+        for i in range(len(times)):
+            t0 = time.perf_counter()
+            surface_normal(lay, d[i % len(d)], shape[i % len(d)])
+            times[i] = time.perf_counter() - t0
+        best_median, best_mean = min(best_median, float(np.median(times))), min(best_mean, float(times.mean()))
+    log.unlink()
+    return {"holes": holes, "measured": int(ok.sum()), "batched_holes_per_s": holes / best_batch,
+            "one_hole_median_ms": best_median * 1e3, "one_hole_mean_ms": best_mean * 1e3}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--holes", type=float, default=1e6)
@@ -278,9 +325,10 @@ def main(argv=None):
     ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--sections", default="in-process,process,qif,dask",
-                    help="which of in-process, process, qif, dask, cluster, panel")
+                    help="which of in-process, process, qif, dask, cluster, panel, controller")
     ap.add_argument("--panel-holes", type=float, default=1e6, help="holes of the panel section's log")
     ap.add_argument("--cluster-holes", type=float, default=4e6, help="holes of the cluster section's log")
+    ap.add_argument("--controller-holes", type=float, default=2e5, help="holes of the controller section's batch")
     args = ap.parse_args(argv)
     sections = set(args.sections.split(","))
     work = Path(tempfile.mkdtemp(prefix="bench-measure-")) if args.workdir is None else args.workdir
@@ -291,7 +339,9 @@ def main(argv=None):
     res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
     if "panel" in sections:
         res["panel"] = panel(work, int(args.panel_holes), args.repeat, metro)
-    if sections <= {"cluster", "panel"}:
+    if "controller" in sections:
+        res["controller"] = controller(work, int(args.controller_holes), args.repeat, metro)
+    if sections <= {"cluster", "panel", "controller"}:
         if "cluster" in sections:
             res["cluster"] = cluster(work, int(args.cluster_holes), metro)
         return _done(res, args, work)
