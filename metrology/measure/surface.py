@@ -161,9 +161,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
         w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
         wx, wy = w * x, w * y
-        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0),
-                                             w.sum(0))
-        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
+        i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), wx.sum(0), _dot(wy, y), wy.sum(0), w.sum(0))
+        b0, b1, b2 = -_dot(wx, z), -_dot(wy, z), -_dot(w, z)
         gx = -(i00 * b0 + i01 * b1 + i02 * b2)
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
@@ -186,11 +185,11 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
             if not whole:
                 w = np.where(valid, w, 0.0)
             wx, wy, wc = w * x, w * y, w * jc
-            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0),
-                                                 -(wc * y).sum(0), (wc * jc).sum(0))
+            i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), -_dot(wc, x), _dot(wy, y), -_dot(wc, y),
+                                                 _dot(wc, jc))
             if it == steps:
                 break
-            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+            b0, b1, b2 = -_dot(wx, hres), -_dot(wy, hres), _dot(wc, hres)
             gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
             gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
             c = c - (i02 * b0 + i12 * b1 + i22 * b2)
@@ -225,6 +224,11 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
               + mKm[:, None, None] * m[:, :, None] * m[:, None, :])
         plane = normal.copy()
     return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
+
+
+def _dot(a, b):
+    """``(a * b).sum(0)`` of two (n, h) arrays, without the product's temporary."""
+    return np.einsum("ij,ij->j", a, b)
 
 
 def _turned_tangent(K, mx, my, mz, sg):
@@ -345,10 +349,13 @@ class PanelTerms:
 
 def _tangent_basis(m):
     """Two unit vectors (h, 3) spanning the plane square to unit ``m (h, 3)``."""
-    ref = np.where(np.abs(m[:, 0:1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    t1 = ref - (ref * m).sum(1, keepdims=True) * m
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return t1, np.cross(m, t1)
+    mx, my, mz = m[:, 0], m[:, 1], m[:, 2]
+    use_x = np.abs(mx) < 0.9  # the reference e_x, else e_y
+    rm = np.where(use_x, mx, my)  # ref . m
+    t1 = np.stack([np.where(use_x, 1.0, 0.0) - rm * mx, np.where(use_x, 0.0, 1.0) - rm * my, -rm * mz], axis=1)
+    t1 /= np.sqrt((t1 * t1).sum(1))[:, None]
+    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
+    return t1, np.stack([my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax], axis=1)  # m x t1
 
 
 def _shape_basis(fit, g2, axis):
@@ -358,8 +365,9 @@ def _shape_basis(fit, g2, axis):
     m = fit.normal
     t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
     sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
-    a1 = np.einsum("hni,hi->hn", fit.q, t1)
-    a2 = np.einsum("hni,hi->hn", fit.q, t2)
+    q = fit.q
+    a1 = q[..., 0] * t1[:, 0, None] + q[..., 1] * t1[:, 1, None] + q[..., 2] * t1[:, 2, None]  # (N, n), mm
+    a2 = q[..., 0] * t2[:, 0, None] + q[..., 1] * t2[:, 1, None] + q[..., 2] * t2[:, 2, None]
     return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
 
 
