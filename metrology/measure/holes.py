@@ -290,6 +290,8 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
                           & np.all(np.isfinite(normal), axis=1))
     if rows.size == 0:
         return ang, off
+    if rows.size == N:  # every row (the usual batch): views, not copies
+        rows = slice(None)
     r = table_row[rows]
     ncad = surf.normal[r]  # outward (toward the head), panel frame
     Rr = R[rows]
