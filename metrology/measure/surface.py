@@ -227,8 +227,9 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
 
 
 def _dot(a, b):
-    """``(a * b).sum(0)`` of two (n, h) arrays, without the product's temporary."""
-    return np.einsum("ij,ij->j", a, b)
+    """``(a * b).sum(0)`` of two (n, h) arrays: the sensors summed in order, whatever ``h`` (an einsum's
+    order depends on the array's shape: a hole's bits would depend on its batch)."""
+    return (a * b).sum(0)
 
 
 def _turned_tangent(K, mx, my, mz, sg):
