@@ -259,17 +259,22 @@ def panel(work: Path, holes: int, repeat: int, metro, name: str = "wing") -> dic
                    stdout=subprocess.DEVNULL)
     out = {"holes": holes, "panel": f"{name}.stl", "table": f"{name}.holes.csv", "generate_s": time.perf_counter() - t0}
     base = [*metro, "-q", "measure", str(log), "--layout", str(layout), "--out", str(work / "panel-out.parquet")]
-    cpu_p, cpu_b, best = [], [], {}
+    cpu_p, cpu_b, best, rounds = [], [], {}, []
     for _ in range(repeat):  # in turn: the machine's load falls on both alike
+        rounds.append({})
         for key, cmd, cpu in (("plain", base, cpu_b), ("panel", [*base, "--panel", str(mesh), "--points", str(points)],
                                                        cpu_p)):
             t, rss = process(cmd, 1, cpu)
             b = best.setdefault(key, [np.inf, 0.0])
             b[0], b[1] = min(b[0], t), max(b[1], rss)
+            rounds[-1].update({f"{key}_s": t, f"{key}_cpu_s": cpu[-1], f"{key}_rss_mb": rss})
+        r = rounds[-1]
+        r.update(ratio_time=r["panel_s"] / r["plain_s"], ratio_cpu=r["panel_cpu_s"] / r["plain_cpu_s"],
+                 ratio_rss=r["panel_rss_mb"] / r["plain_rss_mb"])
     out.update(plain_s=best["plain"][0], plain_cpu_s=min(cpu_b), plain_rss_mb=best["plain"][1],
                panel_s=best["panel"][0], panel_cpu_s=min(cpu_p), panel_rss_mb=best["panel"][1])
     out.update(ratio_time=out["panel_s"] / out["plain_s"], ratio_cpu=out["panel_cpu_s"] / out["plain_cpu_s"],
-               ratio_rss=out["panel_rss_mb"] / out["plain_rss_mb"])
+               ratio_rss=out["panel_rss_mb"] / out["plain_rss_mb"], rounds=rounds)
     log.unlink()
     return out
 
