@@ -56,6 +56,8 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
+from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
+from metrology.core.sym3 import turned as _turned, turned_tangent as _turned_tangent
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
@@ -104,18 +106,6 @@ class SurfaceFit:
     Kt: np.ndarray | None
 
 
-def _inv3(a00, a01, a02, a11, a12, a22):
-    """The inverse of symmetric 3 x 3 matrices given by their 6 entries (arrays): 6 arrays (NaN where singular)."""
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    with np.errstate(invalid="ignore", divide="ignore"):
-        f = np.where(np.abs(det) > 1e-300, 1.0 / det, np.nan)
-    return (c00 * f, c01 * f, c02 * f, (a00 * a22 - a02 * a02) * f, (a01 * a02 - a00 * a12) * f,
-            (a00 * a11 - a01 * a01) * f)
-
-
 def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
     """Fit the local surface's pose (see the module docstring) to each hole's readings.
 
@@ -161,8 +151,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
         w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
         wx, wy = w * x, w * y
-        i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), wx.sum(0), _dot(wy, y), wy.sum(0), w.sum(0))
-        b0, b1, b2 = -_dot(wx, z), -_dot(wy, z), -_dot(w, z)
+        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
+        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
         gx = -(i00 * b0 + i01 * b1 + i02 * b2)
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
@@ -185,11 +175,11 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
             if not whole:
                 w = np.where(valid, w, 0.0)
             wx, wy, wc = w * x, w * y, w * jc
-            i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), -_dot(wc, x), _dot(wy, y), -_dot(wc, y),
-                                                 _dot(wc, jc))
+            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0), -(wc * y).sum(0),
+                                                 (wc * jc).sum(0))
             if it == steps:
                 break
-            b0, b1, b2 = -_dot(wx, hres), -_dot(wy, hres), _dot(wc, hres)
+            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
             gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
             gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
             c = c - (i02 * b0 + i12 * b1 + i22 * b2)
@@ -224,74 +214,6 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
               + mKm[:, None, None] * m[:, :, None] * m[:, None, :])
         plane = normal.copy()
     return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
-
-
-def _dot(a, b):
-    """``(a * b).sum(0)`` of two (n, h) arrays: the sensors summed in order, whatever ``h`` (an einsum's
-    order depends on the array's shape: a hole's bits would depend on its batch)."""
-    return (a * b).sum(0)
-
-
-def _turned_tangent(K, mx, my, mz, sg):
-    """:func:`_turned` of shape operators tangent to the TCS ``xy`` plane, given by their entries
-    ``K = (00, 01, 11)`` ((h,) arrays; the ``z`` row and column are 0): the 6 entries of ``Q K Q^T``."""
-    k00, k01, k11 = K
-    vx, vy = -sg * my, sg * mx  # sg e_z x m
-    f = 1.0 / (1.0 + sg * mz)
-    fx, fy = f * vx, f * vy
-    # the first two columns of Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
-    q00, q01 = 1.0 - fy * vy, fx * vy
-    q11 = 1.0 - fx * vx
-    q20, q21 = -vy, vx
-    a00, a01 = q00 * k00 + q01 * k01, q00 * k01 + q01 * k11  # (Q K)_i0, (Q K)_i1
-    a10, a11 = q01 * k00 + q11 * k01, q01 * k01 + q11 * k11
-    a20, a21 = q20 * k00 + q21 * k01, q20 * k01 + q21 * k11
-    return (a00 * q00 + a01 * q01, a00 * q01 + a01 * q11, a00 * q20 + a01 * q21, a10 * q01 + a11 * q11,
-            a10 * q20 + a11 * q21, a20 * q20 + a21 * q21)
-
-
-def _turned(K, mx, my, mz, sg):
-    """The 6 entries ``(00, 01, 02, 11, 12, 22)`` ((h,) arrays) of ``Q K Q^T``, ``Q`` the smallest
-    rotation taking ``sg e_z`` onto the unit normal ``m = (mx, my, mz)`` (arrays (h,), ``sg mz > 0``);
-    ``K`` the 6 entries of symmetric 3 x 3 matrices: the shape operator given square to the drill
-    axis (as for a head square to the panel) turned onto the fitted tangent plane. A projection
-    ``T K T`` instead shrinks the curvature across the tilt by ``cos^2`` of it (0.8 % at 5 deg: on a
-    3-sensor ring, whose curvature correction is of the order of 1 deg, about 0.01 deg of error)."""
-    k00, k01, k02, k11, k12, k22 = K
-    vx, vy = -sg * my, sg * mx  # sg e_z x m
-    f = 1.0 / (1.0 + sg * mz)
-    fx, fy = f * vx, f * vy
-    # Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
-    q00, q01, q02 = 1.0 - fy * vy, fx * vy, vy
-    q10, q11, q12 = q01, 1.0 - fx * vx, -vx
-    q20, q21, q22 = -vy, vx, 1.0 - fx * vx - fy * vy
-    a = [[q00 * k00 + q01 * k01 + q02 * k02, q00 * k01 + q01 * k11 + q02 * k12, q00 * k02 + q01 * k12 + q02 * k22],
-         [q10 * k00 + q11 * k01 + q12 * k02, q10 * k01 + q11 * k11 + q12 * k12, q10 * k02 + q11 * k12 + q12 * k22],
-         [q20 * k00 + q21 * k01 + q22 * k02, q20 * k01 + q21 * k11 + q22 * k12, q20 * k02 + q21 * k12 + q22 * k22]]
-    q = [[q00, q01, q02], [q10, q11, q12], [q20, q21, q22]]
-
-    def e(i, j):  # (Q K Q^T)_ij = sum_l (Q K)_il Q_jl
-        return a[i][0] * q[j][0] + a[i][1] * q[j][1] + a[i][2] * q[j][2]
-
-    return e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)
-
-
-def _full(k):
-    """(h, 3, 3) from the 6 entries ``(00, 01, 02, 11, 12, 22)``."""
-    k00, k01, k02, k11, k12, k22 = k
-    return np.stack([np.stack([k00, k01, k02], -1), np.stack([k01, k11, k12], -1),
-                     np.stack([k02, k12, k22], -1)], -2)
-
-
-def _null_vector_cols(a, b, c):
-    """(h, 4) unit vectors orthogonal to the columns ``a, b, c`` (each (4, h)) of a 4 x 3 matrix:
-    the signed 3 x 3 minors of the rows left after dropping each one."""
-    def det(i, j, k):
-        return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
-                + c[i] * (a[j] * b[k] - a[k] * b[j]))
-
-    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
-    return q / np.sqrt((q * q).sum(1))[:, None]
 
 
 def surface_normal(layout, d, shape):
