@@ -1,8 +1,8 @@
 """Speed and memory of ``metro measure``, against baselines measured in the same run.
 
     python benchmarks/bench_measure.py [--holes 1e6] [--repeat 3] [--workdir DIR] [--big 1e8] [--json F]
-                                       [--sections in-process,process,qif,dask,cluster,panel] [--cluster-holes 4e6]
-                                       [--panel-holes 1e6]
+                                       [--sections in-process,process,qif,dask,cluster,panel,controller] [--cluster-holes 4e6]
+                                       [--panel-holes 1e6] [--controller-holes 2e5]
 
 On a hole log drawn by the independent forward simulator (Table 6 head, flat panel, after-readings,
 ``--holes`` holes written as one Parquet file and as a partitioned folder of 8 files):
@@ -32,7 +32,12 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
    the bundled Table 6 head), and ``metro measure LOG --layout L --panel P --points H`` against the
    same command without ``--panel --points``, run in turn in the same run: wall time, CPU time and
    peak RSS and their ratios (goal: <= 2x);
-7. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+7. **controller** (``--sections controller``): :func:`metrology.measure.surface_normal`, the call a
+   cell's controller makes per hole, in process, on the readings of a wing log of 2000 holes
+   (as 6., with the CAD's shape operator under the commanded pose) tiled to ``--controller-holes``
+   holes: batched (holes/s, best of ``--repeat``; goal: >= 2e5) and one hole a call (ms, the
+   median and the mean of 2000 calls, best of ``--repeat``; goal: <= 1 ms);
+8. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -254,19 +259,66 @@ def panel(work: Path, holes: int, repeat: int, metro, name: str = "wing") -> dic
                    stdout=subprocess.DEVNULL)
     out = {"holes": holes, "panel": f"{name}.stl", "table": f"{name}.holes.csv", "generate_s": time.perf_counter() - t0}
     base = [*metro, "-q", "measure", str(log), "--layout", str(layout), "--out", str(work / "panel-out.parquet")]
-    cpu_p, cpu_b, best = [], [], {}
+    cpu_p, cpu_b, best, rounds = [], [], {}, []
     for _ in range(repeat):  # in turn: the machine's load falls on both alike
+        rounds.append({})
         for key, cmd, cpu in (("plain", base, cpu_b), ("panel", [*base, "--panel", str(mesh), "--points", str(points)],
                                                        cpu_p)):
             t, rss = process(cmd, 1, cpu)
             b = best.setdefault(key, [np.inf, 0.0])
             b[0], b[1] = min(b[0], t), max(b[1], rss)
+            rounds[-1].update({f"{key}_s": t, f"{key}_cpu_s": cpu[-1], f"{key}_rss_mb": rss})
+        r = rounds[-1]
+        r.update(ratio_time=r["panel_s"] / r["plain_s"], ratio_cpu=r["panel_cpu_s"] / r["plain_cpu_s"],
+                 ratio_rss=r["panel_rss_mb"] / r["plain_rss_mb"])
     out.update(plain_s=best["plain"][0], plain_cpu_s=min(cpu_b), plain_rss_mb=best["plain"][1],
                panel_s=best["panel"][0], panel_cpu_s=min(cpu_p), panel_rss_mb=best["panel"][1])
     out.update(ratio_time=out["panel_s"] / out["plain_s"], ratio_cpu=out["panel_cpu_s"] / out["plain_cpu_s"],
-               ratio_rss=out["panel_rss_mb"] / out["plain_rss_mb"])
+               ratio_rss=out["panel_rss_mb"] / out["plain_rss_mb"], rounds=rounds)
     log.unlink()
     return out
+
+
+def controller(work: Path, holes: int, repeat: int, metro) -> dict:
+    """Section 7: ``surface_normal`` batched and one hole a call (module docstring)."""
+    import pyarrow.parquet as pq
+
+    from metrology.io.layout import load_layout
+    from metrology.jobs.measure import _surfaces
+    from metrology.measure import surface_normal
+    from metrology.measure.holes import _pose, _readings
+    from metrology.measure.normals import drill_axis
+
+    data = ROOT / "metrology" / "data"
+    mesh, points = data / "panels" / "wing.stl", data / "panels" / "wing.holes.csv"
+    layout = data / "measured" / "nominal.toml"
+    log = work / "controller-wing.parquet"
+    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--panel", str(mesh), "--points", str(points),
+                    "--holes", "2000", "--seed", "1", "--no-truth", "--out", str(log)], check=True,
+                   stdout=subprocess.DEVNULL)
+    lay = load_layout(layout)
+    surf = _surfaces(lay, str(mesh), str(points), 0.5, 0.0, 0.0)
+    table = pq.read_table(log)
+    d = _readings(table, lay.names)
+    shape = surf.shape_pose(surf.rows(table.column("point_id")), _pose(table)[0], drill_axis(lay)[2])
+    keep = np.all(np.isfinite(d), axis=1)
+    d, shape = d[keep], shape[keep]
+    reps = -(-holes // len(d))
+    db, kb = np.tile(d, (reps, 1))[:holes], np.tile(shape, (reps, 1, 1))[:holes]
+    best_batch, best_median, best_mean = np.inf, np.inf, np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        normal, ok = surface_normal(lay, db, kb)
+        best_batch = min(best_batch, time.perf_counter() - t0)
+        times = np.empty(2000)
+        for i in range(len(times)):
+            t0 = time.perf_counter()
+            surface_normal(lay, d[i % len(d)], shape[i % len(d)])
+            times[i] = time.perf_counter() - t0
+        best_median, best_mean = min(best_median, float(np.median(times))), min(best_mean, float(times.mean()))
+    log.unlink()
+    return {"holes": holes, "measured": int(ok.sum()), "batched_holes_per_s": holes / best_batch,
+            "one_hole_median_ms": best_median * 1e3, "one_hole_mean_ms": best_mean * 1e3}
 
 
 def main(argv=None):
@@ -278,9 +330,10 @@ def main(argv=None):
     ap.add_argument("--big", type=float, default=0.0, help="holes of the big run (e.g. 1e8); 0: none")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--sections", default="in-process,process,qif,dask",
-                    help="which of in-process, process, qif, dask, cluster, panel")
+                    help="which of in-process, process, qif, dask, cluster, panel, controller")
     ap.add_argument("--panel-holes", type=float, default=1e6, help="holes of the panel section's log")
     ap.add_argument("--cluster-holes", type=float, default=4e6, help="holes of the cluster section's log")
+    ap.add_argument("--controller-holes", type=float, default=2e5, help="holes of the controller section's batch")
     args = ap.parse_args(argv)
     sections = set(args.sections.split(","))
     work = Path(tempfile.mkdtemp(prefix="bench-measure-")) if args.workdir is None else args.workdir
@@ -291,7 +344,9 @@ def main(argv=None):
     res = {"machine": {"cores": os.cpu_count(), "python": platform.python_version()}, "holes": int(args.holes)}
     if "panel" in sections:
         res["panel"] = panel(work, int(args.panel_holes), args.repeat, metro)
-    if sections <= {"cluster", "panel"}:
+    if "controller" in sections:
+        res["controller"] = controller(work, int(args.controller_holes), args.repeat, metro)
+    if sections <= {"cluster", "panel", "controller"}:
         if "cluster" in sections:
             res["cluster"] = cluster(work, int(args.cluster_holes), metro)
         return _done(res, args, work)

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.layout import SensorLayout
+from metrology.core.sym3 import smallest_eigvec
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
 from metrology.measure.normals import hole_normals
 
@@ -289,20 +290,35 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
                           & np.all(np.isfinite(normal), axis=1))
     if rows.size == 0:
         return ang, off
+    if rows.size == N:  # every row (the usual batch): views, not copies
+        rows = slice(None)
     r = table_row[rows]
     ncad = surf.normal[r]  # outward (toward the head), panel frame
-    n_panel = np.einsum("hij,hj->hi", R[rows], normal[rows])  # along the drill axis: into the panel
-    ang[rows] = np.arccos(np.clip(-np.sum(n_panel * ncad, axis=1), -1.0, 1.0))
+    Rr = R[rows]
+    nr = normal[rows]
+    # R n, along the drill axis (into the panel), dotted with the CAD's normal: explicit 3 x 3 over the holes
+    cos = -sum((Rr[:, i, 0] * nr[:, 0] + Rr[:, i, 1] * nr[:, 1] + Rr[:, i, 2] * nr[:, 2]) * ncad[:, i] for i in range(3))
+    ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
     a = drill_axis(layout)
-    spots = layout.zero[None] + d[rows][:, :, None] * layout.direction[None]  # (h, n, 3) mm, TCS
-    lat = spots - np.einsum("hni,i->hn", spots, a)[:, :, None] * a
-    sag = 0.5 * np.einsum("hni,hij,hnj->hn", lat, shape[rows], lat)  # away from the head
-    spots = spots - sag[:, :, None] * a
-    c = spots.mean(1)
-    _, _, vt = np.linalg.svd(spots - c[:, None], full_matrices=False)
-    m = vt[:, 2]
-    t = np.sum(c * m, axis=1) / (m @ a)
-    hit = origin[rows] + np.einsum("hij,hj->hi", R[rows], t[:, None] * a[None])
+    # the spots, sensor-major (n, h) per component, mm, TCS
+    dT = d[rows].T
+    E, u = layout.zero, layout.direction
+    sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
+    sa = sx * a[0] + sy * a[1] + sz * a[2]
+    lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
+    K = shape[rows]
+    k00, k01, k02, k11, k12, k22 = (K[:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
+                 + k22 * lz * lz)  # away from the head
+    sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
+    cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
+    xc, yc, zc = sx - cx, sy - cy, sz - cz
+    # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
+    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
+                        (zc * zc).sum(0), a)
+    t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
+    Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
+    hit = origin[rows] + t[:, None] * Ra
     off[rows] = np.sum((hit - surf.point[r]) * ncad, axis=1)
     return ang, off
 

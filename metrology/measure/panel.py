@@ -199,13 +199,22 @@ class HoleSurfaces:
         tangent plane; the pose's spin about the tool axis is kept)."""
         from metrology.measure.surface import _full, _turned
 
-        K = np.einsum("hji,hjk,hkl->hil", tcs2panel, self.shape[rows], tcs2panel)
-        nt = np.einsum("hji,hj->hi", tcs2panel, self.normal[rows])  # the CAD's normal, toward the head, TCS
+        T = np.asarray(tcs2panel, float)
+        r = [[T[:, j, i] for i in range(3)] for j in range(3)]  # r[j][i] = T_ji
+        S = self.shape[rows]
+        # T^T S T entry by entry over the holes (explicit 3 x 3 products, not an einsum with inner dims of 3)
+        a = [[S[:, j, 0] * r[0][i] + S[:, j, 1] * r[1][i] + S[:, j, 2] * r[2][i] for i in range(3)]
+             for j in range(3)]  # a[j][i] = (S T)_ji
+        k6 = tuple(r[0][i] * a[0][j] + r[1][i] * a[1][j] + r[2][i] * a[2][j]
+                   for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+        nrm = self.normal[rows]
+        ntx, nty, ntz = (r[0][i] * nrm[:, 0] + r[1][i] * nrm[:, 1] + r[2][i] * nrm[:, 2] for i in range(3))  # TCS
         sg = -s
-        ok = sg * nt[:, 2] > 1e-6
+        ok = sg * ntz > 1e-6
         # the smallest rotation taking nt onto sg e_z is that taking sg e_z onto nt mirrored about the axis
-        k6 = tuple(K[ok][:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
-        K[ok] = _full(_turned(k6, -nt[ok, 0], -nt[ok, 1], nt[ok, 2], sg))
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            turned = _turned(k6, -ntx, -nty, ntz, sg)
+        K = _full(tuple(np.where(ok, t, k) for t, k in zip(turned, k6)))
         return K
 
 

@@ -56,6 +56,8 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
+from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
+from metrology.core.sym3 import turned as _turned, turned_tangent as _turned_tangent
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
@@ -65,6 +67,9 @@ __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit"
 #: error by >= 200 on panels of R >= 300 mm (sphere R 300, Table 6, noise-free: 0.23 deg after the
 #: micro-plane, 1e-3 deg after one more step, 5e-6 deg after two)
 GN_STEPS = 3
+#: rows per call of the fit in :func:`surface_normal`: its temporaries stay in the processor's cache (as
+#: :data:`metrology.measure.holes.CACHE_ROWS`; measured: 2e5 holes in one call ran at 2/3 of the rate)
+SLICE_ROWS = 16384
 
 
 @dataclass(frozen=True)
@@ -101,18 +106,6 @@ class SurfaceFit:
     Kt: np.ndarray | None
 
 
-def _inv3(a00, a01, a02, a11, a12, a22):
-    """The inverse of symmetric 3 x 3 matrices given by their 6 entries (arrays): 6 arrays (NaN where singular)."""
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    with np.errstate(invalid="ignore", divide="ignore"):
-        f = np.where(np.abs(det) > 1e-300, 1.0 / det, np.nan)
-    return (c00 * f, c01 * f, c02 * f, (a00 * a22 - a02 * a02) * f, (a01 * a02 - a00 * a12) * f,
-            (a00 * a11 - a01 * a01) * f)
-
-
 def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
     """Fit the local surface's pose (see the module docstring) to each hole's readings.
 
@@ -133,62 +126,67 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
     K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
-    K6 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    # square to the drill axis (as given): its entries in the TCS xy plane; K_m = Q K Q^T then has
+    # K_m m = 0, so K_m T q = T K_m q = K_m q and (Tq)^T K_m (Tq) = q^T K_m q (no projections per step)
+    K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
     good = np.isfinite(sig) & (sig > 0)
-    sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
+    if not good.all():
+        sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
     s2 = (sig * sig)[:, None]
     dT = np.ascontiguousarray(d.T)
     valid = np.isfinite(dT)
-    dT = np.where(valid, dT, 0.0)
+    whole = bool(valid.all())
+    if not whole:
+        dT = np.where(valid, dT, 0.0)
     E, u = layout.zero, layout.direction
     x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
     y = E[:, 1, None] + dT * u[:, 1, None]
     z = E[:, 2, None] + dT * u[:, 2, None]
     ok = valid.sum(0) >= 3
-    gx = np.zeros(h)
-    gy = np.zeros(h)
-    c = np.zeros(h)
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
-    for it in range(steps + 1):
-        rho = np.sqrt(1.0 + gx * gx + gy * gy)
-        mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
-        zq = z - c
-        if it > 0:
-            k00, k01, k02, k11, k12, k22 = _turned(K6, mx, my, mz, sg)  # K on the fitted tangent plane
-            mq = mx * x + my * y + mz * zq
-            px, py, pz = x - mx * mq, y - my * mq, zq - mz * mq  # T q
-            vx = k00 * px + k01 * py + k02 * pz  # K T q
-            vy = k01 * px + k11 * py + k12 * pz
-            vz = k02 * px + k12 * py + k22 * pz
-            mv = mx * vx + my * vy + mz * vz
-            Kx, Ky, Kz = vx - mx * mv, vy - my * mv, vz - mz * mv  # K_t q
-            kappa = 0.5 * (px * vx + py * vy + pz * vz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
+        w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
+        wx, wy = w * x, w * y
+        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
+        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
+        gx = -(i00 * b0 + i01 * b1 + i02 * b2)
+        gy = -(i01 * b0 + i11 * b1 + i12 * b2)
+        c = -(i02 * b0 + i12 * b1 + i22 * b2)
+        gx0, gy0 = gx, gy
+        for it in range(1, steps + 1):  # Gauss-Newton with K; the last pass only evaluates at the solution
+            rho = np.sqrt(1.0 + gx * gx + gy * gy)
+            mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
+            zq = z - c
+            k00, k01, k02, k11, k12, k22 = _turned_tangent(K3, mx, my, mz, sg)  # K on the fitted tangent plane
+            Kx = k00 * x + k01 * y + k02 * zq  # K_m q = K_t q
+            Ky = k01 * x + k11 * y + k12 * zq
+            Kz = k02 * x + k12 * y + k22 * zq
             sc = sg * rho
-            hres = zq - gx * x - gy * y + sc * kappa
-            jc = -1.0 - sc * Kz
-            Gx, Gy, Gz = -gx + sc * Kx, -gy + sc * Ky, 1.0 + sc * Kz
+            hres = zq - gx * x - gy * y + (0.5 * sc) * (x * Kx + y * Ky + zq * Kz)
+            Gz = 1.0 + sc * Kz
+            jc = -Gz
+            Gx, Gy = sc * Kx - gx, sc * Ky - gy
             Gu = Gx * u0 + Gy * u1 + Gz * u2
-        else:
-            hres = zq - gx * x - gy * y
-            jc = np.full_like(x, -1.0)
-            Gu = -gx * u0 - gy * u1 + u2 + 0.0 * x
-        with np.errstate(divide="ignore"):
-            w = np.where(valid, 1.0 / (Gu * Gu * s2), 0.0)
-        wx, wy, wc = w * x, w * y, w * jc
-        m00, m01, m02 = (wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0)
-        m11, m12, m22 = (wy * y).sum(0), -(wc * y).sum(0), (wc * jc).sum(0)
-        i00, i01, i02, i11, i12, i22 = _inv3(m00, m01, m02, m11, m12, m22)
-        if it == steps:
-            break
-        b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
-        gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
-        gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
-        c = c - (i02 * b0 + i12 * b1 + i22 * b2)
-        if it == 0:  # the first step from 0 with K left out is the weighted micro-plane
-            gx0, gy0 = gx.copy(), gy.copy()
+            w = 1.0 / (Gu * Gu * s2)
+            if not whole:
+                w = np.where(valid, w, 0.0)
+            wx, wy, wc = w * x, w * y, w * jc
+            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0), -(wc * y).sum(0),
+                                                 (wc * jc).sum(0))
+            if it == steps:
+                break
+            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+            gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
+            gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
+            c = c - (i02 * b0 + i12 * b1 + i22 * b2)
+    if steps == 0:
+        rho = np.ones(h)
+        mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
+        zq, hres, jc = z, z, np.full_like(x, -1.0)
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
     normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
@@ -202,67 +200,20 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
                   i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
     G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
-    q = np.stack([x, y, z - c], axis=-1).transpose(1, 0, 2)
+    q = np.stack([x, y, zq], axis=-1).transpose(1, 0, 2)
     null = _null_vector_cols(-x, -y, jc) if n == 4 else None
-    m = np.stack([mx, my, mz], axis=1)
     if steps > 0:
-        K = _full((k00, k01, k02, k11, k12, k22))
-    Km = np.einsum("hij,hj->hi", K, m)
-    mKm = (m * Km).sum(1)
-    # T K T, entry by entry as K - m Km^T - Km m^T + (m.Km) m m^T, on (3, 3, h) arrays (long inner loops)
-    mT, KmT = np.ascontiguousarray(m.T), np.ascontiguousarray(Km.T)
-    Kt = np.ascontiguousarray((np.ascontiguousarray(K.transpose(1, 2, 0)) - mT[:, None] * KmT[None]
-                               - KmT[:, None] * mT[None] + mKm[None, None] * mT[:, None] * mT[None]).transpose(2, 0, 1))
-    if steps > 0:
+        Kt = _full((k00, k01, k02, k11, k12, k22))  # K_m, tangent to the fitted plane: T K_m T = K_m
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
-    else:
+    else:  # the micro-plane: K projected onto it, T K T
+        m = np.stack([mx, my, mz], axis=1)
+        Km = np.einsum("hij,hj->hi", K, m)
+        mKm = (m * Km).sum(1)
+        Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
+              + mKm[:, None, None] * m[:, :, None] * m[:, None, :])
         plane = normal.copy()
     return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
-
-
-def _turned(K, mx, my, mz, sg):
-    """The 6 entries ``(00, 01, 02, 11, 12, 22)`` ((h,) arrays) of ``Q K Q^T``, ``Q`` the smallest
-    rotation taking ``sg e_z`` onto the unit normal ``m = (mx, my, mz)`` (arrays (h,), ``sg mz > 0``);
-    ``K`` the 6 entries of symmetric 3 x 3 matrices: the shape operator given square to the drill
-    axis (as for a head square to the panel) turned onto the fitted tangent plane. A projection
-    ``T K T`` instead shrinks the curvature across the tilt by ``cos^2`` of it (0.8 % at 5 deg: on a
-    3-sensor ring, whose curvature correction is of the order of 1 deg, about 0.01 deg of error)."""
-    k00, k01, k02, k11, k12, k22 = K
-    vx, vy = -sg * my, sg * mx  # sg e_z x m
-    f = 1.0 / (1.0 + sg * mz)
-    fx, fy = f * vx, f * vy
-    # Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
-    q00, q01, q02 = 1.0 - fy * vy, fx * vy, vy
-    q10, q11, q12 = q01, 1.0 - fx * vx, -vx
-    q20, q21, q22 = -vy, vx, 1.0 - fx * vx - fy * vy
-    a = [[q00 * k00 + q01 * k01 + q02 * k02, q00 * k01 + q01 * k11 + q02 * k12, q00 * k02 + q01 * k12 + q02 * k22],
-         [q10 * k00 + q11 * k01 + q12 * k02, q10 * k01 + q11 * k11 + q12 * k12, q10 * k02 + q11 * k12 + q12 * k22],
-         [q20 * k00 + q21 * k01 + q22 * k02, q20 * k01 + q21 * k11 + q22 * k12, q20 * k02 + q21 * k12 + q22 * k22]]
-    q = [[q00, q01, q02], [q10, q11, q12], [q20, q21, q22]]
-
-    def e(i, j):  # (Q K Q^T)_ij = sum_l (Q K)_il Q_jl
-        return a[i][0] * q[j][0] + a[i][1] * q[j][1] + a[i][2] * q[j][2]
-
-    return e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)
-
-
-def _full(k):
-    """(h, 3, 3) from the 6 entries ``(00, 01, 02, 11, 12, 22)``."""
-    k00, k01, k02, k11, k12, k22 = k
-    return np.stack([np.stack([k00, k01, k02], -1), np.stack([k01, k11, k12], -1),
-                     np.stack([k02, k12, k22], -1)], -2)
-
-
-def _null_vector_cols(a, b, c):
-    """(h, 4) unit vectors orthogonal to the columns ``a, b, c`` (each (4, h)) of a 4 x 3 matrix:
-    the signed 3 x 3 minors of the rows left after dropping each one."""
-    def det(i, j, k):
-        return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
-                + c[i] * (a[j] * b[k] - a[k] * b[j]))
-
-    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
-    return q / np.sqrt((q * q).sum(1))[:, None]
 
 
 def surface_normal(layout, d, shape):
@@ -288,10 +239,19 @@ def surface_normal(layout, d, shape):
     """
     d = np.asarray(d, float)
     single = d.ndim == 1
-    fit = fit_surface(layout, np.atleast_2d(d), np.asarray(shape, float).reshape(-1, 3, 3), full=False)
-    if single:
-        return fit.normal[0], bool(fit.ok[0])
-    return fit.normal, fit.ok
+    d = d.reshape(-1, layout.n)
+    shape = np.asarray(shape, float).reshape(-1, 3, 3)
+    if len(d) <= SLICE_ROWS:
+        fit = fit_surface(layout, d, shape, full=False)
+        if single:
+            return fit.normal[0], bool(fit.ok[0])
+        return fit.normal, fit.ok
+    normal, ok = np.empty((len(d), 3)), np.empty(len(d), bool)
+    one = len(shape) == 1
+    for i in range(0, len(d), SLICE_ROWS):
+        fit = fit_surface(layout, d[i:i + SLICE_ROWS], shape if one else shape[i:i + SLICE_ROWS], full=False)
+        normal[i:i + SLICE_ROWS], ok[i:i + SLICE_ROWS] = fit.normal, fit.ok
+    return normal, ok
 
 
 @dataclass(frozen=True)
@@ -312,10 +272,13 @@ class PanelTerms:
 
 def _tangent_basis(m):
     """Two unit vectors (h, 3) spanning the plane square to unit ``m (h, 3)``."""
-    ref = np.where(np.abs(m[:, 0:1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    t1 = ref - (ref * m).sum(1, keepdims=True) * m
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return t1, np.cross(m, t1)
+    mx, my, mz = m[:, 0], m[:, 1], m[:, 2]
+    use_x = np.abs(mx) < 0.9  # the reference e_x, else e_y
+    rm = np.where(use_x, mx, my)  # ref . m
+    t1 = np.stack([np.where(use_x, 1.0, 0.0) - rm * mx, np.where(use_x, 0.0, 1.0) - rm * my, -rm * mz], axis=1)
+    t1 /= np.sqrt((t1 * t1).sum(1))[:, None]
+    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
+    return t1, np.stack([my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax], axis=1)  # m x t1
 
 
 def _shape_basis(fit, g2, axis):
@@ -325,8 +288,9 @@ def _shape_basis(fit, g2, axis):
     m = fit.normal
     t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
     sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
-    a1 = np.einsum("hni,hi->hn", fit.q, t1)
-    a2 = np.einsum("hni,hi->hn", fit.q, t2)
+    q = fit.q
+    a1 = q[..., 0] * t1[:, 0, None] + q[..., 1] * t1[:, 1, None] + q[..., 2] * t1[:, 2, None]  # (N, n), mm
+    a2 = q[..., 0] * t2[:, 0, None] + q[..., 1] * t2[:, 1, None] + q[..., 2] * t2[:, 2, None]
     return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
 
 

@@ -1,0 +1,29 @@
+"""The one Open3D loader: Open3D without Plotly and Dash at import, its Plotly functions still there."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SCRIPT = """
+import sys
+import numpy as np
+from metrology.io._o3d import open3d
+o3d = open3d()
+print("dash" in sys.modules, "plotly" in sys.modules)
+cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.random.default_rng(0).normal(size=(10, 3))))
+fig = o3d.visualization.get_plotly_fig([cloud])
+print(type(fig).__module__.split(".")[0], len(fig.data[0].x))
+"""
+
+
+def test_open3d_loads_without_plotly_and_dash_and_draw_plotly_still_works():
+    # a fresh interpreter: another test may have loaded Plotly already
+    r = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.split("\n")
+    assert lines[0] == "False False"  # not loaded by Open3D's import
+    assert lines[1] == "plotly 10"  # loaded at the first call, the real function's figure of the 10 points
