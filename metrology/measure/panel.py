@@ -162,6 +162,10 @@ class HoleSurfaces:
     source : str, where the curvature came from (named in the verdict and the JSON)
     spin : float, rad, the head's spin about the tool axis relative to the panel is within +-spin
     point : (m, 3) float, mm, panel frame, the table's nominal drill point, or None
+    frame : (m, 2, 3) float, unit, panel frame, the local axes ``e1, e2`` of ``higher``, or None
+    higher : (m, 9) float, the CAD surface's height along ``normal`` beyond second order, or None: the
+        coefficients of ``s^3/6, s^2 t/2, s t^2/2, t^3/6`` (1/mm^2) and ``s^4/24, s^3 t/6, s^2 t^2/4,
+        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point
     """
 
     ids: tuple
@@ -173,6 +177,8 @@ class HoleSurfaces:
     source: str
     spin: float = 0.0
     point: np.ndarray | None = None
+    frame: np.ndarray | None = None
+    higher: np.ndarray | None = None
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):
@@ -207,6 +213,16 @@ class HoleSurfaces:
         k6 = tuple(K[ok][:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
         K[ok] = _full(_turned(k6, -nt[ok, 0], -nt[ok, 1], nt[ok, 2], sg))
         return K
+
+
+    def higher_tcs(self, rows, s: float, tcs2panel=None):
+        """``(axes (h, 2, 3) unit TCS, higher (h, 9), tcs2panel (h, 3, 3))`` of table rows ``rows``: the
+        local axes ``e1, e2`` of :attr:`higher` in the TCS of the commanded pose ``tcs2panel`` ((h, 3, 3),
+        or the cell's convention where None) and that pose; None without :attr:`higher`."""
+        if self.higher is None or self.frame is None:
+            return None
+        R = tcs2panel_nominal(self.normal[rows], s) if tcs2panel is None else tcs2panel
+        return np.einsum("hji,hkj->hki", R, self.frame[rows]), self.higher[rows], R
 
 
 def tcs2panel_nominal(n, s: float):

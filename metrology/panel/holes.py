@@ -61,7 +61,8 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     ``table``: a hole table (``ids``, ``point (m, 3)`` mm, ``feed (m, 3)`` unit, ``source``,
     ``line(row)``: :class:`metrology.measure.panel.HoleTable`). Returns a dict: ``normal (m, 3)``
     unit toward the head, ``shape (m, 3, 3)`` 1/mm, ``k (m, 2)`` 1/mm, ``u_shape (m,)`` 1/mm,
-    ``problem (m,)`` object, ``source`` str (panel frame).
+    ``frame (m, 2, 3)`` unit (``e1, e2``), ``higher (m, 9)`` the height along ``n`` beyond second order
+    (:class:`metrology.measure.panel.HoleSurfaces`), ``problem (m,)`` object, ``source`` str (panel frame).
 
     Raises ValueError (one line, naming the table's row) when a drill point is off the panel or its
     feed does not point into it. A hole whose sampled footprint runs off the panel gets a
@@ -146,10 +147,11 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     u_fit = np.sqrt(var_h.mean(1))
     Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
     Kl = -Hl
+    higher = np.concatenate([coef[:, 6:10], np.zeros((len(P), 5))], axis=1)  # the ray-cast fit: no quartic
     if hess is None:  # the mesh's vertices where it has enough of them near the point (VERTEX_K)
         vcoef, vu, vok = _vertex_cubic(panel, P, n, e1, e2, rho)
         use = vok & ~miss.any(1)
-        coef[use], u_fit[use] = vcoef[use], vu[use]
+        coef[use], u_fit[use], higher[use] = vcoef[use, :10], vu[use], vcoef[use, 6:]
         Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
         Kl = -Hl
     c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
@@ -170,7 +172,9 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
     k = principal_curvatures(Kl)
     k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
+    higher = np.where(np.isfinite(higher), higher, 0.0)
     return {"normal": n, "shape": embed_shape(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
+            "frame": np.stack([e1, e2], axis=1), "higher": higher,
             "problem": problem, "source": src}
 
 
@@ -186,8 +190,8 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
     CAD surface, its facets are chords of it (a height sampled on a facet is off the surface by up to
     ``k L^2 / 8``, a bias the cubic takes into its curvature).
 
-    ``P (m, 3)`` mm panel frame, ``n, e1, e2 (m, 3)`` the local frame. Returns ``coef (m, 10)`` (the
-    quartic's terms up to the cubic, as the ray-cast fit's columns), ``u_fit (m,)`` 1/mm (the residual through the fit's covariance, mean of
+    ``P (m, 3)`` mm panel frame, ``n, e1, e2 (m, 3)`` the local frame. Returns ``coef (m, 15)`` (the
+    quartic's terms: the ray-cast fit's 10 columns, then ``s^4/24, s^3 t/6, s^2 t^2/4, s t^3/6, t^4/24``), ``u_fit (m,)`` 1/mm (the residual through the fit's covariance, mean of
     the Hessian's 3 components) and ``ok (m,)`` (at least :data:`VERTEX_MIN` vertices and a well-posed fit)."""
     from scipy.spatial import cKDTree
 
@@ -197,7 +201,7 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         tree = panel._vertex_tree = cKDTree(V)
     m = len(P)
     k = min(VERTEX_K, len(V))
-    coef = np.full((m, 10), np.nan)
+    coef = np.full((m, 15), np.nan)
     u_fit = np.full(m, np.nan)
     ok = np.zeros(m, bool)
     for a in range(0, m, CHUNK_HOLES):
@@ -219,8 +223,8 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         cf = np.einsum("cij,cpj,cp->ci", inv, X, np.where(have, w, 0.0))
         res = np.where(have, w - np.einsum("cpi,ci->cp", X, cf), 0.0)
         s2 = (res * res).sum(1) / np.maximum(cnt - 15, 1)
-        scale = np.array([1.0, rho, rho, rho ** 2, rho ** 2, rho ** 2, rho ** 3, rho ** 3, rho ** 3, rho ** 3])
-        coef[b] = cf[:, :10] / scale  # back to mm
+        scale = rho ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
+        coef[b] = cf / scale  # back to mm
         u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / rho ** 2
         ok[b] = good
     return coef, u_fit, ok
