@@ -122,9 +122,8 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
     allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
     (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it);
-    ``higher`` None or ``(axes (N, 2, 3), coefficients (N, 9), tcs2panel (N, 3, 3), turn (N, 3, 3) or
-    None)``: the CAD surface beyond second order, the head's rotation the shape was put into the TCS
-    with, the turn about the axis found before the adjustment (:class:`metrology.measure.surface.PanelTerms`)."""
+    ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
+    the head's rotation the shape was put into the TCS with, the turn found before the adjustment."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -157,13 +156,9 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         if shape is not None:
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
-            def terms(r):
-                if higher is None:
-                    return PanelTerms(u_shape[r], spin[r])
-                return PanelTerms(u_shape[r], spin[r], *(None if x is None else x[r] for x in higher))
-
             parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
-                                          terms(rows[i:i + CACHE_ROWS]))
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]),
+                                          beyond=None if higher is None else higher.rows(rows[i:i + CACHE_ROWS]))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
             h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
                                      np.concatenate([getattr(p[0], f) for p in parts])
@@ -339,6 +334,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     shape = u_shape = spin = table_row = higher = None
     surf = settings.surfaces
     if surf is not None:
+        from metrology.measure.beyond import Beyond
         from metrology.measure.normals import drill_axis
 
         # the table's own id: ``point_id`` where the log has it (a hole table drilled more than once
@@ -353,7 +349,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
-                higher = (np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan), None)
+                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
                 shape[sel[0]] = surf.shape_pose(table_row[sel[0]], pose[0][sel[0]], drill_axis(layout)[2])
@@ -363,14 +359,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             for k, m in enumerate(sel):
                 if higher is not None and m.any():
                     hx = surf.higher_tcs(table_row[m], drill_axis(layout)[2], pose[0][m] if k == 0 else None)
-                    higher[0][m], higher[1][m], higher[2][m] = hx
+                    higher.axes[m], higher.higher[m], higher.tcs2panel[m] = hx
             u_shape[have] = surf.u_shape[table_row[have]]
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
-        higher_after = None if higher is None else (higher[0], higher[1], None, before.extra["turn"])
+        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
         after = _measure(layout, da, settings, shape, u_shape, spin, higher_after)
         judge_after = np.isfinite(da).any(1)
     else:

@@ -56,11 +56,11 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
+from metrology.measure.beyond import beyond_second_order
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
-__all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS",
-           "second_order_readings"]
+__all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
 
 #: steps from g = 0: the first is the micro-plane (K left out), then Gauss-Newton with K; each divides the
 #: error by >= 200 on panels of R >= 300 mm (sphere R 300, Table 6, noise-free: 0.23 deg after the
@@ -305,105 +305,10 @@ class PanelTerms:
         (mesh fit, position error along the surface, form tolerance; combined)
     spin : float or (h,) float, rad, the head's spin about the tool axis relative to the panel is
         within ``+-spin`` (uniform); 0 where the robot's commanded pose gives it
-    axes : (h, 2, 3) float, unit, TCS, or None: the local axes ``e1, e2`` of ``higher``
-    higher : (h, 9) float, or None: the CAD surface's height beyond second order
-        (:class:`metrology.measure.panel.HoleSurfaces`; :func:`second_order_readings`)
-    tcs2panel : (h, 3, 3) float, or None: the head's rotation the shape (and ``axes``) were put into
-        the TCS with (the commanded pose, or the cell's convention at the CAD's normal; columns the
-        TCS axes in the panel frame); with it the head's spin at its measured axis follows the cell's
-        convention (:func:`convention_spin`)
-    turn : (h, 3, 3) float, or None: that turn given (the head after the cell's adjustment is the head
-        before it turned by the smallest rotation in the TCS: it keeps the spin found before; NaN rows: none)
     """
 
     u_shape: np.ndarray
     spin: float | np.ndarray = 0.0
-    axes: np.ndarray | None = None
-    higher: np.ndarray | None = None
-    tcs2panel: np.ndarray | None = None
-    turn: np.ndarray | None = None
-
-
-def _smallest(v, w):
-    """Smallest rotations ``(h, 3, 3)`` taking unit ``v (h, 3)`` to unit ``w (h, 3)`` (Rodrigues; not opposite)."""
-    k = np.cross(v, w)
-    c = (v * w).sum(1)
-    Kx = np.zeros((len(v), 3, 3))
-    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    return np.eye(3)[None] + Kx + Kx @ Kx / (1.0 + c)[:, None, None]
-
-
-def convention_spin(tcs2panel, m, s: float):
-    """``Y (h, 3, 3)``: the turn about the drill axis that puts the head's spin where the cell's
-    convention has it at the head's measured axis.
-
-    The fit turns the shape, given square to the axis under ``tcs2panel`` (``R_c``), onto the measured
-    normal ``m`` (TCS, toward the head) by the smallest rotation ``Q_m`` (``sigma e_z -> m``): the head
-    ``R = R_c Q_m^T``. The cell holds the commanded spin ``psi_c`` in its convention (metrology/sim/forward/log.py
-    step 3; :func:`metrology.measure.panel.tcs2panel_nominal`): at the axis ``a = R s e_z`` its head is
-    ``Q(-e_z -> a) F Rz(psi_c)``, not ``R``. The two differ by a spin about the axis, the holonomy of the
-    tilt: ``theta beta / 2`` or so for a tilt ``theta`` off an axis ``beta`` from the panel's ``z``
-    (0.3 deg at 5 and 7.6 deg, the nacelle's table), which turns a shape of unequal curvatures (a
-    saddle: ``2 delta_psi / R``). ``Y = Q_m^T X Q_m`` with ``X = R^T Q(-e_z -> a) F Rz(psi_c)``; the
-    shape square to the axis becomes ``Y^T K Y``.
-
-    ``tcs2panel (h, 3, 3)``, ``m (h, 3)`` unit TCS, ``s`` the drill axis's sign."""
-    from metrology.measure.panel import tcs2panel_nominal
-
-    Rc = np.asarray(tcs2panel, float)
-    sg = -s
-    ez = np.broadcast_to(np.array([0.0, 0.0, sg]), m.shape)
-    Qm = _smallest(ez, m)
-    R = Rc @ np.swapaxes(Qm, 1, 2)
-    a = R[:, :, 2] * s
-    f = Rc[:, :, 2] * s
-    spin_c = np.swapaxes(tcs2panel_nominal(-f, s), 1, 2) @ Rc  # F Q(-e_z -> f)^T R_c = Rz(psi_c)
-    X = np.swapaxes(R, 1, 2) @ tcs2panel_nominal(-a, s) @ spin_c
-    return np.swapaxes(Qm, 1, 2) @ X @ Qm
-
-
-def second_order_readings(layout: SensorLayout, d, fit: SurfaceFit, axes, higher):
-    """The readings the second-order surface of :func:`fit_surface` would give: ``d`` plus the CAD
-    surface's height beyond second order at each spot over ``|u_i . m|``.
-
-    The fit models the panel to second order about the drill point; its cubic and quartic terms
-    (a curvature that changes across the footprint, a sphere's ``r^4 / 8 R^3``) are heights of up to
-    a few um at a 40-60 mm footprint, the order of the reading noise, and they tilt the fit. The
-    CAD knows them: at each spot ``q_i = S_i - c e_z`` (TCS, from the ``fit``), ``(s, t)`` its
-    components along ``axes`` square to the fitted normal ``m``, ``w = higher . (s^3/6, s^2 t/2,
-    s t^2/2, t^3/6, s^4/24, s^3 t/6, s^2 t^2/4, s t^3/6, t^4/24)`` mm along ``m`` (toward the head):
-    the beam, running away from the head, meets the panel ``w / |u_i . m|`` before the second-order
-    surface.
-
-    Parameters
-    ----------
-    layout : SensorLayout: zero (n, 3) mm TCS, direction (n, 3) unit TCS
-    d : (h, n) float, mm, readings; fit : SurfaceFit of them (``normal``, ``c``)
-    axes : (h, 2, 3) float, unit, TCS; higher : (h, 9) float (see :class:`PanelTerms`)
-
-    Returns
-    -------
-    (h, n) float, mm (``d`` where the fit is not ok)
-    """
-    d = np.asarray(d, float)
-    m = np.where(fit.ok[:, None], fit.normal, np.array([0.0, 0.0, 1.0]))
-    S = layout.zero[None] + d[..., None] * layout.direction[None]  # (h, n, 3)
-    q = S.copy()
-    q[..., 2] -= np.where(fit.ok, fit.c, 0.0)[:, None]
-    q -= (q * m[:, None]).sum(2)[..., None] * m[:, None]  # T q
-    a = np.asarray(axes, float)
-    a = a - (a * m[:, None]).sum(2)[..., None] * m[:, None]
-    a /= np.linalg.norm(a, axis=2, keepdims=True)
-    s_ = (q * a[:, None, 0]).sum(2)
-    t_ = (q * a[:, None, 1]).sum(2)
-    c = np.asarray(higher, float)[:, None, :]
-    w = (c[..., 0] * s_ ** 3 / 6 + c[..., 1] * s_ * s_ * t_ / 2 + c[..., 2] * s_ * t_ * t_ / 2 + c[..., 3] * t_ ** 3 / 6
-         + c[..., 4] * s_ ** 4 / 24 + c[..., 5] * s_ ** 3 * t_ / 6 + c[..., 6] * s_ * s_ * t_ * t_ / 4
-         + c[..., 7] * s_ * t_ ** 3 / 6 + c[..., 8] * t_ ** 4 / 24)
-    um = np.abs(np.einsum("ni,hi->hn", layout.direction, m))
-    out = d + w / um
-    return np.where(fit.ok[:, None] & np.isfinite(out), out, d)
 
 
 def _tangent_basis(m):
@@ -427,7 +332,7 @@ def _shape_basis(fit, g2, axis):
 
 
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
-                         covariance=None, sigma_mm=None):
+                         covariance=None, sigma_mm=None, beyond=None):
     """Normals, angles and uncertainties of holes (every reading present) with the surface known.
 
     Parameters
@@ -436,6 +341,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     shape : (N, 3, 3) float, 1/mm, TCS (see :func:`surface_normal`)
     terms : PanelTerms or None (the panel's own uncertainty; None: the shape is exact)
     covariance, sigma_mm : as :func:`metrology.measure.normals.hole_normals`
+    beyond : None or :func:`metrology.measure.beyond.beyond_second_order`'s ``terms`` (``extra["turn"]`` its turn)
 
     Returns
     -------
@@ -445,27 +351,14 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         ``correction`` rad (the corrected normal's angle to the micro-plane's), ``panel_misfit``
         1/mm (n = 4: the shape change along the direction the redundant reading sees, its size as
         the largest eigenvalue; NaN otherwise), ``panel_misfit_z`` (that over its standard
-        uncertainty from noise, calibration and the panel's terms); ``turn`` (N, 3, 3) the turn about
-        the axis applied to the shape (:class:`PanelTerms`; the identity without one)
+        uncertainty from noise, calibration and the panel's terms)
     """
     n = layout.n
     d = np.asarray(d, float).reshape(-1, n)
     N = len(d)
-    Y = np.broadcast_to(np.eye(3), (N, 3, 3)).copy()  # the turn about the axis (convention_spin)
-    if terms is not None and (terms.higher is not None or terms.tcs2panel is not None or terms.turn is not None):
-        fit0 = fit_surface(layout, d, shape, sigma_mm=sigma_mm, full=False)  # one more fit
-        axes = terms.axes
-        if terms.turn is not None:
-            given = np.all(np.isfinite(terms.turn), axis=(1, 2))
-            Y[given] = terms.turn[given]
-        elif terms.tcs2panel is not None:  # the head's spin at its measured axis, in the cell's convention
-            ok0 = fit0.ok & np.all(np.isfinite(terms.tcs2panel), axis=(1, 2))
-            Y[ok0] = convention_spin(terms.tcs2panel[ok0], fit0.normal[ok0], drill_axis(layout)[2])
-        shape = np.swapaxes(Y, 1, 2) @ np.asarray(shape, float) @ Y
-        if axes is not None:
-            axes = np.einsum("hji,hkj->hki", Y, axes)  # Y^T a
-        if terms.higher is not None:
-            d = second_order_readings(layout, d, fit0, axes, terms.higher)
+    Y = np.broadcast_to(np.eye(3), (N, 3, 3))  # the CAD beyond second order, the head's spin: metrology.measure.beyond
+    if beyond is not None:
+        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit_surface(layout, d, shape, sigma_mm=sigma_mm, full=False))
     fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
