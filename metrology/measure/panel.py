@@ -12,12 +12,13 @@ there (the mesh's reference normal, turned toward the head: against the feed) gi
 frame ``(e1, e2, n)``, ``e1`` the panel's ``x`` made square to ``n`` (the cell's convention, as
 the forward simulator's step 3). :data:`RING_SAMPLES` rays along ``-n`` on rings of the head's
 footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x the footprint radius, and the
-centre) sample the surface's heights ``w(s, t)``; a full cubic fitted to them (10 terms, one
-design matrix for every hole) gives the Hessian ``H`` at the point and its gradient. The shape
+centre) sample the surface's heights ``w(s, t)``; a full quartic through the mesh's own vertices
+near the point (a cubic through the ray-cast heights where it has too few) gives the Hessian ``H``
+at the point, its gradient and its terms beyond second order (:mod:`metrology.measure.beyond`). The shape
 operator is ``K = -H`` (positive where the surface bends away from the head). Its standard
 uncertainty per component (``u_shape``, 1/mm) combines
 
-- the fit: the cubic's residual (mesh faceting; form beyond the cubic) through the fit's
+- the fit: its residual (vertex noise; form beyond the fit's order) through the fit's
   covariance;
 - the drill point's position error along the surface ``delta_s`` (``--position-error-mm``): the
   cubic's ``|grad K|`` times ``delta_s``, uniform over the disc (``/ 3``);

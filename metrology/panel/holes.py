@@ -5,11 +5,14 @@ The drill point is snapped onto the mesh; the CAD's normal there (the mesh's ref
 turned toward the head: against the feed) gives the local frame ``(e1, e2, n)``, ``e1`` the
 panel's ``x`` made square to ``n``. :data:`RING_SAMPLES` rays along ``-n`` on three rings of the
 head's footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x its radius) and the centre
-sample the heights ``w(s, t)``; a full cubic fitted to them (10 terms, one design matrix for every
-hole) gives the Hessian ``H`` and its gradient; the shape operator is ``K = -H`` (positive where
-the surface bends away from the head). ``u_shape`` (1/mm, per component) combines the fit's
-residual through its covariance (faceting), ``|grad K| position_mm / 3`` and a stated form
-tolerance ``2 t / rho^2 / sqrt(3)``.
+sample the heights ``w(s, t)`` (and tell a footprint that runs off the panel); the shape comes from
+a full quartic fitted to the mesh's own vertices near the point (:data:`VERTEX_K`; they lie on the
+CAD surface, a facet is a chord of it), or where the mesh has too few there, a full cubic fitted to
+the ray-cast heights (10 terms, one design matrix for every hole): its Hessian ``H`` and gradient,
+the shape operator ``K = -H`` (positive where the surface bends away from the head), its terms
+beyond second order (``higher``, for :mod:`metrology.measure.beyond`). ``u_shape`` (1/mm, per
+component) combines the fit's residual through its covariance, ``|grad K| position_mm / 3`` and a
+stated form tolerance ``2 t / rho^2 / sqrt(3)``.
 
 Where the panel is a STEP read with its B-rep (the ``step-exact`` extra: ``panel.surface`` a
 :class:`metrology.panel.brep.BRepSurface`), the normal and the shape operator come from the exact
