@@ -234,7 +234,8 @@ def _known_log(rng, kind, R, spec_kw, holes, cal, axis_groups, bundled, pose=Fal
     surf = HoleSurfaces(tuple(i for p in parts for i in p.ids), *(np.concatenate([getattr(p, k) for p in parts])
                                                                    for k in ("normal", "shape", "k", "u_shape",
                                                                              "problem")),
-                        first.source, first.spin, point=np.concatenate([p.point for p in parts]))
+                        first.source, first.spin, point=np.concatenate([p.point for p in parts]),
+                        frame=np.concatenate([p.frame for p in parts]), higher=np.concatenate([p.higher for p in parts]))
     cols = {"hole_id": list(surf.ids), CELL: ["C1"] * ch.n, PANEL: ["P1"] * ch.n, TIME_S: np.arange(ch.n, dtype=float)}
     for j, s in enumerate(cal.names):
         cols[f"d_{s}"] = ch.d[:, j]

@@ -225,7 +225,8 @@ def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0
     from metrology.panel.holes import panel_surfaces
 
     f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
-    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin, point=table.point)
+    return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin,
+                        point=table.point, frame=f["frame"], higher=f["higher"])
 
 
 def _digest(layout) -> str:

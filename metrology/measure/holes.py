@@ -118,11 +118,13 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None) -> _Measured:
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None) -> _Measured:
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
     allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
-    (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it)."""
+    (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it);
+    ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
+    the head's rotation the shape was put into the TCS with, the turn found before the adjustment."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -133,6 +135,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                     np.full((N, 3), np.nan))
     if shape is not None:
         out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
+        out.extra["turn"] = np.full((N, 3, 3), np.nan)
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -155,7 +158,8 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
             parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
-                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]))
+                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]),
+                                          beyond=None if higher is None else higher.rows(rows[i:i + CACHE_ROWS]))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
             h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
                                      np.concatenate([getattr(p[0], f) for p in parts])
@@ -343,9 +347,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    shape = u_shape = spin = table_row = None
+    shape = u_shape = spin = table_row = higher = None
     surf = settings.surfaces
     if surf is not None:
+        from metrology.measure.beyond import Beyond
         from metrology.measure.normals import drill_axis
 
         # the table's own id: ``point_id`` where the log has it (a hole table drilled more than once
@@ -359,18 +364,26 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
-            if (have & posed).any():  # the pose gives the spin: no doubt about it left in U95
-                shape[have & posed] = surf.shape_pose(table_row[have & posed], pose[0][have & posed],
-                                                       drill_axis(layout)[2])
+            if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
+                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
+            sel = (have & posed, have & ~posed)
+            if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
+                shape[sel[0]] = surf.shape_pose(table_row[sel[0]], pose[0][sel[0]], drill_axis(layout)[2])
                 spin[posed] = 0.0
-            if (have & ~posed).any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
-                shape[have & ~posed] = surf.shape_tcs(table_row[have & ~posed], drill_axis(layout)[2])
+            if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
+                shape[sel[1]] = surf.shape_tcs(table_row[sel[1]], drill_axis(layout)[2])
+            for k, m in enumerate(sel):
+                if higher is not None and m.any():
+                    hx = surf.higher_tcs(table_row[m], drill_axis(layout)[2], pose[0][m] if k == 0 else None)
+                    higher.axes[m], higher.higher[m], higher.tcs2panel[m] = hx
             u_shape[have] = surf.u_shape[table_row[have]]
-    before = _measure(layout, d, settings, shape, u_shape, spin)
+    before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
-        after = _measure(layout, da, settings, shape, u_shape, spin)
+        # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
+        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
+        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)

@@ -12,12 +12,13 @@ there (the mesh's reference normal, turned toward the head: against the feed) gi
 frame ``(e1, e2, n)``, ``e1`` the panel's ``x`` made square to ``n`` (the cell's convention, as
 the forward simulator's step 3). :data:`RING_SAMPLES` rays along ``-n`` on rings of the head's
 footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x the footprint radius, and the
-centre) sample the surface's heights ``w(s, t)``; a full cubic fitted to them (10 terms, one
-design matrix for every hole) gives the Hessian ``H`` at the point and its gradient. The shape
+centre) sample the surface's heights ``w(s, t)``; a full quartic through the mesh's own vertices
+near the point (a cubic through the ray-cast heights where it has too few) gives the Hessian ``H``
+at the point, its gradient and its terms beyond second order (:mod:`metrology.measure.beyond`). The shape
 operator is ``K = -H`` (positive where the surface bends away from the head). Its standard
 uncertainty per component (``u_shape``, 1/mm) combines
 
-- the fit: the cubic's residual (mesh faceting; form beyond the cubic) through the fit's
+- the fit: its residual (vertex noise; form beyond the fit's order) through the fit's
   covariance;
 - the drill point's position error along the surface ``delta_s`` (``--position-error-mm``): the
   cubic's ``|grad K|`` times ``delta_s``, uniform over the disc (``/ 3``);
@@ -162,6 +163,10 @@ class HoleSurfaces:
     source : str, where the curvature came from (named in the verdict and the JSON)
     spin : float, rad, the head's spin about the tool axis relative to the panel is within +-spin
     point : (m, 3) float, mm, panel frame, the table's nominal drill point, or None
+    frame : (m, 2, 3) float, unit, panel frame, the local axes ``e1, e2`` of ``higher``, or None
+    higher : (m, 9) float, the CAD surface's height along ``normal`` beyond second order, or None: the
+        coefficients of ``s^3/6, s^2 t/2, s t^2/2, t^3/6`` (1/mm^2) and ``s^4/24, s^3 t/6, s^2 t^2/4,
+        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point
     """
 
     ids: tuple
@@ -173,6 +178,8 @@ class HoleSurfaces:
     source: str
     spin: float = 0.0
     point: np.ndarray | None = None
+    frame: np.ndarray | None = None
+    higher: np.ndarray | None = None
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):
@@ -216,6 +223,16 @@ class HoleSurfaces:
             turned = _turned(k6, -ntx, -nty, ntz, sg)
         K = _full(tuple(np.where(ok, t, k) for t, k in zip(turned, k6)))
         return K
+
+
+    def higher_tcs(self, rows, s: float, tcs2panel=None):
+        """``(axes (h, 2, 3) unit TCS, higher (h, 9), tcs2panel (h, 3, 3))`` of table rows ``rows``: the
+        local axes ``e1, e2`` of :attr:`higher` in the TCS of the commanded pose ``tcs2panel`` ((h, 3, 3),
+        or the cell's convention where None) and that pose; None without :attr:`higher`."""
+        if self.higher is None or self.frame is None:
+            return None
+        R = tcs2panel_nominal(self.normal[rows], s) if tcs2panel is None else tcs2panel
+        return np.einsum("hji,hkj->hki", R, self.frame[rows]), self.higher[rows], R
 
 
 def tcs2panel_nominal(n, s: float):

@@ -58,6 +58,7 @@ from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
 from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
 from metrology.core.sym3 import turned as _turned, turned_tangent as _turned_tangent
+from metrology.measure.beyond import beyond_second_order
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
 
@@ -295,7 +296,7 @@ def _shape_basis(fit, g2, axis):
 
 
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
-                         covariance=None, sigma_mm=None):
+                         covariance=None, sigma_mm=None, beyond=None):
     """Normals, angles and uncertainties of holes (every reading present) with the surface known.
 
     Parameters
@@ -304,6 +305,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     shape : (N, 3, 3) float, 1/mm, TCS (see :func:`surface_normal`)
     terms : PanelTerms or None (the panel's own uncertainty; None: the shape is exact)
     covariance, sigma_mm : as :func:`metrology.measure.normals.hole_normals`
+    beyond : None or :func:`metrology.measure.beyond.beyond_second_order`'s ``terms`` (``extra["turn"]`` its turn)
 
     Returns
     -------
@@ -318,6 +320,9 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     n = layout.n
     d = np.asarray(d, float).reshape(-1, n)
     N = len(d)
+    Y = np.broadcast_to(np.eye(3), (N, 3, 3))  # the CAD beyond second order, the head's spin: metrology.measure.beyond
+    if beyond is not None:
+        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit_surface(layout, d, shape, sigma_mm=sigma_mm, full=False))
     fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
@@ -456,4 +461,4 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     hn = HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z,
                      None if signature is None else np.ascontiguousarray(signature), panel_share, twist,
                      residual_sd, sd)
-    return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z}
+    return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z, "turn": Y}

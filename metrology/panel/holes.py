@@ -5,11 +5,14 @@ The drill point is snapped onto the mesh; the CAD's normal there (the mesh's ref
 turned toward the head: against the feed) gives the local frame ``(e1, e2, n)``, ``e1`` the
 panel's ``x`` made square to ``n``. :data:`RING_SAMPLES` rays along ``-n`` on three rings of the
 head's footprint (``1/3, 2/3, 1`` times :data:`FOOTPRINT_MARGIN` x its radius) and the centre
-sample the heights ``w(s, t)``; a full cubic fitted to them (10 terms, one design matrix for every
-hole) gives the Hessian ``H`` and its gradient; the shape operator is ``K = -H`` (positive where
-the surface bends away from the head). ``u_shape`` (1/mm, per component) combines the fit's
-residual through its covariance (faceting), ``|grad K| position_mm / 3`` and a stated form
-tolerance ``2 t / rho^2 / sqrt(3)``.
+sample the heights ``w(s, t)`` (and tell a footprint that runs off the panel); the shape comes from
+a full quartic fitted to the mesh's own vertices near the point (:data:`VERTEX_K`; they lie on the
+CAD surface, a facet is a chord of it), or where the mesh has too few there, a full cubic fitted to
+the ray-cast heights (10 terms, one design matrix for every hole): its Hessian ``H`` and gradient,
+the shape operator ``K = -H`` (positive where the surface bends away from the head), its terms
+beyond second order (``higher``, for :mod:`metrology.measure.beyond`). ``u_shape`` (1/mm, per
+component) combines the fit's residual through its covariance, ``|grad K| position_mm / 3`` and a
+stated form tolerance ``2 t / rho^2 / sqrt(3)``.
 
 Where the panel is a STEP read with its B-rep (the ``step-exact`` extra: ``panel.surface`` a
 :class:`metrology.panel.brep.BRepSurface`), the normal and the shape operator come from the exact
@@ -27,7 +30,8 @@ import numpy as np
 
 from metrology.core.frames import embed_shape, principal_curvatures, tangent_frame
 
-__all__ = ["panel_surfaces", "RING_SAMPLES", "FOOTPRINT_MARGIN", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO"]
+__all__ = ["panel_surfaces", "RING_SAMPLES", "FOOTPRINT_MARGIN", "POINT_OFF_MM", "FEED_MIN_COS", "UNIT_RATIO",
+           "VERTEX_K", "VERTEX_REACH", "VERTEX_MIN"]
 
 #: rays per ring of the footprint sampled on the panel (3 rings and the centre: 37 samples)
 RING_SAMPLES = 12
@@ -41,6 +45,16 @@ UNIT_RATIO = 300.0
 CHUNK_HOLES = 4096
 #: a feed direction must be within acos(this) = 60 deg of the panel's normal (into the panel)
 FEED_MIN_COS = 0.5
+#: the curvature is fitted to the mesh's own vertices (on the CAD surface; a facet is a chord, below a
+#: convex surface by up to k L^2 / 8: on the bundled 10 mm meshes the ray-cast heights gave the
+#: nacelle's shape operator 4e-5 1/mm off, 3x its u_shape, and a 3-sensor ring 92 % coverage), a full
+#: quartic (the cubic's Hessian takes the quartic's terms: 4e-6 1/mm on the nacelle, the quartic's
+#: 1e-8): the VERTEX_K nearest within VERTEX_REACH x the sampled disc's radius, ...
+VERTEX_K = 40
+VERTEX_REACH = 2.0
+#: ... at least VERTEX_MIN of them (the quartic's 15 terms and 10 to spare), else the ray-cast heights
+#: (a mesh coarse for the footprint)
+VERTEX_MIN = 25
 
 
 def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, form_mm: float = 0.0,
@@ -50,7 +64,8 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     ``table``: a hole table (``ids``, ``point (m, 3)`` mm, ``feed (m, 3)`` unit, ``source``,
     ``line(row)``: :class:`metrology.measure.panel.HoleTable`). Returns a dict: ``normal (m, 3)``
     unit toward the head, ``shape (m, 3, 3)`` 1/mm, ``k (m, 2)`` 1/mm, ``u_shape (m,)`` 1/mm,
-    ``problem (m,)`` object, ``source`` str (panel frame).
+    ``frame (m, 2, 3)`` unit (``e1, e2``), ``higher (m, 9)`` the height along ``n`` beyond second order
+    (:class:`metrology.measure.panel.HoleSurfaces`), ``problem (m,)`` object, ``source`` str (panel frame).
 
     Raises ValueError (one line, naming the table's row) when a drill point is off the panel or its
     feed does not point into it. A hole whose sampled footprint runs off the panel gets a
@@ -124,8 +139,7 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         w[b] = (H - t).reshape(-1, len(st))
     miss = ~np.isfinite(w)
     s_, t_ = st[:, 0], st[:, 1]
-    X = np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
-                  s_ * t_ * t_ / 2, t_ ** 3 / 6], axis=1)
+    X = _cubic_design(s_, t_)
     XtX_inv = np.linalg.inv(X.T @ X)
     pinv = XtX_inv @ X.T
     coef = np.where(miss.any(1)[:, None], np.nan, np.nan_to_num(w) @ pinv.T)
@@ -136,11 +150,18 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     u_fit = np.sqrt(var_h.mean(1))
     Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
     Kl = -Hl
+    higher = np.concatenate([coef[:, 6:10], np.zeros((len(P), 5))], axis=1)  # the ray-cast fit: no quartic
+    if hess is None:  # the mesh's vertices where it has enough of them near the point (VERTEX_K)
+        vcoef, vu, vok = _vertex_cubic(panel, P, n, e1, e2, rho)
+        use = vok & ~miss.any(1)
+        coef[use], u_fit[use], higher[use] = vcoef[use, :10], vu[use], vcoef[use, 6:]
+        Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
+        Kl = -Hl
     c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0
     u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
-    src = f"panel {shown} (mesh, cubic fit over the footprint)"
+    src = f"panel {shown} (mesh, cubic fit to its vertices near each hole)"
     if hess is not None:  # the exact surface: no faceting; the gradient (position term) from the cubic fit
         E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
         Kl = np.where(miss.any(1)[:, None, None], np.nan, -np.einsum("mai,mij,mbj->mab", E, hess, E))
@@ -154,5 +175,59 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
     k = principal_curvatures(Kl)
     k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
+    higher = np.where(np.isfinite(higher), higher, 0.0)
     return {"normal": n, "shape": embed_shape(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
+            "frame": np.stack([e1, e2], axis=1), "higher": higher,
             "problem": problem, "source": src}
+
+
+def _cubic_design(s_, t_):
+    """The full cubic's 10 columns at local coordinates ``s_, t_`` (mm, any shape): ``(..., 10)``."""
+    return np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
+                     s_ * t_ * t_ / 2, t_ ** 3 / 6], axis=-1)
+
+
+def _vertex_cubic(panel, P, n, e1, e2, rho):
+    """The heights over the tangent plane up to the cubic, from a full quartic fitted to the mesh's vertices near each
+    point: the :data:`VERTEX_K` nearest within ``VERTEX_REACH rho`` (mm). A mesh's vertices lie on the
+    CAD surface, its facets are chords of it (a height sampled on a facet is off the surface by up to
+    ``k L^2 / 8``, a bias the cubic takes into its curvature).
+
+    ``P (m, 3)`` mm panel frame, ``n, e1, e2 (m, 3)`` the local frame. Returns ``coef (m, 15)`` (the
+    quartic's terms: the ray-cast fit's 10 columns, then ``s^4/24, s^3 t/6, s^2 t^2/4, s t^3/6, t^4/24``), ``u_fit (m,)`` 1/mm (the residual through the fit's covariance, mean of
+    the Hessian's 3 components) and ``ok (m,)`` (at least :data:`VERTEX_MIN` vertices and a well-posed fit)."""
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(panel.mesh.vertices, float)
+    tree = getattr(panel, "_vertex_tree", None)
+    if tree is None:  # once per panel
+        tree = panel._vertex_tree = cKDTree(V)
+    m = len(P)
+    k = min(VERTEX_K, len(V))
+    coef = np.full((m, 15), np.nan)
+    u_fit = np.full(m, np.nan)
+    ok = np.zeros(m, bool)
+    for a in range(0, m, CHUNK_HOLES):
+        b = slice(a, a + CHUNK_HOLES)
+        dist, idx = tree.query(P[b], k=k, distance_upper_bound=VERTEX_REACH * rho)
+        dist, idx = dist.reshape(len(dist), -1), idx.reshape(len(idx), -1)
+        have = np.isfinite(dist)
+        q = V[np.where(have, idx, 0)] - P[b, None, :]  # (c, k, 3)
+        s_ = (q * e1[b, None, :]).sum(2) / rho  # scaled: a well-conditioned design
+        t_ = (q * e2[b, None, :]).sum(2) / rho
+        w = (q * n[b, None, :]).sum(2)
+        X = np.concatenate([_cubic_design(s_, t_), np.stack([s_ ** 4 / 24, s_ ** 3 * t_ / 6, s_ * s_ * t_ * t_ / 4,
+                                                             s_ * t_ ** 3 / 6, t_ ** 4 / 24], axis=-1)], axis=-1)
+        X = X * have[..., None]
+        XtX = np.einsum("cpi,cpj->cij", X, X)
+        cnt = have.sum(1)
+        good = (cnt >= VERTEX_MIN) & (np.linalg.cond(XtX) < 1e12)
+        inv = np.linalg.inv(np.where(good[:, None, None], XtX, np.eye(15)))
+        cf = np.einsum("cij,cpj,cp->ci", inv, X, np.where(have, w, 0.0))
+        res = np.where(have, w - np.einsum("cpi,ci->cp", X, cf), 0.0)
+        s2 = (res * res).sum(1) / np.maximum(cnt - 15, 1)
+        scale = rho ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
+        coef[b] = cf / scale  # back to mm
+        u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / rho ** 2
+        ok[b] = good
+    return coef, u_fit, ok

@@ -71,6 +71,7 @@ class Panel:
     unit_warning: str | None = None
     _corners: tuple | None = field(default=None, init=False, repr=False, compare=False)
     _edges: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _vertex_tree: object = field(default=None, init=False, repr=False, compare=False)
 
     def edges(self, crease_deg=CREASE_ANGLE_DEG):
         """The mesh's creases, outline and holes (:func:`metrology.panel.edges.panel_edges`), cached."""

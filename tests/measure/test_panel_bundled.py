@@ -214,10 +214,13 @@ def test_the_robots_own_tilt_counts_no_hole_off_its_cad(tmp_path):
     runner = CliRunner()
     panels = data_path("panels")
     log = tmp_path / "w.csv"
-    r = runner.invoke(app, ["simulate-log", "--layout", str(data_path("measured", "nominal.toml")), "--panel", "wing",
+    # the head as its layout says (without --true-layout a covariance-less layout is drawn off by
+    # DEFAULT_LAYOUT_ERROR, unexplained in U95: its redundant misfit, near 6 sigma on a hole or two, is not what this checks)
+    nominal = str(data_path("measured", "nominal.toml"))
+    r = runner.invoke(app, ["simulate-log", "--layout", nominal, "--true-layout", nominal, "--panel", "wing",
                             "--points", str(panels / "wing.holes.csv"), "--holes", "200", "--out", str(log)])
     assert r.exit_code == 0, r.output
-    r = runner.invoke(app, ["measure", str(log), "--layout", str(data_path("measured", "nominal.toml")), "--panel",
+    r = runner.invoke(app, ["measure", str(log), "--layout", nominal, "--panel",
                             str(panels / "wing.stl"), "--points", str(panels / "wing.holes.csv"), "--json"])
     assert r.exit_code in (0, 1), r.output
     cv = json.loads(r.stdout)["curvature"]
