@@ -373,26 +373,9 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
     from metrology.measure.run import measure_log
 
     o = MeasureOptions() if options is None else options
-    if not (0 < o.tolerance_deg < 90):
-        raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {o.tolerance_deg:g}")
-    stated = layout_panel(layout_path)
-    radius_source = "--min-radius-mm"
-    if o.panel is None and o.points is None:
-        o = dataclasses.replace(o, panel=stated.get("file"), points=stated.get("points"))
-    if o.min_radius_mm is None:
-        o = dataclasses.replace(o, min_radius_mm=stated.get("radius_mm", 500.0))
-        radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
+    o, radius_source = _panel_options(o, layout_path)
     min_radius_mm, panel, points = o.min_radius_mm, o.panel, o.points
-    if not min_radius_mm > 0:
-        raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {min_radius_mm:g}")
-    if o.report_html is not None:
-        from metrology.report.html import check_report_path
-
-        check_report_path(o.report_html)
-    if o.qif is not None:
-        from metrology.io.qif import check_qif_path
-
-        check_qif_path(o.qif)
+    _check_report_paths(o)
     layout = load_layout(layout_path)
     shown_layout = display_name(layout_path)
     warnings = _layout_warnings(layout, shown_layout)
@@ -411,12 +394,7 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
             warn(w)
     output = None
     if target is not None and not is_file_out(o.out):
-        output = PartitionedOutput(target, {"tolerance_deg": o.tolerance_deg, "min_radius_mm": min_radius_mm,
-                                            "chart_by_panel": o.chart_by_panel,
-                                            "panel": None if panel is None else str(Path(panel).resolve()),
-                                            "points": None if points is None else str(Path(points).resolve()),
-                                            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg],
-                                            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())})
+        output = PartitionedOutput(target, _manifest(o, layout, log_path))
     done = [0]
 
     def tick(n):
@@ -435,6 +413,9 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
             return measure_log(log, layout, settings, engine, sink=sink, output=output, progress=tick,
                                by_panel=o.chart_by_panel)
 
+    def check_fit(result, **kw):
+        _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces, **kw)
+
     if output is not None:
         try:
             result = run(None)
@@ -445,38 +426,91 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
         output.release()
     elif target is None and not o.per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
         result = run(None)
-        _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)
+        check_fit(result)
     else:
         with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
             result = run(sink if q is None else _Tee(sink, q))
-            _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces)  # before the files appear
+            check_fit(result)  # before the files appear
     if output is not None:
-        _check_fit(result, shown_layout, min_radius_mm, warn=warn, warnings=warnings, surfaces=surfaces)
+        check_fit(result, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
             _qif_from_output(qif_doc, output, log)
+    report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
+                           layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
+                           {**chart_settings(), "by_panel": o.chart_by_panel},
+                           _curvature(o, result, surfaces, radius_source, shown_layout))
+    if o.report_html is not None:
+        _write_report_html(o, report, log_path, layout_path)
+    return report
+
+
+def _panel_options(o: MeasureOptions, layout_path) -> tuple:
+    """``o`` with the panel, the hole table and the radius bound the layout states where the options
+    give none (:func:`layout_panel`; the radius 500 mm when neither does), and where the radius came
+    from; ValueError for a tolerance or a radius out of range."""
+    import dataclasses
+
+    if not (0 < o.tolerance_deg < 90):
+        raise ValueError(f"--tolerance-deg must be in (0, 90) deg, got {o.tolerance_deg:g}")
+    stated = layout_panel(layout_path)
+    radius_source = "--min-radius-mm"
+    if o.panel is None and o.points is None:
+        o = dataclasses.replace(o, panel=stated.get("file"), points=stated.get("points"))
+    if o.min_radius_mm is None:
+        o = dataclasses.replace(o, min_radius_mm=stated.get("radius_mm", 500.0))
+        radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
+    if not o.min_radius_mm > 0:
+        raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {o.min_radius_mm:g}")
+    return o, radius_source
+
+
+def _check_report_paths(o: MeasureOptions) -> None:
+    """The HTML report's and the QIF document's paths checked before anything is measured."""
+    if o.report_html is not None:
+        from metrology.report.html import check_report_path
+
+        check_report_path(o.report_html)
+    if o.qif is not None:
+        from metrology.io.qif import check_qif_path
+
+        check_qif_path(o.qif)
+
+
+def _manifest(o: MeasureOptions, layout, log_path) -> dict:
+    """What a folder output's resume manifest records of the run (paths resolved)."""
+    return {"tolerance_deg": o.tolerance_deg, "min_radius_mm": o.min_radius_mm, "chart_by_panel": o.chart_by_panel,
+            "panel": None if o.panel is None else str(Path(o.panel).resolve()),
+            "points": None if o.points is None else str(Path(o.points).resolve()),
+            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg],
+            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())}
+
+
+def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str) -> dict:
+    """The report's account of the panel's curvature: the bound the layout states, or the known
+    surfaces' figures ({} when the radius bound is assumed)."""
     curvature = {}
     if surfaces is None and radius_source == "layout [panel] radius_mm":
-        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {min_radius_mm:g} mm stated in "
-                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": min_radius_mm}
+        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {o.min_radius_mm:g} mm stated in "
+                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": o.min_radius_mm}
     if surfaces is not None:
         curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
                      "position_error_mm": o.position_error_mm, "form_tolerance_mm": o.form_tolerance_mm,
                      "spin_deg": o.spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
                      "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
                      **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
-    report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
-                           layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
-                           {**chart_settings(), "by_panel": o.chart_by_panel}, curvature)
-    if o.report_html is not None:
-        from metrology.io.atomic import write_text
-        from metrology.report.html import render_html, run_info
-        from metrology.report.measure import measure_section
+    return curvature
 
-        paths = {"log": log_path, "layout": layout_path} if o.log_display is None else {"layout": layout_path}
-        write_text(o.report_html, render_html("Hole measurement", run_info(paths, o.command,
-                                                                           extra_versions=("pyarrow", "dask")),
-                                              [measure_section(report)]))
-    return report
+
+def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None:
+    """The HTML report of the run, written atomically to ``o.report_html``."""
+    from metrology.io.atomic import write_text
+    from metrology.report.html import render_html, run_info
+    from metrology.report.measure import measure_section
+
+    paths = {"log": log_path, "layout": layout_path} if o.log_display is None else {"layout": layout_path}
+    write_text(o.report_html, render_html("Hole measurement", run_info(paths, o.command,
+                                                                       extra_versions=("pyarrow", "dask")),
+                                          [measure_section(report)]))
 
 
 def _layout_warnings(layout, shown_layout) -> list:
