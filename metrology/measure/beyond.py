@@ -110,6 +110,10 @@ def convention_spin(tcs2panel, m, s: float):
     return np.swapaxes(Qm, 1, 2) @ X @ Qm
 
 
+#: the Taylor factors of ``higher``'s nine terms (:func:`second_order_readings`)
+_TAYLOR = np.array([6.0, 2.0, 2.0, 6.0, 24.0, 6.0, 4.0, 6.0, 24.0])
+
+
 def second_order_readings(layout, d, fit, axes, higher):
     """The readings the second-order surface of :func:`fit_surface` would give: ``d`` plus the CAD
     surface's height beyond second order at each spot over ``|u_i . m|``.
@@ -135,20 +139,23 @@ def second_order_readings(layout, d, fit, axes, higher):
     """
     d = np.asarray(d, float)
     m = np.where(fit.ok[:, None], fit.normal, np.array([0.0, 0.0, 1.0]))
-    S = layout.zero[None] + d[..., None] * layout.direction[None]  # (h, n, 3)
-    q = S.copy()
-    q[..., 2] -= np.where(fit.ok, fit.c, 0.0)[:, None]
-    q -= (q * m[:, None]).sum(2)[..., None] * m[:, None]  # T q
+    m0, m1, m2 = (m[:, k:k + 1] for k in range(3))  # (h, 1): the products below by component, over (h, n)
+    z, u = layout.zero, layout.direction
+    qx, qy = z[:, 0] + d * u[:, 0], z[:, 1] + d * u[:, 1]  # q = S - c e_z, S = E + d u
+    qz = z[:, 2] + d * u[:, 2] - np.where(fit.ok, fit.c, 0.0)[:, None]
     a = np.asarray(axes, float)
     a = a - (a * m[:, None]).sum(2)[..., None] * m[:, None]
     a /= np.linalg.norm(a, axis=2, keepdims=True)
-    s_ = (q * a[:, None, 0]).sum(2)
-    t_ = (q * a[:, None, 1]).sum(2)
-    c = np.asarray(higher, float)[:, None, :]
-    w = (c[..., 0] * s_ ** 3 / 6 + c[..., 1] * s_ * s_ * t_ / 2 + c[..., 2] * s_ * t_ * t_ / 2 + c[..., 3] * t_ ** 3 / 6
-         + c[..., 4] * s_ ** 4 / 24 + c[..., 5] * s_ ** 3 * t_ / 6 + c[..., 6] * s_ * s_ * t_ * t_ / 4
-         + c[..., 7] * s_ * t_ ** 3 / 6 + c[..., 8] * t_ ** 4 / 24)
-    um = np.abs(np.einsum("ni,hi->hn", layout.direction, m))
+    a = np.ascontiguousarray(np.moveaxis(a, 0, 2))[..., None]  # (2, 3, h, 1)
+    # (s, t): T q along the axes; the axes are square to m, so T q . a = q . a
+    s_ = qx * a[0, 0] + qy * a[0, 1] + qz * a[0, 2]
+    t_ = qx * a[1, 0] + qy * a[1, 1] + qz * a[1, 2]
+    # the nine terms with the products shared, each coefficient a contiguous column (no ``**``)
+    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)[:, :, None]  # (9, h, 1)
+    s2, st, t2 = s_ * s_, s_ * t_, t_ * t_
+    w = (s_ * (c[0] * s2 + c[1] * st + c[2] * t2) + c[3] * t_ * t2
+         + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
+    um = np.abs(u[:, 0] * m0 + u[:, 1] * m1 + u[:, 2] * m2)
     out = d + w / um
     return np.where(fit.ok[:, None] & np.isfinite(out), out, d)
 
