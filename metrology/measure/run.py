@@ -238,8 +238,9 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
             if own is not None:
                 own.write(public)
             yield Piece(summary, len(batch), Feed.of(batch, log, part, first), public if rows else None, last=False)
-    # the partition's end, once its file is complete (an empty summary: merging it changes no sum)
-    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write)
+    # the partition's end, once its file is complete (an empty summary: merging it changes no sum); a
+    # one-file output's rows (``rows``) are written by this run too, by the caller
+    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write or rows)
 
 
 def _public(table, drop=()):

@@ -5,6 +5,7 @@ import json
 import numpy as np
 
 import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute below)
 import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
@@ -293,6 +294,27 @@ def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
     (out / "cell=C2" / "part-0.parquet").unlink()
     r = runner.invoke(app, args)
     assert "resumed: 1 of 2 partition(s) kept as an earlier run wrote them, 1 written" in r.output, r.output
+
+
+def test_a_first_run_into_one_file_says_it_wrote_it_not_that_it_resumed(tmp_path, layout):
+    """A one-file output (CSV, Parquet) is written whole by the run: no "resumed" line, and --json's
+    ``partitions_written`` counts it (it once said 0 and "kept as an earlier run wrote them")."""
+    cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
+    root = tmp_path / "fleet"
+    t = pa.table(cols)
+    for cell in ("C1", "C2"):
+        (root / f"cell={cell}").mkdir(parents=True)
+        pq.write_table(t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"]),
+                       root / f"cell={cell}" / "part-0.parquet")
+    log = tmp_path / "log.parquet"
+    pq.write_table(t, log)
+    for src, out in ((log, tmp_path / "holes.csv"), (log, tmp_path / "holes.parquet"), (root, tmp_path / "all.parquet")):
+        r = runner.invoke(app, ["measure", str(src), "--layout", str(layout), "--out", str(out)])
+        assert r.exit_code == 0 and out.exists(), r.output
+        assert "resumed" not in r.output and "already written" not in r.output, r.output
+        j = runner.invoke(app, ["measure", str(src), "--layout", str(layout), "--out", str(out), "--json"])
+        s = json.loads(j.stdout)
+        assert s["partitions_written"] == s["partitions"], s
 
 
 def test_report_histogram_axis_ends_near_the_largest_angle_and_versions_name_pyarrow_dask(tmp_path, layout):
