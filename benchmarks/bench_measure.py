@@ -256,8 +256,8 @@ def panel(work: Path, holes: int, repeat: int, metro, name: str = "wing") -> dic
     layout = data / "measured" / "nominal.toml"
     log = work / f"panel-{name}.parquet"
     t0 = time.perf_counter()
-    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--true-layout", str(layout), "--panel", str(mesh),
-                    "--points", str(points),
+    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--true-layout", str(layout),
+                    "--panel", str(mesh), "--points", str(points),
                     "--holes", str(holes), "--seed", "1", "--no-truth", "--out", str(log)], check=True,
                    stdout=subprocess.DEVNULL)
     out = {"holes": holes, "panel": f"{name}.stl", "table": f"{name}.holes.csv", "generate_s": time.perf_counter() - t0}
@@ -296,8 +296,8 @@ def controller(work: Path, holes: int, repeat: int, metro) -> dict:
     mesh, points = data / "panels" / "wing.stl", data / "panels" / "wing.holes.csv"
     layout = data / "measured" / "nominal.toml"
     log = work / "controller-wing.parquet"
-    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--true-layout", str(layout), "--panel", str(mesh),
-                    "--points", str(points),
+    subprocess.run([*metro, "-q", "simulate-log", "--layout", str(layout), "--true-layout", str(layout),
+                    "--panel", str(mesh), "--points", str(points),
                     "--holes", "2000", "--seed", "1", "--no-truth", "--out", str(log)], check=True,
                    stdout=subprocess.DEVNULL)
     lay = load_layout(layout)
