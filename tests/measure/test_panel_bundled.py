@@ -226,3 +226,47 @@ def test_the_robots_own_tilt_counts_no_hole_off_its_cad(tmp_path):
     cv = json.loads(r.stdout)["curvature"]
     assert cv["cad_checked"] == 200 and cv["normal_vs_cad_max_deg"] > 0.5
     assert cv["cad_off_holes"] == 0 and abs(cv["cad_offset_max_mm"]) < 0.05
+
+
+def _wing_seed2(tmp_path, layout, measure_layout=None, panel=True):
+    """The 100-hole wing log of seed 2 drawn with ``layout`` (the head drawn from it: its covariance,
+    else the simulator's default 15-30 um / 0.015-0.03 deg off it), measured with ``measure_layout``."""
+    wing, pts = str(data_path("panels", "wing.stl")), str(data_path("panels", "wing.holes.csv"))
+    log = tmp_path / "wing2.csv"
+    r = runner.invoke(app, ["simulate-log", "--layout", str(layout), "--panel", wing, "--points", pts,
+                            "--holes", "100", "--seed", "2", "--out", str(log)])
+    assert r.exit_code == 0, r.output
+    out = tmp_path / "wing2.m.csv"
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(measure_layout or layout), "--out", str(out),
+                            *(["--panel", wing, "--points", pts] if panel else [])])
+    truth = {t["hole_id"]: t for t in _read(tmp_path / "wing2.truth.csv")}
+    return r, (_read(out) if out.exists() else None), truth
+
+
+def test_a_wing_log_from_a_head_within_its_calibration_is_never_refused(tmp_path):
+    """The reported "wing, 100 holes, --seed 2, exit 2": with a layout that states its calibration's
+    covariance (the head drawn from it) the same log is measured, every hole, its U95 covering."""
+    from metrology.io.layout import load_layout, save_layout
+
+    nominal = load_layout(TABLE6)
+    C = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, nominal.n))
+    save_layout(nominal.with_params(nominal.zero, nominal.direction, covariance=C), tmp_path / "cal.toml")
+    r, rows, truth = _wing_seed2(tmp_path, tmp_path / "cal.toml")
+    assert r.exit_code == 0, r.output
+    assert [x["status"] for x in rows] == ["conforms"] * 100
+    err = np.array([abs(float(x["angle_after_deg"]) - float(truth[x["hole_id"]]["true_after_deg"])) for x in rows])
+    assert np.mean(err <= np.array([float(x["U95_after_deg"]) for x in rows])) >= 0.9
+
+
+def test_a_nominal_layout_on_a_head_30um_off_it_is_refused_with_the_panel_known_and_rightly(tmp_path):
+    """The same seed drawn with the nominal layout (no covariance: the simulator's head 15-30 um and
+    0.015-0.03 deg off it): with the panel known the misfit (~20 um against a 3 um sigma) refuses the
+    layout, exit 2; a true refusal: measured without the panel, the angles are off the truth by more
+    than their U95 (which states no calibration error) at most holes."""
+    r, rows, _ = _wing_seed2(tmp_path, TABLE6)
+    assert r.exit_code == 2 and rows is None
+    assert "a nominal layout, not its calibration?" in r.output
+    r, rows, truth = _wing_seed2(tmp_path, TABLE6, panel=False)
+    assert r.exit_code == 0, r.output
+    err = np.array([abs(float(x["angle_after_deg"]) - float(truth[x["hole_id"]]["true_after_deg"])) for x in rows])
+    assert np.mean(err <= np.array([float(x["U95_after_deg"]) for x in rows])) < 0.5
