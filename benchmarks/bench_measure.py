@@ -287,7 +287,7 @@ def controller(work: Path, holes: int, repeat: int, metro) -> dict:
     import pyarrow.parquet as pq
 
     from metrology.io.layout import load_layout
-    from metrology.jobs.measure import _surfaces
+    from metrology.jobs.measure_panel import hole_surfaces
     from metrology.measure import surface_normal
     from metrology.measure.holes import _pose, _readings
     from metrology.measure.normals import drill_axis
@@ -301,7 +301,7 @@ def controller(work: Path, holes: int, repeat: int, metro) -> dict:
                     "--holes", "2000", "--seed", "1", "--no-truth", "--out", str(log)], check=True,
                    stdout=subprocess.DEVNULL)
     lay = load_layout(layout)
-    surf = _surfaces(lay, str(mesh), str(points), 0.5, 0.0, 0.0)
+    surf = hole_surfaces(lay, str(mesh), str(points), 0.5, 0.0, 0.0)
     table = pq.read_table(log)
     d = _readings(table, lay.names)
     shape = surf.shape_pose(surf.rows(table.column("point_id")), _pose(table)[0], drill_axis(lay)[2])

@@ -195,7 +195,7 @@ def _known_log(rng, kind, R, spec_kw, holes, cal, axis_groups, bundled, pose=Fal
     import pyarrow as pa
 
     from metrology.io.holelog import CELL, PANEL, TIME_S
-    from metrology.jobs.measure import _footprint, panel_hole_surfaces
+    from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
     from metrology.jobs.simulate_log import metro_controller
     from metrology.measure.panel import HoleSurfaces, HoleTable
     from metrology.panel.mesh import Panel
@@ -212,7 +212,7 @@ def _known_log(rng, kind, R, spec_kw, holes, cal, axis_groups, bundled, pose=Fal
         seed = int(rng.integers(2**31))
         ch = next(simulate_cell(spec, seed, 0, holes, chunk_holes=holes))
         loop = next(simulate_cell(replace(spec, controller=metro), seed, 0, holes, chunk_holes=holes))
-        return ch, loop, log_table(ch), cad_surf(_footprint(cal))
+        return ch, loop, log_table(ch), cad_surf(footprint_mm(cal))
     chunks, parts, loops = [], [], []
     edges = np.linspace(0, holes, axis_groups + 1).astype(int)
     for g in range(axis_groups):
@@ -226,7 +226,7 @@ def _known_log(rng, kind, R, spec_kw, holes, cal, axis_groups, bundled, pose=Fal
         ids = tuple(f"h{int(edges[g]) + i}" for i in range(ch.n))
         P = ch.drill_point
         parts.append(panel_hole_surfaces(Panel(panel_mesh(panel, half_mm=400.0, step_mm=4.0)),
-                                         HoleTable(ids, P, -panel.normal_at(P), "holes"), _footprint(cal), 0.5, 0.0,
+                                         HoleTable(ids, P, -panel.normal_at(P), "holes"), footprint_mm(cal), 0.5, 0.0,
                                          np.radians(2.0)))
         chunks.append(ch)
     ch, loop = HoleChunk.concat(chunks), HoleChunk.concat(loops)
@@ -252,7 +252,7 @@ def _bundled_panels(names):
     ``names``: the simulator drills the generated surface (metrology.sim.forward.shapes); metro measures
     with the bundled CAD file (mesh, or the STEP's B-rep) and hole table."""
     from metrology.io.data import data_path
-    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.jobs.measure_panel import panel_hole_surfaces
     from metrology.measure.panel import read_hole_table
     from metrology.panel.mesh import load_panel
     from metrology.sim.forward.holes import read_hole_table as sim_table

@@ -48,7 +48,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
 
     from metrology.io.holelog import CsvLog, batch_of
     from metrology.io.layout import load_layout
-    from metrology.jobs.measure import _surfaces, layout_panel
+    from metrology.jobs.measure_panel import hole_surfaces, layout_panel
     from metrology.measure.holes import STATUSES, Settings, Status, measure_batch
     from metrology.measure.run import Feed, Watch
 
@@ -62,7 +62,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
         raise ValueError(f"--panel {panel}: give the hole table too (--points HOLES.csv)")
     surfaces = None
     if points is not None:
-        surfaces = _surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
+        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
     settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)

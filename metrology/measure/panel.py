@@ -6,7 +6,7 @@ drill point (mm, the panel's frame) and the drill's feed direction into the pane
 log by ``hole_id``.
 
 **From the panel** (:func:`metrology.panel.holes.panel_surfaces`, joined here by
-:func:`metrology.jobs.measure.panel_hole_surfaces`): the drill point is snapped onto the mesh (a STEP
+:func:`metrology.jobs.measure_panel.panel_hole_surfaces`): the drill point is snapped onto the mesh (a STEP
 file is tessellated with 1 um chords, :func:`metrology.panel.mesh.load_panel`); the CAD's normal
 there (the mesh's reference normal, turned toward the head: against the feed) gives the local
 frame ``(e1, e2, n)``, ``e1`` the panel's ``x`` made square to ``n`` (the cell's convention, as

@@ -128,7 +128,7 @@ def _spun_batch(with_pose, holes=3000, seed=3):
     import pyarrow as pa
 
     from metrology.io.holelog import CELL, PANEL, TIME_S
-    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.jobs.measure_panel import panel_hole_surfaces
     from metrology.measure.holes import Settings, measure_batch
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel

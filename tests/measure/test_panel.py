@@ -202,7 +202,7 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, mesh_half=150.0, *
     import pyarrow as pa
 
     from metrology.measure.holes import Settings, measure_batch
-    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.jobs.measure_panel import panel_hole_surfaces
     from metrology.measure.panel import HoleTable
     from metrology.measure.summary import FleetSummary
     from metrology.panel.mesh import Panel

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from metrology.io.data import data_path
 from metrology.io.layout import load_layout
-from metrology.jobs.measure import _surfaces
+from metrology.jobs.measure_panel import hole_surfaces
 from metrology.measure.holes import Settings, measure_batch
 
 TABLE6 = str(data_path("measured", "nominal.toml"))
@@ -29,7 +29,7 @@ def wing(tmp_path_factory):
                                  "--layout", TABLE6, "--out", str(log), "--no-truth"])
     assert r.exit_code == 0, r.output
     layout = load_layout(TABLE6)
-    surf = _surfaces(layout, str(data_path("panels", "wing.stl")), str(data_path("panels", "wing.holes.csv")),
+    surf = hole_surfaces(layout, str(data_path("panels", "wing.stl")), str(data_path("panels", "wing.holes.csv")),
                      0.5, 0.0, 0.0)
     return layout, pq.read_table(log), dataclasses.replace(Settings(), surfaces=surf)
 

@@ -175,7 +175,7 @@ def test_the_bundled_step_wing_is_the_generated_wing():
     STEP panel: at the bundled holes its normals and shape operators are the generated wing's
     (metrology.sim.forward.shapes) from the exact B-rep, the bundled mesh's to its faceting."""
     pytest.importorskip("cascadio")
-    from metrology.jobs.measure import panel_hole_surfaces
+    from metrology.jobs.measure_panel import panel_hole_surfaces
     from metrology.measure.panel import read_hole_table
     from metrology.panel.mesh import load_panel
     from metrology.sim.forward.shapes import generated_panel

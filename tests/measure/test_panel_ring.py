@@ -6,7 +6,7 @@ measures it with the bundled CAD mesh (a 10 mm grid of that surface) and hole ta
 import numpy as np
 
 from metrology.io.data import data_path
-from metrology.jobs.measure import _footprint, panel_hole_surfaces
+from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
 from metrology.measure.holes import Settings, measure_batch
 from metrology.measure.panel import read_hole_table
 from metrology.panel.holes import panel_surfaces
@@ -40,7 +40,7 @@ def _ring_on(kind, holes=300):
     spec = LogSpec(true_layout=ring, cell_layout=ring, panel=generated_panel(kind), table=sim_table(path), spin_rad=0.0)
     ch = next(simulate_cell(spec, 5, 0, holes, chunk_holes=holes))
     surf = panel_hole_surfaces(load_panel(str(data_path("panels", f"{kind}.stl"))), read_hole_table(path),
-                               _footprint(ring), 0.5, 0.0, 0.0)
+                               footprint_mm(ring), 0.5, 0.0, 0.0)
     b = measure_batch(ring, log_table(ch), Settings(surfaces=surf))
     return b.angle_before - ch.true_angle, b.angle_after - ch.true_after
 
