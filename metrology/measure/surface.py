@@ -115,7 +115,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     layout : SensorLayout, n >= 3 sensors: zero (n, 3) mm TCS, direction (n, 3) unit TCS
     d : (h, n) float, mm, readings; NaN for blanks (a hole needs 3)
     shape : (h, 3, 3) float, 1/mm, TCS, the shape operator at each hole (0: flat), tangent to the
-        TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane
+        TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane; or its
+        entries ``(00, 01, 11)`` as a tuple of (h,) arrays (the only ones the fit takes)
     steps : int, steps from g = 0 (the first gives the micro-plane, the rest are Gauss-Newton with ``K``)
     sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
     full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None)
@@ -126,10 +127,14 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     n = layout.n
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
-    K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
     # square to the drill axis (as given): its entries in the TCS xy plane; K_m = Q K Q^T then has
     # K_m m = 0, so K_m T q = T K_m q = K_m q and (Tq)^T K_m (Tq) = q^T K_m q (no projections per step)
-    K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
+    if isinstance(shape, tuple):  # those entries given
+        K3 = tuple(np.broadcast_to(np.asarray(k, float), (h,)) for k in shape)
+        K = None
+    else:
+        K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
+        K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
@@ -208,6 +213,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
     else:  # the micro-plane: K projected onto it, T K T
+        if K is None:
+            K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
         m = np.stack([mx, my, mz], axis=1)
         Km = np.einsum("hij,hj->hi", K, m)
         mKm = (m * Km).sum(1)
