@@ -119,7 +119,8 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         entries ``(00, 01, 11)`` as a tuple of (h,) arrays (the only ones the fit takes)
     steps : int, steps from g = 0 (the first gives the micro-plane, the rest are Gauss-Newton with ``K``)
     sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
-    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None)
+    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None,
+        and the pass that only evaluates them at the solution is not run: the same ``normal``, ``g``, ``c``)
 
     Sensor-major ``(n, h)`` arrays and explicit 3 x 3 algebra: a sum over the sensors is a sum of
     contiguous rows (as :func:`metrology.measure.normals.hole_normals`).
@@ -163,7 +164,9 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
         gx0, gy0 = gx, gy
-        for it in range(1, steps + 1):  # Gauss-Newton with K; the last pass only evaluates at the solution
+        # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
+        # it (full=False) ``ok`` takes the matrix inverted for the last update
+        for it in range(1, steps + 1 if full else steps):
             rho = np.sqrt(1.0 + gx * gx + gy * gy)
             mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
             zq = z - c
