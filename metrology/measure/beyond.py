@@ -191,26 +191,28 @@ def second_order_readings(layout, d, fit, axes, higher):
 
 def _readings_beyond(layout, d, fit, ax, higher):
     """:func:`second_order_readings` with the axes by component: ``ax[k][i]`` (h,) the ``i``-th TCS
-    component of ``e_(k+1)``."""
-    d = np.asarray(d, float)
+    component of ``e_(k+1)``. Sensor-major ``(n, h)`` arrays (each hole's numbers a contiguous row's
+    entries, as :func:`metrology.measure.surface.fit_surface`); returns the transpose of one: the
+    fit's own layout, no copy there."""
+    dT = np.ascontiguousarray(np.asarray(d, float).T)  # (n, h)
     ok = fit.ok
     mx, my, mz = (np.where(ok, fit.normal[:, i], e) for i, e in enumerate((0.0, 0.0, 1.0)))
     z, u = layout.zero, layout.direction
-    qx, qy = z[:, 0] + d * u[:, 0], z[:, 1] + d * u[:, 1]  # q = S - c e_z, S = E + d u
-    qz = z[:, 2] + d * u[:, 2] - np.where(ok, fit.c, 0.0)[:, None]
+    qx, qy = z[:, 0, None] + dT * u[:, 0, None], z[:, 1, None] + dT * u[:, 1, None]  # q = S - c e_z, S = E + d u
+    qz = z[:, 2, None] + dT * u[:, 2, None] - np.where(ok, fit.c, 0.0)
     st = []
     for k in range(2):  # (s, t): T q along the axes made square to m and unit; T q . a = q . a
         ax0, ax1, ax2 = ax[k]
         am = ax0 * mx + ax1 * my + ax2 * mz
         ax0, ax1, ax2 = ax0 - am * mx, ax1 - am * my, ax2 - am * mz
         f = 1.0 / np.sqrt(ax0 * ax0 + ax1 * ax1 + ax2 * ax2)
-        st.append(qx * (ax0 * f)[:, None] + qy * (ax1 * f)[:, None] + qz * (ax2 * f)[:, None])
+        st.append(qx * (ax0 * f) + qy * (ax1 * f) + qz * (ax2 * f))
     s_, t_ = st
-    # the nine terms with the products shared, each coefficient a contiguous column (no ``**``)
-    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)[:, :, None]  # (9, h, 1)
+    # the nine terms with the products shared, each coefficient a contiguous row (no ``**``)
+    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)  # (9, h)
     s2, st, t2 = s_ * s_, s_ * t_, t_ * t_
     w = (s_ * (c[0] * s2 + c[1] * st + c[2] * t2) + c[3] * t_ * t2
          + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
-    um = np.abs(u[:, 0] * mx[:, None] + u[:, 1] * my[:, None] + u[:, 2] * mz[:, None])
-    out = d + w / um
-    return np.where(ok[:, None] & np.isfinite(out), out, d)
+    um = np.abs(u[:, 0, None] * mx + u[:, 1, None] * my + u[:, 2, None] * mz)
+    out = dT + w / um
+    return np.where(ok & np.isfinite(out), out, dT).T

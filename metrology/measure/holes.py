@@ -157,9 +157,12 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         if shape is not None:
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
-            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
-                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]),
-                                          beyond=None if higher is None else higher.rows(rows[i:i + CACHE_ROWS]))
+            def of(r):  # the rows r: a slice (views, no gather) where they run on (all sensors read: the usual)
+                return slice(r[0], r[-1] + 1) if r[-1] - r[0] + 1 == len(r) else r
+
+            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[of(rows[i:i + CACHE_ROWS])],
+                                          PanelTerms(u_shape[of(rows[i:i + CACHE_ROWS])], spin[of(rows[i:i + CACHE_ROWS])]),
+                                          beyond=None if higher is None else higher.rows(of(rows[i:i + CACHE_ROWS])))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
             h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
                                      np.concatenate([getattr(p[0], f) for p in parts])
