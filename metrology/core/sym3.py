@@ -141,5 +141,5 @@ def null_vector_cols(a, b, c):
         return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
                 + c[i] * (a[j] * b[k] - a[k] * b[j]))
 
-    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
-    return q / np.sqrt((q * q).sum(1))[:, None]
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
+    return (q / np.sqrt((q * q).sum(0))).T  # a view of (4, h): its transpose contiguous
