@@ -309,13 +309,13 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
     a = drill_axis(layout)
     # the spots, sensor-major (n, h) per component, mm, TCS
-    dT = d[rows].T
+    dT = np.ascontiguousarray(d[rows].T)  # (n, h): each op over contiguous rows
     E, u = layout.zero, layout.direction
     sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
     sa = sx * a[0] + sy * a[1] + sz * a[2]
     lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
     K = shape[rows]
-    k00, k01, k02, k11, k12, k22 = (K[:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
     sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
                  + k22 * lz * lz)  # away from the head
     sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
