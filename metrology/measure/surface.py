@@ -135,7 +135,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         K = None
     else:
         K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
-        K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
+        K3 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (1, 1)))  # read every step
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
