@@ -130,8 +130,12 @@ def turned(K, mx, my, mz, sg):
 def full(k):
     """(h, 3, 3) from the 6 entries ``(00, 01, 02, 11, 12, 22)``."""
     k00, k01, k02, k11, k12, k22 = k
-    return np.stack([np.stack([k00, k01, k02], -1), np.stack([k01, k11, k12], -1),
-                     np.stack([k02, k12, k22], -1)], -2)
+    out = np.empty(np.broadcast_shapes(*(np.shape(x) for x in k)) + (3, 3))
+    out[..., 0, 0], out[..., 1, 1], out[..., 2, 2] = k00, k11, k22
+    out[..., 0, 1] = out[..., 1, 0] = k01
+    out[..., 0, 2] = out[..., 2, 0] = k02
+    out[..., 1, 2] = out[..., 2, 1] = k12
+    return out
 
 
 def null_vector_cols(a, b, c):
@@ -141,5 +145,5 @@ def null_vector_cols(a, b, c):
         return (a[i] * (b[j] * c[k] - b[k] * c[j]) - b[i] * (a[j] * c[k] - a[k] * c[j])
                 + c[i] * (a[j] * b[k] - a[k] * b[j]))
 
-    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)], axis=1)
-    return q / np.sqrt((q * q).sum(1))[:, None]
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
+    return (q / np.sqrt((q * q).sum(0))).T  # a view of (4, h): its transpose contiguous

@@ -55,30 +55,81 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
       spin found before; NaN rows: none);
     - ``terms.axes (N, 2, 3)`` unit TCS, ``terms.higher (N, 9)``: the CAD's height beyond second order
       (:class:`metrology.measure.panel.HoleSurfaces`; :func:`second_order_readings`).
+
+    The shape returned is the tangent entries ``(00, 01, 11)`` ((N,) arrays) of ``Y^T K Y``: the
+    entries :func:`metrology.measure.surface.fit_surface` takes of a shape square to the axis (``K``'s
+    own, ``shape[:, 0, 0], [:, 0, 1], [:, 1, 1]``, likewise). Explicit 3 x 3 products over the holes,
+    one ``(N,)`` array per entry (no batched matmul or einsum of 3 x 3 matrices).
     """
     N = len(d)
-    Y = np.broadcast_to(np.eye(3), (N, 3, 3)).copy()
-    axes = terms.axes
+    eye = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    y = None  # Y's entries y[i][j], (N,) arrays
     if terms.turn is not None:
-        given = np.all(np.isfinite(terms.turn), axis=(1, 2))
-        Y[given] = terms.turn[given]
+        T = terms.turn
+        given = np.isfinite(T.reshape(N, 9)).all(1)
+        y = [[np.where(given, T[:, i, j], eye[i][j]) for j in range(3)] for i in range(3)]
     elif terms.tcs2panel is not None:  # the head's spin at its measured axis, in the cell's convention
-        ok0 = fit0.ok & np.all(np.isfinite(terms.tcs2panel), axis=(1, 2))
-        Y[ok0] = convention_spin(terms.tcs2panel[ok0], fit0.normal[ok0], drill_axis(layout)[2])
-    shape = np.swapaxes(Y, 1, 2) @ np.asarray(shape, float) @ Y
-    if axes is not None:
-        axes = np.einsum("hji,hkj->hki", Y, axes)  # Y^T a
+        Rc = terms.tcs2panel
+        ok0 = fit0.ok & np.isfinite(Rc.reshape(N, 9)).all(1)
+        m = fit0.normal
+        with np.errstate(invalid="ignore", divide="ignore"):
+            e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2],
+                              drill_axis(layout)[2])
+        y = [[np.where(ok0, e[i][j], eye[i][j]) for j in range(3)] for i in range(3)]
+    K = np.asarray(shape, float)
+    k00, k01, k11 = K[:, 0, 0], K[:, 0, 1], K[:, 1, 1]
+    axes = terms.axes
+    if y is None:
+        Y = np.broadcast_to(np.eye(3), (N, 3, 3))
+        kt = (k00, k01, k11)
+        ax = None if axes is None else [[axes[:, k, i] for i in range(3)] for k in range(2)]
+    else:
+        Y = np.empty((N, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                Y[:, i, j] = y[i][j]
+        y00, y01, y10, y11 = y[0][0], y[0][1], y[1][0], y[1][1]
+        # (Y^T K Y)_ij over the tangent entries of K (square to the axis: its z row and column are 0)
+        a0, a1 = k00 * y00 + k01 * y10, k01 * y00 + k11 * y10  # (K Y)_k0
+        b0, b1 = k00 * y01 + k01 * y11, k01 * y01 + k11 * y11  # (K Y)_k1
+        kt = (y00 * a0 + y10 * a1, y00 * b0 + y10 * b1, y01 * b0 + y11 * b1)
+        ax = None if axes is None else [[y[0][i] * axes[:, k, 0] + y[1][i] * axes[:, k, 1] + y[2][i] * axes[:, k, 2]
+                                         for i in range(3)] for k in range(2)]  # Y^T a
     if terms.higher is not None:
-        d = second_order_readings(layout, d, fit0, axes, terms.higher)
-    return d, shape, Y
-def _smallest(v, w):
-    """Smallest rotations ``(h, 3, 3)`` taking unit ``v (h, 3)`` to unit ``w (h, 3)`` (Rodrigues; not opposite)."""
-    k = np.cross(v, w)
-    c = (v * w).sum(1)
-    Kx = np.zeros((len(v), 3, 3))
-    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    return np.eye(3)[None] + Kx + Kx @ Kx / (1.0 + c)[:, None, None]
+        d = _readings_beyond(layout, d, fit0, ax, terms.higher)
+    return d, kt, Y
+
+
+def _smallest_entries(kx, ky, kz, c):
+    """The entries ``q[i][j]`` ((h,) arrays) of the smallest rotation taking a unit ``v`` onto a unit
+    ``w``, given ``k = v x w`` and ``c = v . w`` (Rodrigues: ``I + [k]x + [k]x^2 / (1 + c)``,
+    ``[k]x^2 = k k^T - |k|^2 I``; not opposite)."""
+    f = 1.0 / (1.0 + c)
+    fx, fy, fz = f * kx, f * ky, f * kz
+    xx, yy, zz = fx * kx, fy * ky, fz * kz
+    xy, xz, yz = fx * ky, fx * kz, fy * kz
+    return [[1.0 - yy - zz, xy - kz, xz + ky], [xy + kz, 1.0 - xx - zz, yz - kx], [xz - ky, yz + kx, 1.0 - xx - yy]]
+
+
+def _spin_entries(Rc, mx, my, mz, s: float):
+    """:func:`convention_spin` entry by entry: ``Rc[i][j]`` and ``mx, my, mz`` (h,) arrays; returns ``Y[i][j]``.
+
+    ``Y = Q_m^T X Q_m = R_c^T Q(-e_z -> a) Q(-e_z -> f)^T R_c Q_m`` (``F F = I``, ``R = R_c Q_m^T``),
+    and a smallest rotation turned is the smallest rotation between the turned vectors:
+    ``R_c^T Q(v -> w) R_c = Q(R_c^T v -> R_c^T w)``, with ``R_c^T a = s Q_m^T e_z = (m_x, m_y, -m_z)``
+    and ``R_c^T f = s e_z``: ``Y = Q(-r -> b) Q(-r -> s e_z)^T Q_m``, ``r = R_c^T e_z`` (the panel's
+    ``z`` in the TCS: ``R_c``'s last row), ``b = (m_x, m_y, -m_z)``."""
+    rx, ry, rz = Rc[2][0], Rc[2][1], Rc[2][2]
+    bz = -mz
+    # A = Q(-r -> b): k = -r x b, c = -r . b
+    A = _smallest_entries(rz * my - ry * bz, rx * bz - rz * mx, ry * mx - rx * my, -(rx * mx + ry * my + rz * bz))
+    # B = Q(-r -> s e_z): k = -s (r_y, -r_x, 0), c = -s r_z
+    B = _smallest_entries(-s * ry, s * rx, 0.0, -s * rz)
+    # Q_m = Q(sg e_z -> m), sg = -s: I + [v]x + [v]x^2 / (1 + sg m_z), v = sg e_z x m = (-sg m_y, sg m_x, 0)
+    sg = -s
+    Q = _smallest_entries(-sg * my, sg * mx, 0.0, sg * mz)
+    M = [[A[i][0] * B[j][0] + A[i][1] * B[j][1] + A[i][2] * B[j][2] for j in range(3)] for i in range(3)]  # A B^T
+    return [[M[i][0] * Q[0][j] + M[i][1] * Q[1][j] + M[i][2] * Q[2][j] for j in range(3)] for i in range(3)]
 
 
 def convention_spin(tcs2panel, m, s: float):
@@ -95,19 +146,16 @@ def convention_spin(tcs2panel, m, s: float):
     saddle: ``2 delta_psi / R``). ``Y = Q_m^T X Q_m`` with ``X = R^T Q(-e_z -> a) F Rz(psi_c)``; the
     shape square to the axis becomes ``Y^T K Y``.
 
-    ``tcs2panel (h, 3, 3)``, ``m (h, 3)`` unit TCS, ``s`` the drill axis's sign."""
+    ``tcs2panel (h, 3, 3)``, ``m (h, 3)`` unit TCS, ``s`` the drill axis's sign. Entry by entry over
+    the holes (:func:`_spin_entries`, the closed form of the products)."""
     Rc = np.asarray(tcs2panel, float)
-    sg = -s
-    ez = np.broadcast_to(np.array([0.0, 0.0, sg]), m.shape)
-    Qm = _smallest(ez, m)
-    R = Rc @ np.swapaxes(Qm, 1, 2)
-    a = R[:, :, 2] * s
-    f = Rc[:, :, 2] * s
-    flip = np.array([1.0, -s, -s])  # F (columns)
-    down = np.broadcast_to(np.array([0.0, 0.0, -1.0]), m.shape)
-    spin_c = np.swapaxes(_smallest(down, f) * flip, 1, 2) @ Rc  # F Q(-e_z -> f)^T R_c = Rz(psi_c)
-    X = np.swapaxes(R, 1, 2) @ (_smallest(down, a) * flip) @ spin_c
-    return np.swapaxes(Qm, 1, 2) @ X @ Qm
+    m = np.asarray(m, float)
+    e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2], s)
+    Y = np.empty((len(m), 3, 3))
+    for i in range(3):
+        for j in range(3):
+            Y[:, i, j] = e[i][j]
+    return Y
 
 
 #: the Taylor factors of ``higher``'s nine terms (:func:`second_order_readings`)
@@ -137,25 +185,34 @@ def second_order_readings(layout, d, fit, axes, higher):
     -------
     (h, n) float, mm (``d`` where the fit is not ok)
     """
-    d = np.asarray(d, float)
-    m = np.where(fit.ok[:, None], fit.normal, np.array([0.0, 0.0, 1.0]))
-    m0, m1, m2 = (m[:, k:k + 1] for k in range(3))  # (h, 1): the products below by component, over (h, n)
-    z, u = layout.zero, layout.direction
-    qx, qy = z[:, 0] + d * u[:, 0], z[:, 1] + d * u[:, 1]  # q = S - c e_z, S = E + d u
-    qz = z[:, 2] + d * u[:, 2] - np.where(fit.ok, fit.c, 0.0)[:, None]
     a = np.asarray(axes, float)
-    a = a - (a * m[:, None]).sum(2)[..., None] * m[:, None]
-    a /= np.linalg.norm(a, axis=2, keepdims=True)
-    a = np.ascontiguousarray(np.moveaxis(a, 0, 2))[..., None]  # (2, 3, h, 1)
-    # (s, t): T q along the axes; the axes are square to m, so T q . a = q . a
-    s_ = qx * a[0, 0] + qy * a[0, 1] + qz * a[0, 2]
-    t_ = qx * a[1, 0] + qy * a[1, 1] + qz * a[1, 2]
-    # the nine terms with the products shared, each coefficient a contiguous column (no ``**``)
-    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)[:, :, None]  # (9, h, 1)
+    return _readings_beyond(layout, d, fit, [[a[:, k, i] for i in range(3)] for k in range(2)], higher)
+
+
+def _readings_beyond(layout, d, fit, ax, higher):
+    """:func:`second_order_readings` with the axes by component: ``ax[k][i]`` (h,) the ``i``-th TCS
+    component of ``e_(k+1)``. Sensor-major ``(n, h)`` arrays (each hole's numbers a contiguous row's
+    entries, as :func:`metrology.measure.surface.fit_surface`); returns the transpose of one: the
+    fit's own layout, no copy there."""
+    dT = np.ascontiguousarray(np.asarray(d, float).T)  # (n, h)
+    ok = fit.ok
+    mx, my, mz = (np.where(ok, fit.normal[:, i], e) for i, e in enumerate((0.0, 0.0, 1.0)))
+    z, u = layout.zero, layout.direction
+    qx, qy = z[:, 0, None] + dT * u[:, 0, None], z[:, 1, None] + dT * u[:, 1, None]  # q = S - c e_z, S = E + d u
+    qz = z[:, 2, None] + dT * u[:, 2, None] - np.where(ok, fit.c, 0.0)
+    st = []
+    for k in range(2):  # (s, t): T q along the axes made square to m and unit; T q . a = q . a
+        ax0, ax1, ax2 = ax[k]
+        am = ax0 * mx + ax1 * my + ax2 * mz
+        ax0, ax1, ax2 = ax0 - am * mx, ax1 - am * my, ax2 - am * mz
+        f = 1.0 / np.sqrt(ax0 * ax0 + ax1 * ax1 + ax2 * ax2)
+        st.append(qx * (ax0 * f) + qy * (ax1 * f) + qz * (ax2 * f))
+    s_, t_ = st
+    # the nine terms with the products shared, each coefficient a contiguous row (no ``**``)
+    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)  # (9, h)
     s2, st, t2 = s_ * s_, s_ * t_, t_ * t_
     w = (s_ * (c[0] * s2 + c[1] * st + c[2] * t2) + c[3] * t_ * t2
          + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
-    um = np.abs(u[:, 0] * m0 + u[:, 1] * m1 + u[:, 2] * m2)
-    out = d + w / um
-    return np.where(fit.ok[:, None] & np.isfinite(out), out, d)
-
+    um = np.abs(u[:, 0, None] * mx + u[:, 1, None] * my + u[:, 2, None] * mz)
+    out = dT + w / um
+    return np.where(ok & np.isfinite(out), out, dT).T

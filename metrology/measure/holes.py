@@ -149,6 +149,9 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     # one group per pattern of usable sensors (all, or all but one, in practice)
     code = in_range @ (1 << np.arange(n))
     code[few] = -1
+    def of(r):  # the rows r: a slice (views, no gather) where they run on (all sensors read: the usual)
+        return slice(r[0], r[-1] + 1) if r[-1] - r[0] + 1 == len(r) else r
+
     for p in np.flatnonzero(np.bincount(code[~few], minlength=1 << n)):
         mask = ((p >> np.arange(n)) & 1).astype(bool)
         rows = np.flatnonzero(code == p)
@@ -157,19 +160,20 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         if shape is not None:
             from metrology.measure.surface import PanelTerms, surface_hole_normals
 
-            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[rows[i:i + CACHE_ROWS]],
-                                          PanelTerms(u_shape[rows[i:i + CACHE_ROWS]], spin[rows[i:i + CACHE_ROWS]]),
-                                          beyond=None if higher is None else higher.rows(rows[i:i + CACHE_ROWS]))
+            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[of(rows[i:i + CACHE_ROWS])],
+                                          PanelTerms(u_shape[of(rows[i:i + CACHE_ROWS])], spin[of(rows[i:i + CACHE_ROWS])]),
+                                          beyond=None if higher is None else higher.rows(of(rows[i:i + CACHE_ROWS])))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
             h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
                                      np.concatenate([getattr(p[0], f) for p in parts])
                                      for f in parts[0][0].__dataclass_fields__})
             for k in parts[0][1]:
-                out.extra[k][rows] = np.concatenate([p[1][k] for p in parts])
+                out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
         else:
             h = _hole_normals(sub, dd, settings.min_radius_mm)
-        out.normal[rows], out.angle[rows], out.U95[rows] = h.normal, h.angle, h.U95
-        out.residual[rows] = h.residual
+        rs = of(rows)
+        out.normal[rs], out.angle[rs], out.U95[rs] = h.normal, h.angle, h.U95
+        out.residual[rs] = h.residual
         if h.signature is not None:
             out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
             out.noise_sd[rows] = h.residual_noise_sd
@@ -305,13 +309,13 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
     a = drill_axis(layout)
     # the spots, sensor-major (n, h) per component, mm, TCS
-    dT = d[rows].T
+    dT = np.ascontiguousarray(d[rows].T)  # (n, h): each op over contiguous rows
     E, u = layout.zero, layout.direction
     sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
     sa = sx * a[0] + sy * a[1] + sz * a[2]
     lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
     K = shape[rows]
-    k00, k01, k02, k11, k12, k22 = (K[:, i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
     sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
                  + k22 * lz * lz)  # away from the head
     sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
@@ -367,15 +371,19 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
                 higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
+            whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
-                shape[sel[0]] = surf.shape_pose(table_row[sel[0]], pose[0][sel[0]], drill_axis(layout)[2])
+                w = whole[0]
+                shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
                 spin[posed] = 0.0
             if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
-                shape[sel[1]] = surf.shape_tcs(table_row[sel[1]], drill_axis(layout)[2])
+                w = whole[1]
+                shape[w] = surf.shape_tcs(table_row[w], drill_axis(layout)[2])
             for k, m in enumerate(sel):
                 if higher is not None and m.any():
-                    hx = surf.higher_tcs(table_row[m], drill_axis(layout)[2], pose[0][m] if k == 0 else None)
-                    higher.axes[m], higher.higher[m], higher.tcs2panel[m] = hx
+                    w = whole[k]
+                    hx = surf.higher_tcs(table_row[w], drill_axis(layout)[2], pose[0][w] if k == 0 else None)
+                    higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape[have] = surf.u_shape[table_row[have]]
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)

@@ -232,7 +232,12 @@ class HoleSurfaces:
         if self.higher is None or self.frame is None:
             return None
         R = tcs2panel_nominal(self.normal[rows], s) if tcs2panel is None else tcs2panel
-        return np.einsum("hji,hkj->hki", R, self.frame[rows]), self.higher[rows], R
+        F = self.frame[rows]
+        axes = np.empty(F.shape)
+        for k in range(2):  # R^T e_k entry by entry over the holes (not an einsum with inner dims of 3)
+            for i in range(3):
+                axes[:, k, i] = R[:, 0, i] * F[:, k, 0] + R[:, 1, i] * F[:, k, 1] + R[:, 2, i] * F[:, k, 2]
+        return axes, self.higher[rows], R
 
 
 def tcs2panel_nominal(n, s: float):

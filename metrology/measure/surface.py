@@ -115,10 +115,12 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     layout : SensorLayout, n >= 3 sensors: zero (n, 3) mm TCS, direction (n, 3) unit TCS
     d : (h, n) float, mm, readings; NaN for blanks (a hole needs 3)
     shape : (h, 3, 3) float, 1/mm, TCS, the shape operator at each hole (0: flat), tangent to the
-        TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane
+        TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane; or its
+        entries ``(00, 01, 11)`` as a tuple of (h,) arrays (the only ones the fit takes)
     steps : int, steps from g = 0 (the first gives the micro-plane, the rest are Gauss-Newton with ``K``)
     sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
-    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None)
+    full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None,
+        and the pass that only evaluates them at the solution is not run: the same ``normal``, ``g``, ``c``)
 
     Sensor-major ``(n, h)`` arrays and explicit 3 x 3 algebra: a sum over the sensors is a sum of
     contiguous rows (as :func:`metrology.measure.normals.hole_normals`).
@@ -126,10 +128,14 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     n = layout.n
     d = np.asarray(d, float).reshape(-1, n)
     h = len(d)
-    K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
     # square to the drill axis (as given): its entries in the TCS xy plane; K_m = Q K Q^T then has
     # K_m m = 0, so K_m T q = T K_m q = K_m q and (Tq)^T K_m (Tq) = q^T K_m q (no projections per step)
-    K3 = (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1])
+    if isinstance(shape, tuple):  # those entries given
+        K3 = tuple(np.broadcast_to(np.asarray(k, float), (h,)) for k in shape)
+        K = None
+    else:
+        K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
+        K3 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (1, 1)))  # read every step
     s = drill_axis(layout)[2]
     sg = -s
     sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
@@ -158,7 +164,9 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
         gx0, gy0 = gx, gy
-        for it in range(1, steps + 1):  # Gauss-Newton with K; the last pass only evaluates at the solution
+        # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
+        # it (full=False) ``ok`` takes the matrix inverted for the last update
+        for it in range(1, steps + 1 if full else steps):
             rho = np.sqrt(1.0 + gx * gx + gy * gy)
             mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
             zq = z - c
@@ -200,14 +208,16 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     jz = jc * w
     A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
                   i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
-    G = np.stack([Gx, Gy, Gz], axis=-1).transpose(1, 0, 2) if steps > 0 else None
-    q = np.stack([x, y, zq], axis=-1).transpose(1, 0, 2)
+    G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
+    q = np.stack([x, y, zq]).transpose(2, 1, 0)
     null = _null_vector_cols(-x, -y, jc) if n == 4 else None
     if steps > 0:
         Kt = _full((k00, k01, k02, k11, k12, k22))  # K_m, tangent to the fitted plane: T K_m T = K_m
         r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
     else:  # the micro-plane: K projected onto it, T K T
+        if K is None:
+            K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
         m = np.stack([mx, my, mz], axis=1)
         Km = np.einsum("hij,hj->hi", K, m)
         mKm = (m * Km).sum(1)
@@ -283,15 +293,15 @@ def _tangent_basis(m):
 
 
 def _shape_basis(fit, g2, axis):
-    """The heights' change ``(N, n)`` per unit change of each of the three components of the shape
-    operator in an orthonormal basis of the tangent plane's symmetric tensors (``t1 t1``, ``t2 t2``,
-    ``(t1 t2 + t2 t1) / sqrt 2``), ``sigma rho 1/2 (Tq)^T delta K (Tq)``: a list of 3."""
+    """The heights' change ``(n, N)`` (sensor-major) per unit change of each of the three components
+    of the shape operator in an orthonormal basis of the tangent plane's symmetric tensors (``t1 t1``,
+    ``t2 t2``, ``(t1 t2 + t2 t1) / sqrt 2``), ``sigma rho 1/2 (Tq)^T delta K (Tq)``: a list of 3."""
     m = fit.normal
     t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
-    sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
-    q = fit.q
-    a1 = q[..., 0] * t1[:, 0, None] + q[..., 1] * t1[:, 1, None] + q[..., 2] * t1[:, 2, None]  # (N, n), mm
-    a2 = q[..., 0] * t2[:, 0, None] + q[..., 1] * t2[:, 1, None] + q[..., 2] * t2[:, 2, None]
+    sc = -axis[2] * np.sqrt(1.0 + g2)  # sigma rho
+    qx, qy, qz = fit.q.transpose(2, 1, 0)  # (n, N) each, mm
+    a1 = qx * t1[:, 0] + qy * t1[:, 1] + qz * t1[:, 2]  # (n, N), mm
+    a2 = qx * t2[:, 0] + qy * t2[:, 1] + qz * t2[:, 2]
     return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
 
 
@@ -334,65 +344,75 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     gn = np.sqrt(g2)
     angle = np.arctan(gn)
     normal = -fit.normal  # along the drill axis
+    # sensor-major (n, N) arrays (the fit's own layout: each sum over the sensors a sum of contiguous
+    # rows) and the 2 x 2 covariances by their entries (00, 01, 11), (N,) each
+    A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T  # (n, N): the tilt's change per unit change of each height
     Ag = fit.A[:, :2, :]  # (N, 2, n)
+    Gx, Gy, Gz = fit.G.transpose(2, 1, 0)  # (n, N)
+    u = layout.direction
     # reading noise
-    Gu = np.einsum("hni,ni->hn", fit.G, layout.direction)
-    qn = (Gu * sigma[None]) ** 2
-    C_noise = np.einsum("hin,hjn->hij", Ag * qn[:, None, :], Ag)
+    Gu = Gx * u[:, 0, None] + Gy * u[:, 1, None] + Gz * u[:, 2, None]  # (n, N)
+    qn = (Gu * sigma[:, None]) ** 2
+
+    def cov2(qq):  # sum_n A_i qq A_j
+        a0 = A0 * qq
+        return [(a0 * A0).sum(0), (a0 * A1).sum(0), (A1 * qq * A1).sum(0)]
+
+    C_noise = cov2(qn)
     # calibration
-    C_cal = np.zeros((N, 2, 2))
-    q_cal = np.zeros((N, n))
+    C_cal = [np.zeros(N)] * 3
+    q_cal = np.zeros((n, N))
     if cov is not None:
-        e = direction_basis(layout.direction)  # (n, 2, 3)
-        rows = np.empty((N, n, 5))
-        rows[..., :3] = fit.G
-        for k in range(2):
-            rows[..., 3 + k] = d * np.einsum("hni,ni->hn", fit.G, e[:, k, :])
-        blocks = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])
+        e = direction_basis(u)  # (n, 2, 3)
+        r = [Gx, Gy, Gz] + [d.T * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
+        blocks = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])  # (n, 5, 5)
         off = cov.copy()
         for i in range(n):
             off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
-        q_cal = np.einsum("hnk,nkl,hnl->hn", rows, blocks, rows)
+        q_cal = sum(r[k] * sum(blocks[:, k, l, None] * r[l] for l in range(5)) for k in range(5))  # (n, N)
         if not np.any(off):
-            C_cal = np.einsum("hin,hjn->hij", Ag * q_cal[:, None, :], Ag)
+            C_cal = cov2(q_cal)
         else:  # the whole covariance
+            rows = np.stack(r, axis=-1).transpose(1, 0, 2)  # (N, n, 5)
             Sx = (rows * Ag[:, 0, :, None]).reshape(N, -1)
             Sy = (rows * Ag[:, 1, :, None]).reshape(N, -1)
             Sg = np.stack([Sx, Sy], axis=1)  # (N, 2, 5n)
-            C_cal = np.einsum("hik,kl,hjl->hij", Sg, cov, Sg)
+            Cc = np.einsum("hik,kl,hjl->hij", Sg, cov, Sg)
+            C_cal = [Cc[:, 0, 0], Cc[:, 0, 1], Cc[:, 1, 1]]
     # the panel: delta K in an orthonormal basis of the tangent plane's symmetric tensors, and the spin
-    C_pan = np.zeros((N, 2, 2))
+    C_pan = [np.zeros(N)] * 3
     dh_basis = None
     dh_spin = None
     v_spin = None
     if terms is not None:
         m = fit.normal
-        sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
-        dh_basis = _shape_basis(fit, g2, axis)  # (N, n) each
+        dh_basis = _shape_basis(fit, g2, axis)  # (n, N) each
         uK = np.asarray(terms.u_shape, float).reshape(-1)
-        uK = np.broadcast_to(uK, (N,))
+        uK2 = np.broadcast_to(uK, (N,)) ** 2
         for dh in dh_basis:
-            v = np.einsum("hin,hn->hi", Ag, dh)
-            C_pan += v[:, :, None] * v[:, None, :] * (uK ** 2)[:, None, None]
+            v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
+            C_pan = [C_pan[0] + v0 * v0 * uK2, C_pan[1] + v0 * v1 * uK2, C_pan[2] + v1 * v1 * uK2]
         spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
         if np.any(spin > 0):
+            sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
             W = np.zeros((N, 3, 3))
             W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -m[:, 2], m[:, 1], -m[:, 0]
             W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
             dK = W @ fit.Kt - fit.Kt @ W
             dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
-            dh_spin = dh
+            dh_spin = dh.T  # (n, N)
             v = np.einsum("hin,hn->hi", Ag, dh)
             v_spin = v * spin[:, None]  # the tilt at the spin's end, +-spin
-            C_pan += v[:, :, None] * v[:, None, :] * (spin ** 2 / 3.0)[:, None, None]
-    C = C_noise + C_cal + C_pan
+            f = spin ** 2 / 3.0
+            C_pan = [C_pan[0] + v[:, 0] * v[:, 0] * f, C_pan[1] + v[:, 0] * v[:, 1] * f, C_pan[2] + v[:, 1] * v[:, 1] * f]
+    C = [a + b + c for a, b, c in zip(C_noise, C_cal, C_pan)]
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
     k = np.where(np.isfinite(k), k, 0.0)
-    cvec = np.stack([gx * k, gy * k], axis=1)
+    c0, c1 = gx * k, gy * k
 
     def quad(Cm):
-        return np.einsum("hi,hij,hj->h", cvec, Cm, cvec)
+        return c0 * c0 * Cm[0] + 2.0 * c0 * c1 * Cm[1] + c1 * c1 * Cm[2]
 
     var_noise = quad(C_noise)
     var_pan = quad(C_pan)
@@ -401,9 +421,12 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     if v_spin is None:
         U95 = K95 * u_angle
     else:  # the spin's share is uniform, not normal: the 95 % half-width of their sum
-        a_spin = np.abs((cvec * v_spin).sum(1))  # rad, the angle at the spin's end
+        a_spin = np.abs(c0 * v_spin[:, 0] + c1 * v_spin[:, 1])  # rad, the angle at the spin's end
         U95 = normal_uniform_u95(np.sqrt(np.maximum(var - a_spin ** 2 / 3.0, 0.0)), a_spin)
-    Ca = C / ((1.0 + g2) ** 2)[:, None, None]  # rad^2: the tilt's covariance in angle
+    f = 1.0 / ((1.0 + g2) ** 2)
+    Ca = np.empty((N, 2, 2))  # rad^2: the tilt's covariance in angle
+    Ca[:, 0, 0], Ca[:, 1, 1] = C[0] * f, C[2] * f
+    Ca[:, 0, 1] = Ca[:, 1, 0] = C[1] * f
     s2d = major_sd(Ca)  # rad: its major axis's standard deviation
     # near 0, u is the 2-D spread's major axis
     still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle) & (angle < SMALL_ANGLE_SIGMAS * s2d)
@@ -422,34 +445,35 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     misfit = np.full(N, np.nan)
     misfit_z = np.full(N, np.nan)
     if n == 4:
-        qv = fit.null
-        residual = (qv * fit.h_res).sum(1)
+        qv = fit.null.T  # (n, N)
+        residual = (qv * fit.h_res.T).sum(0)
         sig_k = qv * Gu
-        sd = np.sqrt(((sig_k * sigma[None]) ** 2).sum(1))
+        sd = np.sqrt(((sig_k * sigma[:, None]) ** 2).sum(0))
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
         var_pan_rho = np.zeros(N)
         # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
         basis = dh_basis if dh_basis is not None else _shape_basis(fit, g2, axis)
-        s_b = np.stack([(qv * b).sum(1) for b in basis], axis=1)  # (N, 3) d rho / d x_b
+        s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b
+        sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
         if terms is not None:
-            var_pan_rho = (s_b ** 2).sum(1) * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
+            var_pan_rho = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
             if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
-                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(1) ** 2 * spin ** 2 / 3.0
-        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(1) + var_pan_rho)
-        signature = sig_k
+                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(0) ** 2 * spin ** 2 / 3.0
+        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho)
+        signature = sig_k.T
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
-            nrm2 = (s_b ** 2).sum(1)
-            xb = s_b * (residual / nrm2)[:, None]  # the least-norm shape change giving rho
-            # its size: the largest |eigenvalue| of x1 t1t1 + x2 t2t2 + x3 (t1t2 + t2t1)/sqrt2
-            a, b, cc = xb[:, 0], xb[:, 1], xb[:, 2] / np.sqrt(2.0)
+            f = residual / sb2
+            # the least-norm shape change giving rho; its size: the largest |eigenvalue| of
+            # x1 t1t1 + x2 t2t2 + x3 (t1t2 + t2t1)/sqrt2
+            a, b, cc = s_b[0] * f, s_b[1] * f, s_b[2] * f / np.sqrt(2.0)
             misfit = np.abs(0.5 * (a + b)) + np.sqrt(0.25 * (a - b) ** 2 + cc * cc)
             misfit_z = residual / residual_sd
     elif n > 4:
         res = fit.h_res
         residual = np.sqrt((res * res).sum(1) / n)
-        v = (Gu * sigma[None]) ** 2
+        v = ((Gu * sigma[:, None]) ** 2).T
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
     with np.errstate(invalid="ignore"):

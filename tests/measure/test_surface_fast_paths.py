@@ -77,3 +77,108 @@ def test_surface_normal_in_slices_is_one_call_bit_for_bit():
     one, good = surface_normal(lay, d[3], K[3])
     np.testing.assert_array_equal(one, normal[3])
     assert good
+
+
+def _old_smallest(v, w):
+    """The smallest rotations taking unit v onto unit w as the matrix products (Rodrigues)."""
+    k = np.cross(v, w)
+    c = (v * w).sum(1)
+    Kx = np.zeros((len(v), 3, 3))
+    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    Kx[:, 1, 0], Kx[:, 2, 0], Kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    return np.eye(3)[None] + Kx + Kx @ Kx / (1.0 + c)[:, None, None]
+
+
+def _old_convention_spin(Rc, m, s):
+    """convention_spin's products as written first: Y = Q_m^T R^T Q(-e_z -> a) F F Q(-e_z -> f)^T R_c Q_m."""
+    ez = np.broadcast_to(np.array([0.0, 0.0, -s]), m.shape)
+    Qm = _old_smallest(ez, m)
+    R = Rc @ np.swapaxes(Qm, 1, 2)
+    a, f = R[:, :, 2] * s, Rc[:, :, 2] * s
+    flip = np.array([1.0, -s, -s])
+    down = np.broadcast_to(np.array([0.0, 0.0, -1.0]), m.shape)
+    spin_c = np.swapaxes(_old_smallest(down, f) * flip, 1, 2) @ Rc
+    X = np.swapaxes(R, 1, 2) @ (_old_smallest(down, a) * flip) @ spin_c
+    return np.swapaxes(Qm, 1, 2) @ X @ Qm
+
+
+def _poses_and_normals(rng, h, s):
+    """Commanded poses (the cell's convention at CAD normals up to 30 deg off the panel's z, spun and
+    tilted a little) and measured normals a few degrees off the drill axis."""
+    from metrology.measure.panel import tcs2panel_nominal
+
+    n = rng.normal(0.0, 0.3, (h, 3)) + [0.0, 0.0, 1.0]
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    Rc = tcs2panel_nominal(n, s) @ Rotation.from_rotvec(rng.normal(0.0, [0.02, 0.02, 0.5], (h, 3))).as_matrix()
+    g = rng.normal(0.0, 0.05, (h, 2))
+    m = s * np.column_stack([g, -np.ones(h)])  # toward the head: -s e_z tilted
+    return Rc, m / np.linalg.norm(m, axis=1, keepdims=True)
+
+
+def test_the_spin_convention_in_closed_form_is_the_matrix_products():
+    from metrology.measure.beyond import convention_spin
+
+    rng = np.random.default_rng(10)
+    for s in (1.0, -1.0):
+        Rc, m = _poses_and_normals(rng, 4000, s)
+        Y = convention_spin(Rc, m, s)
+        np.testing.assert_allclose(Y, _old_convention_spin(Rc, m, s), rtol=0, atol=2e-15)
+        np.testing.assert_allclose(Y @ np.swapaxes(Y, 1, 2), np.broadcast_to(np.eye(3), Y.shape), atol=2e-15)
+
+
+def test_beyond_turns_the_shape_and_axes_and_corrects_the_readings_as_the_plain_formulas():
+    """beyond_second_order's entries against the matrix products (Y^T K Y's tangent block, Y^T a) and
+    the CAD's heights at the spots hole by hole with powers (second_order_readings' docstring)."""
+    from metrology.measure.beyond import Beyond, beyond_second_order
+
+    lay = load_layout(ROOT / "metrology" / "data" / "measured" / "nominal.toml")
+    rng = np.random.default_rng(11)
+    h = 300
+    from metrology.measure.normals import drill_axis
+
+    sa = drill_axis(lay)[2]
+    Rc, _ = _poses_and_normals(rng, h, sa)
+    d = lay.range_mm.mean(1)[None] + rng.normal(0.0, 1.0, (h, lay.n))
+    K = _tangent_shapes(rng, h)
+    axes = rng.normal(size=(h, 2, 3))
+    axes /= np.linalg.norm(axes, axis=2, keepdims=True)
+    higher = rng.normal(0.0, 1e-5, (h, 9))
+    fit0 = fit_surface(lay, d, K, full=False)
+    for terms in (Beyond(axes, higher, Rc), Beyond(axes, higher, None, _old_convention_spin(Rc, fit0.normal, sa))):
+        d2, kt, Y = beyond_second_order(lay, d, K, terms, fit0)
+        Yr = _old_convention_spin(Rc, fit0.normal, sa)
+        np.testing.assert_allclose(Y, Yr, rtol=0, atol=2e-15)
+        KY = np.swapaxes(Yr, 1, 2) @ K @ Yr
+        for e, (i, j) in zip(kt, ((0, 0), (0, 1), (1, 1))):
+            np.testing.assert_allclose(e, KY[:, i, j], rtol=0, atol=1e-17)
+        ax = np.einsum("hji,hkj->hki", Yr, axes)
+        for i in range(h):
+            mi = fit0.normal[i]
+            q = lay.zero + d[i, :, None] * lay.direction - [0.0, 0.0, fit0.c[i]]
+            e = ax[i] - np.outer(ax[i] @ mi, mi)
+            e /= np.linalg.norm(e, axis=1, keepdims=True)
+            st = q @ e.T
+            S, T = st[:, 0], st[:, 1]
+            mono = [S ** 3 / 6, S ** 2 * T / 2, S * T ** 2 / 2, T ** 3 / 6, S ** 4 / 24, S ** 3 * T / 6,
+                    S ** 2 * T ** 2 / 4, S * T ** 3 / 6, T ** 4 / 24]
+            w = sum(c * x for c, x in zip(higher[i], mono))
+            np.testing.assert_allclose(d2[i], d[i] + w / np.abs(lay.direction @ mi), rtol=0, atol=1e-13)
+
+
+def test_the_fit_without_its_uncertainty_gives_the_same_pose_and_takes_the_shape_by_entries():
+    lay = load_layout(ROOT / "metrology" / "data" / "measured" / "nominal.toml")
+    rng = np.random.default_rng(12)
+    h = 2000
+    d = lay.range_mm.mean(1)[None] + rng.normal(0.0, 0.5, (h, lay.n))
+    d[3, 2] = np.nan
+    K = _tangent_shapes(rng, h)
+    for steps in (1, 2, 3):
+        a = fit_surface(lay, d, K, steps=steps)
+        b = fit_surface(lay, d, K, steps=steps, full=False)
+        c = fit_surface(lay, d, (K[:, 0, 0], K[:, 0, 1], K[:, 1, 1]), steps=steps)
+        for x in (b, c):
+            np.testing.assert_array_equal(x.normal, a.normal)
+            np.testing.assert_array_equal(x.g, a.g)
+            np.testing.assert_array_equal(x.c, a.c)
+            np.testing.assert_array_equal(x.ok, a.ok)
+        np.testing.assert_array_equal(c.A, a.A)
