@@ -280,14 +280,20 @@ def test_json_without_out_prints_the_summary_only(tmp_path, layout):
     assert not [p for p in tmp_path.iterdir() if p.suffix in (".csv", ".parquet") and p != log]
 
 
-def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
-    root = tmp_path / "fleet"
+def _two_cell_fleet(root):
+    """A 60-hole log of cells C1 and C2 as a hive folder ``root`` (``cell=C1/part-0.parquet``, ...); its table."""
     cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
     t = pa.table(cols)
     for cell in ("C1", "C2"):
         (root / f"cell={cell}").mkdir(parents=True)
         pq.write_table(t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"]),
                        root / f"cell={cell}" / "part-0.parquet")
+    return t
+
+
+def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
+    root = tmp_path / "fleet"
+    _two_cell_fleet(root)
     out = tmp_path / "out"
     args = ["measure", str(root), "--layout", str(layout), "--out", str(out)]
     assert runner.invoke(app, args).exit_code == 0
@@ -299,13 +305,8 @@ def test_a_resumed_run_says_how_many_partitions_it_kept(tmp_path, layout):
 def test_a_first_run_into_one_file_says_it_wrote_it_not_that_it_resumed(tmp_path, layout):
     """A one-file output (CSV, Parquet) is written whole by the run: no "resumed" line, and --json's
     ``partitions_written`` counts it (it once said 0 and "kept as an earlier run wrote them")."""
-    cols, _, _ = hole_log(calibrated_layout(), n=60, cells=("C1", "C2"), angle_deg=(0.01, 0.1))
     root = tmp_path / "fleet"
-    t = pa.table(cols)
-    for cell in ("C1", "C2"):
-        (root / f"cell={cell}").mkdir(parents=True)
-        pq.write_table(t.filter(pa.compute.equal(t.column("cell"), cell)).drop_columns(["cell"]),
-                       root / f"cell={cell}" / "part-0.parquet")
+    t = _two_cell_fleet(root)
     log = tmp_path / "log.parquet"
     pq.write_table(t, log)
     for src, out in ((log, tmp_path / "holes.csv"), (log, tmp_path / "holes.parquet"), (root, tmp_path / "all.parquet")):
