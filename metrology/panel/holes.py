@@ -161,7 +161,9 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0
     u_form = 2.0 * form_mm / (rho * rho) / math.sqrt(3.0)
-    src = f"panel {shown} (mesh, cubic fit to its vertices near each hole)"
+    coarse = 0 if hess is not None else int((~vok & ~miss.any(1)).sum())  # holes on the ray-cast heights
+    src = (f"panel {shown} (mesh, a quartic fitted to its vertices near each hole"
+           + (f"; {coarse} from the ray-cast heights: too few vertices there)" if coarse else ")"))
     if hess is not None:  # the exact surface: no faceting; the gradient (position term) from the cubic fit
         E = np.stack([e1, e2], axis=1)  # (m, 2, 3)
         Kl = np.where(miss.any(1)[:, None, None], np.nan, -np.einsum("mai,mij,mbj->mab", E, hess, E))
