@@ -15,7 +15,9 @@ from metrology.io._o3d import open3d
 o3d = open3d()
 print("dash" in sys.modules, "plotly" in sys.modules)
 cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.random.default_rng(0).normal(size=(10, 3))))
-fig = o3d.visualization.get_plotly_fig([cloud])
+assert callable(o3d.visualization.draw_plotly)  # the package's name in Open3D 0.18 and 0.20
+# get_plotly_fig: its module's in both (the package exports it in 0.20, not in 0.18)
+fig = sys.modules["open3d.visualization.draw_plotly"].get_plotly_fig([cloud])
 print(type(fig).__module__.split(".")[0], len(fig.data[0].x))
 """
 
