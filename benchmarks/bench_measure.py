@@ -18,7 +18,8 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 3. **Dask**: a partitioned log of ``--dask-holes`` holes (40 partitions) with ``--workers 1`` and
    ``--workers 2`` (holes/s, the cluster's start included), against the single process on the
    same folder, ``--repeat`` rounds run in turn: the best of each, and 2 workers against 1 in each
-   round (its spread);
+   round (its spread); and the CPU a cluster of 2 idle workers takes (cores, client and workers),
+   with Dask's defaults and with the settings ``--workers`` starts it with (``QUIET_CLUSTER``);
 4. **QIF**: the whole-process run of 2. with ``--qif results.qif`` added (a QIF 3.0 Results
    document of every hole, streamed): wall time, CPU and peak RSS against the run without it
    (goal: <= 3x the time; RSS bounded, not growing with the holes);
@@ -391,8 +392,36 @@ def main(argv=None):
     _done(res, args, work)
 
 
+def dask_idle(seconds: float = 10.0) -> dict:
+    """The CPU (cores) that a LocalCluster of 2 idle workers takes, client and workers, with Dask's
+    defaults and with :data:`metrology.measure.fleet.QUIET_CLUSTER` (what ``--workers`` starts): on a
+    2-core machine, what the tasks of a 2-worker run lose to the cluster's own housekeeping."""
+    import dask.config
+    import psutil
+    from distributed import Client, LocalCluster
+
+    from metrology.measure.fleet import QUIET_CLUSTER
+
+    def cpu(p):
+        t = p.cpu_times()
+        return t.user + t.system
+
+    out = {}
+    for name, cfg in (("dask defaults", {}), ("QUIET_CLUSTER", QUIET_CLUSTER)):
+        with dask.config.set(cfg), LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                                dashboard_address=None) as cl, Client(cl) as c:
+            c.submit(time.sleep, 0.1).result()
+            procs = [psutil.Process()] + psutil.Process().children(recursive=True)
+            a = [cpu(p) for p in procs]
+            time.sleep(seconds)
+            b = [cpu(p) for p in procs]
+            out[name] = {"cores_total": (sum(b) - sum(a)) / seconds, "cores_client": (b[0] - a[0]) / seconds}
+    return out
+
+
 def _dask(res, args, work, metro):
     """Section 3 (module docstring), then the big run of ``--big``."""
+    res["dask_idle_cores"] = dask_idle()
     daskdir = work / "dask"
     shutil.rmtree(daskdir, ignore_errors=True)
     daskdir.mkdir()
