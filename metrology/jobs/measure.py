@@ -249,18 +249,27 @@ class MeasureOptions:
 
 @contextlib.contextmanager
 def _engine(opts: MeasureOptions):
-    """The engine the options ask for, for a ``with`` block: one process, or Dask (the cluster
-    closed at the block's end when this run started it)."""
+    """The engine the options ask for, for a ``with`` block: a callable that returns it. One process;
+    or Dask, whose cluster (or connection) is started in a thread as the block begins, so its start
+    (0.5 s for 2 local workers) overlaps the reading and checking of the inputs; the block's end
+    waits for it and closes the cluster when this run started it."""
     if not opts.distributed:
         from metrology.measure.run import OneProcess
 
-        yield OneProcess()
+        yield OneProcess
         return
+    from concurrent.futures import ThreadPoolExecutor
+
     from metrology.measure.fleet import DaskEngine, connect
 
-    with connect(opts.workers, opts.scheduler) as client:
-        yield DaskEngine(client, f"Dask scheduler {opts.scheduler}" if opts.scheduler else
-                         f"Dask LocalCluster, {opts.workers} worker(s)")
+    name = f"Dask scheduler {opts.scheduler}" if opts.scheduler else f"Dask LocalCluster, {opts.workers} worker(s)"
+    opened = contextlib.ExitStack()
+    with ThreadPoolExecutor(1) as starter:  # one thread opens and closes (Dask's client is bound to it)
+        client = starter.submit(opened.enter_context, connect(opts.workers, opts.scheduler))
+        try:
+            yield lambda: DaskEngine(client.result(), name)  # a start that failed raises here, if asked for
+        finally:
+            starter.submit(opened.close).result()
 
 
 def measure_files(log_path, layout_path, options: MeasureOptions | None = None, warn=None,
@@ -272,9 +281,9 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
     Results document (:mod:`metrology.io.qif`). With ``per_hole`` False and no ``out`` nothing per
     hole is written (``--json`` alone: the summary).
 
-    Everything is checked before anything is written; each output file is written atomically.
-    ``warn(line)`` receives the warnings (also kept in the report); ``progress(done, total, what)``
-    is called as holes are measured.
+    Everything is checked before anything is written (a new Dask cluster starts meanwhile); each
+    output file is written atomically. ``warn(line)`` receives the warnings (also kept in the
+    report); ``progress(done, total, what)`` is called as holes are measured.
 
     ``panel`` (a mesh or STEP file) with ``points`` (the hole table ``hole_id,x,y,z,i,j,k``), or
     ``points`` alone: each hole's local surface is known (:mod:`metrology.measure.panel`) and its
@@ -287,6 +296,13 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
     ``points``, or ``radius_mm``), used where the options give none. ``min_radius_mm`` None: the
     layout's ``[panel] radius_mm``, else 500 mm (assumed).
     """
+    o = MeasureOptions() if options is None else options
+    with _engine(o) as engine:
+        return _measure_files(log_path, layout_path, o, engine, warn, progress)
+
+
+def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progress) -> MeasureReport:
+    """:func:`measure_files` with the engine being started (``engine()`` returns it when it is up)."""
     import dataclasses
 
     from metrology.io.holelog import BATCH_ROWS, open_log
@@ -297,7 +313,6 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
     from metrology.measure.holes import Settings
     from metrology.measure.run import measure_log
 
-    o = MeasureOptions() if options is None else options
     o, radius_source = _panel_options(o, layout_path)
     min_radius_mm, panel, points = o.min_radius_mm, o.panel, o.points
     _check_report_paths(o)
@@ -334,9 +349,8 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
 
     def run(sink):
         """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
-        with _engine(o) as engine:
-            return measure_log(log, layout, settings, engine, sink=sink, output=output, progress=tick,
-                               by_panel=o.chart_by_panel)
+        return measure_log(log, layout, settings, engine(), sink=sink, output=output, progress=tick,
+                           by_panel=o.chart_by_panel)
 
     def check_fit(result, **kw):
         _check_fit(result, shown_layout, min_radius_mm, surfaces=surfaces, **kw)

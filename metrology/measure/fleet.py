@@ -20,18 +20,25 @@ from metrology.measure.run import Feed, Piece, Watch, measure_partition, tune_al
 
 __all__ = ["connect", "DaskEngine", "QUIET_CLUSTER"]
 
+#: s, how long :func:`connect` tries to reach a running scheduler (Dask retries a refused connection)
+CONNECT_TIMEOUT_S = 10
+
 #: Dask settings of the LocalCluster :func:`connect` starts (a running scheduler keeps its own). It has
 #: no dashboard, so the workers' statistical profiler (a stack sample every 10 ms) and the system
 #: monitor (every 0.5 s) feed nothing anyone sees; the event loops' health tick (every 20 ms) and the
 #: memory monitor (every 0.1 s: a task holds one partition, bounded) run every second. With one worker
 #: a core is spare for them; with a worker per core they take the tasks' time. Measured on 2 cores, 2
-#: idle workers: 0.146 -> 0.017 cores (client and workers; benchmarks/results/measure_dask_quiet_*.txt).
+#: idle workers: 0.12 -> 0.014 cores, client and workers (``benchmarks/bench_measure.py``, ``dask_idle``).
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.memory.monitor-interval": "1s",
 }
+
+#: the scheduler's own HTTP server (health and metrics, no dashboard) on a free port of this host: on
+#: Dask's 8787 a second run at once warned "Port 8787 is already in use", on every interface
+_NO_PORT_8787 = {"dashboard_address": "127.0.0.1:0"}
 
 
 @contextlib.contextmanager
@@ -46,7 +53,7 @@ def connect(workers: int | None = None, scheduler: str | None = None):
         raise ValueError("--workers/--scheduler need Dask: pip install \"metro[fleet]\"") from None
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
         except (OSError, TimeoutError) as exc:
             raise ValueError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from None
         with client:
@@ -59,7 +66,8 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     # processes of one thread each: the per-hole maths holds the GIL in parts (pyarrow, Python loops);
     # without a dashboard, and without the monitors that only feed one (QUIET_CLUSTER)
     with dask.config.set(QUIET_CLUSTER), \
-            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                         scheduler_kwargs=_NO_PORT_8787) as cluster, \
             Client(cluster) as client:
         yield client
 

@@ -154,7 +154,8 @@ def test_one_parquet_file_on_dask_into_one_file_with_its_qif(fleet, tmp_path):
     assert (tmp_path / "one.qif").read_bytes() == (tmp_path / "dask.qif").read_bytes()
 
 
-def test_a_scheduler_that_cannot_be_reached_leaves_nothing(fleet, tmp_path):
+def test_a_scheduler_that_cannot_be_reached_leaves_nothing(fleet, tmp_path, monkeypatch):
+    monkeypatch.setattr("metrology.measure.fleet.CONNECT_TIMEOUT_S", 1)  # Dask retries until then
     r = runner.invoke(app, ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"), "--out",
                             str(tmp_path / "out"), "--scheduler", f"tcp://127.0.0.1:{_free_port()}"])
     assert r.exit_code == 2, r.output
@@ -325,3 +326,40 @@ def test_the_resume_manifest_names_the_log_by_its_resolved_path(fleet, tmp_path,
     r = runner.invoke(app, ["measure", "log", "--layout", "./calibrated.toml", "--out", str(out), "--json"])
     assert r.exit_code in (0, 1), r.output
     assert json.loads(r.stdout)["partitions_written"] == 0
+
+
+def test_metros_local_cluster_runs_without_a_dashboards_monitors_and_restores_the_config(fleet):
+    """The LocalCluster of --workers runs its workers with QUIET_CLUSTER (no profiler, the monitors
+    every second: with a worker per core they took the tasks' time), and leaves Dask's config as
+    it was."""
+    import dask.config
+
+    from metrology.measure.fleet import QUIET_CLUSTER, connect
+
+    before = {k: dask.config.get(k) for k in QUIET_CLUSTER}
+    assert before != QUIET_CLUSTER  # Dask's defaults differ, or the test shows nothing
+    with connect(workers=1) as client:
+        seen = client.run(lambda: {k: dask.config.get(k) for k in QUIET_CLUSTER})
+    assert list(seen.values()) == [QUIET_CLUSTER]
+    assert {k: dask.config.get(k) for k in QUIET_CLUSTER} == before
+
+
+def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_meanwhile_is_closed(fleet, tmp_path):
+    """--workers starts the cluster while the inputs are read: a bad log is still its own one-line
+    error (exit 2, nothing written), and the cluster is closed, its worker processes gone. Dask's
+    port 8787 taken (another cluster) adds no warning line."""
+    import psutil
+
+    with socket.socket() as busy:
+        try:
+            busy.bind(("", 8787))
+            busy.listen()
+        except OSError:  # taken already: the same case
+            pass
+        r = runner.invoke(app, ["measure", str(tmp_path / "missing"), "--layout", str(fleet / "calibrated.toml"),
+                                "--out", str(tmp_path / "out"), "--workers", "2"])
+    assert r.exit_code == 2, r.output
+    assert r.output.strip().count("\n") == 0 and "missing: no such file or folder" in r.output
+    assert not (tmp_path / "out").exists()
+    workers = [p for p in psutil.Process().children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
+    assert not workers
