@@ -267,7 +267,7 @@ POSE_COLUMNS = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_
 
 def _pose(table):
     """The log's commanded pose, or None without its columns: ``(tcs2panel (N, 3, 3), origin (N, 3) mm,
-    panel frame)``; a row with no pose gets NaN."""
+    panel frame)``; a row with no pose gets NaN (the whole row: a row is NaN or finite throughout)."""
     if not all(c in table.column_names for c in POSE_COLUMNS):
         return None
     from scipy.spatial.transform import Rotation
@@ -367,7 +367,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         spin = np.full(N, float(surf.spin))
         pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
-            posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
+            posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
                 higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
