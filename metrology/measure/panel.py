@@ -207,10 +207,10 @@ class HoleSurfaces:
         (as :func:`metrology.measure.surface.fit_surface` takes it: it turns it onto the fitted
         tangent plane; the pose's spin about the tool axis is kept).
 
-        ``Q T^T S T Q^T`` (``T`` the pose, ``S`` the shape in the panel frame, ``Q`` that rotation) is
-        square to the axis: its entries ``00, 01, 11`` are ``p_i^T S p_j`` with ``p_i = T Q^T e_i`` (panel
-        frame), the rest 0; entry by entry over the holes (no batched 3 x 3 products). Where the CAD's
-        normal does not face the head (``s n_z >= -1e-6`` in the TCS) ``T^T S T`` as it is."""
+        ``Q T^T S T Q^T`` (``T`` the pose, ``S`` the shape in the panel frame, ``Q`` that rotation): its
+        entries are ``p_i^T S p_j`` with ``p_i = T Q^T e_i`` (panel frame); entry by entry over the holes
+        (no batched 3 x 3 products). Where the CAD's normal does not face the head (``s n_z >= -1e-6`` in
+        the TCS) ``T^T S T`` as it is."""
         if "entries" not in self._tcs:  # once per table: each entry a contiguous array to gather from
             self._tcs["entries"] = [np.ascontiguousarray(self.shape[:, i, j]) for i, j in _SIX] + \
                 [np.ascontiguousarray(self.normal[:, i]) for i in range(3)]
@@ -222,23 +222,24 @@ class HoleSurfaces:
         sg = -s
         ok = sg * ntz > 1e-6
         # Q: the smallest rotation taking sg e_z onto (-nt_x, -nt_y, nt_z) (that taking nt onto sg e_z,
-        # mirrored about the axis): I + [v]x + f [v]x^2, v = sg e_z x m = (sg nt_y, -sg nt_x, 0); its rows 0, 1
+        # mirrored about the axis): I + [v]x + f [v]x^2, v = sg e_z x m = (sg nt_y, -sg nt_x, 0)
         vx, vy = sg * nty, -sg * ntx
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN where not ok: replaced below
             f = 1.0 / (1.0 + sg * ntz)
             fx, fy = f * vx, f * vy
-            q = ((1.0 - fy * vy, fx * vy, vy), (fx * vy, 1.0 - fx * vx, -vx))
-            p = [[q[k][0] * r[j][0] + q[k][1] * r[j][1] + q[k][2] * r[j][2] for j in range(3)] for k in range(2)]  # T Q^T e_k
+            q = ((1.0 - fy * vy, fx * vy, vy), (fx * vy, 1.0 - fx * vx, -vx), (-vy, vx, 1.0 - fx * vx - fy * vy))
+            p = [[q[k][0] * r[j][0] + q[k][1] * r[j][1] + q[k][2] * r[j][2] for j in range(3)] for k in range(3)]
 
             def sp(v):  # S v
                 return (s00 * v[0] + s01 * v[1] + s02 * v[2], s01 * v[0] + s11 * v[1] + s12 * v[2],
                         s02 * v[0] + s12 * v[1] + s22 * v[2])
 
-            a0, a1 = sp(p[0]), sp(p[1])
-            K = np.zeros((len(ntz), 3, 3))
-            K[:, 0, 0] = p[0][0] * a0[0] + p[0][1] * a0[1] + p[0][2] * a0[2]
-            K[:, 0, 1] = K[:, 1, 0] = p[0][0] * a1[0] + p[0][1] * a1[1] + p[0][2] * a1[2]
-            K[:, 1, 1] = p[1][0] * a1[0] + p[1][1] * a1[1] + p[1][2] * a1[2]
+            a = [sp(v) for v in p]
+            K = np.empty((len(ntz), 3, 3))
+            for i, j in _SIX:
+                K[:, i, j] = p[i][0] * a[j][0] + p[i][1] * a[j][1] + p[i][2] * a[j][2]
+                if i != j:
+                    K[:, j, i] = K[:, i, j]
         bad = np.flatnonzero(~ok)
         if bad.size:  # T^T S T, not turned
             Tb = T[bad]

@@ -79,6 +79,11 @@ PRELIMINARY_STEPS = 2
 SLICE_ROWS = 16384
 
 
+def _dot(a, b):
+    """``(a * b).sum(0)`` of sensor-major ``(n, h)`` arrays without the product array: (h,)."""
+    return np.einsum("ij,ij->j", a, b)
+
+
 @dataclass(frozen=True)
 class SurfaceFit:
     """The local surface's pose fitted to the readings.
@@ -160,48 +165,51 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     z = E[:, 2, None] + dT * u[:, 2, None]
     ok = valid.sum(0) >= 3
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
+    is2 = 1.0 / s2
     with np.errstate(divide="ignore", invalid="ignore"):
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
-        w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
+        w = is2 / (u2 * u2) * (valid if not whole else np.ones((1, h)))
         wx, wy = w * x, w * y
-        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
-        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
+        i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), wx.sum(0), _dot(wy, y), wy.sum(0), w.sum(0))
+        b0, b1, b2 = -_dot(wx, z), -_dot(wy, z), -_dot(w, z)
         gx = -(i00 * b0 + i01 * b1 + i02 * b2)
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
         gx0, gy0 = gx, gy
         # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
-        # it (full=False) ``ok`` takes the matrix inverted for the last update
+        # it (full=False) ``ok`` takes the matrix inverted for the last update. Each (n, h) operation
+        # counted: G first (``sigma rho K_t`` by its (h,) entries), the height from it,
+        # ``h = zq - g.q + sigma rho q^T K_t q / 2 = ((G_x - g_x) x + (G_y - g_y) y + (G_z + 1) zq) / 2``,
+        # the weighted sums by :func:`_dot` (no product arrays); ``jc = -G_z`` (``w jc`` is ``-w G_z``)
         for it in range(1, steps + 1 if full else steps):
             rho = np.sqrt(1.0 + gx * gx + gy * gy)
             mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
             zq = z - c
             k00, k01, k02, k11, k12, k22 = _turned_tangent(K3, mx, my, mz, sg)  # K on the fitted tangent plane
-            Kx = k00 * x + k01 * y + k02 * zq  # K_m q = K_t q
-            Ky = k01 * x + k11 * y + k12 * zq
-            Kz = k02 * x + k12 * y + k22 * zq
             sc = sg * rho
-            hres = zq - gx * x - gy * y + (0.5 * sc) * (x * Kx + y * Ky + zq * Kz)
-            Gz = 1.0 + sc * Kz
-            jc = -Gz
-            Gx, Gy = sc * Kx - gx, sc * Ky - gy
+            s00, s01, s02, s11, s12, s22 = sc * k00, sc * k01, sc * k02, sc * k11, sc * k12, sc * k22
+            Gx = s00 * x + s01 * y + s02 * zq - gx  # (-g_x, -g_y, 1) + sigma rho K_m q
+            Gy = s01 * x + s11 * y + s12 * zq - gy
+            Gz = s02 * x + s12 * y + s22 * zq + 1.0
+            hres = 0.5 * (x * (Gx - gx) + y * (Gy - gy) + zq * (Gz + 1.0))
             Gu = Gx * u0 + Gy * u1 + Gz * u2
-            w = 1.0 / (Gu * Gu * s2)
+            w = is2 / (Gu * Gu)
             if not whole:
                 w = np.where(valid, w, 0.0)
-            wx, wy, wc = w * x, w * y, w * jc
-            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0), -(wc * y).sum(0),
-                                                 (wc * jc).sum(0))
+            wx, wy, wz = w * x, w * y, w * Gz
+            i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), _dot(wz, x), _dot(wy, y), _dot(wz, y),
+                                                 _dot(wz, Gz))
             if it == steps:
                 break
-            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+            b0, b1, b2 = -_dot(wx, hres), -_dot(wy, hres), -_dot(wz, hres)
             gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
             gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
             c = c - (i02 * b0 + i12 * b1 + i22 * b2)
     if steps == 0:
         rho = np.ones(h)
         mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
-        zq, hres, jc = z, z, np.full_like(x, -1.0)
+        zq, hres, Gz = z, z, np.ones_like(x)
+        wz = w * Gz
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
     normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
@@ -209,11 +217,14 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     g = np.stack([gx, gy], axis=1)
     if not full:
         return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
-    # A = M^-1 J^T W, J = (-x, -y, jc)
-    jx, jy = -x * w, -y * w
-    jz = jc * w
-    A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
-                  i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
+    # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
+    jc = -Gz
+    A = np.empty((3, n, h))
+    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
+        np.multiply(wx, -a0, out=A[r])
+        A[r] -= wy * a1
+        A[r] -= wz * a2
+    A = A.transpose(2, 0, 1)  # (h, 3, n), a view
     G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
     null = _null_vector_cols(-x, -y, jc) if n == 4 else None
