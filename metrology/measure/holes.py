@@ -294,8 +294,9 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     R, origin = pose
     N = len(d)
     ang, off = np.full(N, np.nan), np.full(N, np.nan)
-    rows = np.flatnonzero((table_row >= 0) & np.all(np.isfinite(d), axis=1) & np.all(np.isfinite(origin), axis=1)
-                          & np.all(np.isfinite(normal), axis=1))
+    from metrology.measure.beyond import _finite_rows
+
+    rows = np.flatnonzero((table_row >= 0) & _finite_rows(d) & _finite_rows(origin) & _finite_rows(normal))
     if rows.size == 0:
         return ang, off
     if rows.size == N:  # every row (the usual batch): views, not copies
@@ -322,12 +323,14 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
     xc, yc, zc = sx - cx, sy - cy, sz - cz
     # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
-    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
-                        (zc * zc).sum(0), a)
+    def dot(p, q):  # (p * q).sum(0) without the product array
+        return np.einsum("ij,ij->j", p, q)
+
+    m = smallest_eigvec(dot(xc, xc), dot(xc, yc), dot(xc, zc), dot(yc, yc), dot(yc, zc), dot(zc, zc), a)
     t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
     Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
-    hit = origin[rows] + t[:, None] * Ra
-    off[rows] = np.sum((hit - surf.point[r]) * ncad, axis=1)
+    o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
+    off[rows] = sum((o[:, i] + t * Ra[:, i] - p[:, i]) * ncad[:, i] for i in range(3))
     return ang, off
 
 

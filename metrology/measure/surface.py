@@ -298,28 +298,30 @@ class PanelTerms:
     spin: float | np.ndarray = 0.0
 
 
-def _tangent_basis(m):
-    """Two unit vectors (h, 3) spanning the plane square to unit ``m (h, 3)``."""
-    mx, my, mz = m[:, 0], m[:, 1], m[:, 2]
+def _tangent_basis(mx, my, mz):
+    """Two unit vectors spanning the plane square to the unit ``m``, by components: ``(t1, t2)``, each a
+    tuple of three (h,) arrays (``mx, my, mz`` (h,) arrays)."""
     use_x = np.abs(mx) < 0.9  # the reference e_x, else e_y
     rm = np.where(use_x, mx, my)  # ref . m
-    t1 = np.stack([np.where(use_x, 1.0, 0.0) - rm * mx, np.where(use_x, 0.0, 1.0) - rm * my, -rm * mz], axis=1)
-    t1 /= np.sqrt((t1 * t1).sum(1))[:, None]
-    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
-    return t1, np.stack([my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax], axis=1)  # m x t1
+    ax, ay, az = use_x - rm * mx, ~use_x - rm * my, -rm * mz
+    f = 1.0 / np.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax * f, ay * f, az * f
+    return (ax, ay, az), (my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax)  # m x t1
 
 
 def _shape_basis(fit, g2, axis):
     """The heights' change ``(n, N)`` (sensor-major) per unit change of each of the three components
     of the shape operator in an orthonormal basis of the tangent plane's symmetric tensors (``t1 t1``,
     ``t2 t2``, ``(t1 t2 + t2 t1) / sqrt 2``), ``sigma rho 1/2 (Tq)^T delta K (Tq)``: a list of 3."""
+    ok = fit.ok
     m = fit.normal
-    t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
+    t1, t2 = _tangent_basis(*(np.where(ok, m[:, i], e) for i, e in enumerate((0.0, 0.0, 1.0))))
     sc = -axis[2] * np.sqrt(1.0 + g2)  # sigma rho
     qx, qy, qz = fit.q.transpose(2, 1, 0)  # (n, N) each, mm
-    a1 = qx * t1[:, 0] + qy * t1[:, 1] + qz * t1[:, 2]  # (n, N), mm
-    a2 = qx * t2[:, 0] + qy * t2[:, 1] + qz * t2[:, 2]
-    return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
+    a1 = qx * t1[0] + qy * t1[1] + qz * t1[2]  # (n, N), mm
+    a2 = qx * t2[0] + qy * t2[1] + qz * t2[2]
+    h = 0.5 * sc
+    return [h * a1 * a1, h * a2 * a2, (sc / np.sqrt(2.0)) * a1 * a2]
 
 
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
@@ -495,7 +497,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
     with np.errstate(invalid="ignore"):
-        correction = np.arccos(np.clip((fit.normal * fit.plane_normal).sum(1), -1.0, 1.0))
+        nm, pm = fit.normal, fit.plane_normal
+        correction = np.arccos(np.clip(nm[:, 0] * pm[:, 0] + nm[:, 1] * pm[:, 1] + nm[:, 2] * pm[:, 2], -1.0, 1.0))
     bad = ~fit.ok
     for arr in (angle, u_angle, U95, correction):
         arr[bad] = np.nan
