@@ -65,7 +65,8 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
     y = None  # Y's entries y[i][j], (N,) arrays
     if terms.turn is not None:
         Y = np.where(_finite_rows(terms.turn)[:, None, None], terms.turn, np.eye(3))
-        y = [[Y[:, i, j] for j in range(3)] for i in range(3)]
+        Yt = np.ascontiguousarray(Y.reshape(N, 9).T)  # (9, N): each entry contiguous, read more than once
+        y = [[Yt[3 * i + j] for j in range(3)] for i in range(3)]
     elif terms.tcs2panel is not None:  # the head's spin at its measured axis, in the cell's convention
         Rc = terms.tcs2panel
         ok0 = fit0.ok & _finite_rows(Rc)
@@ -73,11 +74,11 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
         with np.errstate(invalid="ignore", divide="ignore"):
             e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2],
                               drill_axis(layout)[2])
+        y = [[np.where(ok0, e[i][j], float(i == j)) for j in range(3)] for i in range(3)]
         Y = np.empty((N, 3, 3))
         for i in range(3):
             for j in range(3):
-                Y[:, i, j] = np.where(ok0, e[i][j], float(i == j))
-        y = [[Y[:, i, j] for j in range(3)] for i in range(3)]
+                Y[:, i, j] = y[i][j]
     K = np.asarray(shape, float)
     k00, k01, k11 = K[:, 0, 0], K[:, 0, 1], K[:, 1, 1]
     axes = terms.axes
@@ -91,8 +92,12 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
         a0, a1 = k00 * y00 + k01 * y10, k01 * y00 + k11 * y10  # (K Y)_k0
         b0, b1 = k00 * y01 + k01 * y11, k01 * y01 + k11 * y11  # (K Y)_k1
         kt = (y00 * a0 + y10 * a1, y00 * b0 + y10 * b1, y01 * b0 + y11 * b1)
-        ax = None if axes is None else [[y[0][i] * axes[:, k, 0] + y[1][i] * axes[:, k, 1] + y[2][i] * axes[:, k, 2]
-                                         for i in range(3)] for k in range(2)]  # Y^T a
+        if axes is not None:  # Y^T a, each axis's components contiguous
+            at = np.ascontiguousarray(np.asarray(axes, float).reshape(N, 6).T)
+            ax = [[y[0][i] * at[3 * k] + y[1][i] * at[3 * k + 1] + y[2][i] * at[3 * k + 2] for i in range(3)]
+                  for k in range(2)]
+        else:
+            ax = None
     if terms.higher is not None:
         d = _readings_beyond(layout, d, fit0, ax, terms.higher)
     return d, kt, Y

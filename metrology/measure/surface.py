@@ -79,6 +79,12 @@ PRELIMINARY_STEPS = 2
 SLICE_ROWS = 16384
 
 
+def _unit_normal(gx, gy, rho, sg):
+    """(h, 3): ``sg (-g_x, -g_y, 1) / rho``, a view of (3, h) (each component contiguous)."""
+    f = sg / rho
+    return np.array([-gx * f, -gy * f, f]).T
+
+
 def _dot(a, b):
     """``(a * b).sum(0)`` of sensor-major ``(n, h)`` arrays without the product array: (h,)."""
     return np.einsum("ij,ij->j", a, b)
@@ -212,7 +218,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         wz = w * Gz
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
-    normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
+    normal = _unit_normal(gx, gy, rho, sg)
     normal[~ok] = np.nan
     g = np.stack([gx, gy], axis=1)
     if not full:
@@ -227,11 +233,11 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     A = A.transpose(2, 0, 1)  # (h, 3, n), a view
     G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
-    null = _null_vector_cols(-x, -y, jc) if n == 4 else None
+    null = _null_vector_cols(x, y, jc) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
     if steps > 0:
-        Kt = _full((k00, k01, k02, k11, k12, k22))  # K_m, tangent to the fitted plane: T K_m T = K_m
-        r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
-        plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
+        # K_m, tangent to the fitted plane: T K_m T = K_m; (h, 3, 3), a view of (3, 3, h)
+        Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)
+        plane = _unit_normal(gx0, gy0, np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0), sg)
     else:  # the micro-plane: K projected onto it, T K T
         if K is None:
             K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
