@@ -382,7 +382,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
 
     def cov2(qq):  # sum_n A_i qq A_j
         a0 = A0 * qq
-        return [(a0 * A0).sum(0), (a0 * A1).sum(0), (A1 * qq * A1).sum(0)]
+        return [_dot(a0, A0), _dot(a0, A1), _dot(A1 * qq, A1)]
 
     C_noise = cov2(qn)
     # calibration
@@ -416,7 +416,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         uK = np.asarray(terms.u_shape, float).reshape(-1)
         uK2 = np.broadcast_to(uK, (N,)) ** 2
         for dh in dh_basis:
-            v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
+            v0, v1 = _dot(A0, dh), _dot(A1, dh)
             C_pan = [C_pan[0] + v0 * v0 * uK2, C_pan[1] + v0 * v1 * uK2, C_pan[2] + v1 * v1 * uK2]
         spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
         if np.any(spin > 0):
@@ -472,21 +472,22 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     misfit_z = np.full(N, np.nan)
     if n == 4:
         qv = fit.null.T  # (n, N)
-        residual = (qv * fit.h_res.T).sum(0)
+        residual = _dot(qv, fit.h_res.T)
         sig_k = qv * Gu
-        sd = np.sqrt(((sig_k * sigma[:, None]) ** 2).sum(0))
+        ss = sig_k * sigma[:, None]
+        sd = np.sqrt(_dot(ss, ss))
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
         var_pan_rho = np.zeros(N)
         # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
         basis = dh_basis if dh_basis is not None else _shape_basis(fit, g2, axis)
-        s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b
+        s_b = [_dot(qv, b) for b in basis]  # d rho / d x_b
         sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
         if terms is not None:
             var_pan_rho = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
             if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
                 var_pan_rho = var_pan_rho + (qv * dh_spin).sum(0) ** 2 * spin ** 2 / 3.0
-        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho)
+        residual_sd = np.sqrt(sd * sd + _dot(qv * qv, q_cal) + var_pan_rho)
         signature = sig_k.T
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
