@@ -274,7 +274,9 @@ def _pose(table):
 
     v = np.column_stack([np.asarray(table.column(c).cast("float64").to_numpy(zero_copy_only=False), float)
                          for c in POSE_COLUMNS])
-    ok = np.all(np.isfinite(v), axis=1)
+    ok = np.isfinite(v.sum(1))  # every one of the six finite
+    if ok.all():  # the usual: no gather, no masked copy (each costs three times the rotations)
+        return Rotation.from_rotvec(np.radians(v[:, :3])).as_matrix(), v[:, 3:]
     R = np.full((len(v), 3, 3), np.nan)
     if ok.any():
         R[ok] = Rotation.from_rotvec(np.radians(v[ok, :3])).as_matrix()
@@ -323,10 +325,8 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
     xc, yc, zc = sx - cx, sy - cy, sz - cz
     # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
-    def dot(p, q):  # (p * q).sum(0) without the product array
-        return np.einsum("ij,ij->j", p, q)
-
-    m = smallest_eigvec(dot(xc, xc), dot(xc, yc), dot(xc, zc), dot(yc, yc), dot(yc, zc), dot(zc, zc), a)
+    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
+                        (zc * zc).sum(0), a)
     t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
     Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
     o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
@@ -377,7 +377,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
                 w = whole[0]
-                shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
+                if isinstance(w, slice):  # every row: the array itself, no copy
+                    shape = surf.shape_pose(table_row, pose[0], drill_axis(layout)[2])
+                else:
+                    shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
                 spin[posed] = 0.0
             if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
                 w = whole[1]
@@ -386,7 +389,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                 if higher is not None and m.any():
                     w = whole[k]
                     hx = surf.higher_tcs(table_row[w], drill_axis(layout)[2], pose[0][w] if k == 0 else None)
-                    higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
+                    if isinstance(w, slice):  # every row: the arrays themselves, no copy
+                        higher = Beyond(*hx)
+                    else:
+                        higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape[have] = surf.u_shape[table_row[have]]
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)

@@ -255,12 +255,14 @@ class HoleSurfaces:
         if self.higher is None or self.frame is None:
             return None
         R = tcs2panel_nominal(self.normal[rows], s) if tcs2panel is None else tcs2panel
-        F = self.frame[rows]
-        axes = np.empty(F.shape)
+        if "frame" not in self._tcs:  # once per table: each component a contiguous array to gather from
+            self._tcs["frame"] = np.ascontiguousarray(self.frame.reshape(-1, 6).T)
+        F = [x[rows] for x in self._tcs["frame"]]  # F[3 k + j]: e_k's component j
+        axes = np.empty((2, 3, len(F[0])))
         for k in range(2):  # R^T e_k entry by entry over the holes (not an einsum with inner dims of 3)
             for i in range(3):
-                axes[:, k, i] = R[:, 0, i] * F[:, k, 0] + R[:, 1, i] * F[:, k, 1] + R[:, 2, i] * F[:, k, 2]
-        return axes, self.higher[rows], R
+                axes[k, i] = R[:, 0, i] * F[3 * k] + R[:, 1, i] * F[3 * k + 1] + R[:, 2, i] * F[3 * k + 2]
+        return axes.transpose(2, 0, 1), self.higher[rows], R  # (h, 2, 3), a view: each component contiguous
 
 
 def tcs2panel_nominal(n, s: float):

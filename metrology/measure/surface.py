@@ -79,17 +79,6 @@ PRELIMINARY_STEPS = 2
 SLICE_ROWS = 16384
 
 
-def _unit_normal(gx, gy, rho, sg):
-    """(h, 3): ``sg (-g_x, -g_y, 1) / rho``, a view of (3, h) (each component contiguous)."""
-    f = sg / rho
-    return np.array([-gx * f, -gy * f, f]).T
-
-
-def _dot(a, b):
-    """``(a * b).sum(0)`` of sensor-major ``(n, h)`` arrays without the product array: (h,)."""
-    return np.einsum("ij,ij->j", a, b)
-
-
 @dataclass(frozen=True)
 class SurfaceFit:
     """The local surface's pose fitted to the readings.
@@ -159,7 +148,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     good = np.isfinite(sig) & (sig > 0)
     if not good.all():
         sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
-    s2 = (sig * sig)[:, None]
+    is2 = 1.0 / (sig * sig)[:, None]  # 1 / sigma^2, (n, 1)
     dT = np.ascontiguousarray(d.T)
     valid = np.isfinite(dT)
     whole = bool(valid.all())
@@ -171,22 +160,19 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     z = E[:, 2, None] + dT * u[:, 2, None]
     ok = valid.sum(0) >= 3
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
-    is2 = 1.0 / s2
     with np.errstate(divide="ignore", invalid="ignore"):
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
         w = is2 / (u2 * u2) * (valid if not whole else np.ones((1, h)))
         wx, wy = w * x, w * y
-        i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), wx.sum(0), _dot(wy, y), wy.sum(0), w.sum(0))
-        b0, b1, b2 = -_dot(wx, z), -_dot(wy, z), -_dot(w, z)
+        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
+        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
         gx = -(i00 * b0 + i01 * b1 + i02 * b2)
         gy = -(i01 * b0 + i11 * b1 + i12 * b2)
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
         gx0, gy0 = gx, gy
         # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
-        # it (full=False) ``ok`` takes the matrix inverted for the last update. Each (n, h) operation
-        # counted: G first (``sigma rho K_t`` by its (h,) entries), the height from it,
-        # ``h = zq - g.q + sigma rho q^T K_t q / 2 = ((G_x - g_x) x + (G_y - g_y) y + (G_z + 1) zq) / 2``,
-        # the weighted sums by :func:`_dot` (no product arrays); ``jc = -G_z`` (``w jc`` is ``-w G_z``)
+        # it (full=False) ``ok`` takes the matrix inverted for the last update. G first, the height from it:
+        # ``zq - g.q + sigma rho q^T K_m q / 2 = ((G_x - g_x) x + (G_y - g_y) y + (G_z + 1) zq) / 2``; jc = -G_z
         for it in range(1, steps + 1 if full else steps):
             rho = np.sqrt(1.0 + gx * gx + gy * gy)
             mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
@@ -203,41 +189,40 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
             if not whole:
                 w = np.where(valid, w, 0.0)
             wx, wy, wz = w * x, w * y, w * Gz
-            i00, i01, i02, i11, i12, i22 = _inv3(_dot(wx, x), _dot(wx, y), _dot(wz, x), _dot(wy, y), _dot(wz, y),
-                                                 _dot(wz, Gz))
+            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), (wz * x).sum(0), (wy * y).sum(0), (wz * y).sum(0),
+                                                 (wz * Gz).sum(0))
             if it == steps:
                 break
-            b0, b1, b2 = -_dot(wx, hres), -_dot(wy, hres), -_dot(wz, hres)
+            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), -(wz * hres).sum(0)
             gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
             gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
             c = c - (i02 * b0 + i12 * b1 + i22 * b2)
     if steps == 0:
         rho = np.ones(h)
         mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
-        zq, hres, Gz = z, z, np.ones_like(x)
-        wz = w * Gz
+        zq, hres, Gz, wz = z, z, np.ones_like(x), w  # w G_z = w
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
-    normal = _unit_normal(gx, gy, rho, sg)
+    f = sg / rho
+    normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
     normal[~ok] = np.nan
     g = np.stack([gx, gy], axis=1)
     if not full:
         return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
-    # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
-    jc = -Gz
-    A = np.empty((3, n, h))
+    A = np.empty((3, n, h))  # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
     for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
         np.multiply(wx, -a0, out=A[r])
         A[r] -= wy * a1
         A[r] -= wz * a2
-    A = A.transpose(2, 0, 1)  # (h, 3, n), a view
+    A, jc = A.transpose(2, 0, 1), -Gz  # (h, 3, n), a view
     G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
     null = _null_vector_cols(x, y, jc) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
     if steps > 0:
         # K_m, tangent to the fitted plane: T K_m T = K_m; (h, 3, 3), a view of (3, 3, h)
         Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)
-        plane = _unit_normal(gx0, gy0, np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0), sg)
+        f = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = np.array([-gx0 * f, -gy0 * f, f]).T
     else:  # the micro-plane: K projected onto it, T K T
         if K is None:
             K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
@@ -382,7 +367,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
 
     def cov2(qq):  # sum_n A_i qq A_j
         a0 = A0 * qq
-        return [_dot(a0, A0), _dot(a0, A1), _dot(A1 * qq, A1)]
+        return [(a0 * A0).sum(0), (a0 * A1).sum(0), (A1 * qq * A1).sum(0)]
 
     C_noise = cov2(qn)
     # calibration
@@ -416,7 +401,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         uK = np.asarray(terms.u_shape, float).reshape(-1)
         uK2 = np.broadcast_to(uK, (N,)) ** 2
         for dh in dh_basis:
-            v0, v1 = _dot(A0, dh), _dot(A1, dh)
+            v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
             C_pan = [C_pan[0] + v0 * v0 * uK2, C_pan[1] + v0 * v1 * uK2, C_pan[2] + v1 * v1 * uK2]
         spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
         if np.any(spin > 0):
@@ -472,22 +457,21 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     misfit_z = np.full(N, np.nan)
     if n == 4:
         qv = fit.null.T  # (n, N)
-        residual = _dot(qv, fit.h_res.T)
+        residual = (qv * fit.h_res.T).sum(0)
         sig_k = qv * Gu
-        ss = sig_k * sigma[:, None]
-        sd = np.sqrt(_dot(ss, ss))
+        sd = np.sqrt(((sig_k * sigma[:, None]) ** 2).sum(0))
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = residual / sd
         var_pan_rho = np.zeros(N)
         # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
         basis = dh_basis if dh_basis is not None else _shape_basis(fit, g2, axis)
-        s_b = [_dot(qv, b) for b in basis]  # d rho / d x_b
+        s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b
         sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
         if terms is not None:
             var_pan_rho = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
             if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
                 var_pan_rho = var_pan_rho + (qv * dh_spin).sum(0) ** 2 * spin ** 2 / 3.0
-        residual_sd = np.sqrt(sd * sd + _dot(qv * qv, q_cal) + var_pan_rho)
+        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho)
         signature = sig_k.T
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
