@@ -162,7 +162,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
-        w = is2 / (u2 * u2) * (valid if not whole else np.ones((1, h)))
+        w = is2 / (u2 * u2) * valid if not whole else is2 / (u2 * u2)  # (n, h), or (n, 1): each sensor's
         wx, wy = w * x, w * y
         i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
         b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
@@ -200,13 +200,14 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     if steps == 0:
         rho = np.ones(h)
         mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
-        zq, hres, Gz, wz = z, z, np.ones_like(x), w  # w G_z = w
+        zq, hres, Gz = z, z, np.ones_like(x)
+        wz = w = np.broadcast_to(w, x.shape)  # every hole's weights; w G_z = w
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
     f = sg / rho
     normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
     normal[~ok] = np.nan
-    g = np.stack([gx, gy], axis=1)
+    g = np.array([gx, gy]).T  # (h, 2), a view of (2, h)
     if not full:
         return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
     A = np.empty((3, n, h))  # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
@@ -219,8 +220,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
     null = _null_vector_cols(x, y, jc) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
     if steps > 0:
-        # K_m, tangent to the fitted plane: T K_m T = K_m; (h, 3, 3), a view of (3, 3, h)
-        Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)
+        Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)  # K_m = T K_m T, (h, 3, 3)
         f = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = np.array([-gx0 * f, -gy0 * f, f]).T
     else:  # the micro-plane: K projected onto it, T K T
