@@ -226,4 +226,5 @@ def _readings_beyond(layout, d, fit, ax, higher):
          + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
     um = np.abs(u[:, 0, None] * mx + u[:, 1, None] * my + u[:, 2, None] * mz)
     out = dT + w / um
-    return np.where(ok & np.isfinite(out), out, dT).T
+    keep = ok & np.isfinite(out)
+    return (out if keep.all() else np.where(keep, out, dT)).T

@@ -393,7 +393,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                         higher = Beyond(*hx)
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
-            u_shape[have] = surf.u_shape[table_row[have]]
+            u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
@@ -469,8 +469,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
     if surf is not None:  # the panel's columns
-        k = np.full((N, 2), np.nan)
-        k[table_row >= 0] = surf.k[table_row[table_row >= 0]]
+        k = surf.k[table_row] if have.all() else np.where((table_row >= 0)[:, None], surf.k[table_row], np.nan)
         cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
         cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
         cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
