@@ -106,7 +106,8 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
 def _finite_rows(X):
     """(h,) bool: every entry of each row of ``X (h, ...)`` finite (their sum by a matrix-vector product:
     NaN and inf carry through it; an inner-axis ``all`` over 9 entries costs six times as much)."""
-    X = np.asarray(X, float).reshape(len(X), -1)
+    X = np.asarray(X, float)
+    X = X.reshape(len(X), int(np.prod(X.shape[1:])))  # (h, k), also h = 0
     with np.errstate(invalid="ignore", over="ignore"):
         return np.isfinite(X @ np.ones(X.shape[1]))
 
