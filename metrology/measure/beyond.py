@@ -62,20 +62,23 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
     one ``(N,)`` array per entry (no batched matmul or einsum of 3 x 3 matrices).
     """
     N = len(d)
-    eye = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     y = None  # Y's entries y[i][j], (N,) arrays
     if terms.turn is not None:
-        T = terms.turn
-        given = np.isfinite(T.reshape(N, 9)).all(1)
-        y = [[np.where(given, T[:, i, j], eye[i][j]) for j in range(3)] for i in range(3)]
+        Y = np.where(_finite_rows(terms.turn)[:, None, None], terms.turn, np.eye(3))
+        Yt = np.ascontiguousarray(Y.reshape(N, 9).T)  # (9, N): each entry contiguous, read more than once
+        y = [[Yt[3 * i + j] for j in range(3)] for i in range(3)]
     elif terms.tcs2panel is not None:  # the head's spin at its measured axis, in the cell's convention
         Rc = terms.tcs2panel
-        ok0 = fit0.ok & np.isfinite(Rc.reshape(N, 9)).all(1)
+        ok0 = fit0.ok & _finite_rows(Rc)
         m = fit0.normal
         with np.errstate(invalid="ignore", divide="ignore"):
             e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2],
                               drill_axis(layout)[2])
-        y = [[np.where(ok0, e[i][j], eye[i][j]) for j in range(3)] for i in range(3)]
+        y = [[np.where(ok0, e[i][j], float(i == j)) for j in range(3)] for i in range(3)]
+        Y = np.empty((N, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                Y[:, i, j] = y[i][j]
     K = np.asarray(shape, float)
     k00, k01, k11 = K[:, 0, 0], K[:, 0, 1], K[:, 1, 1]
     axes = terms.axes
@@ -84,20 +87,29 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
         kt = (k00, k01, k11)
         ax = None if axes is None else [[axes[:, k, i] for i in range(3)] for k in range(2)]
     else:
-        Y = np.empty((N, 3, 3))
-        for i in range(3):
-            for j in range(3):
-                Y[:, i, j] = y[i][j]
         y00, y01, y10, y11 = y[0][0], y[0][1], y[1][0], y[1][1]
         # (Y^T K Y)_ij over the tangent entries of K (square to the axis: its z row and column are 0)
         a0, a1 = k00 * y00 + k01 * y10, k01 * y00 + k11 * y10  # (K Y)_k0
         b0, b1 = k00 * y01 + k01 * y11, k01 * y01 + k11 * y11  # (K Y)_k1
         kt = (y00 * a0 + y10 * a1, y00 * b0 + y10 * b1, y01 * b0 + y11 * b1)
-        ax = None if axes is None else [[y[0][i] * axes[:, k, 0] + y[1][i] * axes[:, k, 1] + y[2][i] * axes[:, k, 2]
-                                         for i in range(3)] for k in range(2)]  # Y^T a
+        if axes is not None:  # Y^T a, each axis's components contiguous
+            at = np.ascontiguousarray(np.asarray(axes, float).reshape(N, 6).T)
+            ax = [[y[0][i] * at[3 * k] + y[1][i] * at[3 * k + 1] + y[2][i] * at[3 * k + 2] for i in range(3)]
+                  for k in range(2)]
+        else:
+            ax = None
     if terms.higher is not None:
         d = _readings_beyond(layout, d, fit0, ax, terms.higher)
     return d, kt, Y
+
+
+def _finite_rows(X):
+    """(h,) bool: every entry of each row of ``X (h, ...)`` finite (their sum by a matrix-vector product:
+    NaN and inf carry through it; an inner-axis ``all`` over 9 entries costs six times as much)."""
+    X = np.asarray(X, float)
+    X = X.reshape(len(X), int(np.prod(X.shape[1:])))  # (h, k), also h = 0
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.isfinite(X @ np.ones(X.shape[1]))
 
 
 def _smallest_entries(kx, ky, kz, c):
@@ -209,10 +221,11 @@ def _readings_beyond(layout, d, fit, ax, higher):
         st.append(qx * (ax0 * f) + qy * (ax1 * f) + qz * (ax2 * f))
     s_, t_ = st
     # the nine terms with the products shared, each coefficient a contiguous row (no ``**``)
-    c = np.ascontiguousarray((np.asarray(higher, float) / _TAYLOR).T)  # (9, h)
+    c = np.divide(np.asarray(higher, float).T, _TAYLOR[:, None], out=np.empty((9, len(ok))))  # (9, h)
     s2, st, t2 = s_ * s_, s_ * t_, t_ * t_
     w = (s_ * (c[0] * s2 + c[1] * st + c[2] * t2) + c[3] * t_ * t2
          + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
     um = np.abs(u[:, 0, None] * mx + u[:, 1, None] * my + u[:, 2, None] * mz)
     out = dT + w / um
-    return np.where(ok & np.isfinite(out), out, dT).T
+    keep = ok & np.isfinite(out)
+    return (out if keep.all() else np.where(keep, out, dT)).T

@@ -267,14 +267,16 @@ POSE_COLUMNS = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_
 
 def _pose(table):
     """The log's commanded pose, or None without its columns: ``(tcs2panel (N, 3, 3), origin (N, 3) mm,
-    panel frame)``; a row with no pose gets NaN."""
+    panel frame)``; a row with no pose gets NaN (the whole row: a row is NaN or finite throughout)."""
     if not all(c in table.column_names for c in POSE_COLUMNS):
         return None
     from scipy.spatial.transform import Rotation
 
     v = np.column_stack([np.asarray(table.column(c).cast("float64").to_numpy(zero_copy_only=False), float)
                          for c in POSE_COLUMNS])
-    ok = np.all(np.isfinite(v), axis=1)
+    ok = np.isfinite(v.sum(1))  # every one of the six finite
+    if ok.all():  # the usual: no gather, no masked copy (each costs three times the rotations)
+        return Rotation.from_rotvec(np.radians(v[:, :3])).as_matrix(), v[:, 3:]
     R = np.full((len(v), 3, 3), np.nan)
     if ok.any():
         R[ok] = Rotation.from_rotvec(np.radians(v[ok, :3])).as_matrix()
@@ -294,8 +296,9 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
     R, origin = pose
     N = len(d)
     ang, off = np.full(N, np.nan), np.full(N, np.nan)
-    rows = np.flatnonzero((table_row >= 0) & np.all(np.isfinite(d), axis=1) & np.all(np.isfinite(origin), axis=1)
-                          & np.all(np.isfinite(normal), axis=1))
+    from metrology.measure.beyond import _finite_rows
+
+    rows = np.flatnonzero((table_row >= 0) & _finite_rows(d) & _finite_rows(origin) & _finite_rows(normal))
     if rows.size == 0:
         return ang, off
     if rows.size == N:  # every row (the usual batch): views, not copies
@@ -326,8 +329,8 @@ def _against_cad(layout, d, normal, shape, surf, table_row, pose):
                         (zc * zc).sum(0), a)
     t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
     Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
-    hit = origin[rows] + t[:, None] * Ra
-    off[rows] = np.sum((hit - surf.point[r]) * ncad, axis=1)
+    o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
+    off[rows] = sum((o[:, i] + t * Ra[:, i] - p[:, i]) * ncad[:, i] for i in range(3))
     return ang, off
 
 
@@ -367,14 +370,17 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         spin = np.full(N, float(surf.spin))
         pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
-            posed = np.zeros(N, bool) if pose is None else np.all(np.isfinite(pose[0]), axis=(1, 2))
+            posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
                 higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
             whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
                 w = whole[0]
-                shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
+                if isinstance(w, slice):  # every row: the array itself, no copy
+                    shape = surf.shape_pose(table_row, pose[0], drill_axis(layout)[2])
+                else:
+                    shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
                 spin[posed] = 0.0
             if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
                 w = whole[1]
@@ -383,8 +389,11 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                 if higher is not None and m.any():
                     w = whole[k]
                     hx = surf.higher_tcs(table_row[w], drill_axis(layout)[2], pose[0][w] if k == 0 else None)
-                    higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
-            u_shape[have] = surf.u_shape[table_row[have]]
+                    if isinstance(w, slice):  # every row: the arrays themselves, no copy
+                        higher = Beyond(*hx)
+                    else:
+                        higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
+            u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
@@ -460,8 +469,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
     }
     if surf is not None:  # the panel's columns
-        k = np.full((N, 2), np.nan)
-        k[table_row >= 0] = surf.k[table_row[table_row >= 0]]
+        k = surf.k[table_row] if have.all() else np.where((table_row >= 0)[:, None], surf.k[table_row], np.nan)
         cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
         cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
         cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])

@@ -53,6 +53,8 @@ __all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table"
 FOOTPRINT_MARGIN = 1.25
 #: neighbours whose nominal normals give a hole's curvature without a panel
 NEIGHBOURS = 6
+#: the entries (00, 01, 02, 11, 12, 22) of a symmetric 3 x 3 matrix
+_SIX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 @dataclass(frozen=True)
@@ -203,27 +205,48 @@ class HoleSurfaces:
         commanded pose ``tcs2panel`` ((h, 3, 3), columns the TCS axes in the panel frame), turned
         square to the drill axis ``s e_z`` by the smallest rotation taking the CAD's normal there
         (as :func:`metrology.measure.surface.fit_surface` takes it: it turns it onto the fitted
-        tangent plane; the pose's spin about the tool axis is kept)."""
-        from metrology.measure.surface import _full, _turned
+        tangent plane; the pose's spin about the tool axis is kept).
 
+        ``Q T^T S T Q^T`` (``T`` the pose, ``S`` the shape in the panel frame, ``Q`` that rotation): its
+        entries are ``p_i^T S p_j`` with ``p_i = T Q^T e_i`` (panel frame); entry by entry over the holes
+        (no batched 3 x 3 products). Where the CAD's normal does not face the head (``s n_z >= -1e-6`` in
+        the TCS) ``T^T S T`` as it is."""
+        if "entries" not in self._tcs:  # once per table: each entry a contiguous array to gather from
+            self._tcs["entries"] = [np.ascontiguousarray(self.shape[:, i, j]) for i, j in _SIX] + \
+                [np.ascontiguousarray(self.normal[:, i]) for i in range(3)]
+        e = self._tcs["entries"]
+        s00, s01, s02, s11, s12, s22, n0, n1, n2 = (x[rows] for x in e)
         T = np.asarray(tcs2panel, float)
         r = [[T[:, j, i] for i in range(3)] for j in range(3)]  # r[j][i] = T_ji
-        S = self.shape[rows]
-        # T^T S T entry by entry over the holes (explicit 3 x 3 products, not an einsum with inner dims of 3)
-        a = [[S[:, j, 0] * r[0][i] + S[:, j, 1] * r[1][i] + S[:, j, 2] * r[2][i] for i in range(3)]
-             for j in range(3)]  # a[j][i] = (S T)_ji
-        k6 = tuple(r[0][i] * a[0][j] + r[1][i] * a[1][j] + r[2][i] * a[2][j]
-                   for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
-        nrm = self.normal[rows]
-        ntx, nty, ntz = (r[0][i] * nrm[:, 0] + r[1][i] * nrm[:, 1] + r[2][i] * nrm[:, 2] for i in range(3))  # TCS
+        ntx, nty, ntz = (r[0][i] * n0 + r[1][i] * n1 + r[2][i] * n2 for i in range(3))  # the CAD's normal, TCS
         sg = -s
         ok = sg * ntz > 1e-6
-        # the smallest rotation taking nt onto sg e_z is that taking sg e_z onto nt mirrored about the axis
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            turned = _turned(k6, -ntx, -nty, ntz, sg)
-        K = _full(tuple(np.where(ok, t, k) for t, k in zip(turned, k6)))
-        return K
+        # Q: the smallest rotation taking sg e_z onto (-nt_x, -nt_y, nt_z) (that taking nt onto sg e_z,
+        # mirrored about the axis): I + [v]x + f [v]x^2, v = sg e_z x m = (sg nt_y, -sg nt_x, 0)
+        vx, vy = sg * nty, -sg * ntx
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN where not ok: replaced below
+            f = 1.0 / (1.0 + sg * ntz)
+            fx, fy = f * vx, f * vy
+            q = ((1.0 - fy * vy, fx * vy, vy), (fx * vy, 1.0 - fx * vx, -vx), (-vy, vx, 1.0 - fx * vx - fy * vy))
+            p = [[q[k][0] * r[j][0] + q[k][1] * r[j][1] + q[k][2] * r[j][2] for j in range(3)] for k in range(3)]
 
+            def sp(v):  # S v
+                return (s00 * v[0] + s01 * v[1] + s02 * v[2], s01 * v[0] + s11 * v[1] + s12 * v[2],
+                        s02 * v[0] + s12 * v[1] + s22 * v[2])
+
+            a = [sp(v) for v in p]
+            K = np.empty((len(ntz), 3, 3))
+            for i, j in _SIX:
+                K[:, i, j] = p[i][0] * a[j][0] + p[i][1] * a[j][1] + p[i][2] * a[j][2]
+                if i != j:
+                    K[:, j, i] = K[:, i, j]
+        bad = np.flatnonzero(~ok)
+        if bad.size:  # T^T S T, not turned
+            Tb = T[bad]
+            Sb = np.stack([s00[bad], s01[bad], s02[bad], s01[bad], s11[bad], s12[bad], s02[bad], s12[bad], s22[bad]],
+                          axis=1).reshape(-1, 3, 3)
+            K[bad] = np.einsum("hji,hjk,hkl->hil", Tb, Sb, Tb)
+        return K
 
     def higher_tcs(self, rows, s: float, tcs2panel=None):
         """``(axes (h, 2, 3) unit TCS, higher (h, 9), tcs2panel (h, 3, 3))`` of table rows ``rows``: the
@@ -232,12 +255,14 @@ class HoleSurfaces:
         if self.higher is None or self.frame is None:
             return None
         R = tcs2panel_nominal(self.normal[rows], s) if tcs2panel is None else tcs2panel
-        F = self.frame[rows]
-        axes = np.empty(F.shape)
+        if "frame" not in self._tcs:  # once per table: each component a contiguous array to gather from
+            self._tcs["frame"] = np.ascontiguousarray(self.frame.reshape(-1, 6).T)
+        F = [x[rows] for x in self._tcs["frame"]]  # F[3 k + j]: e_k's component j
+        axes = np.empty((2, 3, len(F[0])))
         for k in range(2):  # R^T e_k entry by entry over the holes (not an einsum with inner dims of 3)
             for i in range(3):
-                axes[:, k, i] = R[:, 0, i] * F[:, k, 0] + R[:, 1, i] * F[:, k, 1] + R[:, 2, i] * F[:, k, 2]
-        return axes, self.higher[rows], R
+                axes[k, i] = R[:, 0, i] * F[3 * k] + R[:, 1, i] * F[3 * k + 1] + R[:, 2, i] * F[3 * k + 2]
+        return axes.transpose(2, 0, 1), self.higher[rows], R  # (h, 2, 3), a view: each component contiguous
 
 
 def tcs2panel_nominal(n, s: float):

@@ -148,7 +148,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     good = np.isfinite(sig) & (sig > 0)
     if not good.all():
         sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
-    s2 = (sig * sig)[:, None]
+    is2 = 1.0 / (sig * sig)[:, None]  # 1 / sigma^2, (n, 1)
     dT = np.ascontiguousarray(d.T)
     valid = np.isfinite(dT)
     whole = bool(valid.all())
@@ -162,7 +162,7 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
-        w = 1.0 / (u2 * u2 * s2) * (valid if not whole else np.ones((1, h)))
+        w = is2 / (u2 * u2) * valid if not whole else is2 / (u2 * u2)  # (n, h), or (n, 1): each sensor's
         wx, wy = w * x, w * y
         i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
         b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
@@ -171,56 +171,58 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         c = -(i02 * b0 + i12 * b1 + i22 * b2)
         gx0, gy0 = gx, gy
         # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
-        # it (full=False) ``ok`` takes the matrix inverted for the last update
+        # it (full=False) ``ok`` takes the matrix inverted for the last update. G first, the height from it:
+        # ``zq - g.q + sigma rho q^T K_m q / 2 = ((G_x - g_x) x + (G_y - g_y) y + (G_z + 1) zq) / 2``; jc = -G_z
         for it in range(1, steps + 1 if full else steps):
             rho = np.sqrt(1.0 + gx * gx + gy * gy)
             mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
             zq = z - c
             k00, k01, k02, k11, k12, k22 = _turned_tangent(K3, mx, my, mz, sg)  # K on the fitted tangent plane
-            Kx = k00 * x + k01 * y + k02 * zq  # K_m q = K_t q
-            Ky = k01 * x + k11 * y + k12 * zq
-            Kz = k02 * x + k12 * y + k22 * zq
             sc = sg * rho
-            hres = zq - gx * x - gy * y + (0.5 * sc) * (x * Kx + y * Ky + zq * Kz)
-            Gz = 1.0 + sc * Kz
-            jc = -Gz
-            Gx, Gy = sc * Kx - gx, sc * Ky - gy
+            s00, s01, s02, s11, s12, s22 = sc * k00, sc * k01, sc * k02, sc * k11, sc * k12, sc * k22
+            Gx = s00 * x + s01 * y + s02 * zq - gx  # (-g_x, -g_y, 1) + sigma rho K_m q
+            Gy = s01 * x + s11 * y + s12 * zq - gy
+            Gz = s02 * x + s12 * y + s22 * zq + 1.0
+            hres = 0.5 * (x * (Gx - gx) + y * (Gy - gy) + zq * (Gz + 1.0))
             Gu = Gx * u0 + Gy * u1 + Gz * u2
-            w = 1.0 / (Gu * Gu * s2)
+            w = is2 / (Gu * Gu)
             if not whole:
                 w = np.where(valid, w, 0.0)
-            wx, wy, wc = w * x, w * y, w * jc
-            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), -(wc * x).sum(0), (wy * y).sum(0), -(wc * y).sum(0),
-                                                 (wc * jc).sum(0))
+            wx, wy, wz = w * x, w * y, w * Gz
+            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), (wz * x).sum(0), (wy * y).sum(0), (wz * y).sum(0),
+                                                 (wz * Gz).sum(0))
             if it == steps:
                 break
-            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), (wc * hres).sum(0)
+            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), -(wz * hres).sum(0)
             gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
             gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
             c = c - (i02 * b0 + i12 * b1 + i22 * b2)
     if steps == 0:
         rho = np.ones(h)
         mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
-        zq, hres, jc = z, z, np.full_like(x, -1.0)
+        zq, hres, Gz = z, z, np.ones_like(x)
+        wz = w = np.broadcast_to(w, x.shape)  # every hole's weights; w G_z = w
     ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     rho = np.sqrt(1.0 + gx * gx + gy * gy)
-    normal = sg * np.stack([-gx, -gy, np.ones(h)], axis=1) / rho[:, None]
+    f = sg / rho
+    normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
     normal[~ok] = np.nan
-    g = np.stack([gx, gy], axis=1)
+    g = np.array([gx, gy]).T  # (h, 2), a view of (2, h)
     if not full:
         return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
-    # A = M^-1 J^T W, J = (-x, -y, jc)
-    jx, jy = -x * w, -y * w
-    jz = jc * w
-    A = np.stack([i00 * jx + i01 * jy + i02 * jz, i01 * jx + i11 * jy + i12 * jz,
-                  i02 * jx + i12 * jy + i22 * jz], axis=0).transpose(2, 0, 1)  # (h, 3, n)
+    A = np.empty((3, n, h))  # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
+    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
+        np.multiply(wx, -a0, out=A[r])
+        A[r] -= wy * a1
+        A[r] -= wz * a2
+    A, jc = A.transpose(2, 0, 1), -Gz  # (h, 3, n), a view
     G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
-    null = _null_vector_cols(-x, -y, jc) if n == 4 else None
+    null = _null_vector_cols(x, y, jc) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
     if steps > 0:
-        Kt = _full((k00, k01, k02, k11, k12, k22))  # K_m, tangent to the fitted plane: T K_m T = K_m
-        r0 = np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
-        plane = sg * np.stack([-gx0, -gy0, np.ones(h)], axis=1) / r0[:, None]
+        Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)  # K_m = T K_m T, (h, 3, 3)
+        f = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = np.array([-gx0 * f, -gy0 * f, f]).T
     else:  # the micro-plane: K projected onto it, T K T
         if K is None:
             K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
@@ -287,28 +289,30 @@ class PanelTerms:
     spin: float | np.ndarray = 0.0
 
 
-def _tangent_basis(m):
-    """Two unit vectors (h, 3) spanning the plane square to unit ``m (h, 3)``."""
-    mx, my, mz = m[:, 0], m[:, 1], m[:, 2]
+def _tangent_basis(mx, my, mz):
+    """Two unit vectors spanning the plane square to the unit ``m``, by components: ``(t1, t2)``, each a
+    tuple of three (h,) arrays (``mx, my, mz`` (h,) arrays)."""
     use_x = np.abs(mx) < 0.9  # the reference e_x, else e_y
     rm = np.where(use_x, mx, my)  # ref . m
-    t1 = np.stack([np.where(use_x, 1.0, 0.0) - rm * mx, np.where(use_x, 0.0, 1.0) - rm * my, -rm * mz], axis=1)
-    t1 /= np.sqrt((t1 * t1).sum(1))[:, None]
-    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
-    return t1, np.stack([my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax], axis=1)  # m x t1
+    ax, ay, az = use_x - rm * mx, ~use_x - rm * my, -rm * mz
+    f = 1.0 / np.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax * f, ay * f, az * f
+    return (ax, ay, az), (my * az - mz * ay, mz * ax - mx * az, mx * ay - my * ax)  # m x t1
 
 
 def _shape_basis(fit, g2, axis):
     """The heights' change ``(n, N)`` (sensor-major) per unit change of each of the three components
     of the shape operator in an orthonormal basis of the tangent plane's symmetric tensors (``t1 t1``,
     ``t2 t2``, ``(t1 t2 + t2 t1) / sqrt 2``), ``sigma rho 1/2 (Tq)^T delta K (Tq)``: a list of 3."""
+    ok = fit.ok
     m = fit.normal
-    t1, t2 = _tangent_basis(np.where(np.isfinite(m), m, np.array([0, 0, 1.0])))
+    t1, t2 = _tangent_basis(*(np.where(ok, m[:, i], e) for i, e in enumerate((0.0, 0.0, 1.0))))
     sc = -axis[2] * np.sqrt(1.0 + g2)  # sigma rho
     qx, qy, qz = fit.q.transpose(2, 1, 0)  # (n, N) each, mm
-    a1 = qx * t1[:, 0] + qy * t1[:, 1] + qz * t1[:, 2]  # (n, N), mm
-    a2 = qx * t2[:, 0] + qy * t2[:, 1] + qz * t2[:, 2]
-    return [sc * 0.5 * a1 * a1, sc * 0.5 * a2 * a2, sc * a1 * a2 / np.sqrt(2.0)]
+    a1 = qx * t1[0] + qy * t1[1] + qz * t1[2]  # (n, N), mm
+    a2 = qx * t2[0] + qy * t2[1] + qz * t2[2]
+    h = 0.5 * sc
+    return [h * a1 * a1, h * a2 * a2, (sc / np.sqrt(2.0)) * a1 * a2]
 
 
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
@@ -484,7 +488,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         with np.errstate(invalid="ignore", divide="ignore"):
             residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
     with np.errstate(invalid="ignore"):
-        correction = np.arccos(np.clip((fit.normal * fit.plane_normal).sum(1), -1.0, 1.0))
+        nm, pm = fit.normal, fit.plane_normal
+        correction = np.arccos(np.clip(nm[:, 0] * pm[:, 0] + nm[:, 1] * pm[:, 1] + nm[:, 2] * pm[:, 2], -1.0, 1.0))
     bad = ~fit.ok
     for arr in (angle, u_angle, U95, correction):
         arr[bad] = np.nan
