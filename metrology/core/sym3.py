@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["smallest_eigvec", "inv3", "turned", "turned_tangent", "full", "null_vector_cols", "ADJ_STEPS", "GAP_MAX"]
+__all__ = ["smallest_eigvec", "inv3", "smallest_rotation", "turned", "turned_tangent", "full", "null_vector_cols",
+           "ADJ_STEPS", "GAP_MAX"]
 
 #: products with the adjugate: each multiplies the other eigenvectors' share by ``lambda_3 / lambda_2``
 ADJ_STEPS = 3
@@ -101,6 +102,17 @@ def turned_tangent(K, mx, my, mz, sg):
             a10 * q20 + a11 * q21, a20 * q20 + a21 * q21)
 
 
+def smallest_rotation(kx, ky, kz, c):
+    """The entries ``q[i][j]`` ((h,) arrays or floats) of the smallest rotation taking a unit ``v``
+    onto a unit ``w``, given ``k = v x w`` and ``c = v . w`` (Rodrigues: ``I + [k]x + [k]x^2 / (1 + c)``,
+    ``[k]x^2 = k k^T - |k|^2 I``; ``v`` and ``w`` not opposite)."""
+    f = 1.0 / (1.0 + c)
+    fx, fy, fz = f * kx, f * ky, f * kz
+    xx, yy, zz = fx * kx, fy * ky, fz * kz
+    xy, xz, yz = fx * ky, fx * kz, fy * kz
+    return [[1.0 - yy - zz, xy - kz, xz + ky], [xy + kz, 1.0 - xx - zz, yz - kx], [xz - ky, yz + kx, 1.0 - xx - yy]]
+
+
 def turned(K, mx, my, mz, sg):
     """The 6 entries ``(00, 01, 02, 11, 12, 22)`` ((h,) arrays) of ``Q K Q^T``, ``Q`` the smallest
     rotation taking ``sg e_z`` onto the unit normal ``m = (mx, my, mz)`` (arrays (h,), ``sg mz > 0``);
@@ -109,17 +121,11 @@ def turned(K, mx, my, mz, sg):
     ``T K T`` instead shrinks the curvature across the tilt by ``cos^2`` of it (0.8 % at 5 deg: on a
     3-sensor ring, whose curvature correction is of the order of 1 deg, about 0.01 deg of error)."""
     k00, k01, k02, k11, k12, k22 = K
-    vx, vy = -sg * my, sg * mx  # sg e_z x m
-    f = 1.0 / (1.0 + sg * mz)
-    fx, fy = f * vx, f * vy
-    # Q = I + [v]x + f [v]x^2, v = (vx, vy, 0)
-    q00, q01, q02 = 1.0 - fy * vy, fx * vy, vy
-    q10, q11, q12 = q01, 1.0 - fx * vx, -vx
-    q20, q21, q22 = -vy, vx, 1.0 - fx * vx - fy * vy
+    q = smallest_rotation(-sg * my, sg * mx, 0.0, sg * mz)  # k = sg e_z x m
+    (q00, q01, q02), (q10, q11, q12), (q20, q21, q22) = q
     a = [[q00 * k00 + q01 * k01 + q02 * k02, q00 * k01 + q01 * k11 + q02 * k12, q00 * k02 + q01 * k12 + q02 * k22],
          [q10 * k00 + q11 * k01 + q12 * k02, q10 * k01 + q11 * k11 + q12 * k12, q10 * k02 + q11 * k12 + q12 * k22],
          [q20 * k00 + q21 * k01 + q22 * k02, q20 * k01 + q21 * k11 + q22 * k12, q20 * k02 + q21 * k12 + q22 * k22]]
-    q = [[q00, q01, q02], [q10, q11, q12], [q20, q21, q22]]
 
     def e(i, j):  # (Q K Q^T)_ij = sum_l (Q K)_il Q_jl
         return a[i][0] * q[j][0] + a[i][1] * q[j][1] + a[i][2] * q[j][2]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.core.sym3 import smallest_rotation
 from metrology.measure.normals import drill_axis
 
 __all__ = ["second_order_readings", "convention_spin", "beyond_second_order", "Beyond"]
@@ -112,17 +113,6 @@ def _finite_rows(X):
         return np.isfinite(X @ np.ones(X.shape[1]))
 
 
-def _smallest_entries(kx, ky, kz, c):
-    """The entries ``q[i][j]`` ((h,) arrays) of the smallest rotation taking a unit ``v`` onto a unit
-    ``w``, given ``k = v x w`` and ``c = v . w`` (Rodrigues: ``I + [k]x + [k]x^2 / (1 + c)``,
-    ``[k]x^2 = k k^T - |k|^2 I``; not opposite)."""
-    f = 1.0 / (1.0 + c)
-    fx, fy, fz = f * kx, f * ky, f * kz
-    xx, yy, zz = fx * kx, fy * ky, fz * kz
-    xy, xz, yz = fx * ky, fx * kz, fy * kz
-    return [[1.0 - yy - zz, xy - kz, xz + ky], [xy + kz, 1.0 - xx - zz, yz - kx], [xz - ky, yz + kx, 1.0 - xx - yy]]
-
-
 def _spin_entries(Rc, mx, my, mz, s: float):
     """:func:`convention_spin` entry by entry: ``Rc[i][j]`` and ``mx, my, mz`` (h,) arrays; returns ``Y[i][j]``.
 
@@ -134,12 +124,12 @@ def _spin_entries(Rc, mx, my, mz, s: float):
     rx, ry, rz = Rc[2][0], Rc[2][1], Rc[2][2]
     bz = -mz
     # A = Q(-r -> b): k = -r x b, c = -r . b
-    A = _smallest_entries(rz * my - ry * bz, rx * bz - rz * mx, ry * mx - rx * my, -(rx * mx + ry * my + rz * bz))
+    A = smallest_rotation(rz * my - ry * bz, rx * bz - rz * mx, ry * mx - rx * my, -(rx * mx + ry * my + rz * bz))
     # B = Q(-r -> s e_z): k = -s (r_y, -r_x, 0), c = -s r_z
-    B = _smallest_entries(-s * ry, s * rx, 0.0, -s * rz)
+    B = smallest_rotation(-s * ry, s * rx, 0.0, -s * rz)
     # Q_m = Q(sg e_z -> m), sg = -s: I + [v]x + [v]x^2 / (1 + sg m_z), v = sg e_z x m = (-sg m_y, sg m_x, 0)
     sg = -s
-    Q = _smallest_entries(-sg * my, sg * mx, 0.0, sg * mz)
+    Q = smallest_rotation(-sg * my, sg * mx, 0.0, sg * mz)
     M = [[A[i][0] * B[j][0] + A[i][1] * B[j][1] + A[i][2] * B[j][2] for j in range(3)] for i in range(3)]  # A B^T
     return [[M[i][0] * Q[0][j] + M[i][1] * Q[1][j] + M[i][2] * Q[2][j] for j in range(3)] for i in range(3)]
 

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrology.core.frames import embed_shape, principal_curvatures, tangent_frame
+from metrology.core.sym3 import smallest_rotation
 
 __all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
 
@@ -223,11 +224,8 @@ class HoleSurfaces:
         ok = sg * ntz > 1e-6
         # Q: the smallest rotation taking sg e_z onto (-nt_x, -nt_y, nt_z) (that taking nt onto sg e_z,
         # mirrored about the axis): I + [v]x + f [v]x^2, v = sg e_z x m = (sg nt_y, -sg nt_x, 0)
-        vx, vy = sg * nty, -sg * ntx
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN where not ok: replaced below
-            f = 1.0 / (1.0 + sg * ntz)
-            fx, fy = f * vx, f * vy
-            q = ((1.0 - fy * vy, fx * vy, vy), (fx * vy, 1.0 - fx * vx, -vx), (-vy, vx, 1.0 - fx * vx - fy * vy))
+            q = smallest_rotation(sg * nty, -sg * ntx, 0.0, sg * ntz)
             p = [[q[k][0] * r[j][0] + q[k][1] * r[j][1] + q[k][2] * r[j][2] for j in range(3)] for k in range(3)]
 
             def sp(v):  # S v
