@@ -251,8 +251,8 @@ class MeasureOptions:
 def _engine(opts: MeasureOptions):
     """The engine the options ask for, for a ``with`` block: a callable that returns it. One process;
     or Dask, whose cluster (or connection) is started in a thread as the block begins, so its start
-    (0.5 s for 2 local workers) overlaps the reading and checking of the inputs; the block's end
-    waits for it and closes the cluster when this run started it."""
+    (0.5 s for 2 local workers) can overlap the reading and checking of the inputs (both hold the GIL
+    in parts); the block's end waits for it and closes the cluster when this run started it."""
     if not opts.distributed:
         from metrology.measure.run import OneProcess
 

@@ -28,7 +28,7 @@ CONNECT_TIMEOUT_S = 10
 #: monitor (every 0.5 s) feed nothing anyone sees; the event loops' health tick (every 20 ms) and the
 #: memory monitor (every 0.1 s: a task holds one partition, bounded) run every second. With one worker
 #: a core is spare for them; with a worker per core they take the tasks' time. Measured on 2 cores, 2
-#: idle workers: 0.12 -> 0.014 cores, client and workers (``benchmarks/bench_measure.py``, ``dask_idle``).
+#: idle workers: 0.12 -> 0.013 cores, client and workers (``benchmarks/bench_measure.py``, ``dask_idle``).
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
