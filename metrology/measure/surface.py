@@ -57,7 +57,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
 from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
-from metrology.core.sym3 import turned as _turned, turned_tangent as _turned_tangent
+from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
