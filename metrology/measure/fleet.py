@@ -29,11 +29,16 @@ CONNECT_TIMEOUT_S = 10
 #: memory monitor (every 0.1 s: a task holds one partition, bounded) run every second. With one worker
 #: a core is spare for them; with a worker per core they take the tasks' time. Measured on 2 cores, 2
 #: idle workers: 0.12 -> 0.013 cores, client and workers (``benchmarks/bench_measure.py``, ``dask_idle``).
+#: ``worker-saturation`` 1.0: a worker is sent its next partition when it has nothing to run, so a
+#: partition's watch link runs as its measuring ends, beside its feed (at Dask's 1.1 a worker held a
+#: second partition queued, ran it first, and the watch chain fell further behind all run: the feeds
+#: waiting for it grew with the log, and were moved between workers to catch up).
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.admin.tick.interval": "1s",
     "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.worker-saturation": 1.0,
 }
 
 #: the scheduler's own HTTP server (health and metrics, no dashboard) on a free port of this host: on

@@ -89,6 +89,13 @@ class Feed:
         """How an error names the hole at ``row`` of the partition's file."""
         return self.log.locate(self.part, row)
 
+    def __sizeof__(self) -> int:
+        """Bytes, its arrays': what Dask's scheduler weighs (``dask.sizeof`` falls back to
+        ``sys.getsizeof``) when it places a watch link beside its partition's feed or moves the feed."""
+        arrays = (self.row, self.cell, self.panel, self.time_s, self.charted, self.rho_mm, self.noise_sd_mm,
+                  self.signature)
+        return object.__sizeof__(self) + sum(a.nbytes for a in arrays) + self.hole_id.nbytes
+
     @classmethod
     def of(cls, batch: HoleBatch, log: HoleLog | str, part: Partition | None = None, first_row: int = 0) -> "Feed":
         """The feed of ``batch``, whose first hole is row ``first_row`` of ``part``'s file (``log`` a
@@ -214,6 +221,11 @@ class Piece:
     table: "pa.Table | None" = None
     last: bool = True
     written: bool = False
+
+    def __sizeof__(self) -> int:
+        """Bytes, its feed's and table's (:meth:`Feed.__sizeof__`)."""
+        return (object.__sizeof__(self) + (self.feed.__sizeof__() if self.feed is not None else 0)
+                + (self.table.nbytes if self.table is not None else 0))
 
 
 def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, settings: Settings,

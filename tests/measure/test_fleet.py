@@ -363,3 +363,67 @@ def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_me
     assert not (tmp_path / "out").exists()
     workers = [p for p in psutil.Process().children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
     assert not workers
+
+
+def test_each_partitions_drift_watch_link_follows_its_measuring_so_the_feeds_held_stay_bounded(tmp_path):
+    """One cell's chain of 24 partitions on 2 workers: each partition's watch link runs as its
+    measuring ends (QUIET_CLUSTER's worker-saturation 1.0), not after the partitions queued behind
+    it, so the per-hole feeds the workers hold waiting for the watch stay a few whatever the log's
+    length (at Dask's 1.1 the chain fell further behind all run: 8 and 11 feeds held at this log's
+    end in two runs, every feed to the end of a long one). The results are the single process's."""
+    from distributed import get_task_stream
+
+    from metrology.io.holelog import open_log
+    from metrology.io.holeout import PartitionedOutput
+    from metrology.measure.fleet import DaskEngine, connect
+    from metrology.measure.holes import Settings
+    from metrology.measure.run import measure_log
+
+    lay = calibrated_layout()
+    cols, _, _ = hole_log(lay, n=24 * 600, seed=4, angle_deg=(1, 4))
+    t = pa.table(cols).drop_columns(["cell"])
+    for k in range(24):
+        d = tmp_path / "log" / "cell=C1" / f"part={k:02d}"
+        d.mkdir(parents=True)
+        pq.write_table(t.slice(600 * k, 600), d / "part-0.parquet")
+    log = open_log(tmp_path / "log", lay.names)
+    one = measure_log(log, lay, Settings(), output=PartitionedOutput(tmp_path / "one", {}))
+    with connect(workers=2) as client, get_task_stream(client) as ts:
+        out = PartitionedOutput(tmp_path / "dask", {})
+        two = measure_log(log, lay, Settings(), DaskEngine(client), output=out)
+        out.release()
+    assert two.summary.counts() == one.summary.counts() and two.rows == one.rows == 14400
+    span = {}
+    for task in ts.data:
+        kind, i = task["key"].split("-")[1:3]
+        run = [s for s in task["startstops"] if s["action"] == "compute"][-1]
+        span[kind, int(i)] = (run["start"], run["stop"])
+    held = [sum(span["measure", j][1] <= span["measure", i][0] < span["watch", j][0] for j in range(24))
+            for i in range(24)]
+    # measured, not yet watched, as each partition's measuring starts: after the first half (a
+    # worker's first task, its imports, can hold the chain back meanwhile), a few, not growing
+    assert max(held[12:]) <= 3, held
+
+
+def test_dask_weighs_a_measured_partition_by_its_arrays(tmp_path):
+    """``dask.sizeof`` of a partition's piece is its feed's and table's bytes (not the 100 bytes of
+    ``sys.getsizeof``'s default): the scheduler places a watch link beside the feed it takes, and a
+    worker's memory accounting sees what it holds."""
+    from dask.sizeof import sizeof
+
+    from metrology.io.holelog import open_log
+    from metrology.measure.holes import Settings
+    from metrology.measure.run import measure_partition
+
+    lay = calibrated_layout()
+    cols, _, _ = hole_log(lay, n=2000, seed=2)
+    path = tmp_path / "log.parquet"
+    pq.write_table(pa.table(cols), path)
+    log = open_log(path, lay.names)
+    piece, end = list(measure_partition(log, log.partitions[0], lay, Settings(), rows=True))
+    f = piece.feed
+    arrays = sum(a.nbytes for a in (f.row, f.cell, f.panel, f.time_s, f.charted, f.rho_mm, f.noise_sd_mm,
+                                    f.signature))
+    assert sizeof(f) >= arrays + f.hole_id.nbytes > 2000 * 80
+    assert sizeof(piece) >= sizeof(f) + piece.table.nbytes
+    assert sizeof(end) < 1000  # the partition's end: no feed, no rows
