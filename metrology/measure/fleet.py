@@ -31,8 +31,8 @@ CONNECT_TIMEOUT_S = 10
 #: idle workers: 0.12 -> 0.013 cores, client and workers (``benchmarks/bench_measure.py``, ``dask_idle``).
 #: ``worker-saturation`` 1.0: a worker is sent its next partition when it has nothing to run, so a
 #: partition's watch link runs as its measuring ends, beside its feed (at Dask's 1.1 a worker held a
-#: second partition queued, ran it first, and the watch chain fell further behind all run: the feeds
-#: waiting for it grew with the log, and were moved between workers to catch up).
+#: second partition queued and ran it first: the watch chain fell behind, the workers held 4-6
+#: partitions' feeds waiting for it instead of 0-2, and its links moved feeds between workers).
 QUIET_CLUSTER = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",

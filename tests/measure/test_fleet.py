@@ -366,11 +366,12 @@ def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_me
 
 
 def test_each_partitions_drift_watch_link_follows_its_measuring_so_the_feeds_held_stay_bounded(tmp_path):
-    """One cell's chain of 24 partitions on 2 workers: each partition's watch link runs as its
-    measuring ends (QUIET_CLUSTER's worker-saturation 1.0), not after the partitions queued behind
-    it, so the per-hole feeds the workers hold waiting for the watch stay a few whatever the log's
-    length (at Dask's 1.1 the chain fell further behind all run: 8 and 11 feeds held at this log's
-    end in two runs, every feed to the end of a long one). The results are the single process's."""
+    """One cell's chain of 32 partitions of 4000 holes on 2 workers: each partition's watch link runs
+    as its measuring ends (QUIET_CLUSTER's worker-saturation 1.0), not after the partition queued
+    behind it, so the workers hold the per-hole feeds of 0-2 partitions waiting for the watch
+    (with two such runs at once on 2 cores too). At Dask's 1.1 the chain fell behind and stayed
+    behind: 4-6 partitions' feeds held all through the second half (15 at the end of a log of
+    600-hole partitions). The results are the single process's."""
     from distributed import get_task_stream
 
     from metrology.io.holelog import open_log
@@ -380,29 +381,33 @@ def test_each_partitions_drift_watch_link_follows_its_measuring_so_the_feeds_hel
     from metrology.measure.run import measure_log
 
     lay = calibrated_layout()
-    cols, _, _ = hole_log(lay, n=24 * 600, seed=4, angle_deg=(1, 4))
+    cols, _, _ = hole_log(lay, n=32 * 4000, seed=4, angle_deg=(1, 4))
     t = pa.table(cols).drop_columns(["cell"])
-    for k in range(24):
+    for k in range(32):
         d = tmp_path / "log" / "cell=C1" / f"part={k:02d}"
         d.mkdir(parents=True)
-        pq.write_table(t.slice(600 * k, 600), d / "part-0.parquet")
+        pq.write_table(t.slice(4000 * k, 4000), d / "part-0.parquet")
     log = open_log(tmp_path / "log", lay.names)
     one = measure_log(log, lay, Settings(), output=PartitionedOutput(tmp_path / "one", {}))
-    with connect(workers=2) as client, get_task_stream(client) as ts:
-        out = PartitionedOutput(tmp_path / "dask", {})
-        two = measure_log(log, lay, Settings(), DaskEngine(client), output=out)
-        out.release()
-    assert two.summary.counts() == one.summary.counts() and two.rows == one.rows == 14400
+    with connect(workers=2) as client:
+        # a first run warms both workers (their first partition imports metro: on a fresh machine it
+        # took as long as ten others, and the chain waited for it meanwhile); the second is watched
+        for name in ("warm", "dask"):
+            with get_task_stream(client) as ts:
+                out = PartitionedOutput(tmp_path / name, {})
+                two = measure_log(log, lay, Settings(), DaskEngine(client), output=out)
+                out.release()
+    assert two.summary.counts() == one.summary.counts() and two.rows == one.rows == 128000
     span = {}
     for task in ts.data:
         kind, i = task["key"].split("-")[1:3]
         run = [s for s in task["startstops"] if s["action"] == "compute"][-1]
         span[kind, int(i)] = (run["start"], run["stop"])
-    held = [sum(span["measure", j][1] <= span["measure", i][0] < span["watch", j][0] for j in range(24))
-            for i in range(24)]
-    # measured, not yet watched, as each partition's measuring starts: after the first half (a
-    # worker's first task, its imports, can hold the chain back meanwhile), a few, not growing
-    assert max(held[12:]) <= 3, held
+    held = [sum(span["measure", j][1] <= span["measure", i][0] < span["watch", j][0] for j in range(32))
+            for i in range(32)]
+    # measured, not yet watched, as each partition's measuring starts: in the second half (the
+    # first partitions can hold the chain back meanwhile)
+    assert max(held[16:]) <= 3, held
 
 
 def test_dask_weighs_a_measured_partition_by_its_arrays(tmp_path):
