@@ -18,8 +18,9 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 3. **Dask**: a partitioned log of ``--dask-holes`` holes (40 partitions) with ``--workers 1`` and
    ``--workers 2`` (holes/s, the cluster's start included), against the single process on the
    same folder, ``--repeat`` rounds run in turn: the best of each, and 2 workers against 1 in each
-   round (its spread, and their median); and the CPU a cluster of 2 idle workers takes (cores, client and workers),
-   with Dask's defaults and with the settings ``--workers`` starts it with (``QUIET_CLUSTER``);
+   round (its spread, and their median); and the CPU a cluster of 2 idle workers takes (cores,
+   client and workers), with Dask's defaults and with the settings ``--workers`` starts it with
+   (``QUIET_CLUSTER``);
 4. **QIF**: the whole-process run of 2. with ``--qif results.qif`` added (a QIF 3.0 Results
    document of every hole, streamed): wall time, CPU and peak RSS against the run without it
    (goal: <= 3x the time; RSS bounded, not growing with the holes);

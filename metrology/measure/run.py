@@ -92,9 +92,8 @@ class Feed:
     def __sizeof__(self) -> int:
         """Bytes, its arrays': what Dask's scheduler weighs (``dask.sizeof`` falls back to
         ``sys.getsizeof``) when it places a watch link beside its partition's feed or moves the feed."""
-        arrays = (self.row, self.cell, self.panel, self.time_s, self.charted, self.rho_mm, self.noise_sd_mm,
-                  self.signature)
-        return object.__sizeof__(self) + sum(a.nbytes for a in arrays) + self.hole_id.nbytes
+        arrays = sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
+        return object.__sizeof__(self) + arrays + self.hole_id.nbytes
 
     @classmethod
     def of(cls, batch: HoleBatch, log: HoleLog | str, part: Partition | None = None, first_row: int = 0) -> "Feed":
