@@ -132,6 +132,16 @@ def major_sd(C):
     return np.sqrt(0.5 * (C[:, 0, 0] + C[:, 1, 1]) + np.sqrt(0.25 * (C[:, 0, 0] - C[:, 1, 1]) ** 2 + C[:, 0, 1] ** 2))
 
 
+def _grid_index(x, s, w):
+    """(3, N) float: the table's fractional indices of the points ``x, s, w`` (each grid is uniform
+    piecewise, so linear interpolation of the indices over it is exact), the coordinates with which
+    ``scipy.ndimage.map_coordinates`` interpolates linearly as ``RegularGridInterpolator`` does;
+    ``scipy.interpolate`` would import ``scipy.optimize``, ``sparse`` and ``linalg`` into every
+    worker for this one lookup (tests/measure/test_magnitude.py compares the two)."""
+    return np.stack([np.interp(v, grid, np.arange(len(grid), dtype=float))
+                     for v, grid in ((x, GRID_X), (s, GRID_S), (w, GRID_W))])
+
+
 def magnitude_u95(g, C):
     """U95 of the length of 2-D tilts (see the module docstring).
 
@@ -145,7 +155,7 @@ def magnitude_u95(g, C):
     (N,) float, rad: the half-width of ``|g| +- U95`` holding 95 % of the true length
     (NaN where ``C`` or ``g`` is not finite)
     """
-    from scipy.interpolate import RegularGridInterpolator
+    from scipy.ndimage import map_coordinates
 
     g = np.asarray(g, float).reshape(-1, 2)
     C = np.asarray(C, float).reshape(-1, 2, 2)
@@ -166,8 +176,8 @@ def magnitude_u95(g, C):
     ok = np.isfinite(x) & np.isfinite(sr) & (l1 > 0)
     near = ok & (x < X_MAX)
     if near.any():
-        f = RegularGridInterpolator((GRID_X, GRID_S, GRID_W), _table())
-        out[near] = s1[near] * f(np.stack([x[near], sr[near], w[near]], axis=1))
+        out[near] = s1[near] * map_coordinates(_table(), _grid_index(x[near], sr[near], w[near]), order=1,
+                                               mode="nearest")
     far = ok & ~near
     out[far] = K95 * radial[far]
     out[np.isfinite(gn) & (l1 == 0)] = 0.0

@@ -69,6 +69,22 @@ def test_the_shipped_table_is_its_integral():
     np.testing.assert_allclose(t[i, j, k], q, rtol=1e-9)
 
 
+def test_the_table_is_interpolated_linearly_between_its_points():
+    """The lookup (``scipy.ndimage`` on the grid's fractional indices) against scipy.interpolate's
+    linear RegularGridInterpolator on the grid's own coordinates, at random points of every segment
+    of the x grid (steps 1/8, 1/4 and 1) and on the grid's edges."""
+    from scipy.interpolate import RegularGridInterpolator
+    from scipy.ndimage import map_coordinates
+
+    rng = np.random.default_rng(11)
+    n = 20_000
+    x, s, w = rng.uniform(0.0, M.GRID_X[-1], n), rng.uniform(0.0, 1.0, n), rng.uniform(0.0, 1.0, n)
+    x[:50], s[50:100], w[100:150] = M.GRID_X[-1], 1.0, 0.0
+    ref = RegularGridInterpolator((M.GRID_X, M.GRID_S, M.GRID_W), M._table())(np.stack([x, s, w], axis=1))
+    got = map_coordinates(M._table(), M._grid_index(x, s, w), order=1, mode="nearest")
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+
+
 def test_anisotropic_u95_holds_95_percent_of_the_length_given_the_tilt():
     """Monte Carlo over t ~ N(g, C): the share of |t| within |g| +- U95 (the definition) on an
     elongated covariance, g at several directions and distances (off the grid's points)."""
