@@ -132,14 +132,18 @@ def major_sd(C):
     return np.sqrt(0.5 * (C[:, 0, 0] + C[:, 1, 1]) + np.sqrt(0.25 * (C[:, 0, 0] - C[:, 1, 1]) ** 2 + C[:, 0, 1] ** 2))
 
 
-def _grid_index(x, s, w):
-    """(3, N) float: the table's fractional indices of the points ``x, s, w`` (each grid is uniform
-    piecewise, so linear interpolation of the indices over it is exact), the coordinates with which
-    ``scipy.ndimage.map_coordinates`` interpolates linearly as ``RegularGridInterpolator`` does;
-    ``scipy.interpolate`` would import ``scipy.optimize``, ``sparse`` and ``linalg`` into every
-    worker for this one lookup (tests/measure/test_magnitude.py compares the two)."""
-    return np.stack([np.interp(v, grid, np.arange(len(grid), dtype=float))
-                     for v, grid in ((x, GRID_X), (s, GRID_S), (w, GRID_W))])
+def _lookup(x, s, w):
+    """(N,) float: ``q / sqrt(l1)`` interpolated linearly in the table at the points ``x, s, w``
+    (N,) within the grid. ``scipy.ndimage.map_coordinates`` at the points' fractional indices (each
+    grid is uniform piecewise, so interpolating the indices over it is exact) does what
+    ``RegularGridInterpolator`` does, whose ``scipy.interpolate`` would import ``scipy.optimize``,
+    ``sparse`` and ``linalg`` into every worker for this one lookup (tests/measure/test_magnitude.py
+    compares the two)."""
+    from scipy.ndimage import map_coordinates
+
+    index = np.stack([np.interp(v, grid, np.arange(len(grid), dtype=float))
+                      for v, grid in ((x, GRID_X), (s, GRID_S), (w, GRID_W))])
+    return map_coordinates(_table(), index, order=1, mode="nearest")
 
 
 def magnitude_u95(g, C):
@@ -155,8 +159,6 @@ def magnitude_u95(g, C):
     (N,) float, rad: the half-width of ``|g| +- U95`` holding 95 % of the true length
     (NaN where ``C`` or ``g`` is not finite)
     """
-    from scipy.ndimage import map_coordinates
-
     g = np.asarray(g, float).reshape(-1, 2)
     C = np.asarray(C, float).reshape(-1, 2, 2)
     a, b, c = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
@@ -176,8 +178,7 @@ def magnitude_u95(g, C):
     ok = np.isfinite(x) & np.isfinite(sr) & (l1 > 0)
     near = ok & (x < X_MAX)
     if near.any():
-        out[near] = s1[near] * map_coordinates(_table(), _grid_index(x[near], sr[near], w[near]), order=1,
-                                               mode="nearest")
+        out[near] = s1[near] * _lookup(x[near], sr[near], w[near])
     far = ok & ~near
     out[far] = K95 * radial[far]
     out[np.isfinite(gn) & (l1 == 0)] = 0.0

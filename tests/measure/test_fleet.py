@@ -40,10 +40,16 @@ def fleet(tmp_path_factory):
     return root
 
 
+def _finished(r):
+    """A CLI run that ended with a verdict (exit 0 or 1), not with a crash (CliRunner gives an
+    uncaught exception exit code 1 too: its ``exception`` tells them apart)."""
+    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+
+
 def _run(fleet, out, *extra):
     r = runner.invoke(app, ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"),
                             "--out", str(out), "--json", *extra])
-    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+    _finished(r)
     s = json.loads(r.stdout)
     s.pop("engine")
     s["sources"].pop("out")
@@ -53,7 +59,7 @@ def _run(fleet, out, *extra):
 def _run_relative(fleet, out, *extra):
     """As :func:`_run`, from ``fleet``'s folder with every path relative."""
     r = runner.invoke(app, ["measure", "log", "--layout", "calibrated.toml", "--out", out, "--json", *extra])
-    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+    _finished(r)
     s = json.loads(r.stdout)
     s.pop("engine")
     s["sources"].pop("out")
@@ -144,7 +150,7 @@ def test_one_parquet_file_on_dask_into_one_file_with_its_qif(fleet, tmp_path):
         r = runner.invoke(app, ["measure", str(log), "--layout", str(fleet / "calibrated.toml"), "--out",
                                 str(tmp_path / f"{name}.parquet"), "--qif", str(tmp_path / f"{name}.qif"), "--json",
                                 *extra])
-        assert r.exit_code in (0, 1), r.output
+        _finished(r)
         out[name] = json.loads(r.stdout)
     for k in ("counts", "fleet", "cells", "groups", "drift", "worst", "holes"):
         assert out["one"][k] == out["dask"][k], k
@@ -310,7 +316,7 @@ def test_two_runs_into_one_folder_at_once_the_second_is_refused(fleet, tmp_path,
     dead.wait()
     lock.write_text(f"pid {dead.pid} on {socket.gethostname()}")  # a killed run's lock
     r = runner.invoke(app, args)
-    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+    _finished(r)
     assert len(list(out.rglob("*.parquet"))) == 6 and not lock.exists()
     lock.write_text(f"pid {os.getpid()} on {socket.gethostname()}")  # a live run resuming the whole folder
     r = runner.invoke(app, args)
@@ -322,9 +328,9 @@ def test_the_resume_manifest_names_the_log_by_its_resolved_path(fleet, tmp_path,
     monkeypatch.chdir(fleet)
     out = tmp_path / "out"
     r = runner.invoke(app, ["measure", "./log", "--layout", "calibrated.toml", "--out", str(out), "--json"])
-    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+    _finished(r)
     r = runner.invoke(app, ["measure", "log", "--layout", "./calibrated.toml", "--out", str(out), "--json"])
-    assert r.exit_code in (0, 1) and isinstance(r.exception, (SystemExit, type(None))), (r.output, repr(r.exception))
+    _finished(r)
     assert json.loads(r.stdout)["partitions_written"] == 0
 
 
