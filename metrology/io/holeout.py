@@ -153,6 +153,7 @@ class PartitionedOutput:
         self.folder = Path(folder).resolve()  # workers started in another folder write the same files
         self.settings = settings
         self._created = None  # what begin() made: (folder made?, manifest made?)
+        self._earlier = frozenset()  # begin(): the partitions' files there before this run
         manifest = self.folder / MANIFEST
         if manifest.exists():
             old = json.loads(manifest.read_text(encoding="utf-8"))
@@ -175,6 +176,9 @@ class PartitionedOutput:
         if made_manifest:
             write_text(manifest, json.dumps(self.settings, indent=1, sort_keys=True))
         self._created = (made_folder, made_manifest)
+        # the partitions' files already there: written by earlier runs (a temporary is dot-named)
+        self._earlier = frozenset(q.relative_to(self.folder).as_posix() for q in self.folder.rglob("*.parquet")
+                                  if not q.name.startswith("."))
 
     def _lock(self) -> None:
         """Hold the folder's lock (created exclusively): another run's is waited for up to
@@ -235,8 +239,13 @@ class PartitionedOutput:
         return self.folder / rel.with_suffix(".parquet")
 
     def done(self, relative: str) -> bool:
-        """Whether the partition's file exists: written whole by an earlier run."""
+        """Whether the partition's file exists (whole: it is written atomically), by an earlier run or
+        by this one's worker that was lost after it (:meth:`earlier` tells which)."""
         return self.target(relative).exists()
+
+    def earlier(self, relative: str) -> bool:
+        """Whether an earlier run wrote the partition's file: it was there when :meth:`begin` ran."""
+        return self.target(relative).relative_to(self.folder).as_posix() in self._earlier
 
     def sink(self, relative: str) -> TableSink:
         t = self.target(relative)

@@ -6,14 +6,37 @@ Modules: :mod:`.normals` (the micro-plane and its GUM uncertainty, pure arrays),
 :mod:`.surface` (the normal fitted with the panel's local surface known: ``surface_normal``, the
 per-hole call of a cell's controller), :mod:`.panel` (each hole's local surface from the hole table),
 :mod:`.summary` (the mergeable fleet summary), :mod:`.run` (the one driver; one process, in batches),
-:mod:`.fleet` (the Dask engine, one task per partition). pyarrow and Dask load only when a log is
-read or a cluster used.
+:mod:`.fleet` (the Dask engine, one task per partition), :mod:`.preload` (what the forkserver its
+workers are forked from imports). pyarrow and Dask load only when a log is read or a cluster used.
 """
 
-from metrology.measure.chart import Alarm, CusumChart, cusum_arl, cusum_h
-from metrology.measure.holes import Settings, Status, measure_batch
-from metrology.measure.normals import HoleNormals, drill_axis, hole_normals
-from metrology.measure.surface import surface_normal
+import importlib
+
+#: public name -> the module that defines it, imported on first use (PEP 562, as ``metrology``):
+#: importing one module of the package (the workers' preload, which sets their environment before
+#: numpy loads: :mod:`.preload`) loads no other
+_LAZY = {
+    "Alarm": "metrology.measure.chart", "CusumChart": "metrology.measure.chart",
+    "cusum_arl": "metrology.measure.chart", "cusum_h": "metrology.measure.chart",
+    "Settings": "metrology.measure.holes", "Status": "metrology.measure.holes",
+    "measure_batch": "metrology.measure.holes",
+    "HoleNormals": "metrology.measure.normals", "drill_axis": "metrology.measure.normals",
+    "hole_normals": "metrology.measure.normals",
+    "surface_normal": "metrology.measure.surface",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'metrology.measure' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = ["Alarm", "CusumChart", "cusum_arl", "cusum_h", "Settings", "Status", "measure_batch", "HoleNormals",
            "drill_axis", "hole_normals", "surface_normal"]

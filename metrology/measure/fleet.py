@@ -5,7 +5,8 @@ measuring it, writing its result file atomically beside the others) and keeps it
 :class:`~metrology.measure.run.Feed` on the workers, where a chain of watch tasks per cell feeds
 them in the log's order; the client receives each partition's summary (a few kB; and its rows
 when the output is one file) and, at the end, the chains' watches. :func:`connect` opens the
-cluster and closes what it opened. ``dask.distributed`` is imported only here.
+cluster and closes what it opened. ``dask.distributed`` is imported only here (and by the
+forkserver that its LocalCluster's workers are forked from: :mod:`metrology.measure.preload`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from metrology.io.holelog import HoleLog
 from metrology.measure.holes import Settings
 from metrology.measure.run import Feed, Piece, Watch, measure_partition, tune_allocator
 
-__all__ = ["connect", "DaskEngine", "QUIET_CLUSTER"]
+__all__ = ["connect", "DaskEngine", "QUIET_CLUSTER", "WORKER_PRELOAD"]
 
 #: s, how long :func:`connect` tries to reach a running scheduler (Dask retries a refused connection)
 CONNECT_TIMEOUT_S = 10
@@ -52,10 +53,17 @@ def connect(workers: int | None = None, scheduler: str | None = None):
     or to a new LocalCluster of ``workers`` single-threaded worker processes, which the block's end
     closes (a running scheduler is left running). ValueError when Dask is missing or the scheduler
     cannot be reached."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise ValueError("--workers/--scheduler need Dask: pip install \"metro[fleet]\"") from None
+    import importlib.util
+
+    if importlib.util.find_spec("distributed") is None:
+        raise ValueError("--workers/--scheduler need Dask: pip install \"metro[fleet]\"")
+    if scheduler is None and (workers is None or workers < 1):
+        raise ValueError(f"--workers must be at least 1, got {workers}")
+    # a new cluster's workers are forked from a forkserver that has imported what they need: started
+    # first, it imports while Dask is imported here (_forkserver); where there is none, they are spawned
+    forked = scheduler is None and _forkserver()
+    from distributed import Client, LocalCluster
+
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
@@ -64,17 +72,40 @@ def connect(workers: int | None = None, scheduler: str | None = None):
         with client:
             yield client
         return
-    if workers is None or workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {workers}")
     import dask.config
 
     # processes of one thread each: the per-hole maths holds the GIL in parts (pyarrow, Python loops);
     # without a dashboard, and without the monitors that only feed one (QUIET_CLUSTER)
-    with dask.config.set(QUIET_CLUSTER), \
+    start = {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}
+    with dask.config.set({**QUIET_CLUSTER, **start}), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                          scheduler_kwargs=_NO_PORT_8787) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+#: the module the forkserver imports before it forks a LocalCluster's workers (:func:`_forkserver`)
+WORKER_PRELOAD = "metrology.measure.preload"
+
+
+def _forkserver() -> bool:
+    """Start Python's forkserver, with :data:`WORKER_PRELOAD` imported, for a LocalCluster's workers
+    to be forked from; True where the platform has one (POSIX), else their processes are spawned.
+
+    Why: a spawned worker is a new interpreter that imports Dask as it starts and metro's measuring
+    in its first partition, every worker on its own, on the cores the others measure on (about 0.7 s
+    of a core each here). The forkserver imports them once, started before the client imports
+    Dask, and Dask forks each worker from it (its ``multiprocessing-method``, the default start of
+    Python 3.14). It serves this process until it exits: a later cluster forks from it at once, and
+    one running already keeps the preload it was started with."""
+    import multiprocessing
+    import multiprocessing.forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    multiprocessing.get_context("forkserver").set_forkserver_preload([WORKER_PRELOAD])
+    multiprocessing.forkserver.ensure_running()
+    return True
 
 
 def _task(log, part, layout, settings, output, rows):

@@ -250,8 +250,10 @@ def measure_partition(log: HoleLog, part: Partition, layout: SensorLayout, setti
                 own.write(public)
             yield Piece(summary, len(batch), Feed.of(batch, log, part, first), public if rows else None, last=False)
     # the partition's end, once its file is complete (an empty summary: merging it changes no sum); a
-    # one-file output's rows (``rows``) are written by this run too, by the caller
-    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True, write or rows)
+    # one-file output's rows (``rows``) are written by this run too, by the caller. A file this run's
+    # worker wrote before it was lost (the partition re-run here finds it) is this run's too.
+    yield Piece(FleetSummary(tolerance_deg), 0, None, None, True,
+                (output is not None and not output.earlier(part.relative)) or rows)
 
 
 def _public(table, drop=()):

@@ -231,25 +231,40 @@ def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
 
 
 class _KillOnce(distributed.WorkerPlugin):
-    """A worker plugin that kills its worker's process (SIGKILL) a moment after the task of
-    partition 1 starts executing, once (a marker file says it has): a worker lost mid-partition."""
+    """A worker plugin that kills its worker's process (SIGKILL), once (a marker file says it has),
+    in the task of partition 1: ``mid``, as soon as the partition's temporary file is there (its
+    results half written); ``after``, as the task has ended (its file written, its result not yet
+    with the client)."""
 
-    def __init__(self, marker):
-        self.marker = str(marker)
+    def __init__(self, marker, folder, when):
+        self.marker, self.folder, self.when = str(marker), str(folder), when
 
     def transition(self, key, start, finish, **kwargs):
         import signal
         import threading
 
-        if finish == "executing" and str(key).startswith("metro-measure-1-") and not os.path.exists(self.marker):
+        if not str(key).startswith("metro-measure-1-") or os.path.exists(self.marker):
+            return
+        if self.when == "after" and finish == "memory":
             open(self.marker, "w").close()
-            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGKILL)).start()
+            os.kill(os.getpid(), signal.SIGKILL)
+        if self.when == "mid" and finish == "executing":
+            def kill_when_half_written():
+                while not any(n.startswith(".part-0.parquet.") for n in os.listdir(self.folder)):
+                    time.sleep(0.001)
+                open(self.marker, "w").close()
+                os.kill(os.getpid(), signal.SIGKILL)
+
+            os.makedirs(self.folder, exist_ok=True)
+            threading.Thread(target=kill_when_half_written, daemon=True).start()
 
 
-def test_a_worker_killed_mid_partition_is_re_run_and_the_results_are_the_same(fleet, tmp_path):
-    """A real LocalCluster worker process killed while it measures a partition: Dask re-runs the
-    partition on a new worker; every partition's file is written once, whole, the same as one
-    process's (no hole missing or twice), and no temporary is left."""
+@pytest.mark.parametrize("when", ["mid", "after"])
+def test_a_worker_killed_in_a_partition_is_re_run_and_the_results_are_the_same(fleet, tmp_path, when):
+    """A real LocalCluster worker process killed while it writes a partition, or after it wrote
+    it: Dask re-runs the partition on a new worker; every partition's file is written once, whole,
+    the same as one process's (no hole missing or twice), no temporary is left, and a file the lost
+    worker wrote counts as this run's."""
     import cloudpickle
 
     from metrology.io.holelog import open_log
@@ -261,12 +276,13 @@ def test_a_worker_killed_mid_partition_is_re_run_and_the_results_are_the_same(fl
 
     lay = load_layout(fleet / "calibrated.toml")
     log = open_log(fleet / "log", lay.names, batch_rows=100)  # 7 batches a partition: killed between them
+    assert log.partitions[1].relative == "cell=C1/date=2026-11-26/part-0.parquet"
     one = measure_log(log, lay, Settings(), output=PartitionedOutput(tmp_path / "one", {}))
     marker = tmp_path / "killed"
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     try:
         with connect(workers=2) as client:
-            client.register_plugin(_KillOnce(marker))
+            client.register_plugin(_KillOnce(marker, tmp_path / "dask" / "cell=C1" / "date=2026-11-26", when))
             out = PartitionedOutput(tmp_path / "dask", {})
             two = measure_log(log, lay, Settings(), DaskEngine(client), output=out)
             out.release()
@@ -354,8 +370,6 @@ def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_me
     """--workers starts the cluster while the inputs are read: a bad log is still its own one-line
     error (exit 2, nothing written), and the cluster is closed, its worker processes gone. Dask's
     port 8787 taken (another cluster) adds no warning line."""
-    import psutil
-
     with socket.socket() as busy:
         try:
             busy.bind(("", 8787))
@@ -367,8 +381,63 @@ def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_me
     assert r.exit_code == 2, r.output
     assert r.output.strip().count("\n") == 0 and "missing: no such file or folder" in r.output
     assert not (tmp_path / "out").exists()
-    workers = [p for p in psutil.Process().children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
-    assert not workers
+    assert not _worker_processes()
+
+
+def _worker_processes() -> list:
+    """This process's LocalCluster worker processes alive: forked by its forkserver (a child of
+    this process), or spawned (where there is no forkserver)."""
+    import psutil
+
+    me = psutil.Process()
+    return [p for p in me.children(recursive=True) if p.ppid() != me.pid or "spawn_main" in " ".join(p.cmdline())]
+
+
+def test_the_local_clusters_workers_are_forked_with_what_they_need_imported_and_one_blas_thread(tmp_path):
+    """--workers forks its worker processes from a forkserver that has imported Dask and metro's
+    measuring (WORKER_PRELOAD), not spawned to import them each, and the block's end leaves no
+    worker running (a worker killed and restarted is forked again: the killed-worker test). numpy
+    was loaded there with the environment Dask gives a spawned worker: one BLAS thread, a worker per
+    core (the tests' own process has it already, so a new process without it checks that)."""
+    from metrology.measure.fleet import WORKER_PRELOAD, connect
+
+    with connect(workers=2) as client:
+        seen = client.run(lambda: (WORKER_PRELOAD in sys.modules, os.getppid()))
+        assert len(_worker_processes()) == 2
+    assert [v[0] for v in seen.values()] == [True, True]
+    forkserver = {v[1] for v in seen.values()}
+    assert len(forkserver) == 1 and forkserver != {os.getpid()}  # both forked by one forkserver, not spawned by us
+    assert not _worker_processes()
+
+    code = """if True:
+        import ctypes
+        from metrology.measure.fleet import connect
+
+        def blas_threads():  # OpenBLAS's thread count (numpy's wheels bundle it), None without it
+            import numpy  # noqa: F401
+
+            libs = sorted({line.split()[-1] for line in open("/proc/self/maps") if "openblas" in line})
+            lib = ctypes.CDLL(libs[0]) if libs else None
+            for name in ("scipy_openblas_get_num_threads64_", "openblas_get_num_threads64_", "openblas_get_num_threads"):
+                if hasattr(lib, name):
+                    return getattr(lib, name)()
+            return None
+
+        if __name__ == "__main__":
+            print(blas_threads())
+            with connect(workers=1) as client:
+                print(*client.run(blas_threads).values())
+    """
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    script = tmp_path / "blas.py"
+    script.write_text(code)
+    out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    here, worker = out.stdout.split()
+    if here == "None":
+        pytest.skip("numpy without OpenBLAS: its thread count is not read here")
+    assert worker == "1"
+    assert int(here) > 1 or os.cpu_count() == 1  # numpy loaded without the environment: a thread a core
 
 
 def test_each_partitions_drift_watch_link_follows_its_measuring_so_the_feeds_held_stay_bounded(tmp_path):
