@@ -10,7 +10,7 @@ per-hole call of a cell's controller), :mod:`.panel` (each hole's local surface 
 workers are forked from imports). pyarrow and Dask load only when a log is read or a cluster used.
 """
 
-import importlib
+from metrology import lazy_names
 
 #: public name -> the module that defines it, imported on first use (PEP 562, as ``metrology``):
 #: importing one module of the package (the workers' preload, which sets their environment before
@@ -26,16 +26,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'metrology.measure' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())
 
 
 __all__ = ["Alarm", "CusumChart", "cusum_arl", "cusum_h", "Settings", "Status", "measure_batch", "HoleNormals",
