@@ -97,7 +97,9 @@ def _forkserver() -> bool:
     of a core each here). The forkserver imports them once, started before the client imports
     Dask, and Dask forks each worker from it (its ``multiprocessing-method``, the default start of
     Python 3.14). It serves this process until it exits: a later cluster forks from it at once, and
-    one running already keeps the preload it was started with."""
+    one running already keeps the preload it was started with. The forkserver is the process's own
+    (``multiprocessing``'s): other forkserver processes this program starts later come from it too,
+    with metro's modules loaded."""
     import multiprocessing
     import multiprocessing.forkserver
 
