@@ -1,0 +1,49 @@
+#!/bin/bash
+# Golden outputs of `metro measure` (issue 49): every output of one process, Dask, --follow, --panel,
+# --points, --qif on forward-simulated logs, to compare byte for byte before and after a refactor.
+#
+#   benchmarks/golden_measure.sh WORKDIR OUTDIR     # makes the logs in WORKDIR once, the outputs in OUTDIR
+#   diff -r OUT_BEFORE OUT_AFTER
+set -e
+WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
+W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels
+cd "$WD"
+if [ ! -f done ]; then
+  metro calibrate $W/measured/calibration.csv --plane $W/measured/plane.json --layout $L --out cal.toml 2>/dev/null
+  python - <<'PY'
+import pyarrow.csv as c
+import metrology.io.layout as m
+m.save_layout(m.load_layout('cal.toml').subset(['L1', 'L2', 'L3']), 'cal3.toml')
+PY
+  python -c "import metrology.io.layout as m, sys; m.save_layout(m.load_layout(sys.argv[1]).subset(['L1','L2','L3']), 'nom3.toml')" $L
+  metro simulate-log --out flat.csv --holes 3000 --seed 3 --gross-rate 0.002 >/dev/null
+  metro simulate-log --out wing.csv --holes 2000 --seed 5 --panel $P/wing.stl --points $P/wing.holes.csv --true-layout $L --spin-deg 1 >/dev/null
+  metro simulate-log --out barrel.csv --holes 1500 --seed 6 --panel $P/barrel.stl --points $P/barrel.holes.csv --true-layout $L >/dev/null
+  metro simulate-log --out part --holes 4000 --cells 2 --seed 7 >/dev/null
+  metro simulate-log --out calflat.parquet --layout cal.toml --holes 3000 --seed 8 >/dev/null
+  metro simulate-log --out flat3.csv --layout cal3.toml --holes 2000 --seed 9 >/dev/null
+  metro simulate-log --out wing3.csv --layout nom3.toml --true-layout nom3.toml --holes 1500 --seed 10 --panel $P/wing.stl --points $P/wing.holes.csv >/dev/null
+  metro simulate-log --out nacelle.csv --holes 1500 --seed 12 --panel $P/nacelle.stl --points $P/nacelle.holes.csv --true-layout $L --layout $L >/dev/null
+  python - <<'PY'
+import pyarrow.csv as c
+for f in ('wing', 'wing3'):
+    t = c.read_csv(f + '.csv')
+    c.write_csv(t.drop([n for n in t.column_names if n.startswith('pose_')]), f + '_nopose.csv')
+PY
+  touch done
+fi
+m() { name=$1; shift; metro measure "$@" > $O/$name.stdout 2> $O/$name.stderr || true; }
+m flat flat.csv --layout $L --out $O/flat.csv --json
+m calflat calflat.parquet --layout cal.toml --out $O/calflat.csv --json --qif $O/calflat.qif
+m flat3 flat3.csv --layout cal3.toml --out $O/flat3.csv --json
+m flat3inf flat3.csv --layout cal3.toml --out $O/flat3inf.csv --min-radius-mm inf
+m wing wing.csv --layout $L --panel $P/wing.stl --points $P/wing.holes.csv --out $O/wing.csv --qif $O/wing.qif --json
+m barrel barrel.csv --layout $L --panel $P/barrel.stl --points $P/barrel.holes.csv --out $O/barrel.csv --json
+m nacelle_pts nacelle.csv --layout $L --points $P/nacelle.holes.csv --out $O/nacelle_pts.csv --json
+m wing3 wing3.csv --layout nom3.toml --panel $P/wing.stl --points $P/wing.holes.csv --out $O/wing3.csv --json
+m part1 part --layout $L --out $O/part1 --json
+m dask part --layout $L --out $O/dask --json --workers 1
+m follow flat.csv --layout $L --follow
+m follow_wing wing.csv --layout $L --follow --panel $P/wing.stl --points $P/wing.holes.csv
+m wing_nopose wing_nopose.csv --layout $L --panel $P/wing.stl --points $P/wing.holes.csv --out $O/wing_nopose.csv --json
+m wing3_nopose wing3_nopose.csv --layout nom3.toml --panel $P/wing.stl --points $P/wing.holes.csv --out $O/wing3_nopose.csv --json
