@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from metrology.core.sym2 import eig2
+
 __all__ = [
     "tangent_frame",
     "principal_curvatures",
@@ -100,9 +102,7 @@ def tangent_frame(n):
 def principal_curvatures(Kl):
     """``(m, 2)`` 1/mm: the eigenvalues (descending) of the symmetric 2 x 2 curvature tensors
     ``Kl (m, 2, 2)`` 1/mm written in a tangent frame."""
-    a, b, c = Kl[:, 0, 0], Kl[:, 1, 1], Kl[:, 0, 1]
-    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    return np.stack([0.5 * (a + b) + disc, 0.5 * (a + b) - disc], axis=1)
+    return np.stack(eig2(Kl[:, 0, 0], Kl[:, 0, 1], Kl[:, 1, 1]), axis=1)
 
 
 def embed_shape(Kl, e1, e2):

@@ -43,9 +43,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.layout import SensorLayout
+from metrology.core.sym2 import nuclear2
 from metrology.core.sym3 import smallest_eigvec
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
-from metrology.measure.normals import hole_normals
+from metrology.measure.normals import concat_normals, hole_normals
+from metrology.measure.reasons import reason_column, verdict_reasons
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
            "DEFAULT_MIN_RADIUS_MM"]
@@ -94,7 +96,7 @@ class _Measured:
     noise_sd: np.ndarray
     signature: np.ndarray
     used: np.ndarray  # (N, n) bool
-    reason: np.ndarray  # (N,) object: "" or why
+    reason: dict  # row -> why, the rare holes with a note (metrology.measure.reasons)
     disagree: np.ndarray  # (N,) bool: rule 2, the readings disagree
     residual_sd: np.ndarray  # (N,) float, mm: the misfit's sd (noise and calibration), 4 sensors
     twist: np.ndarray  # (N,) float, mm^2: |M|_*, 4 sensors
@@ -111,11 +113,8 @@ def _hole_normals(layout, d, min_radius_mm):
     """:func:`hole_normals` in slices of :data:`CACHE_ROWS` rows, joined."""
     if len(d) <= CACHE_ROWS:
         return hole_normals(layout, d, min_radius_mm=min_radius_mm)
-    parts = [hole_normals(layout, d[i:i + CACHE_ROWS], min_radius_mm=min_radius_mm)
-             for i in range(0, len(d), CACHE_ROWS)]
-    fields = [f for f in parts[0].__dataclass_fields__]
-    return type(parts[0])(**{f: None if getattr(parts[0], f) is None else np.concatenate([getattr(p, f) for p in parts])
-                             for f in fields})
+    return concat_normals([hole_normals(layout, d[i:i + CACHE_ROWS], min_radius_mm=min_radius_mm)
+                           for i in range(0, len(d), CACHE_ROWS)])
 
 
 def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None) -> _Measured:
@@ -131,21 +130,22 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     in_range = finite & (d >= lo[None]) & (d <= hi[None])
     out = _Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
-                    np.full(N, "", dtype=object), np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
+                    {}, np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
                     np.full((N, 3), np.nan))
     if shape is not None:
         out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
         out.extra["turn"] = np.full((N, 3, 3), np.nan)
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
-        out.reason[i] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
+        out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
                                   for j in np.flatnonzero(bad[i]))
     count = in_range.sum(1)
     few = count < MIN_SENSORS
     for i in np.flatnonzero(few):
         blank = [layout.names[j] for j in np.flatnonzero(~finite[i])]
         why = f"{count[i]} usable readings, need {MIN_SENSORS}" + (f" ({', '.join(blank)} blank)" if blank else "")
-        out.reason[i] = why + (f"; {out.reason[i]}" if out.reason[i] else "")
+        prior = out.reason.get(int(i), "")
+        out.reason[int(i)] = why + (f"; {prior}" if prior else "")
     # one group per pattern of usable sensors (all, or all but one, in practice)
     code = in_range @ (1 << np.arange(n))
     code[few] = -1
@@ -164,9 +164,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                                           PanelTerms(u_shape[of(rows[i:i + CACHE_ROWS])], spin[of(rows[i:i + CACHE_ROWS])]),
                                           beyond=None if higher is None else higher.rows(of(rows[i:i + CACHE_ROWS])))
                      for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
-            h = type(parts[0][0])(**{f: None if getattr(parts[0][0], f) is None else
-                                     np.concatenate([getattr(p[0], f) for p in parts])
-                                     for f in parts[0][0].__dataclass_fields__})
+            h = concat_normals([p[0] for p in parts])
             for k in parts[0][1]:
                 out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
         else:
@@ -184,7 +182,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
-                out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
+                out.reason[int(r)] = (f"readings disagree: the redundant reading misses the plane by "
                                  f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
                                  f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
                                  if shape is None else
@@ -210,9 +208,7 @@ def _moment(layout, d):
 
 def _nuclear2(m):
     """(N,) the nuclear norm of the symmetric 2 x 2 matrices ``m (N, 3)`` as (xx, yy, xy)."""
-    a, b, c = m[:, 0], m[:, 1], m[:, 2]
-    disc = np.sqrt(0.25 * (a - b) ** 2 + c * c)
-    return np.abs(0.5 * (a + b) + disc) + np.abs(0.5 * (a + b) - disc)
+    return nuclear2(m[:, 0], m[:, 2], m[:, 1])
 
 
 def _poses_disagree(before, after, settings):
@@ -410,12 +406,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     reason = before.reason
     poses = np.zeros(N, bool)
     if after is not None:
-        for i in np.flatnonzero((after.reason != "") & judge_after):
-            reason[i] = (reason[i] + "; " if reason[i] else "") + "after the adjustment: " + after.reason[i]
+        for i in sorted(after.reason):
+            if judge_after[i]:
+                reason[i] = (reason[i] + "; " if reason.get(i) else "") + "after the adjustment: " + after.reason[i]
         poses, diff = _poses_disagree(before, after, settings)
         poses &= judge_after & ~before.disagree & ~after.disagree  # rule 2 named the gross pose: no doubt left
-        for i in np.flatnonzero(poses):
-            reason[i] = (reason[i] + "; " if reason[i] else "") + (
+        for i in np.flatnonzero(poses).tolist():
+            reason[i] = (reason[i] + "; " if reason.get(i) else "") + (
                 f"not measured after the adjustment: the misfits before and after it differ by {diff[i] * 1e3:.1f} µm, "
                 f"more than {GROSS_SIGMAS:g} sigmas beyond what a panel of radius >= {settings.min_radius_mm:g} mm "
                 f"gives as the head tilts: one reading is gross, the drilled angle is not known")
@@ -427,29 +424,21 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     code[judged - judged_u > tol] = CODE[Status.FAILS]
     measured = np.isfinite(judged) & (np.isfinite(before.angle) | judge_after)
     code[~measured] = CODE[Status.NOT_MEASURED]
-    for i in np.flatnonzero(code == CODE[Status.FAILS]):
-        reason[i] = (reason[i] + "; " if reason[i] else "") + (
-            f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg - "
-            f"U95 {np.degrees(judged_u[i]):.4f} deg > tolerance {np.degrees(tol):g} deg")
-    for i in np.flatnonzero(code == CODE[Status.UNDECIDED]):
-        reason[i] = (reason[i] + "; " if reason[i] else "") + (
-            f"{'after the adjustment' if judge_after[i] else 'as measured'}: angle {np.degrees(judged[i]):.4f} deg "
-            f"+- U95 {np.degrees(judged_u[i]):.4f} deg straddles the tolerance {np.degrees(tol):g} deg")
     ids = table.column("hole_id").cast(pa.string())
     if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
         for i in np.flatnonzero(table_row < 0):
             code[i] = CODE[Status.NOT_MEASURED]
-            reason[i] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
+            reason[int(i)] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
                          f"unknown")
         known = np.flatnonzero(table_row >= 0)
         for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
             code[i] = CODE[Status.NOT_MEASURED]
-            reason[i] = surf.problem[table_row[i]]
+            reason[int(i)] = surf.problem[table_row[i]]
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = CODE[Status.NOT_MEASURED]
         for r, o in zip(dup, orig):
-            reason[r] = f"duplicate hole_id (row {o + 1} of this batch has it too)"
+            reason[int(r)] = f"duplicate hole_id (row {o + 1} of this batch has it too)"
     patterns = before.used @ (1 << np.arange(layout.n))
     pattern_names = [" ".join(nm for j, nm in enumerate(names) if (p >> j) & 1) if bin(p).count("1") >= MIN_SENSORS
                      else "" for p in range(1 << layout.n)]
@@ -467,7 +456,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
         "sensors_used": _labels(patterns, pattern_names),
         "status": _labels(code, [str(s) for s in STATUSES]),
-        "reason": pa.array(reason.tolist(), pa.string()) if np.any(reason != "") else pa.array(np.full(N, ""), pa.string()),
+        "reason": reason_column(verdict_reasons(code, judge_after, judged, judged_u, tol), reason),
     }
     if surf is not None:  # the panel's columns
         k = surf.k[table_row] if have.all() else np.where((table_row >= 0)[:, None], surf.k[table_row], np.nan)

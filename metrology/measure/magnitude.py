@@ -42,6 +42,8 @@ import functools
 
 import numpy as np
 
+from metrology.core.sym2 import eig2
+
 __all__ = ["K95", "major_sd", "magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
 
 #: the 95 % quantile of |N(0, 1)|, the coverage factor of a normal (re-exported by measure.normals)
@@ -129,7 +131,7 @@ def major_sd(C):
     (N,) float, rad
     """
     C = np.asarray(C, float).reshape(-1, 2, 2)
-    return np.sqrt(0.5 * (C[:, 0, 0] + C[:, 1, 1]) + np.sqrt(0.25 * (C[:, 0, 0] - C[:, 1, 1]) ** 2 + C[:, 0, 1] ** 2))
+    return np.sqrt(eig2(C[:, 0, 0], C[:, 0, 1], C[:, 1, 1])[0])
 
 
 def _lookup(x, s, w):
@@ -162,9 +164,8 @@ def magnitude_u95(g, C):
     g = np.asarray(g, float).reshape(-1, 2)
     C = np.asarray(C, float).reshape(-1, 2, 2)
     a, b, c = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
-    disc = np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    l1 = 0.5 * (a + c) + disc
-    l2 = np.maximum(0.5 * (a + c) - disc, 0.0)
+    l1, l2 = eig2(a, b, c)
+    l2 = np.maximum(l2, 0.0)
     gn = np.hypot(g[:, 0], g[:, 1])
     s1 = np.sqrt(l1)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -267,19 +267,11 @@ def tcs2panel_nominal(n, s: float):
     """(h, 3, 3): the head's rotation with its tool axis on ``a = -n`` (``n (h, 3)`` unit, toward the
     head), no spin: ``Q(-e_z -> a) F``, ``F = diag(1, -s, -s)`` (columns)."""
     a = -np.asarray(n, float)
-    wx, wy, wz = a[:, 0], a[:, 1], a[:, 2]
-    kx, ky, c = wy, -wx, -wz  # -e_z x a, and cos
-    f = 1.0 / (1.0 + c)
+    q = smallest_rotation(a[:, 1], -a[:, 0], 0.0, -a[:, 2])  # -e_z x a, and the cosine
     Q = np.empty((len(a), 3, 3))
-    Q[:, 0, 0] = 1.0 - ky * ky * f
-    Q[:, 0, 1] = kx * ky * f
-    Q[:, 0, 2] = ky
-    Q[:, 1, 0] = kx * ky * f
-    Q[:, 1, 1] = 1.0 - kx * kx * f
-    Q[:, 1, 2] = -kx
-    Q[:, 2, 0] = -ky
-    Q[:, 2, 1] = kx
-    Q[:, 2, 2] = 1.0 - (kx * kx + ky * ky) * f
+    for i in range(3):
+        for j in range(3):
+            Q[:, i, j] = q[i][j]
     return Q * np.array([1.0, -s, -s])
 
 

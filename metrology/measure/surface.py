@@ -55,12 +55,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.layout import SensorLayout
-from metrology.core.model import direction_basis
+from metrology.core.sym2 import eig2
 from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
 from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
-from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
-from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
+from metrology.measure.budget import CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, Budget, Kind, Source, angle_gradient, combine
+from metrology.measure.normals import HoleNormals, drill_axis
+from metrology.measure.terms import calibration_source, noise_source, reading_sigma, redundancy
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
 
@@ -315,6 +316,39 @@ def _shape_basis(fit, g2, axis):
     return [h * a1 * a1, h * a2 * a2, (sc / np.sqrt(2.0)) * a1 * a2]
 
 
+def _panel_sources(fit, g2, axis, terms, A0, A1):
+    """The panel's sources (its shape's uncertainty, normal; the head's spin, uniform within ``+-spin``)
+    and the variance the spin gives the redundant reading's misfit (N,) mm^2 (0 without a spin)."""
+    N = len(g2)
+    C_shape, C_spin = np.zeros((N, 3)), np.zeros((N, 3))
+    a_spin = np.zeros(N)
+    rho_var = 0.0
+    if terms is not None:
+        uK2 = np.broadcast_to(np.asarray(terms.u_shape, float).reshape(-1), (N,)) ** 2
+        for dh in _shape_basis(fit, g2, axis):  # delta K in an orthonormal basis of the tangent plane's tensors
+            v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
+            C_shape[:, 0] += v0 * v0 * uK2
+            C_shape[:, 1] += v0 * v1 * uK2
+            C_shape[:, 2] += v1 * v1 * uK2
+        spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
+        if np.any(spin > 0):  # delta K = delta psi (W K - K W), W the cross matrix of m
+            m = fit.normal
+            sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
+            W = np.zeros((N, 3, 3))
+            W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -m[:, 2], m[:, 1], -m[:, 0]
+            W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
+            dK = W @ fit.Kt - fit.Kt @ W
+            dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
+            v = np.einsum("hin,hn->hi", fit.A[:, :2, :], dh)
+            f = spin ** 2 / 3.0
+            C_spin[:, 0], C_spin[:, 1], C_spin[:, 2] = v[:, 0] * v[:, 0] * f, v[:, 0] * v[:, 1] * f, v[:, 1] * v[:, 1] * f
+            c0, c1 = angle_gradient(fit.g[:, 0], fit.g[:, 1])
+            a_spin = np.abs(c0 * v[:, 0] + c1 * v[:, 1]) * spin  # rad, the angle at the spin's end
+            if fit.null is not None:  # the spin turns the shape's twist: the redundant reading sees it
+                rho_var = (fit.null * dh).sum(1) ** 2 * f
+    return Source(PANEL_SHAPE, C_shape), Source(SPIN, C_spin, Kind.UNIFORM, a_spin), rho_var
+
+
 def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | None = None,
                          covariance=None, sigma_mm=None, beyond=None):
     """Normals, angles and uncertainties of holes (every reading present) with the surface known.
@@ -346,147 +380,50 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0)
     fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
-    sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
-    sigma = np.where(np.isfinite(sigma), sigma, 0.0)
+    sigma = reading_sigma(layout, sigma_mm)
     axis = drill_axis(layout)
     g = fit.g
     gx, gy = g[:, 0], g[:, 1]
     g2 = gx * gx + gy * gy
-    gn = np.sqrt(g2)
-    angle = np.arctan(gn)
     normal = -fit.normal  # along the drill axis
-    # sensor-major (n, N) arrays (the fit's own layout: each sum over the sensors a sum of contiguous
-    # rows) and the 2 x 2 covariances by their entries (00, 01, 11), (N,) each
+    # sensor-major (n, N) arrays (the fit's own layout: each sum over the sensors a sum of contiguous rows)
     A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T  # (n, N): the tilt's change per unit change of each height
-    Ag = fit.A[:, :2, :]  # (N, 2, n)
     Gx, Gy, Gz = fit.G.transpose(2, 1, 0)  # (n, N)
     u = layout.direction
-    # reading noise
     Gu = Gx * u[:, 0, None] + Gy * u[:, 1, None] + Gz * u[:, 2, None]  # (n, N)
-    qn = (Gu * sigma[:, None]) ** 2
-
-    def cov2(qq):  # sum_n A_i qq A_j
-        a0 = A0 * qq
-        return [(a0 * A0).sum(0), (a0 * A1).sum(0), (A1 * qq * A1).sum(0)]
-
-    C_noise = cov2(qn)
-    # calibration
-    C_cal = [np.zeros(N)] * 3
-    q_cal = np.zeros((n, N))
+    noise = noise_source(A0, A1, Gu, sigma)
     if cov is not None:
-        e = direction_basis(u)  # (n, 2, 3)
-        r = [Gx, Gy, Gz] + [d.T * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
-        blocks = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])  # (n, 5, 5)
-        off = cov.copy()
-        for i in range(n):
-            off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
-        q_cal = sum(r[k] * sum(blocks[:, k, l, None] * r[l] for l in range(5)) for k in range(5))  # (n, N)
-        if not np.any(off):
-            C_cal = cov2(q_cal)
-        else:  # the whole covariance
-            rows = np.stack(r, axis=-1).transpose(1, 0, 2)  # (N, n, 5)
-            Sx = (rows * Ag[:, 0, :, None]).reshape(N, -1)
-            Sy = (rows * Ag[:, 1, :, None]).reshape(N, -1)
-            Sg = np.stack([Sx, Sy], axis=1)  # (N, 2, 5n)
-            Cc = np.einsum("hik,kl,hjl->hij", Sg, cov, Sg)
-            C_cal = [Cc[:, 0, 0], Cc[:, 0, 1], Cc[:, 1, 1]]
-    # the panel: delta K in an orthonormal basis of the tangent plane's symmetric tensors, and the spin
-    C_pan = [np.zeros(N)] * 3
-    dh_basis = None
-    dh_spin = None
-    v_spin = None
-    if terms is not None:
-        m = fit.normal
-        dh_basis = _shape_basis(fit, g2, axis)  # (n, N) each
-        uK = np.asarray(terms.u_shape, float).reshape(-1)
-        uK2 = np.broadcast_to(uK, (N,)) ** 2
-        for dh in dh_basis:
-            v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
-            C_pan = [C_pan[0] + v0 * v0 * uK2, C_pan[1] + v0 * v1 * uK2, C_pan[2] + v1 * v1 * uK2]
-        spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
-        if np.any(spin > 0):
-            sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
-            W = np.zeros((N, 3, 3))
-            W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -m[:, 2], m[:, 1], -m[:, 0]
-            W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = m[:, 2], -m[:, 1], m[:, 0]
-            dK = W @ fit.Kt - fit.Kt @ W
-            dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
-            dh_spin = dh.T  # (n, N)
-            v = np.einsum("hin,hn->hi", Ag, dh)
-            v_spin = v * spin[:, None]  # the tilt at the spin's end, +-spin
-            f = spin ** 2 / 3.0
-            C_pan = [C_pan[0] + v[:, 0] * v[:, 0] * f, C_pan[1] + v[:, 0] * v[:, 1] * f, C_pan[2] + v[:, 1] * v[:, 1] * f]
-    C = [a + b + c for a, b, c in zip(C_noise, C_cal, C_pan)]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        k = 1.0 / (gn * (1.0 + g2))
-    k = np.where(np.isfinite(k), k, 0.0)
-    c0, c1 = gx * k, gy * k
-
-    def quad(Cm):
-        return c0 * c0 * Cm[0] + 2.0 * c0 * c1 * Cm[1] + c1 * c1 * Cm[2]
-
-    var_noise = quad(C_noise)
-    var_pan = quad(C_pan)
-    var = var_noise + quad(C_cal) + var_pan
-    u_angle = np.sqrt(var)
-    if v_spin is None:
-        U95 = K95 * u_angle
-    else:  # the spin's share is uniform, not normal: the 95 % half-width of their sum
-        a_spin = np.abs(c0 * v_spin[:, 0] + c1 * v_spin[:, 1])  # rad, the angle at the spin's end
-        U95 = normal_uniform_u95(np.sqrt(np.maximum(var - a_spin ** 2 / 3.0, 0.0)), a_spin)
-    f = 1.0 / ((1.0 + g2) ** 2)
-    Ca = np.empty((N, 2, 2))  # rad^2: the tilt's covariance in angle
-    Ca[:, 0, 0], Ca[:, 1, 1] = C[0] * f, C[2] * f
-    Ca[:, 0, 1] = Ca[:, 1, 0] = C[1] * f
-    s2d = major_sd(Ca)  # rad: its major axis's standard deviation
-    # near 0, u is the 2-D spread's major axis
-    still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u_angle) & (angle < SMALL_ANGLE_SIGMAS * s2d)
-    u_angle[still] = s2d[still]
-    # U95: the half-width holding 95 % of the length of the tilt (metrology.measure.magnitude); the
-    # linear rule beyond X_MAX major-axis standard deviations
-    near = angle < X_MAX * s2d
-    if np.any(near):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
-        U95[near] = magnitude_u95(tilt, Ca[near])
-    panel_share = np.sqrt(np.maximum(var_pan, 0.0))
-    residual = np.full(N, np.nan)
-    residual_z = np.full(N, np.nan)
-    signature = twist = residual_sd = sd = None
+        cal, q_cal = calibration_source(layout, cov, d.T, (Gx, Gy, Gz), A0, A1)
+    else:
+        cal, q_cal = Source(CALIBRATION, np.zeros((N, 3))), np.zeros((n, N))
+    shape_src, spin_src, rho_var = _panel_sources(fit, g2, axis, terms, A0, A1)
+    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src))
+    un = combine(budget)
+    angle, u_angle, U95 = un.angle, un.u, un.U95
+    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2)
     misfit = np.full(N, np.nan)
     misfit_z = np.full(N, np.nan)
+    twist = None
     if n == 4:
         qv = fit.null.T  # (n, N)
-        residual = (qv * fit.h_res.T).sum(0)
-        sig_k = qv * Gu
-        sd = np.sqrt(((sig_k * sigma[:, None]) ** 2).sum(0))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            residual_z = residual / sd
-        var_pan_rho = np.zeros(N)
-        # the shape change the redundant reading sees: rho = sum_b (q . dh_b) x_b
-        basis = dh_basis if dh_basis is not None else _shape_basis(fit, g2, axis)
-        s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b
+        basis = _shape_basis(fit, g2, axis)
+        s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b: the shape change the redundant reading sees
         sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
+        extra = 0.0
         if terms is not None:
-            var_pan_rho = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
-            if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
-                var_pan_rho = var_pan_rho + (qv * dh_spin).sum(0) ** 2 * spin ** 2 / 3.0
-        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho)
-        signature = sig_k.T
+            extra = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2 + rho_var
+        red = redundancy(qv, fit.h_res.T, Gu, sigma, q_cal, extra)
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
-            f = residual / sb2
+            f = red.residual / sb2
             # the least-norm shape change giving rho; its size: the largest |eigenvalue| of
             # x1 t1t1 + x2 t2t2 + x3 (t1t2 + t2t1)/sqrt2
             a, b, cc = s_b[0] * f, s_b[1] * f, s_b[2] * f / np.sqrt(2.0)
-            misfit = np.abs(0.5 * (a + b)) + np.sqrt(0.25 * (a - b) ** 2 + cc * cc)
-            misfit_z = residual / residual_sd
-    elif n > 4:
-        res = fit.h_res
-        residual = np.sqrt((res * res).sum(1) / n)
-        v = ((Gu * sigma[:, None]) ** 2).T
-        with np.errstate(invalid="ignore", divide="ignore"):
-            residual_z = np.sqrt((res * res / v).sum(1) / (n - 3))
+            l1, l2 = eig2(a, cc, b)
+            misfit = np.maximum(np.abs(l1), np.abs(l2))
+            misfit_z = red.residual / red.sd
+    else:
+        red = redundancy(None, fit.h_res.T, Gu, sigma, q_cal)
     with np.errstate(invalid="ignore"):
         nm, pm = fit.normal, fit.plane_normal
         correction = np.arccos(np.clip(nm[:, 0] * pm[:, 0] + nm[:, 1] * pm[:, 1] + nm[:, 2] * pm[:, 2], -1.0, 1.0))
@@ -494,7 +431,6 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     for arr in (angle, u_angle, U95, correction):
         arr[bad] = np.nan
     normal[bad] = np.nan
-    hn = HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z,
-                     None if signature is None else np.ascontiguousarray(signature), panel_share, twist,
-                     residual_sd, sd)
+    hn = HoleNormals(normal, angle, u_angle, U95, un.of(READING_NOISE), red.residual, red.residual_z, red.signature,
+                     panel_share, twist, red.sd, red.noise_sd, budget)
     return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z, "turn": Y}

@@ -178,16 +178,3 @@ def test_curved_panel_bias_is_bounded_by_the_curvature_term(head, panel):
     assert 3.6 < np.median(ratio[errs[0] > np.radians(0.01)]) < 4.4  # ... and falls as 1/R
     flat = hole_normals(lay, cast_plane(lay.zero, lay.direction, nrm, p), sigma_mm=0.0)
     assert np.all(flat.curvature_bound == 0)
-
-
-def test_radius95_table_and_coverage():
-    from metrology.measure.normals import K95, K95_2D, RADIUS95_F, _radius_table, radius95
-
-    grid, f = _radius_table()
-    assert np.allclose(f, RADIUS95_F, atol=2e-6)
-    assert RADIUS95_F[0] == pytest.approx(K95, abs=5e-5) and RADIUS95_F[-1] == pytest.approx(K95_2D, abs=5e-5)
-    rng = np.random.default_rng(0)
-    z = rng.normal(size=(400_000, 2))
-    for r in (0.0, 0.1, 0.37, 1.0):
-        R = radius95(np.array([4.0]), np.array([4.0 * r]))[0]
-        assert np.mean(4.0 * z[:, 0] ** 2 + 4.0 * r * z[:, 1] ** 2 <= R * R) == pytest.approx(0.95, abs=0.002)

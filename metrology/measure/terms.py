@@ -1,0 +1,132 @@
+"""The budget's terms both fitters share: the reading noise, the calibration's covariance and the
+redundant reading's misfit, from a fit's linear map of the spots' heights.
+
+A fitter (the micro-plane, or the local surface) gives, per hole, how each spot's height moves the
+tilt, ``A = d g / d h`` ((2, n) per hole, as two sensor-major (n, N) arrays ``A0, A1``), and how a
+spot's displacement moves its height, ``G_i = d h_i / d S_i`` (the micro-plane's ``(-g_x, -g_y, 1)``;
+the surface's own slope at the spot). Then
+
+- a reading error ``delta d_i`` moves the height by ``(G_i . u_i) delta d_i``;
+- a calibration error moves the spot by ``delta E_i + d_i (a e1_i + b e2_i)`` (the chart of
+  :mod:`metrology.core.model`), its height by ``r_i . (delta E, a, b)``, ``r_i = (G_i, d_i G_i.e1_i,
+  d_i G_i.e2_i)``;
+
+and the tilt's covariance from independent heights of variance ``q_i`` is ``sum_i q_i A_i A_i^T``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from metrology.core.model import direction_basis
+from metrology.measure.budget import CALIBRATION, READING_NOISE, Source
+
+__all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "redundancy", "Redundancy"]
+
+
+def reading_sigma(layout, sigma_mm=None) -> np.ndarray:
+    """(n,) float, mm: each sensor's reading noise (``sigma_mm``, else the layout's; unknown: 0)."""
+    sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (layout.n,))
+    return np.where(np.isfinite(sigma), sigma, 0.0)
+
+
+def tilt_cov(A0, A1, q) -> np.ndarray:
+    """(N, 3): the tilt's covariance ``(00, 01, 11)`` from independent heights of variance ``q (n, N)``,
+    ``A0, A1 (n, N)`` the tilt's change per unit height."""
+    a0 = A0 * q
+    out = np.empty((A0.shape[1], 3))
+    out[:, 0] = (a0 * A0).sum(0)
+    out[:, 1] = (a0 * A1).sum(0)
+    out[:, 2] = (A1 * q * A1).sum(0)
+    return out
+
+
+def noise_source(A0, A1, Gu, sigma) -> Source:
+    """The reading noise's :class:`Source`: ``Gu (n, N)`` = ``G_i . u_i``, ``sigma (n,)`` mm."""
+    return Source(READING_NOISE, tilt_cov(A0, A1, (Gu * sigma[:, None]) ** 2))
+
+
+def _block_diagonal(cov, n):
+    off = cov.copy()
+    for i in range(n):
+        off[5 * i:5 * i + 5, 5 * i:5 * i + 5] = 0.0
+    return not np.any(off)
+
+
+def calibration_source(layout, cov, dT, G, A0, A1):
+    """The calibration's :class:`Source` and each spot's own height variance ``r_i^T C_ii r_i`` ((n, N),
+    its sensor's 5 x 5 block: the redundant reading's share).
+
+    Parameters
+    ----------
+    layout : SensorLayout, n sensors; cov : (5n, 5n) float, mm and rad, the calibration's covariance
+    dT : (n, N) float, mm, the readings; G : three (n, N) or (N,) arrays, ``G_i`` by component
+    A0, A1 : (n, N), the tilt's change per unit height
+
+    A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: the spots are then
+    independent (an elementwise quadratic form per spot); any other covariance is propagated whole.
+    """
+    n = layout.n
+    e = direction_basis(layout.direction)  # (n, 2, 3): the chart axes of each calibrated beam
+    Gx, Gy, Gz = G
+    r = [Gx, Gy, Gz] + [dT * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
+    B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])[..., None]  # (n, 5, 5, 1)
+    q = 0.0
+    for k in range(5):  # r^T B r over the symmetric entries
+        t = B[:, k, k] * r[k]
+        for m in range(k + 1, 5):
+            t = t + 2.0 * B[:, k, m] * r[m]
+        q = q + r[k] * t
+    q = np.broadcast_to(q, dT.shape)
+    if _block_diagonal(cov, n):
+        return Source(CALIBRATION, tilt_cov(A0, A1, q)), q
+    N = dT.shape[1]
+    rows = np.stack([np.broadcast_to(x, dT.shape) for x in r], axis=-1).transpose(1, 0, 2)  # (N, n, 5)
+    Sx = (rows * A0.T[:, :, None]).reshape(N, -1)
+    Sy = (rows * A1.T[:, :, None]).reshape(N, -1)
+    cx, cy = Sx @ cov, Sy @ cov
+    C = np.stack([np.einsum("ij,ij->i", cx, Sx), np.einsum("ij,ij->i", cx, Sy), np.einsum("ij,ij->i", cy, Sy)], axis=1)
+    return Source(CALIBRATION, C), q
+
+
+@dataclass(frozen=True)
+class Redundancy:
+    """The redundant readings' misfit of ``N`` holes (n >= 4; 3: NaN, nothing to check).
+
+    Attributes
+    ----------
+    residual : (N,) float, mm; 4 sensors: the signed misfit ``rho = q . h``; 5+: the RMS misfit
+    residual_z : (N,) float; 4: ``rho`` over its noise sigma (N(0, 1) in control); 5+: ``sqrt(chi2 / (n - 3))``
+    signature : (N, n) float or None; 4: ``d rho / d delta_k`` of each sensor's zero
+    noise_sd : (N,) float, mm, or None; 4: ``rho``'s sigma from the reading noise
+    sd : (N,) float, mm, or None; 4: ``rho``'s sigma from the noise, the calibration and ``extra_var``
+    """
+
+    residual: np.ndarray
+    residual_z: np.ndarray
+    signature: np.ndarray | None = None
+    noise_sd: np.ndarray | None = None
+    sd: np.ndarray | None = None
+
+
+def redundancy(null, res, Gu, sigma, q_cal, extra_var=0.0) -> Redundancy:
+    """The misfit of the redundant readings: ``null (n, N)`` the unit vectors orthogonal to the fit's
+    columns (n = 4, else None), ``res (n, N)`` mm the heights (their misfit where n > 4), ``Gu (n, N)``,
+    ``sigma (n,)`` mm, ``q_cal (n, N)`` or 0, ``extra_var`` (N,) mm^2 what else moves ``rho`` (the panel's
+    terms)."""
+    n, N = res.shape
+    if n == 4:
+        residual = (null * res).sum(0)
+        sig = null * Gu  # d rho / d delta_k
+        sd = np.sqrt(((sig * sigma[:, None]) ** 2).sum(0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = residual / sd
+        return Redundancy(residual, z, np.ascontiguousarray(sig.T), sd,
+                          np.sqrt(sd * sd + (null * null * q_cal).sum(0) + extra_var))
+    if n > 4:
+        v = (Gu * sigma[:, None]) ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return Redundancy(np.sqrt((res * res).sum(0) / n), np.sqrt((res * res / v).sum(0) / (n - 3)))
+    return Redundancy(np.full(N, np.nan), np.full(N, np.nan))
