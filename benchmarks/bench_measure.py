@@ -41,7 +41,11 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
    (as 6., with the CAD's shape operator under the commanded pose) tiled to ``--controller-holes``
    holes: batched (holes/s, best of ``--repeat``; goal: >= 2e5) and one hole a call (ms, the
    median and the mean of 2000 calls, best of ``--repeat``; goal: <= 1 ms);
-8. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
+8. **verdicts** (``--sections verdicts``): the log of 2. without its after-readings, measured with every
+   hole failing (``--tolerance-deg 0.1``) and with every hole conforming (``--tolerance-deg 10``),
+   against the plain script of 2. on the same file, ``--repeat`` rounds in turn: each round's CPU
+   ratios and their median (goal: <= 1.2x);
+9. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
 
@@ -190,6 +194,35 @@ def process(cmd, repeat, cpu=None):
     return best, rss / 1024.0
 
 
+def verdicts(log, layout, repeat, metro) -> dict:
+    """``metro measure`` on the log without its after-readings, every hole failing (``--tolerance-deg 0.1``:
+    the angles are 0.5-5 deg) and every hole conforming (``--tolerance-deg 10``), against the plain
+    pyarrow+numpy micro-plane script on the same file; ``repeat`` rounds run in turn (the machine is
+    shared: each round's ratios of CPU times, and their median)."""
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(log)
+    before = log.with_name("log_before.parquet")
+    pq.write_table(t.drop_columns([c for c in t.column_names if c.endswith("_after")]), before,
+                   row_group_size=1 << 18)
+    out = log.with_name("holes_before.parquet")
+    rounds = []
+    for _ in range(repeat):
+        cpu = {}
+        for name, cmd in (("baseline", [sys.executable, "-c", BASELINE, str(before), str(layout), str(out)]),
+                          ("all_fail", [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out", str(out),
+                                        "--tolerance-deg", "0.1"]),
+                          ("all_conform", [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out",
+                                           str(out), "--tolerance-deg", "10"])):
+            c = []
+            process(cmd, 1, c)
+            cpu[name] = c[0]
+        rounds.append({**cpu, "ratio_all_fail": cpu["all_fail"] / cpu["baseline"],
+                       "ratio_all_conform": cpu["all_conform"] / cpu["baseline"]})
+    return {"rounds": rounds, "median_ratio_all_fail": float(np.median([r["ratio_all_fail"] for r in rounds])),
+            "median_ratio_all_conform": float(np.median([r["ratio_all_conform"] for r in rounds]))}
+
+
 def _free_port():
     import socket
 
@@ -291,7 +324,8 @@ def controller(work: Path, holes: int, repeat: int, metro) -> dict:
     from metrology.io.layout import load_layout
     from metrology.jobs.measure_panel import hole_surfaces
     from metrology.measure import surface_normal
-    from metrology.measure.holes import _pose, _readings
+    from metrology.measure.holes import _readings
+    from metrology.measure.pose import read_pose as _pose
     from metrology.measure.normals import drill_axis
 
     data = ROOT / "metrology" / "data"
@@ -369,6 +403,10 @@ def main(argv=None):
     cpu_m, cpu_b = [], []
     res["metro_s"], res["metro_rss_mb"] = process([*metro, "-q", "measure", str(log), "--layout", str(layout),
                                                    "--out", str(out)], args.repeat, cpu_m)
+    if "verdicts" in sections:
+        res["verdicts"] = verdicts(log, layout, args.repeat, metro)
+        if sections == {"verdicts"}:
+            return _done(res, args, work)
     if "qif" in sections:
         cpu_q = []
         qif = work / "results.qif"

@@ -48,9 +48,11 @@ def register(app: typer.Typer) -> None:
                                                 "over it)."),
         form_tolerance_mm: float = typer.Option(0.0, "--form-tolerance-mm", help="With --points: the panel's stated "
                                                 "form tolerance over the head's footprint, mm (0: the panel is its CAD)."),
-        spin_deg: float = typer.Option(2.0, "--spin-deg", help="With --points: the head's spin about the tool axis "
-                                       "relative to the panel is within +-SPIN of the cell's convention (TCS x, y near "
-                                       "the panel's x, y), deg; in U95."),
+        spin_deg: float = typer.Option(None, "--spin-deg", help="With --points, for a log without the robot's pose: the "
+                                       "head's spin about the tool axis relative to the panel is within +-SPIN of the "
+                                       "cell's convention (TCS x, y near the panel's x, y), deg; in U95. Not given: "
+                                       "+-2 where a redundant (4th) reading confirms the convention, else a U95 over "
+                                       "every spin."),
         follow: bool = typer.Option(False, "--follow", help="A live log (LOG '-' for stdin, or a CSV file): each "
                                     "hole measured as its line arrives; one JSON line per hole on stdout, "
                                     "{\"alarm\": ...} lines for drift alarms, a final {\"summary\": ...}."),

@@ -80,6 +80,13 @@ class MeasureReport:
                                 f"{self.min_radius_mm:g} mm", self.min_radius_mm, None, "mm", True, gate=False))
         elif cv:
             checks.append(Check(f"curvature from {cv['source']}", cv.get("holes", 0), None, "holes", True, gate=False))
+            if cv.get("spin_on_convention_holes") or cv.get("spin_free_holes"):
+                checks.append(Check(f"head's spin (no pose in the log): holes judged with it in the cell's convention "
+                                    f"(+-{cv['spin_deg']:g} deg{'' if cv['spin_stated'] else ', confirmed by the redundant reading'}; "
+                                    f"log the commanded pose to know it)", cv["spin_on_convention_holes"], None, "holes",
+                                    True, gate=False))
+                checks.append(Check("head's spin not known: holes judged with a U95 over every spin",
+                                    cv["spin_free_holes"], None, "holes", True, gate=False))
             if cv.get("off_cad_holes"):
                 checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "
                                     f"CAD's (|z| > {cv['off_cad_sigmas']:g}; mean size "
@@ -146,7 +153,9 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, su
                 f"{shown_layout}: the readings of {bad:,} of {rows:,} holes disagree with the panel's surface "
                 f"({surfaces.source}): this layout does not fit the head that made the log (another head's layout? "
                 f"a nominal layout, not its calibration? readings not in mm?), or the panel is far off its CAD "
-                f"(--form-tolerance-mm states how far it may be)")
+                f"(--form-tolerance-mm states how far it may be)" + (
+                    f"; {result.summary.on_convention:,} holes took the head's spin from the cell's convention (the log "
+                    f"has no pose_* columns): log the robot's commanded pose" if result.summary.on_convention else ""))
         if warnings is None:
             raise ValueError(line)
         warnings.append(line)
@@ -220,7 +229,8 @@ class MeasureOptions:
     qif : path or None, the per-hole results also as a QIF 3.0 Results document
     per_hole : bool, False with no ``out``: nothing per hole written (``--json`` alone)
     panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
-    position_error_mm, form_tolerance_mm : float, mm; spin_deg : float, deg (with ``points``)
+    position_error_mm, form_tolerance_mm : float, mm; spin_deg : float or None, deg (with
+        ``points``; None: not stated, :func:`metrology.jobs.measure_panel.hole_surfaces`)
     """
 
     out: Path | None = None
@@ -240,7 +250,7 @@ class MeasureOptions:
     points: Path | None = None
     position_error_mm: float = 0.5
     form_tolerance_mm: float = 0.0
-    spin_deg: float = 2.0
+    spin_deg: float | None = None
 
     @property
     def distributed(self) -> bool:
@@ -303,8 +313,6 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
 
 def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progress) -> MeasureReport:
     """:func:`measure_files` with the engine being started (``engine()`` returns it when it is up)."""
-    import dataclasses
-
     from metrology.io.holelog import BATCH_ROWS, open_log
     from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
@@ -427,6 +435,8 @@ def _manifest(o: MeasureOptions, layout, log_path) -> dict:
 def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str) -> dict:
     """The report's account of the panel's curvature: the bound the layout states, or the known
     surfaces' figures ({} when the radius bound is assumed)."""
+    from metrology.measure.spin import DEFAULT_SPIN_DEG
+
     curvature = {}
     if surfaces is None and radius_source == "layout [panel] radius_mm":
         curvature = {"assumed": False, "source": f"bound: the cell's panel radius {o.min_radius_mm:g} mm stated in "
@@ -434,8 +444,11 @@ def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_la
     if surfaces is not None:
         curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
                      "position_error_mm": o.position_error_mm, "form_tolerance_mm": o.form_tolerance_mm,
-                     "spin_deg": o.spin_deg, "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
+                     "spin_deg": DEFAULT_SPIN_DEG if o.spin_deg is None else o.spin_deg,
+                     "spin_stated": surfaces.spin_stated,
+                     "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
                      "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
+                     "spin_on_convention_holes": result.summary.on_convention, "spin_free_holes": result.summary.spin_free,
                      **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
     return curvature
 

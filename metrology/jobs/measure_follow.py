@@ -39,7 +39,7 @@ def _value(text):
 
 def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float = 0.5,
                min_radius_mm: float | None = None, panel=None, points=None, position_error_mm: float = 0.5,
-               form_tolerance_mm: float = 0.0, spin_deg: float = 2.0, stream=None) -> FollowSummary:
+               form_tolerance_mm: float = 0.0, spin_deg: float | None = None, stream=None) -> FollowSummary:
     """Measure each line of ``source`` (``-``: ``stream`` or stdin) as it arrives (module docstring).
 
     Raises ValueError naming the line on a line that cannot be measured (a non-number reading, a

@@ -59,8 +59,13 @@ def footprint_mm(layout) -> float:
 
 def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg):
     """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
-    from metrology.measure.panel import read_hole_table, surfaces_from_table
+    from dataclasses import replace
 
+    from metrology.measure.panel import read_hole_table, surfaces_from_table
+    from metrology.measure.spin import DEFAULT_SPIN_DEG
+
+    stated = spin_deg is not None
+    spin_deg = spin_deg if stated else DEFAULT_SPIN_DEG
     for name, v in (("--position-error-mm", position_error_mm), ("--form-tolerance-mm", form_tolerance_mm),
                     ("--spin-deg", spin_deg)):
         if not (np.isfinite(v) and v >= 0):
@@ -68,12 +73,12 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     table = read_hole_table(points)
     foot = footprint_mm(layout)
     if panel is None:
-        return surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg)))
+        return replace(surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
     from metrology.io.names import display_name
     from metrology.panel.mesh import load_panel
 
-    return panel_hole_surfaces(load_panel(panel), table, foot, position_error_mm, form_tolerance_mm,
-                               float(np.radians(spin_deg)), display=display_name(panel))
+    return replace(panel_hole_surfaces(load_panel(panel), table, foot, position_error_mm, form_tolerance_mm,
+                                       float(np.radians(spin_deg)), display=display_name(panel)), spin_stated=stated)
 
 
 def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0, spin=0.0, display=None):

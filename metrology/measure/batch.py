@@ -64,6 +64,10 @@ class HoleBatch:
         out a wrong turn of the cell (rule 3's; before-readings gross or too few): their drilled angle is not
         known, and may be out of tolerance
     chart : ChartRows, what the drift chart takes of the batch
+    spin_free : (N,) bool or None, with the panel known: judged with a U95 over every spin of the head (its
+        spin not known: :mod:`metrology.measure.spin`)
+    on_convention : (N,) bool or None, with the panel known: judged with the head's spin taken from the cell's
+        convention (no pose in the log)
     """
 
     columns: "pa.Table"
@@ -75,6 +79,8 @@ class HoleBatch:
     chart: "ChartRows"
     disagree: np.ndarray | None = None
     unknown_after: np.ndarray | None = None
+    spin_free: np.ndarray | None = None
+    on_convention: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)

@@ -44,9 +44,9 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
-from metrology.core.sym3 import smallest_eigvec
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
 from metrology.measure.normals import concat_normals, hole_normals
+from metrology.measure.pose import against_cad, read_pose
 from metrology.measure.reasons import reason_column, verdict_reasons
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
@@ -102,6 +102,8 @@ class _Measured:
     twist: np.ndarray  # (N,) float, mm^2: |M|_*, 4 sensors
     moment: np.ndarray  # (N, 3) float, mm^2: M = sum_i q_i r_i r_i^T as (xx, yy, xy), 4 sensors
     extra: dict | None = None  # with the panel known: correction, panel_misfit, panel_misfit_z (N,)
+    spin_free: np.ndarray | None = None  # (N,) bool, with the panel known: judged with the spin not known
+    convention: np.ndarray | None = None  # (N,) bool, with the panel known: the spin in the cell's convention
 
 
 #: rows per call of the per-hole maths (the normals, the misfit's moment): its temporaries stay in
@@ -117,13 +119,16 @@ def _hole_normals(layout, d, min_radius_mm):
                            for i in range(0, len(d), CACHE_ROWS)])
 
 
-def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None) -> _Measured:
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None,
+             convention=None, stated=True) -> _Measured:
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
     allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
     (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it);
     ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
-    the head's rotation the shape was put into the TCS with, the turn found before the adjustment."""
+    the head's rotation the shape was put into the TCS with, the turn found before the adjustment;
+    ``convention`` (N,) bool the rows whose shape rests on the cell's convention (no pose), ``stated`` whether
+    that convention was stated (:func:`metrology.measure.spin.panel_normals`)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -135,6 +140,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     if shape is not None:
         out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
         out.extra["turn"] = np.full((N, 3, 3), np.nan)
+        out.spin_free, out.convention = np.zeros(N, bool), np.zeros(N, bool)
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -158,15 +164,22 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
         if shape is not None:
-            from metrology.measure.surface import PanelTerms, surface_hole_normals
+            from metrology.measure.spin import panel_normals
 
-            parts = [surface_hole_normals(sub, dd[i:i + CACHE_ROWS], shape[of(rows[i:i + CACHE_ROWS])],
-                                          PanelTerms(u_shape[of(rows[i:i + CACHE_ROWS])], spin[of(rows[i:i + CACHE_ROWS])]),
-                                          beyond=None if higher is None else higher.rows(of(rows[i:i + CACHE_ROWS])))
-                     for i in range(0, len(rows), CACHE_ROWS)]  # slices: the temporaries stay small
-            h = concat_normals([p[0] for p in parts])
-            for k in parts[0][1]:
-                out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
+            rs = of(rows)
+            j = panel_normals(sub, dd, shape[rs], u_shape[rs], spin[rs], None if higher is None else higher.rows(rs),
+                              convention[rs], stated)
+            h = j.normals
+            for k, v in j.extra.items():
+                out.extra[k][rs] = v
+            out.spin_free[rs], out.convention[rs] = j.free, j.convention
+            for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
+                prior = out.reason.get(int(rows[i]))
+                out.reason[int(rows[i])] = (prior + "; " if prior else "") + (
+                    f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
+                    f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
+                    "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
+                    ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
         else:
             h = _hole_normals(sub, dd, settings.min_radius_mm)
         rs = of(rows)
@@ -178,7 +191,8 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             out.residual_sd[rows], out.twist[rows] = h.residual_sd, h.twist
             out.moment[rows] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS])  # slices, as the normals
                                                for i in range(0, len(dd), CACHE_ROWS)])
-            bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
+            # the most any panel of radius >= R gives; with the panel known, what is not known of it
+            bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
             gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
@@ -259,78 +273,6 @@ def _duplicates(ids):
     return np.array(dup, int), np.array(orig, int)
 
 
-POSE_COLUMNS = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")
-
-
-def _pose(table):
-    """The log's commanded pose, or None without its columns: ``(tcs2panel (N, 3, 3), origin (N, 3) mm,
-    panel frame)``; a row with no pose gets NaN (the whole row: a row is NaN or finite throughout)."""
-    if not all(c in table.column_names for c in POSE_COLUMNS):
-        return None
-    from scipy.spatial.transform import Rotation
-
-    v = np.column_stack([np.asarray(table.column(c).cast("float64").to_numpy(zero_copy_only=False), float)
-                         for c in POSE_COLUMNS])
-    ok = np.isfinite(v.sum(1))  # every one of the six finite
-    if ok.all():  # the usual: no gather, no masked copy (each costs three times the rotations)
-        return Rotation.from_rotvec(np.radians(v[:, :3])).as_matrix(), v[:, 3:]
-    R = np.full((len(v), 3, 3), np.nan)
-    if ok.any():
-        R[ok] = Rotation.from_rotvec(np.radians(v[ok, :3])).as_matrix()
-    return R, v[:, 3:]
-
-
-def _against_cad(layout, d, normal, shape, surf, table_row, pose):
-    """Each hole against its CAD: ``(angle (N,) rad, offset (N,) mm)``.
-
-    ``angle``: between the measured normal (TCS, turned into the panel frame by the commanded pose)
-    and the CAD's normal at the hole. ``offset``: where the readings put the surface on the drill
-    axis (the spots, their height from the CAD's curvature taken off, fitted by a plane, met by the
-    axis), against the table's nominal point, along the CAD's outward normal: a panel standing 1 mm
-    proud of its CAD reads +1. NaN where a reading, the pose or the table row is missing."""
-    from metrology.measure.normals import drill_axis
-
-    R, origin = pose
-    N = len(d)
-    ang, off = np.full(N, np.nan), np.full(N, np.nan)
-    from metrology.measure.beyond import _finite_rows
-
-    rows = np.flatnonzero((table_row >= 0) & _finite_rows(d) & _finite_rows(origin) & _finite_rows(normal))
-    if rows.size == 0:
-        return ang, off
-    if rows.size == N:  # every row (the usual batch): views, not copies
-        rows = slice(None)
-    r = table_row[rows]
-    ncad = surf.normal[r]  # outward (toward the head), panel frame
-    Rr = R[rows]
-    nr = normal[rows]
-    # R n, along the drill axis (into the panel), dotted with the CAD's normal: explicit 3 x 3 over the holes
-    cos = -sum((Rr[:, i, 0] * nr[:, 0] + Rr[:, i, 1] * nr[:, 1] + Rr[:, i, 2] * nr[:, 2]) * ncad[:, i] for i in range(3))
-    ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
-    a = drill_axis(layout)
-    # the spots, sensor-major (n, h) per component, mm, TCS
-    dT = np.ascontiguousarray(d[rows].T)  # (n, h): each op over contiguous rows
-    E, u = layout.zero, layout.direction
-    sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
-    sa = sx * a[0] + sy * a[1] + sz * a[2]
-    lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
-    K = shape[rows]
-    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
-    sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
-                 + k22 * lz * lz)  # away from the head
-    sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
-    cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
-    xc, yc, zc = sx - cx, sy - cy, sz - cz
-    # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
-    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
-                        (zc * zc).sum(0), a)
-    t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
-    Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
-    o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
-    off[rows] = sum((o[:, i] + t * Ra[:, i] - p[:, i]) * ncad[:, i] for i in range(3))
-    return ang, off
-
-
 def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     """Measure one batch of a hole log.
 
@@ -351,7 +293,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = _readings(table, names)
     N = len(d)
-    shape = u_shape = spin = table_row = higher = None
+    shape = u_shape = spin = table_row = higher = convention = None
     surf = settings.surfaces
     if surf is not None:
         from metrology.measure.beyond import Beyond
@@ -365,12 +307,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         shape = np.zeros((N, 3, 3))
         u_shape = np.zeros(N)
         spin = np.full(N, float(surf.spin))
-        pose = _pose(table)  # the robot's commanded tcs2panel where the log states it
+        convention = np.zeros(N, bool)
+        pose = read_pose(table)  # the robot's commanded tcs2panel where the log states it
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
                 higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
+            convention = sel[1]
             whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
                 w = whole[0]
@@ -391,13 +335,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
-    before = _measure(layout, d, settings, shape, u_shape, spin, higher)
+    stated = surf is None or surf.spin_stated
+    before = _measure(layout, d, settings, shape, u_shape, spin, higher, convention, stated)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
         higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
-        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after)
+        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after, convention, stated)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
@@ -465,7 +410,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
         cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
         if pose is not None and surf.point is not None:
-            vs_cad, offset = _against_cad(layout, d, before.normal, shape, surf, table_row, pose)
+            vs_cad, offset = against_cad(layout, d, before.normal, shape, surf, table_row, pose)
             cols["normal_vs_cad_deg"] = num(np.degrees(vs_cad))
             cols["cad_offset_mm"] = num(offset)
     for k in table.column_names:
@@ -482,5 +427,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if after is not None:
         unknown = (code == CODE[Status.NOT_MEASURED]) & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
+    spin_free = on_convention = None
+    if surf is not None:  # how each judged hole's spin was taken
+        spin_free = np.where(judge_after, after.spin_free, before.spin_free) if after is not None else before.spin_free
+        on_convention = (np.where(judge_after, after.convention, before.convention) if after is not None
+                         else before.convention)
+        measured_code = code != CODE[Status.NOT_MEASURED]
+        spin_free, on_convention = spin_free & measured_code, on_convention & measured_code
     return HoleBatch(out, code, judged, judged_u, before.angle,
-                     after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown)
+                     after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,
+                     spin_free, on_convention)

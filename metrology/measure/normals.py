@@ -108,6 +108,9 @@ class HoleNormals:
         head within its calibration puts the redundant reading
     budget : Budget, the tilts and their covariance by source (:mod:`metrology.measure.budget`), from
         which ``angle``, ``u_angle``, ``U95`` and ``u_angle_noise`` were made
+    misfit_bound : (N,) float, mm, or None; 4 sensors with the panel known: the most what is not known of
+        the panel (the direction of its curvature where the head's spin is not) moves ``rho`` (None: the
+        micro-plane's ``twist / (2 R)``)
     """
 
     normal: np.ndarray
@@ -123,6 +126,7 @@ class HoleNormals:
     residual_sd: np.ndarray | None = None
     residual_noise_sd: np.ndarray | None = None
     budget: Budget | None = None
+    misfit_bound: np.ndarray | None = None
 
 
 def concat_normals(parts) -> "HoleNormals":

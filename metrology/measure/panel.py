@@ -165,6 +165,8 @@ class HoleSurfaces:
     problem : (m,) object, "" or why the hole cannot be measured (its footprint runs off the panel)
     source : str, where the curvature came from (named in the verdict and the JSON)
     spin : float, rad, the head's spin about the tool axis relative to the panel is within +-spin
+    spin_stated : bool, ``spin`` was stated (``--spin-deg``): a hole without a pose and without a redundant
+        reading takes the cell's convention; else its spin is not known (:mod:`metrology.measure.spin`)
     point : (m, 3) float, mm, panel frame, the table's nominal drill point, or None
     frame : (m, 2, 3) float, unit, panel frame, the local axes ``e1, e2`` of ``higher``, or None
     higher : (m, 9) float, the CAD surface's height along ``normal`` beyond second order, or None: the
@@ -183,6 +185,7 @@ class HoleSurfaces:
     point: np.ndarray | None = None
     frame: np.ndarray | None = None
     higher: np.ndarray | None = None
+    spin_stated: bool = True
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):

@@ -171,6 +171,8 @@ class FleetSummary:
     worst : list of dict, the :data:`WORST` holes with the largest judged angle
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
     unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
+    on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
+        (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known)
     """
 
     tolerance_deg: float
@@ -181,6 +183,8 @@ class FleetSummary:
     judged_before: int = 0
     disagree: int = 0
     unknown_after: int = 0
+    on_convention: int = 0
+    spin_free: int = 0
     off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
                                                    "max_hole": None})
     vs_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_abs_mm": 0.0, "max_mm": 0.0,
@@ -275,6 +279,8 @@ class FleetSummary:
         self.judged_before += int((ok & ~after).sum())
         self.disagree += int(batch.disagree.sum()) if batch.disagree is not None else 0
         self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
+        self.on_convention += int(batch.on_convention.sum()) if batch.on_convention is not None else 0
+        self.spin_free += int(batch.spin_free.sum()) if batch.spin_free is not None else 0
         self._off_cad(t)
         self._vs_cad(t)
         self._worst(batch, judged, ok)
@@ -301,6 +307,8 @@ class FleetSummary:
         self.judged_before += other.judged_before
         self.disagree += other.disagree
         self.unknown_after += other.unknown_after
+        self.on_convention += other.on_convention
+        self.spin_free += other.spin_free
         o, p = self.off_cad, other.off_cad
         o["checked"] += p["checked"]
         o["holes"] += p["holes"]

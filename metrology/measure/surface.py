@@ -284,10 +284,16 @@ class PanelTerms:
         (mesh fit, position error along the surface, form tolerance; combined)
     spin : float or (h,) float, rad, the head's spin about the tool axis relative to the panel is
         within ``+-spin`` (uniform); 0 where the robot's commanded pose gives it
+    free : bool, the head's spin is not known at all (no pose, and no convention that holds): the
+        shape's isotropic part (its mean curvature, the same at every spin) is fitted and its deviatoric
+        part, of known size ``(k1 - k2) / 2`` and unknown direction, enters as a bound over every spin
+        (:data:`metrology.measure.budget.SPIN`, a :attr:`~metrology.measure.budget.Kind.BOUND`); ``spin``
+        and the CAD beyond second order are not used
     """
 
     u_shape: np.ndarray
     spin: float | np.ndarray = 0.0
+    free: bool = False
 
 
 def _tangent_basis(mx, my, mz):
@@ -316,6 +322,27 @@ def _shape_basis(fit, g2, axis):
     return [h * a1 * a1, h * a2 * a2, (sc / np.sqrt(2.0)) * a1 * a2]
 
 
+def _free_spin(fit, g2, axis, dev, A0, A1):
+    """The spin's :class:`Source` where it is not known (``PanelTerms.free``): the shape's deviatoric part
+    ``dev (N,)`` 1/mm, ``(k1 - k2) / 2``, at an unknown angle: ``delta K = dev (cos 2t B1 + sin 2t B2)``
+    (``B1 = t1 t1 - t2 t2``, ``B2 = t1 t2 + t2 t1``) tilts by ``dev (cos 2t v1 + sin 2t v2)``: the angle's
+    worst case ``dev |(c.v1, c.v2)|``, a bound; the 2-D spread ``dev^2 / 2 (v1 v1^T + v2 v2^T)`` (t uniform);
+    and the most it moves the redundant reading's misfit, ``dev |(q.dh1, q.dh2)|`` (N,) mm (n = 4, else None)."""
+    b = _shape_basis(fit, g2, axis)
+    dh = (b[0] - b[1], np.sqrt(2.0) * b[2])  # (n, N): the heights' change per unit B1, B2
+    v = [((A0 * h).sum(0), (A1 * h).sum(0)) for h in dh]
+    c0, c1 = angle_gradient(fit.g[:, 0], fit.g[:, 1])
+    half = dev * np.hypot(c0 * v[0][0] + c1 * v[0][1], c0 * v[1][0] + c1 * v[1][1])
+    f = 0.5 * dev * dev
+    C = np.stack([(v[0][0] ** 2 + v[1][0] ** 2) * f, (v[0][0] * v[0][1] + v[1][0] * v[1][1]) * f,
+                  (v[0][1] ** 2 + v[1][1] ** 2) * f], axis=1)
+    rho = None
+    if fit.null is not None:
+        qv = fit.null.T
+        rho = dev * np.hypot((qv * dh[0]).sum(0), (qv * dh[1]).sum(0))
+    return Source(SPIN, C, Kind.BOUND, half), rho
+
+
 def _panel_sources(fit, g2, axis, terms, A0, A1):
     """The panel's sources (its shape's uncertainty, normal; the head's spin, uniform within ``+-spin``)
     and the variance the spin gives the redundant reading's misfit (N,) mm^2 (0 without a spin)."""
@@ -331,7 +358,7 @@ def _panel_sources(fit, g2, axis, terms, A0, A1):
             C_shape[:, 1] += v0 * v1 * uK2
             C_shape[:, 2] += v1 * v1 * uK2
         spin = np.broadcast_to(np.asarray(terms.spin, float), (N,))
-        if np.any(spin > 0):  # delta K = delta psi (W K - K W), W the cross matrix of m
+        if np.any(spin > 0) and not terms.free:  # delta K = delta psi (W K - K W), W the cross matrix of m
             m = fit.normal
             sc = (-axis[2] * np.sqrt(1.0 + g2))[:, None]  # sigma rho
             W = np.zeros((N, 3, 3))
@@ -375,6 +402,13 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     d = np.asarray(d, float).reshape(-1, n)
     N = len(d)
     Y = np.broadcast_to(np.eye(3), (N, 3, 3))  # the CAD beyond second order, the head's spin: metrology.measure.beyond
+    free = terms is not None and terms.free
+    if free:  # the spin unknown: the isotropic part fitted (the same at every spin), the rest a bound
+        k00, k01, k11 = (np.broadcast_to(np.asarray(k, float), (N,)) for k in
+                         (shape if isinstance(shape, tuple) else (shape[:, 0, 0], shape[:, 0, 1], shape[:, 1, 1])))
+        mean = 0.5 * (k00 + k11)
+        dev = np.sqrt(0.25 * (k00 - k11) ** 2 + k01 * k01)
+        shape, beyond = (mean, np.zeros(N), mean), None
     if beyond is not None:
         fit0 = fit_surface(layout, d, shape, steps=PRELIMINARY_STEPS, sigma_mm=sigma_mm, full=False)
         d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0)
@@ -397,6 +431,9 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     else:
         cal, q_cal = Source(CALIBRATION, np.zeros((N, 3))), np.zeros((n, N))
     shape_src, spin_src, rho_var = _panel_sources(fit, g2, axis, terms, A0, A1)
+    rho_bound = None
+    if free:
+        spin_src, rho_bound = _free_spin(fit, g2, axis, dev, A0, A1)
     budget = Budget(g.copy(), (noise, cal, shape_src, spin_src))
     un = combine(budget)
     angle, u_angle, U95 = un.angle, un.u, un.U95
@@ -422,6 +459,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             l1, l2 = eig2(a, cc, b)
             misfit = np.maximum(np.abs(l1), np.abs(l2))
             misfit_z = red.residual / red.sd
+            if rho_bound is not None:  # the spin not known: the misfit beyond what any spin gives
+                misfit_z = np.sign(red.residual) * np.maximum(np.abs(red.residual) - rho_bound, 0.0) / red.sd
     else:
         red = redundancy(None, fit.h_res.T, Gu, sigma, q_cal)
     with np.errstate(invalid="ignore"):
@@ -432,5 +471,6 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         arr[bad] = np.nan
     normal[bad] = np.nan
     hn = HoleNormals(normal, angle, u_angle, U95, un.of(READING_NOISE), red.residual, red.residual_z, red.signature,
-                     panel_share, twist, red.sd, red.noise_sd, budget)
+                     panel_share, twist, red.sd, red.noise_sd, budget,
+                     np.zeros(N) if rho_bound is None else rho_bound)
     return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z, "turn": Y}

@@ -220,6 +220,11 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, mesh_half=150.0, *
             TIME_S: (1.8e9 + np.arange(holes)).astype(float)}
     for j, nm in enumerate(lay.names):
         cols[f"d_{nm}"] = ch.d[:, j]
+    # the commanded pose, as metrology/sim/forward/log_write.py logs it: without it the redundant reading's
+    # misfit is first read as the head's spin off the cell's convention (metrology.measure.spin)
+    for j, ax in enumerate("xyz"):
+        cols[f"pose_r{ax}_deg"] = np.degrees(ch.pose_rotvec[:, j])
+        cols[f"pose_{ax}_mm"] = ch.pose_origin[:, j]
     b = measure_batch(lay, pa.table(cols), Settings(surfaces=surf))
     summ = FleetSummary(0.5)
     summ.add(b)
