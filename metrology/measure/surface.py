@@ -326,16 +326,17 @@ def _free_spin(fit, g2, axis, dev, A0, A1):
     """The spin's :class:`Source` where it is not known (``PanelTerms.free``): the shape's deviatoric part
     ``dev (N,)`` 1/mm, ``(k1 - k2) / 2``, at an unknown angle: ``delta K = dev (cos 2t B1 + sin 2t B2)``
     (``B1 = t1 t1 - t2 t2``, ``B2 = t1 t2 + t2 t1``) tilts by ``dev (cos 2t v1 + sin 2t v2)``: the angle's
-    worst case ``dev |(c.v1, c.v2)|``, a bound; the 2-D spread ``dev^2 / 2 (v1 v1^T + v2 v2^T)`` (t uniform);
+    worst case that ellipse's major semi-axis (the length of the tilt's change), a bound; the 2-D spread ``dev^2 / 2 (v1 v1^T + v2 v2^T)`` (t uniform);
     and the most it moves the redundant reading's misfit, ``dev |(q.dh1, q.dh2)|`` (N,) mm (n = 4, else None)."""
     b = _shape_basis(fit, g2, axis)
     dh = (b[0] - b[1], np.sqrt(2.0) * b[2])  # (n, N): the heights' change per unit B1, B2
     v = [((A0 * h).sum(0), (A1 * h).sum(0)) for h in dh]
-    c0, c1 = angle_gradient(fit.g[:, 0], fit.g[:, 1])
-    half = dev * np.hypot(c0 * v[0][0] + c1 * v[0][1], c0 * v[1][0] + c1 * v[1][1])
+    M = ((v[0][0] ** 2 + v[1][0] ** 2), (v[0][0] * v[0][1] + v[1][0] * v[1][1]), (v[0][1] ** 2 + v[1][1] ** 2))
+    # the angle moves by at most the tilt's change, |dg| <= dev sqrt(l1(M)): the ellipse's major semi-axis (not
+    # its projection on the angle's gradient: the change is not small beside the angle)
+    half = dev * np.sqrt(np.maximum(eig2(*M)[0], 0.0)) / (1.0 + fit.g[:, 0] ** 2 + fit.g[:, 1] ** 2)
     f = 0.5 * dev * dev
-    C = np.stack([(v[0][0] ** 2 + v[1][0] ** 2) * f, (v[0][0] * v[0][1] + v[1][0] * v[1][1]) * f,
-                  (v[0][1] ** 2 + v[1][1] ** 2) * f], axis=1)
+    C = np.stack([M[0] * f, M[1] * f, M[2] * f], axis=1)
     rho = None
     if fit.null is not None:
         qv = fit.null.T
