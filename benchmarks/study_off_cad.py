@@ -37,8 +37,8 @@ def main():
         K = np.diag([1.0, 1.0, 0.0]) / Rc if kind == "sphere" else np.outer(c, c) / Rc
         h, ex = surface_hole_normals(lay, ch.d[ok], np.broadcast_to(K, (ok.sum(), 3, 3)), PanelTerms(np.zeros(ok.sum())))
         err = np.abs(h.angle - ch.true_angle[ok])
-        print(f"| {kind} | R {Rc} | {tuple(round(v, 3) for v in ax)} | {np.mean(np.abs(ex['panel_misfit_z']) > 4):.0%} | "
-              f"{np.median(ex['panel_misfit']):.2g} | {np.degrees(np.median(err)):.4f} | {np.mean(err <= h.U95):.0%} |")
+        print(f"| {kind} | R {Rc} | {tuple(round(v, 3) for v in ax)} | {np.mean(np.abs(ex.panel_misfit_z) > 4):.0%} | "
+              f"{np.median(ex.panel_misfit):.2g} | {np.degrees(np.median(err)):.4f} | {np.mean(err <= h.U95):.0%} |")
 
 
 if __name__ == "__main__":

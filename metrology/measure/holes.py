@@ -39,6 +39,7 @@ split into batches or partitions (the Dask path relies on it).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,6 +49,10 @@ from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
 from metrology.measure.normals import concat_normals, hole_normals
 from metrology.measure.pose import against_cad, read_pose
 from metrology.measure.reasons import reason_column, verdict_reasons
+
+if TYPE_CHECKING:
+    from metrology.measure.panel import HoleSurfaces
+    from metrology.measure.surface import PanelFit
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
            "DEFAULT_MIN_RADIUS_MM"]
@@ -84,7 +89,7 @@ class Settings:
     min_radius_mm: float = DEFAULT_MIN_RADIUS_MM
     #: each hole's local surface (:class:`metrology.measure.panel.HoleSurfaces`, joined by ``hole_id``):
     #: the normal is fitted with the surface known (:mod:`metrology.measure.surface`), not the micro-plane
-    surfaces: object = None
+    surfaces: "HoleSurfaces | None" = None
 
 
 @dataclass
@@ -101,7 +106,7 @@ class _Measured:
     residual_sd: np.ndarray  # (N,) float, mm: the misfit's sd (noise and calibration), 4 sensors
     twist: np.ndarray  # (N,) float, mm^2: |M|_*, 4 sensors
     moment: np.ndarray  # (N, 3) float, mm^2: M = sum_i q_i r_i r_i^T as (xx, yy, xy), 4 sensors
-    extra: dict | None = None  # with the panel known: correction, panel_misfit, panel_misfit_z (N,)
+    extra: "PanelFit | None" = None  # with the panel known: correction, panel_misfit, panel_misfit_z, turn
     spin_free: np.ndarray | None = None  # (N,) bool, with the panel known: judged with the spin not known
     convention: np.ndarray | None = None  # (N,) bool, with the panel known: the spin in the cell's convention
 
@@ -138,8 +143,9 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                     {}, np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
                     np.full((N, 3), np.nan))
     if shape is not None:
-        out.extra = {k: np.full(N, np.nan) for k in ("correction", "panel_misfit", "panel_misfit_z")}
-        out.extra["turn"] = np.full((N, 3, 3), np.nan)
+        from metrology.measure.surface import PanelFit
+
+        out.extra = PanelFit.blank(N)
         out.spin_free, out.convention = np.zeros(N, bool), np.zeros(N, bool)
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
@@ -170,8 +176,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             j = panel_normals(sub, dd, shape[rs], u_shape[rs], spin[rs], None if higher is None else higher.rows(rs),
                               convention[rs], stated)
             h = j.normals
-            for k, v in j.extra.items():
-                out.extra[k][rs] = v
+            out.extra.put(rs, j.extra)
             out.spin_free[rs], out.convention[rs] = j.free, j.convention
             for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
                 prior = out.reason.get(int(rows[i]))
@@ -341,7 +346,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if has_after:
         da = _readings(table, names, "_after")
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
-        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
+        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra.turn)
         after = _measure(layout, da, settings, shape, u_shape, spin, higher_after, convention, stated)
         judge_after = np.isfinite(da).any(1)
     else:
@@ -406,9 +411,9 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if surf is not None:  # the panel's columns
         k = surf.k[table_row] if have.all() else np.where((table_row >= 0)[:, None], surf.k[table_row], np.nan)
         cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
-        cols["correction_deg"] = num(np.degrees(before.extra["correction"]))
-        cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
-        cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
+        cols["correction_deg"] = num(np.degrees(before.extra.correction))
+        cols["panel_misfit_per_mm"] = num(before.extra.panel_misfit)
+        cols["panel_misfit_z"] = num(before.extra.panel_misfit_z)
         if pose is not None and surf.point is not None:
             vs_cad, offset = against_cad(layout, d, before.normal, shape, surf, table_row, pose)
             cols["normal_vs_cad_deg"] = num(np.degrees(vs_cad))

@@ -26,10 +26,14 @@ the convention.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from metrology.measure.normals import HoleNormals, concat_normals
+
+if TYPE_CHECKING:
+    from metrology.measure.surface import PanelFit
 
 __all__ = ["SPIN_SIGMAS", "DEFAULT_SPIN_DEG", "SpinJudged", "panel_normals"]
 
@@ -42,8 +46,6 @@ SPIN_SIGMAS = 4.0
 DEFAULT_SPIN_DEG = 2.0
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
 CACHE_ROWS = 16384
-#: the per-hole figures :func:`metrology.measure.surface.surface_hole_normals` returns beside the normals
-EXTRA = ("correction", "panel_misfit", "panel_misfit_z", "turn")
 
 
 @dataclass(frozen=True)
@@ -53,14 +55,14 @@ class SpinJudged:
     Attributes
     ----------
     normals : HoleNormals of the holes, in order (its ``budget`` None where the two ways were merged)
-    extra : dict of (m,) arrays, :data:`EXTRA` (``turn`` (m, 3, 3))
+    extra : PanelFit of the holes
     free : (m,) bool, judged with the spin not known (a U95 over every spin)
     convention : (m,) bool, judged with the spin in the cell's convention (no pose: the convention assumed)
     z : (m,) float, the convention's misfit in sigmas where the test refused it (NaN elsewhere)
     """
 
     normals: HoleNormals
-    extra: dict
+    extra: "PanelFit"
     free: np.ndarray
     convention: np.ndarray
     z: np.ndarray
@@ -68,14 +70,14 @@ class SpinJudged:
 
 def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
     """:func:`metrology.measure.surface.surface_hole_normals` in slices of :data:`CACHE_ROWS` rows."""
-    from metrology.measure.surface import PanelTerms, surface_hole_normals
+    from metrology.measure.surface import PanelFit, PanelTerms, surface_hole_normals
 
     def part(s):
         return surface_hole_normals(sub, dd[s], shape[s], PanelTerms(u_shape[s], spin[s], free),
                                     beyond=None if higher is None or free else higher.rows(s))
 
     parts = [part(slice(i, i + CACHE_ROWS)) for i in range(0, len(dd), CACHE_ROWS)]
-    return concat_normals([p[0] for p in parts]), {k: np.concatenate([p[1][k] for p in parts]) for k in EXTRA}
+    return concat_normals([p[0] for p in parts]), PanelFit.concat([p[1] for p in parts])
 
 
 def _merge(m, parts):
@@ -91,12 +93,9 @@ def _merge(m, parts):
         for idx, h, _ in parts:
             a[idx] = getattr(h, f)
         fields[f] = a
-    extra = {}
-    for k, v in parts[0][2].items():
-        a = np.empty((m,) + v.shape[1:], v.dtype)
-        for idx, _, e in parts:
-            a[idx] = e[k]
-        extra[k] = a
+    extra = parts[0][2].blank(m)
+    for idx, _, e in parts:
+        extra.put(idx, e)
     return HoleNormals(**fields), extra
 
 
@@ -123,13 +122,13 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     free = free0.copy()
     if a.size:
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
-        test = np.abs(extra["panel_misfit_z"])
+        test = np.abs(extra.panel_misfit_z)
         off = convention[a] & (test > SPIN_SIGMAS) if redundant else np.zeros(a.size, bool)
         free[a[off]] = True
-        z[a[off]] = extra["panel_misfit_z"][off]
+        z[a[off]] = extra.panel_misfit_z[off]
         keep = ~off
         if keep.any():
-            parts.append((a[keep], _rows(h, keep), {k: v[keep] for k, v in extra.items()}))
+            parts.append((a[keep], _rows(h, keep), extra.rows(keep)))
     b = np.flatnonzero(free)
     if b.size:
         h, extra = _fit(sub, dd[b], shape[b], u_shape[b], spin[b], None, free=True)
