@@ -27,7 +27,6 @@ sys.path.insert(0, str(ROOT))
 
 
 def run(panel: str, n_sensors: int, spin_deg: float, holes: int, seed: int, work: Path, stated: float | None):
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from metrology.io.layout import load_layout, save_layout
