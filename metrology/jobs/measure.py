@@ -404,7 +404,9 @@ def _panel_options(o: MeasureOptions, layout_path) -> tuple:
     if o.panel is None and o.points is None:
         o = dataclasses.replace(o, panel=stated.get("file"), points=stated.get("points"))
     if o.min_radius_mm is None:
-        o = dataclasses.replace(o, min_radius_mm=stated.get("radius_mm", 500.0))
+        from metrology.measure.holes import DEFAULT_MIN_RADIUS_MM
+
+        o = dataclasses.replace(o, min_radius_mm=stated.get("radius_mm", DEFAULT_MIN_RADIUS_MM))
         radius_source = "layout [panel] radius_mm" if "radius_mm" in stated else "default"
     if not o.min_radius_mm > 0:
         raise ValueError(f"--min-radius-mm must be positive (inf: flat panels only), got {o.min_radius_mm:g}")

@@ -57,7 +57,9 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
     if panel is None and points is None:
         panel, points = stated.get("file"), stated.get("points")
     if min_radius_mm is None:
-        min_radius_mm = stated.get("radius_mm", 500.0)
+        from metrology.measure.holes import DEFAULT_MIN_RADIUS_MM
+
+        min_radius_mm = stated.get("radius_mm", DEFAULT_MIN_RADIUS_MM)
     if panel is not None and points is None:
         raise ValueError(f"--panel {panel}: give the hole table too (--points HOLES.csv)")
     surfaces = None

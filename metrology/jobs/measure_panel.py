@@ -6,9 +6,11 @@ from the CAD panel and the hole table, or the table alone (:func:`hole_surfaces`
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["layout_panel", "footprint_mm", "hole_surfaces", "panel_hole_surfaces"]
+__all__ = ["layout_panel", "footprint_mm", "hole_surfaces", "panel_hole_surfaces", "CadPanel"]
 
 
 def layout_panel(layout_path) -> dict:
@@ -61,7 +63,7 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
     from dataclasses import replace
 
-    from metrology.measure.panel import read_hole_table, surfaces_from_table
+    from metrology.measure.panel import TableNormals, read_hole_table
     from metrology.measure.spin import DEFAULT_SPIN_DEG
 
     stated = spin_deg is not None
@@ -73,12 +75,26 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     table = read_hole_table(points)
     foot = footprint_mm(layout)
     if panel is None:
-        return replace(surfaces_from_table(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
-    from metrology.io.names import display_name
-    from metrology.panel.mesh import load_panel
+        source = TableNormals()
+    else:
+        from metrology.io.names import display_name
+        from metrology.panel.mesh import load_panel
 
-    return replace(panel_hole_surfaces(load_panel(panel), table, foot, position_error_mm, form_tolerance_mm,
-                                       float(np.radians(spin_deg)), display=display_name(panel)), spin_stated=stated)
+        source = CadPanel(load_panel(panel), position_error_mm, display_name(panel))
+    return replace(source.surfaces(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
+
+
+@dataclass(frozen=True)
+class CadPanel:
+    """The CAD panel (a mesh, or a STEP file's B-rep faces, as :func:`metrology.panel.mesh.load_panel` loads
+    it): a :class:`metrology.measure.panel.SurfaceSource`; ``position_mm`` the drill point's position error."""
+
+    panel: object
+    position_mm: float = 0.5
+    display: str | None = None
+
+    def surfaces(self, table, footprint_mm: float, form_mm: float, spin: float):
+        return panel_hole_surfaces(self.panel, table, footprint_mm, self.position_mm, form_mm, spin, self.display)
 
 
 def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0, spin=0.0, display=None):

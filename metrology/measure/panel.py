@@ -42,13 +42,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from metrology.core.frames import embed_shape, principal_curvatures, tangent_frame
 from metrology.core.sym3 import smallest_rotation
 
-__all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
+__all__ = ["HoleTable", "HoleSurfaces", "SurfaceSource", "TableNormals", "read_hole_table", "surfaces_from_table", "FOOTPRINT_MARGIN", "NEIGHBOURS"]
 
 #: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
 FOOTPRINT_MARGIN = 1.25
@@ -276,6 +277,22 @@ def tcs2panel_nominal(n, s: float):
         for j in range(3):
             Q[:, i, j] = q[i][j]
     return Q * np.array([1.0, -s, -s])
+
+
+class SurfaceSource(Protocol):
+    """Where each hole's local surface comes from: the CAD panel (a mesh, or a STEP B-rep's faces:
+    :class:`metrology.jobs.measure_panel.CadPanel`) or the hole table alone (:class:`TableNormals`)."""
+
+    def surfaces(self, table: HoleTable, footprint_mm: float, form_mm: float, spin: float) -> "HoleSurfaces":
+        """The local surface of every hole of ``table`` (footprint radius and form tolerance mm, spin rad)."""
+
+
+@dataclass(frozen=True)
+class TableNormals:
+    """The hole table alone: each hole's curvature from its neighbours' nominal normals."""
+
+    def surfaces(self, table: HoleTable, footprint_mm: float, form_mm: float, spin: float) -> "HoleSurfaces":
+        return surfaces_from_table(table, footprint_mm, form_mm, spin)
 
 
 def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 0.0, spin: float = 0.0) -> HoleSurfaces:

@@ -13,7 +13,7 @@ partition, and hands back one piece per partition in the log's order. The result
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Iterator
+from typing import TYPE_CHECKING, Iterator, Protocol
 
 import numpy as np
 
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
     from metrology.io.holeout import PartitionedOutput
 
-__all__ = ["Feed", "Watch", "Piece", "MeasureResult", "OneProcess", "measure_partition", "measure_log",
+__all__ = ["Feed", "Watch", "Piece", "MeasureResult", "Engine", "OneProcess", "measure_partition", "measure_log",
            "tune_allocator"]
 
 _TUNED = False
@@ -261,6 +261,24 @@ def _public(table, drop=()):
     return table.drop_columns([c for c in (*INTERNAL, *drop) if c in table.column_names])
 
 
+class Engine(Protocol):
+    """What measures a log's partitions: :class:`OneProcess` here, or
+    :class:`metrology.measure.fleet.DaskEngine` on a Dask cluster; :func:`measure_log` is the one loop over
+    either (no ``if engine ==`` anywhere else)."""
+
+    name: str
+
+    def plan(self, log: HoleLog, output=None) -> HoleLog:
+        """The log as this engine's tasks split it."""
+
+    def pieces(self, log: HoleLog, layout: SensorLayout, settings: Settings, output=None, rows: bool = False,
+               by_panel: bool = False) -> Iterator[Piece]:
+        """Each partition's results (:class:`Piece`), in the log's order."""
+
+    def watches(self) -> list:
+        """The drift watches the engine ran itself (empty where every piece carries its feed)."""
+
+
 class OneProcess:
     """The engine of one process: each partition measured here, in the log's order, batch by batch
     (memory bounded by one batch: the watch is fed each batch as it is measured)."""
@@ -308,7 +326,7 @@ class MeasureResult:
         return self.watch.alarms
 
 
-def measure_log(log: HoleLog, layout: SensorLayout, settings: Settings, engine=None, sink=None,
+def measure_log(log: HoleLog, layout: SensorLayout, settings: Settings, engine: Engine | None = None, sink=None,
                 output: "PartitionedOutput | None" = None, progress=None, by_panel: bool = False) -> MeasureResult:
     """Measure every partition of ``log`` on ``engine`` (:class:`OneProcess` when None; or a
     :class:`metrology.measure.fleet.DaskEngine`), results into ``output`` (a folder: each partition

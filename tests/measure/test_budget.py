@@ -84,3 +84,20 @@ def test_a_uniform_source_takes_the_normal_plus_uniform_rule():
     un = combine(b)
     assert un.u[0] == pytest.approx(np.hypot(sd, a / np.sqrt(3.0)), rel=1e-9)
     assert un.U95[0] == pytest.approx(normal_uniform_u95(np.array([sd]), np.array([a]))[0], rel=1e-9)
+
+
+def test_engines_and_panel_sources_each_behind_one_protocol():
+    import inspect
+
+    from metrology.jobs.measure_panel import CadPanel
+    from metrology.measure.fleet import DaskEngine
+    from metrology.measure.panel import SurfaceSource, TableNormals
+    from metrology.measure.run import Engine, OneProcess
+
+    for cls in (OneProcess, DaskEngine):
+        for name in ("plan", "pieces", "watches"):
+            assert list(inspect.signature(getattr(cls, name)).parameters) == \
+                list(inspect.signature(getattr(Engine, name)).parameters), (cls, name)
+    for cls in (TableNormals, CadPanel):
+        assert list(inspect.signature(cls.surfaces).parameters) == \
+            list(inspect.signature(SurfaceSource.surfaces).parameters), cls
