@@ -46,7 +46,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
-from metrology.measure.normals import concat_normals, hole_normals
+from metrology.measure.normals import hole_normals
 from metrology.measure.pose import against_cad, read_pose
 from metrology.measure.reasons import reason_column, verdict_reasons
 
@@ -116,14 +116,6 @@ class _Measured:
 CACHE_ROWS = 16384
 
 
-def _hole_normals(layout, d, min_radius_mm):
-    """:func:`hole_normals` in slices of :data:`CACHE_ROWS` rows, joined."""
-    if len(d) <= CACHE_ROWS:
-        return hole_normals(layout, d, min_radius_mm=min_radius_mm)
-    return concat_normals([hole_normals(layout, d[i:i + CACHE_ROWS], min_radius_mm=min_radius_mm)
-                           for i in range(0, len(d), CACHE_ROWS)])
-
-
 def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None,
              convention=None, stated=True) -> _Measured:
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
@@ -161,9 +153,6 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     # one group per pattern of usable sensors (all, or all but one, in practice)
     code = in_range @ (1 << np.arange(n))
     code[few] = -1
-    def of(r):  # the rows r: a slice (views, no gather) where they run on (all sensors read: the usual)
-        return slice(r[0], r[-1] + 1) if r[-1] - r[0] + 1 == len(r) else r
-
     for p in np.flatnonzero(np.bincount(code[~few], minlength=1 << n)):
         mask = ((p >> np.arange(n)) & 1).astype(bool)
         rows = np.flatnonzero(code == p)
@@ -172,7 +161,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         if shape is not None:
             from metrology.measure.spin import panel_normals
 
-            rs = of(rows)
+            rs = _of(rows)
             j = panel_normals(sub, dd, shape[rs], u_shape[rs], spin[rs], None if higher is None else higher.rows(rs),
                               convention[rs], stated)
             h = j.normals
@@ -185,33 +174,49 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                     f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
                     "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
                     ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
-        else:
-            h = _hole_normals(sub, dd, settings.min_radius_mm)
-        rs = of(rows)
-        out.normal[rs], out.angle[rs], out.U95[rs] = h.normal, h.angle, h.U95
-        out.residual[rs] = h.residual
-        if h.signature is not None:
-            out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
-            out.noise_sd[rows] = h.residual_noise_sd
-            out.residual_sd[rows], out.twist[rows] = h.residual_sd, h.twist
-            out.moment[rows] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS])  # slices, as the normals
-                                               for i in range(0, len(dd), CACHE_ROWS)])
-            # the most any panel of radius >= R gives; with the panel known, what is not known of it
-            bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
-            gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
-            out.disagree[rows[gross]] = True
-            for i, r in zip(np.flatnonzero(gross), rows[gross]):
-                out.reason[int(r)] = (f"readings disagree: the redundant reading misses the plane by "
-                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
-                                 f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
-                                 if shape is None else
-                                 f"readings disagree: the redundant reading misses the panel's surface by "
-                                 f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas (a gross reading, "
-                                 f"or the panel far off its CAD here)")
-                out.angle[r] = np.nan  # no normal from these readings
-                out.normal[r] = np.nan
-                out.U95[r] = np.nan
+            _store(out, rows, mask, sub, dd, h, settings, micro=False)
+        else:  # in slices of CACHE_ROWS rows, each stored as it comes (its temporaries stay in the cache)
+            for i in range(0, len(rows), CACHE_ROWS):
+                sl = slice(i, i + CACHE_ROWS)
+                _store(out, rows[sl], mask, sub, dd[sl], hole_normals(sub, dd[sl], min_radius_mm=settings.min_radius_mm),
+                       settings, micro=True)
     return out
+
+
+def _of(r):
+    """The rows ``r``: a slice (views, no gather) where they run on (all sensors read: the usual)."""
+    return slice(r[0], r[-1] + 1) if len(r) and r[-1] - r[0] + 1 == len(r) else r
+
+
+def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bool) -> None:
+    """Write the holes ``rows`` measured on the sensors ``mask`` (``h``, readings ``dd``) into ``out``, and
+    apply rule 2 (the readings disagree) to them."""
+    rs = _of(rows)
+    out.normal[rs], out.angle[rs], out.U95[rs] = h.normal, h.angle, h.U95
+    out.residual[rs] = h.residual
+    if h.signature is None:
+        return
+    out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
+    out.noise_sd[rs] = h.residual_noise_sd
+    out.residual_sd[rs], out.twist[rs] = h.residual_sd, h.twist
+    out.moment[rs] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS]) for i in range(0, len(dd), CACHE_ROWS)])
+    # the most any panel of radius >= R gives; with the panel known, what is not known of it
+    bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
+    gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
+    if not gross.any():
+        return
+    out.disagree[rows[gross]] = True
+    for i, r in zip(np.flatnonzero(gross), rows[gross]):
+        out.reason[int(r)] = (f"readings disagree: the redundant reading misses the plane by "
+                              f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas beyond what a "
+                              f"panel of radius >= {settings.min_radius_mm:g} mm gives (a gross reading)"
+                              if micro else
+                              f"readings disagree: the redundant reading misses the panel's surface by "
+                              f"{h.residual[i] * 1e3:.1f} µm, more than {GROSS_SIGMAS:g} sigmas (a gross reading, "
+                              f"or the panel far off its CAD here)")
+        out.angle[r] = np.nan  # no normal from these readings
+        out.normal[r] = np.nan
+        out.U95[r] = np.nan
 
 
 def _moment(layout, d):
@@ -263,9 +268,9 @@ def _duplicates(ids):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    counts = pc.value_counts(ids)
-    if len(counts) == len(ids):
+    if len(pc.unique(ids)) == len(ids):  # the usual: no repeat (a hash of each id, no counts)
         return np.zeros(0, int), np.zeros(0, int)
+    counts = pc.value_counts(ids)
     repeated = counts.field("values").filter(pc.greater(counts.field("counts"), 1))
     rows = np.flatnonzero(pc.is_in(ids, value_set=repeated).to_numpy(zero_copy_only=False))
     seen, dup, orig = {}, [], []

@@ -52,18 +52,21 @@ def verdict_reasons(code, judge_after, judged, judged_u, tolerance):
     import pyarrow.compute as pc
 
     N = len(code)
-    out = pa.array(np.full(N, ""), pa.string())
+    out = pa.array(np.full(N, ""), pa.string())  # (a fresh array of "" per batch: cheap beside the texts)
     tol = f"{np.degrees(tolerance):g}"
     for status, (mid, end) in ((Status.FAILS, (" deg - U95 ", f" deg > tolerance {tol} deg")),
                                (Status.UNDECIDED, (" deg +- U95 ", f" deg straddles the tolerance {tol} deg"))):
         mask = code == CODE[status]
         if not mask.any():
             continue
-        rows = np.flatnonzero(mask)
-        where = pc.if_else(pa.array(judge_after[rows]), "after the adjustment: angle ", "as measured: angle ")
+        every = bool(mask.all())  # every hole one status (a log all failing): no gathers, no scatter
+        rows = slice(None) if every else np.flatnonzero(mask)
+        after = judge_after[rows]
+        where = ("after the adjustment: angle " if after.all() else "as measured: angle " if not after.any() else
+                 pc.if_else(pa.array(after), "after the adjustment: angle ", "as measured: angle "))
         text = pc.binary_join_element_wise(where, fixed(np.degrees(judged[rows])), mid, fixed(np.degrees(judged_u[rows])),
                                            end, "")
-        out = pc.replace_with_mask(out, pa.array(mask), text)
+        out = text if every else pc.replace_with_mask(out, pa.array(mask), text)
     return out
 
 
