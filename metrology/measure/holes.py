@@ -362,7 +362,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     poses = np.zeros(N, bool)
     if after is not None:
         for i in sorted(after.reason):
-            if judge_after[i]:
+            if judge_after[i] and after.reason[i] != reason.get(i):  # (the same note before and after: once)
                 reason[i] = (reason[i] + "; " if reason.get(i) else "") + "after the adjustment: " + after.reason[i]
         poses, diff = _poses_disagree(before, after, settings)
         poses &= judge_after & ~before.disagree & ~after.disagree  # rule 2 named the gross pose: no doubt left
