@@ -45,6 +45,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym3 import smallest_eigvec
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
+from metrology.measure.effects import apply_terms
 from metrology.measure.normals import hole_normals
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
@@ -118,13 +119,14 @@ def _hole_normals(layout, d, min_radius_mm):
                              for f in fields})
 
 
-def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None) -> _Measured:
+def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None, effects=None):
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
     allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
     (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it);
     ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
-    the head's rotation the shape was put into the TCS with, the turn found before the adjustment."""
+    the head's rotation the shape was put into the TCS with, the turn found before the adjustment;
+    ``effects`` the layout's head terms removed from ``d`` (:class:`~metrology.measure.effects.Applied`)."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -171,6 +173,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                 out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
         else:
             h = _hole_normals(sub, dd, settings.min_radius_mm)
+        h = h if effects is None else effects.widen(h, sub, rows, mask)  # the head terms' covariance in U95
         rs = of(rows)
         out.normal[rs], out.angle[rs], out.U95[rs] = h.normal, h.angle, h.U95
         out.residual[rs] = h.residual
@@ -353,7 +356,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     import pyarrow as pa
 
     names = layout.names
-    d = _readings(table, names)
+    d = (applied := apply_terms(layout, _readings(table, names), table)).d  # the layout's head terms removed
     N = len(d)
     shape = u_shape = spin = table_row = higher = None
     surf = settings.surfaces
@@ -395,13 +398,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
-    before = _measure(layout, d, settings, shape, u_shape, spin, higher)
+    before = _measure(layout, d, settings, shape, u_shape, spin, higher, effects=applied)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
-        da = _readings(table, names, "_after")
+        da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
         higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
-        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after)
+        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after, effects=applied_after)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)

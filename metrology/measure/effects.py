@@ -1,0 +1,170 @@
+"""A layout's head terms in the production loop: the readings corrected, and the terms' share of U95.
+
+Where readings enter a batch (:func:`metrology.measure.holes.measure_batch`, the controller's
+:func:`metrology.measure.surface.surface_normal`, ``metro normals``) they pass through
+:func:`apply_terms`: the terms are removed (:func:`metrology.core.effects.apply.correct_readings`)
+with the covariates the log gives, the temperature from its ``temperature_c`` column and each beam's
+incidence from the hole's own micro-plane (:data:`INCIDENCE_PASSES` passes: the normal of the
+corrected readings, then the incidence again; a 50 um bias at 45 deg moves the normal by a few
+mdeg, which moves the incidence by as much: the second pass is within 1e-4 of its term).
+
+**The terms in U95** (the Budget source ``"effects"``): the parameters ``theta`` of the terms
+were estimated with the sensors' chart parameters ``beta`` (jointly, by ``diagnose --out`` or
+``calibrate``); the corrected reading ``d0_i`` moves by ``J_i dtheta`` and the point's height along
+the micro-plane's normal by ``(m.u_i) J_i dtheta`` (``m = (-g_x, -g_y, 1)``). With ``w_i`` the
+angle's change per unit height of point ``i`` (``c^T P_i``, :mod:`metrology.measure.normals`) and
+``r_i`` the base chart's height rows, the angle's variance gains
+
+    var_effects = a_t^T C_tt a_t + 2 a_b^T C_bt a_t,   a_t = sum_i w_i (m.u_i) J_i,  a_b = (w_i r_i)_i,
+
+the terms' own covariance and their correlation with the base (a gain and the zero along its beam
+trade: without the cross term the gain's share would be counted at the stand-off, not at the
+readings' centre). The sum with the calibration's share (``C_bb``) is the joint covariance
+propagated; ``var_effects`` alone can be negative. U95 is widened as ``sqrt(U95^2 + K95^2
+var_effects)`` (the linear rule; near angle 0 a first-order widening of the half-width).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from metrology.core.effects.apply import Corrected, correct_readings, covariates_for, incidence_from_normal
+from metrology.core.model import direction_basis
+from metrology.measure.magnitude import K95
+
+__all__ = ["Applied", "apply_terms", "micro_normals", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
+
+#: passes of the incidence: normal of the readings, incidence, corrected readings, again
+INCIDENCE_PASSES = 2
+#: the hole log's column a temperature coefficient reads (deg C)
+TEMPERATURE_COLUMN = "temperature_c"
+
+
+def micro_normals(layout, d) -> np.ndarray:
+    """``(N, 3)`` unit, TCS: the least-squares plane through the finite projection points of each
+    row of ``d (N, n)`` mm (NaN with fewer than 3), oriented along the beams."""
+    w = np.isfinite(d).astype(float)
+    dz = np.where(w > 0, d, 0.0)
+    P = layout.zero[None] + dz[..., None] * layout.direction[None]  # (N, n, 3)
+    cnt = np.maximum(w.sum(1), 1.0)
+    c = (P * w[..., None]).sum(1) / cnt[:, None]
+    X = (P - c[:, None]) * w[..., None]
+    S = np.einsum("nij,nik->njk", X, X)
+    _, vec = np.linalg.eigh(S)
+    n = vec[:, :, 0]
+    n = n * np.sign(n @ np.sign(np.mean(layout.direction[:, 2])) * np.array([0, 0, 1.0]))[:, None]
+    n[w.sum(1) < 3] = np.nan
+    return n
+
+
+@dataclass(frozen=True)
+class Applied:
+    """A batch's readings with the layout's terms removed (:func:`apply_terms`).
+
+    d : (N, n) float, mm, corrected readings; corrected : Corrected or None (no terms);
+    layout : SensorLayout, the layout whose terms were applied
+    """
+
+    d: np.ndarray
+    corrected: Corrected | None
+    layout: object
+
+    def widen(self, h, sub, rows, mask):
+        """``h`` (a :class:`~metrology.measure.normals.HoleNormals` of the holes ``rows`` measured on
+        the sensors ``mask`` (n,) bool, sub-layout ``sub``) with the terms' share of its U95 added
+        (the module docstring); ``h`` unchanged without terms."""
+        if self.corrected is None:
+            return h
+        terms = self.layout.effects
+        var = effects_variance(sub, self.d[np.ix_(rows, np.flatnonzero(mask))], h.normal,
+                               self.corrected.jac[rows][:, mask], terms.cov,
+                               terms.cross[[5 * i + j for i in np.flatnonzero(mask) for j in range(5)]])
+        u2 = np.maximum(h.u_angle ** 2 + var, 0.0)
+        U2 = np.maximum(h.U95 ** 2 + K95 ** 2 * var, 0.0)
+        return replace(h, u_angle=np.sqrt(u2), U95=np.sqrt(U2))
+
+
+def effects_variance(layout, d, normal, jac, C_tt, C_bt) -> np.ndarray:
+    """``(N,)`` rad^2: the terms' share of the angle's variance (module docstring) for holes read
+    ``d (N, n)`` mm by ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac (N, n, k)``
+    mm per parameter, the terms' covariance ``C_tt (k, k)`` and its cross-covariance with these
+    sensors' chart parameters ``C_bt (5n, k)``."""
+    E, u = layout.zero, layout.direction
+    nz = normal[:, 2]
+    gx, gy = -normal[:, 0] / nz, -normal[:, 1] / nz
+    dT = d.T  # (n, N)
+    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]
+    xc, yc = x - x.mean(0), y - y.mean(0)
+    sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
+    det = sxx * syy - sxy * sxy
+    px, py = (syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det
+    g2 = gx * gx + gy * gy
+    with np.errstate(invalid="ignore", divide="ignore"):
+        kk = 1.0 / (np.sqrt(g2) * (1.0 + g2))
+    kk = np.where(np.isfinite(kk), kk, 0.0)
+    w = gx * kk * px + gy * kk * py  # (n, N): d angle / d height of point i
+    mu = u[:, 2, None] - gx * u[:, 0, None] - gy * u[:, 1, None]
+    a_t = np.einsum("iN,Nik->Nk", w * mu, jac)  # (N, k)
+    e = direction_basis(u)  # (n, 2, 3)
+    rows = np.empty(dT.shape + (5,))
+    rows[..., 0], rows[..., 1], rows[..., 2] = -gx[None], -gy[None], 1.0
+    for j in range(2):
+        rows[..., 3 + j] = dT * (e[:, j, 2, None] - gx[None] * e[:, j, 0, None] - gy[None] * e[:, j, 1, None])
+    a_b = (w[..., None] * rows).transpose(1, 0, 2).reshape(len(d), -1)  # (N, 5n)
+    var = np.einsum("Nk,kl,Nl->N", a_t, C_tt, a_t) + 2.0 * np.einsum("Nb,bk,Nk->N", a_b, C_bt, a_t)
+    return np.where(np.isfinite(var), var, 0.0)
+
+
+def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:
+    """The readings ``d (N, n)`` mm of ``layout``'s sensors with its terms removed (:class:`Applied`).
+
+    The temperature is ``temp_c (N,)`` deg C, else the ``temperature_c`` column of ``table`` (a
+    pyarrow Table of the same rows) when a term needs it; a term whose covariate is missing raises
+    ValueError naming the column (``what`` names the source)."""
+    terms = layout.effects
+    if terms is None:
+        return Applied(d, None, layout)
+    needs = terms.needs()
+    if "temperature_c" in needs and temp_c is None:
+        if table is None or TEMPERATURE_COLUMN not in table.column_names:
+            raise ValueError(f"{what} has no {TEMPERATURE_COLUMN} column (deg C): the layout's temperature "
+                             f"coefficient ({', '.join(c.label for c in terms.components if c.name == 'drift')}) "
+                             f"needs the temperature of every hole")
+        col = table.column(TEMPERATURE_COLUMN)
+        temp_c = np.asarray(col.cast("float64").to_numpy(zero_copy_only=False), float)
+    N = len(d)
+    cos = None
+    passes = INCIDENCE_PASSES if "incidence" in needs else 0
+    if passes:
+        cos = incidence_from_normal(layout, micro_normals(layout, d))
+    temp = None if temp_c is None else np.where(np.isfinite(temp_c), temp_c, np.nan)
+    for k in range(max(passes, 1)):
+        cov = covariates_for(layout, N, temp, cos)
+        corr = _correct_rows(terms, d, cov, what)
+        if k + 1 < passes:
+            cos = incidence_from_normal(layout, micro_normals(layout, corr.d))
+    return Applied(corr.d, corr, layout)
+
+
+def _correct_rows(terms, d, cov, what):
+    """:func:`correct_readings` where the covariates are known; a row whose temperature is blank, or
+    whose incidence cannot be found (fewer than 3 readings), has its term-bearing readings blanked (no
+    reading the model cannot place): the hole is then measured on the others or not at all."""
+    ok_t = np.isfinite(cov.temp_c) if "temperature_c" in terms.needs() else np.ones(len(d), bool)
+    ok_c = np.ones(d.shape, bool)
+    if "incidence" in terms.needs():
+        ok_c = np.isfinite(cov.cos_inc)
+    ok = ok_t[:, None] & ok_c
+    if ok.all():
+        return correct_readings(terms, d, cov, what)
+    if "temperature_c" in terms.needs() and not ok_t.any():
+        correct_readings(terms, d, cov, what)  # raises, naming the column
+    cols = np.zeros(d.shape[1], bool)
+    for c in terms.components:
+        cols[c.sensors[0]] = True
+    dd = np.where(ok | ~cols[None], d, np.nan)
+    safe = replace(cov, temp_c=np.where(np.isfinite(cov.temp_c), cov.temp_c, 20.0),
+                   cos_inc=np.where(np.isfinite(cov.cos_inc), cov.cos_inc, 1.0))
+    return correct_readings(terms, dd, safe, what)
