@@ -10,18 +10,23 @@ mdeg, which moves the incidence by as much: the second pass is within 1e-4 of it
 
 **The terms in U95** (the Budget source ``"effects"``): the parameters ``theta`` of the terms
 were estimated with the sensors' chart parameters ``beta`` (jointly, by ``diagnose --out`` or
-``calibrate``); the corrected reading ``d0_i`` moves by ``J_i dtheta`` and the point's height along
-the micro-plane's normal by ``(m.u_i) J_i dtheta`` (``m = (-g_x, -g_y, 1)``). With ``w_i`` the
-angle's change per unit height of point ``i`` (``c^T P_i``, :mod:`metrology.measure.normals`) and
-``r_i`` the base chart's height rows, the angle's variance gains
+``calibrate``); their joint covariance has blocks ``C_bb`` (the layout's ``covariance``), ``C_bt``
+and ``C_tt``. The corrected reading ``d0_i`` moves by ``J_i dtheta`` and the point's height along
+the micro-plane's normal by ``(m.u_i) J_i dtheta`` (``m = (-g_x, -g_y, 1)``). A gain and the zero
+along its beam trade almost exactly (a run's readings fix ``z + k d`` at their centre), so the
+marginal ``C_bb`` is large and cancels against the cross term: propagated as two sums it loses
+the small difference. The joint covariance is split instead into two positive parts,
 
-    var_effects = a_t^T C_tt a_t + 2 a_b^T C_bt a_t,   a_t = sum_i w_i (m.u_i) J_i,  a_b = (w_i r_i)_i,
+    C_b|t = C_bb - C_bt C_tt^-1 C_tb             the calibration given the terms: the layout's
+                                                  covariance the normals propagate (Budget source
+                                                  "calibration"),
+    var_effects = v^T C_tt v,   v = a_t + C_tt^-1 C_tb a_b,
 
-the terms' own covariance and their correlation with the base (a gain and the zero along its beam
-trade: without the cross term the gain's share would be counted at the stand-off, not at the
-readings' centre). The sum with the calibration's share (``C_bb``) is the joint covariance
-propagated; ``var_effects`` alone can be negative. U95 is widened as ``sqrt(U95^2 + K95^2
-var_effects)`` (the linear rule; near angle 0 a first-order widening of the half-width).
+with ``w_i`` the angle's change per unit height of point ``i`` (``c^T P_i``,
+:mod:`metrology.measure.normals`), ``r_i`` the base chart's height rows, ``a_t = sum_i w_i (m.u_i)
+J_i`` and ``a_b = (w_i r_i)_i``: their sum is the joint covariance propagated exactly. U95 is
+widened as ``sqrt(U95^2 + K95^2 var_effects)`` (the linear rule; near angle 0 a first-order
+widening of the half-width).
 """
 
 from __future__ import annotations
@@ -54,7 +59,8 @@ def micro_normals(layout, d) -> np.ndarray:
     S = np.einsum("nij,nik->njk", X, X)
     _, vec = np.linalg.eigh(S)
     n = vec[:, :, 0]
-    n = n * np.sign(n @ np.sign(np.mean(layout.direction[:, 2])) * np.array([0, 0, 1.0]))[:, None]
+    axis = np.array([0.0, 0.0, 1.0 if np.mean(layout.direction[:, 2]) > 0 else -1.0])
+    n = n * np.where(n @ axis < 0, -1.0, 1.0)[:, None]
     n[w.sum(1) < 3] = np.nan
     return n
 
@@ -71,26 +77,38 @@ class Applied:
     corrected: Corrected | None
     layout: object
 
+    @property
+    def normals_layout(self):
+        """The layout the normals are computed with: its ``covariance`` the calibration's given the
+        terms (``C_b|t``, the module docstring); the layout itself without terms."""
+        t = self.layout.effects
+        if self.corrected is None or self.layout.covariance is None:
+            return self.layout
+        cond = self.layout.covariance - t.cross @ self._gain()
+        return replace(self.layout, covariance=0.5 * (cond + cond.T))
+
+    def _gain(self):
+        """``(k, 5n)``: ``C_tt^-1 C_tb``."""
+        t = self.layout.effects
+        return np.linalg.pinv(t.cov, hermitian=True) @ t.cross.T
+
     def widen(self, h, sub, rows, mask):
         """``h`` (a :class:`~metrology.measure.normals.HoleNormals` of the holes ``rows`` measured on
         the sensors ``mask`` (n,) bool, sub-layout ``sub``) with the terms' share of its U95 added
         (the module docstring); ``h`` unchanged without terms."""
         if self.corrected is None:
             return h
-        terms = self.layout.effects
+        cols = [5 * i + j for i in np.flatnonzero(mask) for j in range(5)]
         var = effects_variance(sub, self.d[np.ix_(rows, np.flatnonzero(mask))], h.normal,
-                               self.corrected.jac[rows][:, mask], terms.cov,
-                               terms.cross[[5 * i + j for i in np.flatnonzero(mask) for j in range(5)]])
-        u2 = np.maximum(h.u_angle ** 2 + var, 0.0)
-        U2 = np.maximum(h.U95 ** 2 + K95 ** 2 * var, 0.0)
-        return replace(h, u_angle=np.sqrt(u2), U95=np.sqrt(U2))
+                               self.corrected.jac[rows][:, mask], self.layout.effects.cov, self._gain()[:, cols])
+        return replace(h, u_angle=np.sqrt(h.u_angle ** 2 + var), U95=np.sqrt(h.U95 ** 2 + K95 ** 2 * var))
 
 
-def effects_variance(layout, d, normal, jac, C_tt, C_bt) -> np.ndarray:
-    """``(N,)`` rad^2: the terms' share of the angle's variance (module docstring) for holes read
-    ``d (N, n)`` mm by ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac (N, n, k)``
-    mm per parameter, the terms' covariance ``C_tt (k, k)`` and its cross-covariance with these
-    sensors' chart parameters ``C_bt (5n, k)``."""
+def effects_variance(layout, d, normal, jac, C_tt, gain) -> np.ndarray:
+    """``(N,)`` rad^2: the terms' share of the angle's variance, ``v^T C_tt v`` (module docstring), for
+    holes read ``d (N, n)`` mm by ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac
+    (N, n, k)`` mm per parameter, the terms' covariance ``C_tt (k, k)`` and ``gain (k, 5n)``, ``C_tt^-1 C_tb``
+    on these sensors' chart parameters."""
     E, u = layout.zero, layout.direction
     nz = normal[:, 2]
     gx, gy = -normal[:, 0] / nz, -normal[:, 1] / nz
@@ -113,8 +131,9 @@ def effects_variance(layout, d, normal, jac, C_tt, C_bt) -> np.ndarray:
     for j in range(2):
         rows[..., 3 + j] = dT * (e[:, j, 2, None] - gx[None] * e[:, j, 0, None] - gy[None] * e[:, j, 1, None])
     a_b = (w[..., None] * rows).transpose(1, 0, 2).reshape(len(d), -1)  # (N, 5n)
-    var = np.einsum("Nk,kl,Nl->N", a_t, C_tt, a_t) + 2.0 * np.einsum("Nb,bk,Nk->N", a_b, C_bt, a_t)
-    return np.where(np.isfinite(var), var, 0.0)
+    v = a_t + a_b @ gain.T
+    var = np.einsum("Nk,kl,Nl->N", v, C_tt, v)
+    return np.where(np.isfinite(var), np.maximum(var, 0.0), 0.0)
 
 
 def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:

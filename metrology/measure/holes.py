@@ -398,13 +398,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
-    before = _measure(layout, d, settings, shape, u_shape, spin, higher, effects=applied)
+    before = _measure(applied.normals_layout, d, settings, shape, u_shape, spin, higher, effects=applied)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
         higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
-        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after, effects=applied_after)
+        after = _measure(applied_after.normals_layout, da, settings, shape, u_shape, spin, higher_after, effects=applied_after)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
