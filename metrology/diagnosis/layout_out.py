@@ -70,9 +70,11 @@ def terms_removed(ds):
     without them: the data the simple model should explain if the terms are all the head has."""
     from metrology.calibration.terms import corrected_obs
 
+    from metrology.calibration.terms import dataset_covariates
+
     terms = ds.layout.effects
     plain = replace(ds, layout=replace(ds.layout, effects=None))
-    _, cov = _base_covariates(plain)
+    cov = dataset_covariates(ds.layout, ds.obs, ds.export, ds.plane, ds.datum_points)  # at the layout's geometry
     d = corrected_obs(terms, ds.obs, cov).d
     return replace(plain, export=replace(ds.export, d=d))
 

@@ -326,6 +326,9 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     if points is not None:
         surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg)
     log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
+    from metrology.measure.effects import check_log
+
+    check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
     target = check_out(o.out, log.partitioned, o.distributed)
     settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)

@@ -39,7 +39,7 @@ from metrology.core.effects.apply import Corrected, correct_readings, covariates
 from metrology.core.model import direction_basis
 from metrology.measure.magnitude import K95
 
-__all__ = ["Applied", "apply_terms", "micro_normals", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
+__all__ = ["Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
 
 #: passes of the incidence: normal of the readings, incidence, corrected readings, again
 INCIDENCE_PASSES = 2
@@ -187,3 +187,31 @@ def _correct_rows(terms, d, cov, what):
     safe = replace(cov, temp_c=np.where(np.isfinite(cov.temp_c), cov.temp_c, 20.0),
                    cos_inc=np.where(np.isfinite(cov.cos_inc), cov.cos_inc, 1.0))
     return correct_readings(terms, dd, safe, what)
+
+
+def check_log(layout, log) -> None:
+    """Refuse a hole log (:class:`metrology.io.holelog.HoleLog`) that lacks a covariate the layout's
+    terms need, naming the column and the partition, before a hole is measured."""
+    if layout.effects is None or "temperature_c" not in layout.effects.needs():
+        return
+    labels = ", ".join(c.label for c in layout.effects.components if c.name == "drift")
+    for part in log.partitions:
+        if TEMPERATURE_COLUMN not in log.columns(part):
+            raise ValueError(f"{log.where(part)}: no {TEMPERATURE_COLUMN} column (deg C): the layout's temperature "
+                             f"coefficient ({labels}) needs the temperature of every hole")
+
+
+def surface_normal(layout, d, shape, temp_c=None):
+    """The controller's per-hole call (:func:`metrology.measure.surface.surface_normal`, the contract
+    there) with the layout's head terms removed from the readings ``d (h, n)`` mm first; ``temp_c (h,)``
+    deg C, the head's temperature, for a temperature coefficient (ValueError naming it when missing).
+    ``metrology.measure.surface_normal`` is this function."""
+    from metrology.measure.surface import surface_normal as plain
+
+    if layout.effects is None:
+        return plain(layout, d, shape)
+    d = np.asarray(d, float)
+    single = d.ndim == 1
+    dd = apply_terms(layout, d.reshape(-1, layout.n), temp_c=None if temp_c is None else np.atleast_1d(temp_c),
+                     what="surface_normal").d
+    return plain(replace(layout, effects=None), dd[0] if single else dd, shape)

@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 __all__ = ["HeadTerms", "HEAD_TERMS", "OPTIONS", "TERM_LIMITS", "why_not_a_head_term", "term_from_table",
-           "term_to_table", "is_head_term"]
+           "term_to_table", "is_head_term", "refuse_terms"]
 
 #: the registry entries a layout carries: properties of a sensor that hold from calibration to production
 HEAD_TERMS = ("scale", "incidence", "nonlinearity", "drift")
@@ -239,3 +239,13 @@ def term_to_table(comp) -> list:
     for p, v, s in zip(comp.param_names, comp.values, se):
         lines += [f"{p} = {float(v):.9g}", f"{p}_stderr = {float(s):.9g}"]
     return lines
+
+
+def refuse_terms(layout, source, command: str, why: str) -> None:
+    """Refuse (ValueError, one line) a layout with head terms in a command that cannot apply them:
+    never measured silently with the simple model."""
+    if layout is None or layout.effects is None:
+        return
+    labels = ", ".join(c.label for c in layout.effects.components)
+    raise ValueError(f"{source}: the layout has effect terms ({labels}) that metro {command} cannot apply ({why}); "
+                     f"use a layout without [sensors.effects], or metro simulate-log and metro measure, which apply them")
