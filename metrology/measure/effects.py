@@ -4,9 +4,9 @@ Where readings enter a batch (:func:`metrology.measure.holes.measure_batch`, the
 :func:`metrology.measure.surface.surface_normal`, ``metro normals``) they pass through
 :func:`apply_terms`: the terms are removed (:func:`metrology.core.effects.apply.correct_readings`)
 with the covariates the log gives, the temperature from its ``temperature_c`` column and each beam's
-incidence from the hole's own micro-plane (:data:`INCIDENCE_PASSES` passes: the normal of the
-corrected readings, then the incidence again; a 50 um bias at 45 deg moves the normal by a few
-mdeg, which moves the incidence by as much: the second pass is within 1e-4 of its term).
+incidence from the hole's own micro-plane (:data:`INCIDENCE_PASSES` pass: the normal of the raw
+readings; a 50 um bias moves it by about 1 mrad over the spots' 50 mm, which moves ``tan^2`` of a
+30 deg incidence by 1.5e-3 of itself: 0.1 um of a 50 um term, so a second pass changes nothing).
 
 **The terms in U95** (the Budget source ``"effects"``): the parameters ``theta`` of the terms
 were estimated with the sensors' chart parameters ``beta`` (jointly, by ``diagnose --out`` or
@@ -41,27 +41,29 @@ from metrology.measure.magnitude import K95
 
 __all__ = ["Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
 
-#: passes of the incidence: normal of the readings, incidence, corrected readings, again
-INCIDENCE_PASSES = 2
+#: passes of the incidence: the normal of the readings, the incidence, the corrected readings
+INCIDENCE_PASSES = 1
 #: the hole log's column a temperature coefficient reads (deg C)
 TEMPERATURE_COLUMN = "temperature_c"
 
 
 def micro_normals(layout, d) -> np.ndarray:
-    """``(N, 3)`` unit, TCS: the least-squares plane through the finite projection points of each
-    row of ``d (N, n)`` mm (NaN with fewer than 3), oriented along the beams."""
-    w = np.isfinite(d).astype(float)
-    dz = np.where(w > 0, d, 0.0)
-    P = layout.zero[None] + dz[..., None] * layout.direction[None]  # (N, n, 3)
-    cnt = np.maximum(w.sum(1), 1.0)
-    c = (P * w[..., None]).sum(1) / cnt[:, None]
-    X = (P - c[:, None]) * w[..., None]
-    S = np.einsum("nij,nik->njk", X, X)
-    _, vec = np.linalg.eigh(S)
-    n = vec[:, :, 0]
-    axis = np.array([0.0, 0.0, 1.0 if np.mean(layout.direction[:, 2]) > 0 else -1.0])
-    n = n * np.where(n @ axis < 0, -1.0, 1.0)[:, None]
-    n[w.sum(1) < 3] = np.nan
+    """``(N, 3)`` unit, TCS: the least-squares plane ``z = c + g_x x + g_y y`` through the finite
+    projection points of each row of ``d (N, n)`` mm (NaN with fewer than 3), along the beams."""
+    w = np.isfinite(d).T.astype(float)  # (n, N), sensor-major as hole_normals
+    dT = np.where(w > 0, d.T, 0.0)
+    E, u = layout.zero, layout.direction
+    x, y, z = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
+    cnt = np.maximum(w.sum(0), 1.0)
+    xc, yc, zc = (v - (w * v).sum(0) / cnt for v in (x, y, z))
+    sxx, syy, sxy = (w * xc * xc).sum(0), (w * yc * yc).sum(0), (w * xc * yc).sum(0)
+    sxz, syz = (w * xc * zc).sum(0), (w * yc * zc).sum(0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        det = sxx * syy - sxy * sxy
+        gx, gy = (syy * sxz - sxy * syz) / det, (sxx * syz - sxy * sxz) / det
+    s = 1.0 if np.mean(u[:, 2]) > 0 else -1.0
+    n = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (s / np.sqrt(1.0 + gx * gx + gy * gy))[:, None]
+    n[w.sum(0) < 3] = np.nan
     return n
 
 

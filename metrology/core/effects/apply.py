@@ -93,10 +93,15 @@ def correct_readings(terms, d, cov: Covariates, what="readings") -> Corrected:
     for c in terms.components:
         cols[c.sensors[0]] = True
     d0 = dz.copy()
+    live = [c for c in terms.components if c.uses_d0]
     with np.errstate(invalid="ignore"):
-        for _ in range(INVERSION_STEPS):
-            f = np.zeros((N, n))
-            for c in terms.components:
+        fixed = np.zeros((N, n))  # the terms that do not depend on the reading: evaluated once
+        for c in terms.components:
+            if not c.uses_d0:
+                fixed += c.evaluate(c.values, d0, cov)
+        for _ in range(INVERSION_STEPS if live else 1):
+            f = fixed.copy()
+            for c in live:
                 f += c.evaluate(c.values, d0, cov)
             d0 = np.where(cols[None, :], dz - f, dz)
         slope = np.ones((N, n))
