@@ -115,7 +115,8 @@ class _MetroController:
     def load(self):
         if self._fn is None:
             try:
-                from metrology.measure.effects import surface_normal  # the layout's head terms applied
+                from metrology.measure.surface import surface_normal as _plain  # noqa: F401 (the contract's home)
+                from metrology.measure.effects import surface_normal  # it, the layout's head terms applied
             except ImportError as exc:
                 raise ValueError(f"--controller metro: metrology.measure.surface.surface_normal is not available "
                                  f"({exc})") from None
