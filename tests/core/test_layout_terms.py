@@ -88,3 +88,32 @@ def test_correction_inverts_the_terms_and_names_a_missing_temperature():
     assert out.jac.shape == (50, 4, 5)
     with pytest.raises(ValueError, match="temperature_c"):
         correct_readings(lay.effects, d0 + f, covariates_for(lay, 50, None, cos))
+
+
+def test_a_calibration_row_naming_a_term_the_layout_lacks_is_refused(tmp_path):
+    text = layout_to_toml(_layout()).replace('"incidence.L4.c_mm"', '"incidence.L9.c_mm"')
+    p = tmp_path / "stray.toml"
+    p.write_text(text)
+    with pytest.raises(ValueError, match="has no covariance of the term parameter incidence.L4.c_mm"):
+        load_layout(p)
+
+
+@pytest.mark.parametrize("args", [
+    ["plan", "--layout", "{lay}", "--plane", "{plane}", "--poses", "10"],
+    ["normals", "{panel}", "--layout", "{lay}", "--grid", "40"],
+    ["simulate", "--layout", "{lay}", "--plane", "{plane}", "--out", "{tmp}/e.csv"],
+])
+def test_commands_that_cannot_apply_terms_refuse_them_in_one_line(tmp_path, args):
+    """Never measured silently with the simple model: exit 2, one line naming the terms."""
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from metrology.io.data import DATA_DIR
+
+    save_layout(_layout(), tmp_path / "ext.toml")
+    sub = {"lay": str(tmp_path / "ext.toml"), "plane": str(DATA_DIR / "measured" / "plane.json"),
+           "panel": str(DATA_DIR / "panel_cyl800.stl"), "tmp": str(tmp_path)}
+    r = CliRunner().invoke(app, [a.format(**sub) for a in args])
+    assert r.exit_code == 2, r.output
+    assert "effect terms (nonlinearity.L1, scale.L2, drift.L3@temp, incidence.L4)" in r.output
+    assert len(r.output.strip().splitlines()) == 1
