@@ -103,7 +103,7 @@ def run_head(seed, family, n_sensors, holes, workdir, panel="flat", standoff_mm=
                        noise_mm=0.004, temperature_c=(20.0, 3.0, 0.05), standoff_mm=standoff_mm,
                        properties=None if name == "reference" else props)
         chunks = list(simulate_log(spec, log_seed, holes))
-        out[name] = _measure(lay, chunks)
+        out[name] = _measure(lay, chunks, math.inf if panel == "flat" else 800.0)
     ref = out["reference"]["median_error_deg"]
     for name in ("simple", "extended"):
         if name in out:
@@ -129,13 +129,13 @@ def _diagnose(export, plane, layout, dest):
     return {"cause": diag.cause, "named": [c.label for c in diag.causes], **ext.to_dict()}
 
 
-def _measure(layout, chunks):
+def _measure(layout, chunks, min_radius_mm):
     from metrology.measure.holes import Settings, measure_batch
     from metrology.sim.forward.log_write import log_table
 
     err, cover, U = [], [], []
     for ch in chunks:
-        b = measure_batch(layout, log_table(ch), Settings(min_radius_mm=math.inf))
+        b = measure_batch(layout, log_table(ch), Settings(min_radius_mm=min_radius_mm))
         t = b.columns
         n = np.column_stack([t.column(f"normal_{k}").to_numpy(zero_copy_only=False) for k in "xyz"]).astype(float)
         cos = -np.einsum("hi,hi->h", n, ch.normal_tcs)

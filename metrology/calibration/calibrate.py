@@ -291,9 +291,15 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
         check_method(dataset.layout, method)
         cal, terms, obs = calibrate_terms(dataset)
         dataset = replace(dataset, export=replace(dataset.export, d=obs.d))  # the readings less the terms
-        if dataset.plane_cov is not None:  # the datum estimated with the sensors on them
-            cal = with_datum(cal, dataset)
-            cal, obs = replace(cal, layout=replace(cal.layout, effects=terms.terms)), cal_obs(cal, dataset)
+        if dataset.plane_cov is not None:  # the datum estimated with the sensors on them; its share added
+            from metrology.core.model import chart_cov_recentred  # to the joint fit's (the joint stays PSD)
+
+            joint, cal = cal.layout.covariance, with_datum(cal, dataset)
+            share = chart_cov_recentred(cal.nominal.direction, cal.theta[:, 3:],
+                                        cal.datum.cov_marginal - cal.datum.cov_conditional)
+            cal = replace(cal, layout=replace(cal.layout, covariance=joint + 0.5 * (share + share.T),
+                                              effects=terms.terms))
+            obs = cal_obs(cal, dataset)
     else:
         cal = calibrate(dataset.layout, obs, method, **opts)
     if terms is None and dataset.plane_cov is not None and np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov)):
