@@ -170,14 +170,16 @@ def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0
         j += c.n_params
     for c, h in zip(comps, held):
         cols = list(range(o, o + c.n_params))
-        if h:
+        if h:  # carried: the layout's covariance, else (a term no layout gave) its physical range as 1 sigma
             pi = _prior_index(prior, c)
-            fitted.append(c)
             if pi is not None:
                 C_full[np.ix_(cols, cols)] = prior.cov[np.ix_(pi, pi)]
             else:
-                C_full[np.ix_(cols, cols)] = np.diag(np.asarray(c.stderr if c.stderr is not None else
-                                                                np.zeros(c.n_params), float) ** 2)
+                from metrology.core.effects.terms import SPLINE_LIMIT_MM, TERM_LIMITS
+
+                se = np.array([TERM_LIMITS.get(pn, SPLINE_LIMIT_MM) for pn in c.param_names])
+                C_full[np.ix_(cols, cols)] = np.diag(se ** 2)
+            fitted.append(c.with_values(c.values, np.sqrt(np.diag(C_full[np.ix_(cols, cols)]))))
         else:
             v = next(it)
             sc = src[id(c)]

@@ -112,7 +112,7 @@ def extend_layout(ds, diag, carried=None) -> ExtendedLayout:
     nominal = replace(ds.layout, effects=None)
     cal, cov = _base_covariates(replace(ds, layout=nominal))
     names = nominal.names
-    comps = [c.with_values(c.values) for c in (carried.components if carried else ())]
+    comps = list(carried.components if carried else ())  # their values the start, their stderr kept
     have = {c.label for c in comps}
     not_written = []
     for cause in diag.causes:
