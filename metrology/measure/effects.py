@@ -39,7 +39,7 @@ from metrology.core.effects.apply import Corrected, correct_readings, covariates
 from metrology.core.model import direction_basis
 from metrology.measure.magnitude import K95
 
-__all__ = ["Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
+__all__ = ["Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "effects_slope_cov", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
 
 #: passes of the incidence: the normal of the readings, the incidence, the corrected readings
 INCIDENCE_PASSES = 1
@@ -106,11 +106,13 @@ class Applied:
         return replace(h, u_angle=np.sqrt(h.u_angle ** 2 + var), U95=np.sqrt(h.U95 ** 2 + K95 ** 2 * var))
 
 
-def effects_variance(layout, d, normal, jac, C_tt, gain) -> np.ndarray:
-    """``(N,)`` rad^2: the terms' share of the angle's variance, ``v^T C_tt v`` (module docstring), for
-    holes read ``d (N, n)`` mm by ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac
-    (N, n, k)`` mm per parameter, the terms' covariance ``C_tt (k, k)`` and ``gain (k, 5n)``, ``C_tt^-1 C_tb``
-    on these sensors' chart parameters."""
+def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
+    """``(c00, c01, c11)`` each ``(N,)``: the terms' share of the covariance of the micro-plane's slopes
+    ``(g_x, g_y)`` (the Budget source "effects": ``P_v C_tt P_v^T``, ``P_v`` the slopes' change per unit
+    term parameter, base-correlated part included; module docstring), for holes read ``d (N, n)`` mm by
+    ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac (N, n, k)`` mm per parameter,
+    the terms' covariance ``C_tt (k, k)`` and ``gain (k, 5n)``, ``C_tt^-1 C_tb`` on these sensors' chart
+    parameters. Also returns ``(g_x, g_y)``."""
     E, u = layout.zero, layout.direction
     nz = normal[:, 2]
     gx, gy = -normal[:, 0] / nz, -normal[:, 1] / nz
@@ -119,22 +121,30 @@ def effects_variance(layout, d, normal, jac, C_tt, gain) -> np.ndarray:
     xc, yc = x - x.mean(0), y - y.mean(0)
     sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
     det = sxx * syy - sxy * sxy
-    px, py = (syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det
-    g2 = gx * gx + gy * gy
-    with np.errstate(invalid="ignore", divide="ignore"):
-        kk = 1.0 / (np.sqrt(g2) * (1.0 + g2))
-    kk = np.where(np.isfinite(kk), kk, 0.0)
-    w = gx * kk * px + gy * kk * py  # (n, N): d angle / d height of point i
     mu = u[:, 2, None] - gx * u[:, 0, None] - gy * u[:, 1, None]
-    a_t = np.einsum("iN,Nik->Nk", w * mu, jac)  # (N, k)
     e = direction_basis(u)  # (n, 2, 3)
     rows = np.empty(dT.shape + (5,))
     rows[..., 0], rows[..., 1], rows[..., 2] = -gx[None], -gy[None], 1.0
     for j in range(2):
         rows[..., 3 + j] = dT * (e[:, j, 2, None] - gx[None] * e[:, j, 0, None] - gy[None] * e[:, j, 1, None])
-    a_b = (w[..., None] * rows).transpose(1, 0, 2).reshape(len(d), -1)  # (N, 5n)
-    v = a_t + a_b @ gain.T
-    var = np.einsum("Nk,kl,Nl->N", v, C_tt, v)
+    v = []
+    for p in ((syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det):  # P_i: slope per unit height of point i
+        a_t = np.einsum("iN,Nik->Nk", p * mu, jac)  # (N, k)
+        a_b = (p[..., None] * rows).transpose(1, 0, 2).reshape(len(d), -1)  # (N, 5n)
+        v.append(a_t + a_b @ gain.T)
+    c = [np.einsum("Nk,kl,Nl->N", a, C_tt, b) for a, b in ((v[0], v[0]), (v[0], v[1]), (v[1], v[1]))]
+    return tuple(np.where(np.isfinite(x), x, 0.0) for x in c), (gx, gy)
+
+
+def effects_variance(layout, d, normal, jac, C_tt, gain) -> np.ndarray:
+    """``(N,)`` rad^2: the terms' share of the angle's variance, ``c^T Sigma c`` with ``Sigma``
+    :func:`effects_slope_cov`'s and ``c = g / (|g| (1 + |g|^2))`` the angle's gradient (arguments as there)."""
+    (c00, c01, c11), (gx, gy) = effects_slope_cov(layout, d, normal, jac, C_tt, gain)
+    g2 = gx * gx + gy * gy
+    with np.errstate(invalid="ignore", divide="ignore"):
+        kk = 1.0 / (np.sqrt(g2) * (1.0 + g2))
+    cx, cy = gx * kk, gy * kk
+    var = cx * cx * c00 + 2 * cx * cy * c01 + cy * cy * c11
     return np.where(np.isfinite(var), np.maximum(var, 0.0), 0.0)
 
 
