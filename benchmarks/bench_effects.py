@@ -27,11 +27,16 @@ def layouts():
     names = simple.names
     comps = (Scale((1,), [0.005], np.array([1e-4]), names), Incidence((3,), [0.02], np.array([1e-3]), names),
              Drift((2,), [0.003], np.array([1e-4]), names, variable="temp", ref=20.0))
+    # a joint fit's structure: each term correlated with its own sensor's five parameters only
     rng = np.random.default_rng(0)
-    A = rng.normal(size=(23, 23)) * 1e-5
-    full = A @ A.T + np.diag(np.concatenate([np.diag(cov), [1e-8, 1e-6, 1e-8]]))
-    one = HeadTerms(comps[:1], full[20:21, 20:21], full[:20, 20:21])
-    three = HeadTerms(comps, full[20:, 20:], full[:20, 20:])
+    cross = np.zeros((20, 3))
+    for j, c in enumerate(comps):
+        i = c.sensors[0]
+        cross[5 * i:5 * i + 5, j] = 0.5 * np.sqrt(np.diag(cov)[5 * i:5 * i + 5] * [1e-8, 1e-6, 1e-8][j]) \
+            * rng.uniform(-1, 1, 5)
+    C_tt = np.diag([1e-8, 1e-6, 1e-8])
+    one = HeadTerms(comps[:1], C_tt[:1, :1], cross[:, :1])
+    three = HeadTerms(comps, C_tt, cross)
     return {"simple": simple, "gain": replace(simple, effects=one), "gain+incidence+tempco": replace(simple, effects=three)}
 
 

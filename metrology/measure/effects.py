@@ -43,6 +43,9 @@ __all__ = ["Applied", "apply_terms", "check_log", "surface_normal", "micro_norma
 
 #: passes of the incidence: the normal of the readings, the incidence, the corrected readings
 INCIDENCE_PASSES = 1
+#: the calibration's covariance given the terms is taken as block diagonal (sensors independent) when the
+#: layout's is and its cross-sensor entries are below this share of its largest (rounding of the joint fit)
+OFF_BLOCK_RTOL = 1e-9
 #: the hole log's column a temperature coefficient reads (deg C)
 TEMPERATURE_COLUMN = "temperature_c"
 
@@ -87,7 +90,16 @@ class Applied:
         if self.corrected is None or self.layout.covariance is None:
             return self.layout
         cond = self.layout.covariance - t.cross @ self._gain()
-        return replace(self.layout, covariance=0.5 * (cond + cond.T))
+        cond = 0.5 * (cond + cond.T)
+        # a joint fit of terms on single sensors leaves the sensors independent (its covariance block
+        # diagonal up to rounding): kept exactly so, the normals propagate it block by block (fast)
+        n = self.layout.n
+        block = np.kron(np.eye(n, dtype=bool), np.ones((5, 5), bool))
+        off = np.abs(np.where(block, 0.0, cond)).max()
+        if off <= OFF_BLOCK_RTOL * np.abs(np.where(block, cond, 0.0)).max() and not np.any(
+                np.where(block, 0.0, self.layout.covariance)):
+            cond = np.where(block, cond, 0.0)
+        return replace(self.layout, covariance=cond)
 
     def _gain(self):
         """``(k, 5n)``: ``C_tt^-1 C_tb``."""
@@ -121,17 +133,17 @@ def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
     xc, yc = x - x.mean(0), y - y.mean(0)
     sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
     det = sxx * syy - sxy * sxy
-    mu = u[:, 2, None] - gx * u[:, 0, None] - gy * u[:, 1, None]
     e = direction_basis(u)  # (n, 2, 3)
-    rows = np.empty(dT.shape + (5,))
-    rows[..., 0], rows[..., 1], rows[..., 2] = -gx[None], -gy[None], 1.0
-    for j in range(2):
-        rows[..., 3 + j] = dT * (e[:, j, 2, None] - gx[None] * e[:, j, 0, None] - gy[None] * e[:, j, 1, None])
-    v = []
-    for p in ((syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det):  # P_i: slope per unit height of point i
-        a_t = np.einsum("iN,Nik->Nk", p * mu, jac)  # (N, k)
-        a_b = (p[..., None] * rows).transpose(1, 0, 2).reshape(len(d), -1)  # (N, 5n)
-        v.append(a_t + a_b @ gain.T)
+    P = ((syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det)  # P_i: slope per unit height of point i
+    v = [np.zeros((len(d), jac.shape[2])), np.zeros((len(d), jac.shape[2]))]
+    # only the sensors the terms act on or correlate with (a term's own sensor, in a joint fit) contribute
+    for i in sorted(set(np.flatnonzero(np.any(gain != 0, axis=0)) // 5) | set(np.flatnonzero(np.any(jac != 0, axis=(0, 2))))):
+        mu = u[i, 2] - gx * u[i, 0] - gy * u[i, 1]
+        r = np.stack([-gx, -gy, np.ones_like(gx)] + [dT[i] * (e[i, j, 2] - gx * e[i, j, 0] - gy * e[i, j, 1])
+                                                     for j in range(2)], axis=1)  # (N, 5): height rows
+        t = (mu[:, None] * jac[:, i, :]) + r @ gain[:, 5 * i:5 * i + 5].T  # (N, k)
+        for a, p in zip(v, P):
+            a += p[i][:, None] * t
     c = [np.einsum("Nk,kl,Nl->N", a, C_tt, b) for a, b in ((v[0], v[0]), (v[0], v[1]), (v[1], v[1]))]
     return tuple(np.where(np.isfinite(x), x, 0.0) for x in c), (gx, gy)
 
