@@ -148,18 +148,10 @@ def validate_files(export_path, plane_path, layout_path, layout_before_path=None
 
         check_table_path(per_pose, "--per-pose", (".csv",))
     dataset = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn)
-    if dataset.layout.effects is not None:  # the validation poses' readings with the layout's head terms removed
-        from metrology.diagnosis.layout_out import terms_removed
-
-        dataset = terms_removed(dataset)
     layouts = {}
     paths = {"export": export_path, "plane": plane_path}
     if layout_before_path is not None:
         layouts["layout_before"] = load_layout(layout_before_path)
-        from metrology.core.effects.terms import refuse_terms
-
-        refuse_terms(layouts["layout_before"], layout_before_path, "validate --layout-before",
-                     "the export's readings are corrected by --layout's terms only")
         paths["layout_before"] = layout_before_path
     layouts["layout"] = dataset.layout
     paths["layout"] = layout_path

@@ -199,3 +199,17 @@ def test_the_drift_watch_raises_no_alarm_for_a_temperature_coefficient_the_layou
         watch.finish()
         alarms[name] = watch.alarms
     assert len(alarms["simple"]) >= 1 and alarms["extended"] == []
+
+
+def test_validate_judges_each_layout_on_its_own_readings(files):
+    """A held-out run of the head with the gain: the extended layout's normals (its term removed from
+    the readings) deviate less from the datum's than the simple layout's."""
+    tmp = files["tmp"]
+    cal, plane = _write_run(tmp, "held", files["head"], GAIN, 9)
+    r = runner.invoke(app, ["validate", str(cal), "--plane", str(plane), "--layout", str(tmp / "ext_cal.toml"),
+                            "--layout-before", str(tmp / "simple.toml"), "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    mean = {k: v["mean_deg"] for k, v in out["layouts"].items()} if isinstance(out.get("layouts"), dict) else None
+    assert mean is not None, sorted(out)
+    assert mean["layout"] < 0.8 * mean["layout_before"]
