@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
         report: Optional[Path] = typer.Option(None, "--report", help="One HTML report of every step (.html); each "
                                               "step's own report is written into the output folder too."),
     ) -> None:
-        """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> normals -> simulate-log -> measure."""
+        """Run the main job on the bundled data: fit-plane -> calibrate -> validate -> diagnose -> calibrate -> normals -> simulate-log -> measure."""
         import contextlib
         import io
         import json

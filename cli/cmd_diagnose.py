@@ -35,9 +35,12 @@ def register(app: typer.Typer) -> None:
                                      "of the full report (the --json output carries them as 'reasons')."),
         fail_on_cause: bool = typer.Option(False, "--fail-on-cause", help="Exit 1 when a cause is named (or the "
                                            "residuals stay unexplained), not only when the normal is out of tolerance."),
+        out: Path = typer.Option(None, "--out", help="Write the layout refitted with the head terms named (gain, "
+                                 "incidence, characteristic, temperature coefficient) and their joint covariance: "
+                                 "metro calibrate and metro measure apply it (docs/diagnose.md)."),
     ) -> None:
         """Find what the base model misses, name it from the catalogue, extend, measure the gain."""
-        from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report
+        from metrology.jobs.diagnose import check_report_target, diagnose_files, diagnose_report, extend_files
         from metrology.report.diagnose import explain_text, report_text
         from metrology.report.verdicts import diagnosis_verdict, verdict_text
 
@@ -47,11 +50,18 @@ def register(app: typer.Typer) -> None:
             check_report_target(report)
         with stdin_files(("EXPORT", export, ".csv"), ("--plane", plane, plane_suffix),
                          ("--layout", layout, ".toml")) as (export_p, plane_p, layout_p), progress_bar("diagnose") as progress:
-            d = diagnose_files(export_p, plane_p, layout_p, quaternion_order, position_units, no_reading, warn=warn,
-                               folds=folds, seed=seed, progress=progress)
+            ext = None
+            if out is None:
+                d = diagnose_files(export_p, plane_p, layout_p, quaternion_order, position_units, no_reading,
+                                   warn=warn, folds=folds, seed=seed, progress=progress)
+            else:
+                d, ext = extend_files(export_p, plane_p, layout_p, out, quaternion_order, position_units, no_reading,
+                                      warn=warn, folds=folds, seed=seed, progress=progress)
             verdict = diagnosis_verdict(d, fail_on_cause=fail_on_cause)
-            text = dumps(with_verdict(d.to_dict(), verdict), "diagnosis") if json_out else \
-                (explain_text(d) if explain else report_text(d)) + "\n" + verdict_text(verdict)
+            data = d.to_dict() | ({} if ext is None else {"layout_out": {"path": str(out), **ext.to_dict()}})
+            text = dumps(with_verdict(data, verdict), "diagnosis") if json_out else \
+                (explain_text(d) if explain else report_text(d)) + "\n" + verdict_text(verdict) \
+                + ("" if ext is None else f"\n{ext.words()}\nwritten: {out}")
             html = report is not None and str(report).lower().endswith((".html", ".htm"))
             if report is not None:  # inside: a report reads the inputs' checksums
                 progress(0, 1, "writing the report")

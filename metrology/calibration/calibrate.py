@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import numpy as np
 from metrology.calibration.dataset import Dataset
 from metrology.calibration.estimators import METHODS, Calibration, calibrate
@@ -73,6 +73,8 @@ class CalibrationReport:
     target: tuple | None = None
     target_set: bool = False
     certificate: object = None
+    #: the head's effect terms estimated with the sensors (:class:`metrology.calibration.terms.TermFit`), or None
+    terms: object = None
 
     @property
     def layout(self) -> SensorLayout:
@@ -206,6 +208,8 @@ class CalibrationReport:
             "warnings": self.warnings,
             "verdict": self.verdict().to_dict(),
         }
+        if self.terms is not None:
+            out["effects"] = self.terms.to_dict()
         if self.certificate is not None:
             out["certificate"] = self.certificate.to_dict()
         if self.dataset.dropped:
@@ -280,8 +284,25 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
         raise ValueError(f"unknown method {method!r}, expected one of {', '.join(METHODS)}")
     obs = dataset.obs
     opts = {**_METHOD_DEFAULTS.get(method, {}), **kwargs}
-    cal = calibrate(dataset.layout, obs, method, **opts)
-    if dataset.plane_cov is not None and np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov)):
+    terms = None
+    if dataset.layout.effects is not None:  # the sensors and the layout's head terms, jointly
+        from metrology.calibration.terms import calibrate_terms, check_method
+
+        check_method(dataset.layout, method)
+        cal, terms, obs = calibrate_terms(dataset)
+        dataset = replace(dataset, export=replace(dataset.export, d=obs.d))  # the readings less the terms
+        if dataset.plane_cov is not None:  # the datum estimated with the sensors on them; its share added
+            from metrology.core.model import chart_cov_recentred  # to the joint fit's (the joint stays PSD)
+
+            joint, cal = cal.layout.covariance, with_datum(cal, dataset)
+            share = chart_cov_recentred(cal.nominal.direction, cal.theta[:, 3:],
+                                        cal.datum.cov_marginal - cal.datum.cov_conditional)
+            cal = replace(cal, layout=replace(cal.layout, covariance=joint + 0.5 * (share + share.T),
+                                              effects=terms.terms))
+            obs = cal_obs(cal, dataset)
+    else:
+        cal = calibrate(dataset.layout, obs, method, **opts)
+    if terms is None and dataset.plane_cov is not None and np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov)):
         cal = with_datum(cal, dataset)
         obs = cal_obs(cal, dataset)
     if not (np.all(np.isfinite(cal.theta)) and np.all(np.isfinite(cal.cov))):
@@ -295,4 +316,4 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     if target is None:
         target = (TARGET_ZERO_MM, float(np.deg2rad(TARGET_TILT_DEG)))
     ident = identifiability(dataset.layout, cal.layout, cal.theta, obs, sigma, target)
-    return CalibrationReport(cal, dataset, ident, dict(sources or {}), tuple(target), bool(target_set))
+    return CalibrationReport(cal, dataset, ident, dict(sources or {}), tuple(target), bool(target_set), terms=terms)

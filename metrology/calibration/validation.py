@@ -57,7 +57,8 @@ def validate(dataset: Dataset, layouts: dict, sources=None) -> ValidationReport:
     dataset : Dataset
         Validation poses, readings and the datum (its own layout is not used).
     layouts : dict of label -> SensorLayout
-        Each is checked against the export (same sensors, readings within range).
+        Each is checked against the export (same sensors, readings within range); a layout's head
+        terms are removed from the readings it is judged on (:mod:`metrology.calibration.terms`).
 
     Returns
     -------
@@ -74,7 +75,14 @@ def validate(dataset: Dataset, layouts: dict, sources=None) -> ValidationReport:
     dev = []
     for label, layout in layouts.items():
         export = check(dataset.export, layout, f"layout {label}")
-        n = micro_plane_normal(layout.zero, layout.direction, export.d)
+        d = export.d
+        if layout.effects is not None:  # the layout's head terms removed from the readings it judges
+            from metrology.calibration.terms import corrected_obs, dataset_covariates
+            from metrology.core.observations import Observations
+
+            cov = dataset_covariates(layout, obs, export, dataset.plane, dataset.datum_points)
+            d = corrected_obs(layout.effects, Observations(obs.normal, obs.offset, d), cov).d
+        n = micro_plane_normal(layout.zero, layout.direction, d)
         dev.append(angle_between(n, obs.normal))
     dev = np.array(dev)
     if not np.any(np.isfinite(dev[0])):

@@ -26,7 +26,9 @@ class SensorLayout:
     range_mm : (n, 2) float, mm, valid reading interval; (-inf, inf) where not stated
     zero_stderr_mm : (n, 3) float, mm, or None (a nominal layout)
     direction_stderr_deg : (n, 2) float, deg, or None
-    effects : dict of sensor name -> dict of effect-term name -> float
+    effects : HeadTerms or None: the head's effect terms (:mod:`metrology.core.effects.terms`) with
+        their covariance, which every consumer applies (:mod:`metrology.core.effects.apply`); None:
+        the simple model
     covariance : (5n, 5n) float, mm and rad, or None (a nominal layout)
         The calibration's covariance of the five identifiable parameters of every sensor,
         ``(x, y, z, a, b)`` per sensor in layout order: the zero point (mm, TCS) and the beam's
@@ -45,7 +47,7 @@ class SensorLayout:
     range_mm: np.ndarray | None = None
     zero_stderr_mm: np.ndarray | None = None
     direction_stderr_deg: np.ndarray | None = None
-    effects: dict = field(default_factory=dict)
+    effects: object = None
     covariance: np.ndarray | None = None
     certificate: dict = field(default_factory=dict)
 
@@ -89,7 +91,7 @@ class SensorLayout:
             tuple(names), self.zero[idx], self.direction[idx], self.noise_mm[idx], self.range_mm[idx],
             None if self.zero_stderr_mm is None else self.zero_stderr_mm[idx],
             None if self.direction_stderr_deg is None else self.direction_stderr_deg[idx],
-            {k: v for k, v in self.effects.items() if k in names},
+            None if self.effects is None else self.effects.subset(tuple(names), self.names),
             None if self.covariance is None else self.covariance[np.ix_(_rows(idx), _rows(idx))],
         )
 

@@ -11,8 +11,9 @@ Schema (a public contract, see README "File formats")::
     range_mm = [20.0, 80.0]                   # valid readings (optional)
 
 A calibrated layout adds, per sensor, ``zero_stderr_mm`` (3 numbers), ``direction_stderr_deg``
-(2 numbers: tilt about the chart axes e1, e2) and an optional ``[sensors.effects]`` table of
-extra effect terms; files with these keys are read back unchanged. ``metro calibrate`` also
+(2 numbers: tilt about the chart axes e1, e2) and optional ``[sensors.effects.<term>]`` tables of
+the head's effect terms (their schema and checks: :mod:`metrology.core.effects.terms`); files with
+these keys are read back unchanged. ``metro calibrate`` also
 writes the calibration's full parameter covariance, which ``metro measure`` propagates::
 
     [calibration]
@@ -101,12 +102,17 @@ def load_layout(path) -> SensorLayout:
         if "effects" in s:
             if not isinstance(s["effects"], dict):
                 raise ValueError(f"{path}: sensor {name} 'effects' must be a table")
-            effects[name] = {k: float(v) for k, v in s["effects"].items()}
-    covariance = _covariance(path, data.get("calibration"), tuple(names))
+            effects[name] = s["effects"]
+    terms = []
+    if effects:  # the head's terms (imported only here: a layout without them loads no effect)
+        from metrology.core.effects.terms import term_from_table
+    for name, table in effects.items():
+        terms += [term_from_table(path, name, names.index(name), tuple(names), term, t) for term, t in table.items()]
+    covariance, terms = _covariance(path, data.get("calibration"), tuple(names), terms)
     certificate = _certificate(path, data.get("certificate", {}))
     zse_arr = None if any(z is None for z in zse) else np.array(zse)
     dse_arr = None if any(z is None for z in dse) else np.array(dse)
-    return SensorLayout(tuple(names), np.array(zero), np.array(direction), np.array(noise), np.array(rng), zse_arr, dse_arr, effects,
+    return SensorLayout(tuple(names), np.array(zero), np.array(direction), np.array(noise), np.array(rng), zse_arr, dse_arr, terms,
                         covariance, certificate)
 
 
@@ -117,31 +123,57 @@ def _certificate(path, table) -> dict:
     return {str(k): str(v) for k, v in table.items()}
 
 
-def covariance_names(names) -> list:
-    """The parameter names of the ``[calibration]`` covariance: ``"L1.x" ... "L1.b"`` per sensor."""
-    return [f"{nm}.{p}" for nm in names for p in PARAMS_TANGENT]
+def covariance_names(names, terms=None) -> list:
+    """The parameter names of the ``[calibration]`` covariance: ``"L1.x" ... "L1.b"`` per sensor, then
+    the head terms' (``scale.L2.k``, ...) when the layout has them."""
+    return [f"{nm}.{p}" for nm in names for p in PARAMS_TANGENT] + list(() if terms is None else terms.param_names)
 
 
-def _covariance(path, table, names):
-    """The ``[calibration]`` table's covariance ``(5n, 5n)``, checked; None when absent."""
+def _covariance(path, table, names, terms):
+    """The ``[calibration]`` table's covariance: the sensors' ``(5n, 5n)`` and the terms (a
+    :class:`HeadTerms` with their rows of it, or None without terms), checked; None when absent."""
     if table is None:
-        return None
+        if terms:
+            t = terms[0]
+            raise ValueError(f"{path}: sensor {t.names[t.sensors[0]]} effects.{t.name} has no covariance: the "
+                             f"layout needs a [calibration] table with {t.full_param_names[0]} among its parameters "
+                             f"(write it with metro diagnose --out or metro calibrate)")
+        return None, None
     if not isinstance(table, dict) or "covariance" not in table:
         raise ValueError(f"{path}: [calibration] needs 'parameters' and 'covariance'")
-    want = covariance_names(names)
-    if list(table.get("parameters", [])) != want:
-        raise ValueError(f"{path}: [calibration] parameters must be {want[0]} ... {want[-1]} (5 per sensor, "
+    base = covariance_names(names)
+    term_names = [p for c in terms for p in c.full_param_names]
+    got = list(table.get("parameters", []))
+    if got[:len(base)] != base:
+        raise ValueError(f"{path}: [calibration] parameters must be {base[0]} ... {base[-1]} (5 per sensor, "
                          f"in the order of the sensors), got {table.get('parameters')!r}")
+    missing = [p for p in term_names if p not in got[len(base):]]
+    if missing:
+        raise ValueError(f"{path}: [calibration] has no covariance of the term parameter {missing[0]} (a term "
+                         f"without its covariance cannot enter U95; write it with metro diagnose --out or "
+                         f"metro calibrate)")
+    stray = [p for p in got[len(base):] if p not in term_names]
+    if stray:
+        raise ValueError(f"{path}: [calibration] parameter {stray[0]} is no term of the layout's "
+                         f"[sensors.effects] tables")
+    want = base + term_names
     try:
         cov = np.asarray(table["covariance"], dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{path}: [calibration] covariance must be a {len(want)} x {len(want)} table of numbers") from None
-    if cov.shape != (len(want), len(want)) or not np.all(np.isfinite(cov)):
-        raise ValueError(f"{path}: [calibration] covariance must be {len(want)} x {len(want)} finite numbers, "
+        raise ValueError(f"{path}: [calibration] covariance must be a {len(got)} x {len(got)} table of numbers") from None
+    if cov.shape != (len(got), len(got)) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"{path}: [calibration] covariance must be {len(got)} x {len(got)} finite numbers, "
                          f"got shape {cov.shape}")
     if np.max(np.abs(cov - cov.T)) > 1e-9 * max(np.max(np.abs(cov)), 1e-300) or np.min(np.linalg.eigvalsh(0.5 * (cov + cov.T))) < -1e-9 * np.max(np.abs(cov)):
         raise ValueError(f"{path}: [calibration] covariance is not symmetric positive semi-definite")
-    return cov
+    order = [got.index(p) for p in want]
+    cov = cov[np.ix_(order, order)]
+    nb = len(base)
+    if not terms:
+        return cov, None
+    from metrology.core.effects.terms import HeadTerms
+
+    return cov[:nb, :nb], HeadTerms(tuple(terms), cov[nb:, nb:], cov[:nb, nb:])
 
 
 def _fmt(values, digits=6):
@@ -162,17 +194,23 @@ def layout_to_toml(layout: SensorLayout, header: str = "") -> str:
             lines.append(f"zero_stderr_mm = {_fmt(layout.zero_stderr_mm[i], 6)}")
         if layout.direction_stderr_deg is not None:
             lines.append(f"direction_stderr_deg = {_fmt(layout.direction_stderr_deg[i], 6)}")
-        if layout.effects.get(name):
-            lines.append("[sensors.effects]")
-            lines += [f"{k} = {v:.9g}" for k, v in layout.effects[name].items()]
+        for comp in () if layout.effects is None else layout.effects.on(name):
+            from metrology.core.effects.terms import term_to_table
+
+            lines += term_to_table(comp)
         lines.append("")
+    terms = layout.effects
+    if terms is not None and layout.covariance is None:
+        raise ValueError("a layout with effect terms needs the covariance of its calibration (base and terms)")
     if layout.covariance is not None:
         lines += ["[calibration]",
                   "# the calibration's covariance of the parameters below: mm (x y z, TCS) and rad (a b: the beam's",
                   "# tilt about the axes e1, e2 of metrology.core.model.direction_basis of the direction above)",
-                  "parameters = [" + ", ".join(f'"{p}"' for p in covariance_names(layout.names)) + "]",
+                  "parameters = [" + ", ".join(f'"{p}"' for p in covariance_names(layout.names, terms)) + "]",
                   "covariance = ["]
-        lines += ["  [" + ", ".join(f"{v:.9g}" for v in row) + "]," for row in layout.covariance]
+        full = layout.covariance if terms is None else np.block([[layout.covariance, terms.cross],
+                                                                  [terms.cross.T, terms.cov]])
+        lines += ["  [" + ", ".join(f"{v:.9g}" for v in row) + "]," for row in full]
         lines += ["]", ""]
     if layout.certificate:
         lines += ["[certificate]", "# the calibration certificate's header fields (metro calibrate --meta)"]

@@ -20,9 +20,12 @@ DEMO_STEPS = (
     ("3. Validate on held-out poses: nominal against calibrated layout",
      "validate {fx}/measured/validation.csv --plane {out}/plane.json --layout {out}/calibrated.toml "
      "--layout-before {fx}/measured/nominal.toml --plot {out}/validation.png"),
-    ("4. Diagnose a measured data set that hides an effect the simple model lacks",
+    ("4. Diagnose a measured data set that hides an effect the simple model lacks; write it into the layout",
      "diagnose {fx}/hidden/export.csv --plane {fx}/hidden/plane.json --layout {fx}/hidden/layout.toml "
-     "--report {out}/diagnose"),
+     "--report {out}/diagnose --out {out}/extended.toml"),
+    ("4b. Calibrate that head with the term diagnose named, jointly (its U on the certificate)",
+     "calibrate {fx}/hidden/export.csv --plane {fx}/hidden/plane.json --layout {out}/extended.toml "
+     "--out {out}/calibrated_extended.toml"),
     ("5. Micro-plane against micro-sphere normals on a curved panel (R = 800 mm)",
      "normals {fx}/panel_cyl800.stl --layout {fx}/layout_table6.toml --grid 40 --tilt-deg 2 --seed 1 "
      "--plot {out}/panel_errors.png"),
@@ -47,8 +50,8 @@ def new_output_dir(base="metro-demo") -> Path:
 
 
 #: with ``--report``: each step's own HTML report, in ``out`` (None: the step writes no report)
-STEP_REPORTS = ("fit-plane.html", "calibrate.html", "validate.html", "diagnose.html", "normals.html", None,
-                "measure.html")
+STEP_REPORTS = ("fit-plane.html", "calibrate.html", "validate.html", "diagnose.html", "calibrate-extended.html",
+                "normals.html", None, "measure.html")
 
 
 def _with_report(args, path):
@@ -137,5 +140,5 @@ def _write_demo_report(report, pages, step_files, command):
                 seen.add(row[1])
                 inputs.append((f"{row[0]} ({run.command.split()[1]})",) + tuple(row[1:]))
     run = run_info({}, command)
-    write_report(report, "metro demo: fit-plane, calibrate, validate, diagnose, normals, simulate-log, measure",
+    write_report(report, "metro demo: fit-plane, calibrate, validate, diagnose, calibrate, normals, simulate-log, measure",
                  RunInfo(run.command, tuple(inputs), run.versions, None, run.written), sections)

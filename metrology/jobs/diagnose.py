@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from metrology.diagnosis.decide import Diagnosis, diagnose
 
-__all__ = ["diagnose_files", "diagnose_report", "check_report_target"]
+__all__ = ["diagnose_files", "extend_files", "diagnose_report", "check_report_target"]
 
 
 def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz", position_units="mm", no_reading=None,
@@ -16,7 +18,35 @@ def diagnose_files(export_path, plane_path, layout_path, quaternion_order="wxyz"
 
     ds = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn,
                       allow_gross_readings=True)
-    return diagnose(ds, **kw)
+    return diagnose(_plain(ds), **kw)
+
+
+def _plain(ds):
+    """``ds`` as the simple model should see it: a layout's head terms removed from the readings
+    (what they explain is not named again: :func:`metrology.diagnosis.layout_out.terms_removed`)."""
+    if ds.layout.effects is None:
+        return ds
+    from metrology.diagnosis.layout_out import terms_removed
+
+    return terms_removed(ds)
+
+
+def extend_files(export_path, plane_path, layout_path, out_path, quaternion_order="wxyz", position_units="mm",
+                 no_reading=None, warn=None, **kw) -> tuple:
+    """``metro diagnose --out``: :func:`diagnose_files`, then the layout refitted with the head terms
+    named (and those ``layout_path`` carries) written to ``out_path`` atomically:
+    ``(Diagnosis, ExtendedLayout)`` (:mod:`metrology.diagnosis.layout_out`)."""
+    from metrology.calibration.sanity import load_checked
+    from metrology.diagnosis.layout_out import extend_layout
+    from metrology.io.layout import save_layout
+
+    ds = load_checked(export_path, plane_path, layout_path, quaternion_order, position_units, no_reading, warn,
+                      allow_gross_readings=True)
+    diag = diagnose(_plain(ds), **kw)
+    ext = extend_layout(replace(ds, layout=replace(ds.layout, effects=None)), diag, ds.layout.effects)
+    save_layout(ext.layout, out_path, header=f"metro diagnose --out: the layout of {export_path} refitted with the "
+                                             f"head terms named ({', '.join(ext.written) or 'none'})")
+    return diag, ext
 
 
 

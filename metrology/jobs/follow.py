@@ -111,6 +111,9 @@ def follow_export(source, plane_path, layout_path, targets: Targets, on_step=Non
 
     label = str(source) if name is None else str(name)
     layout = load_layout(layout_path)
+    from metrology.core.effects.terms import refuse_terms
+
+    refuse_terms(layout, layout_path, "calibrate --follow", "the live filter's state does not carry them")
     plane, points = load_plane(plane_path)
     sigma = layout.noise_mm if sigma_mm is None else np.full(layout.n, float(sigma_mm))
     if not np.all(np.isfinite(sigma) & (sigma > 0)):

@@ -38,6 +38,7 @@ class MeasureReport:
     fail_on_drift : bool, whether a drift alarm fails the verdict
     chart : dict, the drift chart's settings (:func:`metrology.measure.chart.chart_settings`, by_panel)
     curvature : dict, where each hole's curvature came from ({} : the assumed bound)
+    effects : tuple of str, the layout's head terms applied to every hole (their covariance in U95)
     """
 
     result: "MeasureResult"
@@ -51,6 +52,7 @@ class MeasureReport:
     fail_on_drift: bool = False
     chart: dict = field(default_factory=dict)
     curvature: dict = field(default_factory=dict)
+    effects: tuple = ()
 
     @property
     def counts(self) -> dict:
@@ -114,7 +116,8 @@ class MeasureReport:
             "tolerance_deg": self.tolerance_deg,
             "decision_rule": "ISO 14253-1: conforms if angle + U95 <= tolerance, fails if angle - U95 > tolerance",
             "judged": {"after_adjustment": s.judged_after, "before_adjustment": s.judged_before},
-            "uncertainty": {"reading_noise": True, "calibration_covariance": self.has_covariance, "coverage": 0.95},
+            "uncertainty": {"reading_noise": True, "calibration_covariance": self.has_covariance, "coverage": 0.95,
+                            "effect_terms": list(self.effects)},
             "min_radius_mm": self.min_radius_mm,
             "curvature": dict(self.curvature) if self.curvature else {"assumed": True, "source": (
                 f"bound: every panel's radius >= {self.min_radius_mm:g} mm (an assumption: no --panel or --points)")},
@@ -334,6 +337,9 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     if points is not None:
         surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg)
     log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
+    from metrology.measure.effects import check_log
+
+    check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
     target = check_out(o.out, log.partitioned, o.distributed)
     settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
@@ -385,7 +391,8 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
                            {**chart_settings(), "by_panel": o.chart_by_panel},
-                           _curvature(o, result, surfaces, radius_source, shown_layout))
+                           _curvature(o, result, surfaces, radius_source, shown_layout),
+                           () if layout.effects is None else tuple(c.label for c in layout.effects.components))
     if o.report_html is not None:
         _write_report_html(o, report, log_path, layout_path)
     return report

@@ -60,6 +60,10 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     notify(progress, 0, 6, "loading the panel and building its ray scene")
     layout = load_layout(layout_path)
     layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
+    from metrology.core.effects.terms import refuse_terms
+
+    for lay, src in ((layout, layout_path), (layout_true, true_layout_path)):
+        refuse_terms(lay, src, "normals", "its ray-cast readings and normals are the simple model's")
     panel = load_panel(panel_path, units)
     for w in panel.warnings:
         if on_warning is not None:

@@ -107,6 +107,9 @@ def plan_files(layout_path, plane_path, n_poses: int, tilt_max_deg: float = 10.0
         if path is not None and not Path(path).resolve().parent.is_dir():
             raise ValueError(f"{path}: directory {Path(path).parent} does not exist (for the {what})")
     layout = load_layout(layout_path)
+    from metrology.core.effects.terms import refuse_terms
+
+    refuse_terms(layout, layout_path, "plan", "its design and predicted sigmas are of the sensors' five parameters")
     if noise_mm is not None:
         layout = replace(layout, noise_mm=np.full(layout.n, float(noise_mm)))
     if range_mm is not None:

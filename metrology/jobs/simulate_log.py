@@ -115,7 +115,8 @@ class _MetroController:
     def load(self):
         if self._fn is None:
             try:
-                from metrology.measure.surface import surface_normal
+                from metrology.measure.surface import surface_normal as _plain  # noqa: F401 (the contract's home)
+                from metrology.measure.effects import surface_normal  # it, the layout's head terms applied
             except ImportError as exc:
                 raise ValueError(f"--controller metro: metrology.measure.surface.surface_normal is not available "
                                  f"({exc})") from None
@@ -197,9 +198,21 @@ def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_
     if layout_error_mm is None and layout_error_deg is None and cell.covariance is not None:
         from metrology.core.model import direction_basis
 
-        theta = rng.multivariate_normal(np.zeros(5 * cell.n), cell.covariance, method="eigh").reshape(cell.n, 5)
+        t = cell.effects  # a head with terms: its sensors and terms drawn jointly (their joint covariance)
+        full = cell.covariance if t is None else np.block([[cell.covariance, t.cross], [t.cross.T, t.cov]])
+        draw = rng.multivariate_normal(np.zeros(len(full)), full, method="eigh")
+        theta = draw[:5 * cell.n].reshape(cell.n, 5)
         u = cell.direction + np.einsum("nk,nkj->nj", theta[:, 3:], direction_basis(cell.direction))
-        return cell, cell.with_params(cell.zero + theta[:, :3], u / np.linalg.norm(u, axis=1, keepdims=True))
+        true = cell.with_params(cell.zero + theta[:, :3], u / np.linalg.norm(u, axis=1, keepdims=True))
+        if t is not None:
+            from dataclasses import replace
+
+            vals, j = [], 5 * cell.n
+            for c in t.components:
+                vals.append(c.with_values(c.values + draw[j:j + c.n_params]))
+                j += c.n_params
+            true = replace(true, effects=replace(t, components=tuple(vals)))
+        return cell, true
     layout_error_mm = DEFAULT_LAYOUT_ERROR if layout_error_mm is None else layout_error_mm
     layout_error_deg = DEFAULT_LAYOUT_ERROR if layout_error_deg is None else layout_error_deg
     if layout_error_mm < 0 or layout_error_deg < 0:
@@ -224,6 +237,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     """
     from metrology.sim.forward.log import BLOCK_HOLES, simulate_log
     from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.head_terms import properties_from_terms
     from metrology.sim.forward.log_write import LOG_FORMATS, check_log_output
     if not write_truth and truth is not None:
         raise ValueError("--truth and --no-truth exclude each other")
@@ -252,7 +266,8 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
                    patch_half_mm=patch_mm / 2, holes_per_hour=holes_per_hour, drifts=tuple(drifts),
                    shifts=tuple(shifts), gross_rate=gross_rate, table=table,
                    cad_panel=None if cad_panel is truth_panel else cad_panel,
-                   controller=None if controller == "microplane" else control)
+                   controller=None if controller == "microplane" else control,
+                   properties=properties_from_terms(true if true.effects is not None else cell))
     done = {"n": 0}
 
     def chunks():

@@ -3,8 +3,8 @@ the verdict against the tolerance, the drift watch, and the fleet summary (``met
 
 Modules: :mod:`.normals` (the micro-plane and its GUM uncertainty, pure arrays), :mod:`.holes`
 (a batch of a log measured and judged: the rules), :mod:`.batch` (what a measured batch is, the status codes), :mod:`.chart` (the CUSUM drift watch),
-:mod:`.surface` (the normal fitted with the panel's local surface known: ``surface_normal``, the
-per-hole call of a cell's controller), :mod:`.panel` (each hole's local surface from the hole table),
+:mod:`.surface` (the normal fitted with the panel's local surface known; ``surface_normal``, the
+per-hole call of a cell's controller, applies the layout's head terms first: :mod:`.effects`), :mod:`.panel` (each hole's local surface from the hole table),
 :mod:`.summary` (the mergeable fleet summary), :mod:`.run` (the one driver; one process, in batches),
 :mod:`.fleet` (the Dask engine, one task per partition), :mod:`.preload` (what the forkserver its
 workers are forked from imports). pyarrow and Dask load only when a log is read or a cluster used.
@@ -22,7 +22,7 @@ _LAZY = {
     "measure_batch": "metrology.measure.holes",
     "HoleNormals": "metrology.measure.normals", "drill_axis": "metrology.measure.normals",
     "hole_normals": "metrology.measure.normals",
-    "surface_normal": "metrology.measure.surface",
+    "surface_normal": "metrology.measure.effects",
 }
 
 

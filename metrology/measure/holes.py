@@ -46,6 +46,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
+from metrology.measure.effects import apply_terms
 from metrology.measure.normals import hole_normals
 from metrology.measure.pose import against_cad, read_pose
 from metrology.measure.reasons import reason_column, verdict_reasons
@@ -117,7 +118,7 @@ CACHE_ROWS = 16384
 
 
 def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None,
-             convention=None, stated=True) -> _Measured:
+             convention=None, stated=True, effects=None) -> _Measured:
     """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
     (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
     allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
@@ -125,7 +126,9 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
     ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
     the head's rotation the shape was put into the TCS with, the turn found before the adjustment;
     ``convention`` (N,) bool the rows whose shape rests on the cell's convention (no pose), ``stated`` whether
-    that convention was stated (:func:`metrology.measure.spin.panel_normals`)."""
+    that convention was stated (:func:`metrology.measure.spin.panel_normals`);
+    ``effects`` the layout's head terms removed from ``d`` (:class:`~metrology.measure.effects.Applied`): their
+    covariance a source of each hole's budget."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -164,7 +167,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             rs = _of(rows)
             j = panel_normals(sub, dd, shape[rs], u_shape[rs], spin[rs], None if higher is None else higher.rows(rs),
                               convention[rs], stated)
-            h = j.normals
+            h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
             out.extra.put(rs, j.extra)
             out.spin_free[rs], out.convention[rs] = j.free, j.convention
             for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
@@ -178,8 +181,9 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         else:  # in slices of CACHE_ROWS rows, each stored as it comes (its temporaries stay in the cache)
             for i in range(0, len(rows), CACHE_ROWS):
                 sl = slice(i, i + CACHE_ROWS)
-                _store(out, rows[sl], mask, sub, dd[sl], hole_normals(sub, dd[sl], min_radius_mm=settings.min_radius_mm),
-                       settings, micro=True)
+                h = hole_normals(sub, dd[sl], min_radius_mm=settings.min_radius_mm)
+                h = h if effects is None else effects.widen(h, sub, rows[sl], mask)
+                _store(out, rows[sl], mask, sub, dd[sl], h, settings, micro=True)
     return out
 
 
@@ -301,7 +305,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     import pyarrow as pa
 
     names = layout.names
-    d = _readings(table, names)
+    d = (applied := apply_terms(layout, _readings(table, names), table)).d  # the layout's head terms removed
     N = len(d)
     shape = u_shape = spin = table_row = higher = convention = None
     surf = settings.surfaces
@@ -346,13 +350,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
     stated = surf is None or surf.spin_stated
-    before = _measure(layout, d, settings, shape, u_shape, spin, higher, convention, stated)
+    before = _measure(applied.normals_layout, d, settings, shape, u_shape, spin, higher, convention, stated, effects=applied)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
-        da = _readings(table, names, "_after")
+        da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
         higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra.turn)
-        after = _measure(layout, da, settings, shape, u_shape, spin, higher_after, convention, stated)
+        after = _measure(applied_after.normals_layout, da, settings, shape, u_shape, spin, higher_after, convention, stated,
+                         effects=applied_after)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)

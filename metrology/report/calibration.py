@@ -55,6 +55,10 @@ def calibration_text(report: CalibrationReport) -> str:
         lines.append("  corrected    zero " + _vec(c["zero_mm"], 4) + " mm, direction " + _vec(c["direction"], 6))
         lines += ["  " + x for x in fit_report(fit).splitlines()]
     lines.append(f"unidentified: {d['unidentified']}")
+    for t in d.get("effects", []):  # the head's terms estimated with the sensors
+        vals = ", ".join(f"{p} {v['value']:.6g} +- {v['U_k2']:.2g} (U, k = 2) {v['unit']}" for p, v in t["params"].items())
+        lines.append(f"term {t['label']}: {vals}; " + ("identified by these poses" if t["identified"] else
+                                                       f"not identified: {t['why_not']}"))
     for ident in report.identifiability:
         sv = " ".join(f"{v:.2g}" for v in ident.chart_singular)
         lines.append(f"{ident.name}: chart singular values (relative) {sv}; raw null direction: {ident.raw_null_words}")

@@ -46,7 +46,8 @@ class Certificate:
     ----------
     header : tuple of (key, words, value), the header fields given (``--meta``), known ones first
     rows : tuple of (sensor, parameter, value, u, U, unit), floats as read from the TOML;
-        ``u``/``U`` None for a direction component (its uncertainty is the tilt rows')
+        ``u``/``U`` None for a direction component (its uncertainty is the tilt rows'); the head's
+        effect terms (``scale.L2 k``, ...) after each sensor's own rows
     correlations : tuple of (sensor, a, b, r), pairs of one sensor's parameters with
         ``|r| > CORRELATION_REPORT`` from the TOML's ``[calibration]`` covariance
     file : str or None, the calibrated TOML's name (None: not written, no ``--out``)
@@ -132,6 +133,11 @@ def certificate_from_toml(text: str, layout, file, method: str, n_poses: int, st
             for j, e in enumerate(("e1", "e2")):
                 u = float(tilt_u[j])
                 rows.append((name, f"beam tilt about {e}", 0.0, u, COVERAGE_K * u, "deg"))
+        for comp in () if layout.effects is None else layout.effects.on(name):  # the head's terms, as written
+            t = s["effects"][comp.name]
+            for pn, unit in zip(comp.param_names, comp.param_units):
+                u = float(t[pn + "_stderr"])
+                rows.append((name, f"{comp.label} {pn}", float(t[pn]), u, COVERAGE_K * u, "" if unit == "1" else unit))
         if cov is not None:
             se = np.sqrt(np.maximum(np.diag(cov), 0.0))
             for a in range(5):

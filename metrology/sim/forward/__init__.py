@@ -14,7 +14,8 @@ closed-form rays), :mod:`.shapes` (height-field panels: the generated wing skin,
 and saddle; panels off their CAD), :mod:`.meshes` (panel files ray-cast as meshes; the generated
 panels' exports), :mod:`.holes` (hole tables), :mod:`.log_spec` (set-up, faults, chunks), :mod:`.log`
 (generation, the cell's own attitude adjustment through a pluggable controller), :mod:`.log_write`
-(CSV, partitioned Parquet, truth).
+(CSV, partitioned Parquet, truth); :mod:`.properties` (a head's sensor properties acting on its
+calibration run and its production log alike, and a calibration run drawn with them).
 """
 
 from metrology.sim.forward.beams import BeamHits, cast_beams
@@ -30,6 +31,7 @@ from metrology.sim.forward.log_spec import HoleChunk, LogSpec, SensorDrift, Sens
 from metrology.sim.forward.log_write import write_log_csv, write_log_parquet
 from metrology.sim.forward.meshes import MeshPanel, load_sim_panel, write_generated
 from metrology.sim.forward.panels import PANELS, CylinderPanel, FlatPanel, Panel, SpherePanel, make_panel
+from metrology.sim.forward.properties import CalibrationRun, HeadProperties, SensorProperty, draw_calibration
 from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
 from metrology.sim.forward.shapes import GENERATED, GeneratedPanel, HeightPanel, OffCadPanel, generated_panel, \
     parse_off_cad
@@ -44,5 +46,5 @@ __all__ = [
     "sample_cloud", "sample_hand_scan", "HAND_SCAN", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
     "SensorDrift", "SensorShift", "write_log_csv", "write_log_parquet", "PANELS", "CylinderPanel", "FlatPanel",
     "Panel", "SpherePanel", "make_panel", "HoleTable", "read_hole_table", "MicroPlane", "MeshPanel", "load_sim_panel",
-    "write_generated", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad",
+    "write_generated", "CalibrationRun", "HeadProperties", "SensorProperty", "draw_calibration", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad",
 ]

@@ -5,7 +5,8 @@
 
 - ``one_minus_cos``: ``k (1 - cos a)``;
 - ``quadratic``: ``k a^2``;
-- ``even_poly``: ``sum_j c_j a^(2j)``, ``j = 1..3`` with random ``c_j`` (normalised).
+- ``even_poly``: ``sum_j c_j a^(2j)``, ``j = 1..3`` with random ``c_j`` (normalised);
+- ``tan_poly`` (a head's stated response, never drawn at random): ``sum_j c_j tan(a)^(2j)``.
 
 ``draw_incidence`` scales the curve so ``b`` at the largest angle seen equals the size (mm).
 """
@@ -37,6 +38,9 @@ class IncidenceBias:
             return p["k_mm"] * a**2
         if self.shape == "even_poly":
             return sum(c * a ** (2 * (j + 1)) for j, c in enumerate(p["coeffs_mm"]))
+        if self.shape == "tan_poly":  # a stated response: sum_j c_j tan(a)^(2j), mm (a spot elongating as 1/cos a)
+            t2 = np.tan(a) ** 2
+            return sum(c * t2 ** (j + 1) for j, c in enumerate(p["coeffs_mm"]))
         raise ValueError(f"incidence shape must be one of {INCIDENCE_SHAPES}, got {self.shape!r}")
 
     def to_dict(self) -> dict:

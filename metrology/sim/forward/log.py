@@ -263,6 +263,22 @@ class _Geometry:
         beam = (rows @ self.u.T).reshape(h, 3, -1)
         return self.spec.panel.intersect(zero.transpose(0, 2, 1), beam.transpose(0, 2, 1))
 
+    def distances(self, R, O, offset, temp):
+        """``(t_true (h, n) mm, offset (h, n) mm)``: the true distances of heads at ``R``, ``O`` and the
+        offsets of the readings, the faults' ``offset`` plus the head's sensor properties at them
+        (:mod:`.properties`: characteristic, incidence bias, temperature ``temp (h,)`` deg C)."""
+        t = self.cast(R, O)
+        props = self.spec.properties
+        if props is None:
+            return t, offset
+        angle = None
+        if props.needs_incidence:  # the true incidence of each beam on the panel at its spot
+            beam = np.einsum("hij,nj->hni", R, self.u)
+            spot = O[:, None, :] + np.einsum("hij,nj->hni", R, self.E) + np.where(np.isfinite(t), t, 0.0)[..., None] * beam
+            m = self.spec.panel.normal_at(spot)
+            angle = np.arccos(np.clip(np.abs(np.einsum("hni,hni->hn", beam, m)), 0.0, 1.0))
+        return t, offset + props.offsets(t, angle, temp)
+
     def read(self, rng, t_true, offset):
         """Readings ``(h, n)`` mm from true distances: offset, noise, gross errors, rounding, range."""
         spec = self.spec
@@ -299,12 +315,12 @@ class _Geometry:
         R = _head(a, self.flip, psi)  # Q(-e_z -> a) F Rz(psi)
         O = P - self.D * a
         offset = self._offset(cell_index, hole, time_s)
-        d, gross = self.read(rng, self.cast(R, O), offset)
+        d, gross = self.read(rng, *self.distances(R, O, offset, temp))
         # the cell's adjustment, with its own layout (the commanded pose is the pose before it)
         R2, ok = self.adjust(R, d, lambda: _to_tcs(R, spec.cad.shape_at(P)))
         a2 = R2[:, :, 2] * s
         O2 = P - self.D * a2
-        d2, gross2 = self.read(rng, self.cast(R2, O2), offset)
+        d2, gross2 = self.read(rng, *self.distances(R2, O2, offset, temp))
         return HoleChunk(
             cell=cell_name(cell_index), sensors=spec.sensors, hole=hole, time_s=time_s, temperature_c=temp,
             panel=hole // spec.holes_per_panel, d=d, d_after=d2, drill_point=P,
@@ -338,11 +354,11 @@ class _Geometry:
         R = _head(a, self.flip, psi)
         O = N - self.D * a
         offset = self._offset(cell_index, hole, time_s)
-        d, gross = self.read(rng, self.cast(R, O), offset)
+        d, gross = self.read(rng, *self.distances(R, O, offset, temp))
         R2, ok = self.adjust(R, d, lambda: _to_tcs(Rc, self.cad_shape[row]))
         a2 = R2[:, :, 2] * s
         O2 = N - self.D * a2
-        d2, gross2 = self.read(rng, self.cast(R2, O2), offset)
+        d2, gross2 = self.read(rng, *self.distances(R2, O2, offset, temp))
         panel = spec.panel
         P1 = O + panel.intersect(O, a)[:, None] * a
         P2 = O2 + panel.intersect(O2, a2)[:, None] * a2

@@ -121,13 +121,15 @@ class LogSpec:
     gross_mm : (2,) float, mm
     resolution_mm : float, mm, readings are rounded to this (the sensor's output step)
     temperature_c : (3,) float, deg C: mean, daily half-swing, 1 sigma noise of ``temperature_c``
-        (logged metadata; it does not act on the readings)
+        (logged; it acts on the readings only through a temperature coefficient of ``properties``)
     table : HoleTable or None; given, the holes are drilled at its points, cycled (:mod:`.log`), and
         ``angle_rad`` is the robot's attitude error from the table's feed; None: points uniform over the patch
     cad_panel : Panel or None, the panel the cell knows (its CAD: hole table checks, the shape operator it
         hands the controller); None: ``panel`` (the panel sits on its CAD)
     controller : callable or None, ``controller(layout, d, shape) -> (normal, ok)`` (:mod:`.log`, step 5),
         with an attribute ``wants_shape``; None: the micro-plane (:func:`.log.plane_normal`)
+    properties : HeadProperties or None, the true head's sensor properties (:mod:`.properties`: a
+        characteristic, an incidence bias, a temperature coefficient acting with ``temperature_c``)
     """
 
     true_layout: SensorLayout
@@ -150,6 +152,7 @@ class LogSpec:
     table: object = None
     cad_panel: Panel | None = None
     controller: object = None
+    properties: object = None
 
     @property
     def cad(self) -> Panel:
@@ -242,6 +245,7 @@ class LogSpec:
                 "table": None if self.table is None else {"source": self.table.source, "holes": self.table.m},
                 "cad_panel": self.cad.to_dict(),
                 "controller": getattr(self.controller, "name", "microplane"),
+                "properties": None if self.properties is None else self.properties.to_dict(),
                 "true_zero_mm": self.true_layout.zero.tolist(),
                 "true_direction": self.true_layout.direction.tolist()}
 
