@@ -60,6 +60,10 @@ def register(app: typer.Typer) -> None:
                                            "Results document (.qif): each hole an angle characteristic with its "
                                            "value, U95 and ISO 14253-1 status; the head and its calibration's "
                                            "SHA-256 as the measurement device."),
+        dfq: Optional[Path] = typer.Option(None, "--dfq", help="Also write the per-hole results as a Q-DAS AQDEF "
+                                           "file (.dfq) for SPC: one characteristic per hole of the hole table (or "
+                                           "one for the log), nominal 0, upper limit the tolerance, deg; the cell as "
+                                           "machine, the calibration's SHA-256 as gauge (docs/plant.md)."),
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
@@ -74,8 +78,9 @@ def register(app: typer.Typer) -> None:
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
                     "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
         if follow:
-            if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None:
-                fail("--follow answers each hole on stdout: no --out, --report, --qif, --workers or --scheduler")
+            if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None \
+                    or dfq is not None:
+                fail("--follow answers each hole on stdout: no --out, --report, --qif, --dfq, --workers or --scheduler")
             import json as _json
 
             from metrology.jobs.measure_follow import follow_log
@@ -95,7 +100,7 @@ def register(app: typer.Typer) -> None:
 
         options = MeasureOptions(out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm, workers=workers,
                                  scheduler=scheduler, report_html=report, command=invocation(ctx),
-                                 fail_on_drift=fail_on_drift, chart_by_panel=chart_by_panel, qif=qif,
+                                 fail_on_drift=fail_on_drift, chart_by_panel=chart_by_panel, qif=qif, dfq=dfq,
                                  per_hole=not (json_out and out is None), **panel_kw)
         if log == "-":
             import shutil
