@@ -219,6 +219,7 @@ class MeasureOptions:
     chart_by_panel : bool, a new drift-chart baseline at each panel
     qif : path or None, the per-hole results also as a QIF 3.0 Results document
     dfq : path or None, the per-hole results also as a Q-DAS DFQ file (:mod:`metrology.jobs.plant`)
+    plant : a results sink or None, the OPC UA server of ``--opcua`` (started), sent every hole's result
     per_hole : bool, False with no ``out``: nothing per hole written (``--json`` alone)
     panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
     position_error_mm, form_tolerance_mm : float, mm; spin_deg : float, deg (with ``points``)
@@ -237,6 +238,7 @@ class MeasureOptions:
     chart_by_panel: bool = False
     qif: Path | None = None
     dfq: Path | None = None
+    plant: object | None = None
     per_hole: bool = True
     panel: Path | None = None
     points: Path | None = None
@@ -368,20 +370,21 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
         output.release()
-    elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None:  # --json alone: the summary, nothing per hole
+    elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None and o.plant is None:  # --json alone: the summary, nothing per hole
         result = run(None)
         check_fit(result)
     else:
         with qif_doc or contextlib.nullcontext() as q, dfq_doc or contextlib.nullcontext() as d, \
                 TableSink(target) as sink:
             table = sink if target is not None or o.per_hole else None  # --json alone: no CSV on stdout
-            result = run(sink if q is None and d is None else _Tee(*(x for x in (table, q, d) if x is not None)))
+            result = run(sink if q is None and d is None and o.plant is None else
+                         _Tee(*(x for x in (table, q, d, o.plant) if x is not None)))
             check_fit(result)  # before the files appear
     if output is not None:
         check_fit(result, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
             _qif_from_output(qif_doc, output, log)
-        docs_from_output((dfq_doc,), output, log)
+        docs_from_output((dfq_doc,), output, log, (o.plant,))
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
                            {**chart_settings(), "by_panel": o.chart_by_panel},
