@@ -194,12 +194,14 @@ class PlantServer:
     # ----- the server's thread -----
     def _run(self) -> None:
         self._loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(self._loop)
         try:
             self._loop.run_until_complete(self._serve())
             tasks = asyncio.all_tasks(self._loop)  # the sessions' own loops, ended with the server
             for t in tasks:
                 t.cancel()
-            self._loop.run_until_complete(asyncio.gather(*tasks, return_exceptions=True))
+            if tasks:
+                self._loop.run_until_complete(asyncio.gather(*tasks, return_exceptions=True))
         finally:
             self._loop.close()
 
@@ -250,29 +252,40 @@ class PlantServer:
         self._ready.set()
         checked = time.monotonic()
         try:
-            while True:
-                kind, item, _ = await self._queue.get()
-                if kind == "close":
+            closing = False
+            while not closing:
+                items = [await self._queue.get()]
+                while not self._queue.empty():  # all that came meanwhile: one pass of node writes for them
+                    items.append(self._queue.get_nowait())
+                last = {}
+                for kind, item, _ in items:
+                    if kind == "close":
+                        closing = True
+                        break
+                    if kind == "hole":
+                        cell, fields = await self._hole(item)
+                        last[cell] = fields
+                    else:
+                        await self._alarm(item)
+                for cell, fields in last.items():
+                    await self._write_last(cell, fields)
+                if closing:
                     await self._drain()
-                    break
-                if kind == "hole":
-                    await self._hole(item)
-                else:
-                    await self._alarm(item)
-                if time.monotonic() - checked > 0.2:
+                elif time.monotonic() - checked > 0.2:
                     checked = time.monotonic()
                     await self._drop_slow()
         finally:
             await server.stop()
 
-    async def _hole(self, hole: dict) -> None:
+    async def _hole(self, hole: dict) -> tuple:
+        """Fire the hole's result-ready event; (cell, its fields) for :meth:`_write_last`."""
         from asyncua import ua
 
-        from metrology.plant.gms import EVALUATION, cell_node
+        from metrology.plant.gms import EVALUATION, HOLE_FIELDS, cell_node
 
         self.sequence += 1
         cell = str(hole.get("cell") or "cell")
-        _, nodes = await cell_node(self.space, cell)
+        await cell_node(self.space, cell)
         after = hole.get("angle_after_deg")
         use_after = after is not None and after == after
         angle = after if use_after else hole.get("angle_deg")
@@ -287,22 +300,31 @@ class PlantServer:
                   "U95": float(u95) if valid and u95 is not None else nan, "Status": status,
                   "CorrectionValueAbsolute": float(corr) if corr is not None else nan, "Cell": cell,
                   "Sequence": self.sequence, "Line": int(hole.get("line") or 0)}
-        from metrology.plant.gms import HOLE_FIELDS
-
         ev = self.space.hole_event.event
         for name, vt in HOLE_FIELDS.items():
             setattr(ev, name, ua.Variant(fields[name], getattr(ua.VariantType, vt)))
-        for name, node in nodes["result"].items():
-            await node.write_value(ua.Variant(fields[name], getattr(ua.VariantType, HOLE_FIELDS[name])))
-        await nodes["U95"].write_value(fields["U95"])
-        await nodes["Status"].write_value(status)
-        await nodes["correction"]["CharacteristicIdentifier"].write_value(fields["CharacteristicIdentifier"])
-        await nodes["correction"]["Identifier"].write_value(f"{cell}/{fields['CharacteristicIdentifier']}/normal")
-        await nodes["correction"]["CorrectionValueAbsolute"].write_value(fields["CorrectionValueAbsolute"])
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = 100 if status == "conforms" else 500
         await self._fire(self.space.hole_event, f"{cell} {fields['CharacteristicIdentifier']}: {status}")
+        return cell, fields
+
+    async def _write_last(self, cell: str, fields: dict) -> None:
+        """The cell's ``LastResult`` and ``LastCorrection``: its last hole's (written straight into the
+        address space, once per pass over the queue)."""
+        from asyncua import ua
+
+        from metrology.plant.gms import HOLE_FIELDS
+
+        _, nodes = self.space.cells[cell]
+        server = self.space.server
+        values = [(nodes["result"][k], fields[k], HOLE_FIELDS[k]) for k in nodes["result"]]
+        values += [(nodes["U95"], fields["U95"], "Double"), (nodes["Status"], fields["Status"], "String"),
+                   (nodes["correction"]["CharacteristicIdentifier"], fields["CharacteristicIdentifier"], "String"),
+                   (nodes["correction"]["Identifier"], f"{cell}/{fields['CharacteristicIdentifier']}/normal", "String"),
+                   (nodes["correction"]["CorrectionValueAbsolute"], fields["CorrectionValueAbsolute"], "Double")]
+        for node, value, vt in values:
+            await server.write_attribute_value(node.nodeid, ua.DataValue(ua.Variant(value, getattr(ua.VariantType, vt))))
 
     async def _alarm(self, alarm: dict) -> None:
         from asyncua import ua
@@ -325,17 +347,23 @@ class PlantServer:
                                                  + ("raised" if raised else "sized on its new baseline"))
 
     async def _fire(self, gen, message: str) -> None:
-        """Emit from the Server object, then from the cell's object (for a client subscribed to it)."""
+        """Emit from the Server object, then from the cell's object (for a client subscribed to it):
+        asyncua's ``EventGenerator.trigger`` less its per-event local-time lookup."""
+        import os
+        from datetime import datetime, timezone
+
         from asyncua import ua
 
         ev = gen.event
+        ev.EventId = ua.Variant(os.urandom(16), ua.VariantType.ByteString)
+        ev.Time = ev.ReceiveTime = datetime.now(timezone.utc)
         ev.Message = ua.LocalizedText(message)
         subs = self.space.server.iserver.subscription_service
         cell_id = ev.SourceNode
-        await gen.trigger(message=message)
+        ev.emitting_node = ua.NodeId(ua.ObjectIds.Server)
+        await subs.trigger_event(ev)
         ev.emitting_node = cell_id
         await subs.trigger_event(ev)
-        ev.emitting_node = ua.NodeId(ua.ObjectIds.Server)
 
     async def _drop_slow(self) -> None:
         subs = self.space.server.iserver.subscription_service

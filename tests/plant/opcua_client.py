@@ -32,7 +32,10 @@ class Collector:
     """``event_notification`` handler: results and alarms, each with ``time.perf_counter()`` at arrival."""
 
     def __init__(self):
-        self.results, self.alarms = [], []
+        self.results, self.alarms, self.status = [], [], []
+
+    def status_change_notification(self, status):
+        self.status.append(str(status.Status))
 
     def event_notification(self, event):
         f = {k: v for k, v in event.get_event_props_as_fields_dict().items()}
@@ -47,7 +50,7 @@ async def connect(url: str, timeout_s: float = 120.0, proc=None):
 
     end = time.monotonic() + timeout_s
     while True:
-        c = Client(url, timeout=10)
+        c = Client(url, timeout=30)
         try:
             await c.connect()
             return c
@@ -57,16 +60,28 @@ async def connect(url: str, timeout_s: float = 120.0, proc=None):
             await asyncio.sleep(0.2)
 
 
+#: the event fields a controller asks for (not the ~60 of both types: Machinery Result's empty
+#: ``Result`` structure and its parts, BaseEventType's local time, ...)
+FIELDS = ("EventType", "SourceName", "Message", "Severity", "CharacteristicIdentifier", "IsValid",
+          "LowerToleranceLimit", "Nominal", "ResultEvaluation", "ResultValue", "UpperToleranceLimit", "U95", "Status",
+          "CorrectionValueAbsolute", "Cell", "Sequence", "Line", "Sensor", "HoleId", "Alarm")
+
+
 async def subscribe(client, period_ms: float = 5.0, queue: int = 200_000):
-    """Subscribe to the Server object's hole results and drift alarms; (subscription, collector)."""
+    """Subscribe to the Server object's hole results and drift alarms (the fields :data:`FIELDS`);
+    (subscription, collector)."""
     from asyncua import ua
+    from asyncua.common.events import get_filter_from_event_type
 
     base = client.get_node(ua.ObjectIds.BaseEventType)
     hole_t = await _subtype(base, "HoleResultReadyEventType")
     alarm_t = await _subtype(base, "DriftAlarmEventType")
+    evfilter = await get_filter_from_event_type([hole_t, alarm_t])
+    evfilter.SelectClauses = [c for c in evfilter.SelectClauses
+                              if len(c.BrowsePath) == 1 and c.BrowsePath[0].Name in FIELDS]
     col = Collector()
     sub = await client.create_subscription(period_ms, col)
-    await sub.subscribe_events(client.nodes.server, [hole_t, alarm_t], queuesize=queue)
+    await sub.subscribe_events(client.nodes.server, [hole_t, alarm_t], evfilter=evfilter, queuesize=queue)
     return sub, col
 
 
