@@ -73,6 +73,8 @@ def register(app: typer.Typer) -> None:
         opcua_key: Optional[Path] = typer.Option(None, "--opcua-key", help="The certificate's private key (PEM)."),
         opcua_users: Optional[Path] = typer.Option(None, "--opcua-users", help="The users allowed: user:SHA-256-of-"
                                                    "the-password lines."),
+        opcua_wait_s: float = typer.Option(0.0, "--opcua-wait-s", help="Wait up to this long for an OPC UA client to "
+                                           "subscribe before measuring (a whole log's results go out as measured)."),
         opcua_queue: int = typer.Option(20000, "--opcua-queue", help="Results queued for a client that does not "
                                         "read before its subscription is deleted (a warning; measuring goes on)."),
     ) -> None:
@@ -109,6 +111,8 @@ def register(app: typer.Typer) -> None:
                 sys.stdout.flush()
 
             with server as plant:
+                _wait_for_client(plant, opcua_wait_s)
+
                 def on_hole(h):
                     emit(h)
                     if plant is not None:
@@ -144,11 +148,13 @@ def register(app: typer.Typer) -> None:
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
                 with server as plant:
+                    _wait_for_client(plant, opcua_wait_s)
                     rep = _run(path, layout, dataclasses.replace(options, log_display="<stdin>", plant=plant))
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
             with server as plant:
+                _wait_for_client(plant, opcua_wait_s)
                 rep = _run(log, layout, dataclasses.replace(options, plant=plant))
         if json_out:
             echo_json(rep.to_dict(), "measure")
@@ -158,6 +164,10 @@ def register(app: typer.Typer) -> None:
             typer.echo("\n".join(lines), err=out is None)
         reported(report)
         finish(rep.verdict)
+
+    def _wait_for_client(plant, wait_s):
+        if plant is not None and wait_s > 0 and not plant.wait_for_client(wait_s):
+            warn(f"--opcua-wait-s {wait_s:g}: no OPC UA client subscribed; measuring")
 
     def _run(log, layout, options):
         from metrology.jobs.measure import measure_files

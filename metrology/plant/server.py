@@ -169,6 +169,20 @@ class PlantServer:
                 raise ValueError(f"--opcua {self.url}: cannot listen on {self.host}:{self.port} "
                                  f"({exc.strerror or exc})") from None
 
+    def wait_for_client(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for a client's subscription with a monitored item (before a whole
+        log is measured: the results go out as they are measured); whether one came."""
+        async def wait():
+            subs = self.space.server.iserver.subscription_service
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end:
+                if any(sub.monitored_item_srv._monitored_items for sub in subs.subscriptions.values()):
+                    return True
+                await asyncio.sleep(0.05)
+            return False
+
+        return asyncio.run_coroutine_threadsafe(wait(), self._loop).result()
+
     def result(self, hole: dict) -> None:
         """Announce a hole's result (the dict of ``measure --follow``: hole_id, status, angle_deg,
         U95_angle_deg, angle_after_deg, U95_after_deg, correction_deg, cell, line)."""

@@ -207,3 +207,35 @@ def test_a_client_that_stops_reading_is_dropped_and_measuring_goes_on(knocked, t
     holes = [x for x in map(json.loads, out.splitlines()) if "hole_id" in x and "line" in x]
     assert len(holes) == 1150
     assert "a client is not reading" in err and "subscription" in err
+
+
+async def _whole_log(log, out_csv, tmp):
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    metro = Metro(["measure", str(log), "--layout", str(TABLE6), "--out", str(out_csv), "--json", "--opcua", url,
+                   "--opcua-wait-s", "300"], tmp, ROOT)
+    try:
+        client = await connect(url, proc=metro.proc)
+        _, col = await subscribe(client)
+        rc, out, err = await asyncio.get_running_loop().run_in_executor(None, metro.finish)
+        return rc, err, col
+    finally:
+        metro.kill()
+
+
+def test_a_whole_log_sends_every_hole_equal_to_the_out_table(knocked, tmp_path):
+    """Without --follow: the server waits for the client (--opcua-wait-s), then every hole's result
+    goes out as the log is measured, each value the --out table's own."""
+    log = tmp_path / "head.csv"
+    log.write_text("".join(knocked.read_text().splitlines(keepends=True)[:301]))
+    out_csv = tmp_path / "out.csv"
+    rc, err, col = asyncio.run(_whole_log(log, out_csv, tmp_path))
+    assert rc in (0, 1), err
+    with open(out_csv, newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert len(col.results) == len(table) == 300
+    assert [r["Sequence"] for r in col.results] == list(range(1, 301))
+    for r, t in zip(col.results, table):
+        use_after = t["angle_after_deg"] not in ("", "nan")
+        assert r["CharacteristicIdentifier"] == t["hole_id"] and r["Status"] == t["status"]
+        assert r["ResultValue"] == float(t["angle_after_deg"] if use_after else t["angle_deg"])
+        assert r["U95"] == float(t["U95_after_deg"] if use_after else t["U95_angle_deg"])
