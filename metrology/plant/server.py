@@ -9,8 +9,8 @@ events receives every one) and by the cell's object (reached from Server by HasN
 
 Security (OPC UA's own modes): the endpoint binds 127.0.0.1 unless the URL names another host; a
 host that is not loopback needs ``cert`` and ``key`` (PEM) and ``users`` (a file of ``user:SHA-256 of
-the password`` lines), and then serves Basic256Sha256 SignAndEncrypt only, with user names only (no
-anonymous). Nothing in the address space is writable and no client may add or delete nodes or
+the password`` lines), and with them (on any host) the server serves Basic256Sha256 SignAndEncrypt
+only, with user names only (no anonymous). Nothing in the address space is writable and no client may add or delete nodes or
 references, whoever it is.
 
 A client that stops reading (its queued notifications reach :data:`SLOW_CLIENT_RESULTS`) has its
@@ -121,10 +121,12 @@ class PlantServer:
         self.url = url
         self.host, self.port, loopback = parse_endpoint(url)
         self.users = None
-        if not loopback:
+        secure = cert is not None or key is not None or users is not None
+        if not loopback or secure:
             if cert is None or key is None or users is None:
-                raise ValueError(f"--opcua {url}: a host that is not loopback needs --opcua-cert, --opcua-key and "
-                                 f"--opcua-users (signed and encrypted, user and password): refused")
+                raise ValueError(f"--opcua {url}: " + ("a host that is not loopback" if not loopback else "a secured "
+                                 "endpoint") + " needs --opcua-cert, --opcua-key and --opcua-users (signed and "
+                                 "encrypted, user and password): refused")
             self.users = read_users(users)
         self.cert, self.key = cert, key
         self.tolerance_deg = float(tolerance_deg)

@@ -239,3 +239,68 @@ def test_a_whole_log_sends_every_hole_equal_to_the_out_table(knocked, tmp_path):
         assert r["CharacteristicIdentifier"] == t["hole_id"] and r["Status"] == t["status"]
         assert r["ResultValue"] == float(t["angle_after_deg"] if use_after else t["angle_deg"])
         assert r["U95"] == float(t["U95_after_deg"] if use_after else t["U95_angle_deg"])
+
+
+def _pem_pair(tmp, name, uri, usage):
+    from asyncua.crypto.cert_gen import dump_private_key_as_pem, generate_private_key, generate_self_signed_app_certificate
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+
+    key = generate_private_key()
+    cert = generate_self_signed_app_certificate(key, name, {}, [x509.UniformResourceIdentifier(uri),
+                                                                x509.DNSName("localhost")], [usage])
+    (tmp / f"{name}.key.pem").write_bytes(dump_private_key_as_pem(key))
+    (tmp / f"{name}.cert.pem").write_bytes(cert.public_bytes(Encoding.PEM))
+    return tmp / f"{name}.cert.pem", tmp / f"{name}.key.pem"
+
+
+async def _secure_session(url, proc, client_cert, client_key, user, password):
+    """(anonymous refused?, the user's session reads the calibration's SHA-256)"""
+    from asyncua import Client, ua
+
+    anonymous = Client(url, timeout=30)
+    try:
+        await anonymous.connect()
+        refused = False
+        await anonymous.disconnect()
+    except Exception:  # noqa: BLE001 - no endpoint without security, no anonymous token: refused
+        refused = True
+    c = Client(url, timeout=30)
+    c.application_uri = "urn:metro:test-client"
+    await c.set_security_string(f"Basic256Sha256,SignAndEncrypt,{client_cert},{client_key}")
+    c.set_user(user)
+    c.set_password(password)
+    await c.connect()
+    try:
+        ns = await c.get_namespace_index("urn:metro:plant")
+        sha = await (await c.get_node(ua.NodeId("cell/C1/Calibration", ns)).get_child(f"{ns}:Sha256")).read_value()
+    finally:
+        await c.disconnect()
+    return refused, sha
+
+
+def test_with_certificate_and_users_only_a_user_over_an_encrypted_channel_gets_in(knocked, tmp_path):
+    import hashlib
+
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    cert, key = _pem_pair(tmp_path, "server", "urn:metro:measure", ExtendedKeyUsageOID.SERVER_AUTH)
+    ccert, ckey = _pem_pair(tmp_path, "client", "urn:metro:test-client", ExtendedKeyUsageOID.CLIENT_AUTH)
+    (tmp_path / "users").write_text(f"# cell controllers\ncell1:{hashlib.sha256(b'secret').hexdigest()}\n")
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    metro = Metro(["measure", "-", "--layout", str(TABLE6), "--follow", "--opcua", url, "--opcua-cert", str(cert),
+                   "--opcua-key", str(key), "--opcua-users", str(tmp_path / "users")], tmp_path, ROOT)
+    proc = metro.proc
+    try:
+        proc.stdin.write("".join(knocked.read_text().splitlines(keepends=True)[:4]))
+        proc.stdin.flush()
+        for _ in range(3):
+            assert proc.stdout.readline()
+        refused, sha = asyncio.run(_secure_session(url, proc, ccert, ckey, "cell1", "secret"))
+        proc.stdin.close()
+        rc, _, err = metro.finish()
+        assert rc in (0, 1), err
+    finally:
+        metro.kill()
+    assert refused
+    assert sha == hashlib.sha256(TABLE6.read_bytes()).hexdigest()
