@@ -114,6 +114,9 @@ def register(app: typer.Typer) -> None:
         qif: Optional[Path] = typer.Option(None, "--qif", help="Also write the calibrated head as a QIF 3.0 "
                                            "measurement device (.qif): its sensors' calibrated values and the "
                                            "SHA-256 of the calibrated layout, which metro measure --qif names."),
+        dfq: Optional[Path] = typer.Option(None, "--dfq", help="Also write the calibrated parameters as a Q-DAS "
+                                           "AQDEF file (.dfq) for SPC: per sensor its zero point (mm) and beam "
+                                           "direction, nominal the layout's; the calibration's SHA-256 as gauge."),
         plot: Optional[Path] = typer.Option(None, "--plot", help="Convergence and residual figures: a .pdf file (a "
                                             "page each) or a directory (PNGs)."),
         report_html: Optional[Path] = typer.Option(None, "--report", help=REPORT_HELP),
@@ -154,9 +157,9 @@ def register(app: typer.Typer) -> None:
         import math
 
         if follow:
-            if plot is not None or report_html is not None or qif is not None:
+            if plot is not None or report_html is not None or qif is not None or dfq is not None:
                 fail("--follow writes no figures, report or QIF: run calibrate on the finished file for --plot/--report/"
-                     "--qif")
+                     "--qif/--dfq")
             return _follow(export, plane, layout, method, out, json_out, target_mm, target_deg, target_normal_deg,
                            idle_s, stop_when_met, quaternion_order, position_units, no_reading, target_set)
 
@@ -169,7 +172,8 @@ def register(app: typer.Typer) -> None:
                                      target_set=target_set,
                                      out=out, plot_dir=plot, quaternion_order=quaternion_order,
                                      position_units=position_units, no_reading=no_reading, warn=warn, progress=progress,
-                                     report_html=report_html, command=invocation(ctx), meta=fields, qif=qif)
+                                     report_html=report_html, command=invocation(ctx), meta=fields, qif=qif,
+                                     dfq=dfq)
         for w in calibration_warnings(report):
             warn(w)
         if json_out:

@@ -62,6 +62,23 @@ def register(app: typer.Typer) -> None:
                                            "Results document (.qif): each hole an angle characteristic with its "
                                            "value, U95 and ISO 14253-1 status; the head and its calibration's "
                                            "SHA-256 as the measurement device."),
+        dfq: Optional[Path] = typer.Option(None, "--dfq", help="Also write the per-hole results as a Q-DAS AQDEF "
+                                           "file (.dfq) for SPC: one characteristic per hole of the hole table (or "
+                                           "one for the log), nominal 0, upper limit the tolerance, deg; the cell as "
+                                           "machine, the calibration's SHA-256 as gauge (docs/plant.md)."),
+        opcua: Optional[str] = typer.Option(None, "--opcua", help="Also serve each hole's result live on an OPC UA "
+                                            "server at opc.tcp://HOST:PORT (OPC 40210 GMS characteristics, a "
+                                            "result-ready event per hole, drift alarms as events; needs "
+                                            "metro\\[plant]). A host that is not loopback needs --opcua-cert, "
+                                            "--opcua-key and --opcua-users (docs/plant.md)."),
+        opcua_cert: Optional[Path] = typer.Option(None, "--opcua-cert", help="The server's certificate (PEM)."),
+        opcua_key: Optional[Path] = typer.Option(None, "--opcua-key", help="The certificate's private key (PEM)."),
+        opcua_users: Optional[Path] = typer.Option(None, "--opcua-users", help="The users allowed: user:SHA-256-of-"
+                                                   "the-password lines."),
+        opcua_wait_s: float = typer.Option(0.0, "--opcua-wait-s", help="Wait up to this long for an OPC UA client to "
+                                           "subscribe before measuring (a whole log's results go out as measured)."),
+        opcua_queue: int = typer.Option(20000, "--opcua-queue", help="Results queued for a client that does not "
+                                        "read before its subscription is deleted (a warning; measuring goes on)."),
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
@@ -75,9 +92,18 @@ def register(app: typer.Typer) -> None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
                     "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
+        import contextlib
+
+        server = contextlib.nullcontext()
+        if opcua is not None:  # started (and refused: exit 2) before anything is measured
+            from metrology.jobs.plant import opcua_server
+
+            server = opcua_server(opcua, tolerance_deg, layout, opcua_cert, opcua_key, opcua_users, warn=warn,
+                                  slow_results=opcua_queue)
         if follow:
-            if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None:
-                fail("--follow answers each hole on stdout: no --out, --report, --qif, --workers or --scheduler")
+            if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None \
+                    or dfq is not None:
+                fail("--follow answers each hole on stdout: no --out, --report, --qif, --dfq, --workers or --scheduler")
             import json as _json
 
             from metrology.jobs.measure_follow import follow_log
@@ -86,8 +112,21 @@ def register(app: typer.Typer) -> None:
                 sys.stdout.write(_json.dumps(obj) + "\n")
                 sys.stdout.flush()
 
-            summary = follow_log(log, layout, emit, lambda a: emit({"alarm": a}), tolerance_deg=tolerance_deg,
-                                 min_radius_mm=min_radius_mm, **panel_kw)
+            with server as plant:
+                _wait_for_client(plant, opcua_wait_s)
+
+                def on_hole(h):
+                    emit(h)
+                    if plant is not None:
+                        plant.result(h)
+
+                def on_alarm(a):
+                    emit({"alarm": a})
+                    if plant is not None:
+                        plant.alarm(a)
+
+                summary = follow_log(log, layout, on_hole, on_alarm, tolerance_deg=tolerance_deg,
+                                     min_radius_mm=min_radius_mm, **panel_kw)
             emit({"summary": summary.to_dict()})
             bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
             raise typer.Exit(1 if bad else 0)
@@ -97,7 +136,7 @@ def register(app: typer.Typer) -> None:
 
         options = MeasureOptions(out=out, tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm, workers=workers,
                                  scheduler=scheduler, report_html=report, command=invocation(ctx),
-                                 fail_on_drift=fail_on_drift, chart_by_panel=chart_by_panel, qif=qif,
+                                 fail_on_drift=fail_on_drift, chart_by_panel=chart_by_panel, qif=qif, dfq=dfq,
                                  per_hole=not (json_out and out is None), **panel_kw)
         if log == "-":
             import shutil
@@ -110,11 +149,15 @@ def register(app: typer.Typer) -> None:
                     shutil.copyfileobj(sys.stdin.buffer, fh)
                 if path.stat().st_size == 0:
                     fail("LOG -: nothing on stdin")
-                rep = _run(path, layout, dataclasses.replace(options, log_display="<stdin>"))
+                with server as plant:
+                    _wait_for_client(plant, opcua_wait_s)
+                    rep = _run(path, layout, dataclasses.replace(options, log_display="<stdin>", plant=plant))
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
         else:
-            rep = _run(log, layout, options)
+            with server as plant:
+                _wait_for_client(plant, opcua_wait_s)
+                rep = _run(log, layout, dataclasses.replace(options, plant=plant))
         if json_out:
             echo_json(rep.to_dict(), "measure")
         else:
@@ -123,6 +166,10 @@ def register(app: typer.Typer) -> None:
             typer.echo("\n".join(lines), err=out is None)
         reported(report)
         finish(rep.verdict)
+
+    def _wait_for_client(plant, wait_s):
+        if plant is not None and wait_s > 0 and not plant.wait_for_client(wait_s):
+            warn(f"--opcua-wait-s {wait_s:g}: no OPC UA client subscribed; measuring")
 
     def _run(log, layout, options):
         from metrology.jobs.measure import measure_files

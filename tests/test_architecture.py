@@ -21,7 +21,7 @@ PKG = ROOT / "metrology"
 LAYERS = {
     "core": 0,
     "io": 1,
-    "datum": 2, "calibration": 2, "panel": 2, "measure": 2,
+    "datum": 2, "calibration": 2, "panel": 2, "measure": 2, "plant": 2,
     "diagnosis": 3, "sim": 3, "plan": 3,
     "report": 4, "jobs": 5,
 }

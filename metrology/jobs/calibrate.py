@@ -13,7 +13,7 @@ from metrology.io.names import display_name
 def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_METHOD, target=None, out=None,
                     plot_dir=None, quaternion_order="wxyz", position_units="mm", no_reading=None,
                     warn=None, report_html=None, command=None, progress: ProgressFn | None = None,
-                    meta=None, qif=None, **kwargs) -> CalibrationReport:
+                    meta=None, qif=None, dfq=None, **kwargs) -> CalibrationReport:
     """Load and cross-check the three files, calibrate, and write the requested outputs.
 
     ``quaternion_order``, ``position_units`` and ``no_reading`` say how to read the export
@@ -28,7 +28,8 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
     ``progress(done, total, what)`` is called before each step (read, calibrate, figures, write).
 
     ``qif``: the calibrated head also as a QIF 3.0 measurement device
-    (:func:`metrology.io.qif.write_device_document`), written after ``out``.
+    (:func:`metrology.io.qif.write_device_document`), written after ``out``; ``dfq``: the calibrated
+    parameters as a Q-DAS DFQ file (:func:`metrology.io.dfq.write_calibration_dfq`).
 
     ``meta`` (dict of str -> str): the certificate's header fields, written into the calibrated
     layout's ``[certificate]`` table. The report's ``certificate`` is made from the calibrated
@@ -44,6 +45,10 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
         from metrology.io.qif import check_qif_path
 
         check_qif_path(qif)
+    if dfq is not None:
+        from metrology.io.dfq import check_dfq_path
+
+        check_dfq_path(dfq)
     if plot_dir is not None:
         from metrology.report.calibration import check_plot_target
 
@@ -92,6 +97,12 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
         write_device_document(qif, replace(report.layout, certificate=dict(meta or {})),
                               hashlib.sha256(text.encode()).hexdigest(), None if out is None else display_name(out).replace("\\", "/").rsplit("/", 1)[-1],
                               __version__, method, dataset.export.n_poses)
+    if dfq is not None:
+        import time
+
+        from metrology.io.dfq import write_calibration_dfq
+
+        write_calibration_dfq(dfq, text, dataset.layout, time.time())
     if page is not None:
         write_text(report_html, page)
     notify(progress, total, total, "done")

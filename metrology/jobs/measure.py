@@ -230,6 +230,8 @@ class MeasureOptions:
     batch_rows : int or None, rows per batch (None: :data:`metrology.io.holelog.BATCH_ROWS`)
     chart_by_panel : bool, a new drift-chart baseline at each panel
     qif : path or None, the per-hole results also as a QIF 3.0 Results document
+    dfq : path or None, the per-hole results also as a Q-DAS DFQ file (:mod:`metrology.jobs.plant`)
+    plant : a results sink or None, the OPC UA server of ``--opcua`` (started), sent every hole's result
     per_hole : bool, False with no ``out``: nothing per hole written (``--json`` alone)
     panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
     position_error_mm, form_tolerance_mm : float, mm; spin_deg : float or None, deg (with
@@ -248,6 +250,8 @@ class MeasureOptions:
     batch_rows: int | None = None
     chart_by_panel: bool = False
     qif: Path | None = None
+    dfq: Path | None = None
+    plant: object | None = None
     per_hole: bool = True
     panel: Path | None = None
     points: Path | None = None
@@ -360,6 +364,9 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     if o.qif is not None:
         sources["qif"] = str(o.qif)
     qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display)
+    from metrology.jobs.plant import dfq_sink, docs_from_output
+
+    dfq_doc = dfq_sink(o.dfq, o.tolerance_deg, layout_path, points, surfaces, log.display)
 
     def run(sink):
         """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
@@ -377,17 +384,21 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
         output.release()
-    elif target is None and not o.per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
+    elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None and o.plant is None:  # --json alone: the summary, nothing per hole
         result = run(None)
         check_fit(result)
     else:
-        with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
-            result = run(sink if q is None else _Tee(sink, q))
+        with qif_doc or contextlib.nullcontext() as q, dfq_doc or contextlib.nullcontext() as d, \
+                TableSink(target) as sink:
+            table = sink if target is not None or o.per_hole else None  # --json alone: no CSV on stdout
+            result = run(sink if q is None and d is None and o.plant is None else
+                         _Tee(*(x for x in (table, q, d, o.plant) if x is not None)))
             check_fit(result)  # before the files appear
     if output is not None:
         check_fit(result, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
             _qif_from_output(qif_doc, output, log)
+        docs_from_output((dfq_doc,), output, log, (o.plant,))
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
                            {**chart_settings(), "by_panel": o.chart_by_panel},
@@ -430,6 +441,10 @@ def _check_report_paths(o: MeasureOptions) -> None:
         from metrology.io.qif import check_qif_path
 
         check_qif_path(o.qif)
+    if o.dfq is not None:
+        from metrology.io.dfq import check_dfq_path
+
+        check_dfq_path(o.dfq)
 
 
 def _manifest(o: MeasureOptions, layout, log_path) -> dict:

@@ -119,7 +119,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
                      "normal": [f("normal_x"), f("normal_y"), f("normal_z")],
                      **({"k1_per_mm": f("k1_per_mm"), "k2_per_mm": f("k2_per_mm"),
                          "correction_deg": f("correction_deg")} if surfaces is not None else {}),
-                     "reason": f("reason")})
+                     "reason": f("reason"), **({"cell": f("cell")} if "cell" in t.column_names else {})})
             watch.feed(Feed.of(batch, log, first_row=lineno - 2))
             _report_alarms(watch, alarms, raised, on_alarm)
     finally:
