@@ -187,7 +187,37 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     clear_all()  # the fits kept are this data set's: none of an earlier one can be asked for again
     # the null includes the datum's uncertainty: the data set on the plane the readings place
     # under the scan's covariance (issue 40; metrology.diagnosis.datum.datum_plane)
-    ds, plane_check = datum_plane(ds)
+    scan = ds
+    ds, plane_check = datum_plane(scan)
+    diag = _diagnose_on(ds, folds, sim_reps, seed, progress)
+    if plane_check.off:  # the first test is a screen: off only given the causes named (rule 18)
+        given = plane_given(scan, ds, plane_check, diag)
+        plane_check = replace(plane_check, given_causes=given, screen_p=plane_check.p,
+                              off=rules.datum_plane_off(given.p))
+        if not plane_check.off:  # the plane under the scan's covariance, as for a plane not off
+            ds, first = datum_plane(scan, widen=False)
+            plane_check = replace(first, off=False, given_causes=given, screen_p=first.p)
+            diag = _diagnose_on(ds, folds, sim_reps, seed, progress)
+    return name_datum_plane(diag, plane_check)
+
+
+def plane_given(scan, ds, check, diag: Diagnosis):
+    """Rule 18's test of the plane the diagnosis ``diag`` ran on (``ds``, moved from the scan's
+    plane of ``scan`` by ``check.phi``) given the causes it named
+    (:func:`~metrology.diagnosis.planegiven.plane_given_causes`)."""
+    from metrology.diagnosis.planegiven import plane_given_causes
+
+    pd = diag.plot_data
+    named = diag.outcome == Outcome.NAMED and pd.best is not None
+    fit = pd.best.fit if named else pd.base
+    rand = next((c for c in diag.causes if c.label.endswith("@random")), None)
+    rp = None if rand is None else (rand.params["sigma_position_mm"].value ** 2, rand.params["sigma_tilt_rad"].value ** 2)
+    labels = tuple(c.label for c in diag.causes) if named else ()
+    return plane_given_causes(ds, scan.plane, scan.plane_cov, check.phi, fit, pd.cov, pd.sigma, labels, rp)
+
+
+def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
+    """The diagnosis of ``ds`` on its plane (:func:`diagnose` without the datum plane's test)."""
     rng = np.random.default_rng(seed)
     notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)
@@ -221,13 +251,13 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return name_datum_plane(Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
+    return Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
                      candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
                      structure_base=b.structure, discrepancy=discrepancy, heldout=heldout, confounding=v.confounding,
                      base_theta=b.fit.theta, base_stderr=b.fit.theta_stderr, thresholds=dict(THRESHOLDS),
                      datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
                      detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
-                     reasons=v.reasons), plane_check)
+                     reasons=v.reasons)
 
 
 # -- the verdict in one paragraph, made from the trail of reasons -----------------------------------
