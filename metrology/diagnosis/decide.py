@@ -251,13 +251,39 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
+    empirical = None
+    if rules.search_tried(v.cause, v.confidence):  # the catalogue does not explain: the open search
+        empirical = open_search(ds, b, v, gross, folds)
+        summary += empirical_text(empirical)
+    return Diagnosis(empirical=empirical, reasons=v.reasons + (() if empirical is None else empirical.reasons),
+                     cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
                      candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
                      structure_base=b.structure, discrepancy=discrepancy, heldout=heldout, confounding=v.confounding,
                      base_theta=b.fit.theta, base_stderr=b.fit.theta_stderr, thresholds=dict(THRESHOLDS),
                      datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
-                     detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
-                     reasons=v.reasons)
+                     detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
+
+
+def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds):
+    """The open search (:func:`metrology.diagnosis.search.search`) on the residuals of the model the
+    verdict judged (the causes named; the base model where none is), the readings named gross left out."""
+    from metrology.core.model import jacobian_raw
+    from metrology.diagnosis.search import search
+
+    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None else b.fit
+    zero, u = geometry(ds.layout, fit.theta)
+    J = jacobian_raw(zero, u, ds.obs.normal, ds.obs.offset)
+    return search(ds, b.cov, b.d0, np.where(gross, np.nan, fit.residual), b.sigma, J, folds)
+
+
+def empirical_text(e) -> str:
+    """The summary's sentence on the open search's terms (none: what was tried)."""
+    if not e.terms:
+        return (f"; the open search found no term of the run's variables that predicts held-out poses better "
+                f"({e.n_tried} terms tried)")
+    return ("; outside the catalogue, an empirical model: " + "; ".join(
+        f"{t.equation} (held-out chi-square gain {t.gain_chi2:.3g}, p = {t.p_heldout:.2g})" for t in e.terms)
+        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} each)")
 
 
 # -- the verdict in one paragraph, made from the trail of reasons -----------------------------------

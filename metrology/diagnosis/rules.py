@@ -11,7 +11,8 @@ numerical tolerances of the solvers are not decision rules and stay with them.
 
 Order: gross readings (1), a candidate's significance (2), a step's choice (3-6), the selection's
 stop and scope (7-9), the verdict: each cause needed (10), judged on its sensors (11), not
-crosstalk (12), the random pose error (13), confidence (14-16), the datum cloud (17).
+crosstalk (12), the random pose error (13), confidence (14-16), the datum cloud (17), the datum
+plane (18), the open search beyond the catalogue (19-21).
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
-           "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists"]
+           "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "MAX_EMPIRICAL", "search_tried",
+           "search_in_sample", "search_held_out", "room_for_another_term"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -266,6 +268,34 @@ def datum_plane_off(p: float) -> bool:
     return p < ALPHA_DATUM_PLANE
 
 
+# -- 19-21. the open search beyond the catalogue (issue 54; metrology.diagnosis.search) -------------
+#: 19. at most this many empirical terms (as ``MAX_CAUSES`` causes)
+MAX_EMPIRICAL = 3
+
+
+def search_tried(cause: str, confidence) -> bool:
+    """19. The vocabulary is searched where the residuals stay inconsistent with the noise: the verdict
+    ``unexplained``, or a cause named that leaves structure (``partial``). Reason: elsewhere the
+    catalogue explains the data, and a search run on every data set would spend the nulls' budget."""
+    return cause == Outcome.UNEXPLAINED or Confidence(confidence) == Confidence.PARTIAL
+
+
+def search_in_sample(p: float, n_tried: int) -> bool:
+    """19. A term passes in sample at ``ALPHA_CANDIDATES`` split over every term tried on every sensor
+    (Bonferroni over the search: the catalogue's level, its multiplicity accounted for)."""
+    return p < ALPHA_CANDIDATES / max(int(n_tried), 1)
+
+
+def search_held_out(p: float, gain: float) -> bool:
+    """20, 21. The term predicts held-out poses better, at the catalogue's ``ALPHA_HELDOUT``."""
+    return p < ALPHA_HELDOUT and gain > 0
+
+
+def room_for_another_term(n_found: int) -> bool:
+    """19. The search goes on while fewer than ``MAX_EMPIRICAL`` terms are taken."""
+    return n_found < MAX_EMPIRICAL
+
+
 #: the levels (the ``thresholds`` of the ``--json`` output; the keys and their order are its schema)
 THRESHOLDS = {
     "alpha_candidates": ALPHA_CANDIDATES,
@@ -280,4 +310,5 @@ THRESHOLDS = {
     "lr_one_sensor": LR_ONE_SENSOR,
     "alpha_datum_plane": ALPHA_DATUM_PLANE,
     "gross_run": GROSS_RUN,
+    "max_empirical": MAX_EMPIRICAL,
 }
