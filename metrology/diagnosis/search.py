@@ -108,18 +108,38 @@ class _Sensor:
         cols = [self.X] + [t.columns[self.fin] for t in self.taken] + ([] if extra is None else [extra[self.fin]])
         return np.column_stack(cols)
 
-    def f_test(self, term: Term) -> float:
-        """In-sample p of ``term`` given the base parameters and the terms taken (an F-test)."""
-        from scipy import stats
+    def _reference(self):
+        """The model without the term, held once per state: an orthonormal basis of its design
+        ``(m, rank)``, the residual of the readings off it, its size and rank."""
+        key = len(self.taken)
+        if getattr(self, "_ref_key", None) != key:
+            X0, y = self.design(), self.r[self.fin]
+            U, sv, _ = np.linalg.svd(X0, full_matrices=False)
+            Q = U[:, sv > 1e-10 * max(float(sv[0]), 1e-300)]
+            e = y - Q @ (Q.T @ y)
+            self._ref, self._ref_key = (Q, e, float(e @ e), float(sv[0])), key
+        return self._ref
 
-        X0, X1 = self.design(), self.design(term.columns)
-        y = self.r[self.fin]
-        rss0, rk0 = _rss(X0, y)
-        rss1, rk1 = _rss(X1, y)
-        k, dof = rk1 - rk0, len(y) - rk1
+    def f_test(self, term: Term) -> float:
+        """In-sample p of ``term`` given the base parameters and the terms taken (an F-test: the
+        term's columns projected off the model without it)."""
+        from scipy.special import fdtrc  # the F distribution's survival function (scipy.stats.f.sf's)
+
+        Q, e, rss0, s0 = self._reference()
+        C = term.columns[self.fin]
+        Ct = C - Q @ (Q.T @ C)
+        if Ct.shape[1] == 1:  # one column: its own direction
+            nc = float(np.linalg.norm(Ct))
+            U = Ct / nc if nc > 1e-10 * max(s0, float(np.linalg.norm(C)), 1e-300) else Ct[:, :0]
+        else:
+            U, sv, _ = np.linalg.svd(Ct, full_matrices=False)
+            U = U[:, sv > 1e-10 * max(s0, float(np.linalg.norm(C)), 1e-300)]
+        k = U.shape[1]
+        rss1 = rss0 - float(np.sum((U.T @ e) ** 2))
+        dof = len(e) - Q.shape[1] - k
         if k <= 0 or dof <= 0 or rss1 <= 0:
             return 1.0
-        return float(stats.f.sf(((rss0 - rss1) / k) / (rss1 / dof), k, dof))
+        return float(fdtrc(k, dof, ((rss0 - rss1) / k) / (rss1 / dof)))
 
     def heldout(self, cols):
         """Per-pose held-out residuals ``(p,)`` mm (NaN off the sensor's readings) of the base parameters,
@@ -143,12 +163,6 @@ class _Sensor:
         e0, e1 = self.heldout(None), self.heldout(term.columns)
         d = ((e0**2 - e1**2) / self.s**2)[self.fin]
         return d, paired_gain_p(d)
-
-
-def _rss(X, y):
-    beta, _, rank, _ = np.linalg.lstsq(X, y, rcond=1e-10)
-    e = y - X @ beta
-    return float(e @ e), int(rank)
 
 
 def search(ds, cov, d0, residual, sigma, J, folds: int) -> Empirical:
