@@ -51,7 +51,10 @@ class EmpiricalTerm:
     their standard errors, fitted jointly with the sensor's base parameters; size : Param, the
     term's peak-to-valley over the poses (mm; for ``tails`` the contaminated fraction); gain_chi2 :
     float, its held-out chi-square gain (for ``tails``, twice the held-out log-likelihood gain);
-    p_heldout, p_insample : float; step : int.
+    p_heldout, p_insample : float; step : int; plot : dict or None, what its partial-residual figure
+    draws (``x (m,)`` the term's variable on the sensor's readings: the column of a line, the phase
+    in rad of a periodic term, the fitted term of a shape; ``partial (m,)`` mm, the residual with the
+    term added back; ``fit (m,)`` mm, the term; ``xlabel``), not in ``--json``.
     """
 
     sensor: str
@@ -65,6 +68,7 @@ class EmpiricalTerm:
     p_heldout: float
     p_insample: float
     step: int
+    plot: dict | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"sensor": self.sensor, "term": self.key, "variables": list(self.variables), "equation": self.equation,
@@ -245,7 +249,12 @@ def _describe(sen: _Sensor, t: Term, name, p_in, p_ho, gain, step) -> EmpiricalT
         eq = f"{name} reads {t.expr}, {size.value * um:.3g} ± {size.stderr * um:.2g} um peak-to-valley"
         params = {f"c{j}": Param(float(b[j]), "mm", float(np.sqrt(max(Cb[j, j], 0.0)))) for j in range(k)}
         meaning = f"the reading depends on {', '.join(t.variables)}"
-    return EmpiricalTerm(name, t.key, t.variables, eq, meaning, params, size, gain, p_ho, p_in, step)
+    cols = t.columns[sen.fin]
+    x, xlabel = ((cols[:, 0], t.expr) if t.kind == "line" else
+                 (np.arctan2(cols[:, 0], cols[:, 1]), f"phase of 2 pi {t.expr} / {t.period:.4g} {t.period_unit} [rad]")
+                 if t.kind == "periodic" else (term * um, f"the fitted term [um]: {t.expr}"))
+    plot = {"x": x, "partial": e + term, "fit": term, "xlabel": xlabel}
+    return EmpiricalTerm(name, t.key, t.variables, eq, meaning, params, size, gain, p_ho, p_in, step, plot)
 
 
 def _mixture(z):

@@ -93,3 +93,16 @@ def test_every_term_names_variables_of_the_vocabulary():
     assert all(set(t.variables) <= set(VARIABLES) and t.columns.shape[0] == 40 for t in terms)
     kinds = {t.kind for t in terms}
     assert kinds == {"line", "periodic", "shape"}
+
+
+def test_a_partial_residual_figure_per_term(backlash, tmp_path):
+    from metrology.report.diagnose import plot_report
+
+    _, d = backlash
+    files = plot_report(d, tmp_path)
+    assert any(f.endswith("residuals_empirical.png") for f in files)
+    t = d.empirical.terms[0]
+    # the partial residual against sign(delta_d): its two groups' means differ by twice the coefficient
+    x, y = t.plot["x"], t.plot["partial"]
+    step = float(np.mean(y[x > 0]) - np.mean(y[x < 0]))
+    assert abs(step - 2 * t.params["c"].value) < 4 * t.params["c"].stderr
