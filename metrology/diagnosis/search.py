@@ -82,7 +82,9 @@ class Empirical:
     """The search's result: ``terms`` (EmpiricalTerm, in the order chosen), ``variables`` (every
     variable they name, in order), ``gain_chi2`` (their held-out chi-square gains summed),
     ``n_tried`` (the terms the in-sample level was split over), ``level`` (that split level),
-    ``reasons`` (rules 19-21 as they fired)."""
+    ``reasons`` (rules 19-21 as they fired); ``heldout_rms_mm`` : (2,) float or None, mm, the
+    k-fold held-out residual RMS on the sensors with a term other than ``tails``, without and with
+    the terms (the base parameters refitted on each fold either way)."""
 
     terms: tuple = ()
     variables: tuple = ()
@@ -90,10 +92,14 @@ class Empirical:
     n_tried: int = 0
     level: float = 0.0
     reasons: tuple = field(default=(), repr=False)
+    heldout_rms_mm: tuple | None = None
 
     def to_dict(self) -> dict:
-        return {"terms": [t.to_dict() for t in self.terms], "variables": list(self.variables),
-                "heldout_gain_chi2": self.gain_chi2, "terms_tried": self.n_tried, "level_insample": self.level}
+        out = {"terms": [t.to_dict() for t in self.terms], "variables": list(self.variables),
+               "heldout_gain_chi2": self.gain_chi2, "terms_tried": self.n_tried, "level_insample": self.level}
+        if self.heldout_rms_mm is not None:
+            out.update(heldout_rms_without_mm=self.heldout_rms_mm[0], heldout_rms_with_mm=self.heldout_rms_mm[1])
+        return out
 
 
 class _Sensor:
@@ -206,7 +212,21 @@ def search(ds, cov, d0, residual, sigma, J, folds: int) -> Empirical:
     terms = [_describe(sens[i], t, names[i], p_in, p_ho, g, step) for i, t, p_in, p_ho, g, step in found]
     terms += _tails(sens, names, n_tried, why, len(found))
     variables = tuple(dict.fromkeys(v for t in terms for v in t.variables))
-    return Empirical(tuple(terms), variables, float(sum(t.gain_chi2 for t in terms)), n_tried, level, tuple(why))
+    return Empirical(tuple(terms), variables, float(sum(t.gain_chi2 for t in terms)), n_tried, level, tuple(why),
+                     _heldout_rms([sen for sen in sens if sen.taken]))
+
+
+def _heldout_rms(with_terms) -> tuple | None:
+    """``(without, with)`` the k-fold held-out residual RMS (mm) over the sensors ``with_terms``."""
+    if not with_terms:
+        return None
+    after = np.concatenate([sen.heldout(None)[sen.fin] for sen in with_terms])
+    before = []
+    for sen in with_terms:
+        taken, sen.taken = sen.taken, []
+        before.append(sen.heldout(None)[sen.fin])
+        sen.taken = taken
+    return float(np.sqrt(np.mean(np.concatenate(before) ** 2))), float(np.sqrt(np.mean(after**2)))
 
 
 def _describe(sen: _Sensor, t: Term, name, p_in, p_ho, gain, step) -> EmpiricalTerm:
