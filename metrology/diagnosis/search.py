@@ -35,10 +35,12 @@ from metrology.diagnosis.results import Decision, Param, Reason
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.vocabulary import Term, terms_for
 
-__all__ = ["EmpiricalTerm", "Empirical", "search", "TRIES_PER_STEP"]
+__all__ = ["EmpiricalTerm", "Empirical", "search", "TRIES_PER_STEP", "MIN_READINGS"]
 
 #: candidates passing in sample whose held-out test is tried at one step before the search stops
 TRIES_PER_STEP = 5
+#: the fewest readings of a sensor the search looks at
+MIN_READINGS = 12
 
 
 @dataclass(frozen=True)
@@ -182,7 +184,9 @@ def search(ds, cov, d0, residual, sigma, J, folds: int) -> Empirical:
     names = ds.layout.names
     n = residual.shape[1]
     sens = [_Sensor(residual[:, i], J[:, i], sigma[i], folds) for i in range(n)]
-    pool = {i: terms_for(ds.export, cov, d0, i, names, sens[i].fin) for i in range(n)}
+    # a sensor with fewer readings than a fold's fit needs is not searched
+    pool = {i: terms_for(ds.export, cov, d0, i, names, sens[i].fin) if sens[i].fin.sum() >= MIN_READINGS else []
+            for i in range(n)}
     n_tried = sum(len(v) for v in pool.values()) + n  # and the tails, one test a sensor
     level = rules.ALPHA_CANDIDATES / n_tried
     why, found = [], []
@@ -305,6 +309,8 @@ def _tails(sens, names, n_tried, why, step0) -> list:
 
     out = []
     for i, sen in enumerate(sens):
+        if sen.fin.sum() < MIN_READINGS:
+            continue
         e = sen.heldout(None)  # held-out residuals: a tail is judged on readings its fit did not see
         fin = sen.fin & np.isfinite(e)
         y = sen.r[sen.fin]
