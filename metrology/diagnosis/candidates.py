@@ -18,7 +18,7 @@ from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
-           "score_candidate", "Reference", "flag_given_rigid", "deleted_t", "steps_beside"]
+           "score_candidate", "Reference", "flag_given_rigid", "deleted_t", "steps_beside", "without_runs"]
 
 
 def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -179,7 +179,26 @@ def flag_residuals(residual, sigma):
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
     t = float(stats.norm.isf(rules.gross_level(m)))
     flags = np.isfinite(z) & (np.abs(z) > t)
-    return flags, p_max
+    return without_runs(flags, z), p_max
+
+
+def without_runs(flags, z):
+    """``flags (p, n)`` bool less the runs of consecutive flagged readings of one sensor, in pose
+    order (blanks skipped), of one sign (``z (p, n)``, NaN at blanks) that persist
+    (:func:`~metrology.diagnosis.rules.persists`): a step or a drift, left to their candidates."""
+    out = flags.copy()
+    for i in range(flags.shape[1]):
+        rows = np.flatnonzero(np.isfinite(z[:, i]))
+        sign = np.where(flags[rows, i], np.sign(z[rows, i]), 0.0)
+        k = 0
+        while k < len(rows):
+            e = k
+            while sign[k] != 0 and e + 1 < len(rows) and sign[e + 1] == sign[k]:
+                e += 1
+            if sign[k] != 0 and rules.persists(e - k + 1):
+                out[rows[k:e + 1], i] = False
+            k = e + 1
+    return out
 
 
 @dataclass(frozen=True)

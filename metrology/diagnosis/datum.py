@@ -12,6 +12,8 @@ from metrology.diagnosis.fit import Fit, FitData
 from metrology.diagnosis import rules
 from metrology.diagnosis.results import Param
 
+# ``PlaneGiven`` (diagnosis/planegiven) is named in an annotation only (a string)
+
 __all__ = ["SpotWindow", "FormAgreement", "DatumFormCheck", "datum_form", "form_agreement", "FORM_QUADRATIC", "MIN_FORM_POINTS", "DatumPlaneCheck",
            "datum_plane", "name_datum_plane"]
 
@@ -206,6 +208,9 @@ class DatumPlaneCheck:
     chi2 : float, ``phi`` against its null covariance (prior - posterior), ``dof`` directions
     p : float; off : bool, :func:`metrology.diagnosis.rules.datum_plane_off`
     tilt_rad : float, the correction's tilt; normal, offset : the plane the diagnosis used
+    given : PlaneGiven or None, the correction tested given the causes named
+    (:func:`metrology.diagnosis.planegiven.plane_given_causes`), where the first test found it off:
+    ``off`` is then that test's; screen_p : float or None, the first test's p, where ``given`` is set
     """
 
     given: bool
@@ -219,6 +224,8 @@ class DatumPlaneCheck:
     tilt_rad: float = 0.0
     normal: np.ndarray | None = None
     offset: float | None = None
+    given_causes: "PlaneGiven | None" = None
+    screen_p: float | None = None
 
     def to_dict(self) -> dict:
         if not self.given:
@@ -232,15 +239,19 @@ class DatumPlaneCheck:
                 "posterior_stderr": {"tilt_urad": (1e6 * self.posterior_stderr[:2]).tolist(),
                                      "offset_um": float(1e3 * self.posterior_stderr[2])},
                 "chi2": self.chi2, "dof": self.dof, "p": self.p, "off": self.off,
-                "used": "the plane the readings place (the base model's null includes the datum's uncertainty)"}
+                "used": "the plane the readings place (the base model's null includes the datum's uncertainty)",
+                "given_causes": None if self.given_causes is None else self.given_causes.to_dict(),
+                "screen_p": self.screen_p}
 
 
-def datum_plane(ds):
+def datum_plane(ds, widen: bool = True):
     """The datum plane estimated with every sensor's base model under the scan's covariance
     (:func:`metrology.calibration.datum_prior.fit_with_datum`, each sensor whitened by its own
     scatter), and the data set on that plane: a residual pattern a plane within its stated
     uncertainty explains is then no cause. The innovation test: the correction ``phi`` against its
     null covariance ``prior - posterior`` (chi-square over the directions the readings inform).
+    A plane off is placed under a prior :data:`~metrology.diagnosis.rules.DATUM_OFF_PRIOR_WIDEN`
+    times wider unless ``widen`` is False (the plane under the scan's covariance, as when not off).
 
     Returns (Dataset on the plane the readings place, or ``ds`` itself; DatumPlaneCheck).
     """
@@ -267,7 +278,7 @@ def datum_plane(ds):
     p = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
     off = rules.datum_plane_off(p)
     prior = nuis.prior
-    if off:  # the scan is off: the plane the readings place, under a much wider prior
+    if off and widen:  # the scan is off: the plane the readings place, under a much wider prior
         _, nuis = fit_with_datum(ds.layout, ds.export, ds.plane.normal, ds.plane.offset,
                                  ds.plane_cov * rules.DATUM_OFF_PRIOR_WIDEN**2, cal.theta, cal.sigma_mm, move=True)
     check = DatumPlaneCheck(True, nuis.phi, np.sqrt(np.diag(prior)), np.sqrt(np.maximum(np.diag(nuis.posterior), 0)),
@@ -276,9 +287,11 @@ def datum_plane(ds):
 
 
 def name_datum_plane(diag, check: DatumPlaneCheck):
-    """The diagnosis with the datum plane check attached; a plane off beyond its uncertainty is
-    named first, as ``datum_tilt`` (the datum's, not a pose error), the other causes after it,
-    unless ``plane_form`` is named (the datum's form, of which the plane's move is a part)."""
+    """The diagnosis with the datum plane check attached; a plane off beyond its uncertainty (given
+    the causes named, :attr:`DatumPlaneCheck.given_causes`) is named ``datum_tilt`` (the datum's, not a
+    pose error): the headline where nothing else is named, else beside the causes named, after them
+    (the headline is the cause of the largest held-out gain, rule 18); not where ``plane_form`` is
+    named (the datum's form, of which the plane's move is a part)."""
     from dataclasses import replace
 
     from metrology.diagnosis.results import Cause, Confidence, Decision, Reason, Size
@@ -287,17 +300,23 @@ def name_datum_plane(diag, check: DatumPlaneCheck):
     # a form named is the datum's already (plane_form): the plane's move is part of it
     if not check.off or any(c.cause == "plane_form" for c in diag.causes):
         return diag
+    g = check.given_causes
+    p = check.p if g is None else g.p
     cause = Cause("datum_tilt", "datum_tilt", [], Size(check.tilt_rad, None, "rad", "tilt of the datum plane the "
                                                        "readings place from the scan's"),
-                  check.chi2, None, check.p, 0, test="the plane's correction against the scan's covariance (chi-square)",
+                  check.chi2 if g is None else g.chi2, None, p, 0,
+                  test="the plane's correction against the scan's covariance (chi-square)" + (
+                      "" if g is None or not g.given else ", given the causes named"),
                   params={name: Param(float(check.phi[i]), unit,
                                       None if check.posterior_stderr is None else float(check.posterior_stderr[i]))
                           for i, (name, unit) in enumerate((("tilt_1", "rad"), ("tilt_2", "rad"), ("offset", "mm")))})
-    summary = diag.summary + DATUM_PLANE_OFF.format(tilt=1e6 * check.tilt_rad, offset=1e3 * check.phi[2], p=check.p)
+    summary = diag.summary.rstrip(".") + "." + DATUM_PLANE_OFF.format(tilt=1e6 * check.tilt_rad, offset=1e3 * check.phi[2], p=p)
     named = diag.cause not in ("none", "unexplained")
-    why = Reason(18, "datum_plane_off", Decision.DATUM_PLANE_OFF, ("datum_tilt",),
-                 "p of the plane's correction against the scan's covariance (chi-square)", check.p,
+    why = Reason(18, "datum_plane_off", Decision.DATUM_PLANE_OFF, ("datum_tilt",) + (() if g is None else g.given),
+                 "p of the plane's correction against the scan's covariance (chi-square)" + (
+                     "" if g is None or not g.given else ", given the causes named"), p,
                  rules.ALPHA_DATUM_PLANE, outcome="datum_tilt")
+    if named:  # the headline stays the cause of the largest held-out gain; the datum's finding beside it
+        return replace(diag, summary=summary, reasons=diag.reasons + (why,), causes=tuple(diag.causes) + (cause,))
     return replace(diag, cause="datum_tilt", sensors=[], summary=summary, named=cause, reasons=diag.reasons + (why,),
-                   confidence=diag.confidence if named else Confidence.HIGH if check.p < 1e-6 else Confidence.MODERATE,
-                   causes=(cause,) + tuple(diag.causes))
+                   confidence=Confidence.HIGH if p < 1e-6 else Confidence.MODERATE, causes=(cause,))

@@ -187,7 +187,37 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
     clear_all()  # the fits kept are this data set's: none of an earlier one can be asked for again
     # the null includes the datum's uncertainty: the data set on the plane the readings place
     # under the scan's covariance (issue 40; metrology.diagnosis.datum.datum_plane)
-    ds, plane_check = datum_plane(ds)
+    scan = ds
+    ds, plane_check = datum_plane(scan)
+    diag = _diagnose_on(ds, folds, sim_reps, seed, progress)
+    if plane_check.off:  # the first test is a screen: off only given the causes named (rule 18)
+        given = plane_given(scan, ds, plane_check, diag)
+        plane_check = replace(plane_check, given_causes=given, screen_p=plane_check.p,
+                              off=rules.datum_plane_off(given.p))
+        if not plane_check.off:  # the plane under the scan's covariance, as for a plane not off
+            ds, first = datum_plane(scan, widen=False)
+            plane_check = replace(first, off=False, given_causes=given, screen_p=first.p)
+            diag = _diagnose_on(ds, folds, sim_reps, seed, progress)
+    return name_datum_plane(diag, plane_check)
+
+
+def plane_given(scan, ds, check, diag: Diagnosis):
+    """Rule 18's test of the plane the diagnosis ``diag`` ran on (``ds``, moved from the scan's
+    plane of ``scan`` by ``check.phi``) given the causes it named
+    (:func:`~metrology.diagnosis.planegiven.plane_given_causes`)."""
+    from metrology.diagnosis.planegiven import plane_given_causes
+
+    pd = diag.plot_data
+    named = diag.outcome == Outcome.NAMED and pd.best is not None
+    fit = pd.best.fit if named else pd.base
+    rand = next((c for c in diag.causes if c.label.endswith("@random")), None)
+    rp = None if rand is None else (rand.params["sigma_position_mm"].value ** 2, rand.params["sigma_tilt_rad"].value ** 2)
+    labels = tuple(c.label for c in diag.causes) if named else ()
+    return plane_given_causes(ds, scan.plane, scan.plane_cov, check.phi, fit, pd.cov, pd.sigma, labels, rp)
+
+
+def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
+    """The diagnosis of ``ds`` on its plane (:func:`diagnose` without the datum plane's test)."""
     rng = np.random.default_rng(seed)
     notify(progress, 0, 5, "base model and its held-out figures")
     b = base_analysis(ds, folds)
@@ -221,13 +251,42 @@ def diagnose(ds: Dataset, folds: int = 5, sim_reps: int = 2, seed: int = 0, prog
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    return name_datum_plane(Diagnosis(cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
+    empirical = None
+    if rules.search_tried(v.cause, v.confidence):  # the catalogue does not explain: the open search
+        empirical = open_search(ds, b, v, gross, folds)
+        summary += empirical_text(empirical)
+    return Diagnosis(empirical=empirical, reasons=v.reasons + (() if empirical is None else empirical.reasons),
+                     cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
                      candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
                      structure_base=b.structure, discrepancy=discrepancy, heldout=heldout, confounding=v.confounding,
                      base_theta=b.fit.theta, base_stderr=b.fit.theta_stderr, thresholds=dict(THRESHOLDS),
                      datum_form=datum, plot_data=plot, causes=v.causes, steps=tuple(_steps_table(b, steps, v)),
-                     detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds),
-                     reasons=v.reasons), plane_check)
+                     detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
+
+
+def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds):
+    """The open search (:func:`metrology.diagnosis.search.search`) on the residuals of the model the
+    verdict judged (the causes named; the base model where none is), the readings named gross left out."""
+    from metrology.core.model import jacobian_raw
+    from metrology.diagnosis.search import search
+
+    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None else b.fit
+    zero, u = geometry(ds.layout, fit.theta)
+    J = jacobian_raw(zero, u, ds.obs.normal, ds.obs.offset)
+    return search(ds, b.cov, b.d0, np.where(gross, np.nan, fit.residual), b.sigma, J, folds)
+
+
+def empirical_text(e) -> str:
+    """The summary's sentence on the open search's terms (none: what was tried)."""
+    if not e.terms:
+        return (f"; the open search found no term of the run's variables that predicts held-out poses better "
+                f"({e.n_tried} terms tried)")
+    return ("; outside the catalogue, an empirical model: " + "; ".join(
+        f"{t.equation} (held-out chi-square gain {t.gain_chi2:.3g}, p = {t.p_heldout:.2g})" for t in e.terms)
+        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} each)" + (
+            "" if e.heldout_rms_mm is None else
+            f"; held-out RMS on its sensors {1e3 * e.heldout_rms_mm[0]:.3g} um without the terms, "
+            f"{1e3 * e.heldout_rms_mm[1]:.3g} um with them"))
 
 
 # -- the verdict in one paragraph, made from the trail of reasons -----------------------------------

@@ -16,7 +16,7 @@ import numpy as np
 # import cycle; annotations stay strings, ``from __future__ import annotations``): ``Fit``
 # (diagnosis/fit), ``Covariates`` (core/effects), ``CandidateResult`` (diagnosis/candidates),
 # ``NoiseTests`` and ``Trend`` (diagnosis/stats), ``DatumFormCheck`` and ``DatumPlaneCheck``
-# (diagnosis/datum), ``Detectable`` (diagnosis/detectable).
+# (diagnosis/datum), ``Detectable`` (diagnosis/detectable), ``Empirical`` (diagnosis/search).
 
 __all__ = ["Outcome", "Confidence", "Decision", "Reason", "Param", "Size", "Rival", "Cause", "Confounding", "Discrepancy",
            "HeldOutFigures", "StepFigures", "Diagnosis", "PlotData"]
@@ -65,6 +65,8 @@ class Decision(StrEnum):
     CONFIDENCE = "confidence"  # 16: the verdict's confidence
     DATUM_DISAGREES = "datum disagrees"  # 17: the datum cloud's form disagrees with the readings'
     DATUM_PLANE_OFF = "datum plane off"  # 18: the plane the readings place is off its scan's beyond its covariance
+    EMPIRICAL = "empirical term"  # 20-21: a term of the open search predicts held-out poses better: taken
+    EMPIRICAL_NOT_HELD = "not held out"  # 20-21: passes in sample, does not predict held-out poses better
 
 
 @dataclass(frozen=True)
@@ -433,6 +435,9 @@ class Diagnosis:
     #: the datum plane estimated with the sensors under its scan's covariance
     #: (:class:`metrology.diagnosis.datum.DatumPlaneCheck`), None when not run
     datum_plane: DatumPlaneCheck | None = None
+    #: the open search's terms where the catalogue does not explain
+    #: (:class:`metrology.diagnosis.search.Empirical`), None where not searched
+    empirical: Empirical | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "confidence", Confidence(self.confidence))
@@ -459,4 +464,5 @@ class Diagnosis:
             "detectable": {family: d.to_dict() for family, d in self.detectable.items()},
             "reasons": [r.to_dict() for r in self.reasons],
             "datum_plane": None if self.datum_plane is None else self.datum_plane.to_dict(),
+            "empirical": None if self.empirical is None else self.empirical.to_dict(),
         }

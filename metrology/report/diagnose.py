@@ -333,7 +333,36 @@ def diagnosis_figures(diag: Diagnosis) -> list:
                       f"fit) of the base model and of the base model + {model}, on the sensors of {comp.label}; grey: "
                       "the stated noise, ± 1 σ. These are the residuals of the held-out RMS in the text, not the "
                       "in-sample ones (which are smaller by the parameters fitted to them)."))
+    figure = _empirical_figure(diag, plt)
+    if figure is not None:
+        files.append(figure)
     return files
+
+
+def _empirical_figure(diag: Diagnosis, plt):
+    """The open search's terms (``diag.empirical``), one partial-residual panel each: the residual
+    with the term added back against the term's variable, and the fitted term; None without terms."""
+    from metrology.report.html import COLUMN_IN
+
+    terms = [t for t in (diag.empirical.terms if diag.empirical is not None else ()) if t.plot is not None]
+    if not terms:
+        return None
+    fig, axes = plt.subplots(len(terms), 1, figsize=(COLUMN_IN, 0.6 + 2.5 * len(terms)), squeeze=False,
+                             layout="constrained")
+    for ax, t in zip(axes[:, 0], terms):
+        x, y, f = (np.asarray(t.plot[k], float) for k in ("x", "partial", "fit"))
+        order = np.argsort(x)
+        ax.plot(x, 1e3 * y, ".", ms=3, label="partial residual")
+        ax.plot(x[order], 1e3 * f[order], "-", color="C3", label="fitted term")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(t.plot["xlabel"])
+        ax.set_ylabel(f"{t.sensor} [µm]")
+        ax.set_title(t.equation, fontsize=9)
+    axes[0, 0].legend(fontsize=9)
+    fig.suptitle("outside the catalogue: the open search's terms (partial residuals)")
+    return ("residuals_empirical.png", fig, "Each term the open search took: the sensor's residual under the model "
+            "the verdict judged, less the other terms, with this term added back (its partial residual), against "
+            "the term's variable, and the fitted term.")
 
 
 def simulate_text(out, poses, effect, sensor, size, cloud, n_points) -> str:

@@ -8,7 +8,8 @@ Modules: :mod:`.surface` (datum height field), :mod:`.beams` (beam casting), :mo
 (sensor rings), :mod:`.poses` (poses and pose error), :mod:`.characteristic` (reading error vs
 distance), :mod:`.drift` (time, temperature, drift), :mod:`.incidence` (incidence bias),
 :mod:`.errors` (noise, gross readings, blanks, periodic error, cross-talk), :mod:`.families`
-(the causes and their sizes), :mod:`.cases` (blind cases), :mod:`.write` (case files); the
+(the causes and their sizes), :mod:`.outside` (effects outside the catalogue, from their physics),
+:mod:`.cases` (blind cases), :mod:`.write` (case files); the
 production hole log of ``metro simulate-log``: :mod:`.panels` (flat, sphere, cylinder with
 closed-form rays), :mod:`.shapes` (height-field panels: the generated wing skin, barrel, nacelle lip
 and saddle; panels off their CAD), :mod:`.meshes` (panel files ray-cast as meshes; the generated
@@ -19,7 +20,7 @@ calibration run and its production log alike, and a calibration run drawn with t
 """
 
 from metrology.sim.forward.beams import BeamHits, cast_beams
-from metrology.sim.forward.cases import Case, draw_case, draw_cases, draw_pair
+from metrology.sim.forward.cases import Case, draw_case, draw_cases, draw_outside, draw_pair
 from metrology.sim.forward.characteristic import Characteristic, draw_curve
 from metrology.sim.forward.drift import Drift, TemperatureProfile, draw_drift, draw_temperature, draw_times
 from metrology.sim.forward.families import CATALOGUE, FAMILIES, OUT_OF_CATALOGUE, Effect, FamilySpec
@@ -39,7 +40,7 @@ from metrology.sim.forward.surface import HAND_SCAN, DatumSurface, draw_surface,
 from metrology.sim.forward.write import CASE_FILES, write_case
 
 __all__ = [
-    "BeamHits", "cast_beams", "Case", "draw_case", "draw_cases", "draw_pair", "Characteristic", "draw_curve",
+    "BeamHits", "cast_beams", "Case", "draw_case", "draw_cases", "draw_outside", "draw_pair", "Characteristic", "draw_curve",
     "Drift", "TemperatureProfile", "draw_drift", "draw_temperature", "draw_times", "CATALOGUE", "FAMILIES",
     "OUT_OF_CATALOGUE", "Effect", "FamilySpec", "Head", "draw_head", "perturb_layout", "IncidenceBias",
     "draw_incidence", "draw_poses", "perturb_poses", "tilt_of", "DatumSurface", "draw_surface", "flat_surface",

@@ -25,7 +25,7 @@ from metrology.sim.forward.head import Head, draw_head
 from metrology.sim.forward.poses import draw_poses
 from metrology.sim.forward.surface import DatumSurface, draw_surface, sample_cloud, sample_hand_scan
 
-__all__ = ["Case", "draw_case", "draw_pair", "draw_cases"]
+__all__ = ["Case", "draw_case", "draw_pair", "draw_cases", "draw_outside"]
 
 _FORM_SHAPES = ("bow", "twist", "higher", "mixed")
 
@@ -97,7 +97,7 @@ def _choose(rng, value, choices):
 
 
 def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, range_mm, n_cloud,
-          cloud_noise_mm, blanks, scan="tracker") -> Case:
+          cloud_noise_mm, blanks, scan="tracker", outside=None) -> Case:
     for f in families:
         if f not in FAMILIES:
             raise ValueError(f"family must be one of {tuple(FAMILIES)}, got {f!r}")
@@ -134,7 +134,19 @@ def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, r
         if count:
             gross.append((len(effects), count))
         effects.append(eff)
-    d = add_noise(rng, d, noise_mm)
+    noise_scale = None
+    if outside is not None:  # (kind, factor): an effect outside the catalogue on the first sensor of ``order``
+        from metrology.sim.forward.outside import draw_outside_effect
+
+        normal_tcs = np.einsum("pji,j->pi", rot, surface.normal)
+        s_, t_, _ = surface.plane_coords(hits.spot)
+        eff, off, noise_scale = draw_outside_effect(
+            rng, outside[0], sensor=order[0], names=head.nominal.names, d_true=hits.d, incidence=hits.incidence,
+            time_s=t, temp_c=temp, rot=rot, spot_st=np.stack([s_, t_], axis=-1), normal_tcs=normal_tcs,
+            noise_mm=noise_mm, range_mm=range_mm, factor=outside[1])
+        d = d + off
+        effects.append(eff)
+    d = add_noise(rng, d, noise_mm if noise_scale is None else noise_mm * noise_scale)
     n_blank = int(_choose(rng, blanks, (0, 1, 2)))
     d, blank_cells = add_blanks(rng, d, n_blank)
     for idx, count in gross:
@@ -151,7 +163,7 @@ def _draw(rng, families, sizes, *, n_sensors, noise_mm, n_poses, tilt_max_deg, r
         cloud = sample_cloud(surface, rng, n_cloud, cloud_noise_mm)
     else:
         raise ValueError(f"scan must be 'tracker' or 'hand', got {scan!r}")
-    family = "+".join(families) if families else "none"
+    family = "+".join(families) if families else ("outside" if outside is not None else "none")
     return Case(family, tuple(effects), head.nominal, head.true, export, cloud, surface, head, rot, trans,
                 hits.d, hits.incidence, noise_mm, profile.to_dict(), tuple(blank_cells), tilt)
 
@@ -195,6 +207,20 @@ def draw_pair(rng: np.random.Generator, family_a: str, family_b: str, *, n_senso
     return _draw(rng, [family_a, family_b], list(sizes), n_sensors=n_sensors, noise_mm=noise_mm, n_poses=n_poses,
                  tilt_max_deg=tilt_max_deg, range_mm=range_mm, n_cloud=n_cloud, cloud_noise_mm=cloud_noise_mm,
                  blanks=blanks, scan=scan)
+
+
+def draw_outside(rng: np.random.Generator, kind: str, *, factor: float | None = None, n_sensors: int | None = None,
+                 noise_mm: float | None = None, n_poses: int | None = None, tilt_max_deg: float = 14.0,
+                 range_mm=(30.0, 70.0), n_cloud: int = 2000, cloud_noise_mm: float = 0.010,
+                 blanks: int | None = None, scan: str = "tracker") -> Case:
+    """A random case carrying one effect outside the catalogue, of ``kind`` (a key of
+    :data:`~metrology.sim.forward.outside.OUTSIDE_KINDS`), ``factor`` times its detectable size
+    (drawn in 1.5-4 when None); the rest as :func:`draw_case` (30-150 poses when ``n_poses`` is None)."""
+    if n_poses is None:
+        n_poses = int(rng.integers(30, 151))
+    return _draw(rng, [], [], n_sensors=n_sensors, noise_mm=noise_mm, n_poses=n_poses, tilt_max_deg=tilt_max_deg,
+                 range_mm=range_mm, n_cloud=n_cloud, cloud_noise_mm=cloud_noise_mm, blanks=blanks, scan=scan,
+                 outside=(kind, factor))
 
 
 def draw_cases(rng: np.random.Generator, family: str, count: int, **kw) -> list:

@@ -20,9 +20,9 @@ __all__ = ["add_noise", "add_gross", "add_blanks", "periodic_offset", "crosstalk
 
 
 def add_noise(rng: np.random.Generator, d, sigma_mm):
-    """``d (p, n)`` mm plus Gaussian noise of ``sigma_mm`` (scalar or ``(n,)``) mm."""
+    """``d (p, n)`` mm plus Gaussian noise of ``sigma_mm`` (scalar, ``(n,)`` or ``(p, n)``) mm."""
     d = np.asarray(d, float)
-    return d + rng.normal(size=d.shape) * np.broadcast_to(np.asarray(sigma_mm, float), d.shape[1:])
+    return d + rng.normal(size=d.shape) * np.broadcast_to(np.asarray(sigma_mm, float), d.shape)
 
 
 def add_gross(rng: np.random.Generator, d, count: int, sensors=None, delta_mm=(0.1, 2.0)):

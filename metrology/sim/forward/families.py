@@ -53,9 +53,13 @@ FAMILIES = {
                         "kept to the run's end; the pose uniform over the middle 80 % of the run", "mm"),
     "periodic": FamilySpec((0.02, 0.10), "amplitude of a sine in the pose index or in time", "mm", False),
     "crosstalk": FamilySpec((0.02, 0.10), "peak-to-valley of the shift, in proportion to another sensor's distance", "mm", False),
+    "outside": FamilySpec((1.5, 4.0), "a term of a kind outside the catalogue (shape: kind, variables), 1.5-4 times "
+                          "its detectable size (metrology.sim.forward.outside)", "mm", False),
 }
 CATALOGUE = tuple(k for k, v in FAMILIES.items() if v.in_catalogue and k != "none")
-OUT_OF_CATALOGUE = tuple(k for k, v in FAMILIES.items() if not v.in_catalogue)
+#: the two older out-of-catalogue families :func:`draw_effect` draws (the kinds of ``outside`` are
+#: drawn by :mod:`metrology.sim.forward.outside`)
+OUT_OF_CATALOGUE = tuple(k for k, v in FAMILIES.items() if not v.in_catalogue and k != "outside")
 
 
 @dataclass(frozen=True)
