@@ -51,6 +51,9 @@ def register(app: typer.Typer) -> None:
         spin_deg: float = typer.Option(2.0, "--spin-deg", help="With --points: the head's spin about the tool axis "
                                        "relative to the panel is within +-SPIN of the cell's convention (TCS x, y near "
                                        "the panel's x, y), deg; in U95."),
+        units: Optional[str] = typer.Option(None, "--units", help="Unit of the panel file's and the hole table's "
+                                            "coordinates: mm, cm, m or in (overrides what the panel file declares; "
+                                            "STL/OBJ/PLY and tables declare none: mm)."),
         follow: bool = typer.Option(False, "--follow", help="A live log (LOG '-' for stdin, or a CSV file): each "
                                     "hole measured as its line arrives; one JSON line per hole on stdout, "
                                     "{\"alarm\": ...} lines for drift alarms, a final {\"summary\": ...}."),
@@ -72,7 +75,7 @@ def register(app: typer.Typer) -> None:
         if workers is not None and scheduler is not None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
-                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
+                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg, "units": units}
         if follow:
             if out is not None or report is not None or qif is not None or workers is not None or scheduler is not None:
                 fail("--follow answers each hole on stdout: no --out, --report, --qif, --workers or --scheduler")

@@ -11,8 +11,9 @@ The document (``metro measure --qif RESULTS.qif``; its shape is shown in docs/me
 - ``Results``: one ``MeasurementResults`` whose traceability names the log and the layout (file
   references, metro's version), with one ``AngleCharacteristicMeasurement`` per hole: the ISO
   14253-1 status (conforms PASS, fails FAIL, undecided INDETERMINATE, not measured NOT_ANALYZED),
-  the hole's time, the judged angle (deg) as ``Value`` and its U95 (deg) as the attribute
-  ``U95_deg``; the whole inspection's status (FAIL if a hole fails, else UNKNOWN if a hole is
+  the hole's time, the judged angle (deg) as ``Value`` with QIF's own ``combinedUncertainty`` (the
+  standard uncertainty U95 / 2, :data:`COVERAGE_K`; ``meanError`` 0) and its U95 (deg) as the
+  attribute ``U95_deg``; a hole not measured has no ``Value`` and no ``U95_deg``; the whole inspection's status (FAIL if a hole fails, else UNKNOWN if a hole is
   undecided or not measured, else PASS).
 
 Why an angle characteristic: QIF's perpendicularity and angularity characteristics are tolerance
@@ -50,6 +51,9 @@ _FIRST_HOLE_ID = 7
 #: holes formatted at once: their text (~600 bytes a hole) and its temporaries stay small
 SLICE_ROWS = 32768
 _DIGITS = 6  # decimals of an angle in deg (1e-6 deg: far below any U95)
+#: QIF's ``combinedUncertainty`` is a standard uncertainty (GUM's u_c): the U95 over the coverage factor k = 2
+#: of a 95 % interval; ``meanError`` 0 beside it (the schema asks for both: the calibration removed the bias)
+COVERAGE_K = 2.0
 
 
 def check_qif_path(path) -> Path:
@@ -181,12 +185,18 @@ class QifResults:
         lo, hi = float(seconds.min()), float(seconds.max())
         self.t_first = lo if self.t_first is None else min(self.t_first, lo)
         self.t_last = hi if self.t_last is None else max(self.t_last, hi)
+        # a hole not measured carries no value (whatever figures its row may hold), NOT_ANALYZED alone
+        ok = np.isfinite(angle) & np.asarray(pc.not_equal(status, "not_measured").to_numpy(zero_copy_only=False))
+        angle, u95 = np.where(ok, angle, np.nan), np.where(ok, u95, np.nan)
         value = _decimal(angle)
         u = _decimal(u95)
-        measured = pa.array(np.isfinite(angle))
+        uc = _decimal(u95 / COVERAGE_K)  # the standard uncertainty QIF's combinedUncertainty states
+        measured = pa.array(ok)
         attrs = pc.if_else(pc.is_valid(u), _join('<Attributes n="1"><AttributeD1 name="U95_deg" value="',
                                                   pc.fill_null(u, ""), '"/></Attributes>'), "")
-        val = pc.if_else(measured, _join("<Value>", pc.fill_null(value, ""), "</Value>"), "")
+        opening = pc.if_else(pc.is_valid(uc), _join('<Value combinedUncertainty="', pc.fill_null(uc, ""),
+                                                      '" meanError="0">'), "<Value>")
+        val = pc.if_else(measured, _join(opening, pc.fill_null(value, ""), "</Value>"), "")
         items = _join('<AngleCharacteristicItem id="', item_id, '"><Name>', name,
                       "</Name><CharacteristicNominalId>4</CharacteristicNominalId></AngleCharacteristicItem>\n")
         meas = _join('<AngleCharacteristicMeasurement id="', meas_id, '">', attrs,
@@ -252,7 +262,8 @@ class QifResults:
             '<CharacteristicDefinitions n="1"><AngleCharacteristicDefinition id="3">'
             "<Description>drilling normality: angle between the drill axis and the surface normal (ISO 14253-1: "
             "conforms if angle + U95 &lt;= tolerance, fails if angle - U95 &gt; tolerance); each measurement's "
-            "attribute U95_deg is its expanded uncertainty (95 % coverage), deg</Description>"
+            "Value's combinedUncertainty is its standard uncertainty (U95 / 2), deg, and the attribute U95_deg its "
+            "expanded uncertainty (95 % coverage), deg</Description>"
             "<Name>normality</Name>"
             f"<Tolerance><MaxValue>{tol}</MaxValue><MinValue>0.{'0' * _DIGITS}</MinValue>"
             "<DefinedAsLimit>false</DefinedAsLimit></Tolerance></AngleCharacteristicDefinition>"

@@ -12,7 +12,7 @@ import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.core.verdict import Check, Verdict
-from metrology.jobs.measure_panel import hole_surfaces, layout_panel
+from metrology.jobs.measure_panel import check_join, hole_surfaces, layout_panel
 
 if TYPE_CHECKING:
     from metrology.measure.run import MeasureResult
@@ -221,6 +221,8 @@ class MeasureOptions:
     per_hole : bool, False with no ``out``: nothing per hole written (``--json`` alone)
     panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
     position_error_mm, form_tolerance_mm : float, mm; spin_deg : float, deg (with ``points``)
+    units : str or None, the unit of the panel file and the hole table (mm, cm, m, in; None: the
+        panel's own, else mm)
     """
 
     out: Path | None = None
@@ -241,6 +243,7 @@ class MeasureOptions:
     position_error_mm: float = 0.5
     form_tolerance_mm: float = 0.0
     spin_deg: float = 2.0
+    units: str | None = None
 
     @property
     def distributed(self) -> bool:
@@ -324,8 +327,11 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
         raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
                          f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
     if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg)
+        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
+                                 o.units)
     log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
+    if surfaces is not None:
+        check_join(log, surfaces, display_name(points))
     target = check_out(o.out, log.partitioned, o.distributed)
     settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
@@ -420,7 +426,7 @@ def _manifest(o: MeasureOptions, layout, log_path) -> dict:
     return {"tolerance_deg": o.tolerance_deg, "min_radius_mm": o.min_radius_mm, "chart_by_panel": o.chart_by_panel,
             "panel": None if o.panel is None else str(Path(o.panel).resolve()),
             "points": None if o.points is None else str(Path(o.points).resolve()),
-            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg],
+            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg], "units": o.units,
             "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())}
 
 

@@ -39,7 +39,7 @@ def _value(text):
 
 def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float = 0.5,
                min_radius_mm: float | None = None, panel=None, points=None, position_error_mm: float = 0.5,
-               form_tolerance_mm: float = 0.0, spin_deg: float = 2.0, stream=None) -> FollowSummary:
+               form_tolerance_mm: float = 0.0, spin_deg: float = 2.0, stream=None, units=None) -> FollowSummary:
     """Measure each line of ``source`` (``-``: ``stream`` or stdin) as it arrives (module docstring).
 
     Raises ValueError naming the line on a line that cannot be measured (a non-number reading, a
@@ -62,7 +62,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
         raise ValueError(f"--panel {panel}: give the hole table too (--points HOLES.csv)")
     surfaces = None
     if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
+        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units)
     settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)

@@ -44,7 +44,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym3 import smallest_eigvec
-from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
+from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status, blanked
 from metrology.measure.normals import hole_normals
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
@@ -457,12 +457,15 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         return pa.array(x, pa.float64(), from_pandas=True)
 
     nan = np.full(N, np.nan)
+    nm = code == CODE[Status.NOT_MEASURED]  # no judged figure on a hole not measured (docs/measure.md: blank)
+    judged, judged_u, after_angle, after_u = blanked(nm, judged, judged_u, *((after.angle, after.U95) if after
+                                                                             is not None else (nan, nan)))
+    before_angle, before_u = blanked(nm & ~judge_after, before.angle, before.U95)  # unless the after was judged
     cols = {
         "hole_id": ids,
         "normal_x": num(before.normal[:, 0]), "normal_y": num(before.normal[:, 1]), "normal_z": num(before.normal[:, 2]),
-        "angle_deg": num(np.degrees(before.angle)), "U95_angle_deg": num(np.degrees(before.U95)),
-        "angle_after_deg": num(np.degrees(after.angle) if after is not None else nan),
-        "U95_after_deg": num(np.degrees(after.U95) if after is not None else nan),
+        "angle_deg": num(np.degrees(before_angle)), "U95_angle_deg": num(np.degrees(before_u)),
+        "angle_after_deg": num(np.degrees(after_angle)), "U95_after_deg": num(np.degrees(after_u)),
         "fit_residual_um": num(before.residual * 1e3),
         "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
         "sensors_used": _labels(patterns, pattern_names),
