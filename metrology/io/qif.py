@@ -8,8 +8,9 @@ The document (``metro measure --qif RESULTS.qif``; its shape is shown in docs/me
 - ``Characteristics``: one definition (the angle between drill axis and surface normal, tolerance
   ``0 .. tolerance_deg``, deg), one nominal (target 0 deg), and one ``AngleCharacteristicItem`` per
   hole, named by its ``hole_id``;
-- ``Results``: one ``MeasurementResults`` whose traceability names the log and the layout (file
-  references, metro's version), with one ``AngleCharacteristicMeasurement`` per hole: the ISO
+- ``Results``: one ``MeasurementResults`` whose traceability names the log, the layout and, with
+  ``--panel``/``--points``, the CAD panel and the hole table (file references with their SHA-256,
+  metro's version), with one ``AngleCharacteristicMeasurement`` per hole: the ISO
   14253-1 status (conforms PASS, fails FAIL, undecided INDETERMINATE, not measured NOT_ANALYZED),
   the hole's time, the judged angle (deg) as ``Value`` with QIF's own ``combinedUncertainty`` (the
   standard uncertainty U95 / 2, :data:`COVERAGE_K`; ``meanError`` 0) and its U95 (deg) as the
@@ -51,6 +52,9 @@ _FIRST_HOLE_ID = 7
 #: holes formatted at once: their text (~600 bytes a hole) and its temporaries stay small
 SLICE_ROWS = 32768
 _DIGITS = 6  # decimals of an angle in deg (1e-6 deg: far below any U95)
+#: how the traceability describes an input file by its role
+INPUT_SPECS = {"CAD panel": "CAD panel (STL, OBJ, PLY, GLB or STEP), mm",
+               "hole table": "hole table (CSV or Parquet: hole_id,x,y,z,i,j,k), mm"}
 #: QIF's ``combinedUncertainty`` is a standard uncertainty (GUM's u_c): the U95 over the coverage factor k = 2
 #: of a 95 % interval; ``meanError`` 0 beside it (the schema asks for both: the calibration removed the bias)
 COVERAGE_K = 2.0
@@ -123,10 +127,12 @@ class QifResults:
     log : str, the log as named on the command line (traceability)
     certificate : dict, the layout's ``[certificate]`` fields (device name, serial, ...)
     version : str, metro's version
+    inputs : dict, role -> path of the other input files (the CAD panel, the hole table): each listed
+        with its SHA-256 in the traceability
     """
 
     def __init__(self, path, *, tolerance_deg: float, layout_path, sensors, log: str, certificate=None,
-                 version: str = ""):
+                 version: str = "", inputs=None):
         self.path = Path(path)
         self.tolerance_deg = float(tolerance_deg)
         self.layout_path = Path(layout_path)
@@ -135,6 +141,7 @@ class QifResults:
         self.log = str(log)
         self.certificate = dict(certificate or {})
         self.version = version
+        self.inputs = tuple((role, Path(p), sha256_file(p)) for role, p in (inputs or {}).items() if p is not None)
         self.n = 0
         self.counts = dict.fromkeys(QIF_STATUS, 0)
         self.t_first = self.t_last = None
@@ -231,6 +238,8 @@ class QifResults:
                  "metro hole log (CSV, Parquet or a folder of hive-partitioned Parquet)", "the hole log measured"),
                 (self.layout_path.resolve().as_uri(), "metro calibrated layout (TOML)",
                  f"the calibrated layout, SHA-256 {self.layout_sha256}")]
+        refs += [(p.resolve().as_uri(), INPUT_SPECS.get(role, role), f"the {role}, SHA-256 {digest}")
+                 for role, p, digest in self.inputs]
         ext = "".join(f"<ExternalFileReference><URI>{escape(u)}</URI><FileSpec><OtherFileSpec>{escape(s)}"
                       f"</OtherFileSpec></FileSpec><Description>{escape(d)}</Description></ExternalFileReference>"
                       for u, s, d in refs)

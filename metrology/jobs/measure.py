@@ -12,6 +12,7 @@ import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.core.verdict import Check, Verdict
+from metrology.jobs.measure_map import holes_collector
 from metrology.jobs.measure_panel import check_join, hole_surfaces, layout_panel
 
 if TYPE_CHECKING:
@@ -38,6 +39,8 @@ class MeasureReport:
     fail_on_drift : bool, whether a drift alarm fails the verdict
     chart : dict, the drift chart's settings (:func:`metrology.measure.chart.chart_settings`, by_panel)
     curvature : dict, where each hole's curvature came from ({} : the assumed bound)
+    panel_map : PanelMap or None, the hole table's holes as judged (:mod:`metrology.report.panel_map`),
+        with ``--points`` and ``--report``
     """
 
     result: "MeasureResult"
@@ -51,6 +54,7 @@ class MeasureReport:
     fail_on_drift: bool = False
     chart: dict = field(default_factory=dict)
     curvature: dict = field(default_factory=dict)
+    panel_map: object = None
 
     @property
     def counts(self) -> dict:
@@ -173,15 +177,15 @@ class _Tee:
             s.write(table)
 
 
-def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display):
-    """The QIF 3.0 Results writer for ``--qif`` (None without it)."""
+def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display, inputs=None):
+    """The QIF 3.0 Results writer for ``--qif`` (None without it); ``inputs``: the panel's files by role."""
     if qif is None:
         return None
     from metrology import __version__
     from metrology.io.qif import QifResults
 
     return QifResults(qif, tolerance_deg=tolerance_deg, layout_path=layout_path, sensors=layout.names,
-                      log=log_display, certificate=layout.certificate, version=__version__)
+                      log=log_display, certificate=layout.certificate, version=__version__, inputs=inputs)
 
 
 def _qif_from_output(doc, output, log) -> None:
@@ -351,7 +355,10 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     sources = {"log": log.display, "layout": shown_layout, "out": None if o.out is None else str(o.out)}
     if o.qif is not None:
         sources["qif"] = str(o.qif)
-    qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display)
+    qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display,
+                       {"CAD panel": panel, "hole table": points})
+
+    holes_map = None if o.report_html is None else holes_collector(surfaces, panel, points, o.units)
 
     def run(sink):
         """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
@@ -370,20 +377,23 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             raise
         output.release()
     elif target is None and not o.per_hole and qif_doc is None:  # --json alone: the summary, nothing per hole
-        result = run(None)
+        result = run(holes_map)
         check_fit(result)
     else:
         with qif_doc or contextlib.nullcontext() as q, TableSink(target) as sink:
-            result = run(sink if q is None else _Tee(sink, q))
+            result = run(_Tee(*(k for k in (sink, q, holes_map) if k is not None)))
             check_fit(result)  # before the files appear
     if output is not None:
         check_fit(result, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
             _qif_from_output(qif_doc, output, log)
+        if holes_map is not None:
+            holes_map.read_output(output, log)
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
                            {**chart_settings(), "by_panel": o.chart_by_panel},
-                           _curvature(o, result, surfaces, radius_source, shown_layout))
+                           _curvature(o, result, surfaces, radius_source, shown_layout),
+                           None if holes_map is None else holes_map.panel_map())
     if o.report_html is not None:
         _write_report_html(o, report, log_path, layout_path)
     return report
@@ -453,6 +463,7 @@ def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None
     from metrology.report.measure import measure_section
 
     paths = {"log": log_path, "layout": layout_path} if o.log_display is None else {"layout": layout_path}
+    paths.update({"CAD panel": o.panel, "hole table": o.points})
     write_text(o.report_html, render_html("Hole measurement", run_info(paths, o.command,
                                                                        extra_versions=("pyarrow", "dask")),
                                           [measure_section(report)]))

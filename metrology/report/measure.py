@@ -55,6 +55,31 @@ def _q(fig: dict, which: str, key: str) -> str:
     return "-" if not np.isfinite(v) else f"{v:.4g}"
 
 
+def _panel_terms(report) -> str:
+    """What of the panel U95 carries: its known surface's terms, or the curvature bound."""
+    cv = report.curvature or {}
+    if "holes" in cv:  # each hole's surface known (--panel/--points)
+        return (f" + each hole's curvature from {cv['source']} (its fit; the drill point's position error "
+                f"{cv['position_error_mm']:g} mm; the form tolerance {cv['form_tolerance_mm']:g} mm; the head's spin "
+                f"+-{cv['spin_deg']:g} deg where the log has no pose)")
+    return f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm"
+
+
+def _limits(report) -> list:
+    """What the data could not determine, for the run's panel: known (its CAD) or bounded."""
+    cv = report.curvature or {}
+    if "holes" in cv:
+        panel = [f"each hole's surface is taken from {cv['source']}: a panel off its CAD by more than the form "
+                 f"tolerance stated ({cv['form_tolerance_mm']:g} mm) is not in U95; the redundant reading names the "
+                 f"holes where it sees the shape off the CAD (the 'panel off its CAD' check)"]
+    else:
+        panel = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second "
+                 "order in the spots' spread over the radius (docs/measure.md gives its size); no panel was given, "
+                 f"the radius >= {report.min_radius_mm:g} mm is " + ("stated" if cv else "assumed")]
+    return panel + ["the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would "
+                    "need"]
+
+
 def measure_text(report) -> str:
     """The text report of ``metro measure`` (on stderr when the table goes to stdout)."""
     s = report.result.summary
@@ -83,7 +108,8 @@ def measure_text(report) -> str:
               f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
               f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
-                                              " only (the layout has no calibration covariance)") + ", 95 %"]
+                                              " (the layout has no calibration covariance)") + _panel_terms(report)
+              + ", 95 %"]
     ch = report.chart
     lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.get('k')}, "
                   f"h {ch.get('h')}, in-control ARL {ch.get('arl0_holes', 0):,.0f} holes; a shift of 1 scale is "
@@ -222,9 +248,14 @@ def measure_section(report):
                             tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.run_um:+.1f}",
                                    f"{a.size_um:+.1f}", "yes" if a.persisted else "no",
                                    ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
-    limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
-              "in the spots' spread over the radius (docs/measure.md gives its size)",
-              "the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would need"]
+    if report.panel_map is not None:
+        from metrology.report.panel_map import panel_map_figure
+
+        figs.insert(0, figure_from_matplotlib(panel_map_figure(report.panel_map, report.tolerance_deg),
+                                              "The panel's holes coloured by their judged angle (deg, scale on the right); "
+                                              "ringed red: holes that fail; grey crosses: holes not measured or not "
+                                              "in the log."))
+    limits = _limits(report)
     nxt = ["Recalibrate the head (metro plan, metro calibrate) before drilling on."] if alarms else []
     if c["undecided"]:
         nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "

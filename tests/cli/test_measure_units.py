@@ -143,3 +143,26 @@ def test_a_log_none_of_whose_holes_is_in_the_table_is_refused(skins):
     assert r.exit_code == 2, r.output
     assert "none of its 40 holes is in the hole table" in r.output and "'XH0001'" in r.output
     assert not out.exists() and not qif.exists() and not rep.exists()
+
+
+def test_report_and_qif_record_the_panel_and_table_and_map_the_holes(skins):
+    """Item 6: the inputs with their SHA-256 (report and QIF), the panel map, the panel's own words."""
+    import hashlib
+    import re
+
+    folder, files, log = skins
+    rep, qif = folder / "r.html", folder / "r.qif"
+    r = _measure(log, "--panel", files["mm"][0], "--points", files["mm"][1], "--out", str(folder / "r.csv"),
+                 "--report", str(rep), "--qif", str(qif))
+    assert r.exit_code in (0, 1), r.output
+    from html import unescape
+
+    html = unescape(rep.read_text(encoding="utf-8"))
+    for f in files["mm"]:
+        digest = hashlib.sha256(open(f, "rb").read()).hexdigest()
+        assert digest in html
+        assert digest in qif.read_text(encoding="utf-8")
+    assert "The panel's holes coloured by their judged angle" in html
+    assert re.search(r"uncertainty: [^\n]*each hole's curvature from panel \S*skin_mm.stl", html)
+    assert "each hole's surface is taken from panel" in html  # what the data could not determine
+    assert not re.search(r"curvature bias for a panel radius", html)
