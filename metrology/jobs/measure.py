@@ -158,12 +158,11 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, su
             warn(line)
 
 
-def _digest(layout) -> str:
-    import hashlib
+def _digest(layout_path) -> str:
+    """The layout file's SHA-256, as the certificate, the report and the QIF give it."""
+    from metrology.io.names import sha256_file
 
-    from metrology.io.layout import layout_to_toml
-
-    return hashlib.sha256(layout_to_toml(layout).encode()).hexdigest()
+    return sha256_file(layout_path)
 
 
 class _Tee:
@@ -344,7 +343,7 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             warn(w)
     output = None
     if target is not None and not is_file_out(o.out):
-        output = PartitionedOutput(target, _manifest(o, layout, log_path))
+        output = PartitionedOutput(target, _manifest(o, layout_path, log_path))
     done = [0]
 
     def tick(n):
@@ -431,13 +430,13 @@ def _check_report_paths(o: MeasureOptions) -> None:
         check_qif_path(o.qif)
 
 
-def _manifest(o: MeasureOptions, layout, log_path) -> dict:
+def _manifest(o: MeasureOptions, layout_path, log_path) -> dict:
     """What a folder output's resume manifest records of the run (paths resolved)."""
     return {"tolerance_deg": o.tolerance_deg, "min_radius_mm": o.min_radius_mm, "chart_by_panel": o.chart_by_panel,
             "panel": None if o.panel is None else str(Path(o.panel).resolve()),
             "points": None if o.points is None else str(Path(o.points).resolve()),
             "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg], "units": o.units,
-            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())}
+            "layout_sha256": _digest(layout_path), "log": str(Path(log_path).resolve())}
 
 
 def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str) -> dict:
