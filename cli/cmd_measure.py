@@ -89,6 +89,8 @@ def register(app: typer.Typer) -> None:
 
             summary = follow_log(log, layout, emit, lambda a: emit({"alarm": a}), tolerance_deg=tolerance_deg,
                                  min_radius_mm=min_radius_mm, **panel_kw)
+            for note in summary.notes:
+                warn(note)
             emit({"summary": summary.to_dict()})
             bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
             raise typer.Exit(1 if bad else 0)
