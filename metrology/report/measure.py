@@ -36,7 +36,7 @@ def _alarm_words(a) -> str:
             f"{a.start_hole_id} ({utc(a.start_time_s)}); its level "
             + (f"moved {a.size_um:+.1f} µm and stayed; a zero shift of one sensor alone: {shifts} (one redundant "
                f"reading cannot tell which of the 4)" if a.persisted else
-               f"then returned ({a.size_um:+.2f} µm): the run did not persist") + f": {a.advice}")
+               f"then returned ({a.size_um:+.2f} µm)") + f": {a.advice}")  # the advice says whether it persisted
 
 
 def _ppk(fig: dict, short: bool = False) -> str:
@@ -104,9 +104,10 @@ def measure_text(report) -> str:
               f"p99.9 {_q(fig, 'before', 'p99.9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
               f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
-              f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
-              f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
+              (f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+               f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
+               f"(X99.865 - X50); the angle is bounded below by 0, not normal)" if np.isfinite(fig["mean_deg"]) else
+               "judged angle: none (no hole was judged)"),
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " (the layout has no calibration covariance)") + _panel_terms(report)
               + ", 95 %"]

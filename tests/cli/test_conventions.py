@@ -348,3 +348,18 @@ def test_measure_help_shows_brackets_without_backslashes_and_every_exit_cause(mo
     text = " ".join(r.stdout.replace("│", " ").split())
     assert "\\[" not in text and "[calibration]" in text and "metro[fleet]" in text
     assert "drilled angle not known" in text
+
+
+def test_ctrl_c_exits_130_with_one_line(tmp_path, monkeypatch):
+    """Issue 51, item 14: an interrupted run says so on one line and exits 130."""
+    import metrology.jobs.measure as job
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(job, "measure_files", interrupted)
+    log = tmp_path / "log.csv"
+    log.write_text("hole_id,time\n")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(M / "nominal.toml")])
+    assert r.exit_code == 130, r.output
+    assert r.stderr.strip().splitlines() == [r.stderr.strip()] and r.stderr.startswith("error: interrupted (Ctrl-C)")

@@ -166,3 +166,18 @@ def test_report_and_qif_record_the_panel_and_table_and_map_the_holes(skins):
     assert re.search(r"uncertainty: [^\n]*each hole's curvature from panel \S*skin_mm.stl", html)
     assert "each hole's surface is taken from panel" in html  # what the data could not determine
     assert not re.search(r"curvature bias for a panel radius", html)
+
+
+@pytest.mark.parametrize("length", [2.0, 1.3])
+def test_a_feed_vector_not_of_unit_length_is_refused(skins, tmp_path, length):
+    """Issue 51, item 14: a feed of length 2 or 1.3 was normalised without a word."""
+    folder, files, log = skins
+    with open(files["mm"][1], newline="") as fh:
+        rows = list(csv.reader(fh))
+    rows[3][4:7] = [f"{float(v) * length:.9f}" for v in rows[3][4:7]]
+    bad = tmp_path / "bad.csv"
+    with open(bad, "w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    r = _measure(log, "--panel", files["mm"][0], "--points", str(bad), "--out", str(tmp_path / "o.csv"))
+    assert r.exit_code == 2, r.output
+    assert f"line 4: hole H0003: feed direction i,j,k has length {length:g}" in r.output
