@@ -244,16 +244,21 @@ def measure_section(report):
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
-        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "run [µm]",
-                                             "level moved [µm]", "persisted", "one sensor alone [µm]"),
-                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.run_um:+.1f}",
-                                   f"{a.size_um:+.1f}", "yes" if a.persisted else "no",
-                                   ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
+        # two narrow tables, not one of 8 columns (it ran past a 1280 px page and a phone's; issue 51)
+        tables.append(Table("Drift alarms (where each run began: the text below)",
+                            ("cell", "alarm at hole", "time [UTC]", "run [µm]", "level moved [µm]", "persisted"),
+                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.run_um:+.1f}", f"{a.size_um:+.1f}",
+                                   "yes" if a.persisted else "no") for a in alarms)))
+        names = list(dict.fromkeys(k for a in alarms for k in a.sensor_shift_um))
+        tables.append(Table("Drift alarms: the zero shift of each sensor alone that explains the change [µm] "
+                            "(one redundant reading cannot tell which)", ("alarm at hole", *names),
+                            tuple((a.hole_id, *(f"{a.sensor_shift_um[k]:+.1f}" if k in a.sensor_shift_um else "-"
+                                                for k in names)) for a in alarms)))
     if report.panel_map is not None:
         from metrology.report.panel_map import panel_map_figure
 
         figs.insert(0, figure_from_matplotlib(panel_map_figure(report.panel_map, report.tolerance_deg),
-                                              "The panel's holes coloured by their judged angle (deg, scale on the right); "
+                                              "The panel's holes coloured by their judged angle (deg, the scale beneath); "
                                               "ringed red: holes that fail; grey crosses: holes not measured or not "
                                               "in the log."))
     limits = _limits(report)
