@@ -59,6 +59,8 @@ class _Fixed:
         return params
 
 
+#: the exit code of a run interrupted by Ctrl-C (128 + SIGINT)
+INTERRUPTED = 130
 #: the root options that may be given anywhere on the line (``metro validate -q ...``)
 ANYWHERE = ("-q", "--quiet", "-v", "--verbose")
 
@@ -86,6 +88,8 @@ class MetroGroup(_Fixed, typer.core.TyperGroup):
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except KeyboardInterrupt:  # click, typer < 0.16: typer's newer own returns 130 quietly
+            rv = INTERRUPTED
         except click.exceptions.UsageError as e:
             path = e.ctx.command_path if e.ctx is not None else "metro"
             click.echo(f"error: {' '.join(e.format_message().split())}", err=True)
@@ -94,9 +98,14 @@ class MetroGroup(_Fixed, typer.core.TyperGroup):
         except click.ClickException as e:
             click.echo(f"error: {' '.join(e.format_message().split())}", err=True)
             sys.exit(e.exit_code)
-        except abort:
-            click.echo("error: aborted", err=True)
-            sys.exit(1)
+        except abort as e:
+            if not isinstance(e.__cause__, KeyboardInterrupt):
+                click.echo("error: aborted", err=True)
+                sys.exit(1)
+            rv = INTERRUPTED
+        if rv == INTERRUPTED:  # Ctrl-C: one line, exit 128 + SIGINT as a shell shows it
+            click.echo("error: interrupted (Ctrl-C): every file is written whole or not at all; a folder output "
+                       "resumes", err=True)
         sys.exit(rv if isinstance(rv, int) else 0)
 
 

@@ -18,7 +18,7 @@ def register(app: typer.Typer) -> None:
         log: str = typer.Argument(..., help="The hole log: .csv ('-' for stdin), .parquet, or a folder of hive-"
                                   "partitioned .parquet (cell=C1/date=YYYY-MM-DD/)."),
         layout: Path = typer.Option(..., "--layout", help="The calibrated layout (.toml) from metro calibrate --out; "
-                                    "its \\[calibration] covariance is propagated into U95."),
+                                    "its [calibration] covariance is propagated into U95."),
         out: Optional[Path] = typer.Option(None, "--out", help="Per-hole results: .csv or .parquet, or a folder for a "
                                            "partitioned log (one file per partition; a re-run resumes). Default: CSV "
                                            "on stdout (with --json: none, the summary alone)."),
@@ -26,12 +26,12 @@ def register(app: typer.Typer) -> None:
                                             "largest angle between drill axis and surface normal."),
         min_radius_mm: Optional[float] = typer.Option(None, "--min-radius-mm", help="Smallest panel radius, mm: bounds "
                                             "the micro-plane's curvature bias in U95 and sets what the gross-reading "
-                                            "check allows ('inf': flat panels). Default: the layout's \\[panel] "
+                                            "check allows ('inf': flat panels). Default: the layout's [panel] "
                                             "radius_mm, else 500 (named in the verdict as an assumption)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Run on a new Dask LocalCluster of N worker "
-                                              "processes, one task per partition (needs metro\\[fleet])."),
+                                              "processes, one task per partition (needs metro[fleet])."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run on a running Dask cluster "
-                                                "(tcp://host:port), one task per partition (needs metro\\[fleet])."),
+                                                "(tcp://host:port), one task per partition (needs metro[fleet])."),
         fail_on_drift: bool = typer.Option(False, "--fail-on-drift", help="Exit 1 on a drift alarm whose change persisted too "
                                            "(by default an alarm is reported, and the exit code judges the holes)."),
         chart_by_panel: bool = typer.Option(False, "--chart-by-panel", help="A new drift-chart baseline at each "
@@ -53,6 +53,9 @@ def register(app: typer.Typer) -> None:
                                        "cell's convention (TCS x, y near the panel's x, y), deg; in U95. Not given: "
                                        "+-2 where a redundant (4th) reading confirms the convention, else a U95 over "
                                        "every spin."),
+        units: Optional[str] = typer.Option(None, "--units", help="Unit of the panel file's and the hole table's "
+                                            "coordinates: mm, cm, m or in (overrides what the panel file declares; "
+                                            "STL/OBJ/PLY and tables declare none: mm)."),
         follow: bool = typer.Option(False, "--follow", help="A live log (LOG '-' for stdin, or a CSV file): each "
                                     "hole measured as its line arrives; one JSON line per hole on stdout, "
                                     "{\"alarm\": ...} lines for drift alarms, a final {\"summary\": ...}."),
@@ -82,16 +85,20 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Measure every hole of a log: normal, angle to the drill axis with U95, ISO 14253-1 verdict; drift watch.
 
-        Exit code: 0 when every measured hole conforms, 1 when a hole fails or is undecided (or a drift alarm whose change persisted, with --fail-on-drift), 2 on bad input.
+        Exit code: 0 when every measured hole conforms, 1 when a hole fails, is undecided or has its drilled angle not known (gross readings: re-inspect), or when a drift alarm's change persisted (with --fail-on-drift); 2 on bad input.
         """
         import sys
 
         from metrology.report.measure import measure_text
 
+        for label, value in (("LOG", None if log == "-" else log), ("--layout", layout), ("--panel", panel),
+                             ("--points", points)):
+            if value is not None and not Path(value).exists():  # one wording for every input (docs/cli.md)
+                fail(f"{value}: no such file ({label})")
         if workers is not None and scheduler is not None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,
-                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg}
+                    "form_tolerance_mm": form_tolerance_mm, "spin_deg": spin_deg, "units": units}
         import contextlib
 
         server = contextlib.nullcontext()
@@ -127,6 +134,8 @@ def register(app: typer.Typer) -> None:
 
                 summary = follow_log(log, layout, on_hole, on_alarm, tolerance_deg=tolerance_deg,
                                      min_radius_mm=min_radius_mm, **panel_kw)
+                for note in summary.notes:
+                    warn(note)
             emit({"summary": summary.to_dict()})
             bad = summary.counts["fails"] + summary.counts["undecided"] + (len(summary.alarms) if fail_on_drift else 0)
             raise typer.Exit(1 if bad else 0)

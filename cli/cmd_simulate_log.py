@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from ._common import JSON_HELP, echo, echo_json, guarded, progress_bar, with_verdict
+from ._common import JSON_HELP, echo, echo_json, fail, guarded, progress_bar, with_verdict
 
 
 def register(app: typer.Typer) -> None:
@@ -77,6 +77,10 @@ def register(app: typer.Typer) -> None:
         drifts = [parse_drift(v) for v in drift or []]
         shifts = [parse_shift(v) for v in shift or []]
         layout = data_path("measured", "nominal.toml") if layout is None else layout
+        for label, value in (("--layout", layout), ("--true-layout", true_layout), ("--points", points),
+                             ("--panel", panel if Path(str(panel)).suffix else None)):
+            if value is not None and not Path(value).exists():  # one wording for every input (docs/cli.md)
+                fail(f"{value}: no such file ({label})")
         with progress_bar("simulate-log") as progress:
             summary = simulate_log_files(
                 layout, out, truth=truth, true_layout_path=true_layout, holes=holes, cells=cells, panel=panel,

@@ -169,3 +169,11 @@ def test_metro_help_describes_the_demo_by_its_steps():
     r = CliRunner().invoke(app, ["demo", "--help"], env={"COLUMNS": "400"})
     steps = [line.split()[0] for _, line in DEMO_STEPS]
     assert " -> ".join(steps) in " ".join(r.output.replace("│", " ").split()), steps
+
+
+def test_the_docs_count_the_demos_steps():
+    """Issue 51, item 14: docs/cli.md says how many steps the demo has, as many as it runs."""
+    from metrology.jobs.demo import DEMO_STEPS
+
+    words = {5: "five", 6: "six", 7: "seven", 8: "eight", 9: "nine"}
+    assert f"its {words[len(DEMO_STEPS)]} steps" in (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")

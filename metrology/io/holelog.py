@@ -12,8 +12,9 @@ per file, with its hive keys such as ``cell=C1/date=2026-11-25``), each read in 
 ``hole_id`` as string, readings as float64 mm (NaN for blanks), and three columns added for
 metro's own use (:data:`INTERNAL`, dropped before results are written): ``_metro_time_s`` (float
 seconds since 1970-01-01 UTC), ``_metro_cell`` and ``_metro_panel`` (strings, "" when the log has
-none). Every column of the log stays as it was read, but ``time`` read as text (a CSV's),
-which becomes a timestamp (UTC, to the microsecond).
+none). One schema whatever the format (CSV, Parquet, a hive folder): ``time`` becomes a timestamp
+(UTC, to the microsecond), ``temperature_c`` and the commanded pose ``pose_*`` float64
+(:data:`NUMERIC`); every other column stays as it was read (a CSV's as text).
 
 Errors are one line naming the file (and line or partition) and what was expected; pyarrow is
 imported only here, when a log is read.
@@ -27,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["HoleLog", "CsvLog", "ParquetLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
-           "CELL", "PANEL", "text_codes", "time_seconds"]
+           "CELL", "PANEL", "NUMERIC", "text_codes", "time_seconds"]
 
 #: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
 BATCH_ROWS = 1 << 18
@@ -277,9 +278,17 @@ def _csv_types(log, names):
 
     types = {c: pa.string() for c in names}
     for c in names:
-        if c.startswith("d_") or c == "temperature_c":
+        if _numeric(c):
             types[c] = pa.float64()
     return types
+
+
+#: the log's columns of numbers besides the readings (the one result schema: float64 whatever the format)
+NUMERIC = ("temperature_c", "pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")
+
+
+def _numeric(name: str) -> bool:
+    return name.startswith("d_") or name in NUMERIC
 
 
 def _csv_batches(log, part):
@@ -404,9 +413,10 @@ def _normalise(log, part, table, first_row):
     cols, names = {}, table.column_names
     for c in names:
         col = table.column(c)
-        if c.startswith("d_") or c == "temperature_c":
+        if _numeric(c):
             if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type)):
-                raise ValueError(f"{log.where(part)}: column {c} is {col.type}, expected numbers (mm)")
+                raise ValueError(f"{log.where(part)}: column {c} is {col.type}, expected numbers"
+                                 + (" (mm)" if c.startswith("d_") else ""))
             col = col.cast(pa.float64())
         elif c in ("hole_id", "cell", "panel"):
             col = col.cast(pa.string())
@@ -416,10 +426,8 @@ def _normalise(log, part, table, first_row):
     if bad.size:
         raise ValueError(f"{log.locate(part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
     cols[TIME_S] = pa.array(time_s)
-    if not (pa.types.is_timestamp(table.column("time").type) or pa.types.is_integer(table.column("time").type)
-            or pa.types.is_floating(table.column("time").type)):
-        # text (a CSV's ISO 8601 or seconds): a timestamp, written back as one (UTC, to the microsecond)
-        cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
+    # one result schema whatever the log's format: time a timestamp (UTC, to the microsecond)
+    cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
     for c, name in (("cell", CELL), ("panel", PANEL)):
         cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
     nulls = cols["hole_id"].null_count

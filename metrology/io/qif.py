@@ -8,11 +8,13 @@ The document (``metro measure --qif RESULTS.qif``; its shape is shown in docs/me
 - ``Characteristics``: one definition (the angle between drill axis and surface normal, tolerance
   ``0 .. tolerance_deg``, deg), one nominal (target 0 deg), and one ``AngleCharacteristicItem`` per
   hole, named by its ``hole_id``;
-- ``Results``: one ``MeasurementResults`` whose traceability names the log and the layout (file
-  references, metro's version), with one ``AngleCharacteristicMeasurement`` per hole: the ISO
+- ``Results``: one ``MeasurementResults`` whose traceability names the log, the layout and, with
+  ``--panel``/``--points``, the CAD panel and the hole table (file references with their SHA-256,
+  metro's version), with one ``AngleCharacteristicMeasurement`` per hole: the ISO
   14253-1 status (conforms PASS, fails FAIL, undecided INDETERMINATE, not measured NOT_ANALYZED),
-  the hole's time, the judged angle (deg) as ``Value`` and its U95 (deg) as the attribute
-  ``U95_deg``; the whole inspection's status (FAIL if a hole fails, else UNKNOWN if a hole is
+  the hole's time, the judged angle (deg) as ``Value`` with QIF's own ``combinedUncertainty`` (the
+  standard uncertainty U95 / 2, :data:`COVERAGE_K`; ``meanError`` 0) and its U95 (deg) as the
+  attribute ``U95_deg``; a hole not measured has no ``Value`` and no ``U95_deg``; the whole inspection's status (FAIL if a hole fails, else UNKNOWN if a hole is
   undecided or not measured, else PASS).
 
 Why an angle characteristic: QIF's perpendicularity and angularity characteristics are tolerance
@@ -50,6 +52,12 @@ _FIRST_HOLE_ID = 7
 #: holes formatted at once: their text (~600 bytes a hole) and its temporaries stay small
 SLICE_ROWS = 32768
 _DIGITS = 6  # decimals of an angle in deg (1e-6 deg: far below any U95)
+#: how the traceability describes an input file by its role
+INPUT_SPECS = {"CAD panel": "CAD panel (STL, OBJ, PLY, GLB or STEP), mm",
+               "hole table": "hole table (CSV or Parquet: hole_id,x,y,z,i,j,k), mm"}
+#: QIF's ``combinedUncertainty`` is a standard uncertainty (GUM's u_c): the U95 over the coverage factor k = 2
+#: of a 95 % interval; ``meanError`` 0 beside it (the schema asks for both: the calibration removed the bias)
+COVERAGE_K = 2.0
 
 
 def check_qif_path(path) -> Path:
@@ -119,10 +127,12 @@ class QifResults:
     log : str, the log as named on the command line (traceability)
     certificate : dict, the layout's ``[certificate]`` fields (device name, serial, ...)
     version : str, metro's version
+    inputs : dict, role -> path of the other input files (the CAD panel, the hole table): each listed
+        with its SHA-256 in the traceability
     """
 
     def __init__(self, path, *, tolerance_deg: float, layout_path, sensors, log: str, certificate=None,
-                 version: str = ""):
+                 version: str = "", inputs=None):
         self.path = Path(path)
         self.tolerance_deg = float(tolerance_deg)
         self.layout_path = Path(layout_path)
@@ -131,6 +141,7 @@ class QifResults:
         self.log = str(log)
         self.certificate = dict(certificate or {})
         self.version = version
+        self.inputs = tuple((role, Path(p), sha256_file(p)) for role, p in (inputs or {}).items() if p is not None)
         self.n = 0
         self.counts = dict.fromkeys(QIF_STATUS, 0)
         self.t_first = self.t_last = None
@@ -181,12 +192,18 @@ class QifResults:
         lo, hi = float(seconds.min()), float(seconds.max())
         self.t_first = lo if self.t_first is None else min(self.t_first, lo)
         self.t_last = hi if self.t_last is None else max(self.t_last, hi)
+        # a hole not measured carries no value (whatever figures its row may hold), NOT_ANALYZED alone
+        ok = np.isfinite(angle) & np.asarray(pc.not_equal(status, "not_measured").to_numpy(zero_copy_only=False))
+        angle, u95 = np.where(ok, angle, np.nan), np.where(ok, u95, np.nan)
         value = _decimal(angle)
         u = _decimal(u95)
-        measured = pa.array(np.isfinite(angle))
+        uc = _decimal(u95 / COVERAGE_K)  # the standard uncertainty QIF's combinedUncertainty states
+        measured = pa.array(ok)
         attrs = pc.if_else(pc.is_valid(u), _join('<Attributes n="1"><AttributeD1 name="U95_deg" value="',
                                                   pc.fill_null(u, ""), '"/></Attributes>'), "")
-        val = pc.if_else(measured, _join("<Value>", pc.fill_null(value, ""), "</Value>"), "")
+        opening = pc.if_else(pc.is_valid(uc), _join('<Value combinedUncertainty="', pc.fill_null(uc, ""),
+                                                      '" meanError="0">'), "<Value>")
+        val = pc.if_else(measured, _join(opening, pc.fill_null(value, ""), "</Value>"), "")
         items = _join('<AngleCharacteristicItem id="', item_id, '"><Name>', name,
                       "</Name><CharacteristicNominalId>4</CharacteristicNominalId></AngleCharacteristicItem>\n")
         meas = _join('<AngleCharacteristicMeasurement id="', meas_id, '">', attrs,
@@ -221,6 +238,8 @@ class QifResults:
                  "metro hole log (CSV, Parquet or a folder of hive-partitioned Parquet)", "the hole log measured"),
                 (self.layout_path.resolve().as_uri(), "metro calibrated layout (TOML)",
                  f"the calibrated layout, SHA-256 {self.layout_sha256}")]
+        refs += [(p.resolve().as_uri(), INPUT_SPECS.get(role, role), f"the {role}, SHA-256 {digest}")
+                 for role, p, digest in self.inputs]
         ext = "".join(f"<ExternalFileReference><URI>{escape(u)}</URI><FileSpec><OtherFileSpec>{escape(s)}"
                       f"</OtherFileSpec></FileSpec><Description>{escape(d)}</Description></ExternalFileReference>"
                       for u, s, d in refs)
@@ -252,7 +271,8 @@ class QifResults:
             '<CharacteristicDefinitions n="1"><AngleCharacteristicDefinition id="3">'
             "<Description>drilling normality: angle between the drill axis and the surface normal (ISO 14253-1: "
             "conforms if angle + U95 &lt;= tolerance, fails if angle - U95 &gt; tolerance); each measurement's "
-            "attribute U95_deg is its expanded uncertainty (95 % coverage), deg</Description>"
+            "Value's combinedUncertainty is its standard uncertainty (U95 / 2), deg, and the attribute U95_deg its "
+            "expanded uncertainty (95 % coverage), deg</Description>"
             "<Name>normality</Name>"
             f"<Tolerance><MaxValue>{tol}</MaxValue><MinValue>0.{'0' * _DIGITS}</MinValue>"
             "<DefinedAsLimit>false</DefinedAsLimit></Tolerance></AngleCharacteristicDefinition>"

@@ -66,10 +66,10 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
               f"{dataset.export.n_poses} poses; residual RMS "
               + ", ".join(f"{n} {r * 1e3:.1f} µm" for n, r in zip(report.layout.names, report.calibration.residual_rms))
               + "\nzero_stderr_mm: 1 sigma of the zero point (mm, TCS x y z); direction_stderr_deg: 1 sigma\n"
-              "of the beam tilt about the chart axes e1, e2 of the nominal direction (deg)")
+              f"of the beam tilt about the chart axes e1, e2 of the {_chart(report.layout)} direction (deg)")
     # the certificate states the datum's share of U (or that the plane was taken as exact)
-    text = layout_to_toml(replace(report.layout, certificate={"datum": report.datum_statement(), **dict(meta or {})}),
-                          header)
+    text = layout_to_toml(replace(_tilts_in_covariance_chart(report.layout),
+                                  certificate={"datum": report.datum_statement(), **dict(meta or {})}), header)
     report = replace(report, certificate=_certificate(report, text, out))
     page = None
     if report_html is not None:  # rendered before anything is written: all or nothing
@@ -107,6 +107,23 @@ def calibrate_files(export_path, plane_path, layout_path, method: str = DEFAULT_
         write_text(report_html, page)
     notify(progress, total, total, "done")
     return report
+
+
+def _chart(layout) -> str:
+    return "calibrated" if layout.covariance is not None else "nominal"
+
+
+def _tilts_in_covariance_chart(layout):
+    """``layout`` with ``direction_stderr_deg`` the 1 sigma of its covariance's tilt blocks: the chart of the
+    calibrated direction, the certificate's and ``metro measure``'s (the fit's own is the nominal's)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    if layout.covariance is None or layout.direction_stderr_deg is None:
+        return layout
+    var = np.diag(layout.covariance).reshape(layout.n, 5)[:, 3:]
+    return replace(layout, direction_stderr_deg=np.degrees(np.sqrt(np.maximum(var, 0.0))))
 
 
 def _certificate(report, text, out):

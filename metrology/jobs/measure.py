@@ -12,7 +12,8 @@ import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.core.verdict import Check, Verdict
-from metrology.jobs.measure_panel import hole_surfaces, layout_panel
+from metrology.jobs.measure_map import holes_collector
+from metrology.jobs.measure_panel import check_join, hole_surfaces, layout_panel
 
 if TYPE_CHECKING:
     from metrology.measure.run import MeasureResult
@@ -39,6 +40,8 @@ class MeasureReport:
     chart : dict, the drift chart's settings (:func:`metrology.measure.chart.chart_settings`, by_panel)
     curvature : dict, where each hole's curvature came from ({} : the assumed bound)
     effects : tuple of str, the layout's head terms applied to every hole (their covariance in U95)
+    panel_map : PanelMap or None, the hole table's holes as judged (:mod:`metrology.report.panel_map`),
+        with ``--points`` and ``--report``
     """
 
     result: "MeasureResult"
@@ -53,6 +56,7 @@ class MeasureReport:
     chart: dict = field(default_factory=dict)
     curvature: dict = field(default_factory=dict)
     effects: tuple = ()
+    panel_map: object = None
 
     @property
     def counts(self) -> dict:
@@ -166,12 +170,11 @@ def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, su
             warn(line)
 
 
-def _digest(layout) -> str:
-    import hashlib
+def _digest(layout_path) -> str:
+    """The layout file's SHA-256, as the certificate, the report and the QIF give it."""
+    from metrology.io.names import sha256_file
 
-    from metrology.io.layout import layout_to_toml
-
-    return hashlib.sha256(layout_to_toml(layout).encode()).hexdigest()
+    return sha256_file(layout_path)
 
 
 class _Tee:
@@ -185,15 +188,15 @@ class _Tee:
             s.write(table)
 
 
-def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display):
-    """The QIF 3.0 Results writer for ``--qif`` (None without it)."""
+def _qif_doc(qif, tolerance_deg, layout_path, layout, log_display, inputs=None):
+    """The QIF 3.0 Results writer for ``--qif`` (None without it); ``inputs``: the panel's files by role."""
     if qif is None:
         return None
     from metrology import __version__
     from metrology.io.qif import QifResults
 
     return QifResults(qif, tolerance_deg=tolerance_deg, layout_path=layout_path, sensors=layout.names,
-                      log=log_display, certificate=layout.certificate, version=__version__)
+                      log=log_display, certificate=layout.certificate, version=__version__, inputs=inputs)
 
 
 def _qif_from_output(doc, output, log) -> None:
@@ -236,6 +239,8 @@ class MeasureOptions:
     panel, points : path or None, the CAD panel and the hole table (:func:`measure_files`)
     position_error_mm, form_tolerance_mm : float, mm; spin_deg : float or None, deg (with
         ``points``; None: not stated, :func:`metrology.jobs.measure_panel.hole_surfaces`)
+    units : str or None, the unit of the panel file and the hole table (mm, cm, m, in; None: the
+        panel's own, else mm)
     """
 
     out: Path | None = None
@@ -258,6 +263,7 @@ class MeasureOptions:
     position_error_mm: float = 0.5
     form_tolerance_mm: float = 0.0
     spin_deg: float | None = None
+    units: str | None = None
 
     @property
     def distributed(self) -> bool:
@@ -339,11 +345,14 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
         raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
                          f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
     if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg)
+        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
+                                 o.units)
     log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
     from metrology.measure.effects import check_log
 
     check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
+    if surfaces is not None:
+        check_join(log, surfaces, display_name(points))
     target = check_out(o.out, log.partitioned, o.distributed)
     settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
@@ -352,7 +361,7 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             warn(w)
     output = None
     if target is not None and not is_file_out(o.out):
-        output = PartitionedOutput(target, _manifest(o, layout, log_path))
+        output = PartitionedOutput(target, _manifest(o, layout_path, log_path))
     done = [0]
 
     def tick(n):
@@ -363,10 +372,13 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     sources = {"log": log.display, "layout": shown_layout, "out": None if o.out is None else str(o.out)}
     if o.qif is not None:
         sources["qif"] = str(o.qif)
-    qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display)
+    qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display,
+                       {"CAD panel": panel, "hole table": points})
     from metrology.jobs.plant import dfq_sink, docs_from_output
 
     dfq_doc = dfq_sink(o.dfq, o.tolerance_deg, layout_path, points, surfaces, log.display)
+
+    holes_map = None if o.report_html is None else holes_collector(surfaces, panel, points, o.units)
 
     def run(sink):
         """The log measured by the engine asked for, results into ``output`` (a folder) or ``sink``."""
@@ -385,25 +397,28 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             raise
         output.release()
     elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None and o.plant is None:  # --json alone: the summary, nothing per hole
-        result = run(None)
+        result = run(holes_map)
         check_fit(result)
     else:
         with qif_doc or contextlib.nullcontext() as q, dfq_doc or contextlib.nullcontext() as d, \
                 TableSink(target) as sink:
             table = sink if target is not None or o.per_hole else None  # --json alone: no CSV on stdout
-            result = run(sink if q is None and d is None and o.plant is None else
-                         _Tee(*(x for x in (table, q, d, o.plant) if x is not None)))
+            result = run(sink if q is None and d is None and o.plant is None and holes_map is None else
+                         _Tee(*(x for x in (table, q, d, o.plant, holes_map) if x is not None)))
             check_fit(result)  # before the files appear
     if output is not None:
         check_fit(result, warn=warn, warnings=warnings)
         if qif_doc is not None:  # from the partitions' files, in the log's order, whoever wrote them
             _qif_from_output(qif_doc, output, log)
         docs_from_output((dfq_doc,), output, log, (o.plant,))
+        if holes_map is not None:
+            holes_map.read_output(output, log)
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
                            {**chart_settings(), "by_panel": o.chart_by_panel},
                            _curvature(o, result, surfaces, radius_source, shown_layout),
-                           () if layout.effects is None else tuple(c.label for c in layout.effects.components))
+                           () if layout.effects is None else tuple(c.label for c in layout.effects.components),
+                           None if holes_map is None else holes_map.panel_map())
     if o.report_html is not None:
         _write_report_html(o, report, log_path, layout_path)
     return report
@@ -447,13 +462,13 @@ def _check_report_paths(o: MeasureOptions) -> None:
         check_dfq_path(o.dfq)
 
 
-def _manifest(o: MeasureOptions, layout, log_path) -> dict:
+def _manifest(o: MeasureOptions, layout_path, log_path) -> dict:
     """What a folder output's resume manifest records of the run (paths resolved)."""
     return {"tolerance_deg": o.tolerance_deg, "min_radius_mm": o.min_radius_mm, "chart_by_panel": o.chart_by_panel,
             "panel": None if o.panel is None else str(Path(o.panel).resolve()),
             "points": None if o.points is None else str(Path(o.points).resolve()),
-            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg],
-            "layout_sha256": _digest(layout), "log": str(Path(log_path).resolve())}
+            "panel_terms": [o.position_error_mm, o.form_tolerance_mm, o.spin_deg], "units": o.units,
+            "layout_sha256": _digest(layout_path), "log": str(Path(log_path).resolve())}
 
 
 def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str) -> dict:
@@ -484,6 +499,7 @@ def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None
     from metrology.report.measure import measure_section
 
     paths = {"log": log_path, "layout": layout_path} if o.log_display is None else {"layout": layout_path}
+    paths.update({"CAD panel": o.panel, "hole table": o.points})
     write_text(o.report_html, render_html("Hole measurement", run_info(paths, o.command,
                                                                        extra_versions=("pyarrow", "dask")),
                                           [measure_section(report)]))

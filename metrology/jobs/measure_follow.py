@@ -12,11 +12,15 @@ from __future__ import annotations
 
 import csv
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FollowSummary", "follow_log"]
+__all__ = ["FollowSummary", "follow_log", "PANEL_COLUMNS"]
+
+#: the per-hole columns of a run with the panel known, each in the hole's JSON line as in the table
+PANEL_COLUMNS = ("k1_per_mm", "k2_per_mm", "correction_deg", "panel_misfit_per_mm", "panel_misfit_z",
+                 "normal_vs_cad_deg", "cad_offset_mm")
 
 
 @dataclass(frozen=True)
@@ -25,9 +29,10 @@ class FollowSummary:
 
     counts: dict
     alarms: list
+    notes: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return {"counts": dict(self.counts), "alarms": list(self.alarms)}
+        return {"counts": dict(self.counts), "alarms": list(self.alarms), "notes": list(self.notes)}
 
 
 def _value(text):
@@ -39,14 +44,14 @@ def _value(text):
 
 def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float = 0.5,
                min_radius_mm: float | None = None, panel=None, points=None, position_error_mm: float = 0.5,
-               form_tolerance_mm: float = 0.0, spin_deg: float | None = None, stream=None) -> FollowSummary:
+               form_tolerance_mm: float = 0.0, spin_deg: float | None = None, stream=None, units=None) -> FollowSummary:
     """Measure each line of ``source`` (``-``: ``stream`` or stdin) as it arrives (module docstring).
 
     Raises ValueError naming the line on a line that cannot be measured (a non-number reading, a
     missing column); the holes before it have been answered."""
     import pyarrow as pa
 
-    from metrology.io.holelog import CsvLog, batch_of
+    from metrology.io.holelog import NUMERIC, TIME_S, CsvLog, batch_of
     from metrology.io.layout import load_layout
     from metrology.jobs.measure_panel import hole_surfaces, layout_panel
     from metrology.measure.holes import STATUSES, Settings, Status, measure_batch
@@ -64,7 +69,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
         raise ValueError(f"--panel {panel}: give the hole table too (--points HOLES.csv)")
     surfaces = None
     if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg)
+        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units)
     settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)
@@ -72,10 +77,10 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
     watch = Watch(layout.names)
     log = CsvLog(name, (), layout.names, display=name)  # how errors name a line
     counts = {str(s): 0 for s in Status}
-    alarms, raised = [], set()
+    alarms, raised, cut = [], set(), []
     try:
         # line by line to the stream's end (readline: click 8.2's test stdin raises EOFError from __next__)
-        reader = csv.reader(iter(fh.readline, ""))
+        reader = csv.reader(_complete_lines(fh, cut))
         header = next(reader, None)
         if not header:
             raise ValueError(f"{name}: no header line (hole_id, time, d_<sensor>...)")
@@ -90,11 +95,12 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
                 raise ValueError(f"{name}: line {lineno}: {len(row)} fields, the header has {len(header)}")
             cols = {}
             for h, v in zip(header, row):
-                if h.startswith("d_") or h == "temperature_c":
+                if h.startswith("d_") or h in NUMERIC:
                     try:
                         cols[h] = pa.array([float(v) if v.strip() else np.nan], pa.float64())
                     except ValueError:
-                        raise ValueError(f"{name}: line {lineno}: {h} = {v!r} is not a number (mm)") from None
+                        raise ValueError(f"{name}: line {lineno}: {h} = {v!r} is not a number"
+                                         + (" (mm)" if h.startswith("d_") else "")) from None
                 elif h == "time":
                     t = _value(v)
                     cols[h] = pa.array([t], pa.float64() if isinstance(t, float) else pa.string())
@@ -110,15 +116,14 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
             counts[status] += 1
 
             def f(col):
-                v = t.column(col)[0].as_py() if col in t.column_names else None
-                return v
+                return t.column(col)[0].as_py() if col in t.column_names else None
 
-            on_hole({"line": lineno, "hole_id": f("hole_id"), "status": status, "angle_deg": f("angle_deg"),
+            on_hole({"line": lineno, "hole_id": f("hole_id"), "time": _iso(t.column(TIME_S)[0].as_py()),
+                     "cell": f("cell"), "status": status, "angle_deg": f("angle_deg"),
                      "U95_angle_deg": f("U95_angle_deg"), "angle_after_deg": f("angle_after_deg"),
                      "U95_after_deg": f("U95_after_deg"),
                      "normal": [f("normal_x"), f("normal_y"), f("normal_z")],
-                     **({"k1_per_mm": f("k1_per_mm"), "k2_per_mm": f("k2_per_mm"),
-                         "correction_deg": f("correction_deg")} if surfaces is not None else {}),
+                     **({c: f(c) for c in PANEL_COLUMNS} if surfaces is not None else {}),
                      "reason": f("reason"), **({"cell": f("cell")} if "cell" in t.column_names else {})})
             watch.feed(Feed.of(batch, log, first_row=lineno - 2))
             _report_alarms(watch, alarms, raised, on_alarm)
@@ -127,7 +132,29 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float
             fh.close()
     watch.finish()
     _report_alarms(watch, alarms, raised, on_alarm)
-    return FollowSummary(counts, alarms)
+    notes = [f"{name}: the last line ({cut[0][:40]!r}) ends without a newline: incomplete (cut inside a field?), "
+             f"not measured"] if cut else []
+    return FollowSummary(counts, alarms, notes)
+
+
+def _iso(t_s: float) -> str:
+    """ISO 8601 UTC of seconds since 1970, to the microsecond (the results' timestamp)."""
+    import datetime as dt
+
+    return dt.datetime.fromtimestamp(float(t_s), dt.timezone.utc).isoformat(timespec="microseconds").replace(
+        "+00:00", "Z")
+
+
+def _complete_lines(fh, cut):
+    """The stream's lines that end with their newline; a last line without one (the stream ended inside
+    it: a writer killed, a cut file) goes to ``cut``, not measured: "50.2089" cut to "50.20" would read
+    as a number."""
+    for line in iter(fh.readline, ""):
+        if not line.endswith(("\n", "\r")):
+            if line.strip():
+                cut.append(line)
+            return
+        yield line
 
 
 def _report_alarms(watch, alarms, raised, on_alarm) -> None:

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["layout_panel", "footprint_mm", "hole_surfaces", "panel_hole_surfaces", "CadPanel"]
+__all__ = ["layout_panel", "footprint_mm", "standoff_mm", "read_table_in_mm", "check_units", "hole_surfaces",
+           "panel_hole_surfaces", "check_join", "CadPanel"]
 
 
 def layout_panel(layout_path) -> dict:
@@ -59,11 +60,55 @@ def footprint_mm(layout) -> float:
     return footprint_radius(layout, default_standoff(layout))
 
 
-def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg):
-    """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone."""
+def standoff_mm(layout) -> float:
+    """The readings' stand-off (mm): the sensors' mid-range, else the head's default stand-off."""
+    mid = layout.range_mm.mean(1)
+    if np.all(np.isfinite(mid)):
+        return float(np.mean(mid))
+    from metrology.panel.head import default_standoff
+
+    return float(default_standoff(layout))
+
+
+def read_table_in_mm(points, units=None):
+    """The hole table (:func:`metrology.measure.panel.read_hole_table`), its points scaled to mm from ``units``."""
+    import dataclasses
+
+    from metrology.measure.panel import read_hole_table
+    from metrology.panel.mesh import UNITS_MM
+
+    if units is not None and units not in UNITS_MM:
+        raise ValueError(f"--units {units}: expected one of {', '.join(UNITS_MM)}")
+    table = read_hole_table(points)
+    if units is not None and UNITS_MM[units] != 1.0:
+        table = dataclasses.replace(table, point=table.point * UNITS_MM[units])
+    return table
+
+
+def check_units(layout, panel=None, table=None, panel_path=None, points_path=None, units=None, poses=None):
+    """Refuse (ValueError, one line) a loaded panel and hole table that do not read as mm against the
+    head of ``layout`` (:func:`metrology.io.panel_units.check_panel_units`); ``poses``: the log's
+    commanded positions (m, 3) mm at the table's rows, or None."""
+    from metrology.io.names import display_name
+    from metrology.io.panel_units import check_panel_units
+
+    shown = " and ".join(display_name(p) for p in (panel_path, points_path) if p is not None)
+    settled = panel is not None and units is None and not str(panel.units).startswith("mm (assumed")
+    line = check_panel_units(footprint_mm(layout), standoff_mm(layout),
+                             panel_extent=None if panel is None else panel.mesh.extents,
+                             table_points=None if table is None else table.point, pose_points=poses,
+                             names=shown or "the panel", given=units, panel_in_mm=settled)
+    if line is not None:
+        raise ValueError(line)
+
+
+def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units=None):
+    """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone;
+    ``units`` (mm, cm, m, in): the unit of the panel file and the table (None: the panel's own, the table mm).
+    Refused (ValueError) when the two do not read as mm against the head (:func:`check_units`)."""
     from dataclasses import replace
 
-    from metrology.measure.panel import TableNormals, read_hole_table
+    from metrology.measure.panel import TableNormals
     from metrology.measure.spin import DEFAULT_SPIN_DEG
 
     stated = spin_deg is not None
@@ -72,15 +117,18 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
                     ("--spin-deg", spin_deg)):
         if not (np.isfinite(v) and v >= 0):
             raise ValueError(f"{name} must be a finite number >= 0, got {v:g}")
-    table = read_hole_table(points)
+    table = read_table_in_mm(points, units)
     foot = footprint_mm(layout)
     if panel is None:
+        check_units(layout, None, table, None, points, units)
         source = TableNormals()
     else:
         from metrology.io.names import display_name
         from metrology.panel.mesh import load_panel
 
-        source = CadPanel(load_panel(panel), position_error_mm, display_name(panel))
+        loaded = load_panel(panel, units)
+        check_units(layout, loaded, table, panel, points, units)
+        source = CadPanel(loaded, position_error_mm, display_name(panel))
     return replace(source.surfaces(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
 
 
@@ -106,3 +154,53 @@ def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0
     f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
     return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin,
                         point=table.point, frame=f["frame"], higher=f["higher"])
+
+
+def check_join(log, surfaces, table_display) -> None:
+    """Refuse (ValueError, one line) a log none of whose holes is in the hole table: every hole would be
+    ``not_measured`` and the outputs say nothing. Reads the join's key column alone (``point_id`` where
+    the log has it, else ``hole_id``), partition by partition, and stops at the first hole found."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    known = pa.array(surfaces.ids, pa.string())
+    rows, first, key = 0, None, "hole_id"
+    for part in log.partitions:
+        key = "point_id" if "point_id" in log.columns(part) else "hole_id"
+        for col in _key_column(log, part, key):
+            col = col.cast(pa.string())
+            if len(col) and pc.any(pc.is_in(col, value_set=known)).as_py():
+                return
+            rows += len(col)
+            if first is None and len(col):
+                first = col[0].as_py()
+    if rows == 0:
+        return  # an empty log is named by its reader
+    raise ValueError(f"{log.display}: none of its {rows:,} holes is in the hole table {table_display} (joined on "
+                     f"{key}: the log's {first!r}, the table's {surfaces.ids[0]!r}, ...): every hole's surface would "
+                     f"be unknown; is it this panel's table?")
+
+
+def _key_column(log, part, key):
+    """The partition's ``key`` column in chunks (pyarrow arrays), read alone."""
+    import pyarrow as pa
+
+    if part.path.lower().endswith(".csv"):
+        import pyarrow.csv as pcsv
+
+        reader = pcsv.open_csv(part.path, read_options=pcsv.ReadOptions(block_size=1 << 22),
+                               convert_options=pcsv.ConvertOptions(include_columns=[key],
+                                                                   column_types={key: pa.string()}))
+        for batch in reader:
+            yield batch.column(0)
+        return
+    import pyarrow.parquet as pq
+
+    if key in part.keys:  # a hive key: the same for every row of the file
+        n = pq.ParquetFile(part.path).metadata.num_rows
+        yield pa.array([part.keys[key]] * n, pa.string())
+        return
+    pf = pq.ParquetFile(part.path)
+    groups = range(pf.num_row_groups) if part.row_group is None else (part.row_group,)
+    for g in groups:
+        yield pf.read_row_group(g, columns=[key]).column(0).combine_chunks()

@@ -181,6 +181,27 @@ def make_log_panel(panel, radius_mm=None, azimuth_deg=None, off_cad=None, table=
     return truth, cad
 
 
+def _check_units(layout, panel, cad, table, points) -> None:
+    """A panel file and its hole table that do not read as mm against the head: one line, ValueError
+    (:func:`metrology.io.panel_units.check_panel_units`, as ``metro measure`` checks them)."""
+    import numpy as np
+
+    from metrology.io.panel_units import check_panel_units
+    from metrology.jobs.measure_panel import footprint_mm, standoff_mm
+
+    V = getattr(cad, "V", None)
+    is_file = Path(str(panel)).suffix != "" and V is not None
+    if not is_file and table is None:
+        return
+    names = " and ".join(str(p) for p in ((panel if is_file else None), points) if p is not None)
+    line = check_panel_units(footprint_mm(layout), standoff_mm(layout),
+                             panel_extent=None if not is_file else np.ptp(np.asarray(V, float), axis=0),
+                             table_points=None if table is None else table.points, names=names,
+                             units_option=False)
+    if line is not None:
+        raise ValueError(line)
+
+
 def _layouts(layout_path, true_layout_path, seed, layout_error_mm, layout_error_deg):
     import numpy as np
 
@@ -260,6 +281,7 @@ def simulate_log_files(layout_path, out, *, truth=None, true_layout_path=None, h
     elif off_cad is not None:
         raise ValueError("--off-cad needs --points: a panel off its CAD is seen at the table's nominal holes")
     truth_panel, cad_panel = make_log_panel(panel, radius_mm, azimuth_deg, off_cad, table)
+    _check_units(cell, panel, cad_panel, table, points)
     control = CONTROLLERS[controller]()
     spec = LogSpec(true, cell, truth_panel, angle_rad=tuple(math.radians(a) for a in angle_deg),
                    noise_mm=noise_mm, standoff_mm=standoff_mm, spin_rad=math.radians(spin_deg),

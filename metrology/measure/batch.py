@@ -13,7 +13,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pyarrow as pa
 
-__all__ = ["Status", "STATUSES", "CODE", "ChartRows", "HoleBatch"]
+__all__ = ["Status", "STATUSES", "CODE", "ChartRows", "HoleBatch", "blanked"]
 
 
 class Status(StrEnum):
@@ -27,6 +27,12 @@ class Status(StrEnum):
 STATUSES = tuple(Status)
 #: each status's code
 CODE = {s: i for i, s in enumerate(STATUSES)}
+
+
+def blanked(mask, *arrays) -> tuple:
+    """``arrays`` (N,) float with NaN where ``mask`` (N,) bool: a hole not measured carries no judged
+    figure in any output (its angle and U95 blank; issue 51), whatever its reason."""
+    return tuple(np.where(mask, np.nan, a) if mask.any() else a for a in arrays)
 
 
 @dataclass(frozen=True)

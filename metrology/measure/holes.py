@@ -20,8 +20,8 @@ threshold and reason:
    gives both misfits, so they differ only by what the panel's curvature does as the head
    tilts, at most
    ``|M_after - M_before|_* / (2 R) + TILT_ALLOWANCE alpha^2 max(|M|_*) / (2 R)`` (``alpha`` the
-   larger angle of the two), and by their noise: more than :data:`GROSS_SIGMAS` sigmas beyond
-   that, one of the 8 readings is gross. Which one is not identifiable (a gross before-reading,
+   larger angle of the two), and by their reading noise (the calibration's errors move both alike and
+   cancel): more than :data:`GROSS_SIGMAS` sigmas beyond that, one of the 8 readings is gross. Which one is not identifiable (a gross before-reading,
    the cell turned by it, and a gross after-reading give the same after-readings to first
    order), so the drilled angle is not known: the hole is not measured after the adjustment,
    with that reason, not failed. (A sensor's zero shift moves both misfits alike: the drift
@@ -45,7 +45,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
-from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
+from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status, blanked
 from metrology.measure.effects import apply_terms
 from metrology.measure.normals import hole_normals
 from metrology.measure.pose import against_cad, read_pose
@@ -248,7 +248,8 @@ def _poses_disagree(before, after, settings):
     alpha = np.fmax(before.angle, after.angle)
     curve = 0.0 if not np.isfinite(R) else (_nuclear2(after.moment - before.moment)
                                              + TILT_ALLOWANCE * alpha ** 2 * np.fmax(before.twist, after.twist)) / (2 * R)
-    allowed = curve + GROSS_SIGMAS * np.hypot(before.residual_sd, after.residual_sd)
+    sd = np.hypot(before.noise_sd, after.noise_sd)  # noise alone: the calibration's errors move both alike
+    allowed = curve + GROSS_SIGMAS * np.where(np.isfinite(sd), sd, np.hypot(before.residual_sd, after.residual_sd))
     with np.errstate(invalid="ignore"):
         out = np.abs(diff) > allowed
     return out & np.isfinite(allowed) & np.isfinite(diff), diff
@@ -406,12 +407,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         return pa.array(x, pa.float64(), from_pandas=True)
 
     nan = np.full(N, np.nan)
+    judged, judged_u, after_angle, after_u = blanked(nm := code == CODE[Status.NOT_MEASURED], judged, judged_u,
+                                                     *((after.angle, after.U95) if after is not None else (nan, nan)))
+    before_angle, before_u = blanked(nm & ~judge_after, before.angle, before.U95)  # not measured: blank (docs)
     cols = {
         "hole_id": ids,
         "normal_x": num(before.normal[:, 0]), "normal_y": num(before.normal[:, 1]), "normal_z": num(before.normal[:, 2]),
-        "angle_deg": num(np.degrees(before.angle)), "U95_angle_deg": num(np.degrees(before.U95)),
-        "angle_after_deg": num(np.degrees(after.angle) if after is not None else nan),
-        "U95_after_deg": num(np.degrees(after.U95) if after is not None else nan),
+        "angle_deg": num(np.degrees(before_angle)), "U95_angle_deg": num(np.degrees(before_u)),
+        "angle_after_deg": num(np.degrees(after_angle)), "U95_after_deg": num(np.degrees(after_u)),
         "fit_residual_um": num(before.residual * 1e3),
         "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
         "sensors_used": _labels(patterns, pattern_names),

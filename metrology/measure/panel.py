@@ -53,6 +53,8 @@ __all__ = ["HoleTable", "HoleSurfaces", "SurfaceSource", "TableNormals", "read_h
 
 #: the sampled disc's radius over the head's footprint radius (the spots move out on a tilted head)
 FOOTPRINT_MARGIN = 1.25
+#: a hole table's feed i,j,k is a unit vector to this (CAM writes 6+ digits); beyond it the row is refused
+FEED_UNIT_TOL = 1e-3
 #: neighbours whose nominal normals give a hole's curvature without a panel
 NEIGHBOURS = 6
 #: the entries (00, 01, 02, 11, 12, 22) of a symmetric 3 x 3 matrix
@@ -144,6 +146,11 @@ def _checked(path, ids, vals, csv, lines=None) -> HoleTable:
     if zero.size:
         r = int(zero[0])
         raise ValueError(f"{path}: {where(r)}: hole {ids[r]}: feed direction i,j,k is zero-length")
+    off = np.flatnonzero(np.abs(norm - 1.0) > FEED_UNIT_TOL)
+    if off.size:  # a unit vector by the table's contract: another length is a column out of place, not a scale
+        r = int(off[0])
+        raise ValueError(f"{path}: {where(r)}: hole {ids[r]}: feed direction i,j,k has length {norm[r]:.6g}, expected "
+                         f"a unit vector (within {FEED_UNIT_TOL:g}; {off.size} row(s) so)")
     seen = {}
     for r, h in enumerate(ids):
         if h in seen:

@@ -36,7 +36,7 @@ def _alarm_words(a) -> str:
             f"{a.start_hole_id} ({utc(a.start_time_s)}); its level "
             + (f"moved {a.size_um:+.1f} µm and stayed; a zero shift of one sensor alone: {shifts} (one redundant "
                f"reading cannot tell which of the 4)" if a.persisted else
-               f"then returned ({a.size_um:+.2f} µm): the run did not persist") + f": {a.advice}")
+               f"then returned ({a.size_um:+.2f} µm)") + f": {a.advice}")  # the advice says whether it persisted
 
 
 def _ppk(fig: dict, short: bool = False) -> str:
@@ -53,6 +53,31 @@ def _ppk(fig: dict, short: bool = False) -> str:
 def _q(fig: dict, which: str, key: str) -> str:
     v = fig[f"quantiles_{which}_deg"][key]
     return "-" if not np.isfinite(v) else f"{v:.4g}"
+
+
+def _panel_terms(report) -> str:
+    """What of the panel U95 carries: its known surface's terms, or the curvature bound."""
+    cv = report.curvature or {}
+    if "holes" in cv:  # each hole's surface known (--panel/--points)
+        return (f" + each hole's curvature from {cv['source']} (its fit; the drill point's position error "
+                f"{cv['position_error_mm']:g} mm; the form tolerance {cv['form_tolerance_mm']:g} mm; the head's spin "
+                f"+-{cv['spin_deg']:g} deg where the log has no pose)")
+    return f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm"
+
+
+def _limits(report) -> list:
+    """What the data could not determine, for the run's panel: known (its CAD) or bounded."""
+    cv = report.curvature or {}
+    if "holes" in cv:
+        panel = [f"each hole's surface is taken from {cv['source']}: a panel off its CAD by more than the form "
+                 f"tolerance stated ({cv['form_tolerance_mm']:g} mm) is not in U95; the redundant reading names the "
+                 f"holes where it sees the shape off the CAD (the 'panel off its CAD' check)"]
+    else:
+        panel = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second "
+                 "order in the spots' spread over the radius (docs/measure.md gives its size); no panel was given, "
+                 f"the radius >= {report.min_radius_mm:g} mm is " + ("stated" if cv else "assumed")]
+    return panel + ["the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would "
+                    "need"]
 
 
 def measure_text(report) -> str:
@@ -79,11 +104,13 @@ def measure_text(report) -> str:
               f"p99.9 {_q(fig, 'before', 'p99.9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
               f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
-              f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
-              f"(X99.865 - X50); the angle is bounded below by 0, not normal)",
+              (f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+               f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
+               f"(X99.865 - X50); the angle is bounded below by 0, not normal)" if np.isfinite(fig["mean_deg"]) else
+               "judged angle: none (no hole was judged)"),
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
-                                              " only (the layout has no calibration covariance)") + ", 95 %"]
+                                              " (the layout has no calibration covariance)") + _panel_terms(report)
+              + ", 95 %"]
     ch = report.chart
     lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.get('k')}, "
                   f"h {ch.get('h')}, in-control ARL {ch.get('arl0_holes', 0):,.0f} holes; a shift of 1 scale is "
@@ -217,14 +244,24 @@ def measure_section(report):
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
-        tables.append(Table("Drift alarms", ("cell", "alarm at hole", "time [UTC]", "change from hole", "run [µm]",
-                                             "level moved [µm]", "persisted", "one sensor alone [µm]"),
-                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.start_hole_id}", f"{a.run_um:+.1f}",
-                                   f"{a.size_um:+.1f}", "yes" if a.persisted else "no",
-                                   ", ".join(f"{k} {x:+.1f}" for k, x in a.sensor_shift_um.items())) for a in alarms)))
-    limits = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second order "
-              "in the spots' spread over the radius (docs/measure.md gives its size)",
-              "the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would need"]
+        # two narrow tables, not one of 8 columns (it ran past a 1280 px page and a phone's; issue 51)
+        tables.append(Table("Drift alarms (where each run began: the text below)",
+                            ("cell", "alarm at hole", "time [UTC]", "run [µm]", "level moved [µm]", "persisted"),
+                            tuple((a.cell, a.hole_id, _when(a.time_s), f"{a.run_um:+.1f}", f"{a.size_um:+.1f}",
+                                   "yes" if a.persisted else "no") for a in alarms)))
+        names = list(dict.fromkeys(k for a in alarms for k in a.sensor_shift_um))
+        tables.append(Table("Drift alarms: the zero shift of each sensor alone that explains the change [µm] "
+                            "(one redundant reading cannot tell which)", ("alarm at hole", *names),
+                            tuple((a.hole_id, *(f"{a.sensor_shift_um[k]:+.1f}" if k in a.sensor_shift_um else "-"
+                                                for k in names)) for a in alarms)))
+    if report.panel_map is not None:
+        from metrology.report.panel_map import panel_map_figure
+
+        figs.insert(0, figure_from_matplotlib(panel_map_figure(report.panel_map, report.tolerance_deg),
+                                              "The panel's holes coloured by their judged angle (deg, the scale beneath); "
+                                              "ringed red: holes that fail; grey crosses: holes not measured or not "
+                                              "in the log."))
+    limits = _limits(report)
     nxt = ["Recalibrate the head (metro plan, metro calibrate) before drilling on."] if alarms else []
     if c["undecided"]:
         nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "

@@ -185,8 +185,8 @@ def error_map_figure(run: NormalsRun, tolerance_deg: float):
         fin = e[ok]
         stats = f"max {fin.max():.3f}, mean {fin.mean():.3f} deg" if len(fin) else "no point"
         ax.set_title(f"{name}: {stats} (own colour scale)")
-        ax.set_xlabel("u [mm] (panel best-fit plane)")
-        ax.set_ylabel("v [mm]")
+        ax.set_xlabel("u [mm]")  # short: wrapped on a phone's figure it ran into the legend beneath
+        ax.set_ylabel("v [mm] (best-fit plane)")
         ax.set_aspect("equal")
         ax.grid(False)
     return fig

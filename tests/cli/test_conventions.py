@@ -278,6 +278,13 @@ def test_one_wording_for_a_missing_file_and_the_suffixes_in_every_format_error(t
         (["validate", str(M / "validation.csv"), "--plane", "p.yaml", "--layout", nominal],
          "p.yaml: unknown extension '.yaml' for --plane; expected one of .json, .csv"),
         (["fit-plane", "p.yaml"], "p.yaml: unknown extension '.yaml' for CLOUD; expected one of .csv, .e57"),
+        (["measure", "nope.csv", "--layout", nominal], "nope.csv: no such file (LOG)"),
+        (["measure", "p.yaml", "--layout", "nope.toml"], "nope.toml: no such file (--layout)"),
+        (["measure", "p.yaml", "--layout", nominal, "--panel", "nope.stl", "--points", "p.yaml"],
+         "nope.stl: no such file (--panel)"),
+        (["measure", "p.yaml", "--layout", nominal, "--points", "nope.csv"], "nope.csv: no such file (--points)"),
+        (["simulate-log", "--panel", "nope.stl", "--out", "x.csv"], "nope.stl: no such file (--panel)"),
+        (["simulate-log", "--points", "nope.csv", "--out", "x.csv"], "nope.csv: no such file (--points)"),
     ]
     for args, words in cases:
         r = runner.invoke(app, args)
@@ -331,3 +338,28 @@ def test_a_progress_bar_of_unknown_total_counts_without_a_total(monkeypatch):
     with common.progress_bar("plan") as progress:
         progress(3, 7, "step")
     assert "3/7" in err.getvalue()
+
+
+def test_measure_help_shows_brackets_without_backslashes_and_every_exit_cause(monkeypatch):
+    """Issue 51, item 13: rich markup escapes are not shown; the exit codes name the drilled angle not known."""
+    monkeypatch.setenv("COLUMNS", "200")
+    r = runner.invoke(app, ["measure", "--help"])
+    assert r.exit_code == 0
+    text = " ".join(r.stdout.replace("│", " ").split())
+    assert "\\[" not in text and "[calibration]" in text and "metro[fleet]" in text
+    assert "drilled angle not known" in text
+
+
+def test_ctrl_c_exits_130_with_one_line(tmp_path, monkeypatch):
+    """Issue 51, item 14: an interrupted run says so on one line and exits 130."""
+    import metrology.jobs.measure as job
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(job, "measure_files", interrupted)
+    log = tmp_path / "log.csv"
+    log.write_text("hole_id,time\n")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(M / "nominal.toml")])
+    assert r.exit_code == 130, r.output
+    assert r.stderr.strip().splitlines() == [r.stderr.strip()] and r.stderr.startswith("error: interrupted (Ctrl-C)")

@@ -160,6 +160,19 @@ def test_a_transient_knock_is_shown_but_does_not_fail_the_drift_gate(tmp_path, l
     checks = {c["name"]: c for c in s["verdict"]["checks"]}
     assert checks["drift watch: alarms whose run did not persist (check the head)"]["value"] == 1
     assert checks["drift watch: alarms whose change persisted (recalibrate)"]["value"] == 0
+    # the text says it once (issue 51, item 14: "the run did not persist: check the head: the run did not persist")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h2.csv")])
+    assert r.output.count("did not persist (a false alarm") == 1 and "persist: check the head: the run" not in r.output
+
+
+def test_nothing_judged_says_so_not_nan(tmp_path, layout):
+    """Issue 51, item 14: "judged angle: mean nan deg, s nan deg" when no hole was judged."""
+    cols, _, _ = hole_log(calibrated_layout(), n=30, angle_deg=(1, 2))
+    for s in ("L1", "L2"):
+        cols[f"d_{s}"] = [None] * 30  # 2 readings a hole: none measured
+    log = write_log_csv(cols, tmp_path / "log.csv")
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(tmp_path / "h.csv")])
+    assert "judged angle: none (no hole was judged)" in r.output and " nan " not in r.output
 
 
 def test_a_layout_that_does_not_fit_the_head_is_refused(tmp_path):

@@ -49,6 +49,8 @@ def _mixed_log(tmp_path):
     for s in ("L1", "L2"):
         cols[f"d_{s}"][11] = None
         cols[f"d_{s}_after"][11] = None
+    cols["d_L3_after"][13] += 0.4  # a gross after-reading: the drilled angle not known (not measured)
+    cols["d_L2_after"][17] += 0.04  # before and after disagree (rule 3)
     return write_log_csv(cols, tmp_path / "log.csv")
 
 
@@ -78,14 +80,21 @@ def test_a_valid_qif_results_document_with_every_hole(tmp_path, layout, schema):
         angle = h["angle_after_deg"] if after else h["angle_deg"]
         u95 = h["U95_after_deg"] if after else h["U95_angle_deg"]
         value = m.findtext(f"{Q}Value")
-        if angle is None:
-            assert value is None and h["status"] == "not_measured"
+        if h["status"] == "not_measured":  # no judged figure, in the results or the document (issue 51)
+            assert value is None and m.find(f"{Q}Attributes") is None
+            assert h["angle_after_deg"] is None and h["U95_after_deg"] is None
         else:
             assert float(value) == pytest.approx(angle, abs=5e-7)
+            # QIF's own standard uncertainty on the value (U95 / k, k = 2), and the U95 itself
+            v = m.find(f"{Q}Value")
+            assert float(v.get("combinedUncertainty")) == pytest.approx(u95 / 2, abs=5e-7)
+            assert v.get("meanError") == "0"
             attr = m.find(f"{Q}Attributes/{Q}AttributeD1")
             assert attr.get("name") == "U95_deg" and float(attr.get("value")) == pytest.approx(u95, abs=5e-7)
         assert m.findtext(f"{Q}TimeStamp").startswith(h["time"].strftime("%Y-%m-%dT%H:%M:%S"))  # a timestamp column
     assert seen == set(want), seen  # every status is exercised
+    assert sum(h["status"] == "not_measured" for h in holes) >= 2
+    assert summary["counts_detail"]["unknown_after"] >= 1  # a hole whose drilled angle is not known
     assert summary["counts"]["fails"] > 0
     assert root.find(f".//{Q}InspectionStatus/{Q}InspectionStatusEnum").text == "FAIL"
     tol = root.find(f".//{Q}AngleCharacteristicDefinition/{Q}Tolerance")

@@ -376,10 +376,12 @@ def test_a_bad_log_with_workers_is_its_one_line_error_and_the_cluster_started_me
             busy.listen()
         except OSError:  # taken already: the same case
             pass
-        r = runner.invoke(app, ["measure", str(tmp_path / "missing"), "--layout", str(fleet / "calibrated.toml"),
+        bad = tmp_path / "bad.csv"  # read once the cluster is starting (a missing file is refused before it)
+        bad.write_text("hole_id,when\nH1,2026-11-25T08:00:00Z\n", encoding="utf-8")
+        r = runner.invoke(app, ["measure", str(bad), "--layout", str(fleet / "calibrated.toml"),
                                 "--out", str(tmp_path / "out"), "--workers", "2"])
     assert r.exit_code == 2, r.output
-    assert r.output.strip().count("\n") == 0 and "missing: no such file or folder" in r.output
+    assert r.output.strip().count("\n") == 0 and "bad.csv" in r.output and r.output.startswith("error: ")
     assert not (tmp_path / "out").exists()
     assert not _worker_processes()
 

@@ -113,3 +113,14 @@ def test_the_tilts_are_stated_in_one_chart_the_calibrated_directions(run):
     assert "e1, e2 of its calibrated direction" in text
     assert text.count("e1, e2 of its calibrated direction") == 2
     assert "nominal direction" not in text
+
+
+def test_the_tomls_direction_stderr_is_the_certificates_tilt_u(run):
+    """Issue 51, item 9: the TOML's direction_stderr_deg and the certificate's beam-tilt u are one chart's."""
+    cert, out, _ = run
+    raw = {s["name"]: s for s in tomllib.loads(out.read_text(encoding="utf-8"))["sensors"]}
+    for p in cert["parameters"]:
+        if p["parameter"].startswith("beam tilt"):
+            j = ("e1", "e2").index(p["parameter"][-2:])
+            assert raw[p["sensor"]]["direction_stderr_deg"][j] == pytest.approx(p["u"], abs=1e-6)
+    assert "e1, e2 of the calibrated direction" in out.read_text(encoding="utf-8")

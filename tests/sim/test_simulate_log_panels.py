@@ -75,7 +75,7 @@ def test_the_metro_controller_is_called_with_the_cad_shape(tmp_path, monkeypatch
     monkeypatch.setitem(sys.modules, "metrology.measure.surface", stub)
     r = run(tmp_path, "--panel", "sphere", "--radius-mm", "500", "--points", str(tmp_path / "h.csv"), "--holes", "10",
             "--controller", "metro", "--json")
-    assert r.exit_code == 2 and "no such hole table" in r.output  # (the table is written next)
+    assert r.exit_code == 2 and "h.csv: no such file (--points)" in r.output  # (the table is written next)
     (tmp_path / "h.csv").write_text("hole_id,x,y,z,i,j,k\nA,0,0,0,0,0,-1\nB,10,0,-0.1,0.02,0,-0.9998\n")
     r = run(tmp_path, "--panel", "sphere", "--radius-mm", "500", "--points", str(tmp_path / "h.csv"), "--holes", "10",
             "--controller", "metro", "--json")
@@ -160,7 +160,7 @@ def test_a_panel_in_metres_is_refused(tmp_path):
     (["--panel", "wing", "--off-cad", "dent"], "--off-cad needs --points"),
     (["--panel", "wing", "--points", WING_HOLES, "--off-cad", "bump"], "--off-cad bump: expected dent"),
     (["--controller", "pid"], "--controller pid: expected one of microplane, metro"),
-    (["--panel", "wing.iges"], "no such panel file"),
+    (["--panel", "wing.iges"], "wing.iges: no such file (--panel)"),
 ])
 def test_bad_panel_options_are_one_line_exit_2(tmp_path, args, msg):
     r = run(tmp_path, "--holes", "10", *args)

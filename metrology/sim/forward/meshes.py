@@ -192,7 +192,7 @@ def _check_diagonal(diag, source):
     lo, hi = PLAUSIBLE_DIAGONAL_MM
     if not (lo <= diag <= hi):
         raise ValueError(f"{source}: bounding-box diagonal {diag:.4g}, expected {lo:g}..{hi:g} mm "
-                         "(is the panel in metres or microns? panels are read in mm)")
+                         "(is the panel in metres or inches? panels are read in mm)")
 
 
 def load_sim_panel(path):

@@ -1,0 +1,152 @@
+"""The unit of a panel and its hole table, judged together against the head (mm) that drills them.
+
+A 1200 x 800 mm skin exported in inches reads as a 47 x 31 mm part; its table's holes, 100 mm
+apart, as 3.9 mm apart. Each file alone looks like a part (the mesh's diagonal check in
+:mod:`metrology.panel.mesh` passes it), and a run on it measures nothing, or worse, curvatures
+25 times too large. The layout is in mm (the calibration's own file), so the head is the
+yardstick: the rule (:func:`check_panel_units`) reads the panel's and the table's numbers as mm
+and refuses them when
+
+- the panel is narrower than the head's footprint (:data:`FOOTPRINT_FIT`): the spots around a
+  hole cannot all land on it, so no hole could be measured;
+- the table's holes are closer than :data:`MIN_PITCH_MM` (median distance to the nearest hole),
+  or farther than :data:`MAX_PITCH_MM`: no drilled pattern;
+- the table's holes spread wider than the panel (:data:`TABLE_OVER_PANEL`): the two files are
+  not in one unit;
+- the log's commanded positions (``pose_x_mm``, ...) lie farther from their holes' table points
+  than :data:`POSE_REACH` stand-offs: the table is not in the log's unit.
+
+The refusal names the unit that would make every reading plausible (``in`` or ``m``, read with
+:data:`CANDIDATES`) and the fix (``--units``, or converting the files). Numbers that no other unit
+makes plausible either are let through (a dense test pattern is no unit's mistake), unless the panel
+is narrower than the footprint (nothing could be measured on it). Nothing here reads a file.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["check_panel_units", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
+           "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES"]
+
+#: the panel's two largest sides must hold this many footprint radii (the spots' disc, both sides of a hole)
+FOOTPRINT_FIT = 2.0
+#: holes closer than this (mm) cannot both be drilled: the smallest fastener (2.4 mm) at two diameters' pitch
+MIN_PITCH_MM = 5.0
+#: holes a median 2 m from their nearest neighbour are no hole pattern a cell drills (one hole per skin)
+MAX_PITCH_MM = 2000.0
+#: the table's box may exceed the panel's by this share (holes near an edge, a mesh trimmed to the part)
+TABLE_OVER_PANEL = 1.1
+#: a commanded position lies within this many stand-offs (plus the footprint) of its hole's table point
+POSE_REACH = 4.0
+#: the units tried when the numbers do not read as mm: name -> mm per unit
+CANDIDATES = {"in": 25.4, "m": 1000.0, "cm": 10.0}
+NAMES = {"in": "inches", "m": "metres", "cm": "centimetres"}
+
+
+def nearest_spacing(points) -> float:
+    """Median distance (file units) of each of ``points (m, 3)`` to its nearest other point (NaN under 2).
+    Brute force in blocks: a hole table has thousands of rows, not millions."""
+    P = np.asarray(points, float)
+    if len(P) < 2:
+        return float("nan")
+    P = P - P.mean(axis=0)
+    sq = np.einsum("ij,ij->i", P, P)
+    nn = np.empty(len(P))
+    for a in range(0, len(P), 1000):
+        d2 = sq[a:a + 1000, None] + sq[None, :] - 2.0 * (P[a:a + 1000] @ P.T)
+        d2[np.arange(len(d2)), np.arange(a, a + len(d2))] = np.inf  # itself
+        d2[d2 <= 0] = np.inf  # duplicates (the reader refuses duplicate ids, not duplicate points)
+        nn[a:a + 1000] = d2.min(axis=1)
+    nn = nn[np.isfinite(nn)]
+    return float(np.sqrt(np.median(nn))) if len(nn) else float("nan")
+
+
+def _problems(scale, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, pose_gap) -> list:
+    """What is implausible when the files' numbers times ``scale`` are mm (module rule), as phrases."""
+    out = []
+    if panel_sides is not None and panel_sides[1] * scale < FOOTPRINT_FIT * footprint_mm:
+        out.append(f"the panel ({panel_sides[0] * scale:.3g} x {panel_sides[1] * scale:.3g} mm) is narrower than "
+                   f"the head's footprint ({FOOTPRINT_FIT * footprint_mm:.3g} mm across)")
+    if np.isfinite(pitch) and not MIN_PITCH_MM <= pitch * scale <= MAX_PITCH_MM:
+        out.append(f"the holes are {pitch * scale:.3g} mm apart (a drilled pattern: {MIN_PITCH_MM:g} to "
+                   f"{MAX_PITCH_MM:g} mm)")
+    if panel_sides is not None and table_sides is not None and \
+            table_sides[0] > TABLE_OVER_PANEL * panel_sides[0] + 1e-9:
+        out.append(f"the holes spread {table_sides[0] * scale:.3g} mm, wider than the panel "
+                   f"({panel_sides[0] * scale:.3g} mm)")
+    if pose_gap is not None:
+        gap = pose_gap(scale)
+        if np.isfinite(gap) and gap > POSE_REACH * standoff_mm + footprint_mm:
+            out.append(f"the log's commanded positions lie a median {gap:.3g} mm from their holes' points "
+                       f"(the stand-off is {standoff_mm:.3g} mm)")
+    return out
+
+
+def _sides(extent):
+    """The two largest sides of a box, largest first (file units)."""
+    e = np.sort(np.asarray(extent, float))[::-1]
+    return float(e[0]), float(e[1])
+
+
+def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_points=None, pose_points=None,
+                      names="the panel", given=None, panel_in_mm=False, units_option=True):
+    """A one-line refusal when the panel and hole table do not read as mm against the head, else None.
+
+    Parameters
+    ----------
+    footprint_mm : float, mm, the head's footprint radius (the layout's spots at mid-range)
+    standoff_mm : float, mm, the readings' stand-off (mid-range)
+    panel_extent : (3,) float, file units (mm once loaded), the panel's bounding box, or None
+    table_points : (m, 3) float, file units, the hole table's drill points, or None
+    pose_points : (m, 3) float, mm, the log's commanded TCS positions at the same holes as
+        ``table_points`` (rows matched), or None when the log carries none
+    names : str, how the refusal names the files ("skin.stl and skin.holes.csv")
+    given : str or None, the ``--units`` the user gave (the refusal then asks to check the files)
+    panel_in_mm : bool, the panel's unit is settled (a file that declares it, or ``--units``): only
+        the table is scaled when a candidate unit is tried
+    units_option : bool, the command takes ``--units`` (the refusal offers it; else: convert the files)
+    """
+    panel_sides = None if panel_extent is None else _sides(panel_extent)
+    table_sides = None
+    pitch = float("nan")
+    pose_gap = None
+    if table_points is not None and len(table_points):
+        T = np.asarray(table_points, float)
+        table_sides = _sides(np.percentile(T, 100, axis=0) - np.percentile(T, 0, axis=0))
+        pitch = nearest_spacing(T)
+        if pose_points is not None and len(pose_points):
+            Q = np.asarray(pose_points, float)
+            ok = np.all(np.isfinite(Q), axis=1) & np.all(np.isfinite(T), axis=1)
+            if ok.any():
+                def pose_gap(scale, T=T[ok], Q=Q[ok]):
+                    return float(np.median(np.linalg.norm(Q - scale * T, axis=1)))
+    problems = _problems(1.0, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, pose_gap)
+    if not problems:
+        return None
+    if given is not None:
+        return (f"{names}: read in {given} (--units {given}): {'; '.join(problems)}: check the files' unit "
+                f"(the layout and the log are in mm)")
+    # a panel that reads as mm on its own (or declares its unit) stays: only the table is tried in another unit
+    settled = panel_in_mm or (panel_sides is not None and
+                              not _problems(1.0, footprint_mm, standoff_mm, panel_sides, None, float("nan"), None))
+    likely = []
+    for unit, scale in CANDIDATES.items():
+        ps = None if panel_sides is None else panel_sides if settled else (panel_sides[0] * scale,
+                                                                             panel_sides[1] * scale)
+        ts = None if table_sides is None else (table_sides[0] * scale, table_sides[1] * scale)
+        if not _problems(1.0, footprint_mm, standoff_mm, ps, ts, pitch * scale,
+                         None if pose_gap is None else (lambda s, g=pose_gap, k=scale: g(s * k))):
+            likely.append(unit)
+    if not likely and not (panel_sides is not None and panel_sides[1] < FOOTPRINT_FIT * footprint_mm):
+        return None  # odd numbers, but no other unit explains them (a dense test pattern): not a unit's mistake
+    if not likely:
+        fix = "no unit reads plausibly: are these the panel and the table of this head's cell?"
+    elif settled and table_sides is not None and panel_sides is not None:
+        fix = (f"the hole table is not in mm, it looks like {NAMES[likely[0]]} (the panel like mm): convert the table "
+               f"to mm" + (
+               " (--units applies to both files)" if units_option else ""))
+    else:
+        fix = (f"they look like {NAMES[likely[0]]}: give --units {likely[0]}, or convert them to mm" if units_option
+               else f"they look like {NAMES[likely[0]]}: convert them to mm")
+    return f"{names} read as mm: {'; '.join(problems)}: {fix}"

@@ -1,0 +1,183 @@
+"""A panel and its hole table in inches or metres (together, or the table alone) are refused by
+``metro measure`` and ``metro simulate-log`` with one line naming the likely unit; ``--units``
+reads them (issue 51, item 1 and 2)."""
+
+import csv
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cli.main import app
+from metrology.io.data import data_path
+from metrology.io.panel_units import check_panel_units, nearest_spacing
+
+runner = CliRunner()
+TABLE6 = str(data_path("measured", "nominal.toml"))
+R = 1500.0  # the skin's radius, mm
+
+
+def _skin(folder, unit, scale):
+    """A 1200 x 800 mm paraboloid skin (R 1500 mm) and its 77 holes 100 mm apart, written in ``unit``."""
+    import trimesh
+
+    gx, gy = np.arange(-600, 601, 20.0), np.arange(-400, 401, 20.0)
+    X, Y = np.meshgrid(gx, gy, indexing="ij")
+    V = np.stack([X.ravel(), Y.ravel(), -(X.ravel() ** 2 + Y.ravel() ** 2) / (2 * R)], 1)
+    m = len(gy)
+    i, j = np.meshgrid(np.arange(len(gx) - 1), np.arange(m - 1), indexing="ij")
+    a = (i * m + j).ravel()
+    F = np.concatenate([np.stack([a, a + m, a + m + 1], 1), np.stack([a, a + m + 1, a + 1], 1)])
+    mesh, table = folder / f"skin_{unit}.stl", folder / f"skin_{unit}.holes.csv"
+    trimesh.Trimesh(V * scale, F, process=False).export(str(mesh))
+    with open(table, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["hole_id", "x", "y", "z", "i", "j", "k"])
+        k = 0
+        for x in np.arange(-500, 501, 100.0):
+            for y in np.arange(-300, 301, 100.0):
+                n = np.array([x / R, y / R, 1.0])
+                n /= np.linalg.norm(n)
+                k += 1
+                w.writerow([f"H{k:04d}", x * scale, y * scale, -(x * x + y * y) / (2 * R) * scale, *(-n)])
+    return str(mesh), str(table)
+
+
+@pytest.fixture(scope="module")
+def skins(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("skins")
+    files = {u: _skin(folder, u, s) for u, s in (("mm", 1.0), ("in", 1 / 25.4), ("m", 1e-3))}
+    log = folder / "log.csv"
+    r = runner.invoke(app, ["simulate-log", "--panel", files["mm"][0], "--points", files["mm"][1], "--holes", "40",
+                            "--seed", "3", "--layout", TABLE6, "--true-layout", TABLE6, "--out", str(log)])
+    assert r.exit_code == 0, r.output
+    return folder, files, str(log)
+
+
+def _measure(log, *args):
+    return runner.invoke(app, ["measure", log, "--layout", TABLE6, *args])
+
+
+@pytest.mark.parametrize("unit, word", [("in", "inches"), ("m", "metres")])
+def test_a_panel_and_its_table_in_one_wrong_unit_are_refused(skins, unit, word):
+    folder, files, log = skins
+    out = folder / f"m_{unit}.csv"
+    r = _measure(log, "--panel", files[unit][0], "--points", files[unit][1], "--out", str(out))
+    assert r.exit_code == 2, r.output
+    err = r.output.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "Traceback" not in r.output
+    assert f"look like {word}" in err[0] and f"--units {unit}" in err[0] and "footprint" in err[0]
+    assert not out.exists()
+
+
+def test_the_table_alone_in_inches_is_refused_naming_the_spacing(skins):
+    folder, files, log = skins
+    r = _measure(log, "--points", files["in"][1], "--out", str(folder / "p.csv"))
+    assert r.exit_code == 2, r.output
+    assert "3.94 mm apart" in r.output and "inches" in r.output and "--units in" in r.output
+
+
+def test_a_table_in_inches_on_a_panel_in_mm_asks_to_convert_the_table(skins):
+    folder, files, log = skins
+    r = _measure(log, "--panel", files["mm"][0], "--points", files["in"][1], "--out", str(folder / "q.csv"))
+    assert r.exit_code == 2, r.output
+    assert "hole table is not in mm, it looks like inches (the panel like mm)" in r.output
+
+
+def test_units_in_measures_the_inch_files_as_the_mm_ones(skins):
+    folder, files, log = skins
+    rows = {}
+    for unit, extra in (("mm", []), ("in", ["--units", "in"])):
+        out = folder / f"u_{unit}.csv"
+        r = _measure(log, "--panel", files[unit][0], "--points", files[unit][1], *extra, "--out", str(out))
+        assert r.exit_code in (0, 1), r.output
+        with open(out, newline="") as fh:
+            rows[unit] = list(csv.DictReader(fh))
+    a = np.array([float(x["angle_deg"]) for x in rows["mm"]])
+    b = np.array([float(x["angle_deg"]) for x in rows["in"]])
+    assert np.all(np.isfinite(a)) and np.allclose(a, b, atol=1e-4)
+    # the wrong unit given: refused, the words say --units was given
+    r = _measure(log, "--panel", files["m"][0], "--points", files["m"][1], "--units", "in")
+    assert r.exit_code == 2 and "--units in" in r.output and "check the files' unit" in r.output
+
+
+def test_simulate_log_refuses_the_inch_panel(skins, tmp_path):
+    _, files, _ = skins
+    r = runner.invoke(app, ["simulate-log", "--panel", files["in"][0], "--points", files["in"][1], "--holes", "10",
+                            "--layout", TABLE6, "--out", str(tmp_path / "x.csv")])
+    assert r.exit_code == 2, r.output
+    assert "look like inches" in r.output and not (tmp_path / "x.csv").exists()
+
+
+def test_the_rule_on_numbers():
+    """The rule alone: mm passes; inches, metres caught; a log's commanded positions far from the table's
+    points name the table's unit even where its spacing and the panel pass."""
+    g = np.stack(np.meshgrid(np.arange(0, 2001, 200.0), np.arange(0, 1001, 200.0)), -1).reshape(-1, 2)
+    T = np.c_[g, np.zeros(len(g))]
+    assert nearest_spacing(T) == pytest.approx(200.0)
+    ok = dict(footprint_mm=26.6, standoff_mm=50.0)
+    assert check_panel_units(**ok, panel_extent=(2100, 1100, 10), table_points=T) is None
+    assert "inches" in check_panel_units(**ok, panel_extent=np.array((2100, 1100, 10)) / 25.4,
+                                         table_points=T / 25.4)
+    poses = T + [0, 0, 50.0]
+    assert check_panel_units(**ok, table_points=T, pose_points=poses) is None
+    line = check_panel_units(**ok, table_points=T / 25.4, pose_points=poses)  # 7.9 mm apart: spacing passes
+    assert line is not None and "commanded positions" in line and "inches" in line
+
+
+def test_a_log_none_of_whose_holes_is_in_the_table_is_refused(skins):
+    """Item 4: every hole would be not_measured, "off its CAD"; refused, exit 2, nothing written."""
+    folder, files, log = skins
+    with open(log, newline="") as fh:
+        rows = list(csv.reader(fh))
+    at = [rows[0].index(k) for k in ("hole_id", "point_id")]
+    for r in rows[1:]:
+        for j in at:
+            r[j] = "X" + r[j]
+    other = folder / "other.csv"
+    with open(other, "w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    out, qif, rep = folder / "o.csv", folder / "o.qif", folder / "o.html"
+    r = _measure(str(other), "--panel", files["mm"][0], "--points", files["mm"][1], "--out", str(out),
+                 "--qif", str(qif), "--report", str(rep))
+    assert r.exit_code == 2, r.output
+    assert "none of its 40 holes is in the hole table" in r.output and "'XH0001'" in r.output
+    assert not out.exists() and not qif.exists() and not rep.exists()
+
+
+def test_report_and_qif_record_the_panel_and_table_and_map_the_holes(skins):
+    """Item 6: the inputs with their SHA-256 (report and QIF), the panel map, the panel's own words."""
+    import hashlib
+    import re
+
+    folder, files, log = skins
+    rep, qif = folder / "r.html", folder / "r.qif"
+    r = _measure(log, "--panel", files["mm"][0], "--points", files["mm"][1], "--out", str(folder / "r.csv"),
+                 "--report", str(rep), "--qif", str(qif))
+    assert r.exit_code in (0, 1), r.output
+    from html import unescape
+
+    html = unescape(rep.read_text(encoding="utf-8"))
+    for f in files["mm"]:
+        digest = hashlib.sha256(open(f, "rb").read()).hexdigest()
+        assert digest in html
+        assert digest in qif.read_text(encoding="utf-8")
+    assert "The panel's holes coloured by their judged angle" in html
+    assert re.search(r"uncertainty: [^\n]*each hole's curvature from panel \S*skin_mm.stl", html)
+    assert "each hole's surface is taken from panel" in html  # what the data could not determine
+    assert not re.search(r"curvature bias for a panel radius", html)
+
+
+@pytest.mark.parametrize("length", [2.0, 1.3])
+def test_a_feed_vector_not_of_unit_length_is_refused(skins, tmp_path, length):
+    """Issue 51, item 14: a feed of length 2 or 1.3 was normalised without a word."""
+    folder, files, log = skins
+    with open(files["mm"][1], newline="") as fh:
+        rows = list(csv.reader(fh))
+    rows[3][4:7] = [f"{float(v) * length:.9f}" for v in rows[3][4:7]]
+    bad = tmp_path / "bad.csv"
+    with open(bad, "w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    r = _measure(log, "--panel", files["mm"][0], "--points", str(bad), "--out", str(tmp_path / "o.csv"))
+    assert r.exit_code == 2, r.output
+    assert f"line 4: hole H0003: feed direction i,j,k has length {length:g}" in r.output
