@@ -38,16 +38,21 @@ SEVERITY_RAISED, SEVERITY_SIZED = 700, 800
 
 
 def parse_endpoint(url: str) -> tuple[str, int, bool]:
-    """``opc.tcp://HOST:PORT`` -> (host, port, loopback); ValueError (one line) otherwise."""
+    """``opc.tcp://HOST:PORT`` -> (host, port, loopback), HOST 127.0.0.1 where none is given
+    (``opc.tcp://:4840``); ValueError (one line) otherwise."""
     p = urlparse(url)
-    if p.scheme != "opc.tcp" or not p.hostname or p.port is None:
+    try:
+        port = p.port
+    except ValueError:
+        port = None
+    if p.scheme != "opc.tcp" or port is None:
         raise ValueError(f"--opcua {url}: expected opc.tcp://HOST:PORT (e.g. opc.tcp://127.0.0.1:4840)")
-    host = p.hostname
+    host = p.hostname or "127.0.0.1"
     try:
         loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
     except ValueError:
         loopback = False
-    return host, p.port, loopback
+    return host, port, loopback
 
 
 def read_users(path) -> dict:

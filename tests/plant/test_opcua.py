@@ -148,6 +148,10 @@ def test_port_in_use_exits_2_at_start(knocked):
 
 
 def test_a_host_that_is_not_loopback_needs_certificate_and_users(knocked, tmp_path):
+    from metrology.plant.server import parse_endpoint
+
+    assert parse_endpoint("opc.tcp://:4840") == ("127.0.0.1", 4840, True)  # no host: loopback
+    assert parse_endpoint("opc.tcp://localhost:4840")[2] and not parse_endpoint("opc.tcp://0.0.0.0:4840")[2]
     r = runner.invoke(app, ["measure", str(knocked), "--layout", str(TABLE6), "--follow", "--opcua",
                             f"opc.tcp://0.0.0.0:{free_port()}"])
     assert r.exit_code == 2 and "not loopback" in r.stderr and r.stdout == ""
