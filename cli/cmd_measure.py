@@ -72,7 +72,7 @@ def register(app: typer.Typer) -> None:
         opcua: Optional[str] = typer.Option(None, "--opcua", help="Also serve each hole's result live on an OPC UA "
                                             "server at opc.tcp://HOST:PORT (OPC 40210 GMS characteristics, a "
                                             "result-ready event per hole, drift alarms as events; needs "
-                                            "metro\\[plant]). A host that is not loopback needs --opcua-cert, "
+                                            "metro[plant]). A host that is not loopback needs --opcua-cert, "
                                             "--opcua-key and --opcua-users (docs/plant.md)."),
         opcua_cert: Optional[Path] = typer.Option(None, "--opcua-cert", help="The server's certificate (PEM)."),
         opcua_key: Optional[Path] = typer.Option(None, "--opcua-key", help="The certificate's private key (PEM)."),
