@@ -215,8 +215,11 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         dist, idx = dist.reshape(len(dist), -1), idx.reshape(len(idx), -1)
         have = np.isfinite(dist)
         q = V[np.where(have, idx, 0)] - P[b, None, :]  # (c, k, 3)
-        s_ = (q * e1[b, None, :]).sum(2) / rho  # scaled: a well-conditioned design
-        t_ = (q * e2[b, None, :]).sum(2) / rho
+        # scaled by the neighbours' own reach, not the footprint's: a well-conditioned design whatever the mesh's
+        # step against the footprint (over rho, a 2 mm mesh under a 50 mm disc had cond > 1e12: the ray-cast cubic)
+        r0 = np.maximum(np.where(have, dist, 0.0).max(1), 1e-9)[:, None]  # (c, 1), mm
+        s_ = (q * e1[b, None, :]).sum(2) / r0
+        t_ = (q * e2[b, None, :]).sum(2) / r0
         w = (q * n[b, None, :]).sum(2)
         X = np.concatenate([_cubic_design(s_, t_), np.stack([s_ ** 4 / 24, s_ ** 3 * t_ / 6, s_ * s_ * t_ * t_ / 4,
                                                              s_ * t_ ** 3 / 6, t_ ** 4 / 24], axis=-1)], axis=-1)
@@ -228,8 +231,8 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         cf = np.einsum("cij,cpj,cp->ci", inv, X, np.where(have, w, 0.0))
         res = np.where(have, w - np.einsum("cpi,ci->cp", X, cf), 0.0)
         s2 = (res * res).sum(1) / np.maximum(cnt - 15, 1)
-        scale = rho ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
+        scale = r0 ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
         coef[b] = cf / scale  # back to mm
-        u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / rho ** 2
+        u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / r0[:, 0] ** 2
         ok[b] = good
     return coef, u_fit, ok
