@@ -6,6 +6,13 @@ threshold and reason:
 1. ``NOT_MEASURED``, fewer than :data:`MIN_SENSORS` usable readings: a plane needs 3 points. A
    blank reading, or one outside the sensor's ``range_mm`` (the sensor's own data are not valid
    there), is not used; with 3 left the hole is measured on those 3, with their larger U95.
+1b. ``NOT_MEASURED``, with the panel known, a footprint its local surface cannot represent (a tight
+   radius: a leading edge, a lip, a tube): a spot where the surface has turned more than
+   :data:`MAX_SPOT_TURN_DEG` from the hole's normal (past the crest), or a beam meeting the surface at
+   more than :data:`MAX_INCIDENCE_DEG` of incidence (grazing). Both from the fitted surface at the spots
+   (:mod:`metrology.measure.remainder`); the hole's readings are not counted as disagreeing (rule 2):
+   the model, not the head, is what fails there. (A footprint whose sampled disc leaves the CAD surface,
+   past the crest or off the edge, is refused with the panel: :mod:`metrology.panel.holes`.)
 2. ``NOT_MEASURED``, the readings disagree (4 sensors): the redundant reading's misfit ``rho``
    exceeds what any panel of radius >= ``min_radius_mm`` can give (``|M|_* / (2 R)``, the
    nuclear norm of the points' second moments weighted by ``q``) by more than
@@ -38,17 +45,16 @@ split into batches or partitions (the Dask path relies on it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from metrology.core.layout import SensorLayout
-from metrology.core.sym3 import smallest_eigvec
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status
 from metrology.measure.normals import hole_normals
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
-           "DEFAULT_MIN_RADIUS_MM"]
+           "DEFAULT_MIN_RADIUS_MM", "MAX_SPOT_TURN_DEG", "MAX_INCIDENCE_DEG"]
 
 #: fewest readings that give a plane
 MIN_SENSORS = 3
@@ -61,6 +67,13 @@ GROSS_SIGMAS = 6.0
 TILT_ALLOWANCE = 3.0
 #: the smallest panel radius the gross-reading rule allows for (mm): aircraft skins are >= 500 mm
 DEFAULT_MIN_RADIUS_MM = 500.0
+#: rule 1b: a spot where the surface has turned more than this from the hole's normal is past what the local
+#: surface (a height over the tangent plane, to degree 8 over the footprint) holds: on a cylinder a spot past
+#: 0.71 R from the crest (benchmarks/results/tight_radii.md)
+MAX_SPOT_TURN_DEG = 45.0
+#: rule 1b: a beam meeting the surface at more than this incidence grazes it: its spot stretched twice or more,
+#: a triangulation sensor's reading there is not the one its calibration made
+MAX_INCIDENCE_DEG = 60.0
 
 
 #: the per-hole columns metro writes, in order (before the columns passed through)
@@ -168,9 +181,14 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                                      np.concatenate([getattr(p[0], f) for p in parts])
                                      for f in parts[0][0].__dataclass_fields__})
             for k in parts[0][1]:
-                out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
+                if k != "remainder":
+                    out.extra[k][of(rows)] = np.concatenate([p[1][k] for p in parts])
+            rem = [p[1]["remainder"] for p in parts]  # rule 1b
+            turn, inc = (np.concatenate([getattr(x, a) for x in rem]) for a in ("turn", "incidence"))
+            past = (turn > np.radians(MAX_SPOT_TURN_DEG)) | (inc > np.radians(MAX_INCIDENCE_DEG))
         else:
             h = _hole_normals(sub, dd, settings.min_radius_mm)
+            past = np.zeros(len(rows), bool)
         rs = of(rows)
         out.normal[rs], out.angle[rs], out.U95[rs] = h.normal, h.angle, h.U95
         out.residual[rs] = h.residual
@@ -181,7 +199,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
             out.moment[rows] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS])  # slices, as the normals
                                                for i in range(0, len(dd), CACHE_ROWS)])
             bound = 0.5 * h.twist / settings.min_radius_mm  # the most any panel of radius >= R gives
-            gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
+            gross = (np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd) & ~past
             out.disagree[rows[gross]] = True
             for i, r in zip(np.flatnonzero(gross), rows[gross]):
                 out.reason[r] = (f"readings disagree: the redundant reading misses the plane by "
@@ -194,6 +212,12 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                 out.angle[r] = np.nan  # no normal from these readings
                 out.normal[r] = np.nan
                 out.U95[r] = np.nan
+        for i, r in zip(np.flatnonzero(past), rows[past]):  # rule 1b (rare: a loop)
+            out.reason[r] = (out.reason[r] + "; " if out.reason[r] else "") + (f"the footprint is past what the panel's local surface represents: a spot where the "
+                             f"surface has turned {np.degrees(turn[i]):.0f} deg from the hole's normal (at most "
+                             f"{MAX_SPOT_TURN_DEG:g}: past the crest) or a beam at {np.degrees(inc[i]):.0f} deg of "
+                             f"incidence (at most {MAX_INCIDENCE_DEG:g}: grazing)")
+            out.angle[r], out.normal[r], out.U95[r] = np.nan, np.nan, np.nan
     return out
 
 
@@ -284,57 +308,6 @@ def _pose(table):
     return R, v[:, 3:]
 
 
-def _against_cad(layout, d, normal, shape, surf, table_row, pose):
-    """Each hole against its CAD: ``(angle (N,) rad, offset (N,) mm)``.
-
-    ``angle``: between the measured normal (TCS, turned into the panel frame by the commanded pose)
-    and the CAD's normal at the hole. ``offset``: where the readings put the surface on the drill
-    axis (the spots, their height from the CAD's curvature taken off, fitted by a plane, met by the
-    axis), against the table's nominal point, along the CAD's outward normal: a panel standing 1 mm
-    proud of its CAD reads +1. NaN where a reading, the pose or the table row is missing."""
-    from metrology.measure.normals import drill_axis
-
-    R, origin = pose
-    N = len(d)
-    ang, off = np.full(N, np.nan), np.full(N, np.nan)
-    from metrology.measure.beyond import _finite_rows
-
-    rows = np.flatnonzero((table_row >= 0) & _finite_rows(d) & _finite_rows(origin) & _finite_rows(normal))
-    if rows.size == 0:
-        return ang, off
-    if rows.size == N:  # every row (the usual batch): views, not copies
-        rows = slice(None)
-    r = table_row[rows]
-    ncad = surf.normal[r]  # outward (toward the head), panel frame
-    Rr = R[rows]
-    nr = normal[rows]
-    # R n, along the drill axis (into the panel), dotted with the CAD's normal: explicit 3 x 3 over the holes
-    cos = -sum((Rr[:, i, 0] * nr[:, 0] + Rr[:, i, 1] * nr[:, 1] + Rr[:, i, 2] * nr[:, 2]) * ncad[:, i] for i in range(3))
-    ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
-    a = drill_axis(layout)
-    # the spots, sensor-major (n, h) per component, mm, TCS
-    dT = np.ascontiguousarray(d[rows].T)  # (n, h): each op over contiguous rows
-    E, u = layout.zero, layout.direction
-    sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
-    sa = sx * a[0] + sy * a[1] + sz * a[2]
-    lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
-    K = shape[rows]
-    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
-    sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
-                 + k22 * lz * lz)  # away from the head
-    sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
-    cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
-    xc, yc, zc = sx - cx, sy - cy, sz - cz
-    # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
-    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
-                        (zc * zc).sum(0), a)
-    t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
-    Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
-    o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
-    off[rows] = sum((o[:, i] + t * Ra[:, i] - p[:, i]) * ncad[:, i] for i in range(3))
-    return ang, off
-
-
 def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     """Measure one batch of a hole log.
 
@@ -373,7 +346,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
-                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
+                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, surf.higher.shape[1])), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
             whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
             if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
@@ -395,12 +368,15 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
+            if higher is not None and getattr(surf, "u_height", None) is not None:  # metrology.measure.remainder
+                higher = replace(higher, u_height=np.where(have, surf.u_height[table_row], 0.0))
     before = _measure(layout, d, settings, shape, u_shape, spin, higher)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = _readings(table, names, "_after")
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
-        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"])
+        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra["turn"],
+                                                          higher.u_height)
         after = _measure(layout, da, settings, shape, u_shape, spin, higher_after)
         judge_after = np.isfinite(da).any(1)
     else:
@@ -437,6 +413,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
             f"+- U95 {np.degrees(judged_u[i]):.4f} deg straddles the tolerance {np.degrees(tol):g} deg")
     ids = table.column("hole_id").cast(pa.string())
     if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
+        unmodelled = table_row < 0
         for i in np.flatnonzero(table_row < 0):
             code[i] = CODE[Status.NOT_MEASURED]
             reason[i] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
@@ -445,6 +422,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
             code[i] = CODE[Status.NOT_MEASURED]
             reason[i] = surf.problem[table_row[i]]
+            unmodelled[i] = True  # its readings are not the head's to disagree (rule 2): its surface is not known
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = CODE[Status.NOT_MEASURED]
@@ -476,7 +454,9 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         cols["panel_misfit_per_mm"] = num(before.extra["panel_misfit"])
         cols["panel_misfit_z"] = num(before.extra["panel_misfit_z"])
         if pose is not None and surf.point is not None:
-            vs_cad, offset = _against_cad(layout, d, before.normal, shape, surf, table_row, pose)
+            from metrology.measure.cadcheck import against_cad
+
+            vs_cad, offset = against_cad(layout, d, before.normal, shape, surf, table_row, pose)
             cols["normal_vs_cad_deg"] = num(np.degrees(vs_cad))
             cols["cad_offset_mm"] = num(offset)
     for k in table.column_names:
@@ -487,6 +467,8 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     idx = np.flatnonzero(full4)
     chart = ChartRows(idx, before.residual[idx], before.noise_sd[idx], before.signature[idx])
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
+    if surf is not None:
+        disagree &= ~unmodelled
     # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
     # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
     unknown = np.zeros(N, bool)

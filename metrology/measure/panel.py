@@ -169,7 +169,10 @@ class HoleSurfaces:
     frame : (m, 2, 3) float, unit, panel frame, the local axes ``e1, e2`` of ``higher``, or None
     higher : (m, 9) float, the CAD surface's height along ``normal`` beyond second order, or None: the
         coefficients of ``s^3/6, s^2 t/2, s t^2/2, t^3/6`` (1/mm^2) and ``s^4/24, s^3 t/6, s^2 t^2/4,
-        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point
+        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point; where the footprint is
+        large against the radius, (m, 39): degrees 5 to 8 after them (:mod:`metrology.panel.footprint`)
+    u_height : (m,) float, mm, or None: the height over the footprint that no term carries (a term of U95:
+        :mod:`metrology.measure.remainder`)
     """
 
     ids: tuple
@@ -183,6 +186,7 @@ class HoleSurfaces:
     point: np.ndarray | None = None
     frame: np.ndarray | None = None
     higher: np.ndarray | None = None
+    u_height: np.ndarray | None = None
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):

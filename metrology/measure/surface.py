@@ -13,7 +13,6 @@ as for the head square to it: in the TCS ``xy`` plane; curvature positive where 
     m = sigma (-g_x, -g_y, 1) / rho,     rho = sqrt(1 + |g|^2),   K_m = Q K Q^T,
 
 ``Q`` the smallest rotation taking ``sigma e_z`` onto ``m`` (the shape turned with the tilted head),
-
 ``m`` the unit normal toward the head (``sigma = -s``, the drill axis ``s e_z``). ``h_i = 0`` is
 the surface ``m.(p - c e_z) = -1/2 (Tq)^T K_m (Tq)`` (to second order in the distance from the axis;
 ``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
@@ -61,6 +60,7 @@ from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
+from metrology.measure.remainder import surface_remainder
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
 
@@ -343,7 +343,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     Y = np.broadcast_to(np.eye(3), (N, 3, 3))  # the CAD beyond second order, the head's spin: metrology.measure.beyond
     if beyond is not None:
         fit0 = fit_surface(layout, d, shape, steps=PRELIMINARY_STEPS, sigma_mm=sigma_mm, full=False)
-        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0)
+        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0,  # (a tight radius: once more from a fit)
+                                          lambda dd, kk: fit_surface(layout, dd, kk, sigma_mm=sigma_mm, full=False))
     fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
@@ -392,9 +393,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             C_cal = [Cc[:, 0, 0], Cc[:, 0, 1], Cc[:, 1, 1]]
     # the panel: delta K in an orthonormal basis of the tangent plane's symmetric tensors, and the spin
     C_pan = [np.zeros(N)] * 3
-    dh_basis = None
-    dh_spin = None
-    v_spin = None
+    dh_basis = dh_spin = v_spin = None
     if terms is not None:
         m = fit.normal
         dh_basis = _shape_basis(fit, g2, axis)  # (n, N) each
@@ -416,6 +415,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             v_spin = v * spin[:, None]  # the tilt at the spin's end, +-spin
             f = spin ** 2 / 3.0
             C_pan = [C_pan[0] + v[:, 0] * v[:, 0] * f, C_pan[1] + v[:, 0] * v[:, 1] * f, C_pan[2] + v[:, 1] * v[:, 1] * f]
+    rem = surface_remainder(fit, u, None if beyond is None else beyond.u_height)  # the budget's "surface model"
+    C_pan = [a + b for a, b in zip(C_pan, rem.cov)]  # a panel term (in its share)
     C = [a + b + c for a, b, c in zip(C_noise, C_cal, C_pan)]
     with np.errstate(invalid="ignore", divide="ignore"):
         k = 1.0 / (gn * (1.0 + g2))
@@ -450,11 +451,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
         U95[near] = magnitude_u95(tilt, Ca[near])
     panel_share = np.sqrt(np.maximum(var_pan, 0.0))
-    residual = np.full(N, np.nan)
-    residual_z = np.full(N, np.nan)
+    residual, residual_z, misfit, misfit_z = (np.full(N, np.nan) for _ in range(4))
     signature = twist = residual_sd = sd = None
-    misfit = np.full(N, np.nan)
-    misfit_z = np.full(N, np.nan)
     if n == 4:
         qv = fit.null.T  # (n, N)
         residual = (qv * fit.h_res.T).sum(0)
@@ -471,7 +469,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
             var_pan_rho = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2
             if dh_spin is not None:  # the spin turns the shape's twist: the redundant reading sees it
                 var_pan_rho = var_pan_rho + (qv * dh_spin).sum(0) ** 2 * spin ** 2 / 3.0
-        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho)
+        residual_sd = np.sqrt(sd * sd + (qv * qv * q_cal).sum(0) + var_pan_rho + rem.var_rho)
         signature = sig_k.T
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -497,4 +495,4 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     hn = HoleNormals(normal, angle, u_angle, U95, np.sqrt(var_noise), residual, residual_z,
                      None if signature is None else np.ascontiguousarray(signature), panel_share, twist,
                      residual_sd, sd)
-    return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z, "turn": Y}
+    return hn, {"correction": correction, "panel_misfit": misfit, "panel_misfit_z": misfit_z, "turn": Y, "remainder": rem}

@@ -1,0 +1,62 @@
+"""Each hole of a log with the commanded pose against its CAD (``metro measure --panel --points``): the
+measured normal against the CAD's, and where the readings put the surface on the drill axis against the
+table's nominal point. Moved out of :mod:`metrology.measure.holes` as it is (issue 53)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from metrology.core.sym3 import smallest_eigvec
+
+__all__ = ["against_cad"]
+
+
+def against_cad(layout, d, normal, shape, surf, table_row, pose):
+    """Each hole against its CAD: ``(angle (N,) rad, offset (N,) mm)``.
+
+    ``angle``: between the measured normal (TCS, turned into the panel frame by the commanded pose)
+    and the CAD's normal at the hole. ``offset``: where the readings put the surface on the drill
+    axis (the spots, their height from the CAD's curvature taken off, fitted by a plane, met by the
+    axis), against the table's nominal point, along the CAD's outward normal: a panel standing 1 mm
+    proud of its CAD reads +1. NaN where a reading, the pose or the table row is missing."""
+    from metrology.measure.normals import drill_axis
+
+    R, origin = pose
+    N = len(d)
+    ang, off = np.full(N, np.nan), np.full(N, np.nan)
+    from metrology.measure.beyond import _finite_rows
+
+    rows = np.flatnonzero((table_row >= 0) & _finite_rows(d) & _finite_rows(origin) & _finite_rows(normal))
+    if rows.size == 0:
+        return ang, off
+    if rows.size == N:  # every row (the usual batch): views, not copies
+        rows = slice(None)
+    r = table_row[rows]
+    ncad = surf.normal[r]  # outward (toward the head), panel frame
+    Rr = R[rows]
+    nr = normal[rows]
+    # R n, along the drill axis (into the panel), dotted with the CAD's normal: explicit 3 x 3 over the holes
+    cos = -sum((Rr[:, i, 0] * nr[:, 0] + Rr[:, i, 1] * nr[:, 1] + Rr[:, i, 2] * nr[:, 2]) * ncad[:, i] for i in range(3))
+    ang[rows] = np.arccos(np.clip(cos, -1.0, 1.0))
+    a = drill_axis(layout)
+    # the spots, sensor-major (n, h) per component, mm, TCS
+    dT = np.ascontiguousarray(d[rows].T)  # (n, h): each op over contiguous rows
+    E, u = layout.zero, layout.direction
+    sx, sy, sz = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
+    sa = sx * a[0] + sy * a[1] + sz * a[2]
+    lx, ly, lz = sx - sa * a[0], sy - sa * a[1], sz - sa * a[2]  # lateral
+    K = shape[rows]
+    k00, k01, k02, k11, k12, k22 = (np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    sag = 0.5 * ((k00 * lx + 2.0 * (k01 * ly + k02 * lz)) * lx + (k11 * ly + 2.0 * k12 * lz) * ly
+                 + k22 * lz * lz)  # away from the head
+    sx, sy, sz = sx - sag * a[0], sy - sag * a[1], sz - sag * a[2]
+    cx, cy, cz = sx.mean(0), sy.mean(0), sz.mean(0)
+    xc, yc, zc = sx - cx, sy - cy, sz - cz
+    # the plane through them: the smallest eigenvector of their scatter (the SVD's last right singular vector)
+    m = smallest_eigvec((xc * xc).sum(0), (xc * yc).sum(0), (xc * zc).sum(0), (yc * yc).sum(0), (yc * zc).sum(0),
+                        (zc * zc).sum(0), a)
+    t = (cx * m[:, 0] + cy * m[:, 1] + cz * m[:, 2]) / (m @ a)
+    Ra = Rr[:, :, 0] * a[0] + Rr[:, :, 1] * a[1] + Rr[:, :, 2] * a[2]  # the drill axis in the panel frame
+    o, p = origin[rows], surf.point[r]  # the axis's hit (o + t Ra) from the nominal point, along the CAD's normal
+    off[rows] = sum((o[:, i] + t * Ra[:, i] - p[:, i]) * ncad[:, i] for i in range(3))
+    return ang, off
