@@ -49,11 +49,9 @@ def _monomials(s_, t_, exps):
 
 def _quartic(coef, s_, t_):
     """Heights (mm) of the local quartic ``coef (15,)`` (:func:`metrology.panel.holes._vertex_cubic`'s columns)."""
-    from metrology.panel.holes import _cubic_design
-
-    X = _cubic_design(s_, t_)
-    X4 = np.stack([s_ ** 4 / 24, s_ ** 3 * t_ / 6, s_ * s_ * t_ * t_ / 4, s_ * t_ ** 3 / 6, t_ ** 4 / 24], axis=-1)
-    return X @ coef[:10] + X4 @ coef[10:]
+    exps = [(0, 0), (1, 0), (0, 1)] + [(k - j, j) for k in range(2, 5) for j in range(k + 1)]  # the same order
+    X = np.stack([s_ ** a * t_ ** b / (math.factorial(a) * math.factorial(b)) for a, b in exps], axis=-1)
+    return X @ coef
 
 
 def remainder_terms(panel, P, n, e1, e2, rho: float, coef, k):
