@@ -60,7 +60,7 @@ from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
 from metrology.measure.magnitude import X_MAX, magnitude_u95, major_sd, normal_uniform_u95
 from metrology.measure.normals import K95, SMALL_ANGLE_SIGMAS, HoleNormals, drill_axis
-from metrology.measure.remainder import surface_remainder
+from metrology.measure.remainder import TIGHT_STEPS, surface_remainder
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "GN_STEPS"]
 
@@ -344,8 +344,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     if beyond is not None:
         fit0 = fit_surface(layout, d, shape, steps=PRELIMINARY_STEPS, sigma_mm=sigma_mm, full=False)
         d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0,  # (a tight radius: once more from a fit)
-                                          lambda dd, kk: fit_surface(layout, dd, kk, sigma_mm=sigma_mm, full=False))
-    fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
+                                          lambda dd, kk: fit_surface(layout, dd, kk, TIGHT_STEPS, sigma_mm, full=False))
+    fit = fit_surface(layout, d, shape, GN_STEPS if beyond is None or beyond.higher.shape[1] <= 9 else TIGHT_STEPS, sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
     sigma = np.where(np.isfinite(sigma), sigma, 0.0)
