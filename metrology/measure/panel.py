@@ -54,6 +54,10 @@ __all__ = ["HoleTable", "HoleSurfaces", "read_hole_table", "surfaces_from_table"
 FOOTPRINT_MARGIN = 1.25
 #: neighbours whose nominal normals give a hole's curvature without a panel
 NEIGHBOURS = 6
+#: without a panel, a hole whose footprint leaves more than this beyond the second order the table gives (mm: a
+#: sphere of its largest curvature, ``|k|^3 rho^4 / 8``, four times the reading noise; R ~200 mm under a 27 mm
+#: footprint) is not measured: only the CAD carries those terms (issue 53; ``--panel``)
+TABLE_REMAINDER_MM = 0.02
 #: the entries (00, 01, 02, 11, 12, 22) of a symmetric 3 x 3 matrix
 _SIX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
@@ -325,6 +329,11 @@ def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 
     Kl[:, 0, 0], Kl[:, 0, 1], Kl[:, 1, 0], Kl[:, 1, 1] = x[:, 0], x[:, 1], x[:, 1], x[:, 2]
     for i in np.flatnonzero(~ok):
         problem[i] = "its neighbours in the hole table lie on a line: no curvature from their normals"
+    kmax = np.abs(principal_curvatures(np.where(ok[:, None, None], Kl, 0.0))).max(1)
+    for i in np.flatnonzero(ok & (kmax ** 3 * rho ** 4 / 8.0 > TABLE_REMAINDER_MM)):
+        problem[i] = (f"a radius of {1.0 / kmax[i]:.0f} mm under the head's footprint (radius {rho:.0f} mm) leaves "
+                      f"{1e3 * kmax[i] ** 3 * rho ** 4 / 8.0:.0f} um beyond the second order the hole table gives (at "
+                      f"most {1e3 * TABLE_REMAINDER_MM:g}): give the panel (--panel), whose CAD carries it")
     Kl[~ok] = 0.0
     u = np.sqrt(u_fit ** 2 + u_form ** 2)
     return HoleSurfaces(table.ids, n, embed_shape(Kl, e1, e2), principal_curvatures(Kl),

@@ -115,3 +115,26 @@ def test_a_spot_on_a_surface_turned_past_the_rule_s_limit_is_not_measured():
     assert len(past) >= n // 2, reasons[:3]
     assert f"at most {MAX_SPOT_TURN_DEG:g}" in past[0]
     assert b.disagree.sum() == 0
+
+
+def test_without_the_panel_a_tight_radius_is_not_measured_and_the_log_not_refused():
+    """The hole table alone gives the second order only: on R 50 what it leaves (~0.4 mm at the spots) is named,
+    the holes are not measured, and the misfit rule does not call the head another's."""
+    from metrology.measure.panel import TABLE_REMAINDER_MM, surfaces_from_table
+
+    lay = load_layout(TABLE6)
+    ch, log, _ = _crest_log(lay, make_panel("cylinder", 50.0, axis=(1.0, 0.0, 0.0)), 60, seed=9, mesh=False)
+    # a hole table with a second row of holes off the crest, for the neighbours' normals to span the surface
+    panel = make_panel("cylinder", 50.0, axis=(1.0, 0.0, 0.0))
+    P = np.linspace(-100.0, 100.0, 60)[:, None] * np.array([1.0, 0.0, 0.0])
+    Q = P + np.array([0.0, 10.0, 0.0])
+    Q[:, 2] = panel.height(Q[:, 0], Q[:, 1])
+    pts = np.concatenate([P, Q])
+    feed = -panel.normal_at(pts)
+    ids = tuple(f"H{i:04d}" for i in range(60)) + tuple(f"Q{i:04d}" for i in range(60))
+    surf = surfaces_from_table(HoleTable(ids, pts, feed, "holes"), footprint_mm(lay))
+    b = measure_batch(lay, log, Settings(surfaces=surf))
+    reasons = b.columns.column("reason").to_pylist()
+    assert all(s == "not_measured" for s in b.columns.column("status").to_pylist())
+    assert all("give the panel (--panel)" in r and f"at most {1e3 * TABLE_REMAINDER_MM:g}" in r for r in reasons)
+    assert b.disagree.sum() == 0
