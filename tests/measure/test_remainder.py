@@ -138,3 +138,43 @@ def test_without_the_panel_a_tight_radius_is_not_measured_and_the_log_not_refuse
     assert all(s == "not_measured" for s in b.columns.column("status").to_pylist())
     assert all("give the panel (--panel)" in r and f"at most {1e3 * TABLE_REMAINDER_MM:g}" in r for r in reasons)
     assert b.disagree.sum() == 0
+
+
+@pytest.mark.parametrize("R", [20.0, 50.0])
+def test_metro_measure_does_not_refuse_a_tight_radius_s_log_as_another_head_s(tmp_path, R):
+    """The issue's user, end to end: ``metro simulate-log`` on a cylinder along x from a crest hole table, a binary
+    STL of it, ``metro measure --panel --points``: R 20 every hole not measured with its reason, R 50 judged; the
+    run is not refused ("this layout does not fit the head": the wrong cause)."""
+    import csv
+    import json
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    runner = CliRunner()
+    panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0))
+    holes = tmp_path / "holes.csv"
+    with open(holes, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["hole_id", "x", "y", "z", "i", "j", "k"])
+        for i, x in enumerate(np.linspace(-100.0, 100.0, 60)):
+            w.writerow([f"H{i:03d}", x, 0.0, 0.0, 0.0, 0.0, -1.0])
+    stl = tmp_path / "panel.stl"
+    panel_mesh(panel, half_mm=160.0, step_mm=2.0).export(stl)
+    log = tmp_path / "log.csv"
+    r = runner.invoke(app, ["simulate-log", "--out", str(log), "--holes", "60", "--panel", "cylinder", "--radius-mm",
+                            str(R), "--azimuth-deg", "0", "--points", str(holes), "--layout", str(TABLE6),
+                            "--true-layout", str(TABLE6), "--seed", "4"])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(TABLE6), "--panel", str(stl), "--points", str(holes),
+                            "--out", str(tmp_path / "out.csv"), "--json"])
+    assert r.exit_code in (0, 1), r.output
+    assert "does not fit the head" not in r.output
+    counts = json.loads(r.stdout)["counts"]
+    if R < 30:
+        assert counts["not_measured"] == 60
+        with open(tmp_path / "out.csv", newline="") as fh:
+            assert all("past the crest" in row["reason"] for row in csv.DictReader(fh))
+    else:
+        assert counts["not_measured"] <= 3
