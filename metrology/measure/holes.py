@@ -213,10 +213,12 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                 out.normal[r] = np.nan
                 out.U95[r] = np.nan
         for i, r in zip(np.flatnonzero(past), rows[past]):  # rule 1b (rare: a loop)
-            out.reason[r] = (out.reason[r] + "; " if out.reason[r] else "") + (f"the footprint is past what the panel's local surface represents: a spot where the "
-                             f"surface has turned {np.degrees(turn[i]):.0f} deg from the hole's normal (at most "
-                             f"{MAX_SPOT_TURN_DEG:g}: past the crest) or a beam at {np.degrees(inc[i]):.0f} deg of "
-                             f"incidence (at most {MAX_INCIDENCE_DEG:g}: grazing)")
+            why = (f"a spot where the surface has turned {np.degrees(turn[i]):.0f} deg from the hole's normal (more "
+                   f"than {MAX_SPOT_TURN_DEG:g}: past the crest)" if turn[i] > np.radians(MAX_SPOT_TURN_DEG) else
+                   f"a beam meeting the surface at {np.degrees(inc[i]):.0f} deg of incidence (more than "
+                   f"{MAX_INCIDENCE_DEG:g}: grazing)")
+            out.reason[r] = ((out.reason[r] + "; " if out.reason[r] else "")
+                             + f"the footprint is past what the panel's local surface represents: {why}")
             out.angle[r], out.normal[r], out.U95[r] = np.nan, np.nan, np.nan
     return out
 

@@ -113,7 +113,7 @@ def test_a_spot_on_a_surface_turned_past_the_rule_s_limit_is_not_measured():
     reasons = b.columns.column("reason").to_pylist()
     past = [r for r in reasons if "past what the panel's local surface represents" in r]
     assert len(past) >= n // 2, reasons[:3]
-    assert f"at most {MAX_SPOT_TURN_DEG:g}" in past[0]
+    assert f"more than {MAX_SPOT_TURN_DEG:g}: past the crest" in past[0]
     assert b.disagree.sum() == 0
 
 
