@@ -9,7 +9,7 @@ benchmarks/study_measure.py ``--panel-known`` does it:
 2. a cylinder of radius R (20, 50, 80, 150 mm, and a flat panel for the reference) with its axis along
    the panel's ``x`` or across it (along ``y``); the holes on its crest (a hole table along the axis,
    feed ``-z``), drilled by the simulator from the table (the log carries the commanded pose:
-   ``pose_*`` columns; ``--no-pose`` drops them); a torus lip (``--torus``) likewise on its outer crest;
+   ``pose_*`` columns; ``--no-pose`` drops them) (a torus lip: not yet, the simulator has no torus panel);
 3. the CAD a grid mesh of the simulator's own surface (``--mesh-step`` mm, tests/measure/panel_fixtures.py;
    a binary STL is the same triangles), the hole table the drill points;
 4. measured by ``metrology.measure.holes.measure_batch`` with the surfaces of
@@ -22,6 +22,8 @@ the log: ``jobs.measure._check_fit``), and the reasons of the holes not measured
 
     nice -n 10 python benchmarks/study_tight_radii.py --calibrations 4 --holes 150 --seed 53 \
         --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--no-pose]
+
+Results and what they found: benchmarks/results/tight_radii.md.
 """
 
 from __future__ import annotations
@@ -67,19 +69,8 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
-def torus_panel(R_major, r_minor):
-    """A torus lip (metrology.sim.forward.shapes' TorusPanel where it exists, else None)."""
-    try:
-        from metrology.sim.forward.shapes import TorusPanel
-    except ImportError:
-        return None
-    return TorusPanel(R_major, r_minor)
-
-
 def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
     """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh."""
-    import pyarrow.compute as pc
-
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
@@ -94,7 +85,6 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
     log = log_table(ch)
     if not pose:
         log = log.drop_columns([c for c in log.column_names if c.startswith("pose_")])
-    del pc
     mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
     surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
@@ -125,8 +115,6 @@ def run(args):
         if hname not in args.heads.split(","):
             continue
         cases = [("flat", None, None)] + [(f"cylinder R {R:g} {o}", R, o) for R in radii for o in args.orient.split(",")]
-        if args.torus:
-            cases += [(f"torus lip r {R:g}", R, "torus") for R in radii]
         for pi, (label, R, orient) in enumerate(cases):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
@@ -141,10 +129,6 @@ def run(args):
                 cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
                 if R is None:
                     panel = make_panel("flat")
-                elif orient == "torus":
-                    panel = torus_panel(args.torus_major, R)
-                    if panel is None:
-                        continue
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
                 ch, log, surf = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose)
@@ -210,8 +194,6 @@ def main(argv=None):
     ap.add_argument("--heads", default="table2,table6,ring3,ring4")
     ap.add_argument("--mesh-step", type=float, default=2.0, help="the CAD grid mesh's step, mm")
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
-    ap.add_argument("--torus", action="store_true", help="also a torus lip of each radius (minor) on its outer crest")
-    ap.add_argument("--torus-major", type=float, default=600.0, help="the torus lip's major radius, mm")
     ap.add_argument("--seed", type=int, default=53)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
