@@ -153,7 +153,7 @@ def panel_hole_surfaces(panel, table, footprint_mm, position_mm=0.5, form_mm=0.0
 
     f = panel_surfaces(panel, table, footprint_mm, position_mm, form_mm, display)
     return HoleSurfaces(table.ids, f["normal"], f["shape"], f["k"], f["u_shape"], f["problem"], f["source"], spin,
-                        point=table.point, frame=f["frame"], higher=f["higher"])
+                        point=table.point, frame=f["frame"], higher=f["higher"], u_height=f.get("u_height"))
 
 
 def check_join(log, surfaces, table_display) -> None:

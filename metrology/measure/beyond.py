@@ -28,22 +28,27 @@ class Beyond:
     Attributes
     ----------
     axes : (h, 2, 3) float, unit, TCS, the local axes ``e1, e2`` of ``higher``
-    higher : (h, 9) float, the CAD's height beyond second order (:class:`metrology.measure.panel.HoleSurfaces`)
+    higher : (h, 9) float, the CAD's height beyond second order (:class:`metrology.measure.panel.HoleSurfaces`);
+        (h, 9 + E) with degrees 5.. where the footprint needs them (:mod:`metrology.panel.footprint`)
     tcs2panel : (h, 3, 3) float or None, the head's rotation the shape was put into the TCS with
     turn : (h, 3, 3) float or None, the turn about the axis found before the adjustment (NaN rows: none)
+    u_height : (h,) float or None, mm, the height at each spot that no term carries (the remainder's fit
+        residual: :mod:`metrology.measure.remainder` makes it a term of U95)
     """
 
     axes: np.ndarray
     higher: np.ndarray
     tcs2panel: np.ndarray | None = None
     turn: np.ndarray | None = None
+    u_height: np.ndarray | None = None
 
     def rows(self, r):
         """The holes ``r`` (an index)."""
-        return Beyond(*(None if x is None else x[r] for x in (self.axes, self.higher, self.tcs2panel, self.turn)))
+        return Beyond(*(None if x is None else x[r]
+                        for x in (self.axes, self.higher, self.tcs2panel, self.turn, self.u_height)))
 
 
-def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
+def beyond_second_order(layout, d, shape, terms: Beyond, fit0, refit=None):
     """``(d, shape, turn)``: the readings and the shape square to the axis that the second-order fit
     should take, and the turn about the axis applied (``(N, 3, 3)``), from a first fit ``fit0`` of
     ``d (N, n)`` mm with ``shape (N, 3, 3)`` 1/mm TCS and ``terms`` (:class:`Beyond`):
@@ -61,6 +66,12 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
     entries :func:`metrology.measure.surface.fit_surface` takes of a shape square to the axis (``K``'s
     own, ``shape[:, 0, 0], [:, 0, 1], [:, 1, 1]``, likewise). Explicit 3 x 3 products over the holes,
     one ``(N,)`` array per entry (no batched matmul or einsum of 3 x 3 matrices).
+
+    ``refit(d, shape) -> SurfaceFit`` (optional): where ``higher`` carries degrees beyond the quartic (a footprint
+    large against the radius, :mod:`metrology.panel.footprint`), the readings are moved once more from a fit of the
+    moved ones: the spots' place in the tangent plane and the tilted frame come from ``fit0``, whose tilt is off by
+    the quartic's remainder (0.05-0.1 deg at R 50), and the terms' slope there (``t^3 / 2 R^3``) times the spots'
+    height (6 mm) turns that into 0.5 um; from the second fit it is of the square of that.
     """
     N = len(d)
     y = None  # Y's entries y[i][j], (N,) arrays
@@ -100,7 +111,10 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0):
         else:
             ax = None
     if terms.higher is not None:
-        d = _readings_beyond(layout, d, fit0, ax, terms.higher)
+        moved = _readings_beyond(layout, d, fit0, ax, terms.higher, kt if terms.higher.shape[1] > 9 else None)
+        if refit is not None and terms.higher.shape[1] > 9:
+            return beyond_second_order(layout, d, shape, terms, refit(moved, kt))
+        d = moved
     return d, kt, Y
 
 
@@ -191,7 +205,7 @@ def second_order_readings(layout, d, fit, axes, higher):
     return _readings_beyond(layout, d, fit, [[a[:, k, i] for i in range(3)] for k in range(2)], higher)
 
 
-def _readings_beyond(layout, d, fit, ax, higher):
+def _readings_beyond(layout, d, fit, ax, higher, kt=None):
     """:func:`second_order_readings` with the axes by component: ``ax[k][i]`` (h,) the ``i``-th TCS
     component of ``e_(k+1)``. Sensor-major ``(n, h)`` arrays (each hole's numbers a contiguous row's
     entries, as :func:`metrology.measure.surface.fit_surface`); returns the transpose of one: the
@@ -211,11 +225,56 @@ def _readings_beyond(layout, d, fit, ax, higher):
         st.append(qx * (ax0 * f) + qy * (ax1 * f) + qz * (ax2 * f))
     s_, t_ = st
     # the nine terms with the products shared, each coefficient a contiguous row (no ``**``)
-    c = np.divide(np.asarray(higher, float).T, _TAYLOR[:, None], out=np.empty((9, len(ok))))  # (9, h)
+    higher = np.asarray(higher, float)
+    c = np.divide(higher[:, :9].T, _TAYLOR[:, None], out=np.empty((9, len(ok))))  # (9, h)
     s2, st, t2 = s_ * s_, s_ * t_, t_ * t_
     w = (s_ * (c[0] * s2 + c[1] * st + c[2] * t2) + c[3] * t_ * t2
          + s2 * (c[4] * s2 + c[5] * st + c[6] * t2) + t2 * (c[7] * st + c[8] * t2))
+    if higher.shape[1] > 9:  # degrees 5.. over a footprint large against the radius (metrology.panel.footprint)
+        w = w + _degrees_beyond(higher[:, 9:], s_, t_)
     um = np.abs(u[:, 0, None] * mx + u[:, 1, None] * my + u[:, 2, None] * mz)
+    if kt is not None:  # the second-order surface's slope at the spot (a tight radius): moved along the beam by
+        # w / |u.m| the spot also moves across it (by half that on a 30 deg beam), where that surface's height (toward
+        # the head) has changed by its slope -K q_t times it: to first order the beam meets it after
+        # w / (|u.m| - (K q_t).u_t) (``kt`` the tangent entries (00, 01, 11) square to the axis, K > 0 bending away
+        # from the head, as :func:`metrology.measure.surface.fit_surface` takes it: turned onto the fitted plane)
+        k00, k01, k11 = kt
+        px, py = _square_to_axis(qx, qy, qz, mx, my, mz)  # q_t and u_t turned square to the axis, as K is
+        ux, uy = _square_to_axis(u[:, 0, None], u[:, 1, None], u[:, 2, None], mx, my, mz)
+        um = um - ((k00 * px + k01 * py) * ux + (k01 * px + k11 * py) * uy)
+        a = 0.5 * (k00 * ux * ux + 2.0 * k01 * ux * uy + k11 * uy * uy)  # and its curvature along the beam: the root
+        w = w + a * (w / um) ** 2  # of a t^2 - |u.m| t + w = 0 to second order
     out = dT + w / um
     keep = ok & np.isfinite(out)
     return (out if keep.all() else np.where(keep, out, dT)).T
+
+
+def _degrees_beyond(coef, s_, t_):
+    """``sum_j coef_j s^a t^b / (a! b!)`` over the exponents of degrees 5.. (:func:`metrology.panel.footprint.extra_exponents`,
+    as many as ``coef (h, E)`` has columns), at ``s_, t_ (n, h)`` mm."""
+    import math
+
+    w = np.zeros_like(s_)
+    sp, tp = [np.ones_like(s_)], [np.ones_like(t_)]
+    j, k = 0, 5
+    while j < coef.shape[1]:
+        while len(sp) <= k:
+            sp.append(sp[-1] * s_)
+            tp.append(tp[-1] * t_)
+        for b in range(k + 1):
+            w += (coef[:, j] / (math.factorial(k - b) * math.factorial(b))) * sp[k - b] * tp[b]
+            j += 1
+        k += 1
+    return w
+
+
+def _square_to_axis(vx, vy, vz, mx, my, mz):
+    """The ``x, y`` parts of ``v``'s component square to the unit ``m`` turned by the smallest rotation taking ``m``
+    onto ``sign(m_z) e_z`` (``K_m = Q K Q^T``: ``(K_m v_t) . w_t = (K Q^T v_t) . (Q^T w_t)``); arrays broadcast."""
+    vm = vx * mx + vy * my + vz * mz
+    vx, vy, vz = vx - vm * mx, vy - vm * my, vz - vm * mz
+    sg = np.where(mz < 0, -1.0, 1.0)
+    wx, wy, c = sg * my, -sg * mx, sg * mz  # m x (sg e_z), and the cosine
+    ax, ay, az = wy * vz, -wx * vz, wx * vy - wy * vx  # w x v
+    f = 1.0 / (1.0 + c)
+    return vx + ax + f * (wy * az), vy + ay + f * (-wx * az)  # + w x (w x v) / (1 + c), its x, y

@@ -34,7 +34,7 @@ from metrology.core.sym2 import eig2
 from metrology.measure.magnitude import K95, X_MAX, magnitude_u95, normal_uniform_u95
 
 __all__ = ["Kind", "Source", "Budget", "Uncertainty", "combine", "angle_gradient", "SMALL_ANGLE_SIGMAS", "READING_NOISE",
-           "CALIBRATION", "DATUM", "PANEL_SHAPE", "SPIN", "CURVATURE"]
+           "CALIBRATION", "DATUM", "PANEL_SHAPE", "SPIN", "CURVATURE", "SURFACE_MODEL"]
 
 #: below this many standard uncertainties the angle's distribution is not close to normal (it is the
 #: length of a 2-D vector): u is the 2-D spread's major axis (and with a bound, U95 the length's half-width)
@@ -47,6 +47,9 @@ DATUM = "datum"
 PANEL_SHAPE = "panel shape"
 SPIN = "spin"
 CURVATURE = "curvature"
+#: what the panel's local surface model leaves over a footprint large against the radius (truncation, faceting,
+#: the drill point's position error: :mod:`metrology.measure.remainder`)
+SURFACE_MODEL = "surface model"
 
 
 class Kind(StrEnum):

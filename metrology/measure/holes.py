@@ -6,6 +6,13 @@ threshold and reason:
 1. ``NOT_MEASURED``, fewer than :data:`MIN_SENSORS` usable readings: a plane needs 3 points. A
    blank reading, or one outside the sensor's ``range_mm`` (the sensor's own data are not valid
    there), is not used; with 3 left the hole is measured on those 3, with their larger U95.
+1b. ``NOT_MEASURED``, with the panel known, a footprint its local surface cannot represent (a tight
+   radius: a leading edge, a lip, a tube): a spot where the surface has turned more than
+   :data:`MAX_SPOT_TURN_DEG` from the hole's normal (past the crest), or a beam meeting the surface at
+   more than :data:`MAX_INCIDENCE_DEG` of incidence (grazing). Both from the fitted surface at the spots
+   (:mod:`metrology.measure.remainder`); the hole's readings are not counted as disagreeing (rule 2):
+   the model, not the head, is what fails there. (A footprint whose sampled disc leaves the CAD surface,
+   past the crest or off the edge, is refused with the panel: :mod:`metrology.panel.holes`.)
 2. ``NOT_MEASURED``, the readings disagree (4 sensors): the redundant reading's misfit ``rho``
    exceeds what any panel of radius >= ``min_radius_mm`` can give (``|M|_* / (2 R)``, the
    nuclear norm of the points' second moments weighted by ``q``) by more than
@@ -38,7 +45,7 @@ split into batches or partitions (the Dask path relies on it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -56,7 +63,7 @@ if TYPE_CHECKING:
     from metrology.measure.surface import PanelFit
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
-           "DEFAULT_MIN_RADIUS_MM"]
+           "DEFAULT_MIN_RADIUS_MM", "MAX_SPOT_TURN_DEG", "MAX_INCIDENCE_DEG"]
 
 #: fewest readings that give a plane
 MIN_SENSORS = 3
@@ -69,6 +76,13 @@ GROSS_SIGMAS = 6.0
 TILT_ALLOWANCE = 3.0
 #: the smallest panel radius the gross-reading rule allows for (mm): aircraft skins are >= 500 mm
 DEFAULT_MIN_RADIUS_MM = 500.0
+#: rule 1b: a spot where the surface has turned more than this from the hole's normal is past what the local
+#: surface (a height over the tangent plane, to degree 8 over the footprint) holds: on a cylinder a spot past
+#: 0.71 R from the crest (benchmarks/results/tight_radii.md)
+MAX_SPOT_TURN_DEG = 45.0
+#: rule 1b: a beam meeting the surface at more than this incidence grazes it: its spot stretched twice or more,
+#: a triangulation sensor's reading there is not the one its calibration made
+MAX_INCIDENCE_DEG = 60.0
 
 
 #: the per-hole columns metro writes, in order (before the columns passed through)
@@ -177,7 +191,13 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                     f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
                     "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
                     ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
-            _store(out, rows, mask, sub, dd, h, settings, micro=False)
+            past = past_footprint(j.extra.spot_turn, j.extra.incidence)  # rule 1b
+            _store(out, rows, mask, sub, dd, h, settings, micro=False, past=past)
+            for i in np.flatnonzero(past).tolist():  # rare: a loop
+                r = int(rows[i])
+                out.reason[r] = ((out.reason[r] + "; ") if out.reason.get(r) else "") + past_reason(
+                    j.extra.spot_turn[i], j.extra.incidence[i])
+                out.angle[r], out.normal[r], out.U95[r] = np.nan, np.nan, np.nan
         else:  # in slices of CACHE_ROWS rows, each stored as it comes (its temporaries stay in the cache)
             for i in range(0, len(rows), CACHE_ROWS):
                 sl = slice(i, i + CACHE_ROWS)
@@ -192,7 +212,22 @@ def _of(r):
     return slice(r[0], r[-1] + 1) if len(r) and r[-1] - r[0] + 1 == len(r) else r
 
 
-def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bool) -> None:
+def past_footprint(spot_turn, incidence):
+    """(h,) bool, rule 1b: a spot past the crest or a grazing beam (``spot_turn``, ``incidence`` (h,) rad)."""
+    with np.errstate(invalid="ignore"):
+        return (spot_turn > np.radians(MAX_SPOT_TURN_DEG)) | (incidence > np.radians(MAX_INCIDENCE_DEG))
+
+
+def past_reason(spot_turn: float, incidence: float) -> str:
+    """Rule 1b's reason for one hole (angles in rad)."""
+    why = (f"a spot where the surface has turned {np.degrees(spot_turn):.0f} deg from the hole's normal (more than "
+           f"{MAX_SPOT_TURN_DEG:g}: past the crest)" if spot_turn > np.radians(MAX_SPOT_TURN_DEG) else
+           f"a beam meeting the surface at {np.degrees(incidence):.0f} deg of incidence (more than "
+           f"{MAX_INCIDENCE_DEG:g}: grazing)")
+    return f"the footprint is past what the panel's local surface represents: {why}"
+
+
+def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bool, past=None) -> None:
     """Write the holes ``rows`` measured on the sensors ``mask`` (``h``, readings ``dd``) into ``out``, and
     apply rule 2 (the readings disagree) to them."""
     rs = _of(rows)
@@ -207,6 +242,8 @@ def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bo
     # the most any panel of radius >= R gives; with the panel known, what is not known of it
     bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
     gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
+    if past is not None:  # rule 1b's holes: the model, not the head, fails there
+        gross &= ~past
     if not gross.any():
         return
     out.disagree[rows[gross]] = True
@@ -327,7 +364,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         if have.any():
             posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
             if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
-                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, 9)), np.full((N, 3, 3), np.nan))
+                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, surf.higher.shape[1])), np.full((N, 3, 3), np.nan))
             sel = (have & posed, have & ~posed)
             convention = sel[1]
             whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
@@ -350,13 +387,15 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                     else:
                         higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
             u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
+            if higher is not None and surf.u_height is not None:  # metrology.measure.remainder
+                higher = replace(higher, u_height=np.where(have, surf.u_height[table_row], 0.0))
     stated = surf is None or surf.spin_stated
     before = _measure(applied.normals_layout, d, settings, shape, u_shape, spin, higher, convention, stated, effects=applied)
     has_after = all(f"d_{s}_after" in table.column_names for s in names)
     if has_after:
         da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
         # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
-        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra.turn)
+        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra.turn, higher.u_height)
         after = _measure(applied_after.normals_layout, da, settings, shape, u_shape, spin, higher_after, convention, stated,
                          effects=applied_after)
         judge_after = np.isfinite(da).any(1)
@@ -387,6 +426,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     code[~measured] = CODE[Status.NOT_MEASURED]
     ids = table.column("hole_id").cast(pa.string())
     if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
+        unmodelled = table_row < 0
         for i in np.flatnonzero(table_row < 0):
             code[i] = CODE[Status.NOT_MEASURED]
             reason[int(i)] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
@@ -395,6 +435,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
             code[i] = CODE[Status.NOT_MEASURED]
             reason[int(i)] = surf.problem[table_row[i]]
+            unmodelled[i] = True  # its readings are not the head's to disagree (rule 2): its surface is not known
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = CODE[Status.NOT_MEASURED]
@@ -439,6 +480,8 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     idx = np.flatnonzero(full4)
     chart = ChartRows(idx, before.residual[idx], before.noise_sd[idx], before.signature[idx])
     disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
+    if surf is not None:
+        disagree &= ~unmodelled
     # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
     # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
     unknown = np.zeros(N, bool)

@@ -57,6 +57,10 @@ FOOTPRINT_MARGIN = 1.25
 FEED_UNIT_TOL = 1e-3
 #: neighbours whose nominal normals give a hole's curvature without a panel
 NEIGHBOURS = 6
+#: without a panel, a hole whose footprint leaves more than this beyond the second order the table gives (mm: a
+#: sphere of its largest curvature, ``|k|^3 rho^4 / 8``, four times the reading noise; R ~200 mm under a 27 mm
+#: footprint) is not measured: only the CAD carries those terms (issue 53; ``--panel``)
+TABLE_REMAINDER_MM = 0.02
 #: the entries (00, 01, 02, 11, 12, 22) of a symmetric 3 x 3 matrix
 _SIX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
@@ -179,7 +183,10 @@ class HoleSurfaces:
     frame : (m, 2, 3) float, unit, panel frame, the local axes ``e1, e2`` of ``higher``, or None
     higher : (m, 9) float, the CAD surface's height along ``normal`` beyond second order, or None: the
         coefficients of ``s^3/6, s^2 t/2, s t^2/2, t^3/6`` (1/mm^2) and ``s^4/24, s^3 t/6, s^2 t^2/4,
-        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point
+        s t^3/6, t^4/24`` (1/mm^3), ``s, t`` mm along ``e1, e2`` from the drill point; where the footprint is
+        large against the radius, (m, 39): degrees 5 to 8 after them (:mod:`metrology.panel.footprint`)
+    u_height : (m,) float, mm, or None: the height over the footprint that no term carries (a term of U95:
+        :mod:`metrology.measure.remainder`)
     """
 
     ids: tuple
@@ -194,6 +201,7 @@ class HoleSurfaces:
     frame: np.ndarray | None = None
     higher: np.ndarray | None = None
     spin_stated: bool = True
+    u_height: np.ndarray | None = None
     _tcs: dict = field(default_factory=dict, compare=False, repr=False)
 
     def rows(self, hole_ids):
@@ -340,6 +348,11 @@ def surfaces_from_table(table: HoleTable, footprint_mm: float, form_mm: float = 
     Kl[:, 0, 0], Kl[:, 0, 1], Kl[:, 1, 0], Kl[:, 1, 1] = x[:, 0], x[:, 1], x[:, 1], x[:, 2]
     for i in np.flatnonzero(~ok):
         problem[i] = "its neighbours in the hole table lie on a line: no curvature from their normals"
+    kmax = np.abs(principal_curvatures(np.where(ok[:, None, None], Kl, 0.0))).max(1)
+    for i in np.flatnonzero(ok & (kmax ** 3 * rho ** 4 / 8.0 > TABLE_REMAINDER_MM)):
+        problem[i] = (f"a radius of {1.0 / kmax[i]:.0f} mm under the head's footprint (radius {rho:.0f} mm) leaves "
+                      f"{1e3 * kmax[i] ** 3 * rho ** 4 / 8.0:.0f} um beyond the second order the hole table gives (at "
+                      f"most {1e3 * TABLE_REMAINDER_MM:g}): give the panel (--panel), whose CAD carries it")
     Kl[~ok] = 0.0
     u = np.sqrt(u_fit ** 2 + u_form ** 2)
     return HoleSurfaces(table.ids, n, embed_shape(Kl, e1, e2), principal_curvatures(Kl),

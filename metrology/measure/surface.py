@@ -13,7 +13,6 @@ as for the head square to it: in the TCS ``xy`` plane; curvature positive where 
     m = sigma (-g_x, -g_y, 1) / rho,     rho = sqrt(1 + |g|^2),   K_m = Q K Q^T,
 
 ``Q`` the smallest rotation taking ``sigma e_z`` onto ``m`` (the shape turned with the tilted head),
-
 ``m`` the unit normal toward the head (``sigma = -s``, the drill axis ``s e_z``). ``h_i = 0`` is
 the surface ``m.(p - c e_z) = -1/2 (Tq)^T K_m (Tq)`` (to second order in the distance from the axis;
 ``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
@@ -59,10 +58,11 @@ from metrology.core.sym2 import eig2
 from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
 from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
-from metrology.measure.budget import CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, Budget, Source, combine
+from metrology.measure.budget import CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Source, combine
 from metrology.measure.normals import HoleNormals, drill_axis
 from metrology.measure.panel_terms import PanelTerms, free_spin, panel_sources, shape_basis
 from metrology.measure.terms import calibration_source, noise_source, reading_sigma, redundancy
+from metrology.measure.remainder import TIGHT_STEPS, surface_remainder
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "PanelFit", "GN_STEPS"]
 
@@ -287,17 +287,23 @@ class PanelFit:
     panel_misfit_z : (h,) float, that over its standard uncertainty (noise, calibration, the panel's terms;
         where the spin is not known: what is beyond every spin's)
     turn : (h, 3, 3) float, the turn about the axis applied (:mod:`metrology.measure.beyond`)
+    spot_turn : (h,) float, rad, the most the fitted surface has turned at a spot from the hole's normal
+    incidence : (h,) float, rad, the largest angle a beam meets the fitted surface at
+        (both :func:`metrology.measure.remainder.spot_geometry`: rule 1b of :mod:`metrology.measure.holes`)
     """
 
     correction: np.ndarray
     panel_misfit: np.ndarray
     panel_misfit_z: np.ndarray
     turn: np.ndarray
+    spot_turn: np.ndarray
+    incidence: np.ndarray
 
     @staticmethod
     def blank(h: int) -> "PanelFit":
         """``h`` holes of NaN (to fill)."""
-        return PanelFit(np.full(h, np.nan), np.full(h, np.nan), np.full(h, np.nan), np.full((h, 3, 3), np.nan))
+        return PanelFit(np.full(h, np.nan), np.full(h, np.nan), np.full(h, np.nan), np.full((h, 3, 3), np.nan),
+                        np.full(h, np.nan), np.full(h, np.nan))
 
     @staticmethod
     def concat(parts) -> "PanelFit":
@@ -344,8 +350,9 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         shape, beyond = (mean, np.zeros(N), mean), None
     if beyond is not None:
         fit0 = fit_surface(layout, d, shape, steps=PRELIMINARY_STEPS, sigma_mm=sigma_mm, full=False)
-        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0)
-    fit = fit_surface(layout, d, shape, sigma_mm=sigma_mm)
+        d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0,  # (a tight radius: once more from a fit)
+                                          lambda dd, kk: fit_surface(layout, dd, kk, TIGHT_STEPS, sigma_mm, full=False))
+    fit = fit_surface(layout, d, shape, GN_STEPS if beyond is None or beyond.higher.shape[1] <= 9 else TIGHT_STEPS, sigma_mm)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = reading_sigma(layout, sigma_mm)
     axis = drill_axis(layout)
@@ -367,10 +374,11 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     rho_bound = None
     if free:
         spin_src, rho_bound = free_spin(fit, g2, axis, dev, A0, A1)
-    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src))
+    rem = surface_remainder(fit, u, None if beyond is None else beyond.u_height)  # truncation, faceting, position
+    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, Source(SURFACE_MODEL, np.stack(rem.cov, axis=1))))
     un = combine(budget)
     angle, u_angle, U95 = un.angle, un.u, un.U95
-    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2)
+    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SURFACE_MODEL) ** 2)
     misfit = np.full(N, np.nan)
     misfit_z = np.full(N, np.nan)
     twist = None
@@ -381,7 +389,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
         extra = 0.0
         if terms is not None:
-            extra = sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2 + rho_var
+            extra = extra + sb2 * np.broadcast_to(np.asarray(terms.u_shape, float), (N,)) ** 2 + rho_var
         red = redundancy(qv, fit.h_res.T, Gu, sigma, q_cal, extra)
         twist = np.zeros(N)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -406,4 +414,4 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     hn = HoleNormals(normal, angle, u_angle, U95, un.of(READING_NOISE), red.residual, red.residual_z, red.signature,
                      panel_share, twist, red.sd, red.noise_sd, budget,
                      np.zeros(N) if rho_bound is None else rho_bound)
-    return hn, PanelFit(correction, misfit, misfit_z, np.ascontiguousarray(Y))
+    return hn, PanelFit(correction, misfit, misfit_z, np.ascontiguousarray(Y), rem.turn, rem.incidence)

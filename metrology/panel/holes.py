@@ -65,7 +65,8 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     ``line(row)``: :class:`metrology.measure.panel.HoleTable`). Returns a dict: ``normal (m, 3)``
     unit toward the head, ``shape (m, 3, 3)`` 1/mm, ``k (m, 2)`` 1/mm, ``u_shape (m,)`` 1/mm,
     ``frame (m, 2, 3)`` unit (``e1, e2``), ``higher (m, 9)`` the height along ``n`` beyond second order
-    (:class:`metrology.measure.panel.HoleSurfaces`), ``problem (m,)`` object, ``source`` str (panel frame).
+    (:class:`metrology.measure.panel.HoleSurfaces`; ``(m, 39)`` with degrees 5-8 where the footprint needs
+    them, :mod:`metrology.panel.footprint`), ``u_height (m,)`` mm the height no term carries, ``problem (m,)`` object, ``source`` str (panel frame).
 
     Raises ValueError (one line, naming the table's row) when a drill point is off the panel or its
     feed does not point into it. A hole whose sampled footprint runs off the panel gets a
@@ -157,6 +158,19 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         coef[use], u_fit[use], higher[use] = vcoef[use, :10], vu[use], vcoef[use, 6:]
         Hl = np.stack([np.stack([coef[:, 3], coef[:, 4]], 1), np.stack([coef[:, 4], coef[:, 5]], 1)], axis=1)
         Kl = -Hl
+        # over a footprint large against the radius: the remainder beyond the quartic (metrology.panel.footprint)
+        from metrology.panel.footprint import remainder_terms
+
+        extra, u_height = remainder_terms(panel, P, n, e1, e2, rho, np.where(use[:, None], vcoef, np.nan),
+                                          principal_curvatures(np.where(miss.any(1)[:, None, None], 0.0, Kl)))
+        if extra is not None:
+            higher = np.concatenate([higher, extra], axis=1)
+        # the curvature a missing sample's reason names: the vertices' where the rays missed
+        Kv = -np.stack([np.stack([vcoef[:, 3], vcoef[:, 4]], 1), np.stack([vcoef[:, 4], vcoef[:, 5]], 1)], axis=1)
+        Kr = np.where(vok[:, None, None], Kv, Kl)
+    else:
+        u_height = np.zeros(len(P))
+        Kr = Kl
     c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0
@@ -171,15 +185,19 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         src = f"panel {shown} (B-rep (exact STEP faces); the curvature's gradient from a cubic fit over the footprint)"
     u = np.sqrt(u_fit ** 2 + u_pos ** 2 + u_form ** 2)
     problem = np.full(len(P), "", dtype=object)
+    kmax = np.abs(principal_curvatures(np.nan_to_num(Kr))).max(1)
     for r in np.flatnonzero(miss.any(1)):
-        problem[r] = (f"the head's footprint (radius {rho:.0f} mm) runs off the panel's edge at this hole "
+        problem[r] = (f"the head's footprint (radius {rho:.0f} mm) reaches past the crest of the surface's radius "
+                      f"{1.0 / kmax[r]:.0f} mm here ({int(miss[r].sum())} of {len(st)} samples miss the panel): its "
+                      f"local surface cannot represent the spots" if kmax[r] * rho >= 1.0 else
+                      f"the head's footprint (radius {rho:.0f} mm) runs off the panel's edge at this hole "
                       f"({int(miss[r].sum())} of {len(st)} samples miss the panel)")
     Kl = np.where(miss.any(1)[:, None, None], 0.0, Kl)
     k = principal_curvatures(Kl)
     k[miss.any(1)] = np.nan  # unknown there (the hole is not measured)
     higher = np.where(np.isfinite(higher), higher, 0.0)
     return {"normal": n, "shape": embed_shape(Kl, e1, e2), "k": k, "u_shape": np.where(np.isfinite(u), u, 0.0),
-            "frame": np.stack([e1, e2], axis=1), "higher": higher,
+            "frame": np.stack([e1, e2], axis=1), "higher": higher, "u_height": u_height,
             "problem": problem, "source": src}
 
 
@@ -215,8 +233,11 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         dist, idx = dist.reshape(len(dist), -1), idx.reshape(len(idx), -1)
         have = np.isfinite(dist)
         q = V[np.where(have, idx, 0)] - P[b, None, :]  # (c, k, 3)
-        s_ = (q * e1[b, None, :]).sum(2) / rho  # scaled: a well-conditioned design
-        t_ = (q * e2[b, None, :]).sum(2) / rho
+        # scaled by the neighbours' own reach, not the footprint's: a well-conditioned design whatever the mesh's
+        # step against the footprint (over rho, a 2 mm mesh under a 50 mm disc had cond > 1e12: the ray-cast cubic)
+        r0 = np.maximum(np.where(have, dist, 0.0).max(1), 1e-9)[:, None]  # (c, 1), mm
+        s_ = (q * e1[b, None, :]).sum(2) / r0
+        t_ = (q * e2[b, None, :]).sum(2) / r0
         w = (q * n[b, None, :]).sum(2)
         X = np.concatenate([_cubic_design(s_, t_), np.stack([s_ ** 4 / 24, s_ ** 3 * t_ / 6, s_ * s_ * t_ * t_ / 4,
                                                              s_ * t_ ** 3 / 6, t_ ** 4 / 24], axis=-1)], axis=-1)
@@ -228,8 +249,8 @@ def _vertex_cubic(panel, P, n, e1, e2, rho):
         cf = np.einsum("cij,cpj,cp->ci", inv, X, np.where(have, w, 0.0))
         res = np.where(have, w - np.einsum("cpi,ci->cp", X, cf), 0.0)
         s2 = (res * res).sum(1) / np.maximum(cnt - 15, 1)
-        scale = rho ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
+        scale = r0 ** np.array([0, 1, 1, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4], float)
         coef[b] = cf / scale  # back to mm
-        u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / rho ** 2
+        u_fit[b] = np.sqrt(s2 * np.diagonal(inv, axis1=1, axis2=2)[:, 3:6].mean(1)) / r0[:, 0] ** 2
         ok[b] = good
     return coef, u_fit, ok

@@ -27,8 +27,10 @@ def panel_mesh(panel, half_mm: float = 260.0, step_mm: float = 4.0, shift=(0.0, 
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     off = ~np.all(np.isfinite(V), axis=1)  # beyond a cylinder's or sphere's side: no surface there
     F = F[~np.any(off[F], axis=1)]
-    V[off] = 0.0
-    return trimesh.Trimesh(V, F, process=False)
+    keep = np.zeros(len(V), bool)
+    keep[F.ravel()] = True  # the vertices of a face only (an STL has no other): none left at the origin
+    renum = np.cumsum(keep) - 1
+    return trimesh.Trimesh(V[keep], renum[F], process=False)
 
 
 def write_hole_table(truth_csv, out_csv, panel, rows=None):

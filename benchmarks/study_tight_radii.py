@@ -1,0 +1,206 @@
+"""Tight radii (issue 53): does `angle ± U95` of `metro measure --panel --points` hold on leading edges,
+lips and tubes, and is a hole the local model cannot represent `not_measured` with its reason?
+
+Everything drawn by the independent forward simulator (metrology/sim/forward), as
+benchmarks/study_measure.py ``--panel-known`` does it:
+
+1. each head's true layout (forward.head.perturb_layout of the nominal) and its calibration by metro
+   (``study_measure.calibrate_head``: poses over a flat datum, lsq, the layout with its covariance);
+2. a cylinder of radius R (20, 50, 80, 150 mm, and a flat panel for the reference) with its axis along
+   the panel's ``x`` or across it (along ``y``); the holes on its crest (a hole table along the axis,
+   feed ``-z``), drilled by the simulator from the table (the log carries the commanded pose:
+   ``pose_*`` columns; ``--no-pose`` drops them) (a torus lip: not yet, the simulator has no torus panel);
+3. the CAD a grid mesh of the simulator's own surface (``--mesh-step`` mm, tests/measure/panel_fixtures.py;
+   a binary STL is the same triangles), the hole table the drill points;
+4. measured by ``metrology.measure.holes.measure_batch`` with the surfaces of
+   ``metrology.jobs.measure_panel.panel_hole_surfaces`` (what ``metro measure --panel --points`` runs).
+
+Per row: the share of holes judged (status not ``not_measured``), U95 coverage of the true
+angle among them (before and after the adjustment), the median error of the measured angle over the flat
+panel's (same head), the share of holes whose readings rule 2 calls "disagree" (more than half of them refuses
+the log: ``jobs.measure._check_fit``), and the reasons of the holes not measured.
+
+    nice -n 10 python benchmarks/study_tight_radii.py --calibrations 4 --holes 150 --seed 53 \
+        --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--no-pose]
+
+Results and what they found: benchmarks/results/tight_radii.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _one_blas_thread  # noqa: E402,F401
+
+
+def all_heads(rng):
+    """The study's heads: Table 2 and Table 6 (4 sensors), a drawn 3-sensor ring and a drawn 4-sensor ring."""
+    from study_measure import heads
+
+    from metrology.core.layout import SensorLayout
+    from metrology.sim.forward import draw_head
+
+    h = heads(rng)
+    four = draw_head(rng, 4).nominal
+    h["ring4"] = SensorLayout(four.names, four.zero, four.direction)
+    return h
+
+
+def crest_table(panel, span_mm: float, m: int, name="holes"):
+    """The forward simulator's hole table of ``m`` holes on the crest of ``panel`` (along its axis, or along
+    ``x`` on a flat panel, ``|t| <= span_mm``), feed ``-z``."""
+    from metrology.sim.forward.holes import HoleTable
+
+    axis = np.asarray(getattr(panel, "axis", (1.0, 0.0, 0.0)), float)
+    t = np.linspace(-span_mm, span_mm, m)
+    P = t[:, None] * axis[None, :]
+    P[:, 2] = panel.height(P[:, 0], P[:, 1])
+    feed = np.tile([0.0, 0.0, -1.0], (m, 1))
+    return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
+
+
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
+    """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh."""
+    from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
+    from metrology.measure.panel import HoleTable
+    from metrology.panel.mesh import Panel
+    from metrology.sim.forward.log import simulate_cell
+    from metrology.sim.forward.log_spec import LogSpec
+    from metrology.sim.forward.log_write import log_table
+    from tests.measure.panel_fixtures import panel_mesh
+
+    table = crest_table(panel, 100.0, holes)
+    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(2.0))
+    ch = next(simulate_cell(spec, int(rng.integers(2**31)), 0, holes, chunk_holes=holes))
+    log = log_table(ch)
+    if not pose:
+        log = log.drop_columns([c for c in log.column_names if c.startswith("pose_")])
+    mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
+    surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
+                               0.5, 0.0, 0.0 if pose else np.radians(2.0))
+    return ch, log, surf
+
+
+def _reason_key(r: str) -> str:
+    """A reason without its numbers (for the histogram)."""
+    import re
+
+    return re.sub(r"[-+]?\d[\d.,]*(e[-+]?\d+)?", "#", r)[:120]
+
+
+def run(args):
+    from metrology.measure.batch import CODE, Status
+    from metrology.measure.holes import Settings, measure_batch
+    from metrology.sim.forward import perturb_layout
+    from metrology.sim.forward.panels import make_panel
+
+    out = {"args": {k: str(v) for k, v in vars(args).items()}, "rows": []}
+    range_mm = np.array([30.0, 70.0])
+    heads = all_heads(np.random.default_rng(args.seed))
+    radii = [float(r) for r in args.radii.split(",")]
+    flat_err = {}
+    print(HEADER)
+    print("|" + "---|" * 11)
+    for hi, (hname, nominal) in enumerate(heads.items()):
+        if hname not in args.heads.split(","):
+            continue
+        cases = [("flat", None, None)] + [(f"cylinder R {R:g} {o}", R, o) for R in radii for o in args.orient.split(",")]
+        for pi, (label, R, orient) in enumerate(cases):
+            t0 = time.perf_counter()
+            rng = np.random.default_rng([args.seed, hi, pi])
+            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b")}
+            disagree, refused, reasons, n_all = 0, 0, Counter(), 0
+            for c in range(args.calibrations):
+                true = perturb_layout(rng, nominal)
+                true = true.with_params(true.zero, true.direction, noise_mm=np.full(true.n, args.noise),
+                                        range_mm=np.tile(range_mm, (true.n, 1)))
+                from study_measure import calibrate_head
+
+                cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
+                if R is None:
+                    panel = make_panel("flat")
+                else:
+                    panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
+                ch, log, surf = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose)
+                b = measure_batch(cal, log, Settings(surfaces=surf))
+                t = b.columns
+                ub = np.radians(t.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
+                ua = np.radians(t.column("U95_after_deg").to_numpy(zero_copy_only=False).astype(float))
+                judged = b.status != CODE[Status.NOT_MEASURED]
+                okb = judged & np.isfinite(b.angle_before) & np.isfinite(ub)
+                oka = judged & np.isfinite(b.angle_after) & np.isfinite(ua)
+                acc["hit_b"].append(np.abs(b.angle_before - ch.true_angle)[okb] <= ub[okb])
+                acc["hit_a"].append(np.abs(b.angle_after - ch.true_after)[oka] <= ua[oka])
+                acc["err"].append(np.abs(b.angle_before - ch.true_angle)[okb])
+                acc["u_b"].append(ub[okb])
+                acc["judged"].append(judged)
+                n_all += len(judged)
+                dis = int(b.disagree.sum())
+                disagree += dis
+                refused += int(len(okb) >= 20 and dis > 0.5 * len(okb))
+                status = t.column("status").to_pylist()
+                for s, r in zip(status, t.column("reason").to_pylist()):
+                    if s == "not_measured":
+                        reasons[_reason_key(r or "")] += 1
+            if not acc["judged"]:
+                continue
+            cat = {k: np.concatenate(v) for k, v in acc.items()}
+            med = float(np.degrees(np.median(cat["err"]))) if cat["err"].size else float("nan")
+            if R is None:
+                flat_err[hname] = med
+            row = {"head": hname, "panel": label, "radius_mm": R, "orient": orient, "pose": not args.no_pose,
+                   "holes": n_all, "judged": int(cat["judged"].sum()), "share_judged": float(cat["judged"].mean()),
+                   "coverage_before": float(cat["hit_b"].mean()) if cat["hit_b"].size else float("nan"),
+                   "coverage_after": float(cat["hit_a"].mean()) if cat["hit_a"].size else float("nan"),
+                   "holes_after": int(cat["hit_a"].size),
+                   "median_err_deg": med, "err_over_flat": med / flat_err.get(hname, np.nan),
+                   "median_U95_deg": float(np.degrees(np.median(cat["u_b"]))) if cat["u_b"].size else float("nan"),
+                   "disagree": disagree, "logs_refused": refused, "logs": args.calibrations,
+                   "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1)}
+            out["rows"].append(row)
+            print(line(row), flush=True)
+    return out
+
+
+HEADER = ("| head | panel | judged | coverage before % | after % | median error [deg] | ÷ flat | median U95 [deg] | "
+          "disagree | logs refused | s |")
+
+
+def line(r):
+    return (f"| {r['head']} | {r['panel']} | {r['judged']} / {r['holes']} ({100 * r['share_judged']:.0f} %) | "
+            f"{100 * r['coverage_before']:.1f} | {100 * r['coverage_after']:.1f} | {r['median_err_deg']:.4f} | "
+            f"{r['err_over_flat']:.2f} | {r['median_U95_deg']:.4f} | {r['disagree']} | {r['logs_refused']} / {r['logs']} | "
+            f"{r['seconds']:.0f} |")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--calibrations", type=int, default=4)
+    ap.add_argument("--holes", type=int, default=150, help="holes per calibration (on the crest)")
+    ap.add_argument("--poses", type=int, default=60, help="calibration poses")
+    ap.add_argument("--noise", type=float, default=0.005, help="reading noise, mm (1 sigma)")
+    ap.add_argument("--radii", default="20,50,80,150")
+    ap.add_argument("--orient", default="along,across", help="the cylinder's axis along the panel's x, across it")
+    ap.add_argument("--heads", default="table2,table6,ring3,ring4")
+    ap.add_argument("--mesh-step", type=float, default=2.0, help="the CAD grid mesh's step, mm")
+    ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
+    ap.add_argument("--seed", type=int, default=53)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args(argv)
+    out = run(args)
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()
