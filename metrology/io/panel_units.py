@@ -8,7 +8,10 @@ yardstick: the rule (:func:`check_panel_units`) reads the panel's and the table'
 and refuses them when
 
 - the panel is narrower than the head's footprint (:data:`FOOTPRINT_FIT`): the spots around a
-  hole cannot all land on it, so no hole could be measured;
+  hole cannot all land on it, so no hole could be measured. Its longest side is held to that always;
+  its second side only where the panel is nearly flat (its depth under :data:`FLAT_DEPTH` of that
+  side): a leading edge or a tube of R 20 is narrow across, deep, and drilled (its holes then
+  ``not_measured`` with their own reason), while a skin in inches is narrow and flat;
 - the table's holes are closer than :data:`MIN_PITCH_MM` (median distance to the nearest hole),
   or farther than :data:`MAX_PITCH_MM`: no drilled pattern;
 - the table's holes spread wider than the panel (:data:`TABLE_OVER_PANEL`): the two files are
@@ -27,10 +30,14 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["check_panel_units", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
-           "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES"]
+           "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES", "FLAT_DEPTH"]
 
-#: the panel's two largest sides must hold this many footprint radii (the spots' disc, both sides of a hole)
+#: the panel's sides must hold this many footprint radii (the spots' disc, both sides of a hole)
 FOOTPRINT_FIT = 2.0
+#: a panel whose box is shallower than this share of its second side is nearly flat (a skin's sagitta: R 1500
+#: over 800 mm is 0.07 of it; a half tube's depth is half its width): only then is its second side held to the
+#: footprint
+FLAT_DEPTH = 0.25
 #: holes closer than this (mm) cannot both be drilled: the smallest fastener (2.4 mm) at two diameters' pitch
 MIN_PITCH_MM = 5.0
 #: holes a median 2 m from their nearest neighbour are no hole pattern a cell drills (one hole per skin)
@@ -65,7 +72,7 @@ def nearest_spacing(points) -> float:
 def _problems(scale, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, pose_gap) -> list:
     """What is implausible when the files' numbers times ``scale`` are mm (module rule), as phrases."""
     out = []
-    if panel_sides is not None and panel_sides[1] * scale < FOOTPRINT_FIT * footprint_mm:
+    if panel_sides is not None and _narrow(tuple(x * scale for x in panel_sides), footprint_mm):
         out.append(f"the panel ({panel_sides[0] * scale:.3g} x {panel_sides[1] * scale:.3g} mm) is narrower than "
                    f"the head's footprint ({FOOTPRINT_FIT * footprint_mm:.3g} mm across)")
     if np.isfinite(pitch) and not MIN_PITCH_MM <= pitch * scale <= MAX_PITCH_MM:
@@ -83,10 +90,17 @@ def _problems(scale, footprint_mm, standoff_mm, panel_sides, table_sides, pitch,
     return out
 
 
+def _narrow(sides, footprint_mm) -> bool:
+    """The panel of box ``sides`` (mm, largest first) cannot hold a footprint (module rule: its second side only
+    where it is nearly flat, :data:`FLAT_DEPTH`)."""
+    fit = FOOTPRINT_FIT * footprint_mm
+    return sides[0] < fit or (sides[1] < fit and sides[2] < FLAT_DEPTH * sides[1])
+
+
 def _sides(extent):
-    """The two largest sides of a box, largest first (file units)."""
+    """The three sides of a box, largest first (file units)."""
     e = np.sort(np.asarray(extent, float))[::-1]
-    return float(e[0]), float(e[1])
+    return float(e[0]), float(e[1]), float(e[2])
 
 
 def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_points=None, pose_points=None,
@@ -132,13 +146,12 @@ def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_poi
                               not _problems(1.0, footprint_mm, standoff_mm, panel_sides, None, float("nan"), None))
     likely = []
     for unit, scale in CANDIDATES.items():
-        ps = None if panel_sides is None else panel_sides if settled else (panel_sides[0] * scale,
-                                                                             panel_sides[1] * scale)
-        ts = None if table_sides is None else (table_sides[0] * scale, table_sides[1] * scale)
+        ps = None if panel_sides is None else panel_sides if settled else tuple(x * scale for x in panel_sides)
+        ts = None if table_sides is None else tuple(x * scale for x in table_sides)
         if not _problems(1.0, footprint_mm, standoff_mm, ps, ts, pitch * scale,
                          None if pose_gap is None else (lambda s, g=pose_gap, k=scale: g(s * k))):
             likely.append(unit)
-    if not likely and not (panel_sides is not None and panel_sides[1] < FOOTPRINT_FIT * footprint_mm):
+    if not likely and not (panel_sides is not None and _narrow(panel_sides, footprint_mm)):
         return None  # odd numbers, but no other unit explains them (a dense test pattern): not a unit's mistake
     if not likely:
         fix = "no unit reads plausibly: are these the panel and the table of this head's cell?"

@@ -181,3 +181,12 @@ def test_a_feed_vector_not_of_unit_length_is_refused(skins, tmp_path, length):
     r = _measure(log, "--panel", files["mm"][0], "--points", str(bad), "--out", str(tmp_path / "o.csv"))
     assert r.exit_code == 2, r.output
     assert f"line 4: hole H0003: feed direction i,j,k has length {length:g}" in r.output
+
+
+def test_a_narrow_deep_panel_is_not_read_as_inches():
+    """Issue 53 against issue 51's rule: a leading edge or tube (R 20: 40 mm across, 20 deep, 320 long) is narrower
+    than the footprint but deep, and drilled: not refused as inches; the same box flat (a skin in inches) is."""
+    ok = dict(footprint_mm=26.6, standoff_mm=50.0)
+    assert check_panel_units(**ok, panel_extent=(320.0, 40.0, 20.0)) is None
+    line = check_panel_units(**ok, panel_extent=(320.0, 40.0, 2.0))
+    assert line is not None and "narrower" in line

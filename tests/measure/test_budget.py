@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, Budget, Kind, Source,
+from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Kind, Source,
                                       combine)
 from metrology.measure.magnitude import K95, normal_uniform_u95
 from metrology.measure.normals import hole_normals
@@ -47,7 +47,7 @@ def test_both_fitters_return_one_budget_of_named_sources():
     plane = hole_normals(lay, d)
     surf, _ = surface_hole_normals(lay, d, np.zeros((len(d), 3, 3)))
     assert plane.budget.names[:2] == (READING_NOISE, CALIBRATION)
-    assert surf.budget.names == (READING_NOISE, CALIBRATION, PANEL_SHAPE, SPIN)
+    assert surf.budget.names == (READING_NOISE, CALIBRATION, PANEL_SHAPE, SPIN, SURFACE_MODEL)
     for h in (plane, surf):
         un = combine(h.budget)
         np.testing.assert_array_equal(un.U95, h.U95)

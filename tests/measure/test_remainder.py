@@ -158,12 +158,12 @@ def test_metro_measure_does_not_refuse_a_tight_radius_s_log_as_another_head_s(tm
     with open(holes, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["hole_id", "x", "y", "z", "i", "j", "k"])
-        for i, x in enumerate(np.linspace(-100.0, 100.0, 60)):
+        for i, x in enumerate(np.linspace(-100.0, 100.0, 41)):  # 5 mm apart: a fastener pitch (the units check)
             w.writerow([f"H{i:03d}", x, 0.0, 0.0, 0.0, 0.0, -1.0])
     stl = tmp_path / "panel.stl"
     panel_mesh(panel, half_mm=160.0, step_mm=2.0).export(stl)
     log = tmp_path / "log.csv"
-    r = runner.invoke(app, ["simulate-log", "--out", str(log), "--holes", "60", "--panel", "cylinder", "--radius-mm",
+    r = runner.invoke(app, ["simulate-log", "--out", str(log), "--holes", "41", "--panel", "cylinder", "--radius-mm",
                             str(R), "--azimuth-deg", "0", "--points", str(holes), "--layout", str(TABLE6),
                             "--true-layout", str(TABLE6), "--seed", "4"])
     assert r.exit_code == 0, r.output
@@ -173,7 +173,7 @@ def test_metro_measure_does_not_refuse_a_tight_radius_s_log_as_another_head_s(tm
     assert "does not fit the head" not in r.output
     counts = json.loads(r.stdout)["counts"]
     if R < 30:
-        assert counts["not_measured"] == 60
+        assert counts["not_measured"] == 41
         with open(tmp_path / "out.csv", newline="") as fh:
             assert all("past the crest" in row["reason"] for row in csv.DictReader(fh))
     else:
