@@ -52,21 +52,11 @@ NAMES = {"in": "inches", "m": "metres", "cm": "centimetres"}
 
 
 def nearest_spacing(points) -> float:
-    """Median distance (file units) of each of ``points (m, 3)`` to its nearest other point (NaN under 2).
-    Brute force in blocks: a hole table has thousands of rows, not millions."""
-    P = np.asarray(points, float)
-    if len(P) < 2:
-        return float("nan")
-    P = P - P.mean(axis=0)
-    sq = np.einsum("ij,ij->i", P, P)
-    nn = np.empty(len(P))
-    for a in range(0, len(P), 1000):
-        d2 = sq[a:a + 1000, None] + sq[None, :] - 2.0 * (P[a:a + 1000] @ P.T)
-        d2[np.arange(len(d2)), np.arange(a, a + len(d2))] = np.inf  # itself
-        d2[d2 <= 0] = np.inf  # duplicates (the reader refuses duplicate ids, not duplicate points)
-        nn[a:a + 1000] = d2.min(axis=1)
-    nn = nn[np.isfinite(nn)]
-    return float(np.sqrt(np.median(nn))) if len(nn) else float("nan")
+    """Median distance (file units) of each of ``points (m, 3)`` to its nearest other point (NaN under 2):
+    :func:`metrology.io.units.median_nearest_distance`."""
+    from metrology.io.units import median_nearest_distance
+
+    return median_nearest_distance(points)
 
 
 def _problems(scale, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, pose_gap) -> list:

@@ -98,6 +98,15 @@ def _spacing(points) -> float:
             np.maximum(out, np.abs(block[:, 2] - mid[2]), out=out)
         kth = np.partition(d, SPACING_PATCH - 1)[SPACING_PATCH - 1]
         P = P[np.flatnonzero(d <= kth)[: 4 * SPACING_PATCH]]
+    d = median_nearest_distance(P)
+    return d if np.isfinite(d) else 0.0
+
+
+def median_nearest_distance(points) -> float:
+    """Median distance of each of ``points (m, 3)`` to its nearest other point (zero distances,
+    duplicates, skipped; NaN under 2 distinct points). Brute force in blocks of 500 rows: for a patch
+    of a cloud or a hole table (thousands of points, not millions)."""
+    P = np.asarray(points, float)
     if len(P) < 2:
         return float("nan")
     P = P - P.mean(axis=0)
@@ -108,7 +117,7 @@ def _spacing(points) -> float:
         d2[d2 <= 1e-12 * np.maximum(sq[a : a + 500, None], 1e-300)] = np.inf  # itself and duplicates
         nn[a : a + 500] = d2.min(axis=1)
     nn = nn[np.isfinite(nn)]
-    return float(np.sqrt(np.median(nn))) if len(nn) else 0.0
+    return float(np.sqrt(np.median(nn))) if len(nn) else float("nan")
 
 
 def _plausible(extent, spacing, position, mm) -> bool:
