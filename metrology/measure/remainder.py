@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from metrology.measure.terms import tilt_cov
+
 __all__ = ["Remainder", "surface_remainder", "remainder_covariance", "spot_geometry", "TIGHT_STEPS"]
 
 #: steps of :func:`metrology.measure.surface.fit_surface` where the footprint is large against the radius (the CAD's
@@ -44,14 +46,14 @@ class Remainder:
 
     Attributes
     ----------
-    cov : tuple of three (N,) float, the 2 x 2 covariance of the slopes ``g`` by its entries ``(00, 01, 11)``
-        (zeros where no ``u_height``)
+    cov : (N, 3) float, the 2 x 2 covariance of the slopes ``g`` by its entries ``(00, 01, 11)`` (the Budget
+        source "surface model"; zeros where no ``u_height``)
     var_rho : (N,) float or 0.0, mm^2, the redundant reading's misfit's variance from it
     turn : (N,) float, rad, the largest turn of the surface from the hole's normal at a spot
     incidence : (N,) float, rad, the largest angle of incidence of a beam on the surface
     """
 
-    cov: tuple
+    cov: np.ndarray
     var_rho: np.ndarray | float
     turn: np.ndarray
     incidence: np.ndarray
@@ -62,7 +64,7 @@ def surface_remainder(fit, direction, u_height=None) -> Remainder:
     the spots' geometry (:func:`spot_geometry`) of a full :class:`metrology.measure.surface.SurfaceFit`."""
     N = len(fit.g)
     if u_height is None:
-        cov, var_rho = (np.zeros(N), np.zeros(N), np.zeros(N)), 0.0
+        cov, var_rho = np.zeros((N, 3)), 0.0
     else:
         cov, var_rho = remainder_covariance(fit, u_height)
     return Remainder(cov, var_rho, *spot_geometry(fit, direction))
@@ -78,13 +80,13 @@ def remainder_covariance(fit, u_height):
 
     Returns
     -------
-    cov : tuple of three (N,) float, the 2 x 2 covariance of the slopes ``g`` by its entries ``(00, 01, 11)``
+    cov : (N, 3) float, the 2 x 2 covariance of the slopes ``g`` by its entries ``(00, 01, 11)``
     var_rho : (N,) float, mm^2, the redundant reading's misfit's variance from it (zeros with 3 sensors)
     """
     g = fit.g
     v = (1.0 + g[:, 0] ** 2 + g[:, 1] ** 2) * np.asarray(u_height, float) ** 2  # (rho u)^2, (N,)
-    A0, A1 = fit.A[:, 0, :], fit.A[:, 1, :]  # (N, n)
-    cov = (v * (A0 * A0).sum(1), v * (A0 * A1).sum(1), v * (A1 * A1).sum(1))
+    A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T  # (n, N)
+    cov = tilt_cov(A0, A1, np.broadcast_to(v, A0.shape))  # independent heights, each of variance v
     var_rho = v * (fit.null * fit.null).sum(1) if fit.null is not None else np.zeros(len(v))
     return cov, var_rho
 

@@ -375,7 +375,7 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     if free:
         spin_src, rho_bound = free_spin(fit, g2, axis, dev, A0, A1)
     rem = surface_remainder(fit, u, None if beyond is None else beyond.u_height)  # truncation, faceting, position
-    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, Source(SURFACE_MODEL, np.stack(rem.cov, axis=1))))
+    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, Source(SURFACE_MODEL, rem.cov)))
     un = combine(budget)
     angle, u_angle, U95 = un.angle, un.u, un.U95
     panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SURFACE_MODEL) ** 2)
