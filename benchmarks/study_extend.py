@@ -213,7 +213,16 @@ def main(argv=None):
     ap.add_argument("--standoff-mm", type=float, default=45.0, help="production stand-off (the calibration's "
                     "readings span the 30-70 mm range, mean about 50)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "study_extend"))
+    ap.add_argument("--render", action="store_true", help="rewrite OUT.md from OUT.json (no run)")
     args = ap.parse_args(argv)
+    if args.render:
+        saved = json.loads(Path(args.out + ".json").read_text())
+        for k, v in saved["args"].items():
+            setattr(args, k, v)
+        args.render = True
+        Path(args.out + ".md").write_text(_table(saved["heads"], args, saved["seconds"], saved.get("load_average",
+                                                                                                    (float("nan"),) * 2)))
+        return
     rows = []
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
@@ -276,8 +285,8 @@ def _table(rows, args, total, load):
                      + (f" {s['drilled_ratio']:.2f}x | {e['drilled_ratio']:.2f}x |" if ctl else ""))
     lines += ["", "Per family and sensor count (the goals: extended error <= 1.2x, coverage 95 +- 1.5 %):", "",
               "| family | sensors | heads | simple error (max) | simple coverage | extended error (max) | "
-              "extended coverage |" + (" drilled simple | drilled extended (max) |" if ctl else ""),
-              "|---|---|---|---|---|---|---|" + ("---|---|" if ctl else "")]
+              "extended coverage | reference coverage |" + (" drilled simple | drilled extended (max) |" if ctl else ""),
+              "|---|---|---|---|---|---|---|---|" + ("---|---|" if ctl else "")]
     for fam in dict.fromkeys(r["family"] for r in rows):
         for n in sorted({r["n_sensors"] for r in rows}):
             sub = [r for r in rows if r["family"] == fam and r["n_sensors"] == n]
@@ -288,6 +297,7 @@ def _table(rows, args, total, load):
                 h = [r[name] for r in sub]
                 cells.append(f"{np.median([x['error_ratio'] for x in h]):.2f}x ({np.max([x['error_ratio'] for x in h]):.2f}x) "
                              f"| {100 * np.mean([x['coverage'] for x in h]):.1f} %")
+            cells.append(f"{100 * np.mean([r['reference']['coverage'] for r in sub]):.1f} %")
             if ctl:
                 cells.append(f"{np.median([r['simple']['drilled_ratio'] for r in sub]):.2f}x | "
                              f"{np.median([r['extended']['drilled_ratio'] for r in sub]):.2f}x "
