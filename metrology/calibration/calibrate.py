@@ -286,10 +286,11 @@ def calibrate_dataset(dataset: Dataset, method: str = DEFAULT_METHOD, sources=No
     opts = {**_METHOD_DEFAULTS.get(method, {}), **kwargs}
     terms = None
     if dataset.layout.effects is not None:  # the sensors and the layout's head terms, jointly
-        from metrology.calibration.terms import calibrate_terms, check_method
+        from metrology.calibration.terms import check_method
+        from metrology.calibration.terms_filter import calibrate_terms
 
         check_method(dataset.layout, method)
-        cal, terms, obs = calibrate_terms(dataset)
+        cal, terms, obs = calibrate_terms(dataset, method, **opts)
         dataset = replace(dataset, export=replace(dataset.export, d=obs.d))  # the readings less the terms
         if dataset.plane_cov is not None:  # the datum estimated with the sensors on them; its share added
             from metrology.core.model import chart_cov_recentred  # to the joint fit's (the joint stays PSD)

@@ -13,8 +13,10 @@ beam's incidence on the datum, the temperature) are those of the poses at the ba
 temperature coefficient calibrated at one temperature: the column is zero) or that the base
 parameters take whole (variance inflation above :data:`TERM_VIF_MAX`) is not re-estimated: it is
 carried with the value and covariance the layout gave (a prior, uncorrelated with this fit), and
-the report says so. The filters (``ekf``, ``iekf``, ``ekf_paper``) do not carry terms in their
-state: an extended layout is refused with them (:func:`check_method`).
+the report says so. The filters ``ekf`` and ``iekf`` carry the terms in their state
+(:mod:`metrology.calibration.terms_filter`); ``ekf_paper`` and ``method1`` refuse an extended
+layout (:func:`check_method`). :func:`metrology.calibration.terms_filter.calibrate_terms`
+runs the one chosen.
 
 With a datum covariance (a scanned cloud) the datum plane is then estimated with the sensors as in
 the base calibration (:func:`metrology.calibration.calibrate.with_datum`), on the readings with the
@@ -23,12 +25,16 @@ fitted terms removed; the terms' covariance is the joint fit's.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TermFit", "fit_with_terms", "calibrate_terms", "check_method", "dataset_covariates", "corrected_obs",
-           "TERM_VIF_MAX"]
+__all__ = ["TermFit", "fit_with_terms", "check_method", "dataset_covariates", "corrected_obs",
+           "TERM_VIF_MAX", "identify_terms", "carried_cov", "FILTER_METHODS"]
+
+#: the filters whose state carries a layout's terms (:mod:`metrology.calibration.terms_filter`;
+#: ``ekf_paper`` is the paper's as printed: its six raw errors only)
+FILTER_METHODS = ("ekf", "iekf")
 
 #: a term parameter whose variance the base parameters inflate beyond this (its standard error
 #: more than 300x what it would be with the base known) is not identified by the poses: the data
@@ -39,12 +45,13 @@ TERM_VIF_MAX = 1e5
 
 
 def check_method(layout, method: str) -> None:
-    """Refuse an estimator that cannot apply the layout's terms (one line)."""
-    if layout.effects is not None and method != "lsq":
+    """Refuse an estimator that cannot apply the layout's terms (one line): ``lsq`` and the filters
+    ``ekf``, ``iekf`` (:mod:`metrology.calibration.terms_filter`) carry them."""
+    if layout.effects is not None and method != "lsq" and method not in FILTER_METHODS:
         labels = ", ".join(c.label for c in layout.effects.components)
-        raise ValueError(f"method {method}: the layout has effect terms ({labels}); the filters' state does not "
-                         f"carry them (not implemented), so --method lsq estimates the sensors and the terms "
-                         f"jointly: use it, or a layout without [sensors.effects]")
+        raise ValueError(f"method {method}: the layout has effect terms ({labels}) that {method} cannot estimate "
+                         f"(its state is the paper's six raw errors); use --method lsq, ekf or iekf, or a layout "
+                         f"without [sensors.effects]")
 
 
 @dataclass(frozen=True)
@@ -102,22 +109,15 @@ def _recentre(u0, ab):
     return block_diag(*T)
 
 
-def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0=None):
-    """Fit the sensors of ``nominal`` and ``components`` (registry components on single sensors,
-    their values the start) jointly to ``obs`` (:class:`~metrology.core.Observations`, covariates
-    ``cov``). ``prior`` the layout's :class:`HeadTerms` (their covariance carried for a term the
-    poses do not identify), or None. Returns ``(theta (n, 5), cov_full (5n + k, 5n + k) in the
-    nominal chart, sigma (n,) mm, TermFit)``; the TermFit's terms are in the chart of the fitted
-    directions."""
+def identify_terms(nominal, obs, cov, comps, sigma, theta0):
+    """Which of ``comps`` the poses identify: ``(held, why, vif)``, per component: held (bool) when its
+    covariate does not move over the poses (a zero column) or the base parameters take it (variance
+    inflation above :data:`TERM_VIF_MAX`), why in words (empty when identified), its largest variance
+    inflation. ``sigma (n,) mm`` the readings' weights, ``theta0 (n, 5)`` where the Jacobian is taken."""
     from metrology.calibration.engine import LeastSquares
-    from metrology.core.effects.terms import HeadTerms
 
     n = nominal.n
-    comps = tuple(components)
-    theta0 = np.zeros((n, 5)) if theta0 is None else theta0
-    w = np.ones(n) if sigma is None else np.asarray(sigma, float)
-    # the terms the poses cannot inform (a zero column) are held: fitted without them first
-    probe = LeastSquares(nominal, obs, w, comps, sensors=range(n), theta0=theta0, cov=cov)
+    probe = LeastSquares(nominal, obs, sigma, comps, sensors=range(n), theta0=theta0, cov=cov)
     J = probe.jacobian(probe.x0)
     nb = 5 * n
     held, why, vif_of = [], [], []
@@ -142,6 +142,25 @@ def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0
         held.append(v > TERM_VIF_MAX)
         why.append(f"the zero points and beams take it (variance inflation {v:.3g} > {TERM_VIF_MAX:g}): carried "
                    f"from the layout, not re-estimated" if v > TERM_VIF_MAX else "")
+    return held, why, vif_of
+
+
+def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0=None):
+    """Fit the sensors of ``nominal`` and ``components`` (registry components on single sensors,
+    their values the start) jointly to ``obs`` (:class:`~metrology.core.Observations`, covariates
+    ``cov``). ``prior`` the layout's :class:`HeadTerms` (their covariance carried for a term the
+    poses do not identify), or None. Returns ``(theta (n, 5), cov_full (5n + k, 5n + k) in the
+    nominal chart, sigma (n,) mm, TermFit)``; the TermFit's terms are in the chart of the fitted
+    directions."""
+    from metrology.calibration.engine import LeastSquares
+    from metrology.core.effects.terms import HeadTerms
+
+    n = nominal.n
+    comps = tuple(components)
+    theta0 = np.zeros((n, 5)) if theta0 is None else theta0
+    w = np.ones(n) if sigma is None else np.asarray(sigma, float)
+    held, why, vif_of = identify_terms(nominal, obs, cov, comps, w, theta0)
+    nb = 5 * n
     free = [c for c, h in zip(comps, held) if not h]
     fixed = [c for c, h in zip(comps, held) if h]
     if fixed:  # held terms removed from the readings at their layout values
@@ -171,14 +190,7 @@ def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0
     for c, h in zip(comps, held):
         cols = list(range(o, o + c.n_params))
         if h:  # carried: the layout's covariance, else (a term no layout gave) its physical range as 1 sigma
-            pi = _prior_index(prior, c)
-            if pi is not None:
-                C_full[np.ix_(cols, cols)] = prior.cov[np.ix_(pi, pi)]
-            else:
-                from metrology.core.effects.terms import SPLINE_LIMIT_MM, TERM_LIMITS
-
-                se = np.array([TERM_LIMITS.get(pn, SPLINE_LIMIT_MM) for pn in c.param_names])
-                C_full[np.ix_(cols, cols)] = np.diag(se ** 2)
+            C_full[np.ix_(cols, cols)] = carried_cov(prior, c)
             fitted.append(c.with_values(c.values, np.sqrt(np.diag(C_full[np.ix_(cols, cols)]))))
         else:
             v = next(it)
@@ -198,6 +210,18 @@ def fit_with_terms(nominal, obs, cov, components, sigma=None, prior=None, theta0
     return theta, C_full, sig, fit
 
 
+def carried_cov(prior, comp):
+    """``(k, k)``: the covariance a term carries from the layout ``prior`` (HeadTerms or None); a term no
+    layout gave, its physical range (:data:`~metrology.core.effects.terms.TERM_LIMITS`) as 1 sigma."""
+    pi = _prior_index(prior, comp)
+    if pi is not None:
+        return prior.cov[np.ix_(pi, pi)]
+    from metrology.core.effects.terms import SPLINE_LIMIT_MM, TERM_LIMITS
+
+    se = np.array([TERM_LIMITS.get(pn, SPLINE_LIMIT_MM) for pn in comp.param_names])
+    return np.diag(se ** 2)
+
+
 def _prior_index(prior, comp):
     """The columns of ``comp``'s parameters in ``prior`` (HeadTerms), or None."""
     if prior is None:
@@ -215,25 +239,3 @@ def corrected_obs(terms, obs, cov):
     from metrology.core.observations import Observations
 
     return Observations(obs.normal, obs.offset, correct_readings(terms, obs.d, cov, "the export").d)
-
-
-def calibrate_terms(dataset):
-    """Calibrate ``dataset`` (its layout carries terms) jointly with its terms: ``(Calibration whose
-    layout carries the fitted terms, TermFit, the observations with the terms removed)``; the datum's
-    covariance is the caller's (:func:`metrology.calibration.calibrate.calibrate_dataset`)."""
-    from metrology.calibration.estimators import _finish, calibrate
-    from metrology.core.model import chart_cov_recentred
-
-    prior = dataset.layout.effects
-    nominal = replace(dataset.layout, effects=None)
-    obs = dataset.obs
-    cal0 = calibrate(nominal, obs, "lsq")
-    cov = dataset_covariates(cal0.layout, obs, dataset.export, dataset.plane, dataset.datum_points)
-    theta, C, sig, fit = fit_with_terms(nominal, obs, cov, prior.components, prior=prior, theta0=cal0.theta)
-    n = nominal.n
-    obs_c = corrected_obs(fit.terms, obs, cov)
-    blocks = np.stack([C[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])
-    cal = _finish("lsq", nominal, obs_c, theta, blocks, sig)
-    base = chart_cov_recentred(nominal.direction, theta[:, 3:], C[:5 * n, :5 * n])
-    cal = replace(cal, layout=replace(cal.layout, covariance=0.5 * (base + base.T)))
-    return replace(cal, layout=replace(cal.layout, effects=fit.terms)), fit, obs_c

@@ -60,10 +60,11 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     notify(progress, 0, 6, "loading the panel and building its ray scene")
     layout = load_layout(layout_path)
     layout_true = load_layout(true_layout_path) if true_layout_path is not None else None
-    from metrology.core.effects.terms import refuse_terms
+    from metrology.panel.head_terms import check_terms
 
     for lay, src in ((layout, layout_path), (layout_true, true_layout_path)):
-        refuse_terms(lay, src, "normals", "its ray-cast readings and normals are the simple model's")
+        check_terms(lay, src)  # a term needing a covariate normals lacks (the temperature) is refused
+    offsets = _true_offsets(layout if layout_true is None else layout_true)
     panel = load_panel(panel_path, units)
     for w in panel.warnings:
         if on_warning is not None:
@@ -89,6 +90,7 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
     run = run_normals(panel, layout, drill, rng, tilt=math.radians(tilt_deg), standoff=standoff_mm, noise=noise_mm,
                       tolerance=math.radians(tolerance_deg), motion=motion, layout_true=layout_true, loop=loop,
                       caster=caster, prior_radius_mm=prior_radius_mm, footprint_mm=foot, beams=beams,
+                      reading_offsets=offsets,
                       progress=None if progress is None else lambda d, n, what: progress(1 + d, 6, what))
     if not np.any(run.status == "ok"):
         counts = ", ".join(f"{int(np.sum(run.status == k))} {STATUS[k]}" for k in STATUS if k != "ok" and np.any(run.status == k))
@@ -122,3 +124,14 @@ def normals_job(panel_path, layout_path, *, points_path=None, grid_mm=None, tilt
         write_text(report, page)
     notify(progress, 6, 6, "done")
     return summary
+
+
+def _true_offsets(layout_true):
+    """The true head's terms as the forward simulator's physics (:mod:`metrology.sim.head_terms`): a callable
+    ``(d_true (m, n) mm, incidence (m, n) rad) -> (m, n) mm``, or None without terms."""
+    from metrology.sim.head_terms import properties_from_terms
+
+    props = properties_from_terms(layout_true)
+    if props is None:
+        return None
+    return lambda d, angle: props.offsets(d, angle, None)

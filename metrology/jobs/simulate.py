@@ -31,9 +31,6 @@ def simulate_files(layout_path, plane_path, out_path, effect=None, sensor=None, 
     if (effect is None) != (size is None):
         raise ValueError("--effect and --size go together")
     lay = load_layout(layout_path)
-    from metrology.core.effects.terms import refuse_terms
-
-    refuse_terms(lay, layout_path, "simulate", "it hides one catalogued effect in a head without terms")
     pl = Plane.from_json(plane_path)
     effects = [] if effect is None else [HiddenEffect(effect, sensor, size)]
     if effect is None and sensor is not None:

@@ -108,6 +108,7 @@ class _MetroController:
 
     name = "metro"
     wants_shape = True
+    wants_temperature = True  # the head's temperature, for a layout's temperature coefficient
 
     def __init__(self):
         self._fn = None
@@ -123,8 +124,8 @@ class _MetroController:
             self._fn = surface_normal
         return self._fn
 
-    def __call__(self, layout, d, shape):
-        return self.load()(layout, d, shape)
+    def __call__(self, layout, d, shape, temp_c=None):
+        return self.load()(layout, d, shape, temp_c)
 
 
 def metro_controller():

@@ -8,6 +8,7 @@ import numpy as np
 from metrology.core.normals import angle_between, attitude_angles, micro_plane_normal, rot_x, rot_y
 from metrology.core.sphere import SPHERE_PRIOR_RADIUS_MM, micro_sphere_normal
 from metrology.panel.head import _rotvec_matrix, cast_beams, place_head, tool_axis_tcs
+from metrology.panel.head_terms import corrected, with_terms
 
 
 #: attitude loop: at most this many adjustments per point
@@ -56,8 +57,9 @@ class MotionError:
                 raise ValueError(f"motion error {k} must be a finite number >= 0, got {v}")
 
 
-def _readings(caster, layout_true, R, T, noise, rng):
-    """Noisy readings from poses ``(R, T)``.
+def _readings(caster, layout_true, R, T, noise, rng, offsets=None):
+    """Noisy readings from poses ``(R, T)``; ``offsets`` the true head's terms
+    (:func:`metrology.panel.head_terms.with_terms`), or None.
 
     Returns
     -------
@@ -66,6 +68,7 @@ def _readings(caster, layout_true, R, T, noise, rng):
     tri : (m, n) int, the face each beam hit, -1 on a miss
     """
     d, tri, behind = cast_beams(caster, layout_true, R, T)
+    d = with_terms(d, offsets, caster, layout_true, R, tri)
     miss = tri < 0
     beh = behind & ~miss
     d = d + rng.standard_normal(d.shape) * noise
@@ -95,6 +98,7 @@ def _normal_from(layout_est, a_tcs, R, d, method, noise_mm=0.0, prior_radius_mm=
     n : (m, 3) float, unit, panel frame, out of the panel; NaN where d has NaN
     radius : (m,) float, mm (inf for the plane)
     """
+    d = corrected(layout_est, d)  # the layout's head terms removed
     if method == "plane":
         n_tcs = micro_plane_normal(layout_est.zero, layout_est.direction, d)
         rad = np.full(len(d), np.inf)
@@ -129,7 +133,7 @@ def _feed_frame(a_tcs):
 
 def attitude_loop(caster, panel, layout_true, layout_est, points, R0, standoff, noise, rng, method,
                   tolerance, motion: MotionError, max_adjustments=MAX_ADJUSTMENTS,
-                  prior_radius_mm=SPHERE_PRIOR_RADIUS_MM):
+                  prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, offsets=None):
     """The attitude loop of section 4.2 (Eqs. 20-22) at many points at once.
 
     At each step the head measures the normal (``method``: "plane" or "sphere"); if the
@@ -146,6 +150,7 @@ def attitude_loop(caster, panel, layout_true, layout_est, points, R0, standoff, 
     noise : (n,) float, mm, reading noise 1 sigma
     tolerance : float, rad
     rng : numpy.random.Generator
+    offsets : the true head's terms (:func:`metrology.panel.head_terms.with_terms`), or None
 
     Returns
     -------
@@ -171,7 +176,7 @@ def attitude_loop(caster, panel, layout_true, layout_est, points, R0, standoff, 
             break
         Ra, Pa = R[act], P[act]
         T = place_head(Pa, Ra, a_tcs, layout_est, standoff)
-        d = _readings(caster, layout_true, Ra, T, noise, rng)[0]
+        d = _readings(caster, layout_true, Ra, T, noise, rng, offsets)[0]
         n_meas, _ = _normal_from(layout_est, a_tcs, Ra, d, method, float(np.mean(noise)), prior_radius_mm)
         bad = ~np.all(np.isfinite(n_meas), axis=1)
         f = Ra @ a_tcs

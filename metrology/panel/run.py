@@ -70,7 +70,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
                 motion: MotionError = MotionError(), layout_true: SensorLayout | None = None,
                 loop=True, caster: RayCaster | None = None,
                 prior_radius_mm=SPHERE_PRIOR_RADIUS_MM, footprint_mm=None, progress: ProgressFn | None = None,
-                beams: str = "facets") -> NormalsRun:
+                beams: str = "facets", reading_offsets=None) -> NormalsRun:
     """Measure the normal at each drilling point by both methods, and run the attitude loop.
 
     Parameters
@@ -99,12 +99,18 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
         (:mod:`metrology.core.progress`)
     beams : str, what the simulated beams hit: ``"facets"``, the mesh as it is, or
         ``"smooth"``, the smooth surface it tessellates (:class:`metrology.panel.smooth.SmoothCaster`)
+    reading_offsets : callable or None, the true head's terms: ``(d_true (m, n) mm, incidence (m, n)
+        rad) -> (m, n) mm`` added to the distances (:mod:`metrology.panel.head_terms`); needed when
+        ``layout_true`` carries terms. ``layout``'s terms are removed before each normal
 
     Returns
     -------
     NormalsRun
     """
     layout_true = layout if layout_true is None else layout_true
+    if layout_true.effects is not None and reading_offsets is None:
+        raise ValueError("the true head has effect terms: give reading_offsets, their physics (metro normals takes "
+                         "them from the forward simulator)")
     if layout_true.n != layout.n:
         raise ValueError(f"true and estimating layouts differ in sensor count ({layout_true.n} vs {layout.n})")
     if layout.n < 3:
@@ -157,7 +163,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
     rng_read, rng_loop_p, rng_loop_s = rng.spawn(3)
     notify(progress, 1, 4, f"readings and both normals at {m} points")
     # both methods see the same noisy readings at the first pose
-    d, miss_b, beh_b, oor_b, tri_b = _readings(caster, layout_true, R0, T0, noise, rng_read)
+    d, miss_b, beh_b, oor_b, tri_b = _readings(caster, layout_true, R0, T0, noise, rng_read, reading_offsets)
     miss, beh, oor = np.any(miss_b, axis=1), np.any(beh_b, axis=1), np.any(oor_b, axis=1)
     n_plane, _ = _normal_from(layout, a_tcs, R0, d, "plane")
     n_sphere, rad = _normal_from(layout, a_tcs, R0, d, "sphere", float(np.mean(noise)), prior_radius_mm)
@@ -184,7 +190,7 @@ def run_normals(panel: Panel, layout: SensorLayout, drill: DrillPoints, rng, *, 
         for k, (method, r) in enumerate((("plane", rng_loop_p), ("sphere", rng_loop_s))):
             notify(progress, 2 + k, 4, f"attitude loop, micro-{method}, {int(np.sum(good))} points")
             res = attitude_loop(caster, panel, layout_true, layout, pts[good], R0[good], standoff, noise, r,
-                                method, tolerance, motion, prior_radius_mm=prior_radius_mm)
+                                method, tolerance, motion, prior_radius_mm=prior_radius_mm, offsets=reading_offsets)
             full = {}
             for k, v in res.items():
                 arr = np.full(m, np.nan) if v.dtype.kind == "f" else np.zeros(m, v.dtype)

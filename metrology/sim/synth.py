@@ -4,7 +4,8 @@ A run is drawn with :func:`metrology.simulation.random_poses` (the typical pose 
 metro: stand-off 40-60 mm, tilt up to 5 deg, spots over a 200 mm square), a clock and a
 thermometer (:func:`warmup`), and readings from the true sensors plus, for each hidden
 effect, the *same* component of :mod:`metrology.core.effects` that the diagnosis fits, evaluated
-on the true geometry, plus white Gaussian noise of the layout's ``noise_mm``.
+on the true geometry, plus the layout's own head terms (drawn by the forward simulator's
+physics), plus white Gaussian noise of the layout's ``noise_mm``.
 
 ``size`` of each effect (:data:`SIZE_MEANING`):
 
@@ -140,6 +141,13 @@ def _readings_of(rng, lt, plane, poses, time_s, temp_c, effects):
             d += comp.evaluate(comp.values, d0, cov)
             rec["values"] = dict(zip(comp.param_names, comp.values.tolist()))
         truth["effects"].append(rec)
+    if lt.effects is not None:  # the layout's head terms, as the forward simulator's physics
+        from metrology.sim.head_terms import properties_from_terms
+
+        angle = np.arccos(np.clip(cov.cos_inc, 0.0, 1.0))
+        d += properties_from_terms(lt).offsets(d0, angle, temp_c)
+        truth["terms"] = [{"label": c.label, "values": dict(zip(c.param_names, np.asarray(c.values).tolist()))}
+                          for c in lt.effects.components]
     d += rng.normal(0.0, 1.0, d.shape) * lt.noise_mm[None, :]
     return poses, d, trans, truth
 
@@ -152,7 +160,10 @@ def synth_run(rng: np.random.Generator, layout_true: SensorLayout, plane: Plane,
     ----------
     rng : numpy.random.Generator
     layout_true : SensorLayout, the true sensors; ``noise_mm`` (finite) is the reading noise and
-        ``range_mm`` the linearity range
+        ``range_mm`` the linearity range; its head terms (``effects``), if any, act on every reading as
+        the forward simulator's physics (:func:`metrology.sim.head_terms.properties_from_terms`: a gain
+        of the true distance, a bias of the true incidence on the datum, a coefficient of the
+        warm-up's temperature, a characteristic), listed in ``truth["terms"]``
     plane : Plane, tracker frame, the datum's mean plane (the form, if any, is added to it)
     n_poses : int
     effects : sequence of HiddenEffect

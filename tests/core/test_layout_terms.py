@@ -100,8 +100,6 @@ def test_a_calibration_row_naming_a_term_the_layout_lacks_is_refused(tmp_path):
 
 @pytest.mark.parametrize("args", [
     ["plan", "--layout", "{lay}", "--plane", "{plane}", "--poses", "10"],
-    ["normals", "{panel}", "--layout", "{lay}", "--grid", "40"],
-    ["simulate", "--layout", "{lay}", "--plane", "{plane}", "--out", "{tmp}/e.csv"],
 ])
 def test_commands_that_cannot_apply_terms_refuse_them_in_one_line(tmp_path, args):
     """Never measured silently with the simple model: exit 2, one line naming the terms."""

@@ -118,13 +118,6 @@ def test_diagnose_given_the_extended_layout_names_only_a_further_effect(files):
     assert sorted(out["layout_out"]["terms_written"]) == ["drift.L3@temp", "scale.L2"]
 
 
-def test_the_filters_refuse_an_extended_layout(files):
-    r = runner.invoke(app, ["calibrate", str(files["cal"]), "--plane", str(files["plane"]), "--layout",
-                            str(files["tmp"] / "extended.toml"), "--method", "ekf"])
-    assert r.exit_code == 2
-    assert "effect terms (scale.L2)" in r.output and "--method lsq" in r.output
-
-
 def test_measure_refuses_a_log_without_the_temperature_a_term_needs(files, tmp_path):
     lay = load_layout(files["tmp"] / "extended.toml")
     from metrology.core.effects import Drift

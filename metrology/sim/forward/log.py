@@ -28,7 +28,8 @@ Per hole (panel frame, mm; see :mod:`.panels`; TCS conventions in :mod:`.log_spe
    surface bends away from the head), computed from the CAD panel (:attr:`LogSpec.cad`, not the
    truth) at the nominal point and turned into the TCS with the commanded pose,
    ``R_c^T S R_c``; it returns the unit normal ``(h, 3)`` TCS toward the head and ``ok (h,)``.
-   The default is :class:`MicroPlane` (the plane above). The cell turns the drill onto
+   A controller with ``wants_temperature`` True is also given ``temp_c (h,)`` deg C, the head's
+   temperature (for a layout's temperature coefficient). The default is :class:`MicroPlane` (the plane above). The cell turns the drill onto
    ``-normal``; where ``ok`` is False, or the normal is not finite or does not face the head, it
    keeps its attitude (``adjusted`` False). The controller is the thing under
    test: it may come from anywhere (``metro simulate-log --controller metro`` plugs in the
@@ -241,11 +242,16 @@ class _Geometry:
             self.cad_normal = spec.cad.normal_at(self.table.points)
             self.cad_shape = spec.cad.shape_at(self.table.points)
 
-    def adjust(self, R, d, shape_of):
+    def adjust(self, R, d, shape_of, temp=None):
         """Step 5: the controller's normal from the readings ``d``; the head turned onto ``-normal``.
-        ``shape_of()`` gives the CAD shape operators in the TCS (asked only when the controller wants them)."""
+        ``shape_of()`` gives the CAD shape operators in the TCS (asked only when the controller wants them);
+        ``temp (h,)`` deg C the head's temperature, passed as ``temp_c`` to a controller that wants it
+        (``wants_temperature``: a layout with a temperature coefficient)."""
         shape = shape_of() if getattr(self.controller, "wants_shape", True) else None
-        nc, ok = self.controller(self.spec.cell_layout, d, shape)
+        if getattr(self.controller, "wants_temperature", False):
+            nc, ok = self.controller(self.spec.cell_layout, d, shape, temp_c=temp)
+        else:
+            nc, ok = self.controller(self.spec.cell_layout, d, shape)
         nc = np.asarray(nc, float)
         # the cell refuses a normal that is not finite or does not face the head (n . k < 0): it keeps its attitude
         ok = np.asarray(ok, bool) & np.all(np.isfinite(nc), axis=1) & (nc[:, 2] * self.s < 0)
@@ -317,7 +323,7 @@ class _Geometry:
         offset = self._offset(cell_index, hole, time_s)
         d, gross = self.read(rng, *self.distances(R, O, offset, temp))
         # the cell's adjustment, with its own layout (the commanded pose is the pose before it)
-        R2, ok = self.adjust(R, d, lambda: _to_tcs(R, spec.cad.shape_at(P)))
+        R2, ok = self.adjust(R, d, lambda: _to_tcs(R, spec.cad.shape_at(P)), temp)
         a2 = R2[:, :, 2] * s
         O2 = P - self.D * a2
         d2, gross2 = self.read(rng, *self.distances(R2, O2, offset, temp))
@@ -355,7 +361,7 @@ class _Geometry:
         O = N - self.D * a
         offset = self._offset(cell_index, hole, time_s)
         d, gross = self.read(rng, *self.distances(R, O, offset, temp))
-        R2, ok = self.adjust(R, d, lambda: _to_tcs(Rc, self.cad_shape[row]))
+        R2, ok = self.adjust(R, d, lambda: _to_tcs(Rc, self.cad_shape[row]), temp)
         a2 = R2[:, :, 2] * s
         O2 = N - self.D * a2
         d2, gross2 = self.read(rng, *self.distances(R2, O2, offset, temp))
