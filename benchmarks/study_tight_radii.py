@@ -9,7 +9,9 @@ benchmarks/study_measure.py ``--panel-known`` does it:
 2. a cylinder of radius R (20, 50, 80, 150 mm, and a flat panel for the reference) with its axis along
    the panel's ``x`` or across it (along ``y``); the holes on its crest (a hole table along the axis,
    feed ``-z``), drilled by the simulator from the table (the log carries the commanded pose:
-   ``pose_*`` columns; ``--no-pose`` drops them) (a torus lip: not yet, the simulator has no torus panel);
+   ``pose_*`` columns; ``--no-pose`` drops them); a torus lip (``--lips``: tube radii, ``--lip-ring`` the ring's
+   radius; :class:`metrology.sim.forward.torus.TorusPanel`, its outer side elliptic, its inner a saddle), the holes
+   around its crest, each feed on the lip's normal;
 3. the CAD a grid mesh of the simulator's own surface (``--mesh-step`` mm, tests/measure/panel_fixtures.py;
    a binary STL is the same triangles), the hole table the drill points;
 4. measured by ``metrology.measure.holes.measure_batch`` with the surfaces of
@@ -58,14 +60,14 @@ def all_heads(rng):
 
 def crest_table(panel, span_mm: float, m: int, name="holes"):
     """The forward simulator's hole table of ``m`` holes on the crest of ``panel`` (along its axis, or along
-    ``x`` on a flat panel, ``|t| <= span_mm``), feed ``-z``."""
+    ``x`` on a flat panel, ``|t| <= span_mm``), feed ``-n`` (the panel's normal there)."""
     from metrology.sim.forward.holes import HoleTable
 
     axis = np.asarray(getattr(panel, "axis", (1.0, 0.0, 0.0)), float)
     t = np.linspace(-span_mm, span_mm, m)
     P = t[:, None] * axis[None, :]
     P[:, 2] = panel.height(P[:, 0], P[:, 1])
-    feed = np.tile([0.0, 0.0, -1.0], (m, 1))
+    feed = -panel.normal_at(P)
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
@@ -103,11 +105,13 @@ def run(args):
     from metrology.measure.holes import Settings, measure_batch
     from metrology.sim.forward import perturb_layout
     from metrology.sim.forward.panels import make_panel
+    from metrology.sim.forward.torus import TorusPanel
 
     out = {"args": {k: str(v) for k, v in vars(args).items()}, "rows": []}
     range_mm = np.array([30.0, 70.0])
     heads = all_heads(np.random.default_rng(args.seed))
-    radii = [float(r) for r in args.radii.split(",")]
+    radii = [float(r) for r in args.radii.split(",") if r]
+    lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
     print(HEADER)
     print("|" + "---|" * 11)
@@ -115,6 +119,7 @@ def run(args):
         if hname not in args.heads.split(","):
             continue
         cases = [("flat", None, None)] + [(f"cylinder R {R:g} {o}", R, o) for R in radii for o in args.orient.split(",")]
+        cases += [(f"torus lip r {r:g} {side}", r, side) for r in lips for side in args.lip_sides.split(",")]
         for pi, (label, R, orient) in enumerate(cases):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
@@ -129,6 +134,8 @@ def run(args):
                 cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
                 if R is None:
                     panel = make_panel("flat")
+                elif label.startswith("torus"):
+                    panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
                 ch, log, surf = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose)
@@ -191,6 +198,9 @@ def main(argv=None):
     ap.add_argument("--noise", type=float, default=0.005, help="reading noise, mm (1 sigma)")
     ap.add_argument("--radii", default="20,50,80,150")
     ap.add_argument("--orient", default="along,across", help="the cylinder's axis along the panel's x, across it")
+    ap.add_argument("--lips", default="50,80", help="torus lips' tube radii, mm ('' none)")
+    ap.add_argument("--lip-ring", type=float, default=600.0, help="the torus lip's ring radius, mm")
+    ap.add_argument("--lip-sides", default="outer,inner", help="the lip's outer side (elliptic), inner (a saddle)")
     ap.add_argument("--heads", default="table2,table6,ring3,ring4")
     ap.add_argument("--mesh-step", type=float, default=2.0, help="the CAD grid mesh's step, mm")
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
