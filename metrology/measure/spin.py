@@ -11,7 +11,12 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   the CAD's surface there (``panel_misfit_z``: the redundant reading's misfit over its standard
   deviation from the noise, the calibration, the panel's terms and the spin within ``+-spin``) tested:
   beyond :data:`SPIN_SIGMAS` the convention does not hold at that hole, and the hole is judged with
-  the spin not known;
+  the spin not known; where it holds, **the spin is read from the redundant reading** (:func:`_read_spin`):
+  the misfit moves with the spin by ``s = d rho / d psi`` (the shape and the CAD beyond second order
+  turned with the head), so ``psi = -rho(0) / s`` (secant steps, within ``+-spin``), and the hole is
+  judged at that spin, the spin's doubt its estimate's, ``u_psi = sd(rho) / |s|`` (uniform within
+  ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is less than ``+-spin``; rule 2 keeps the
+  misfit at the convention's spin with its doubt (the gross-reading check is the same);
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
@@ -44,6 +49,13 @@ SPIN_SIGMAS = 4.0
 #: deg: the head's spin about the tool axis beyond the cell's convention where ``--spin-deg`` does not state it
 #: and a redundant reading confirms the convention (a cell's usual orientation error)
 DEFAULT_SPIN_DEG = 2.0
+#: the spin read from the redundant reading (:func:`_read_spin`) enters U95 as uniform within +- this many of its
+#: standard uncertainties: 0.95 x 2 = 1.9, the 95 % of a normal (1.96) where it is the whole budget; its error comes
+#: from the noise in the misfit, which is uncorrelated with the tilt's (the misfit is the readings' part the fit's
+#: tilt does not use)
+SPIN_READ_WIDTH = 2.0
+#: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
+SPIN_READ_STEPS = 2
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
 CACHE_ROWS = 16384
 
@@ -127,6 +139,13 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         free[a[off]] = True
         z[a[off]] = extra.panel_misfit_z[off]
         keep = ~off
+        read = keep & convention[a] & (spin[a] > 0) if redundant else np.zeros(a.size, bool)
+        if read.any():  # the convention holds: the spin read from the redundant reading
+            r = a[read]
+            h, extra = _read_spin(sub, dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r),
+                                  _rows(h, read), extra.rows(read))
+            parts.append((r, h, extra))
+        keep &= ~read
         if keep.any():
             parts.append((a[keep], _rows(h, keep), extra.rows(keep)))
     b = np.flatnonzero(free)
@@ -135,6 +154,62 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         parts.append((b, h, extra))
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
     return SpinJudged(h, extra, free, convention & ~free, z)
+
+
+def spun(shape, higher, psi):
+    """``(shape, higher)`` of a head turned by ``psi (h,)`` rad about its tool axis beyond the given
+    (``tcs2panel Rz(psi)``, as metrology/sim/forward/log.py step 3 turns it): ``Rz^T K Rz``, the axes ``Rz^T e``."""
+    from dataclasses import replace
+
+    c, s = np.cos(psi), np.sin(psi)
+    Rz = np.zeros((len(psi), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    K = np.einsum("hji,hjk,hkl->hil", Rz, shape, Rz)
+    if higher is None:
+        return K, None
+    return K, replace(higher, axes=higher.axes @ Rz, tcs2panel=None if higher.tcs2panel is None else higher.tcs2panel @ Rz)
+
+
+def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
+    """HoleNormals and PanelFit of holes on the cell's convention judged at the spin their redundant reading
+    gives (module docstring); ``h0, e0`` their fit at the convention's spin (its misfit kept for rule 2). Where the
+    spin's estimate is no better than ``+-spin``, or lies beyond it by more than its doubt, ``h0, e0`` as they are."""
+    zero = np.zeros(len(dd))
+
+    def fit(psi, width):
+        K, hi = spun(shape, higher, psi)
+        return _fit(sub, dd, K, u_shape, width, hi)
+
+    r0 = h0.residual
+    h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = (h1.residual - r0) / spin
+        u_psi = h1.residual_sd / np.abs(slope)
+        psi = -r0 / slope
+        for _ in range(SPIN_READ_STEPS - 1):
+            p = np.clip(np.nan_to_num(psi), -spin, spin)
+            hp, _ = fit(p, zero)
+            slope = np.where(np.abs(p) > 1e-3 * spin, (hp.residual - r0) / np.where(p == 0, 1.0, p), slope)
+            psi = p - hp.residual / slope
+        width = SPIN_READ_WIDTH * u_psi
+    use = np.isfinite(psi) & np.isfinite(width) & (width < spin) & (np.abs(psi) <= spin + width)
+    if not use.any():
+        return h0, e0
+    psi = np.clip(np.where(use, psi, 0.0), -spin, spin)
+    h, e = fit(psi, np.where(use, width, spin))
+    keep = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
+    fields = {}
+    for f in h.__dataclass_fields__:
+        v, v0 = getattr(h, f), getattr(h0, f)
+        if f == "budget":
+            fields[f] = v if use.all() else None
+        elif v is None or f in keep:
+            fields[f] = v0
+        else:
+            fields[f] = np.where(use.reshape((-1,) + (1,) * (v.ndim - 1)), v, v0)
+    e.put(~use, e0.rows(~use))
+    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit, e0.panel_misfit_z
+    return HoleNormals(**fields), e
 
 
 def _rows(h, sel):
