@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from metrology.measure.budget import SPIN
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -54,6 +55,9 @@ DEFAULT_SPIN_DEG = 2.0
 #: from the noise in the misfit, which is uncorrelated with the tilt's (the misfit is the readings' part the fit's
 #: tilt does not use)
 SPIN_READ_WIDTH = 2.0
+#: the spin is read (and its term taken from the fits at its ends) where its share of U95, the uniform's half-width,
+#: is over this fraction of U95: below, it moves U95 by under 1 % (a uniform of a tenth of U95 beside normal terms)
+SPIN_READ_SHARE = 0.1
 #: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
 SPIN_READ_STEPS = 2
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
@@ -156,7 +160,7 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     return SpinJudged(h, extra, free, convention & ~free, z)
 
 
-def spun(shape, higher, psi):
+def _spun(shape, higher, psi):
     """``(shape, higher)`` of a head turned by ``psi (h,)`` rad about its tool axis beyond the given
     (``tcs2panel Rz(psi)``, as metrology/sim/forward/log.py step 3 turns it): ``Rz^T K Rz``, the axes ``Rz^T e``."""
     from dataclasses import replace
@@ -172,15 +176,22 @@ def spun(shape, higher, psi):
 
 def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
     """HoleNormals and PanelFit of holes on the cell's convention judged at the spin their redundant reading
-    gives (module docstring); ``h0, e0`` their fit at the convention's spin (its misfit kept for rule 2). Where the
-    spin's estimate is no better than ``+-spin``, or lies beyond it by more than its doubt, ``h0, e0`` as they are."""
-    zero = np.zeros(len(dd))
+    gives (module docstring); ``h0, e0`` their fit at the convention's spin (its misfit kept for rule 2). Holes
+    where the spin's share of U95 is under :data:`SPIN_READ_SHARE` stay ``h0, e0``; where the spin's estimate is
+    no better than ``+-spin``, or lies beyond it by more than its doubt, they are judged at the convention with
+    ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`)."""
+    a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
+    r = np.flatnonzero(a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95))
+    if not r.size:
+        return h0, e0
+    dd, shape, u_shape, spin, higher = dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r)
+    zero = np.zeros(r.size)
 
     def fit(psi, width):
-        K, hi = spun(shape, higher, psi)
+        K, hi = _spun(shape, higher, psi)
         return _fit(sub, dd, K, u_shape, width, hi)
 
-    r0 = h0.residual
+    r0 = h0.residual[r]
     h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = (h1.residual - r0) / spin
@@ -193,23 +204,74 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
             psi = p - hp.residual / slope
         width = SPIN_READ_WIDTH * u_psi
     use = np.isfinite(psi) & np.isfinite(width) & (width < spin) & (np.abs(psi) <= spin + width)
-    if not use.any():
-        return h0, e0
     psi = np.clip(np.where(use, psi, 0.0), -spin, spin)
-    h, e = fit(psi, np.where(use, width, spin))
-    keep = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
+    width = np.where(use, width, spin)
+    h, e = fit(psi, width)
+    h = _spin_ends(h, fit(psi + width, zero)[0], fit(psi - width, zero)[0])
+    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
+    out = e0.rows(np.arange(len(h0.angle)))  # a copy
+    out.put(r, e)
+    return _put(h0, r, h), out
+
+
+def _spin_ends(h, hp, hm):
+    """``h`` with its spin's term from the fits at the spin's ends ``hp, hm`` (HoleNormals of the same holes):
+    the angle's larger change to either end, uniform along it (the tilt's larger change its 2-D spread) (as :func:`metrology.measure.panel_terms.panel_sources`
+    takes it to first order, the shape alone turned): where the footprint is large against the radius the CAD's
+    terms beyond second order turn too, and the change is not linear in the spin. The larger of the two is kept."""
+    from dataclasses import replace
+
+    from metrology.measure.budget import Budget, combine
+
+    b = h.budget
+    g = b.tilt
+    dp, dm = hp.budget.tilt - g, hm.budget.tilt - g
+    d = np.where(((dp * dp).sum(1) >= (dm * dm).sum(1))[:, None], dp, dm)
+    a = np.fmax(np.abs(hp.angle - h.angle), np.abs(hm.angle - h.angle))  # rad, the angle's change to the farther end
+    a = np.where(np.isfinite(a), a, 0.0)
+    src = b.source(SPIN)
+    more = a > src.half_width
+    cov = np.where(more[:, None], np.stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2], 1) / 3.0, src.cov)
+    spin_src = replace(src, cov=cov, half_width=np.where(more, a, src.half_width))
+    b = Budget(g, tuple(spin_src if s.name == SPIN else s for s in b.sources))
+    un = combine(b)
+    bad = ~np.isfinite(h.angle)
+    panel = np.sqrt(h.curvature_bound ** 2 - src.half_width ** 2 / 3.0 + spin_src.half_width ** 2 / 3.0) \
+        if h.curvature_bound is not None else None
+    return replace(h, u_angle=np.where(bad, np.nan, un.u), U95=np.where(bad, np.nan, un.U95), budget=b,
+                   curvature_bound=panel)
+
+
+#: HoleNormals fields rule 2 reads: kept from the fit at the convention's spin, with its doubt (the misfit read
+#: at the spin found is 0 by construction: the redundant reading is spent on the spin)
+_RULE2 = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
+
+
+def _put(h0, r, h):
+    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields)."""
+    from metrology.measure.budget import Budget
+
     fields = {}
-    for f in h.__dataclass_fields__:
-        v, v0 = getattr(h, f), getattr(h0, f)
-        if f == "budget":
-            fields[f] = v if use.all() else None
-        elif v is None or f in keep:
+    for f in h0.__dataclass_fields__:
+        v0, v = getattr(h0, f), getattr(h, f)
+        if f in _RULE2 or v0 is None or v is None:
             fields[f] = v0
+        elif f == "budget":
+            tilt = v0.tilt.copy()
+            tilt[r] = v.tilt
+            srcs = []
+            for s0, s in zip(v0.sources, v.sources):
+                cov, hw = s0.cov.copy(), None if s0.half_width is None else s0.half_width.copy()
+                cov[r] = s.cov
+                if hw is not None:
+                    hw[r] = s.half_width
+                srcs.append(type(s0)(s0.name, cov, s0.kind, hw))
+            fields[f] = Budget(tilt, tuple(srcs))
         else:
-            fields[f] = np.where(use.reshape((-1,) + (1,) * (v.ndim - 1)), v, v0)
-    e.put(~use, e0.rows(~use))
-    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit, e0.panel_misfit_z
-    return HoleNormals(**fields), e
+            a = v0.copy()
+            a[r] = v
+            fields[f] = a
+    return HoleNormals(**fields)
 
 
 def _rows(h, sel):
