@@ -71,8 +71,11 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
-    """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh."""
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False):
+    """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
+    the pose and ``same``, also the log with its pose and its surfaces."""
+    from dataclasses import replace
+
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
@@ -90,6 +93,8 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
     mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
     surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
+    if not pose and same:  # the same log with its pose, measured as such (the spin's cost, on the same draws)
+        return ch, log, surf, log_table(ch), replace(surf, spin=0.0)
     return ch, log, surf
 
 
@@ -113,8 +118,8 @@ def run(args):
     radii = [float(r) for r in args.radii.split(",") if r]
     lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
-    print(HEADER)
-    print("|" + "---|" * 11)
+    print(HEADER + (" same logs with the pose: coverage % | median error [deg] |" if args.no_pose else ""))
+    print("|" + "---|" * (13 if args.no_pose else 11))
     for hi, (hname, nominal) in enumerate(heads.items()):
         if hname not in args.heads.split(","):
             continue
@@ -123,7 +128,7 @@ def run(args):
         for pi, (label, R, orient) in enumerate(cases):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
-            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b")}
+            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b", "hit_p", "err_p")}
             disagree, refused, reasons, n_all = 0, 0, Counter(), 0
             for c in range(args.calibrations):
                 true = perturb_layout(rng, nominal)
@@ -138,8 +143,16 @@ def run(args):
                     panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
-                ch, log, surf = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose)
+                got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose)
+                ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
+                if args.no_pose:  # the same log with its pose
+                    bp = measure_batch(cal, got[3], Settings(surfaces=got[4]))
+                    up = np.radians(bp.columns.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
+                    okp = (bp.status != CODE[Status.NOT_MEASURED]) & np.isfinite(bp.angle_before) & np.isfinite(up)
+                    ep = np.abs(bp.angle_before - ch.true_angle)
+                    acc["hit_p"].append(ep[okp] <= up[okp])
+                    acc["err_p"].append(ep[okp])
                 t = b.columns
                 ub = np.radians(t.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
                 ua = np.radians(t.column("U95_after_deg").to_numpy(zero_copy_only=False).astype(float))
@@ -161,7 +174,7 @@ def run(args):
                         reasons[_reason_key(r or "")] += 1
             if not acc["judged"]:
                 continue
-            cat = {k: np.concatenate(v) for k, v in acc.items()}
+            cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in acc.items()}
             med = float(np.degrees(np.median(cat["err"]))) if cat["err"].size else float("nan")
             if R is None:
                 flat_err[hname] = med
@@ -174,6 +187,9 @@ def run(args):
                    "median_U95_deg": float(np.degrees(np.median(cat["u_b"]))) if cat["u_b"].size else float("nan"),
                    "disagree": disagree, "logs_refused": refused, "logs": args.calibrations,
                    "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1)}
+            if args.no_pose and cat["hit_p"].size:  # the same logs with their pose
+                row["coverage_pose_same"] = float(cat["hit_p"].mean())
+                row["median_err_pose_same_deg"] = float(np.degrees(np.median(cat["err_p"])))
             out["rows"].append(row)
             print(line(row), flush=True)
     return out
@@ -187,7 +203,8 @@ def line(r):
     return (f"| {r['head']} | {r['panel']} | {r['judged']} / {r['holes']} ({100 * r['share_judged']:.0f} %) | "
             f"{100 * r['coverage_before']:.1f} | {100 * r['coverage_after']:.1f} | {r['median_err_deg']:.4f} | "
             f"{r['err_over_flat']:.2f} | {r['median_U95_deg']:.4f} | {r['disagree']} | {r['logs_refused']} / {r['logs']} | "
-            f"{r['seconds']:.0f} |")
+            f"{r['seconds']:.0f} |" + (f" {100 * r['coverage_pose_same']:.1f} | {r['median_err_pose_same_deg']:.4f} |"
+                                       if "coverage_pose_same" in r else ""))
 
 
 def main(argv=None):

@@ -15,7 +15,8 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   the misfit moves with the spin by ``s = d rho / d psi`` (the shape and the CAD beyond second order
   turned with the head), so ``psi = -rho(0) / s`` (secant steps, within ``+-spin``), and the hole is
   judged at that spin, the spin's doubt its estimate's, ``u_psi = sd(rho) / |s|`` (uniform within
-  ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is less than ``+-spin``; rule 2 keeps the
+  ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is under :data:`SPIN_READ_MAX` of ``+-spin``; the
+  spin's term in U95 is taken from the fits at its ends (:func:`_spin_ends`); rule 2 keeps the
   misfit at the convention's spin with its doubt (the gross-reading check is the same);
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
@@ -58,6 +59,11 @@ SPIN_READ_WIDTH = 2.0
 #: the spin is read (and its term taken from the fits at its ends) where its share of U95, the uniform's half-width,
 #: is over this fraction of U95: below, it moves U95 by under 1 % (a uniform of a tenth of U95 beside normal terms)
 SPIN_READ_SHARE = 0.1
+#: the spin read is used where its doubt (+- SPIN_READ_WIDTH u_psi) is under this fraction of +-spin: a misfit that
+#: barely moves with the spin (the Table 2 head on R 50: 2-7 um per deg against its 5 um sd) reads it off by 1-2 deg
+#: where the sd said 0.4-0.8 (the misfit's other terms at a tight radius, and its curvature in the spin, are as large
+#: as the spin's): there the convention with +-spin is kept (benchmarks/results/tight_radii.md)
+SPIN_READ_MAX = 0.25
 #: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
 SPIN_READ_STEPS = 2
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
@@ -131,6 +137,11 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     nan = np.full(m, np.nan)
     if not free0.any() and not (redundant and convention.any()):  # the usual: the pose, or a stated 3-sensor convention
         h, extra = _fit(sub, dd, shape, u_shape, spin, higher)
+        c = np.flatnonzero(convention & (spin > 0))
+        if c.size:  # the stated convention: the spin's term from its ends
+            hc, ec = _read_spin(sub, dd[c], shape[c], u_shape[c], spin[c], None if higher is None else higher.rows(c),
+                                _rows(h, c), extra.rows(c), read=False)
+            h, extra = _put(h, c, hc, everything=True), _with(extra, c, ec)
         return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan)
     a = np.flatnonzero(~free0)
     parts = []
@@ -174,12 +185,13 @@ def _spun(shape, higher, psi):
     return K, replace(higher, axes=higher.axes @ Rz, tcs2panel=None if higher.tcs2panel is None else higher.tcs2panel @ Rz)
 
 
-def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
+def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     """HoleNormals and PanelFit of holes on the cell's convention judged at the spin their redundant reading
     gives (module docstring); ``h0, e0`` their fit at the convention's spin (its misfit kept for rule 2). Holes
     where the spin's share of U95 is under :data:`SPIN_READ_SHARE` stay ``h0, e0``; where the spin's estimate is
     no better than ``+-spin``, or lies beyond it by more than its doubt, they are judged at the convention with
-    ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`)."""
+    ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`). ``read``
+    False (no redundant reading): the convention with ``+-spin``, its term from the ends."""
     a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
     r = np.flatnonzero(a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95))
     if not r.size:
@@ -191,7 +203,19 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
         K, hi = _spun(shape, higher, psi)
         return _fit(sub, dd, K, u_shape, width, hi)
 
-    r0 = h0.residual[r]
+    if not read:  # no redundant reading: the convention, its term from the spin's ends
+        psi, width = zero, spin
+    else:
+        psi, width = _estimate(fit, h0.residual[r], spin, zero)
+    h, e = fit(psi, width)
+    h = _spin_ends(h, fit(psi + width, zero)[0], fit(psi - width, zero)[0])
+    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
+    return _put(h0, r, h), _with(e0, r, e)
+
+
+def _estimate(fit, r0, spin, zero):
+    """``(psi, width)`` (h,) rad: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``)
+    and its doubt, where :data:`SPIN_READ_MAX` admits it; else ``0, spin``."""
     h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = (h1.residual - r0) / spin
@@ -203,22 +227,16 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0):
             slope = np.where(np.abs(p) > 1e-3 * spin, (hp.residual - r0) / np.where(p == 0, 1.0, p), slope)
             psi = p - hp.residual / slope
         width = SPIN_READ_WIDTH * u_psi
-    use = np.isfinite(psi) & np.isfinite(width) & (width < spin) & (np.abs(psi) <= spin + width)
-    psi = np.clip(np.where(use, psi, 0.0), -spin, spin)
-    width = np.where(use, width, spin)
-    h, e = fit(psi, width)
-    h = _spin_ends(h, fit(psi + width, zero)[0], fit(psi - width, zero)[0])
-    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
-    out = e0.rows(np.arange(len(h0.angle)))  # a copy
-    out.put(r, e)
-    return _put(h0, r, h), out
+    use = np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin) & (np.abs(psi) <= spin + width)
+    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin)
 
 
 def _spin_ends(h, hp, hm):
-    """``h`` with its spin's term from the fits at the spin's ends ``hp, hm`` (HoleNormals of the same holes):
-    the angle's larger change to either end, uniform along it (the tilt's larger change its 2-D spread) (as :func:`metrology.measure.panel_terms.panel_sources`
-    takes it to first order, the shape alone turned): where the footprint is large against the radius the CAD's
-    terms beyond second order turn too, and the change is not linear in the spin. The larger of the two is kept."""
+    """``h`` with its spin's term from the fits at the spin's ends ``hp, hm`` (HoleNormals of the same holes): the
+    angle's larger change to either end, uniform along it (the tilt's larger change its 2-D spread). The first-order
+    term (:func:`metrology.measure.panel_terms.panel_sources`) turns the shape alone: where the footprint is large
+    against the radius the CAD's terms beyond second order turn too, and the change is not linear in the spin. The
+    larger of the two is kept."""
     from dataclasses import replace
 
     from metrology.measure.budget import Budget, combine
@@ -247,14 +265,22 @@ def _spin_ends(h, hp, hm):
 _RULE2 = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
 
 
-def _put(h0, r, h):
-    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields)."""
+def _with(e0, r, e):
+    """A copy of ``e0`` (PanelFit) with the holes ``r`` from ``e``."""
+    out = e0.rows(np.arange(len(e0.correction)))
+    out.put(r, e)
+    return out
+
+
+def _put(h0, r, h, everything=False):
+    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields unless
+    ``everything``)."""
     from metrology.measure.budget import Budget
 
     fields = {}
     for f in h0.__dataclass_fields__:
         v0, v = getattr(h0, f), getattr(h, f)
-        if f in _RULE2 or v0 is None or v is None:
+        if (f in _RULE2 and not everything) or v0 is None or v is None:
             fields[f] = v0
         elif f == "budget":
             tilt = v0.tilt.copy()
