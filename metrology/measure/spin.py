@@ -17,7 +17,7 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   judged at that spin, the spin's doubt its estimate's, ``u_psi = sd(rho) / |s|`` (uniform within
   ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is under :data:`SPIN_READ_MAX` of ``+-spin``; the
   spin's term in U95 is taken from the fits at its ends (:func:`_spin_ends`); rule 2 keeps the
-  misfit at the convention's spin with its doubt (the gross-reading check is the same);
+  misfit at the convention's spin with its doubt, and allows the most the spin moves it (to its ends);
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
@@ -31,7 +31,7 @@ the convention.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -174,8 +174,6 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
 def _spun(shape, higher, psi):
     """``(shape, higher)`` of a head turned by ``psi (h,)`` rad about its tool axis beyond the given
     (``tcs2panel Rz(psi)``, as metrology/sim/forward/log.py step 3 turns it): ``Rz^T K Rz``, the axes ``Rz^T e``."""
-    from dataclasses import replace
-
     c, s = np.cos(psi), np.sin(psi)
     Rz = np.zeros((len(psi), 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
@@ -203,19 +201,28 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
         K, hi = _spun(shape, higher, psi)
         return _fit(sub, dd, K, u_shape, width, hi)
 
+    r0 = h0.residual[r]
     if not read:  # no redundant reading: the convention, its term from the spin's ends
-        psi, width = zero, spin
+        psi, width, reach = zero, spin, zero
     else:
-        psi, width = _estimate(fit, h0.residual[r], spin, zero)
+        psi, width, reach = _estimate(fit, r0, spin, zero)
     h, e = fit(psi, width)
-    h = _spin_ends(h, fit(psi + width, zero)[0], fit(psi - width, zero)[0])
+    hp, hm = fit(psi + width, zero)[0], fit(psi - width, zero)[0]
+    h = _spin_ends(h, hp, hm)
     e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
+    if h0.misfit_bound is not None:  # rule 2: the most the spin within +-spin moves the misfit, beyond its first order
+        at_ends = np.fmax(np.abs(hp.residual - r0), np.abs(hm.residual - r0))
+        reach = np.nan_to_num(np.where(width < spin, reach, at_ends))
+        bound = h0.misfit_bound.copy()
+        bound[r] = np.fmax(bound[r], reach)
+        h0 = replace(h0, misfit_bound=bound)
     return _put(h0, r, h), _with(e0, r, e)
 
 
 def _estimate(fit, r0, spin, zero):
-    """``(psi, width)`` (h,) rad: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``)
-    and its doubt, where :data:`SPIN_READ_MAX` admits it; else ``0, spin``."""
+    """``(psi, width, reach)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and its
+    doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; and how far the misfit moves to the
+    spin's ends (h,) mm."""
     h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = (h1.residual - r0) / spin
@@ -228,7 +235,8 @@ def _estimate(fit, r0, spin, zero):
             psi = p - hp.residual / slope
         width = SPIN_READ_WIDTH * u_psi
     use = np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin) & (np.abs(psi) <= spin + width)
-    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin)
+    reach = np.fmax(np.abs(h1.residual - r0), np.abs(slope) * spin)  # mm: the misfit's move to the spin's ends
+    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach
 
 
 def _spin_ends(h, hp, hm):
@@ -237,8 +245,6 @@ def _spin_ends(h, hp, hm):
     term (:func:`metrology.measure.panel_terms.panel_sources`) turns the shape alone: where the footprint is large
     against the radius the CAD's terms beyond second order turn too, and the change is not linear in the spin. The
     larger of the two is kept."""
-    from dataclasses import replace
-
     from metrology.measure.budget import Budget, combine
 
     b = h.budget
