@@ -64,6 +64,9 @@ SPIN_READ_SHARE = 0.1
 #: where the sd said 0.4-0.8 (the misfit's other terms at a tight radius, and its curvature in the spin, are as large
 #: as the spin's): there the convention with +-spin is kept (benchmarks/results/tight_radii.md)
 SPIN_READ_MAX = 0.25
+#: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
+#: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
+SPIN_ENDS_MAX = np.radians(10.0)
 #: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
 SPIN_READ_STEPS = 2
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
@@ -151,6 +154,10 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
         test = np.abs(extra.panel_misfit_z)
         off = convention[a] & (test > SPIN_SIGMAS) if redundant else np.zeros(a.size, bool)
+        near = off & (spin[a] <= SPIN_ENDS_MAX)
+        if near.any():  # the first-order test; the convention holds where a spin within +-spin reaches the misfit
+            off[near] = ~_within_reach(sub, dd[a[near]], shape[a[near]], u_shape[a[near]], spin[a[near]],
+                                       None if higher is None else higher.rows(a[near]), h.residual[near])
         free[a[off]] = True
         z[a[off]] = extra.panel_misfit_z[off]
         keep = ~off
@@ -169,6 +176,18 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         parts.append((b, h, extra))
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
     return SpinJudged(h, extra, free, convention & ~free, z)
+
+
+def _within_reach(sub, dd, shape, u_shape, spin, higher, r0):
+    """(h,) bool: the misfit ``r0`` (mm) at the convention's spin lies within what a spin within ``+-spin`` moves it
+    (fits at its ends) plus :data:`SPIN_SIGMAS` of its sd: the first-order test's spin term leaves out the CAD beyond
+    second order and the misfit's curvature in the spin, as large as the term itself at a tight radius (Table 2 on
+    R 50: 1-2 % of holes refused the convention, then judged over every spin with a model that cannot hold there)."""
+    zero = np.zeros(len(dd))
+    ends = [_fit(sub, dd, K, u_shape, zero, hi)[0] for K, hi in (_spun(shape, higher, sign * spin) for sign in (1.0, -1.0))]
+    reach = np.fmax(np.abs(ends[0].residual - r0), np.abs(ends[1].residual - r0))
+    with np.errstate(invalid="ignore"):
+        return np.abs(r0) <= reach + SPIN_SIGMAS * ends[0].residual_sd
 
 
 def _spun(shape, higher, psi):
@@ -191,7 +210,7 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`). ``read``
     False (no redundant reading): the convention with ``+-spin``, its term from the ends."""
     a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
-    r = np.flatnonzero(a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95))
+    r = np.flatnonzero((a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95)) & (spin <= SPIN_ENDS_MAX))
     if not r.size:
         return h0, e0
     dd, shape, u_shape, spin, higher = dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r)
