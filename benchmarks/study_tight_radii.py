@@ -71,7 +71,7 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False):
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0):
     """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
     the pose and ``same``, also the log with its pose and its surfaces."""
     from dataclasses import replace
@@ -85,7 +85,7 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False):
     from tests.measure.panel_fixtures import panel_mesh
 
     table = crest_table(panel, 100.0, holes)
-    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(2.0))
+    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(spin_deg))
     ch = next(simulate_cell(spec, int(rng.integers(2**31)), 0, holes, chunk_holes=holes))
     log = log_table(ch)
     if not pose:
@@ -143,7 +143,8 @@ def run(args):
                     panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
-                got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose)
+                got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose,
+                              spin_deg=args.sim_spin_deg)
                 ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
                 if args.no_pose:  # the same log with its pose
@@ -221,6 +222,8 @@ def main(argv=None):
     ap.add_argument("--heads", default="table2,table6,ring3,ring4")
     ap.add_argument("--mesh-step", type=float, default=2.0, help="the CAD grid mesh's step, mm")
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
+    ap.add_argument("--sim-spin-deg", type=float, default=2.0,
+                    help="the head's true spin about the tool axis, uniform within +-this (measured as +-2 without the pose)")
     ap.add_argument("--seed", type=int, default=53)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
