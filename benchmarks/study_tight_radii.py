@@ -23,7 +23,10 @@ panel's (same head), the share of holes whose readings rule 2 calls "disagree" (
 the log: ``jobs.measure._check_fit``), and the reasons of the holes not measured.
 
     nice -n 10 python benchmarks/study_tight_radii.py --calibrations 4 --holes 150 --seed 53 \
-        --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--no-pose]
+        --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--lips 50,80]
+        [--no-pose [--sim-spin-deg 0]]
+
+Without the pose each row also measures the same logs with their pose (the last two columns).
 
 Results and what they found: benchmarks/results/tight_radii.md.
 """
