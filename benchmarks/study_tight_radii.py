@@ -9,7 +9,9 @@ benchmarks/study_measure.py ``--panel-known`` does it:
 2. a cylinder of radius R (20, 50, 80, 150 mm, and a flat panel for the reference) with its axis along
    the panel's ``x`` or across it (along ``y``); the holes on its crest (a hole table along the axis,
    feed ``-z``), drilled by the simulator from the table (the log carries the commanded pose:
-   ``pose_*`` columns; ``--no-pose`` drops them) (a torus lip: not yet, the simulator has no torus panel);
+   ``pose_*`` columns; ``--no-pose`` drops them); a torus lip (``--lips``: tube radii, ``--lip-ring`` the ring's
+   radius; :class:`metrology.sim.forward.torus.TorusPanel`, its outer side elliptic, its inner a saddle), the holes
+   around its crest, each feed on the lip's normal;
 3. the CAD a grid mesh of the simulator's own surface (``--mesh-step`` mm, tests/measure/panel_fixtures.py;
    a binary STL is the same triangles), the hole table the drill points;
 4. measured by ``metrology.measure.holes.measure_batch`` with the surfaces of
@@ -21,7 +23,10 @@ panel's (same head), the share of holes whose readings rule 2 calls "disagree" (
 the log: ``jobs.measure._check_fit``), and the reasons of the holes not measured.
 
     nice -n 10 python benchmarks/study_tight_radii.py --calibrations 4 --holes 150 --seed 53 \
-        --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--no-pose]
+        --json benchmarks/results/tight_radii_seed53.json [--heads table6,ring3] [--radii 20,50] [--lips 50,80]
+        [--no-pose [--sim-spin-deg 0]]
+
+Without the pose each row also measures the same logs with their pose (the last two columns).
 
 Results and what they found: benchmarks/results/tight_radii.md.
 """
@@ -58,19 +63,22 @@ def all_heads(rng):
 
 def crest_table(panel, span_mm: float, m: int, name="holes"):
     """The forward simulator's hole table of ``m`` holes on the crest of ``panel`` (along its axis, or along
-    ``x`` on a flat panel, ``|t| <= span_mm``), feed ``-z``."""
+    ``x`` on a flat panel, ``|t| <= span_mm``), feed ``-n`` (the panel's normal there)."""
     from metrology.sim.forward.holes import HoleTable
 
     axis = np.asarray(getattr(panel, "axis", (1.0, 0.0, 0.0)), float)
     t = np.linspace(-span_mm, span_mm, m)
     P = t[:, None] * axis[None, :]
     P[:, 2] = panel.height(P[:, 0], P[:, 1])
-    feed = np.tile([0.0, 0.0, -1.0], (m, 1))
+    feed = -panel.normal_at(P)
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
-    """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh."""
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0):
+    """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
+    the pose and ``same``, also the log with its pose and its surfaces."""
+    from dataclasses import replace
+
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
@@ -80,7 +88,7 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
     from tests.measure.panel_fixtures import panel_mesh
 
     table = crest_table(panel, 100.0, holes)
-    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(2.0))
+    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(spin_deg))
     ch = next(simulate_cell(spec, int(rng.integers(2**31)), 0, holes, chunk_holes=holes))
     log = log_table(ch)
     if not pose:
@@ -88,6 +96,8 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True):
     mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
     surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
+    if not pose and same:  # the same log with its pose, measured as such (the spin's cost, on the same draws)
+        return ch, log, surf, log_table(ch), replace(surf, spin=0.0)
     return ch, log, surf
 
 
@@ -103,22 +113,25 @@ def run(args):
     from metrology.measure.holes import Settings, measure_batch
     from metrology.sim.forward import perturb_layout
     from metrology.sim.forward.panels import make_panel
+    from metrology.sim.forward.torus import TorusPanel
 
     out = {"args": {k: str(v) for k, v in vars(args).items()}, "rows": []}
     range_mm = np.array([30.0, 70.0])
     heads = all_heads(np.random.default_rng(args.seed))
-    radii = [float(r) for r in args.radii.split(",")]
+    radii = [float(r) for r in args.radii.split(",") if r]
+    lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
-    print(HEADER)
-    print("|" + "---|" * 11)
+    print(HEADER + (" same logs with the pose: coverage % | median error [deg] |" if args.no_pose else ""))
+    print("|" + "---|" * (13 if args.no_pose else 11))
     for hi, (hname, nominal) in enumerate(heads.items()):
         if hname not in args.heads.split(","):
             continue
         cases = [("flat", None, None)] + [(f"cylinder R {R:g} {o}", R, o) for R in radii for o in args.orient.split(",")]
+        cases += [(f"torus lip r {r:g} {side}", r, side) for r in lips for side in args.lip_sides.split(",")]
         for pi, (label, R, orient) in enumerate(cases):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
-            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b")}
+            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b", "hit_p", "err_p")}
             disagree, refused, reasons, n_all = 0, 0, Counter(), 0
             for c in range(args.calibrations):
                 true = perturb_layout(rng, nominal)
@@ -129,10 +142,21 @@ def run(args):
                 cal = calibrate_head(rng, nominal, true, args.noise, range_mm, args.poses)
                 if R is None:
                     panel = make_panel("flat")
+                elif label.startswith("torus"):
+                    panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
-                ch, log, surf = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose)
+                got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose,
+                              spin_deg=args.sim_spin_deg)
+                ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
+                if args.no_pose:  # the same log with its pose
+                    bp = measure_batch(cal, got[3], Settings(surfaces=got[4]))
+                    up = np.radians(bp.columns.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
+                    okp = (bp.status != CODE[Status.NOT_MEASURED]) & np.isfinite(bp.angle_before) & np.isfinite(up)
+                    ep = np.abs(bp.angle_before - ch.true_angle)
+                    acc["hit_p"].append(ep[okp] <= up[okp])
+                    acc["err_p"].append(ep[okp])
                 t = b.columns
                 ub = np.radians(t.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
                 ua = np.radians(t.column("U95_after_deg").to_numpy(zero_copy_only=False).astype(float))
@@ -154,7 +178,7 @@ def run(args):
                         reasons[_reason_key(r or "")] += 1
             if not acc["judged"]:
                 continue
-            cat = {k: np.concatenate(v) for k, v in acc.items()}
+            cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in acc.items()}
             med = float(np.degrees(np.median(cat["err"]))) if cat["err"].size else float("nan")
             if R is None:
                 flat_err[hname] = med
@@ -167,6 +191,9 @@ def run(args):
                    "median_U95_deg": float(np.degrees(np.median(cat["u_b"]))) if cat["u_b"].size else float("nan"),
                    "disagree": disagree, "logs_refused": refused, "logs": args.calibrations,
                    "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1)}
+            if args.no_pose and cat["hit_p"].size:  # the same logs with their pose
+                row["coverage_pose_same"] = float(cat["hit_p"].mean())
+                row["median_err_pose_same_deg"] = float(np.degrees(np.median(cat["err_p"])))
             out["rows"].append(row)
             print(line(row), flush=True)
     return out
@@ -180,7 +207,8 @@ def line(r):
     return (f"| {r['head']} | {r['panel']} | {r['judged']} / {r['holes']} ({100 * r['share_judged']:.0f} %) | "
             f"{100 * r['coverage_before']:.1f} | {100 * r['coverage_after']:.1f} | {r['median_err_deg']:.4f} | "
             f"{r['err_over_flat']:.2f} | {r['median_U95_deg']:.4f} | {r['disagree']} | {r['logs_refused']} / {r['logs']} | "
-            f"{r['seconds']:.0f} |")
+            f"{r['seconds']:.0f} |" + (f" {100 * r['coverage_pose_same']:.1f} | {r['median_err_pose_same_deg']:.4f} |"
+                                       if "coverage_pose_same" in r else ""))
 
 
 def main(argv=None):
@@ -191,9 +219,14 @@ def main(argv=None):
     ap.add_argument("--noise", type=float, default=0.005, help="reading noise, mm (1 sigma)")
     ap.add_argument("--radii", default="20,50,80,150")
     ap.add_argument("--orient", default="along,across", help="the cylinder's axis along the panel's x, across it")
+    ap.add_argument("--lips", default="50,80", help="torus lips' tube radii, mm ('' none)")
+    ap.add_argument("--lip-ring", type=float, default=600.0, help="the torus lip's ring radius, mm")
+    ap.add_argument("--lip-sides", default="outer,inner", help="the lip's outer side (elliptic), inner (a saddle)")
     ap.add_argument("--heads", default="table2,table6,ring3,ring4")
     ap.add_argument("--mesh-step", type=float, default=2.0, help="the CAD grid mesh's step, mm")
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
+    ap.add_argument("--sim-spin-deg", type=float, default=2.0,
+                    help="the head's true spin about the tool axis, uniform within +-this (measured as +-2 without the pose)")
     ap.add_argument("--seed", type=int, default=53)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)

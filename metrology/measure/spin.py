@@ -11,7 +11,13 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   the CAD's surface there (``panel_misfit_z``: the redundant reading's misfit over its standard
   deviation from the noise, the calibration, the panel's terms and the spin within ``+-spin``) tested:
   beyond :data:`SPIN_SIGMAS` the convention does not hold at that hole, and the hole is judged with
-  the spin not known;
+  the spin not known; where it holds, **the spin is read from the redundant reading** (:func:`_read_spin`):
+  the misfit moves with the spin by ``s = d rho / d psi`` (the shape and the CAD beyond second order
+  turned with the head), so ``psi = -rho(0) / s`` (secant steps, within ``+-spin``), and the hole is
+  judged at that spin, the spin's doubt its estimate's, ``u_psi = sd(rho) / |s|`` (uniform within
+  ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is under :data:`SPIN_READ_MAX` of ``+-spin``; the
+  spin's term in U95 is taken from the fits at its ends (:func:`_spin_ends`); rule 2 keeps the
+  misfit at the convention's spin with its doubt, and allows the most the spin moves it (to its ends);
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
@@ -25,11 +31,12 @@ the convention.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from metrology.measure.budget import SPIN
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -44,6 +51,24 @@ SPIN_SIGMAS = 4.0
 #: deg: the head's spin about the tool axis beyond the cell's convention where ``--spin-deg`` does not state it
 #: and a redundant reading confirms the convention (a cell's usual orientation error)
 DEFAULT_SPIN_DEG = 2.0
+#: the spin read from the redundant reading (:func:`_read_spin`) enters U95 as uniform within +- this many of its
+#: standard uncertainties: 0.95 x 2 = 1.9, the 95 % of a normal (1.96) where it is the whole budget; its error comes
+#: from the noise in the misfit, which is uncorrelated with the tilt's (the misfit is the readings' part the fit's
+#: tilt does not use)
+SPIN_READ_WIDTH = 2.0
+#: the spin is read (and its term taken from the fits at its ends) where its share of U95, the uniform's half-width,
+#: is over this fraction of U95: below, it moves U95 by under 1 % (a uniform of a tenth of U95 beside normal terms)
+SPIN_READ_SHARE = 0.1
+#: the spin read is used where its doubt (+- SPIN_READ_WIDTH u_psi) is under this fraction of +-spin: a misfit that
+#: barely moves with the spin (the Table 2 head on R 50: 2-7 um per deg against its 5 um sd) reads it off by 1-2 deg
+#: where the sd said 0.4-0.8 (the misfit's other terms at a tight radius, and its curvature in the spin, are as large
+#: as the spin's): there the convention with +-spin is kept (benchmarks/results/tight_radii.md)
+SPIN_READ_MAX = 0.25
+#: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
+#: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
+SPIN_ENDS_MAX = np.radians(10.0)
+#: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
+SPIN_READ_STEPS = 2
 #: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
 CACHE_ROWS = 16384
 
@@ -115,6 +140,11 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     nan = np.full(m, np.nan)
     if not free0.any() and not (redundant and convention.any()):  # the usual: the pose, or a stated 3-sensor convention
         h, extra = _fit(sub, dd, shape, u_shape, spin, higher)
+        c = np.flatnonzero(convention & (spin > 0))
+        if c.size:  # the stated convention: the spin's term from its ends
+            hc, ec = _read_spin(sub, dd[c], shape[c], u_shape[c], spin[c], None if higher is None else higher.rows(c),
+                                _rows(h, c), extra.rows(c), read=False)
+            h, extra = _put(h, c, hc, everything=True), _with(extra, c, ec)
         return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan)
     a = np.flatnonzero(~free0)
     parts = []
@@ -124,9 +154,20 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
         test = np.abs(extra.panel_misfit_z)
         off = convention[a] & (test > SPIN_SIGMAS) if redundant else np.zeros(a.size, bool)
+        near = off & (spin[a] <= SPIN_ENDS_MAX)
+        if near.any():  # the first-order test; the convention holds where a spin within +-spin reaches the misfit
+            off[near] = ~_within_reach(sub, dd[a[near]], shape[a[near]], u_shape[a[near]], spin[a[near]],
+                                       None if higher is None else higher.rows(a[near]), h.residual[near])
         free[a[off]] = True
         z[a[off]] = extra.panel_misfit_z[off]
         keep = ~off
+        read = keep & convention[a] & (spin[a] > 0) if redundant else np.zeros(a.size, bool)
+        if read.any():  # the convention holds: the spin read from the redundant reading
+            r = a[read]
+            h, extra = _read_spin(sub, dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r),
+                                  _rows(h, read), extra.rows(read))
+            parts.append((r, h, extra))
+        keep &= ~read
         if keep.any():
             parts.append((a[keep], _rows(h, keep), extra.rows(keep)))
     b = np.flatnonzero(free)
@@ -135,6 +176,153 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         parts.append((b, h, extra))
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
     return SpinJudged(h, extra, free, convention & ~free, z)
+
+
+def _within_reach(sub, dd, shape, u_shape, spin, higher, r0):
+    """(h,) bool: the misfit ``r0`` (mm) at the convention's spin lies within what a spin within ``+-spin`` moves it
+    (fits at its ends) plus :data:`SPIN_SIGMAS` of its sd: the first-order test's spin term leaves out the CAD beyond
+    second order and the misfit's curvature in the spin, as large as the term itself at a tight radius (Table 2 on
+    R 50: 1-2 % of holes refused the convention, then judged over every spin with a model that cannot hold there)."""
+    zero = np.zeros(len(dd))
+    ends = [_fit(sub, dd, K, u_shape, zero, hi)[0] for K, hi in (_spun(shape, higher, sign * spin) for sign in (1.0, -1.0))]
+    reach = np.fmax(np.abs(ends[0].residual - r0), np.abs(ends[1].residual - r0))
+    with np.errstate(invalid="ignore"):
+        return np.abs(r0) <= reach + SPIN_SIGMAS * ends[0].residual_sd
+
+
+def _spun(shape, higher, psi):
+    """``(shape, higher)`` of a head turned by ``psi (h,)`` rad about its tool axis beyond the given
+    (``tcs2panel Rz(psi)``, as metrology/sim/forward/log.py step 3 turns it): ``Rz^T K Rz``, the axes ``Rz^T e``."""
+    c, s = np.cos(psi), np.sin(psi)
+    Rz = np.zeros((len(psi), 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    K = np.einsum("hji,hjk,hkl->hil", Rz, shape, Rz)
+    if higher is None:
+        return K, None
+    return K, replace(higher, axes=higher.axes @ Rz, tcs2panel=None if higher.tcs2panel is None else higher.tcs2panel @ Rz)
+
+
+def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
+    """HoleNormals and PanelFit of holes on the cell's convention judged at the spin their redundant reading
+    gives (module docstring); ``h0, e0`` their fit at the convention's spin (its misfit kept for rule 2). Holes
+    where the spin's share of U95 is under :data:`SPIN_READ_SHARE` stay ``h0, e0``; where the spin's estimate is
+    no better than ``+-spin``, or lies beyond it by more than its doubt, they are judged at the convention with
+    ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`). ``read``
+    False (no redundant reading): the convention with ``+-spin``, its term from the ends."""
+    a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
+    r = np.flatnonzero((a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95)) & (spin <= SPIN_ENDS_MAX))
+    if not r.size:
+        return h0, e0
+    dd, shape, u_shape, spin, higher = dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r)
+    zero = np.zeros(r.size)
+
+    def fit(psi, width):
+        K, hi = _spun(shape, higher, psi)
+        return _fit(sub, dd, K, u_shape, width, hi)
+
+    r0 = h0.residual[r]
+    if not read:  # no redundant reading: the convention, its term from the spin's ends
+        psi, width, reach = zero, spin, zero
+    else:
+        psi, width, reach = _estimate(fit, r0, spin, zero)
+    h, e = fit(psi, width)
+    hp, hm = fit(psi + width, zero)[0], fit(psi - width, zero)[0]
+    h = _spin_ends(h, hp, hm)
+    e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
+    if h0.misfit_bound is not None:  # rule 2: the most the spin within +-spin moves the misfit, beyond its first order
+        at_ends = np.fmax(np.abs(hp.residual - r0), np.abs(hm.residual - r0))
+        reach = np.nan_to_num(np.where(width < spin, reach, at_ends))
+        bound = h0.misfit_bound.copy()
+        bound[r] = np.fmax(bound[r], reach)
+        h0 = replace(h0, misfit_bound=bound)
+    return _put(h0, r, h), _with(e0, r, e)
+
+
+def _estimate(fit, r0, spin, zero):
+    """``(psi, width, reach)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and its
+    doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; and how far the misfit moves to the
+    spin's ends (h,) mm."""
+    h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = (h1.residual - r0) / spin
+        u_psi = h1.residual_sd / np.abs(slope)
+        psi = -r0 / slope
+        for _ in range(SPIN_READ_STEPS - 1):
+            p = np.clip(np.nan_to_num(psi), -spin, spin)
+            hp, _ = fit(p, zero)
+            slope = np.where(np.abs(p) > 1e-3 * spin, (hp.residual - r0) / np.where(p == 0, 1.0, p), slope)
+            psi = p - hp.residual / slope
+        width = SPIN_READ_WIDTH * u_psi
+    use = np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin) & (np.abs(psi) <= spin + width)
+    reach = np.fmax(np.abs(h1.residual - r0), np.abs(slope) * spin)  # mm: the misfit's move to the spin's ends
+    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach
+
+
+def _spin_ends(h, hp, hm):
+    """``h`` with its spin's term from the fits at the spin's ends ``hp, hm`` (HoleNormals of the same holes): the
+    angle's larger change to either end, uniform along it (the tilt's larger change its 2-D spread). The first-order
+    term (:func:`metrology.measure.panel_terms.panel_sources`) turns the shape alone: where the footprint is large
+    against the radius the CAD's terms beyond second order turn too, and the change is not linear in the spin. The
+    larger of the two is kept."""
+    from metrology.measure.budget import Budget, combine
+
+    b = h.budget
+    g = b.tilt
+    dp, dm = hp.budget.tilt - g, hm.budget.tilt - g
+    d = np.where(((dp * dp).sum(1) >= (dm * dm).sum(1))[:, None], dp, dm)
+    a = np.fmax(np.abs(hp.angle - h.angle), np.abs(hm.angle - h.angle))  # rad, the angle's change to the farther end
+    a = np.where(np.isfinite(a), a, 0.0)
+    src = b.source(SPIN)
+    more = a > src.half_width
+    cov = np.where(more[:, None], np.stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2], 1) / 3.0, src.cov)
+    spin_src = replace(src, cov=cov, half_width=np.where(more, a, src.half_width))
+    b = Budget(g, tuple(spin_src if s.name == SPIN else s for s in b.sources))
+    un = combine(b)
+    bad = ~np.isfinite(h.angle)
+    panel = np.sqrt(h.curvature_bound ** 2 - src.half_width ** 2 / 3.0 + spin_src.half_width ** 2 / 3.0) \
+        if h.curvature_bound is not None else None
+    return replace(h, u_angle=np.where(bad, np.nan, un.u), U95=np.where(bad, np.nan, un.U95), budget=b,
+                   curvature_bound=panel)
+
+
+#: HoleNormals fields rule 2 reads: kept from the fit at the convention's spin, with its doubt (the misfit read
+#: at the spin found is 0 by construction: the redundant reading is spent on the spin)
+_RULE2 = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
+
+
+def _with(e0, r, e):
+    """A copy of ``e0`` (PanelFit) with the holes ``r`` from ``e``."""
+    out = e0.rows(np.arange(len(e0.correction)))
+    out.put(r, e)
+    return out
+
+
+def _put(h0, r, h, everything=False):
+    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields unless
+    ``everything``)."""
+    from metrology.measure.budget import Budget
+
+    fields = {}
+    for f in h0.__dataclass_fields__:
+        v0, v = getattr(h0, f), getattr(h, f)
+        if (f in _RULE2 and not everything) or v0 is None or v is None:
+            fields[f] = v0
+        elif f == "budget":
+            tilt = v0.tilt.copy()
+            tilt[r] = v.tilt
+            srcs = []
+            for s0, s in zip(v0.sources, v.sources):
+                cov, hw = s0.cov.copy(), None if s0.half_width is None else s0.half_width.copy()
+                cov[r] = s.cov
+                if hw is not None:
+                    hw[r] = s.half_width
+                srcs.append(type(s0)(s0.name, cov, s0.kind, hw))
+            fields[f] = Budget(tilt, tuple(srcs))
+        else:
+            a = v0.copy()
+            a[r] = v
+            fields[f] = a
+    return HoleNormals(**fields)
 
 
 def _rows(h, sel):

@@ -12,7 +12,7 @@ distance), :mod:`.drift` (time, temperature, drift), :mod:`.incidence` (incidenc
 :mod:`.cases` (blind cases), :mod:`.write` (case files); the
 production hole log of ``metro simulate-log``: :mod:`.panels` (flat, sphere, cylinder with
 closed-form rays), :mod:`.shapes` (height-field panels: the generated wing skin, barrel, nacelle lip
-and saddle; panels off their CAD), :mod:`.meshes` (panel files ray-cast as meshes; the generated
+and saddle; panels off their CAD), :mod:`.torus` (a torus lip, tight across and gentle around), :mod:`.meshes` (panel files ray-cast as meshes; the generated
 panels' exports), :mod:`.holes` (hole tables), :mod:`.log_spec` (set-up, faults, chunks), :mod:`.log`
 (generation, the cell's own attitude adjustment through a pluggable controller), :mod:`.log_write`
 (CSV, partitioned Parquet, truth); :mod:`.properties` (a head's sensor properties acting on its
@@ -36,6 +36,7 @@ from metrology.sim.forward.properties import CalibrationRun, HeadProperties, Sen
 from metrology.sim.forward.poses import draw_poses, perturb_poses, tilt_of
 from metrology.sim.forward.shapes import GENERATED, GeneratedPanel, HeightPanel, OffCadPanel, generated_panel, \
     parse_off_cad
+from metrology.sim.forward.torus import TorusPanel
 from metrology.sim.forward.surface import HAND_SCAN, DatumSurface, draw_surface, flat_surface, sample_cloud, sample_hand_scan
 from metrology.sim.forward.write import CASE_FILES, write_case
 
@@ -47,5 +48,5 @@ __all__ = [
     "sample_cloud", "sample_hand_scan", "HAND_SCAN", "CASE_FILES", "write_case", "simulate_cell", "simulate_log", "HoleChunk", "LogSpec",
     "SensorDrift", "SensorShift", "write_log_csv", "write_log_parquet", "PANELS", "CylinderPanel", "FlatPanel",
     "Panel", "SpherePanel", "make_panel", "HoleTable", "read_hole_table", "MicroPlane", "MeshPanel", "load_sim_panel",
-    "write_generated", "CalibrationRun", "HeadProperties", "SensorProperty", "draw_calibration", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad",
+    "write_generated", "CalibrationRun", "HeadProperties", "SensorProperty", "draw_calibration", "GENERATED", "GeneratedPanel", "HeightPanel", "OffCadPanel", "generated_panel", "parse_off_cad", "TorusPanel",
 ]
