@@ -115,15 +115,16 @@ def register(app: typer.Typer) -> None:
 
             from metrology.jobs.measure_follow import follow_log
 
-            def emit(obj):
+            def emit(obj, flush=True):
                 sys.stdout.write(_json.dumps(obj) + "\n")
-                sys.stdout.flush()
+                if flush:
+                    sys.stdout.flush()
 
             with server as plant:
                 _wait_for_client(plant, opcua_wait_s)
 
                 def on_hole(h):
-                    emit(h)
+                    emit(h, flush=False)  # flushed at the end of each batch of lines read together
                     if plant is not None:
                         plant.result(h)
 
@@ -132,8 +133,11 @@ def register(app: typer.Typer) -> None:
                     if plant is not None:
                         plant.alarm(a)
 
-                summary = follow_log(log, layout, on_hole, on_alarm, tolerance_deg=tolerance_deg,
-                                     min_radius_mm=min_radius_mm, **panel_kw)
+                from metrology.jobs.measure import MeasureOptions
+
+                summary = follow_log(log, layout, on_hole, on_alarm, on_batch=sys.stdout.flush,
+                                     options=MeasureOptions(tolerance_deg=tolerance_deg, min_radius_mm=min_radius_mm,
+                                                            **panel_kw))
                 for note in summary.notes:
                     warn(note)
             emit({"summary": summary.to_dict()})
