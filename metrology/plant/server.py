@@ -31,8 +31,12 @@ __all__ = ["PlantServer", "parse_endpoint", "SLOW_CLIENT_RESULTS", "read_users"]
 
 #: a subscription with this many notifications queued for it is a client that does not read: deleted
 SLOW_CLIENT_RESULTS = 20_000
-#: how long closing waits for clients to be sent what was queued for them (s)
-DRAIN_S = 5.0
+#: how long closing waits at most for clients to be sent (and acknowledge) what was queued for them (s),
+#: and how long without progress
+DRAIN_S, DRAIN_IDLE_S = 120.0, 15.0
+#: a cell's LastResult and LastCorrection are written at most this often (s; and once the results stop
+#: coming): each write costs as much as an event, and the events carry every result
+LAST_EVERY_S = 0.05
 #: severity (1-1000) of a drift alarm as first raised, and once sized on its new baseline
 SEVERITY_RAISED, SEVERITY_SIZED = 700, 800
 
@@ -195,6 +199,11 @@ class PlantServer:
         U95_angle_deg, angle_after_deg, U95_after_deg, correction_deg, cell, line)."""
         self._loop.call_soon_threadsafe(self._queue.put_nowait, ("hole", hole, time.perf_counter()))
 
+    def results(self, holes: list) -> None:
+        """Announce the results of holes measured together (one hand-over to the server's thread)."""
+        if holes:
+            self._loop.call_soon_threadsafe(self._queue.put_nowait, ("holes", list(holes), time.perf_counter()))
+
     def alarm(self, alarm: dict) -> None:
         """Announce a drift alarm (the dict of ``measure --follow``'s ``{"alarm": ...}`` lines)."""
         self._loop.call_soon_threadsafe(self._queue.put_nowait, ("alarm", alarm, time.perf_counter()))
@@ -203,8 +212,7 @@ class PlantServer:
         """Announce the holes of a per-hole results table (``measure`` on a whole log: a results sink)."""
         cols = [c for c in ("hole_id", "status", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg",
                             "correction_deg", "cell") if c in table.column_names]
-        for row in table.select(cols).to_pylist():
-            self.result(row)
+        self.results(table.select(cols).to_pylist())
 
     def __exit__(self, exc_type, exc, tb):
         if self._loop is not None and self._thread.is_alive():
@@ -271,25 +279,31 @@ class PlantServer:
             self._ready.set()
             return
         self._ready.set()
-        checked = time.monotonic()
+        checked = wrote = time.monotonic()
+        last = {}  # each cell's last result not yet written to its LastResult / LastCorrection
         try:
-            closing = False
+            closing, getter = False, None
             while not closing:
-                items = [await self._queue.get()]
-                while not self._queue.empty():  # all that came meanwhile: one pass of node writes for them
+                # a getter kept across timeouts (wait_for on Queue.get can drop an item it got as it times out)
+                getter = getter or asyncio.ensure_future(self._queue.get())
+                done, _ = await asyncio.wait({getter}, timeout=LAST_EVERY_S if last else None)
+                first, getter = (getter.result(), None) if done else (None, getter)
+                items = [first] if first is not None else []
+                while not self._queue.empty():  # all that came meanwhile: one pass for them
                     items.append(self._queue.get_nowait())
-                last = {}
                 for kind, item, _ in items:
                     if kind == "close":
                         closing = True
                         break
-                    if kind == "hole":
-                        cell, fields = await self._hole(item)
+                    for hole in ((item,) if kind == "hole" else item if kind == "holes" else ()):
+                        cell, fields = await self._hole(hole)
                         last[cell] = fields
-                    else:
+                    if kind == "alarm":
                         await self._alarm(item)
-                for cell, fields in last.items():
-                    await self._write_last(cell, fields)
+                if last and (closing or first is None or time.monotonic() - wrote >= LAST_EVERY_S):
+                    for cell, fields in last.items():
+                        await self._write_last(cell, fields)
+                    last, wrote = {}, time.monotonic()
                 if closing:
                     await self._drain()
                 elif time.monotonic() - checked > 0.2:
@@ -322,8 +336,8 @@ class PlantServer:
                   "CorrectionValueAbsolute": float(corr) if corr is not None else nan, "Cell": cell,
                   "Sequence": self.sequence, "Line": int(hole.get("line") or 0)}
         ev = self.space.hole_event.event
-        for name, vt in HOLE_FIELDS.items():
-            setattr(ev, name, ua.Variant(fields[name], getattr(ua.VariantType, vt)))
+        for name in HOLE_FIELDS:  # plain values (the event type gives their types): asyncua deep-copies each
+            setattr(ev, name, fields[name])
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = 100 if status == "conforms" else 500
@@ -360,7 +374,7 @@ class PlantServer:
         for name, value in (("Cell", cell), ("Sensor", " ".join(sensor) if isinstance(sensor, list) else str(sensor)),
                             ("HoleId", str(alarm.get("hole_id") or "")),
                             ("Alarm", "raised" if raised else "sized")):
-            setattr(ev, name, ua.Variant(value, ua.VariantType.String))
+            setattr(ev, name, value)
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = SEVERITY_RAISED if raised else SEVERITY_SIZED
@@ -376,7 +390,7 @@ class PlantServer:
         from asyncua import ua
 
         ev = gen.event
-        ev.EventId = ua.Variant(os.urandom(16), ua.VariantType.ByteString)
+        ev.EventId = os.urandom(16)
         ev.Time = ev.ReceiveTime = datetime.now(timezone.utc)
         ev.Message = ua.LocalizedText(message)
         subs = self.space.server.iserver.subscription_service
@@ -398,10 +412,17 @@ class PlantServer:
                               f"its subscription is deleted; measuring goes on")
 
     async def _drain(self) -> None:
-        """Wait (at most :data:`DRAIN_S`) until every subscription has been sent what was queued for it."""
+        """Wait until every subscription has been sent what was queued for it and its client has
+        acknowledged it; at most :data:`DRAIN_S`, and no longer than :data:`DRAIN_IDLE_S` without
+        progress (a client that stopped reading)."""
         subs = self.space.server.iserver.subscription_service
         end = time.monotonic() + DRAIN_S
-        while time.monotonic() < end:
-            if not any(sub._triggered_events for sub in subs.subscriptions.values()):
+        idle_end, before = time.monotonic() + DRAIN_IDLE_S, None
+        while time.monotonic() < min(end, idle_end):
+            left = sum(sum(len(q) for q in sub._triggered_events.values()) + len(sub._not_acknowledged_results)
+                       for sub in subs.subscriptions.values())  # asyncua 2.1: queued, and sent not acknowledged
+            if not left:
                 return
+            if left != before:
+                idle_end, before = time.monotonic() + DRAIN_IDLE_S, left
             await asyncio.sleep(0.02)
