@@ -123,10 +123,11 @@ class PlantServer:
     calibration : dict, {"sha256", "file", "certificate": {...}}: the calibration in use
     cert, key, users : paths or None, required for a host that is not loopback
     warn : callable(str) or None, where warnings go (a slow client dropped)
+    history_events : int or None, events kept for HistoryRead (None: :data:`metrology.plant.history.HISTORY_EVENTS`)
     """
 
     def __init__(self, url: str, *, tolerance_deg: float, calibration: dict, cert=None, key=None, users=None,
-                 warn=None, slow_results: int = SLOW_CLIENT_RESULTS):
+                 warn=None, slow_results: int = SLOW_CLIENT_RESULTS, history_events: int | None = None):
         self.url = url
         self.host, self.port, loopback = parse_endpoint(url)
         self.users = None
@@ -142,6 +143,9 @@ class PlantServer:
         self.calibration = dict(calibration)
         self.warn = warn
         self.slow_results = int(slow_results)
+        from metrology.plant.history import HISTORY_EVENTS
+
+        self.history_events = HISTORY_EVENTS if history_events is None else int(history_events)
         self.sequence = 0
         self.dropped = []
         self._loop = None
@@ -263,6 +267,12 @@ class PlantServer:
                                        permission_ruleset=_ruleset(PermissionRuleset))
             server.set_identity_tokens([ua.UserNameIdentityToken])
         self.space = await build(server, self.calibration)
+        from metrology.plant.history import EventHistory, history_storage
+
+        self.history = EventHistory(self.history_events)  # HistoryRead of the Server object's events
+        server.iserver.history_manager.set_storage(history_storage(self.history, ua.NodeId(ua.ObjectIds.Server)))
+        await server.nodes.server.write_attribute(ua.AttributeIds.EventNotifier, ua.DataValue(
+            ua.Variant((1 << ua.EventNotifier.SubscribeToEvents) | (1 << ua.EventNotifier.HistoryRead), ua.VariantType.Byte)))
         try:
             await server.start()
         except OSError as exc:
@@ -341,7 +351,7 @@ class PlantServer:
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = 100 if status == "conforms" else 500
-        await self._fire(self.space.hole_event, f"{cell} {fields['CharacteristicIdentifier']}: {status}")
+        await self._fire(self.space.hole_event, f"{cell} {fields['CharacteristicIdentifier']}: {status}", HOLE_FIELDS)
         return cell, fields
 
     async def _write_last(self, cell: str, fields: dict) -> None:
@@ -364,7 +374,7 @@ class PlantServer:
     async def _alarm(self, alarm: dict) -> None:
         from asyncua import ua
 
-        from metrology.plant.gms import cell_node
+        from metrology.plant.gms import ALARM_FIELDS, cell_node
 
         cell = str(alarm.get("cell") or "cell")
         await cell_node(self.space, cell)
@@ -379,11 +389,12 @@ class PlantServer:
         ev.SourceName = cell
         ev.Severity = SEVERITY_RAISED if raised else SEVERITY_SIZED
         await self._fire(self.space.alarm_event, f"drift alarm {cell} at {alarm.get('hole_id')}: "
-                                                 + ("raised" if raised else "sized on its new baseline"))
+                                                 + ("raised" if raised else "sized on its new baseline"), ALARM_FIELDS)
 
-    async def _fire(self, gen, message: str) -> None:
-        """Emit from the Server object, then from the cell's object (for a client subscribed to it):
-        asyncua's ``EventGenerator.trigger`` less its per-event local-time lookup."""
+    async def _fire(self, gen, message: str, names) -> None:
+        """Emit from the Server object (kept in its history with the fields ``names``), then from the
+        cell's object (for a client subscribed to it): asyncua's ``EventGenerator.trigger`` less its
+        per-event local-time lookup."""
         import os
         from datetime import datetime, timezone
 
@@ -397,6 +408,7 @@ class PlantServer:
         cell_id = ev.SourceNode
         ev.emitting_node = ua.NodeId(ua.ObjectIds.Server)
         await subs.trigger_event(ev)
+        self.history.keep(ev, names)
         ev.emitting_node = cell_id
         await subs.trigger_event(ev)
 
