@@ -5,7 +5,9 @@ The address space is :mod:`metrology.plant.gms`'s. Every hole fires a ``HoleResu
 event (Machinery Result's result-ready event, with GMS's characteristic fields) and updates its
 cell's ``LastResult``/``LastCorrection``; every drift alarm fires a ``DriftAlarmEventType`` with
 its severity. Events are emitted by the Server object (so a client subscribed to the Server's
-events receives every one) and by the cell's object (reached from Server by HasNotifier).
+events receives every one) and by the cell's object (reached from Server by HasNotifier). The
+Server object's events are kept (the last :data:`metrology.plant.history.HISTORY_EVENTS`) for
+OPC UA HistoryRead: a client back after a disconnect reads the results it missed.
 
 Security (OPC UA's own modes): the endpoint binds 127.0.0.1 unless the URL names another host; a
 host that is not loopback needs ``cert`` and ``key`` (PEM) and ``users`` (a file of ``user:SHA-256 of
@@ -271,8 +273,9 @@ class PlantServer:
 
         self.history = EventHistory(self.history_events)  # HistoryRead of the Server object's events
         server.iserver.history_manager.set_storage(history_storage(self.history, ua.NodeId(ua.ObjectIds.Server)))
-        await server.nodes.server.write_attribute(ua.AttributeIds.EventNotifier, ua.DataValue(
-            ua.Variant((1 << ua.EventNotifier.SubscribeToEvents) | (1 << ua.EventNotifier.HistoryRead), ua.VariantType.Byte)))
+        notifier = (1 << ua.EventNotifier.SubscribeToEvents) | (1 << ua.EventNotifier.HistoryRead)  # bit numbers
+        await server.nodes.server.write_attribute(ua.AttributeIds.EventNotifier,
+                                                  ua.DataValue(ua.Variant(notifier, ua.VariantType.Byte)))
         try:
             await server.start()
         except OSError as exc:
