@@ -1,18 +1,20 @@
-"""Live results over OPC UA (issue 52): latency and throughput of ``metro measure --opcua``.
+"""Live results over OPC UA (issue 52): latency and sustained rate of ``metro measure --follow --opcua``.
 
-    python benchmarks/bench_plant.py [--latency-holes 200] [--rate 1000] [--seconds 10]
+    python benchmarks/bench_plant.py [--latency-holes 200] [--trickle 20] [--rate 1000] [--seconds 5]
 
-1. Latency: ``metro measure - --follow --opcua opc.tcp://127.0.0.1:PORT`` as its own process; a
-   real asyncua client (this process) subscribed to the Server object's events with a 5 ms
-   publishing interval; the log's lines written to metro's stdin one at a time, 20 a second. The
-   latency of a hole is from the write of its line to the arrival of its result-ready event at the
-   client (``time.perf_counter``: CLOCK_MONOTONIC, one clock for both processes). It includes
-   metro's measurement of the hole (one row at a time, its drift watch) and the publishing
-   interval's wait. The median against the goal (20 ms).
-2. Throughput: a :class:`metrology.plant.server.PlantServer` in this process, fed per-hole results
-   (dicts as ``--follow`` makes them) at ``--rate`` holes a second for ``--seconds``; the same client
-   in a subprocess counts what arrives: none lost, none reordered (the ``Sequence`` numbers
-   1..N in order), and the rate the server kept up.
+Three processes: ``metro measure - --follow --opcua opc.tcp://127.0.0.1:PORT``; a real asyncua
+client subscribed to the Server object's events (``--period-ms`` publishing, 5 ms); this one,
+which writes the log's lines to metro's stdin, paced (every line due written at once), and reads
+metro's stdout. Each line's write, its answer on stdout and its result-ready event's arrival at
+the client are taken on one clock (``time.perf_counter``: CLOCK_MONOTONIC, shared by processes).
+
+1. Trickle: ``--latency-holes`` lines at ``--trickle`` a second (each line alone: metro measures it
+   on its own). The median line -> event latency against the goal (20 ms).
+2. Sustained: ``--rate`` lines a second for ``--seconds`` (metro measures what has come as one
+   batch): every result received, in order (the ``Sequence`` numbers 1..N), the rate delivered,
+   and the latency under that load.
+3. ``--server-only``: a :class:`metrology.plant.server.PlantServer` in this process fed per-hole
+   results at ``--rate`` (no metro measuring), the same client counting.
 
 The machine's load is printed with the figures (the 2 cores are shared).
 """
@@ -20,7 +22,6 @@ The machine's load is printed with the figures (the 2 cores are shared).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import os
 import subprocess
@@ -35,7 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.plant.opcua_client import Metro, connect, free_port, subscribe  # noqa: E402
+from tests.plant.opcua_client import Metro, free_port  # noqa: E402
 
 TABLE6 = ROOT / "metrology" / "data" / "measured" / "nominal.toml"
 
@@ -48,53 +49,96 @@ def _log(tmp: Path, holes: int) -> Path:
     return log
 
 
-async def latency(tmp: Path, holes: int, per_s: float = 20.0) -> dict:
-    lines = _log(tmp, holes).read_text().splitlines(keepends=True)
+CLIENT = """
+import asyncio, sys, time, json
+sys.path.insert(0, {root!r})
+from tests.plant.opcua_client import connect, subscribe
+async def main():
+    c = await connect({url!r})
+    _, col = await subscribe(c, period_ms={period})
+    print("subscribed", flush=True)
+    n, last, seen = {n}, time.monotonic(), 0
+    while len(col.results) < n and time.monotonic() - last < {idle}:  # until all came, or none for a while
+        await asyncio.sleep(0.05)
+        if len(col.results) != seen:
+            seen, last = len(col.results), time.monotonic()
+    print(json.dumps({{"status_changes": col.status, "results": [[r["Sequence"], r["Line"], r["_arrived"]] for r in col.results]}}), flush=True)
+    await c.disconnect()
+asyncio.run(main())
+"""
+
+
+#: the first lines, written before the timing starts (metro loads its measuring modules on the first)
+WARM = 5
+
+
+def live(tmp: Path, holes: int, per_s: float, period_ms: float = 5.0) -> dict:
+    """``metro measure - --follow --opcua`` fed ``holes`` lines at ``per_s`` a second; a client in its
+    own process subscribed with ``period_ms`` publishing. Each line's write, its answer on metro's
+    stdout and its event's arrival at the client on one clock (CLOCK_MONOTONIC)."""
+    lines = _log(tmp, holes + WARM).read_text().splitlines(keepends=True)
     url = f"opc.tcp://127.0.0.1:{free_port()}"
+    t0 = time.perf_counter()
     metro = Metro(["measure", "-", "--layout", str(TABLE6), "--follow", "--opcua", url], tmp, ROOT)
     try:
-        t0 = time.perf_counter()
-        client = await connect(url, proc=metro.proc)
+        client = subprocess.Popen([sys.executable, "-c", CLIENT.format(root=str(ROOT), url=url, n=holes + WARM, period=period_ms,
+                                                                       idle=20.0)],
+                                  stdout=subprocess.PIPE, text=True)
+        assert client.stdout.readline().strip() == "subscribed"
         started = time.perf_counter() - t0
-        _, col = await subscribe(client, period_ms=5.0)
-        written = {}
+        written, answered = {}, {}
 
-        def feed():
-            metro.proc.stdin.write(lines[0])
-            for k, line in enumerate(lines[1:], start=2):
-                time.sleep(1.0 / per_s)
-                written[k] = time.perf_counter()
-                metro.proc.stdin.write(line)
-                metro.proc.stdin.flush()
-            metro.proc.stdin.close()
-
-        answered = {}
-
-        def read():  # the baseline: each hole's answer on stdout, in the same run
+        def read():  # each hole's answer on stdout, in the same run
             for text in metro.proc.stdout:
                 if '"line"' in text:
                     answered[json.loads(text)["line"]] = time.perf_counter()
 
-        threading.Thread(target=feed, daemon=True).start()
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
-        await asyncio.get_running_loop().run_in_executor(None, reader.join)
+        metro.proc.stdin.write("".join(lines[:1 + WARM]))  # metro's first lines load its modules: not timed
+        metro.proc.stdin.flush()
+        while len(answered) < WARM and metro.proc.poll() is None:
+            time.sleep(0.01)
+        f0 = time.perf_counter()
+        k = 1 + WARM
+        while k < len(lines):  # paced: line k is due at f0 + (k - WARM) / per_s; every line due is written at once
+            now = time.perf_counter()
+            due = min(len(lines), 1 + WARM + int((now - f0) * per_s))
+            if due > k:
+                metro.proc.stdin.write("".join(lines[k:due]))
+                metro.proc.stdin.flush()
+                t = time.perf_counter()
+                for j in range(k, due):
+                    written[j + 1] = t  # line numbers from 1 (the header)
+                k = due
+            else:
+                time.sleep(max(0.0, min(0.001, f0 + (k - WARM) / per_s - now)))
+        fed_s = time.perf_counter() - f0
+        metro.proc.stdin.close()
+        reader.join()
         rc = metro.proc.wait()
-        await asyncio.sleep(0.5)
-        await client.disconnect()
+        got = json.loads(client.stdout.readline())
+        client.wait()
     finally:
         metro.kill()
 
     def stats(ms):
         ms = np.asarray(ms)
-        return {"median_ms": round(float(np.median(ms)), 2), "p95_ms": round(float(np.percentile(ms, 95)), 2)}
+        return {"median_ms": round(float(np.median(ms)), 2), "p95_ms": round(float(np.percentile(ms, 95)), 2)} \
+            if ms.size else None
 
-    got = [r for r in col.results if r["Line"] in written and r["Line"] in answered]
-    return {"holes": holes, "received": len(col.results), "answered_on_stdout": len(answered), "exit": rc,
-            "server_start_s": round(started, 2),
-            "line_to_event": stats([(r["_arrived"] - written[r["Line"]]) * 1e3 for r in got]),
-            "line_to_stdout_answer": stats([(answered[r["Line"]] - written[r["Line"]]) * 1e3 for r in got]),
-            "stdout_answer_to_event": stats([(r["_arrived"] - answered[r["Line"]]) * 1e3 for r in got])}
+    res = got["results"]
+    seq = [r[0] for r in res]
+    arrived = {r[1]: r[2] for r in res}
+    both = [k for k in arrived if k in written and k in answered]
+    span = (res[-1][2] - res[0][2]) if len(res) > 1 else None
+    return {"holes": holes, "rate_asked": per_s, "fed_s": round(fed_s, 2), "received": len(res) - WARM,
+            "in_order": seq == list(range(1, len(seq) + 1)), "answered_on_stdout": len(answered), "exit": rc,
+            "status_changes": got["status_changes"], "server_start_s": round(started, 2),
+            "delivered_per_s": round(len(res) / span, 1) if span else None,
+            "line_to_event": stats([(arrived[k] - written[k]) * 1e3 for k in both]),
+            "line_to_stdout_answer": stats([(answered[k] - written[k]) * 1e3 for k in both]),
+            "stdout_answer_to_event": stats([(arrived[k] - answered[k]) * 1e3 for k in both])}
 
 
 COUNTER = """
@@ -148,23 +192,31 @@ def throughput(rate: float, seconds: float, period_ms: float = 10.0) -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--latency-holes", type=int, default=200)
-    ap.add_argument("--rate", type=float, default=1000.0)
-    ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--period-ms", type=float, default=10.0, help="the throughput client's publishing interval")
+    ap.add_argument("--latency-holes", type=int, default=200, help="holes of the trickle leg (0: none)")
+    ap.add_argument("--trickle", type=float, default=20.0, help="the trickle leg's lines a second")
+    ap.add_argument("--rate", type=float, default=1000.0, help="the sustained leg's lines a second")
+    ap.add_argument("--seconds", type=float, default=5.0, help="the sustained leg's length (0: none)")
+    ap.add_argument("--period-ms", type=float, default=5.0, help="the client's publishing interval")
+    ap.add_argument("--server-only", action="store_true", help="also the server alone fed at --rate (no metro)")
     a = ap.parse_args(argv)
     print(f"load average before: {os.getloadavg()}")
+    legs = []
     if a.latency_holes > 0:
+        legs.append(("trickle", a.latency_holes, a.trickle))
+    if a.seconds > 0:
+        legs.append(("sustained", int(a.rate * a.seconds), a.rate))
+    for name, holes, per_s in legs:
         with tempfile.TemporaryDirectory() as tmp:
-            lat = asyncio.run(latency(Path(tmp), a.latency_holes))
-        print("latency, line on stdin -> result-ready event at the client:", json.dumps(lat))
-        m = lat["line_to_event"]["median_ms"]
-        print(f"  median {m} ms against the goal 20 ms: {'met' if m <= 20 else 'NOT met'}; of it, the hole's measurement "
-              f"(line -> its answer on stdout, no server involved) {lat['line_to_stdout_answer']['median_ms']} ms")
-    thr = throughput(a.rate, a.seconds, a.period_ms)
-    print("throughput through the server:", json.dumps(thr))
-    ok = thr["received"] == thr["sent"] and thr["in_order"]
-    print(f"  {thr['sent']} results at {a.rate:g}/s: {'none lost or reordered' if ok else 'LOST OR REORDERED'}")
+            r = live(Path(tmp), holes, per_s, a.period_ms)
+        print(f"{name}: metro measure - --follow --opcua, {holes} lines at {per_s:g}/s:", json.dumps(r))
+        m = r["line_to_event"]["median_ms"] if r["line_to_event"] else float("nan")
+        ok = r["received"] == holes and r["in_order"]
+        print(f"  line on stdin -> result-ready event at the client: median {m} ms against the goal 20 ms "
+              f"({'met' if m <= 20 else 'NOT met'}); {r['received']} of {holes} results, "
+              f"{'none lost or reordered' if ok else 'LOST OR REORDERED'}")
+    if a.server_only:
+        thr = throughput(a.rate, max(a.seconds, 1.0), a.period_ms)
+        print("the server alone:", json.dumps(thr))
     print(f"load average after: {os.getloadavg()}")
 
 

@@ -115,25 +115,41 @@ def register(app: typer.Typer) -> None:
 
             from metrology.jobs.measure_follow import follow_log
 
-            def emit(obj):
+            def emit(obj, flush=True):
                 sys.stdout.write(_json.dumps(obj) + "\n")
-                sys.stdout.flush()
+                if flush:
+                    sys.stdout.flush()
 
             with server as plant:
                 _wait_for_client(plant, opcua_wait_s)
 
+                served = []  # the batch's results, handed to the server at once (an alarm sends those before it)
+
                 def on_hole(h):
-                    emit(h)
+                    emit(h, flush=False)  # flushed at the end of each batch of lines read together
+                    served.append(h)
+
+                def on_batch():
+                    sys.stdout.flush()
                     if plant is not None:
-                        plant.result(h)
+                        plant.results(served)
+                    served.clear()
 
                 def on_alarm(a):
                     emit({"alarm": a})
                     if plant is not None:
+                        plant.results(served)
                         plant.alarm(a)
+                    served.clear()
 
-                summary = follow_log(log, layout, on_hole, on_alarm, tolerance_deg=tolerance_deg,
-                                     min_radius_mm=min_radius_mm, **panel_kw)
+                from metrology.jobs.measure import MeasureOptions
+
+                try:
+                    summary = follow_log(log, layout, on_hole, on_alarm, on_batch=on_batch,
+                                         options=MeasureOptions(tolerance_deg=tolerance_deg,
+                                                                min_radius_mm=min_radius_mm, **panel_kw))
+                finally:  # a line in error: the holes answered before it are served too
+                    on_batch()
                 for note in summary.notes:
                     warn(note)
             emit({"summary": summary.to_dict()})

@@ -155,6 +155,11 @@ class CsvLog(HoleLog):
     def _tables(self, part: Partition):
         return _csv_batches(self, part)
 
+    def readable(self, part: Partition):
+        """What pyarrow's CSV reader opens for ``part``: its file (a reader of lines in memory,
+        :class:`metrology.io.loglines.LinesLog`, gives a buffer)."""
+        return part.path
+
 
 @dataclass(frozen=True)
 class ParquetLog(HoleLog):
@@ -300,7 +305,7 @@ def _csv_batches(log, part):
                                null_values=["", "NaN", "nan", "NA"])
     read = pcsv.ReadOptions(block_size=max(1 << 20, log.batch_rows * 64))
     try:
-        reader = pcsv.open_csv(part.path, read_options=read, convert_options=opts)
+        reader = pcsv.open_csv(log.readable(part), read_options=read, convert_options=opts)
         for batch in reader:
             table = pa.Table.from_batches([batch])
             for i in range(0, table.num_rows, log.batch_rows):
@@ -317,7 +322,7 @@ def _locate_csv_error(log, part, names, exc) -> str:
 
     numeric = [c for c in names if c.startswith("d_") or c == "temperature_c"]
     try:
-        reader = pcsv.open_csv(part.path, convert_options=pcsv.ConvertOptions(
+        reader = pcsv.open_csv(log.readable(part), convert_options=pcsv.ConvertOptions(
             column_types={c: pa.string() for c in names}, strings_can_be_null=False))
         row = 0
         for batch in reader:

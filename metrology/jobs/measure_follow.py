@@ -2,25 +2,52 @@
 alarm) as soon as its line arrives.
 
 The log is a CSV with its header first (the columns of ``metro measure``'s log), from standard
-input (``-``) or a file read to its end. Each complete line is measured on its own
-(:func:`metrology.measure.holes.measure_batch` on one row, the panel's local surface where
-``--panel``/``--points`` or the layout's ``[panel]`` give it) and fed to the drift watch in order;
-``on_hole(dict)`` receives the hole's answer, ``on_alarm(dict)`` each alarm as it is raised.
+input (``-``) or a file read to its end. A thread reads the stream's complete lines as they come;
+the measuring takes every line already read (at most :data:`MAX_BATCH`) as one batch: read by
+:mod:`metrology.io.holelog`'s CSV reader (:func:`metrology.io.loglines.read_lines`), measured by
+:func:`metrology.measure.holes.measure_batch` at once (the panel's local surface where
+``--panel``/``--points`` or the layout's ``[panel]`` give it), fed to the drift watch, answered in
+order. A slow trickle is answered line by line (each line is alone when it is measured); a fast
+stream (or a file) goes in batches, which keeps up with thousands of lines a second.
+
+The answers are those of one line at a time, in the same order:
+
+- a hole's answer depends on its own row only; a batch never holds a ``hole_id`` twice (it is cut
+  there: ``measure_batch`` would call the second one a duplicate, one line at a time does not);
+- a drift alarm is announced right after the hole that raised it, and sized right after the hole
+  that completed its new baseline: a batch in which the watch raised or sized an alarm (or that
+  holds a line in error) is measured again one line at a time, from the watch as it was before the
+  batch (a snapshot of the watch, taken every :data:`SNAPSHOT_ROWS` rows, and the feeds since);
+- a line in error stops the run with its one-line error (naming the line) after every line before
+  it has been answered.
+
+``on_hole(dict)`` receives each hole's answer, ``on_alarm(dict)`` each alarm as it is raised,
+``on_batch()`` (if given) the end of each batch's answers (where the caller flushes).
 """
 
 from __future__ import annotations
 
-import csv
+import copy
+import dataclasses
+import queue
 import sys
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FollowSummary", "follow_log", "PANEL_COLUMNS"]
+__all__ = ["FollowSummary", "follow_log", "PANEL_COLUMNS", "MAX_BATCH", "SNAPSHOT_ROWS"]
 
 #: the per-hole columns of a run with the panel known, each in the hole's JSON line as in the table
 PANEL_COLUMNS = ("k1_per_mm", "k2_per_mm", "correction_deg", "panel_misfit_per_mm", "panel_misfit_z",
                  "normal_vs_cad_deg", "cad_offset_mm")
+#: lines measured together at most: a batch's first hole waits for its last (about 10 ms for 256
+#: holes on this machine, benchmarks/results/bench_plant.md), and a batch measured again one line
+#: at a time (an alarm in it) costs at most this many single-line measurements
+MAX_BATCH = 256
+#: rows fed to the drift watch between two snapshots of it (the watch is restored to its snapshot and
+#: the feeds since are fed again when a batch is measured again one line at a time)
+SNAPSHOT_ROWS = 4096
 
 
 @dataclass(frozen=True)
@@ -35,106 +62,264 @@ class FollowSummary:
         return {"counts": dict(self.counts), "alarms": list(self.alarms), "notes": list(self.notes)}
 
 
-def _value(text):
-    try:
-        return float(text)
-    except ValueError:
-        return text
+def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream=None, on_batch=None,
+               max_batch: int = MAX_BATCH) -> FollowSummary:
+    """Measure the lines of ``source`` (``-``: ``stream`` or stdin) as they arrive (module docstring).
 
-
-def follow_log(source, layout_path, on_hole, on_alarm=None, tolerance_deg: float = 0.5,
-               min_radius_mm: float | None = None, panel=None, points=None, position_error_mm: float = 0.5,
-               form_tolerance_mm: float = 0.0, spin_deg: float | None = None, stream=None, units=None) -> FollowSummary:
-    """Measure each line of ``source`` (``-``: ``stream`` or stdin) as it arrives (module docstring).
-
-    Raises ValueError naming the line on a line that cannot be measured (a non-number reading, a
-    missing column); the holes before it have been answered."""
-    import pyarrow as pa
-
-    from metrology.io.holelog import NUMERIC, TIME_S, CsvLog, batch_of
+    ``options`` : :class:`metrology.jobs.measure.MeasureOptions` (its tolerance, radius bound and
+    panel fields; checked as ``metro measure`` checks them). Raises ValueError naming the line on a
+    line that cannot be measured (a non-number reading, a missing field, time going back); the holes
+    before it have been answered."""
     from metrology.io.layout import load_layout
-    from metrology.jobs.measure_panel import hole_surfaces, layout_panel
-    from metrology.measure.holes import STATUSES, Settings, Status, measure_batch
-    from metrology.measure.run import Feed, Watch
+    from metrology.io.names import display_name
+    from metrology.jobs.measure import MeasureOptions, _panel_options
+    from metrology.jobs.measure_panel import hole_surfaces
+    from metrology.measure.holes import Settings
 
+    o, _ = _panel_options(MeasureOptions() if options is None else options, layout_path)
     layout = load_layout(layout_path)
-    stated = layout_panel(layout_path)
-    if panel is None and points is None:
-        panel, points = stated.get("file"), stated.get("points")
-    if min_radius_mm is None:
-        from metrology.measure.holes import DEFAULT_MIN_RADIUS_MM
-
-        min_radius_mm = stated.get("radius_mm", DEFAULT_MIN_RADIUS_MM)
-    if panel is not None and points is None:
-        raise ValueError(f"--panel {panel}: give the hole table too (--points HOLES.csv)")
+    if o.panel is not None and o.points is None:
+        raise ValueError(f"--panel {display_name(o.panel)}: give the hole table too (--points HOLES.csv)")
     surfaces = None
-    if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units)
-    settings = Settings(tolerance=float(np.radians(tolerance_deg)), min_radius_mm=float(min_radius_mm),
+    if o.points is not None:
+        surfaces = hole_surfaces(layout, o.panel, o.points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
+                                 o.units)
+    settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(o.min_radius_mm),
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)
     fh = (stream or sys.stdin) if str(source) == "-" else open(source, newline="")
-    watch = Watch(layout.names)
-    log = CsvLog(name, (), layout.names, display=name)  # how errors name a line
-    counts = {str(s): 0 for s in Status}
-    alarms, raised, cut = [], set(), []
+    lines, cut = queue.SimpleQueue(), []
+    reader = threading.Thread(target=_read, args=(fh, lines, cut), name="metro-follow-read", daemon=True)
+    reader.start()
+    run = _Run(layout, settings, name, on_hole, on_alarm, surfaces is not None)
     try:
-        # line by line to the stream's end (readline: click 8.2's test stdin raises EOFError from __next__)
-        reader = csv.reader(_complete_lines(fh, cut))
-        header = next(reader, None)
-        if not header:
+        first = _take(lines)
+        if first is None or not first[1].strip():
             raise ValueError(f"{name}: no header line (hole_id, time, d_<sensor>...)")
-        header = [h.strip() for h in header]
-        missing = [c for c in ("hole_id", "time", *(f"d_{s}" for s in layout.names)) if c not in header]
-        if missing:
-            raise ValueError(f"{name}: line 1: header lacks {', '.join(missing)}")
-        for lineno, row in enumerate(reader, start=2):
-            if not row or all(not c.strip() for c in row):
-                continue
-            if len(row) != len(header):
-                raise ValueError(f"{name}: line {lineno}: {len(row)} fields, the header has {len(header)}")
-            cols = {}
-            for h, v in zip(header, row):
-                if h.startswith("d_") or h in NUMERIC:
-                    try:
-                        cols[h] = pa.array([float(v) if v.strip() else np.nan], pa.float64())
-                    except ValueError:
-                        raise ValueError(f"{name}: line {lineno}: {h} = {v!r} is not a number"
-                                         + (" (mm)" if h.startswith("d_") else "")) from None
-                elif h == "time":
-                    t = _value(v)
-                    cols[h] = pa.array([t], pa.float64() if isinstance(t, float) else pa.string())
-                else:
-                    cols[h] = pa.array([v], pa.string())
-            try:
-                table = batch_of(pa.table(cols), layout.names, name)
-            except ValueError as exc:
-                raise ValueError(f"{name}: line {lineno}: {exc}") from None
-            batch = measure_batch(layout, table, settings)
-            t = batch.columns
-            status = str(STATUSES[int(batch.status[0])])
-            counts[status] += 1
-
-            def f(col):
-                return t.column(col)[0].as_py() if col in t.column_names else None
-
-            on_hole({"line": lineno, "hole_id": f("hole_id"), "time": _iso(t.column(TIME_S)[0].as_py()),
-                     "cell": f("cell"), "status": status, "angle_deg": f("angle_deg"),
-                     "U95_angle_deg": f("U95_angle_deg"), "angle_after_deg": f("angle_after_deg"),
-                     "U95_after_deg": f("U95_after_deg"),
-                     "normal": [f("normal_x"), f("normal_y"), f("normal_z")],
-                     **({c: f(c) for c in PANEL_COLUMNS} if surfaces is not None else {}),
-                     "reason": f("reason"), **({"cell": f("cell")} if "cell" in t.column_names else {})})
-            watch.feed(Feed.of(batch, log, first_row=lineno - 2))
-            _report_alarms(watch, alarms, raised, on_alarm)
+        run.start(first[1])
+        ended = False
+        while not ended:
+            item = _take(lines)
+            if item is None:
+                break
+            batch = [item]
+            while len(batch) < max_batch:  # every line already read: one batch
+                try:
+                    item = lines.get_nowait()
+                except queue.Empty:
+                    break
+                if item is None:
+                    ended = True
+                    break
+                batch.append(_checked(item))
+            batch = [(k, text) for k, text in batch if not _blank(text)]
+            if batch:
+                run.batch(batch)
+                if on_batch is not None:
+                    on_batch()
     finally:
         if fh is not sys.stdin and fh is not stream:
             fh.close()
-    watch.finish()
-    _report_alarms(watch, alarms, raised, on_alarm)
-    notes = [f"{name}: the last line ({cut[0][:40]!r}) ends without a newline: incomplete (cut inside a field?), "
-             f"not measured"] if cut else []
-    return FollowSummary(counts, alarms, notes)
+    reader.join()
+    return run.finish([f"{name}: the last line ({cut[0][:40]!r}) ends without a newline: incomplete (cut inside a "
+                       f"field?), not measured"] if cut else [])
+
+
+def _read(fh, lines, cut) -> None:
+    """The reading thread: (line number, text) of each complete line into ``lines``, then None. A
+    last line without its newline (the stream ended inside it: a writer killed, a cut file) goes to
+    ``cut``, not measured: "50.2089" cut to "50.20" would read as a number. (readline: click 8.2's
+    test stdin raises EOFError from ``__next__``.)"""
+    try:
+        for k, line in enumerate(iter(fh.readline, ""), start=1):
+            if not line.endswith(("\n", "\r")):
+                if line.strip():
+                    cut.append(line)
+                break
+            lines.put((k, line))
+    except Exception as exc:  # noqa: BLE001 - raised again in the measuring thread (a decoding error...)
+        lines.put((None, exc))
+    lines.put(None)
+
+
+def _take(lines):
+    return _checked(lines.get())
+
+
+def _checked(item):
+    if item is not None and item[0] is None:
+        raise item[1]
+    return item
+
+
+def _blank(text: str) -> bool:
+    """A line with no field that holds anything (skipped, as a CSV reader of the whole file would)."""
+    return not text.strip().replace(",", "").replace('"', "").strip()
+
+
+class _Run:
+    """The measuring of one followed log: the drift watch, its snapshot, what was answered."""
+
+    def __init__(self, layout, settings, name, on_hole, on_alarm, panel: bool):
+        from metrology.io.holelog import CsvLog
+        from metrology.measure.holes import Status
+        from metrology.measure.run import Watch
+
+        self.layout, self.settings, self.name = layout, settings, name
+        self.on_hole, self.on_alarm, self.panel = on_hole, on_alarm, panel
+        self.watch = Watch(layout.names)
+        self.snapshot, self.since, self.since_rows = copy.deepcopy(self.watch), [], 0
+        self.log = CsvLog(name, (), layout.names, display=name)  # how the watch's errors name a line
+        self.counts = {str(s): 0 for s in Status}
+        self.alarms, self.raised = [], set()
+        self.header = ()
+
+    def start(self, line: str) -> None:
+        import csv
+
+        from metrology.io.loglines import check_header
+
+        self.header = tuple(h.strip() for h in next(csv.reader([line]), []))
+        check_header(self.header, self.layout.names, self.name)
+
+    def batch(self, items) -> None:
+        """Measure ``items`` ((line number, text), in order) and answer them (module docstring)."""
+        import pyarrow.compute as pc
+
+        from metrology.io.loglines import read_lines
+
+        if len(items) == 1:
+            self._one(*items[0])
+            return
+        try:
+            table = read_lines(self.header, [t for _, t in items], [k for k, _ in items], self.layout.names, self.name)
+        except ValueError:
+            self._each(items)  # the line in error raises after the lines before it are answered
+            return
+        ids = table.column("hole_id")
+        if len(pc.unique(ids)) == len(ids):
+            self._measure(items, table)
+            return
+        lo, seen = 0, set()
+        for i, hid in enumerate(ids.to_pylist()):  # cut where an id repeats
+            if hid in seen:
+                self._measure(items[lo:i], table.slice(lo, i - lo))
+                lo, seen = i, set()
+            seen.add(hid)
+        self._measure(items[lo:], table.slice(lo))
+
+    def _measure(self, items, table) -> None:
+        from metrology.measure.holes import measure_batch
+
+        events = self._events()
+        try:
+            batch = measure_batch(self.layout, table, self.settings)
+            feed = self._feed(batch, [k for k, _ in items])
+            self.watch.feed(feed)
+            again = self._events() != events
+        except ValueError:
+            again = True
+        if again:  # an alarm raised or sized inside the batch, or a line in error: one line at a time
+            self._restore()
+            self._each(items)
+            return
+        self._keep(feed)
+        for hole in _answers(batch, [k for k, _ in items], self.panel):
+            self.counts[hole["status"]] += 1
+            self.on_hole(hole)
+
+    def _each(self, items) -> None:
+        for k, text in items:
+            self._one(k, text)
+
+    def _one(self, k: int, text: str) -> None:
+        """One line measured on its own: answered, fed to the watch, its alarms reported."""
+        from metrology.io.loglines import read_lines
+        from metrology.measure.holes import measure_batch
+
+        try:
+            table = read_lines(self.header, [text], [k], self.layout.names, self.name)
+        except ValueError:
+            import csv
+
+            fields = len(next(csv.reader([text]), []))
+            if fields != len(self.header):  # named as a line (pyarrow's parse error names none)
+                raise ValueError(f"{self.name}: line {k}: {fields} fields, the header has {len(self.header)}") from None
+            raise
+        batch = measure_batch(self.layout, table, self.settings)
+        hole = next(_answers(batch, [k], self.panel))
+        self.counts[hole["status"]] += 1
+        self.on_hole(hole)
+        feed = self._feed(batch, [k])
+        self.watch.feed(feed)
+        self._keep(feed)
+        self._report()
+
+    def _feed(self, batch, numbers):
+        from metrology.measure.run import Feed
+
+        feed = Feed.of(batch, self.log)
+        return dataclasses.replace(feed, row=np.asarray(numbers, int) - 2)  # CsvLog: row r is line r + 2
+
+    def _keep(self, feed) -> None:
+        """Keep ``feed`` for a replay; a new snapshot of the watch every :data:`SNAPSHOT_ROWS` rows."""
+        self.since.append(feed)
+        self.since_rows += len(feed.row)
+        if self.since_rows >= SNAPSHOT_ROWS:
+            self.snapshot, self.since, self.since_rows = copy.deepcopy(self.watch), [], 0
+
+    def _restore(self) -> None:
+        """The watch as it was before the batch: its snapshot, fed again what came since."""
+        self.watch = copy.deepcopy(self.snapshot)
+        for f in self.since:
+            self.watch.feed(f)
+
+    def _events(self) -> tuple:
+        charts = self.watch.charts.values()
+        return (sum(len(ch.alarms) for ch in charts),
+                tuple(sorted((p.raised["cell"], p.raised["hole_id"]) for ch in charts if (p := ch.pending) is not None)))
+
+    def _report(self) -> None:
+        """Each alarm as it is raised (``{"raised": True, ...}``: the hole and direction, at once) and
+        again when sized on its new baseline (the full alarm, as ``metro measure`` reports it)."""
+        for ch in self.watch.charts.values():
+            p = ch.pending
+            if p is not None:
+                key = (p.raised["cell"], p.raised["hole_id"])
+                if key not in self.raised:
+                    self.raised.add(key)
+                    if self.on_alarm is not None:
+                        self.on_alarm({"raised": True, **p.raised})
+        filed = sorted((a for ch in self.watch.charts.values() for a in ch.alarms), key=lambda a: (a.time_s, a.cell))
+        for a in filed[len(self.alarms):]:
+            self.alarms.append(a.to_dict())
+            if self.on_alarm is not None:
+                self.on_alarm(a.to_dict())
+
+    def finish(self, notes) -> FollowSummary:
+        self.watch.finish()
+        self._report()
+        return FollowSummary(self.counts, self.alarms, notes)
+
+
+def _answers(batch, numbers, panel: bool):
+    """Each hole's answer (a dict, the JSON line), in order."""
+    from metrology.io.holelog import TIME_S
+    from metrology.measure.holes import STATUSES
+
+    t = batch.columns
+    n = len(numbers)
+    names = ("hole_id", "cell", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg", "normal_x",
+             "normal_y", "normal_z", "reason", *(PANEL_COLUMNS if panel else ()))
+    col = {c: t.column(c).to_pylist() if c in t.column_names else [None] * n for c in names}
+    times = t.column(TIME_S).to_pylist()
+    status = [str(STATUSES[int(s)]) for s in batch.status]
+    for i in range(n):
+        yield {"line": numbers[i], "hole_id": col["hole_id"][i], "time": _iso(times[i]), "cell": col["cell"][i],
+               "status": status[i], "angle_deg": col["angle_deg"][i], "U95_angle_deg": col["U95_angle_deg"][i],
+               "angle_after_deg": col["angle_after_deg"][i], "U95_after_deg": col["U95_after_deg"][i],
+               "normal": [col["normal_x"][i], col["normal_y"][i], col["normal_z"][i]],
+               **({c: col[c][i] for c in PANEL_COLUMNS} if panel else {}), "reason": col["reason"][i]}
 
 
 def _iso(t_s: float) -> str:
@@ -143,33 +328,3 @@ def _iso(t_s: float) -> str:
 
     return dt.datetime.fromtimestamp(float(t_s), dt.timezone.utc).isoformat(timespec="microseconds").replace(
         "+00:00", "Z")
-
-
-def _complete_lines(fh, cut):
-    """The stream's lines that end with their newline; a last line without one (the stream ended inside
-    it: a writer killed, a cut file) goes to ``cut``, not measured: "50.2089" cut to "50.20" would read
-    as a number."""
-    for line in iter(fh.readline, ""):
-        if not line.endswith(("\n", "\r")):
-            if line.strip():
-                cut.append(line)
-            return
-        yield line
-
-
-def _report_alarms(watch, alarms, raised, on_alarm) -> None:
-    """Each alarm as it is raised (``{"raised": True, ...}``: the hole and direction, at once) and
-    again when sized on its new baseline (the full alarm, as ``metro measure`` reports it)."""
-    for ch in watch.charts.values():
-        p = ch.pending
-        if p is not None:
-            key = (p.raised["cell"], p.raised["hole_id"])
-            if key not in raised:
-                raised.add(key)
-                if on_alarm is not None:
-                    on_alarm({"raised": True, **p.raised})
-    filed = sorted((a for ch in watch.charts.values() for a in ch.alarms), key=lambda a: (a.time_s, a.cell))
-    for a in filed[len(alarms):]:
-        alarms.append(a.to_dict())
-        if on_alarm is not None:
-            on_alarm(a.to_dict())

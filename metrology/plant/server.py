@@ -5,7 +5,9 @@ The address space is :mod:`metrology.plant.gms`'s. Every hole fires a ``HoleResu
 event (Machinery Result's result-ready event, with GMS's characteristic fields) and updates its
 cell's ``LastResult``/``LastCorrection``; every drift alarm fires a ``DriftAlarmEventType`` with
 its severity. Events are emitted by the Server object (so a client subscribed to the Server's
-events receives every one) and by the cell's object (reached from Server by HasNotifier).
+events receives every one) and by the cell's object (reached from Server by HasNotifier). The
+Server object's events are kept (the last :data:`metrology.plant.history.HISTORY_EVENTS`) for
+OPC UA HistoryRead: a client back after a disconnect reads the results it missed.
 
 Security (OPC UA's own modes): the endpoint binds 127.0.0.1 unless the URL names another host; a
 host that is not loopback needs ``cert`` and ``key`` (PEM) and ``users`` (a file of ``user:SHA-256 of
@@ -31,8 +33,12 @@ __all__ = ["PlantServer", "parse_endpoint", "SLOW_CLIENT_RESULTS", "read_users"]
 
 #: a subscription with this many notifications queued for it is a client that does not read: deleted
 SLOW_CLIENT_RESULTS = 20_000
-#: how long closing waits for clients to be sent what was queued for them (s)
-DRAIN_S = 5.0
+#: how long closing waits at most for clients to be sent (and acknowledge) what was queued for them (s),
+#: and how long without progress
+DRAIN_S, DRAIN_IDLE_S = 120.0, 15.0
+#: a cell's LastResult and LastCorrection are written at most this often (s; and once the results stop
+#: coming): each write costs as much as an event, and the events carry every result
+LAST_EVERY_S = 0.05
 #: severity (1-1000) of a drift alarm as first raised, and once sized on its new baseline
 SEVERITY_RAISED, SEVERITY_SIZED = 700, 800
 
@@ -119,10 +125,11 @@ class PlantServer:
     calibration : dict, {"sha256", "file", "certificate": {...}}: the calibration in use
     cert, key, users : paths or None, required for a host that is not loopback
     warn : callable(str) or None, where warnings go (a slow client dropped)
+    history_events : int or None, events kept for HistoryRead (None: :data:`metrology.plant.history.HISTORY_EVENTS`)
     """
 
     def __init__(self, url: str, *, tolerance_deg: float, calibration: dict, cert=None, key=None, users=None,
-                 warn=None, slow_results: int = SLOW_CLIENT_RESULTS):
+                 warn=None, slow_results: int = SLOW_CLIENT_RESULTS, history_events: int | None = None):
         self.url = url
         self.host, self.port, loopback = parse_endpoint(url)
         self.users = None
@@ -138,6 +145,9 @@ class PlantServer:
         self.calibration = dict(calibration)
         self.warn = warn
         self.slow_results = int(slow_results)
+        from metrology.plant.history import HISTORY_EVENTS
+
+        self.history_events = HISTORY_EVENTS if history_events is None else int(history_events)
         self.sequence = 0
         self.dropped = []
         self._loop = None
@@ -195,6 +205,11 @@ class PlantServer:
         U95_angle_deg, angle_after_deg, U95_after_deg, correction_deg, cell, line)."""
         self._loop.call_soon_threadsafe(self._queue.put_nowait, ("hole", hole, time.perf_counter()))
 
+    def results(self, holes: list) -> None:
+        """Announce the results of holes measured together (one hand-over to the server's thread)."""
+        if holes:
+            self._loop.call_soon_threadsafe(self._queue.put_nowait, ("holes", list(holes), time.perf_counter()))
+
     def alarm(self, alarm: dict) -> None:
         """Announce a drift alarm (the dict of ``measure --follow``'s ``{"alarm": ...}`` lines)."""
         self._loop.call_soon_threadsafe(self._queue.put_nowait, ("alarm", alarm, time.perf_counter()))
@@ -203,8 +218,7 @@ class PlantServer:
         """Announce the holes of a per-hole results table (``measure`` on a whole log: a results sink)."""
         cols = [c for c in ("hole_id", "status", "angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg",
                             "correction_deg", "cell") if c in table.column_names]
-        for row in table.select(cols).to_pylist():
-            self.result(row)
+        self.results(table.select(cols).to_pylist())
 
     def __exit__(self, exc_type, exc, tb):
         if self._loop is not None and self._thread.is_alive():
@@ -255,6 +269,13 @@ class PlantServer:
                                        permission_ruleset=_ruleset(PermissionRuleset))
             server.set_identity_tokens([ua.UserNameIdentityToken])
         self.space = await build(server, self.calibration)
+        from metrology.plant.history import EventHistory, history_storage
+
+        self.history = EventHistory(self.history_events)  # HistoryRead of the Server object's events
+        server.iserver.history_manager.set_storage(history_storage(self.history, ua.NodeId(ua.ObjectIds.Server)))
+        notifier = (1 << ua.EventNotifier.SubscribeToEvents) | (1 << ua.EventNotifier.HistoryRead)  # bit numbers
+        await server.nodes.server.write_attribute(ua.AttributeIds.EventNotifier,
+                                                  ua.DataValue(ua.Variant(notifier, ua.VariantType.Byte)))
         try:
             await server.start()
         except OSError as exc:
@@ -271,25 +292,31 @@ class PlantServer:
             self._ready.set()
             return
         self._ready.set()
-        checked = time.monotonic()
+        checked = wrote = time.monotonic()
+        last = {}  # each cell's last result not yet written to its LastResult / LastCorrection
         try:
-            closing = False
+            closing, getter = False, None
             while not closing:
-                items = [await self._queue.get()]
-                while not self._queue.empty():  # all that came meanwhile: one pass of node writes for them
+                # a getter kept across timeouts (wait_for on Queue.get can drop an item it got as it times out)
+                getter = getter or asyncio.ensure_future(self._queue.get())
+                done, _ = await asyncio.wait({getter}, timeout=LAST_EVERY_S if last else None)
+                first, getter = (getter.result(), None) if done else (None, getter)
+                items = [first] if first is not None else []
+                while not self._queue.empty():  # all that came meanwhile: one pass for them
                     items.append(self._queue.get_nowait())
-                last = {}
                 for kind, item, _ in items:
                     if kind == "close":
                         closing = True
                         break
-                    if kind == "hole":
-                        cell, fields = await self._hole(item)
+                    for hole in ((item,) if kind == "hole" else item if kind == "holes" else ()):
+                        cell, fields = await self._hole(hole)
                         last[cell] = fields
-                    else:
+                    if kind == "alarm":
                         await self._alarm(item)
-                for cell, fields in last.items():
-                    await self._write_last(cell, fields)
+                if last and (closing or first is None or time.monotonic() - wrote >= LAST_EVERY_S):
+                    for cell, fields in last.items():
+                        await self._write_last(cell, fields)
+                    last, wrote = {}, time.monotonic()
                 if closing:
                     await self._drain()
                 elif time.monotonic() - checked > 0.2:
@@ -322,12 +349,12 @@ class PlantServer:
                   "CorrectionValueAbsolute": float(corr) if corr is not None else nan, "Cell": cell,
                   "Sequence": self.sequence, "Line": int(hole.get("line") or 0)}
         ev = self.space.hole_event.event
-        for name, vt in HOLE_FIELDS.items():
-            setattr(ev, name, ua.Variant(fields[name], getattr(ua.VariantType, vt)))
+        for name in HOLE_FIELDS:  # plain values (the event type gives their types): asyncua deep-copies each
+            setattr(ev, name, fields[name])
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = 100 if status == "conforms" else 500
-        await self._fire(self.space.hole_event, f"{cell} {fields['CharacteristicIdentifier']}: {status}")
+        await self._fire(self.space.hole_event, f"{cell} {fields['CharacteristicIdentifier']}: {status}", HOLE_FIELDS)
         return cell, fields
 
     async def _write_last(self, cell: str, fields: dict) -> None:
@@ -350,7 +377,7 @@ class PlantServer:
     async def _alarm(self, alarm: dict) -> None:
         from asyncua import ua
 
-        from metrology.plant.gms import cell_node
+        from metrology.plant.gms import ALARM_FIELDS, cell_node
 
         cell = str(alarm.get("cell") or "cell")
         await cell_node(self.space, cell)
@@ -360,29 +387,31 @@ class PlantServer:
         for name, value in (("Cell", cell), ("Sensor", " ".join(sensor) if isinstance(sensor, list) else str(sensor)),
                             ("HoleId", str(alarm.get("hole_id") or "")),
                             ("Alarm", "raised" if raised else "sized")):
-            setattr(ev, name, ua.Variant(value, ua.VariantType.String))
+            setattr(ev, name, value)
         ev.SourceNode = self.space.cells[cell][0].nodeid
         ev.SourceName = cell
         ev.Severity = SEVERITY_RAISED if raised else SEVERITY_SIZED
         await self._fire(self.space.alarm_event, f"drift alarm {cell} at {alarm.get('hole_id')}: "
-                                                 + ("raised" if raised else "sized on its new baseline"))
+                                                 + ("raised" if raised else "sized on its new baseline"), ALARM_FIELDS)
 
-    async def _fire(self, gen, message: str) -> None:
-        """Emit from the Server object, then from the cell's object (for a client subscribed to it):
-        asyncua's ``EventGenerator.trigger`` less its per-event local-time lookup."""
+    async def _fire(self, gen, message: str, names) -> None:
+        """Emit from the Server object (kept in its history with the fields ``names``), then from the
+        cell's object (for a client subscribed to it): asyncua's ``EventGenerator.trigger`` less its
+        per-event local-time lookup."""
         import os
         from datetime import datetime, timezone
 
         from asyncua import ua
 
         ev = gen.event
-        ev.EventId = ua.Variant(os.urandom(16), ua.VariantType.ByteString)
+        ev.EventId = os.urandom(16)
         ev.Time = ev.ReceiveTime = datetime.now(timezone.utc)
         ev.Message = ua.LocalizedText(message)
         subs = self.space.server.iserver.subscription_service
         cell_id = ev.SourceNode
         ev.emitting_node = ua.NodeId(ua.ObjectIds.Server)
         await subs.trigger_event(ev)
+        self.history.keep(ev, names)
         ev.emitting_node = cell_id
         await subs.trigger_event(ev)
 
@@ -398,10 +427,17 @@ class PlantServer:
                               f"its subscription is deleted; measuring goes on")
 
     async def _drain(self) -> None:
-        """Wait (at most :data:`DRAIN_S`) until every subscription has been sent what was queued for it."""
+        """Wait until every subscription has been sent what was queued for it and its client has
+        acknowledged it; at most :data:`DRAIN_S`, and no longer than :data:`DRAIN_IDLE_S` without
+        progress (a client that stopped reading)."""
         subs = self.space.server.iserver.subscription_service
         end = time.monotonic() + DRAIN_S
-        while time.monotonic() < end:
-            if not any(sub._triggered_events for sub in subs.subscriptions.values()):
+        idle_end, before = time.monotonic() + DRAIN_IDLE_S, None
+        while time.monotonic() < min(end, idle_end):
+            left = sum(sum(len(q) for q in sub._triggered_events.values()) + len(sub._not_acknowledged_results)
+                       for sub in subs.subscriptions.values())  # asyncua 2.1: queued, and sent not acknowledged
+            if not left:
                 return
+            if left != before:
+                idle_end, before = time.monotonic() + DRAIN_IDLE_S, left
             await asyncio.sleep(0.02)

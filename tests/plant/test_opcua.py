@@ -47,6 +47,10 @@ async def _follow_with_client(log, tmp):
         _, col = await subscribe(client)
         metro.feed(log.read_text())
         rc, out, err = await asyncio.get_running_loop().run_in_executor(None, metro.finish)
+        seen = -1
+        while len(col.results) != seen:  # what the client's loop had not handled yet when metro ended
+            seen = len(col.results)
+            await asyncio.sleep(2.0)
         return rc, out, err, col
     finally:
         metro.kill()
