@@ -50,7 +50,7 @@ def layout_panel(layout_path) -> dict:
 def footprint_mm(layout) -> float:
     """The head's footprint radius (mm): the spots' largest distance from the tool axis at mid-range
     readings (at the default stand-off where the range is not stated)."""
-    mid = layout.range_mm.mean(1)
+    mid = _mid_range(layout)
     if np.all(np.isfinite(mid)):
         spots = layout.zero + mid[:, None] * layout.direction
         return float(np.max(np.hypot(spots[:, 0], spots[:, 1])))
@@ -60,9 +60,19 @@ def footprint_mm(layout) -> float:
     return footprint_radius(layout, default_standoff(layout))
 
 
+def _mid_range(layout) -> np.ndarray:
+    """Each sensor's mid-range (n,) mm, NaN where its range is not stated (a nominal layout's (-inf, inf): its mean
+    would be inf - inf, numpy's "invalid value encountered in reduce" on stderr, issue 51 item 14)."""
+    r = np.asarray(layout.range_mm, float)
+    ok = np.all(np.isfinite(r), axis=1)
+    mid = np.full(len(r), np.nan)
+    mid[ok] = r[ok].mean(1)
+    return mid
+
+
 def standoff_mm(layout) -> float:
     """The readings' stand-off (mm): the sensors' mid-range, else the head's default stand-off."""
-    mid = layout.range_mm.mean(1)
+    mid = _mid_range(layout)
     if np.all(np.isfinite(mid)):
         return float(np.mean(mid))
     from metrology.panel.head import default_standoff

@@ -259,3 +259,25 @@ def test_a_hive_log_in_inches_is_refused_on_dask(skins, tmp_path):
     keys, xyz = commanded_positions(open_log(ok, ("L1", "L2", "L3", "L4")))
     assert len(keys) == 40 and keys[0] == "H0001" and np.all(np.isfinite(xyz))
     assert check_panel_units(26.6, 50.0, table_points=xyz + [0, 0, -50.0], pose_points=xyz) is None
+
+
+def test_another_heads_nominal_layout_is_refused_in_one_line(skins, tmp_path):
+    """Item 14: a nominal layout (no range stated: (-inf, inf)) of another head on the panel's log: the wrong-head
+    error alone on stderr, no numpy "invalid value encountered in reduce" (the mid-range of (-inf, inf)) before it."""
+    from metrology.core.layout import SensorLayout
+    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
+    from metrology.io.layout import save_layout
+
+    t6 = layout_from_table(TABLE6_NOMINAL)
+    C = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, t6.n))
+    other = SensorLayout(t6.names, t6.zero + [[0.4, 0, 0], [0, 0.4, 0], [0, 0, 0.4], [0.2, 0.2, 0]], t6.direction,
+                         np.full(t6.n, 0.003), np.tile([-np.inf, np.inf], (t6.n, 1)), covariance=C)
+    path = tmp_path / "other.toml"
+    save_layout(other, path)
+    folder, files, log = skins
+    out = tmp_path / "o.csv"
+    r = runner.invoke(app, ["measure", log, "--layout", str(path), "--points", files["mm"][1], "--out", str(out)])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}: the readings of 40 of 40 holes disagree"), r.stderr
+    assert not out.exists()
