@@ -270,6 +270,10 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
         output.release()
+        if output.waited_line() is not None:  # another run's lock, freed within the wait: this one resumed
+            warnings.append(output.waited_line())
+            if warn is not None:
+                warn(output.waited_line())
     elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None and o.plant is None:  # --json alone: the summary, nothing per hole
         result = run(holes_map)
         check_fit(result)
