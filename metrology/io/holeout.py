@@ -189,7 +189,9 @@ class PartitionedOutput:
 
         lock = self.folder / LOCK
         me = f"pid {os.getpid()} on {socket.gethostname()}"
-        deadline = time.monotonic() + LOCK_WAIT_S
+        start = time.monotonic()
+        deadline = start + LOCK_WAIT_S
+        held_by = None
         while True:
             try:
                 fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
@@ -203,6 +205,7 @@ class PartitionedOutput:
                 if host == socket.gethostname() and pid.isdigit() and not _alive(int(pid)):
                     lock.unlink(missing_ok=True)  # a killed run's: nobody holds it
                     continue
+                held_by = held_by or who
                 if time.monotonic() >= deadline:
                     raise ValueError(f"--out {self.folder}: another run is writing into it ({who}; waited "
                                      f"{LOCK_WAIT_S:g} s; if none is, remove {lock})") from None
@@ -210,6 +213,20 @@ class PartitionedOutput:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(me)
         self._locked = True
+        if held_by is not None:
+            self.waited = (time.monotonic() - start, held_by)
+
+    #: ``(seconds, "pid N on HOST")``: the run this one waited for (it ended within :data:`LOCK_WAIT_S`), or None
+    waited = None
+
+    def waited_line(self) -> str | None:
+        """What a run that waited for another's lock says (None when it did not wait): the folder's partitions that
+        run wrote are then kept, not written again."""
+        if self.waited is None:
+            return None
+        s, who = self.waited
+        return (f"--out {self.folder}: waited {s:.1f} s for another run writing into it ({who}), which ended; this "
+                f"run resumes from what it wrote")
 
     def release(self) -> None:
         """The run has ended (well or not): let another run write into the folder."""

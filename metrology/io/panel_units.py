@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_panel_units", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
+__all__ = ["check_panel_units", "pose_rows", "log_positions", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
            "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES", "FLAT_DEPTH"]
 
 #: the panel's sides must hold this many footprint radii (the spots' disc, both sides of a hole)
@@ -49,6 +49,8 @@ POSE_REACH = 4.0
 #: the units tried when the numbers do not read as mm: name -> mm per unit
 CANDIDATES = {"in": 25.4, "m": 1000.0, "cm": 10.0}
 NAMES = {"in": "inches", "m": "metres", "cm": "centimetres"}
+#: the log's columns of the commanded position
+POSE_POSITION = ("pose_x_mm", "pose_y_mm", "pose_z_mm")
 
 
 def nearest_spacing(points) -> float:
@@ -93,9 +95,32 @@ def _sides(extent):
     return float(e[0]), float(e[1]), float(e[2])
 
 
+def pose_rows(table_ids, keys):
+    """Each sampled log row's row in the hole table (-1: not in it): ``table_ids (m,)`` against the log's join keys
+    ``keys (q,)`` (``point_id``, else ``hole_id``; :func:`metrology.io.holelog_sample.commanded_positions`)."""
+    index = {str(h): i for i, h in enumerate(table_ids)}
+    return np.fromiter((index.get(str(k), -1) for k in keys), dtype=np.intp, count=len(keys))
+
+
+def log_positions(log, table_ids):
+    """``(positions (q, 3), rows (q,))``: the first commanded positions of ``log`` (a hole log,
+    :func:`metrology.io.holelog_sample.commanded_positions`) and each one's row in the hole table (-1: not in it),
+    the input :func:`check_panel_units` takes as ``pose_points`` and ``pose_at``; ``(None, None)`` when the log
+    carries no position."""
+    from metrology.io.holelog_sample import commanded_positions
+
+    sample = None if log is None else commanded_positions(log)
+    if sample is None:
+        return None, None
+    keys, xyz = sample
+    return xyz, pose_rows(table_ids, keys)
+
+
 def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_points=None, pose_points=None,
-                      names="the panel", given=None, panel_in_mm=False, units_option=True):
-    """A one-line refusal when the panel and hole table do not read as mm against the head, else None.
+                      names="the panel", given=None, panel_in_mm=False, units_option=True, pose_at=None,
+                      log_name="the log"):
+    """A one-line refusal when the panel, the hole table and the log's commanded positions do not read as mm
+    against the head, else None.
 
     Parameters
     ----------
@@ -103,53 +128,93 @@ def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_poi
     standoff_mm : float, mm, the readings' stand-off (mid-range)
     panel_extent : (3,) float, file units (mm once loaded), the panel's bounding box, or None
     table_points : (m, 3) float, file units, the hole table's drill points, or None
-    pose_points : (m, 3) float, mm, the log's commanded TCS positions at the same holes as
-        ``table_points`` (rows matched), or None when the log carries none
+    pose_points : (q, 3) float, as the log writes them (mm by their names), the log's commanded TCS positions in
+        the panel frame, or None when the log carries none; row i belongs to the table's row ``pose_at[i]``
+        (None: the rows of ``table_points`` themselves; -1: a hole not in the table, left out)
     names : str, how the refusal names the files ("skin.stl and skin.holes.csv")
     given : str or None, the ``--units`` the user gave (the refusal then asks to check the files)
     panel_in_mm : bool, the panel's unit is settled (a file that declares it, or ``--units``): only
         the table is scaled when a candidate unit is tried
     units_option : bool, the command takes ``--units`` (the refusal offers it; else: convert the files)
+    pose_at : (q,) int or None, each commanded position's row of ``table_points`` (:func:`pose_rows`)
+    log_name : str, how the refusal names the log when its positions alone are in another unit
     """
     panel_sides = None if panel_extent is None else _sides(panel_extent)
     table_sides = None
     pitch = float("nan")
-    pose_gap = None
+    gap = None
     if table_points is not None and len(table_points):
         T = np.asarray(table_points, float)
         table_sides = _sides(np.percentile(T, 100, axis=0) - np.percentile(T, 0, axis=0))
         pitch = nearest_spacing(T)
-        if pose_points is not None and len(pose_points):
-            Q = np.asarray(pose_points, float)
-            ok = np.all(np.isfinite(Q), axis=1) & np.all(np.isfinite(T), axis=1)
-            if ok.any():
-                def pose_gap(scale, T=T[ok], Q=Q[ok]):
-                    return float(np.median(np.linalg.norm(Q - scale * T, axis=1)))
-    problems = _problems(1.0, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, pose_gap)
+        gap = _pose_gap(T, pose_points, pose_at)
+    problems = _problems(1.0, footprint_mm, standoff_mm, panel_sides, table_sides, pitch, _at(gap, 1.0, 1.0))
     if not problems:
         return None
-    if given is not None:
-        return (f"{names}: read in {given} (--units {given}): {'; '.join(problems)}: check the files' unit "
-                f"(the layout and the log are in mm)")
     # a panel that reads as mm on its own (or declares its unit) stays: only the table is tried in another unit
-    settled = panel_in_mm or (panel_sides is not None and
-                              not _problems(1.0, footprint_mm, standoff_mm, panel_sides, None, float("nan"), None))
-    likely = []
-    for unit, scale in CANDIDATES.items():
-        ps = None if panel_sides is None else panel_sides if settled else tuple(x * scale for x in panel_sides)
-        ts = None if table_sides is None else tuple(x * scale for x in table_sides)
-        if not _problems(1.0, footprint_mm, standoff_mm, ps, ts, pitch * scale,
-                         None if pose_gap is None else (lambda s, g=pose_gap, k=scale: g(s * k))):
-            likely.append(unit)
+    settled = given is not None or panel_in_mm or (
+        panel_sides is not None and not _problems(1.0, footprint_mm, standoff_mm, panel_sides, None, float("nan"), None))
+
+    def plausible(files, poses):
+        """No problem left when the files' numbers are in unit ``files`` and the positions in ``poses`` (None: mm)."""
+        k = CANDIDATES.get(files, 1.0)
+        ps = None if panel_sides is None else panel_sides if settled else tuple(x * k for x in panel_sides)
+        ts = None if table_sides is None else tuple(x * k for x in table_sides)
+        return not _problems(1.0, footprint_mm, standoff_mm, ps, ts, pitch * k, _at(gap, k, CANDIDATES.get(poses, 1.0)))
+
+    # the files' unit first (the positions in mm), then the positions' (the files in mm, or in theirs)
+    files_units = [None] if given is not None else [None, *CANDIDATES]
+    pose_units = [None] if gap is None else [None, *CANDIDATES]
+    likely = [(f, q) for f in files_units for q in pose_units if (f, q) != (None, None) and plausible(f, q)]
+    if given is not None:
+        fix = (_pose_fix(likely[0][1], False) if likely else
+               "check the files' unit (the layout and the log are in mm)")
+        return f"{names}: read in {given} (--units {given}): {'; '.join(problems)}: {fix}"
     if not likely and not (panel_sides is not None and _narrow(panel_sides, footprint_mm)):
         return None  # odd numbers, but no other unit explains them (a dense test pattern): not a unit's mistake
+    files, poses = likely[0] if likely else (None, None)
     if not likely:
         fix = "no unit reads plausibly: are these the panel and the table of this head's cell?"
+    elif files is None:  # the files read as mm: the log's positions alone are in another unit
+        return f"{log_name}: {'; '.join(problems)}, the holes of {names}: {_pose_fix(poses, False)}"
     elif settled and table_sides is not None and panel_sides is not None:
-        fix = (f"the hole table is not in mm, it looks like {NAMES[likely[0]]} (the panel like mm): convert the table "
+        fix = (f"the hole table is not in mm, it looks like {NAMES[files]} (the panel like mm): convert the table "
                f"to mm" + (
                " (--units applies to both files)" if units_option else ""))
     else:
-        fix = (f"they look like {NAMES[likely[0]]}: give --units {likely[0]}, or convert them to mm" if units_option
-               else f"they look like {NAMES[likely[0]]}: convert them to mm")
+        fix = (f"they look like {NAMES[files]}: give --units {files}, or convert them to mm" if units_option
+               else f"they look like {NAMES[files]}: convert them to mm")
+    if files is not None and poses is not None:
+        fix += "; " + _pose_fix(poses, poses == files)
     return f"{names} read as mm: {'; '.join(problems)}: {fix}"
+
+
+def _pose_gap(T, pose_points, pose_at):
+    """The median distance (mm) of the commanded positions from their holes' table points as a function of the
+    table's and the positions' scales, or None without positions matched to the table."""
+    if pose_points is None or not len(pose_points):
+        return None
+    Q = np.asarray(pose_points, float)
+    rows = np.arange(len(Q)) if pose_at is None else np.asarray(pose_at, np.intp)
+    ok = rows >= 0
+    ok[ok] = np.all(np.isfinite(Q[ok]), axis=1) & np.all(np.isfinite(T[rows[ok]]), axis=1)
+    if not ok.any():
+        return None
+    P, Q = T[rows[ok]], Q[ok]
+
+    def gap(table_scale, pose_scale):
+        return float(np.median(np.linalg.norm(pose_scale * Q - table_scale * P, axis=1)))
+
+    return gap
+
+
+def _at(gap, table_scale, pose_scale):
+    """The pose-gap phrase's input for :func:`_problems`: the gap with the positions' scale fixed."""
+    return None if gap is None else (lambda s: gap(s * table_scale, pose_scale))
+
+
+def _pose_fix(unit, too) -> str:
+    """The fix for commanded positions that read in ``unit`` (a key of :data:`CANDIDATES`)."""
+    return (f"the log's commanded positions ({', '.join(POSE_POSITION)}) look like {NAMES[unit]}"
+            f"{' too' if too else ''}: write them in mm, as their names say (--units applies to the panel and "
+            f"the table only)")

@@ -218,10 +218,10 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     if panel is not None and points is None:
         raise ValueError(f"--panel {display_name(panel)}: give the hole table too (--points HOLES.csv: "
                          f"hole_id,x,y,z,i,j,k), to join the log's holes to the panel")
-    if points is not None:
-        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
-                                 o.units)
     log = open_log(log_path, layout.names, batch_rows=o.batch_rows or BATCH_ROWS, display=o.log_display)
+    if points is not None:  # the log's commanded positions checked against the table's unit too
+        surfaces = hole_surfaces(layout, panel, points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
+                                 o.units, log)
     from metrology.measure.effects import check_log
 
     check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
@@ -270,6 +270,10 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             output.abort()  # nothing written by any run: no manifest, no folder left
             raise
         output.release()
+        if output.waited_line() is not None:  # another run's lock, freed within the wait: this one resumed
+            warnings.append(output.waited_line())
+            if warn is not None:
+                warn(output.waited_line())
     elif target is None and not o.per_hole and qif_doc is None and dfq_doc is None and o.plant is None:  # --json alone: the summary, nothing per hole
         result = run(holes_map)
         check_fit(result)

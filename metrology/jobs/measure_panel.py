@@ -50,7 +50,7 @@ def layout_panel(layout_path) -> dict:
 def footprint_mm(layout) -> float:
     """The head's footprint radius (mm): the spots' largest distance from the tool axis at mid-range
     readings (at the default stand-off where the range is not stated)."""
-    mid = layout.range_mm.mean(1)
+    mid = _mid_range(layout)
     if np.all(np.isfinite(mid)):
         spots = layout.zero + mid[:, None] * layout.direction
         return float(np.max(np.hypot(spots[:, 0], spots[:, 1])))
@@ -60,9 +60,19 @@ def footprint_mm(layout) -> float:
     return footprint_radius(layout, default_standoff(layout))
 
 
+def _mid_range(layout) -> np.ndarray:
+    """Each sensor's mid-range (n,) mm, NaN where its range is not stated (a nominal layout's (-inf, inf): its mean
+    would be inf - inf, numpy's "invalid value encountered in reduce" on stderr, issue 51 item 14)."""
+    r = np.asarray(layout.range_mm, float)
+    ok = np.all(np.isfinite(r), axis=1)
+    mid = np.full(len(r), np.nan)
+    mid[ok] = r[ok].mean(1)
+    return mid
+
+
 def standoff_mm(layout) -> float:
     """The readings' stand-off (mm): the sensors' mid-range, else the head's default stand-off."""
-    mid = layout.range_mm.mean(1)
+    mid = _mid_range(layout)
     if np.all(np.isfinite(mid)):
         return float(np.mean(mid))
     from metrology.panel.head import default_standoff
@@ -85,27 +95,30 @@ def read_table_in_mm(points, units=None):
     return table
 
 
-def check_units(layout, panel=None, table=None, panel_path=None, points_path=None, units=None, poses=None):
+def check_units(layout, panel=None, table=None, panel_path=None, points_path=None, units=None, log=None):
     """Refuse (ValueError, one line) a loaded panel and hole table that do not read as mm against the
-    head of ``layout`` (:func:`metrology.io.panel_units.check_panel_units`); ``poses``: the log's
-    commanded positions (m, 3) mm at the table's rows, or None."""
+    head of ``layout`` (:func:`metrology.io.panel_units.check_panel_units`), with the commanded positions of
+    ``log`` (an opened hole log, or None) at their holes."""
     from metrology.io.names import display_name
-    from metrology.io.panel_units import check_panel_units
+    from metrology.io.panel_units import check_panel_units, log_positions
 
     shown = " and ".join(display_name(p) for p in (panel_path, points_path) if p is not None)
     settled = panel is not None and units is None and not str(panel.units).startswith("mm (assumed")
+    poses, at = (None, None) if table is None else log_positions(log, table.ids)
     line = check_panel_units(footprint_mm(layout), standoff_mm(layout),
                              panel_extent=None if panel is None else panel.mesh.extents,
                              table_points=None if table is None else table.point, pose_points=poses,
-                             names=shown or "the panel", given=units, panel_in_mm=settled)
+                             names=shown or "the panel", given=units, panel_in_mm=settled, pose_at=at,
+                             log_name=getattr(log, "display", "the log"))
     if line is not None:
         raise ValueError(line)
 
 
-def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units=None):
+def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units=None, log=None):
     """Each hole's local surface (HoleSurfaces) from the panel and the hole table, or the table alone;
     ``units`` (mm, cm, m, in): the unit of the panel file and the table (None: the panel's own, the table mm).
-    Refused (ValueError) when the two do not read as mm against the head (:func:`check_units`)."""
+    Refused (ValueError) when the two, with the commanded positions of ``log`` (an opened hole log, or None),
+    do not read as mm against the head (:func:`check_units`)."""
     from dataclasses import replace
 
     from metrology.measure.panel import TableNormals
@@ -120,14 +133,14 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     table = read_table_in_mm(points, units)
     foot = footprint_mm(layout)
     if panel is None:
-        check_units(layout, None, table, None, points, units)
+        check_units(layout, None, table, None, points, units, log)
         source = TableNormals()
     else:
         from metrology.io.names import display_name
         from metrology.panel.mesh import load_panel
 
         loaded = load_panel(panel, units)
-        check_units(layout, loaded, table, panel, points, units)
+        check_units(layout, loaded, table, panel, points, units, log)
         source = CadPanel(loaded, position_error_mm, display_name(panel))
     return replace(source.surfaces(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
 

@@ -193,12 +193,15 @@ def convergence_figure(report: CalibrationReport, convergence=None):
         title = f"{cal.method}: estimate from the first k poses, ±1 σ bands (y range: the last three quarters)"
     for ax in axes.ravel():
         ax.grid(True, alpha=0.3)
-    axes[0, 0].legend(loc="upper right", ncol=3)
-    axes[0, 1].legend(loc="upper right", ncol=3)
     axes[-1, 0].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     axes[-1, 1].set_xlabel("measurements [count]" if cal.history else "poses used [count]")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    # each column's legend in a row of its own between the title and the top axes (issue 51, item 12: inside
+    # the axes, "upper right", it sat over the title and the data); constrained layout makes room for both
+    for c in (0, 1):
+        axes[0, c].legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3, frameon=False,
+                          borderaxespad=0.2)
+    fig.set_layout_engine("constrained")
     return fig
 
 

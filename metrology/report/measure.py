@@ -93,7 +93,8 @@ def measure_text(report) -> str:
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
              *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
-                f"partition(s) kept as an earlier run wrote them, {report.result.written} written"]
+                f"partition(s) kept as an earlier run wrote them, {report.result.written} written (every hole "
+                f"measured again: the summary, the verdict and the drift watch cover the whole log)"]
                if report.sources.get("out") and report.result.written < report.result.partitions else []),
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]

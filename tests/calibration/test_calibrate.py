@@ -303,3 +303,32 @@ def test_fixture_plane_json_matches_the_datum_cloud():
     assert np.degrees(np.arccos(abs(fitted.normal @ plane.normal))) < 2e-3
     assert abs(fitted.offset - plane.offset) < 0.01
     assert 0.95 < len(inlier_pts) / len(pts) < 0.99
+
+
+@pytest.mark.parametrize("history", [False, True])
+def test_convergence_legends_sit_clear_of_title_and_data(report, history):
+    """Issue 51, item 12: the convergence figure's legends overlapped the title and the curves; each now sits in a
+    row of its own, clear of the title and of every axes' data area (a batch method's bands, a filter's history)."""
+    import dataclasses
+
+    from metrology.report.calibration import convergence_figure
+
+    rep = report
+    if history:  # a filter's estimate after each measurement
+        m = len(report.dataset.obs.d)
+        hist = [np.zeros((m, 6)) + i * 1e-3 for i in range(len(report.layout.names))]
+        rep = dataclasses.replace(report, calibration=dataclasses.replace(report.calibration, history=hist))
+    fig = convergence_figure(rep)
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    title = fig._suptitle.get_window_extent(r)
+    legends = [ax.get_legend().get_window_extent(r) for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 2
+    for leg in legends:
+        assert not leg.overlaps(title)
+        for ax in fig.axes:
+            assert not leg.overlaps(ax.get_window_extent(r)), ax.get_ylabel()
+        assert 0 <= leg.x0 and leg.x1 <= fig.bbox.x1 and leg.y1 <= fig.bbox.y1
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)

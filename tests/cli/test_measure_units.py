@@ -190,3 +190,94 @@ def test_a_narrow_deep_panel_is_not_read_as_inches():
     assert check_panel_units(**ok, panel_extent=(320.0, 40.0, 20.0)) is None
     line = check_panel_units(**ok, panel_extent=(320.0, 40.0, 2.0))
     assert line is not None and "narrower" in line
+
+
+def _log_in(log, folder, unit, scale, fmt="csv"):
+    """The simulated log with its commanded positions ``pose_{x,y,z}_mm`` written in ``unit`` (a CSV file, or a hive
+    folder of Parquet files)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
+    t = pcsv.read_csv(log)
+    t = pa.table({n: pc.divide(t[n], scale) if n in ("pose_x_mm", "pose_y_mm", "pose_z_mm") else t[n]
+                  for n in t.column_names})
+    if fmt == "csv":
+        out = folder / f"log_pose_{unit}.csv"
+        pcsv.write_csv(t, out)
+        return str(out)
+    import pyarrow.parquet as pq
+
+    out = folder / f"hive_pose_{unit}"
+    for i, half in enumerate((t.slice(0, 20), t.slice(20))):
+        (out / f"cell=C1/part={i}").mkdir(parents=True, exist_ok=True)
+        pq.write_table(half.drop(["cell"]), out / f"cell=C1/part={i}/log.parquet")
+    return str(out)
+
+
+@pytest.mark.parametrize("unit, scale, word", [("in", 25.4, "inches"), ("m", 1000.0, "metres")])
+def test_a_log_whose_commanded_positions_are_in_another_unit_is_refused(skins, unit, scale, word):
+    """Item 1: panel and table in mm, the log's pose_*_mm in inches or metres: refused naming the log and the fix."""
+    folder, files, log = skins
+    bad = _log_in(log, folder, unit, scale)
+    out = folder / f"pose_{unit}.csv"
+    r = _measure(bad, "--panel", files["mm"][0], "--points", files["mm"][1], "--out", str(out))
+    assert r.exit_code == 2, r.output
+    err = r.output.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {bad}: the log's commanded positions lie a median")
+    assert f"(pose_x_mm, pose_y_mm, pose_z_mm) look like {word}: write them in mm" in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("unit, scale, word", [("in", 25.4, "inches"), ("m", 1000.0, "metres")])
+def test_panel_table_and_log_in_one_wrong_unit_name_both_fixes(skins, unit, scale, word):
+    """All three in one wrong unit: the files' fix (--units) and the positions' (they are not scaled by it), at once;
+    with --units the positions' alone."""
+    folder, files, log = skins
+    bad = _log_in(log, folder, unit, scale)
+    r = _measure(bad, "--panel", files[unit][0], "--points", files[unit][1], "--out", str(folder / "x.csv"))
+    assert r.exit_code == 2, r.output
+    assert f"they look like {word}: give --units {unit}" in r.output
+    assert f"look like {word} too: write them in mm" in r.output
+    r = _measure(bad, "--panel", files[unit][0], "--points", files[unit][1], "--units", unit)
+    assert r.exit_code == 2, r.output
+    assert f"(--units {unit})" in r.output and f"look like {word}: write them in mm" in r.output
+
+
+def test_a_hive_log_in_inches_is_refused_on_dask(skins, tmp_path):
+    """The same check on a hive folder of Parquet files, run by Dask: refused before anything is written."""
+    folder, files, log = skins
+    bad = _log_in(log, folder, "in", 25.4, fmt="hive")
+    out = tmp_path / "out"
+    r = _measure(bad, "--panel", files["mm"][0], "--points", files["mm"][1], "--out", str(out), "--workers", "1")
+    assert r.exit_code == 2, r.output
+    assert "look like inches: write them in mm" in r.output and not out.exists()
+    ok = _log_in(log, folder, "mm", 1.0, fmt="hive")  # the same folder in mm passes the rule
+    from metrology.io.holelog import open_log
+    from metrology.io.holelog_sample import commanded_positions
+
+    keys, xyz = commanded_positions(open_log(ok, ("L1", "L2", "L3", "L4")))
+    assert len(keys) == 40 and keys[0] == "H0001" and np.all(np.isfinite(xyz))
+    assert check_panel_units(26.6, 50.0, table_points=xyz + [0, 0, -50.0], pose_points=xyz) is None
+
+
+def test_another_heads_nominal_layout_is_refused_in_one_line(skins, tmp_path):
+    """Item 14: a nominal layout (no range stated: (-inf, inf)) of another head on the panel's log: the wrong-head
+    error alone on stderr, no numpy "invalid value encountered in reduce" (the mid-range of (-inf, inf)) before it."""
+    from metrology.core.layout import SensorLayout
+    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
+    from metrology.io.layout import save_layout
+
+    t6 = layout_from_table(TABLE6_NOMINAL)
+    C = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, t6.n))
+    other = SensorLayout(t6.names, t6.zero + [[0.4, 0, 0], [0, 0.4, 0], [0, 0, 0.4], [0.2, 0.2, 0]], t6.direction,
+                         np.full(t6.n, 0.003), np.tile([-np.inf, np.inf], (t6.n, 1)), covariance=C)
+    path = tmp_path / "other.toml"
+    save_layout(other, path)
+    folder, files, log = skins
+    out = tmp_path / "o.csv"
+    r = runner.invoke(app, ["measure", log, "--layout", str(path), "--points", files["mm"][1], "--out", str(out)])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}: the readings of 40 of 40 holes disagree"), r.stderr
+    assert not out.exists()

@@ -2,6 +2,7 @@
 LocalCluster and on a real `dask scheduler` with two `dask worker` processes on localhost."""
 
 import json
+import re
 import os
 import shutil
 import socket
@@ -337,6 +338,31 @@ def test_two_runs_into_one_folder_at_once_the_second_is_refused(fleet, tmp_path,
     lock.write_text(f"pid {os.getpid()} on {socket.gethostname()}")  # a live run resuming the whole folder
     r = runner.invoke(app, args)
     assert r.exit_code == 2 and "another run is writing into it" in r.output, r.output
+
+
+def test_a_run_that_waited_for_anothers_lock_says_so_and_a_resume_says_why_it_measures(fleet, tmp_path):
+    """Issue 51, item 11: a second run that finds the first's lock freed within the wait says it waited (how long,
+    for which pid and host) and resumed; a resume that keeps every partition says why it measures every hole."""
+    import threading
+
+    import metrology.io.holeout as holeout
+
+    out = tmp_path / "out"
+    args = ["measure", str(fleet / "log"), "--layout", str(fleet / "calibrated.toml"), "--out", str(out)]
+    _finished(runner.invoke(app, args))  # the first run wrote every partition
+    lock = out / holeout.LOCK
+    who = f"pid {os.getpid()} on {socket.gethostname()}"
+    lock.write_text(who)  # a live run writing: it ends 1 s into this run's wait
+    threading.Timer(1.0, lambda: lock.unlink()).start()
+    r = runner.invoke(app, args)
+    _finished(r)
+    assert re.search(rf"warning: --out \S+: waited [0-4]\.\d s for another run writing into it \({who}\), which "
+                     rf"ended; this run resumes", r.stderr), r.stderr
+    assert ("resumed: 6 of 6 partition(s) kept as an earlier run wrote them, 0 written (every hole measured again: "
+            "the summary, the verdict and the drift watch cover the whole log)") in r.stdout
+    r = runner.invoke(app, args)  # one after the other: nothing to wait for, nothing said of it
+    _finished(r)
+    assert "waited" not in r.stderr and "resumed: 6 of 6" in r.stdout
 
 
 def test_the_resume_manifest_names_the_log_by_its_resolved_path(fleet, tmp_path, monkeypatch):

@@ -4,6 +4,7 @@ cell's adjustment on holes the forward simulator drills."""
 
 from __future__ import annotations
 
+import functools
 import numpy as np
 import pytest
 
@@ -137,14 +138,12 @@ def test_u95_after_the_adjustment_covers_95_percent_of_the_true_angle(head):
     assert np.mean(np.abs(hb.angle - ch.true_angle[ok]) <= hb.U95) == pytest.approx(0.95, abs=0.012)
 
 
-def _spun_batch(with_pose, holes=3000, seed=3):
+@functools.lru_cache(maxsize=1)
+def _spun_cell(holes=3000, seed=3):
     """A 3-sensor ring on a barrel R 500 (axis at 30 deg), the head's spin drawn within +-2 deg by the
-    simulator and stated +-2 deg to the measurement; the log with or without the commanded pose."""
-    import pyarrow as pa
-
-    from metrology.io.holelog import CELL, PANEL, TIME_S
+    simulator; each hole's surface from the panel's mesh, spin stated +-2 deg. Simulated once for both logs
+    (with and without the pose): the cell and the surfaces are most of the test's time."""
     from metrology.jobs.measure_panel import panel_hole_surfaces
-    from metrology.measure.holes import Settings, measure_batch
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
     from tests.measure.panel_fixtures import panel_mesh
@@ -158,6 +157,18 @@ def _spun_batch(with_pose, holes=3000, seed=3):
     table = HoleTable(ids, ch.drill_point, -panel.normal_at(ch.drill_point), "holes.csv")
     surf = panel_hole_surfaces(Panel(panel_mesh(panel, half_mm=150.0, step_mm=3.0)), table, 55.0,
                                spin=np.radians(2.0))
+    return lay, ch, surf, ids
+
+
+def _spun_batch(with_pose):
+    """The cell of :func:`_spun_cell` measured, its log with or without the commanded pose."""
+    import pyarrow as pa
+
+    from metrology.io.holelog import CELL, PANEL, TIME_S
+    from metrology.measure.holes import Settings, measure_batch
+
+    lay, ch, surf, ids = _spun_cell()
+    holes = len(ids)
     cols = {"hole_id": list(ids), CELL: ["C1"] * holes, PANEL: ["P1"] * holes,
             TIME_S: (1.8e9 + np.arange(holes)).astype(float)}
     for j, nm in enumerate(lay.names):

@@ -1,0 +1,81 @@
+"""The first rows of a hole log's commanded positions, read alone: what the units rule
+(:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before any hole is measured.
+
+Only the join's key (``point_id`` where the log has it, else ``hole_id``) and ``pose_x_mm``, ``pose_y_mm``,
+``pose_z_mm`` are read, from the first partitions, at most :data:`SAMPLE_ROWS` rows: a median over a few
+thousand holes names a unit as well as one over 400 k, and costs a few milliseconds whatever the log's size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["commanded_positions", "SAMPLE_ROWS", "POSITION_COLUMNS"]
+
+#: rows read at most (the rule takes a median: a few thousand holes settle it)
+SAMPLE_ROWS = 4096
+#: the commanded TCS origin in the panel frame, mm (:data:`metrology.measure.pose.POSE_COLUMNS`)
+POSITION_COLUMNS = ("pose_x_mm", "pose_y_mm", "pose_z_mm")
+
+
+def commanded_positions(log, rows: int = SAMPLE_ROWS):
+    """``(keys (m,) str, positions (m, 3) float, as written (mm by the columns' names), panel frame)`` of the
+    first ``rows`` rows of ``log`` (a :class:`metrology.io.holelog.HoleLog`) that carry the columns; None when
+    the log has no ``pose_x_mm`` .. ``pose_z_mm``. A value that is not a number reads NaN (the reader names it)."""
+    keys, xyz, left = [], [], rows
+    for part in log.partitions:
+        names = log.file_columns(part)
+        if not all(c in names for c in POSITION_COLUMNS):
+            continue
+        key = "point_id" if "point_id" in names else "hole_id"
+        for k, p in _read(part, key, left):
+            keys.append(k)
+            xyz.append(p)
+            left -= len(k)
+        if left <= 0:
+            break
+    if not keys:
+        return None
+    return np.concatenate(keys), np.concatenate(xyz)
+
+
+def _read(part, key, rows):
+    """``(keys, positions)`` chunks of ``part``'s first ``rows`` rows (its key and position columns alone)."""
+    import pyarrow as pa
+
+    columns = [key, *POSITION_COLUMNS]
+    if part.path.lower().endswith(".csv"):
+        import pyarrow.csv as pcsv
+
+        types = {key: pa.string(), **{c: pa.string() for c in POSITION_COLUMNS}}
+        try:
+            reader = pcsv.open_csv(part.path, read_options=pcsv.ReadOptions(block_size=1 << 20),
+                                   convert_options=pcsv.ConvertOptions(include_columns=columns, column_types=types))
+        except (pa.ArrowInvalid, OSError):
+            return  # the log's reader names what is wrong with the file
+        batches = reader
+    else:
+        import pyarrow.parquet as pq
+
+        pf = pq.ParquetFile(part.path)
+        groups = [part.row_group] if part.row_group is not None else list(range(pf.num_row_groups))
+        batches = pf.iter_batches(batch_size=max(rows, 1), row_groups=groups, columns=columns, use_threads=False)
+    for batch in batches:
+        if rows <= 0:
+            return
+        batch = batch.slice(0, rows)
+        k = np.asarray(batch.column(0).cast(pa.string()).to_pylist(), dtype=object)
+        p = np.column_stack([_numbers(batch.column(i)) for i in (1, 2, 3)])
+        rows -= len(k)
+        yield k, p
+
+
+def _numbers(col) -> np.ndarray:
+    """A column as float64 (text that is not a number: NaN)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
+        col = pc.if_else(pc.match_substring_regex(col, r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$"),
+                         pc.utf8_trim_whitespace(col), pa.scalar(None, pa.string()))
+    return np.asarray(col.cast(pa.float64()).to_numpy(zero_copy_only=False), float)
