@@ -52,7 +52,8 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
-from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status, blanked
+from metrology.io.holelog import CELL, PANEL, text_codes
+from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Labels, Status, blanked
 from metrology.measure.effects import apply_terms
 from metrology.measure.normals import hole_normals
 from metrology.measure.pose import against_cad, read_pose
@@ -238,7 +239,8 @@ def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bo
     out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
     out.noise_sd[rs] = h.residual_noise_sd
     out.residual_sd[rs], out.twist[rs] = h.residual_sd, h.twist
-    out.moment[rs] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS]) for i in range(0, len(dd), CACHE_ROWS)])
+    out.moment[rs] = h.moment if h.moment is not None else np.concatenate(
+        [_moment(sub, dd[i:i + CACHE_ROWS]) for i in range(0, len(dd), CACHE_ROWS)])
     # the most any panel of radius >= R gives; with the panel known, what is not known of it
     bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
     gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
@@ -497,4 +499,4 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         spin_free, on_convention = spin_free & measured_code, on_convention & measured_code
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,
-                     spin_free, on_convention)
+                     spin_free, on_convention, *(Labels(*text_codes(out.column(c))) if c in cols else None for c in (CELL, PANEL)))

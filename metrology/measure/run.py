@@ -117,7 +117,7 @@ class Feed:
         sd[ch.index] = ch.noise_sd_mm
         if ch.index.size:
             sig[ch.index] = ch.signature
-        return cls(log, part, first_row + np.arange(n), _str(t.column(CELL)), _str(t.column(PANEL)),
+        return cls(log, part, first_row + np.arange(n), _str(t.column(CELL), batch.cell), _str(t.column(PANEL), batch.panel),
                    t.column("hole_id").combine_chunks(), t.column(TIME_S).to_numpy(), charted, rho, sd, sig)
 
     @classmethod
@@ -134,9 +134,10 @@ class Feed:
         return cls(feeds[0].log, feeds[0].part, *arrays, pa.concat_arrays([f.hole_id for f in feeds]), *rest)
 
 
-def _str(col) -> np.ndarray:
-    """A string column with few values (cell, panel) as a numpy array, through its dictionary."""
-    codes, values = text_codes(col)
+def _str(col, labels=None) -> np.ndarray:
+    """A string column with few values (cell, panel) as a numpy array, through its dictionary (``labels``,
+    :class:`~metrology.measure.batch.Labels`, where the batch has it already)."""
+    codes, values = text_codes(col) if labels is None else (labels.codes, labels.values)
     return np.array(values or [""], dtype=str)[codes]
 
 
