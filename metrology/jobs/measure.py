@@ -11,7 +11,8 @@ import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.jobs.measure_map import holes_collector
-from metrology.jobs.measure_report import SCHEMA, MeasureReport
+from metrology.jobs.measure_report import (SCHEMA, CadCheck, ChartSettings, KnownSurfaces, MeasureReport, OffCad,
+                                          RadiusBound, Sources)
 from metrology.jobs.measure_panel import check_join, hole_surfaces, layout_panel
 
 __all__ = ["MeasureReport", "MeasureOptions", "measure_files", "SCHEMA"]
@@ -243,9 +244,8 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
         if progress is not None:
             progress(done[0], None, f"{done[0]:,} holes measured")
 
-    sources = {"log": log.display, "layout": shown_layout, "out": None if o.out is None else str(o.out)}
-    if o.qif is not None:
-        sources["qif"] = str(o.qif)
+    sources = Sources(log.display, shown_layout, None if o.out is None else str(o.out),
+                      None if o.qif is None else str(o.qif))
     qif_doc = _qif_doc(o.qif, o.tolerance_deg, layout_path, layout, log.display,
                        {"CAD panel": panel, "hole table": points})
     from metrology.jobs.plant import dfq_sink, docs_from_output
@@ -293,7 +293,7 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
             holes_map.read_output(output, log)
     report = MeasureReport(result, sources, o.tolerance_deg, min_radius_mm, layout.names,
                            layout.covariance is not None, result.engine, tuple(warnings), o.fail_on_drift,
-                           {**chart_settings(), "by_panel": o.chart_by_panel},
+                           ChartSettings(**chart_settings(), by_panel=o.chart_by_panel),
                            _curvature(o, result, surfaces, radius_source, shown_layout),
                            () if layout.effects is None else tuple(c.label for c in layout.effects.components),
                            None if holes_map is None else holes_map.panel_map())
@@ -349,25 +349,17 @@ def _manifest(o: MeasureOptions, layout_path, log_path) -> dict:
             "layout_sha256": _digest(layout_path), "log": str(Path(log_path).resolve())}
 
 
-def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str) -> dict:
-    """The report's account of the panel's curvature: the bound the layout states, or the known
-    surfaces' figures ({} when the radius bound is assumed)."""
+def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_layout: str):
+    """The report's account of the panel's curvature: the radius bound (stated in the layout, or assumed), or
+    the known surfaces' figures (:class:`~metrology.jobs.measure_report.KnownSurfaces`)."""
     from metrology.measure.spin import DEFAULT_SPIN_DEG
 
-    curvature = {}
-    if surfaces is None and radius_source == "layout [panel] radius_mm":
-        curvature = {"assumed": False, "source": f"bound: the cell's panel radius {o.min_radius_mm:g} mm stated in "
-                                                 f"{shown_layout} [panel] radius_mm", "radius_mm": o.min_radius_mm}
-    if surfaces is not None:
-        curvature = {"assumed": False, "source": surfaces.source, "holes": len(surfaces.ids),
-                     "position_error_mm": o.position_error_mm, "form_tolerance_mm": o.form_tolerance_mm,
-                     "spin_deg": DEFAULT_SPIN_DEG if o.spin_deg is None else o.spin_deg,
-                     "spin_stated": surfaces.spin_stated,
-                     "spin_convention": "TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> "
-                     "-n) diag(1, -s, -s)); the spin beyond it within +-spin_deg, uniform, in U95",
-                     "spin_on_convention_holes": result.summary.on_convention, "spin_free_holes": result.summary.spin_free,
-                     **result.summary.off_cad_figures(), **result.summary.vs_cad_figures()}
-    return curvature
+    if surfaces is None:
+        return RadiusBound(o.min_radius_mm, shown_layout if radius_source == "layout [panel] radius_mm" else None)
+    s = result.summary
+    return KnownSurfaces(surfaces.source, len(surfaces.ids), o.position_error_mm, o.form_tolerance_mm,
+                         DEFAULT_SPIN_DEG if o.spin_deg is None else o.spin_deg, surfaces.spin_stated,
+                         s.on_convention, s.spin_free, OffCad(**s.off_cad_figures()), CadCheck(**s.vs_cad_figures()))
 
 
 def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None:

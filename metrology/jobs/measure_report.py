@@ -3,7 +3,7 @@ exit code are made from (``metrology.jobs.measure`` builds it)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING
 
 from metrology.core.verdict import Check, Verdict
@@ -11,9 +11,155 @@ from metrology.core.verdict import Check, Verdict
 if TYPE_CHECKING:
     from metrology.measure.run import MeasureResult
 
-__all__ = ["MeasureReport", "SCHEMA"]
+__all__ = ["MeasureReport", "Sources", "ChartSettings", "RadiusBound", "KnownSurfaces", "OffCad", "CadCheck", "SCHEMA"]
 
 SCHEMA = "metro.measure/1"
+
+
+@dataclass(frozen=True)
+class Sources:
+    """The run's files as the report names them (display names).
+
+    Attributes
+    ----------
+    log, layout : str; out : str or None, the results (``--out``); qif : str or None, the QIF document
+    """
+
+    log: str
+    layout: str
+    out: str | None = None
+    qif: str | None = None
+
+    def to_dict(self) -> dict:
+        return {"log": self.log, "layout": self.layout, "out": self.out,
+                **({} if self.qif is None else {"qif": self.qif})}
+
+
+@dataclass(frozen=True)
+class ChartSettings:
+    """The drift chart's settings (:func:`metrology.measure.chart.chart_settings`): ``k`` and ``h`` (scales), the
+    in-control ARL and the ARL at the detectable shift (holes), the baseline's holes, and whether each panel
+    takes a new baseline (``by_panel``)."""
+
+    k: float
+    h: float
+    arl0_holes: float
+    baseline_holes: int
+    detectable_scales: float
+    arl_at_detectable_holes: float
+    by_panel: bool = False
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RadiusBound:
+    """No panel known: each hole's curvature bounded by the panel's smallest radius.
+
+    Attributes
+    ----------
+    radius_mm : float, mm
+    stated_in : str or None, the layout whose ``[panel] radius_mm`` states it; None: assumed (the default
+        or ``--min-radius-mm``)
+    """
+
+    radius_mm: float
+    stated_in: str | None = None
+
+    #: each hole's surface is not known, only bounded
+    known = False
+
+    @property
+    def assumed(self) -> bool:
+        return self.stated_in is None
+
+    @property
+    def source(self) -> str:
+        return (f"bound: every panel's radius >= {self.radius_mm:g} mm (an assumption: no --panel or --points)"
+                if self.assumed else
+                f"bound: the cell's panel radius {self.radius_mm:g} mm stated in {self.stated_in} [panel] radius_mm")
+
+    def to_dict(self) -> dict:
+        return ({"assumed": True, "source": self.source} if self.assumed else
+                {"assumed": False, "source": self.source, "radius_mm": self.radius_mm})
+
+
+@dataclass(frozen=True)
+class OffCad:
+    """The panel off its CAD (:meth:`metrology.measure.summary.FleetSummary.off_cad_figures`): holes checked (4
+    sensors) and off (``|z|`` over ``off_cad_sigmas``), their mean and largest size (1/mm) and its hole."""
+
+    off_cad_sigmas: float
+    off_cad_checked: int
+    off_cad_holes: int
+    off_cad_mean_per_mm: float
+    off_cad_max_per_mm: float
+    off_cad_max_hole: str | None
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class CadCheck:
+    """The panel against its CAD under the log's commanded pose
+    (:meth:`metrology.measure.summary.FleetSummary.vs_cad_figures`): holes checked and off (``|offset|`` over
+    ``cad_offset_limit_mm``), the offsets (mm) and the normal's angle to the CAD's (deg), with their holes."""
+
+    cad_checked: int
+    cad_off_holes: int
+    cad_offset_limit_mm: float
+    cad_offset_mean_abs_mm: float
+    cad_offset_max_mm: float
+    cad_offset_max_hole: str | None
+    normal_vs_cad_mean_deg: float
+    normal_vs_cad_max_deg: float
+    normal_vs_cad_max_hole: str | None
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+#: how the head's spin is taken where the log has no pose (the cell's convention)
+SPIN_CONVENTION = ("TCS x, y near the panel's x, y (tcs2panel = Q(-e_z -> -n) diag(1, -s, -s)); the spin beyond it "
+                   "within +-spin_deg, uniform, in U95")
+
+
+@dataclass(frozen=True)
+class KnownSurfaces:
+    """Each hole's local surface known (``--panel``/``--points``).
+
+    Attributes
+    ----------
+    source : str, the CAD panel or hole table; holes : int, the table's holes
+    position_error_mm : float, mm, the drill point's position error; form_tolerance_mm : float, mm
+    spin_deg : float, deg, the head's spin within +-spin_deg where the log has no pose; spin_stated : bool
+    spin_on_convention_holes, spin_free_holes : int, holes judged with the spin in the cell's convention, and
+        with a U95 over every spin
+    off_cad : OffCad; cad : CadCheck
+    """
+
+    source: str
+    holes: int
+    position_error_mm: float
+    form_tolerance_mm: float
+    spin_deg: float
+    spin_stated: bool
+    spin_on_convention_holes: int
+    spin_free_holes: int
+    off_cad: OffCad
+    cad: CadCheck
+
+    #: each hole's surface known; the bound is not assumed
+    known, assumed = True, False
+
+    def to_dict(self) -> dict:
+        return {"assumed": False, "source": self.source, "holes": self.holes,
+                "position_error_mm": self.position_error_mm, "form_tolerance_mm": self.form_tolerance_mm,
+                "spin_deg": self.spin_deg, "spin_stated": self.spin_stated, "spin_convention": SPIN_CONVENTION,
+                "spin_on_convention_holes": self.spin_on_convention_holes, "spin_free_holes": self.spin_free_holes,
+                **self.off_cad.to_dict(), **self.cad.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -23,31 +169,31 @@ class MeasureReport:
     Attributes
     ----------
     result : MeasureResult, the holes measured: summary, drift watch, counts
-    sources : dict, role -> display name (log, layout, out, qif)
+    sources : Sources, the files' display names
     tolerance_deg : float, deg; min_radius_mm : float, mm
     layout_names : tuple of str
     has_covariance : bool, the layout carried the calibration's covariance (propagated)
     engine : str, "one process" or the Dask cluster used
     warnings : tuple of str
     fail_on_drift : bool, whether a drift alarm fails the verdict
-    chart : dict, the drift chart's settings (:func:`metrology.measure.chart.chart_settings`, by_panel)
-    curvature : dict, where each hole's curvature came from ({} : the assumed bound)
+    chart : ChartSettings, the drift chart's settings
+    curvature : RadiusBound or KnownSurfaces, where each hole's curvature came from
     effects : tuple of str, the layout's head terms applied to every hole (their covariance in U95)
     panel_map : PanelMap or None, the hole table's holes as judged (:mod:`metrology.report.panel_map`),
         with ``--points`` and ``--report``
     """
 
     result: "MeasureResult"
-    sources: dict
+    sources: Sources
     tolerance_deg: float
     min_radius_mm: float
     layout_names: tuple
     has_covariance: bool
     engine: str
-    warnings: tuple = ()
-    fail_on_drift: bool = False
-    chart: dict = field(default_factory=dict)
-    curvature: dict = field(default_factory=dict)
+    warnings: tuple
+    fail_on_drift: bool
+    chart: ChartSettings
+    curvature: "RadiusBound | KnownSurfaces"
     effects: tuple = ()
     panel_map: object = None
 
@@ -73,32 +219,35 @@ class MeasureReport:
                         gate=self.fail_on_drift),
                   Check("drift watch: alarms whose run did not persist (check the head)", transient, None, "alarms",
                         True, gate=False)]
-        cv = self.curvature or {"assumed": True}
-        if cv.get("assumed"):  # no panel known: the bound is an assumption, named
+        cv = self.curvature
+        if cv.assumed:  # no panel known: the bound is an assumption, named
             checks.append(Check(f"curvature ASSUMED (no --panel/--points): every panel's radius >= "
                                 f"{self.min_radius_mm:g} mm", self.min_radius_mm, None, "mm", True, gate=False))
-        elif cv:
-            checks.append(Check(f"curvature from {cv['source']}", cv.get("holes", 0), None, "holes", True, gate=False))
-            if cv.get("spin_on_convention_holes") or cv.get("spin_free_holes"):
+        elif isinstance(cv, RadiusBound):
+            checks.append(Check(f"curvature from {cv.source}", 0, None, "holes", True, gate=False))
+        else:
+            checks.append(Check(f"curvature from {cv.source}", cv.holes, None, "holes", True, gate=False))
+            if cv.spin_on_convention_holes or cv.spin_free_holes:
                 checks.append(Check(f"head's spin (no pose in the log): holes judged with it in the cell's convention "
-                                    f"(+-{cv['spin_deg']:g} deg{'' if cv['spin_stated'] else ', confirmed by the redundant reading'}; "
-                                    f"log the commanded pose to know it)", cv["spin_on_convention_holes"], None, "holes",
+                                    f"(+-{cv.spin_deg:g} deg{'' if cv.spin_stated else ', confirmed by the redundant reading'}; "
+                                    f"log the commanded pose to know it)", cv.spin_on_convention_holes, None, "holes",
                                     True, gate=False))
                 checks.append(Check("head's spin not known: holes judged with a U95 over every spin",
-                                    cv["spin_free_holes"], None, "holes", True, gate=False))
-            if cv.get("off_cad_holes"):
+                                    cv.spin_free_holes, None, "holes", True, gate=False))
+            o, c = cv.off_cad, cv.cad
+            if o.off_cad_holes:
                 checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "
-                                    f"CAD's (|z| > {cv['off_cad_sigmas']:g}; mean size "
-                                    f"{cv['off_cad_mean_per_mm']:.2g} 1/mm)", cv["off_cad_holes"], None, "holes", True,
+                                    f"CAD's (|z| > {o.off_cad_sigmas:g}; mean size "
+                                    f"{o.off_cad_mean_per_mm:.2g} 1/mm)", o.off_cad_holes, None, "holes", True,
                                     gate=False))
-            if cv.get("cad_checked"):
+            if c.cad_checked:
                 checks.append(Check(f"panel against its CAD (the log's commanded pose): holes off it (|offset| > "
-                                    f"{cv['cad_offset_limit_mm']:g} mm; mean |offset| {cv['cad_offset_mean_abs_mm']:.3f} mm, "
-                                    f"largest {cv['cad_offset_max_mm']:+.3f} mm at {cv['cad_offset_max_hole']}; the "
+                                    f"{c.cad_offset_limit_mm:g} mm; mean |offset| {c.cad_offset_mean_abs_mm:.3f} mm, "
+                                    f"largest {c.cad_offset_max_mm:+.3f} mm at {c.cad_offset_max_hole}; the "
                                     f"measured normal against the CAD's, with the robot's own orientation error: mean "
-                                    f"{cv['normal_vs_cad_mean_deg']:.3f} deg, largest {cv['normal_vs_cad_max_deg']:.3f} "
-                                    f"deg at {cv['normal_vs_cad_max_hole']})",
-                                    cv["cad_off_holes"], None, "holes", True, gate=False))
+                                    f"{c.normal_vs_cad_mean_deg:.3f} deg, largest {c.normal_vs_cad_max_deg:.3f} "
+                                    f"deg at {c.normal_vs_cad_max_hole})",
+                                    c.cad_off_holes, None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:
@@ -108,7 +257,7 @@ class MeasureReport:
         series = [{"cell": cell, "counts": s.counts(grp), **s.figures(grp)} for cell, grp in sorted(s.series.items())]
         return {
             "schema": SCHEMA,
-            "sources": dict(self.sources),
+            "sources": self.sources.to_dict(),
             "sensors": list(self.layout_names),
             "tolerance_deg": self.tolerance_deg,
             "decision_rule": "ISO 14253-1: conforms if angle + U95 <= tolerance, fails if angle - U95 > tolerance",
@@ -116,8 +265,7 @@ class MeasureReport:
             "uncertainty": {"reading_noise": True, "calibration_covariance": self.has_covariance, "coverage": 0.95,
                             "effect_terms": list(self.effects)},
             "min_radius_mm": self.min_radius_mm,
-            "curvature": dict(self.curvature) if self.curvature else {"assumed": True, "source": (
-                f"bound: every panel's radius >= {self.min_radius_mm:g} mm (an assumption: no --panel or --points)")},
+            "curvature": self.curvature.to_dict(),
             "engine": self.engine,
             "holes": self.result.rows,
             "partitions": self.result.partitions,
@@ -127,7 +275,7 @@ class MeasureReport:
             "fleet": s.figures(s.total()),
             "cells": series,
             "groups": groups,
-            "drift": {"chart": dict(self.chart), "cells_charted": sorted(self.result.watch.charts),
+            "drift": {"chart": self.chart.to_dict(), "cells_charted": sorted(self.result.watch.charts),
                       "alarms": [a.to_dict() for a in self.result.alarms]},
             "worst": list(s.worst),
             "warnings": list(self.warnings),

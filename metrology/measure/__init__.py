@@ -2,7 +2,9 @@
 the verdict against the tolerance, the drift watch, and the fleet summary (``metro measure``).
 
 Modules: :mod:`.normals` (the micro-plane and its GUM uncertainty, pure arrays), :mod:`.holes`
-(a batch of a log measured and judged: the rules), :mod:`.batch` (what a measured batch is, the status codes), :mod:`.chart` (the CUSUM drift watch),
+(a batch of a log measured and judged: the rules; :mod:`.placement` each row's local surface in the TCS,
+:mod:`.columns` the per-hole table written), :mod:`.batch` (what a measured batch is, the status codes),
+:mod:`.chart` (the CUSUM drift watch; :mod:`.series` its plotted series),
 :mod:`.surface` (the normal fitted with the panel's local surface known; ``surface_normal``, the
 per-hole call of a cell's controller, applies the layout's head terms first: :mod:`.effects`), :mod:`.panel` (each hole's local surface from the hole table),
 :mod:`.summary` (the mergeable fleet summary), :mod:`.run` (the one driver; one process, in batches),

@@ -13,7 +13,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pyarrow as pa
 
-__all__ = ["Status", "STATUSES", "CODE", "ChartRows", "HoleBatch", "blanked"]
+__all__ = ["Status", "STATUSES", "CODE", "ChartRows", "Labels", "HoleBatch", "blanked"]
 
 
 class Status(StrEnum):
@@ -54,6 +54,21 @@ class ChartRows:
 
 
 @dataclass(frozen=True)
+class Labels:
+    """A text column with few values (the cell, the panel) by its dictionary: made once per batch, read
+    by the summary and the drift watch alike (encoding it costs a hash of every row's text).
+
+    Attributes
+    ----------
+    codes : (N,) int64, each row's value as its index in ``values``
+    values : list of str
+    """
+
+    codes: np.ndarray
+    values: list
+
+
+@dataclass(frozen=True)
 class HoleBatch:
     """A batch measured.
 
@@ -74,6 +89,7 @@ class HoleBatch:
         spin not known: :mod:`metrology.measure.spin`)
     on_convention : (N,) bool or None, with the panel known: judged with the head's spin taken from the cell's
         convention (no pose in the log)
+    cell, panel : Labels, each hole's cell and panel
     """
 
     columns: "pa.Table"
@@ -87,6 +103,8 @@ class HoleBatch:
     unknown_after: np.ndarray | None = None
     spin_free: np.ndarray | None = None
     on_convention: np.ndarray | None = None
+    cell: Labels | None = None
+    panel: Labels | None = None
 
     def __len__(self) -> int:
         return len(self.status)

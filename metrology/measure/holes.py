@@ -45,21 +45,24 @@ split into batches or partitions (the Dask path relies on it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
-from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Status, blanked
+from metrology.io.holelog import CELL, PANEL, text_codes
+from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Labels, Status, blanked
 from metrology.measure.effects import apply_terms
 from metrology.measure.normals import hole_normals
-from metrology.measure.pose import against_cad, read_pose
+from metrology.measure.columns import OUTPUT_COLUMNS, result_table
+from metrology.measure.placement import place
 from metrology.measure.reasons import reason_column, verdict_reasons
 
 if TYPE_CHECKING:
     from metrology.measure.panel import HoleSurfaces
+    from metrology.measure.placement import Placed
     from metrology.measure.surface import PanelFit
 
 __all__ = ["Status", "STATUSES", "CODE", "Settings", "HoleBatch", "ChartRows", "measure_batch", "MIN_SENSORS", "GROSS_SIGMAS", "OUTPUT_COLUMNS",
@@ -83,11 +86,6 @@ MAX_SPOT_TURN_DEG = 45.0
 #: rule 1b: a beam meeting the surface at more than this incidence grazes it: its spot stretched twice or more,
 #: a triangulation sensor's reading there is not the one its calibration made
 MAX_INCIDENCE_DEG = 60.0
-
-
-#: the per-hole columns metro writes, in order (before the columns passed through)
-OUTPUT_COLUMNS = ("hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg", "angle_after_deg",
-                  "U95_after_deg", "fit_residual_um", "fit_residual_after_um", "sensors_used", "status", "reason")
 
 
 @dataclass(frozen=True)
@@ -131,18 +129,12 @@ class _Measured:
 CACHE_ROWS = 16384
 
 
-def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=None, spin=None, higher=None,
-             convention=None, stated=True, effects=None) -> _Measured:
-    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range; with ``shape``
-    (N, 3, 3) 1/mm TCS and ``u_shape`` (N,) 1/mm each hole's local surface is known (rule 2's
-    allowance for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``spin``
-    (N,) rad the head's spin about the tool axis is within +-spin (0 where the commanded pose gives it);
-    ``higher`` None or :class:`metrology.measure.beyond.Beyond`: the CAD surface beyond second order,
-    the head's rotation the shape was put into the TCS with, the turn found before the adjustment;
-    ``convention`` (N,) bool the rows whose shape rests on the cell's convention (no pose), ``stated`` whether
-    that convention was stated (:func:`metrology.measure.spin.panel_normals`);
-    ``effects`` the layout's head terms removed from ``d`` (:class:`~metrology.measure.effects.Applied`): their
-    covariance a source of each hole's budget."""
+def _measure(layout: SensorLayout, d, settings: Settings, placed: "Placed | None" = None, effects=None) -> _Measured:
+    """Measure every hole of ``d (N, n)`` mm on the sensors that read it in range: on the micro-plane, or with
+    ``placed`` (:class:`~metrology.measure.placement.Placed`) each hole's local surface known (rule 2's allowance
+    for the panel's shape is then its stated uncertainty, in ``residual_sd``); ``effects`` the layout's head
+    terms removed from ``d`` (:class:`~metrology.measure.effects.Applied`): their covariance a source of each
+    hole's budget."""
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
@@ -151,7 +143,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     {}, np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
                     np.full((N, 3), np.nan))
-    if shape is not None:
+    if placed is not None:
         from metrology.measure.surface import PanelFit
 
         out.extra = PanelFit.blank(N)
@@ -175,29 +167,8 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
         dd = d[np.ix_(rows, np.flatnonzero(mask))]
-        if shape is not None:
-            from metrology.measure.spin import panel_normals
-
-            rs = _of(rows)
-            j = panel_normals(sub, dd, shape[rs], u_shape[rs], spin[rs], None if higher is None else higher.rows(rs),
-                              convention[rs], stated)
-            h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
-            out.extra.put(rs, j.extra)
-            out.spin_free[rs], out.convention[rs] = j.free, j.convention
-            for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
-                prior = out.reason.get(int(rows[i]))
-                out.reason[int(rows[i])] = (prior + "; " if prior else "") + (
-                    f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
-                    f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
-                    "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
-                    ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
-            past = past_footprint(j.extra.spot_turn, j.extra.incidence)  # rule 1b
-            _store(out, rows, mask, sub, dd, h, settings, micro=False, past=past)
-            for i in np.flatnonzero(past).tolist():  # rare: a loop
-                r = int(rows[i])
-                out.reason[r] = ((out.reason[r] + "; ") if out.reason.get(r) else "") + past_reason(
-                    j.extra.spot_turn[i], j.extra.incidence[i])
-                out.angle[r], out.normal[r], out.U95[r] = np.nan, np.nan, np.nan
+        if placed is not None:
+            _on_surface(out, rows, mask, sub, dd, placed, settings, effects)
         else:  # in slices of CACHE_ROWS rows, each stored as it comes (its temporaries stay in the cache)
             for i in range(0, len(rows), CACHE_ROWS):
                 sl = slice(i, i + CACHE_ROWS)
@@ -205,6 +176,33 @@ def _measure(layout: SensorLayout, d, settings: Settings, shape=None, u_shape=No
                 h = h if effects is None else effects.widen(h, sub, rows[sl], mask)
                 _store(out, rows[sl], mask, sub, dd[sl], h, settings, micro=True)
     return out
+
+
+def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings, effects) -> None:
+    """The holes ``rows`` read by the sensors ``mask`` (sub-layout ``sub``, readings ``dd``) measured with their
+    local surface known (:func:`metrology.measure.spin.panel_normals`), rule 1b and 2 applied, into ``out``."""
+    from metrology.measure.spin import panel_normals
+
+    rs = _of(rows)
+    j = panel_normals(sub, dd, placed.shape[rs], placed.u_shape[rs], placed.spin[rs],
+                      None if placed.higher is None else placed.higher.rows(rs), placed.convention[rs], placed.stated)
+    h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
+    out.extra.put(rs, j.extra)
+    out.spin_free[rs], out.convention[rs] = j.free, j.convention
+    for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
+        prior = out.reason.get(int(rows[i]))
+        out.reason[int(rows[i])] = (prior + "; " if prior else "") + (
+            f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
+            f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
+            "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
+            ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
+    past = past_footprint(j.extra.spot_turn, j.extra.incidence)  # rule 1b
+    _store(out, rows, mask, sub, dd, h, settings, micro=False, past=past)
+    for i in np.flatnonzero(past).tolist():  # rare: a loop
+        r = int(rows[i])
+        out.reason[r] = ((out.reason[r] + "; ") if out.reason.get(r) else "") + past_reason(
+            j.extra.spot_turn[i], j.extra.incidence[i])
+        out.angle[r], out.normal[r], out.U95[r] = np.nan, np.nan, np.nan
 
 
 def _of(r):
@@ -238,7 +236,8 @@ def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bo
     out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
     out.noise_sd[rs] = h.residual_noise_sd
     out.residual_sd[rs], out.twist[rs] = h.residual_sd, h.twist
-    out.moment[rs] = np.concatenate([_moment(sub, dd[i:i + CACHE_ROWS]) for i in range(0, len(dd), CACHE_ROWS)])
+    out.moment[rs] = h.moment if h.moment is not None else np.concatenate(
+        [_moment(sub, dd[i:i + CACHE_ROWS]) for i in range(0, len(dd), CACHE_ROWS)])
     # the most any panel of radius >= R gives; with the panel known, what is not known of it
     bound = 0.5 * h.twist / settings.min_radius_mm if h.misfit_bound is None else h.misfit_bound
     gross = np.abs(h.residual) > bound + GROSS_SIGMAS * h.residual_sd
@@ -298,13 +297,6 @@ def _readings(table, names, suffix=""):
     return np.stack([c.to_numpy(zero_copy_only=False).astype(float, copy=False) for c in cols], axis=1)
 
 
-def _labels(codes, labels):
-    """A pyarrow string array of ``labels[codes]``."""
-    import pyarrow as pa
-
-    return pa.array(list(labels), pa.string()).take(pa.array(codes))
-
-
 def _duplicates(ids):
     """Rows (int array) whose ``hole_id`` repeats an earlier row of the batch, and that row."""
     import pyarrow as pa
@@ -345,59 +337,13 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     names = layout.names
     d = (applied := apply_terms(layout, _readings(table, names), table)).d  # the layout's head terms removed
     N = len(d)
-    shape = u_shape = spin = table_row = higher = convention = None
     surf = settings.surfaces
-    if surf is not None:
-        from metrology.measure.beyond import Beyond
-        from metrology.measure.normals import drill_axis
-
-        # the table's own id: ``point_id`` where the log has it (a hole table drilled more than once
-        # gives each pass its own hole_id, ``ID#k``: metrology/sim/forward/log_write.py), else hole_id
-        key = "point_id" if "point_id" in table.column_names else "hole_id"
-        table_row = surf.rows(table.column(key).cast(pa.string()))
-        have = table_row >= 0
-        shape = np.zeros((N, 3, 3))
-        u_shape = np.zeros(N)
-        spin = np.full(N, float(surf.spin))
-        convention = np.zeros(N, bool)
-        pose = read_pose(table)  # the robot's commanded tcs2panel where the log states it
-        if have.any():
-            posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
-            if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
-                higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, surf.higher.shape[1])), np.full((N, 3, 3), np.nan))
-            sel = (have & posed, have & ~posed)
-            convention = sel[1]
-            whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
-            if sel[0].any():  # the pose gives the spin: no doubt about it left in U95
-                w = whole[0]
-                if isinstance(w, slice):  # every row: the array itself, no copy
-                    shape = surf.shape_pose(table_row, pose[0], drill_axis(layout)[2])
-                else:
-                    shape[w] = surf.shape_pose(table_row[w], pose[0][w], drill_axis(layout)[2])
-                spin[posed] = 0.0
-            if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
-                w = whole[1]
-                shape[w] = surf.shape_tcs(table_row[w], drill_axis(layout)[2])
-            for k, m in enumerate(sel):
-                if higher is not None and m.any():
-                    w = whole[k]
-                    hx = surf.higher_tcs(table_row[w], drill_axis(layout)[2], pose[0][w] if k == 0 else None)
-                    if isinstance(w, slice):  # every row: the arrays themselves, no copy
-                        higher = Beyond(*hx)
-                    else:
-                        higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
-            u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
-            if higher is not None and surf.u_height is not None:  # metrology.measure.remainder
-                higher = replace(higher, u_height=np.where(have, surf.u_height[table_row], 0.0))
-    stated = surf is None or surf.spin_stated
-    before = _measure(applied.normals_layout, d, settings, shape, u_shape, spin, higher, convention, stated, effects=applied)
-    has_after = all(f"d_{s}_after" in table.column_names for s in names)
-    if has_after:
+    placed = None if surf is None else place(surf, table, layout)
+    before = _measure(applied.normals_layout, d, settings, placed, effects=applied)
+    if all(f"d_{s}_after" in table.column_names for s in names):
         da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
-        # the head after the adjustment keeps the spin found before it (surface.PanelTerms.turn)
-        higher_after = None if higher is None else Beyond(higher.axes, higher.higher, None, before.extra.turn, higher.u_height)
-        after = _measure(applied_after.normals_layout, da, settings, shape, u_shape, spin, higher_after, convention, stated,
-                         effects=applied_after)
+        after = _measure(applied_after.normals_layout, da, settings,
+                         None if placed is None else placed.after(before.extra.turn), effects=applied_after)
         judge_after = np.isfinite(da).any(1)
     else:
         after, judge_after = None, np.zeros(N, bool)
@@ -418,83 +364,67 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                 f"gives as the head tilts: one reading is gross, the drilled angle is not known")
         judged[poses] = np.nan
         judged_u[poses] = np.nan
-    tol = settings.tolerance
-    code = np.full(N, CODE[Status.UNDECIDED], np.int8)
-    code[judged + judged_u <= tol] = CODE[Status.CONFORMS]
-    code[judged - judged_u > tol] = CODE[Status.FAILS]
-    measured = np.isfinite(judged) & (np.isfinite(before.angle) | judge_after)
-    code[~measured] = CODE[Status.NOT_MEASURED]
+    code = _verdict(judged, judged_u, settings.tolerance, np.isfinite(before.angle) | judge_after)
     ids = table.column("hole_id").cast(pa.string())
-    if surf is not None:  # holes the table does not have, or whose footprint runs off the panel
-        unmodelled = table_row < 0
-        for i in np.flatnonzero(table_row < 0):
-            code[i] = CODE[Status.NOT_MEASURED]
-            reason[int(i)] = (f"{key} {table.column(key)[int(i)].as_py()!r} is not in the hole table: its local surface is "
-                         f"unknown")
-        known = np.flatnonzero(table_row >= 0)
-        for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
-            code[i] = CODE[Status.NOT_MEASURED]
-            reason[int(i)] = surf.problem[table_row[i]]
-            unmodelled[i] = True  # its readings are not the head's to disagree (rule 2): its surface is not known
+    unmodelled = np.zeros(N, bool)
+    if placed is not None:  # holes the table does not have, or whose footprint runs off the panel
+        unmodelled = _not_in_table(table, placed, surf, code, reason)
     dup, orig = _duplicates(ids)
     if dup.size:
         code[dup] = CODE[Status.NOT_MEASURED]
         for r, o in zip(dup, orig):
             reason[int(r)] = f"duplicate hole_id (row {o + 1} of this batch has it too)"
-    patterns = before.used @ (1 << np.arange(layout.n))
-    pattern_names = [" ".join(nm for j, nm in enumerate(names) if (p >> j) & 1) if bin(p).count("1") >= MIN_SENSORS
-                     else "" for p in range(1 << layout.n)]
-    def num(x):  # NaN (nothing to say) is written as null: blank in CSV
-        return pa.array(x, pa.float64(), from_pandas=True)
-
     nan = np.full(N, np.nan)
     judged, judged_u, after_angle, after_u = blanked(nm := code == CODE[Status.NOT_MEASURED], judged, judged_u,
                                                      *((after.angle, after.U95) if after is not None else (nan, nan)))
     before_angle, before_u = blanked(nm & ~judge_after, before.angle, before.U95)  # not measured: blank (docs)
-    cols = {
-        "hole_id": ids,
-        "normal_x": num(before.normal[:, 0]), "normal_y": num(before.normal[:, 1]), "normal_z": num(before.normal[:, 2]),
-        "angle_deg": num(np.degrees(before_angle)), "U95_angle_deg": num(np.degrees(before_u)),
-        "angle_after_deg": num(np.degrees(after_angle)), "U95_after_deg": num(np.degrees(after_u)),
-        "fit_residual_um": num(before.residual * 1e3),
-        "fit_residual_after_um": num(after.residual * 1e3 if after is not None else nan),
-        "sensors_used": _labels(patterns, pattern_names),
-        "status": _labels(code, [str(s) for s in STATUSES]),
-        "reason": reason_column(verdict_reasons(code, judge_after, judged, judged_u, tol), reason),
-    }
-    if surf is not None:  # the panel's columns
-        k = surf.k[table_row] if have.all() else np.where((table_row >= 0)[:, None], surf.k[table_row], np.nan)
-        cols["k1_per_mm"], cols["k2_per_mm"] = num(k[:, 0]), num(k[:, 1])
-        cols["correction_deg"] = num(np.degrees(before.extra.correction))
-        cols["panel_misfit_per_mm"] = num(before.extra.panel_misfit)
-        cols["panel_misfit_z"] = num(before.extra.panel_misfit_z)
-        if pose is not None and surf.point is not None:
-            vs_cad, offset = against_cad(layout, d, before.normal, shape, surf, table_row, pose)
-            cols["normal_vs_cad_deg"] = num(np.degrees(vs_cad))
-            cols["cad_offset_mm"] = num(offset)
-    for k in table.column_names:
-        if k not in cols and not k.startswith("d_"):
-            cols[k] = table.column(k)
-    out = pa.table({k: v for k, v in cols.items()})
+    out = result_table(layout, table, ids, code,
+                       reason_column(verdict_reasons(code, judge_after, judged, judged_u, settings.tolerance), reason),
+                       before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
     full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
     chart = ChartRows(idx, before.residual[idx], before.noise_sd[idx], before.signature[idx])
-    disagree = before.disagree | (after.disagree & judge_after if after is not None else False) | poses
-    if surf is not None:
-        disagree &= ~unmodelled
+    disagree = (before.disagree | (after.disagree & judge_after if after is not None else False) | poses) & ~unmodelled
     # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
     # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound
     unknown = np.zeros(N, bool)
     if after is not None:
-        unknown = (code == CODE[Status.NOT_MEASURED]) & judge_after & (poses | ~np.isfinite(before.angle))
+        unknown = nm & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
     spin_free = on_convention = None
-    if surf is not None:  # how each judged hole's spin was taken
+    if placed is not None:  # how each judged hole's spin was taken
         spin_free = np.where(judge_after, after.spin_free, before.spin_free) if after is not None else before.spin_free
         on_convention = (np.where(judge_after, after.convention, before.convention) if after is not None
                          else before.convention)
-        measured_code = code != CODE[Status.NOT_MEASURED]
-        spin_free, on_convention = spin_free & measured_code, on_convention & measured_code
+        spin_free, on_convention = spin_free & ~nm, on_convention & ~nm
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,
-                     spin_free, on_convention)
+                     spin_free, on_convention,
+                     *(Labels(*text_codes(out.column(c))) if c in out.column_names else None for c in (CELL, PANEL)))
+
+
+def _verdict(judged, judged_u, tol, sound) -> np.ndarray:
+    """(N,) int8, rule 4 (ISO 14253-1) on the angle judged and its U95 (rad; NaN: not measured), rule 1-3's
+    holes not measured; ``sound`` (N,) bool, a hole whose readings gave a normal before or after."""
+    code = np.full(len(judged), CODE[Status.UNDECIDED], np.int8)
+    code[judged + judged_u <= tol] = CODE[Status.CONFORMS]
+    code[judged - judged_u > tol] = CODE[Status.FAILS]
+    code[~(np.isfinite(judged) & sound)] = CODE[Status.NOT_MEASURED]
+    return code
+
+
+def _not_in_table(table, placed, surf, code, reason) -> np.ndarray:
+    """Rows whose hole the table does not have, or whose footprint its CAD cannot give: not measured (``code``
+    and ``reason`` set), and returned (N,) bool: their readings are not the head's to disagree (rule 2)."""
+    table_row = placed.table_row
+    unmodelled = table_row < 0
+    for i in np.flatnonzero(unmodelled):
+        code[i] = CODE[Status.NOT_MEASURED]
+        reason[int(i)] = (f"{placed.key} {table.column(placed.key)[int(i)].as_py()!r} is not in the hole table: its "
+                          f"local surface is unknown")
+    known = np.flatnonzero(table_row >= 0)
+    for i in known[surf.problem[table_row[known]] != ""]:  # rare: no Python loop over every hole
+        code[i] = CODE[Status.NOT_MEASURED]
+        reason[int(i)] = surf.problem[table_row[i]]
+        unmodelled[i] = True
+    return unmodelled

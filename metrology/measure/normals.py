@@ -111,6 +111,9 @@ class HoleNormals:
     misfit_bound : (N,) float, mm, or None; 4 sensors with the panel known: the most what is not known of
         the panel (the direction of its curvature where the head's spin is not) moves ``rho`` (None: the
         micro-plane's ``twist / (2 R)``)
+    moment : (N, 3) float, mm^2, or None; 4 sensors, the micro-plane: ``M = sum_i q_i r_i r_i^T`` as
+        (xx, yy, xy), whose nuclear norm is ``twist`` (a panel of curvature ``K`` moves ``rho`` by
+        ``tr(K M) / 2``; rule 3 compares it before and after the adjustment)
     """
 
     normal: np.ndarray
@@ -127,6 +130,7 @@ class HoleNormals:
     residual_noise_sd: np.ndarray | None = None
     budget: Budget | None = None
     misfit_bound: np.ndarray | None = None
+    moment: np.ndarray | None = None
 
 
 def concat_normals(parts) -> "HoleNormals":
@@ -208,12 +212,14 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     if n == 4:
         q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
         red = redundancy(q, zc, mu, sigma, q_cal)
-        twist = nuclear2((q * xc * xc).sum(0), (q * xc * yc).sum(0), (q * yc * yc).sum(0))
+        moment = np.empty((N, 3))
+        moment[:, 0], moment[:, 1], moment[:, 2] = (q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)
+        twist = nuclear2(moment[:, 0], moment[:, 2], moment[:, 1])
     else:
         red = redundancy(None, zc - gx * xc - gy * yc, mu, sigma, q_cal)
-        twist = None
+        twist = moment = None
     return HoleNormals(normal, un.angle, un.u, un.U95, un.share[:, 0], red.residual, red.residual_z, red.signature,
-                       bound, twist, red.sd, red.noise_sd, budget)
+                       bound, twist, red.sd, red.noise_sd, budget, moment=moment)
 
 
 def _one_sign(w, x, y):

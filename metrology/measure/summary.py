@@ -82,17 +82,30 @@ class Group:
             self.hist_judged += other.hist_judged
 
 
+#: the geometric edges' logarithms: a bin found from the angle's logarithm, then checked against the edges
+_LOG_FIRST, _LOG_STEP = np.log(EDGES_DEG[1]), np.log(EDGES_DEG[-1] / EDGES_DEG[1]) / (len(EDGES_DEG) - 2)
+
+
 def _bins(angle_deg):
-    """Histogram bin of each finite angle (the last bin takes everything above 90 deg)."""
-    return np.clip(np.searchsorted(EDGES_DEG, angle_deg, side="right") - 1, 0, len(EDGES_DEG) - 1)
+    """Histogram bin of each finite angle >= 0 (the last bin takes everything above 90 deg): the ``i`` with
+    ``EDGES_DEG[i] <= angle < EDGES_DEG[i + 1]``, as a search of the edges finds it (its logarithm gives the bin
+    to a rounding error; the edges themselves settle it: a search cost 0.15 s per million holes)."""
+    last = len(EDGES_DEG) - 1
+    with np.errstate(divide="ignore"):
+        guess = np.clip(np.floor((np.log(angle_deg) - _LOG_FIRST) / _LOG_STEP) + 1, 0, last).astype(np.int64)
+    guess -= angle_deg < EDGES_DEG[guess]
+    up = np.minimum(guess + 1, last)
+    guess += (guess < last) & (angle_deg >= EDGES_DEG[up])
+    return guess
 
 
-def _groups(t):
+def _groups(batch):
     """Each row's group (N,) int and the groups' keys ``(cell, panel, day)`` (day: UTC date)."""
     import datetime as dt
 
-    ci, cells = text_codes(t.column(CELL))
-    pi, panels = text_codes(t.column(PANEL))
+    t = batch.columns
+    ci, cells = (batch.cell.codes, batch.cell.values) if batch.cell is not None else text_codes(t.column(CELL))
+    pi, panels = (batch.panel.codes, batch.panel.values) if batch.panel is not None else text_codes(t.column(PANEL))
     day = np.floor(t.column(TIME_S).to_numpy() / 86400.0).astype(np.int64)
     d0 = int(day.min()) if len(day) else 0
     nd = int(day.max()) - d0 + 1 if len(day) else 1
@@ -249,7 +262,7 @@ class FleetSummary:
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
         t = batch.columns
-        g, keys = _groups(t)
+        g, keys = _groups(batch)
         G = len(keys)
         code = batch.status.astype(np.int64)
         counts = np.bincount(g * len(_STATUSES) + code, minlength=G * len(_STATUSES)).reshape(G, len(_STATUSES))
@@ -289,7 +302,12 @@ class FleetSummary:
         idx = np.flatnonzero(ok)
         if not idx.size:
             return
-        top = idx[np.argsort(-judged[idx], kind="stable")[:WORST]]
+        cand = idx
+        if idx.size > WORST:  # the WORST-th largest and every tie of it: a stable sort of those alone gives
+            # the full stable sort's first WORST (a million holes sorted for 20 cost 0.2 s)
+            kth = np.partition(judged[idx], idx.size - WORST)[idx.size - WORST]
+            cand = idx[judged[idx] >= kth]
+        top = cand[np.argsort(-judged[cand], kind="stable")[:WORST]]
         t = batch.columns
         for i in top:
             self.worst.append({"hole_id": t.column("hole_id")[int(i)].as_py(), "cell": t.column(CELL)[int(i)].as_py(),

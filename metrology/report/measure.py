@@ -57,25 +57,25 @@ def _q(fig: dict, which: str, key: str) -> str:
 
 def _panel_terms(report) -> str:
     """What of the panel U95 carries: its known surface's terms, or the curvature bound."""
-    cv = report.curvature or {}
-    if "holes" in cv:  # each hole's surface known (--panel/--points)
-        return (f" + each hole's curvature from {cv['source']} (its fit; the drill point's position error "
-                f"{cv['position_error_mm']:g} mm; the form tolerance {cv['form_tolerance_mm']:g} mm; the head's spin "
-                f"+-{cv['spin_deg']:g} deg where the log has no pose)")
+    cv = report.curvature
+    if cv.known:  # each hole's surface known (--panel/--points)
+        return (f" + each hole's curvature from {cv.source} (its fit; the drill point's position error "
+                f"{cv.position_error_mm:g} mm; the form tolerance {cv.form_tolerance_mm:g} mm; the head's spin "
+                f"+-{cv.spin_deg:g} deg where the log has no pose)")
     return f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm"
 
 
 def _limits(report) -> list:
     """What the data could not determine, for the run's panel: known (its CAD) or bounded."""
-    cv = report.curvature or {}
-    if "holes" in cv:
-        panel = [f"each hole's surface is taken from {cv['source']}: a panel off its CAD by more than the form "
-                 f"tolerance stated ({cv['form_tolerance_mm']:g} mm) is not in U95; the redundant reading names the "
+    cv = report.curvature
+    if cv.known:
+        panel = [f"each hole's surface is taken from {cv.source}: a panel off its CAD by more than the form "
+                 f"tolerance stated ({cv.form_tolerance_mm:g} mm) is not in U95; the redundant reading names the "
                  f"holes where it sees the shape off the CAD (the 'panel off its CAD' check)"]
     else:
         panel = ["the micro-plane's normal on a curved panel differs from the normal at the drill point to second "
                  "order in the spots' spread over the radius (docs/measure.md gives its size); no panel was given, "
-                 f"the radius >= {report.min_radius_mm:g} mm is " + ("stated" if cv else "assumed")]
+                 f"the radius >= {report.min_radius_mm:g} mm is " + ("assumed" if cv.assumed else "stated")]
     return panel + ["the drift watch cannot tell which of 4 sensors moved: it gives the shift each one alone would "
                     "need"]
 
@@ -87,15 +87,15 @@ def measure_text(report) -> str:
     total = max(report.result.rows, 1)
     v = report.verdict
     fig = s.figures(s.total())
-    lines = [f"metro measure: {report.result.rows:,} holes of {report.sources['log']} "
-             f"({report.result.partitions} partition(s)), layout {report.sources['layout']}, {report.engine}",
+    lines = [f"metro measure: {report.result.rows:,} holes of {report.sources.log} "
+             f"({report.result.partitions} partition(s)), layout {report.sources.layout}, {report.engine}",
              f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
              *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
                 f"partition(s) kept as an earlier run wrote them, {report.result.written} written (every hole "
                 f"measured again: the summary, the verdict and the drift watch cover the whole log)"]
-               if report.sources.get("out") and report.result.written < report.result.partitions else []),
+               if report.sources.out and report.result.written < report.result.partitions else []),
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
     for k in ("conforms", "fails", "undecided", "not_measured"):
@@ -113,10 +113,10 @@ def measure_text(report) -> str:
                                               " (the layout has no calibration covariance)") + _panel_terms(report)
               + ", 95 %"]
     ch = report.chart
-    lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.get('k')}, "
-                  f"h {ch.get('h')}, in-control ARL {ch.get('arl0_holes', 0):,.0f} holes; a shift of 1 scale is "
-                  f"flagged after {ch.get('arl_at_detectable_holes')} holes on average; "
-                  f"{ch.get('baseline_holes')} holes of baseline per " + ("panel" if ch.get("by_panel") else "cell") + ")"]
+    lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.k}, "
+                  f"h {ch.h}, in-control ARL {ch.arl0_holes:,.0f} holes; a shift of 1 scale is "
+                  f"flagged after {ch.arl_at_detectable_holes} holes on average; "
+                  f"{ch.baseline_holes} holes of baseline per " + ("panel" if ch.by_panel else "cell") + ")"]
     if not report.result.watch.charts:
         lines.append("  no cell charted (the drift watch needs holes read by all 4 sensors of a 4-sensor head)")
     alarms = report.result.alarms

@@ -29,7 +29,8 @@ def test_merged_halves_equal_one_pass():
 
         idx = np.arange(len(b))[part]
         sub = replace(b, columns=b.columns.take(pa.array(idx)), status=b.status[idx], judged=b.judged[idx],
-                      judged_u95=b.judged_u95[idx], angle_before=b.angle_before[idx], angle_after=b.angle_after[idx])
+                      judged_u95=b.judged_u95[idx], angle_before=b.angle_before[idx], angle_after=b.angle_after[idx],
+                      cell=None, panel=None)  # the labels read again from the rows taken
         other.add(sub)
         halves.merge(other)
     assert whole.counts() == halves.counts()
@@ -50,3 +51,30 @@ def test_quantiles_and_moments_against_numpy():
     j = np.degrees(b.judged)
     assert f["mean_deg"] == pytest.approx(j.mean(), rel=1e-9) and f["sd_deg"] == pytest.approx(j.std(ddof=1), rel=1e-9)
     assert quantile_deg(np.zeros(10, int), 0.5) != quantile_deg(np.zeros(10, int), 0.5)  # NaN when empty
+
+
+def test_histogram_bins_are_the_edges_search():
+    from metrology.measure.summary import EDGES_DEG, _bins
+
+    rng = np.random.default_rng(0)
+    a = np.concatenate([EDGES_DEG, np.nextafter(EDGES_DEG, -1)[1:], np.nextafter(EDGES_DEG, np.inf),
+                        rng.uniform(0, 100, 10 ** 5), 10 ** rng.uniform(-6, 2.5, 10 ** 5), [0.0, 90.0, 1e9]])
+    want = np.clip(np.searchsorted(EDGES_DEG, a, side="right") - 1, 0, len(EDGES_DEG) - 1)
+    np.testing.assert_array_equal(_bins(a), want)
+
+
+def test_worst_holes_are_the_full_sort_s_first():
+    """Ties at the cut: the earliest rows among equal angles, as a stable sort of every hole keeps them."""
+    from dataclasses import replace
+
+    from metrology.measure.summary import WORST
+
+    b = _batch(3000, 3)
+    rng = np.random.default_rng(1)
+    judged = np.radians(np.round(rng.uniform(0, 1, len(b)), 2))  # many ties at the cut
+    b = replace(b, judged=judged, status=np.zeros(len(b), np.int8))
+    s = FleetSummary(0.5)
+    s.add(b)
+    deg = np.degrees(judged)
+    want = np.argsort(-deg, kind="stable")[:WORST]
+    assert [w["hole_id"] for w in s.worst] == [b.columns.column("hole_id")[int(i)].as_py() for i in want]
