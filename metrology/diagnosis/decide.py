@@ -262,10 +262,11 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
         notify(progress, 3, 5, "datum check")
         datum, v = check_datum(ds, b, v, chosen, scored)
     empirical = None
-    if rules.search_tried(v.cause, v.confidence):  # the catalogue does not explain: the open search
-        empirical = open_search(ds, b, v, gross, folds)
+    tied = any(r.decided == Decision.EMPIRICAL_TIE for r in v.reasons)
+    if rules.search_tried(v.cause, v.confidence) or tied:  # the catalogue does not explain: the open search
+        empirical = open_search(ds, b, v, gross, folds, base=tied)  # a tie: the rival beside the cause
     notify(progress, 4, 5, "side-by-side simulation")
-    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng, empirical)
+    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng, None if tied else empirical)
     summary = verdict_summary(v, b.tests) + ("" if empirical is None else empirical_text(empirical))
     notify(progress, 5, 5, "done")
 
@@ -283,13 +284,15 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
                      detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
 
 
-def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds):
+def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds, base=False):
     """The open search (:func:`metrology.diagnosis.search.search`) on the residuals of the model the
-    verdict judged (the causes named; the base model where none is), the readings named gross left out."""
+    verdict judged (the causes named; the base model where none is, or where ``base``: a cause tied
+    with a term by rule 22, the search then says what predicts as well as the cause), the readings
+    named gross left out."""
     from metrology.core.model import jacobian_raw
     from metrology.diagnosis.search import search
 
-    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None else b.fit
+    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None and not base else b.fit
     zero, u = geometry(ds.layout, fit.theta)
     J = jacobian_raw(zero, u, ds.obs.normal, ds.obs.offset)
     return search(ds, b.cov, b.d0, np.where(gross, np.nan, fit.residual), b.sigma, J, folds)

@@ -11,8 +11,8 @@ search's level (rule 19, its multiplicity as the search's) are fitted *in place 
 with the base parameters, on the same k-fold by pose, and the per-pose held-out chi-squares are
 compared paired. Where a term predicts significantly better (rule 22), the cause is not named:
 the verdict becomes ``unexplained`` and the open search runs on the base residuals. A term that
-predicts better, but not significantly, leaves the cause named, its confidence ``ambiguous`` and
-the term said beside it (as crosstalk's tie, rule 12: the catalogue is the prior, its families
+predicts better, but not significantly, leaves the cause named, its confidence ``ambiguous`` (from
+``high`` or ``moderate``), the term said beside it and the search run on the base residuals (as crosstalk's tie, rule 12: the catalogue is the prior, its families
 the common causes, but the data do not tell them apart).
 
 Both are compared on the readings the selection judges a characteristic on (a held-out reading
@@ -117,9 +117,10 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
             why.append(Reason(22, "empirical_as_good", Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
                               "p_better", tie.p, rules.ALPHA_HELDOUT / len(tries), tie.gain))
     if not found:
-        if ties and v.confidence in (Confidence.HIGH, Confidence.MODERATE):
-            return replace(v, confidence=Confidence.AMBIGUOUS, reasons=v.reasons + tuple(why)), ()
-        return v, ()
+        if not ties:
+            return v, ()
+        lowered = Confidence.AMBIGUOUS if v.confidence in (Confidence.HIGH, Confidence.MODERATE) else v.confidence
+        return replace(v, confidence=lowered, reasons=v.reasons + tuple(why)), ()
     if len(v.causes) == 1:
         v = replace(v, cause=Outcome.UNEXPLAINED, confidence=Confidence.LOW, sensors=[], causes=(), named=None,
                     reasons=v.reasons + tuple(why))
