@@ -305,7 +305,7 @@ def empirical_text(e) -> str:
                 f"({e.n_tried} terms tried)")
     return ("; outside the catalogue, an empirical model: " + "; ".join(
         f"{t.equation} (held-out chi-square gain {t.gain_chi2:.3g}, p = {t.p_heldout:.2g})" for t in e.terms)
-        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} each)" + (
+        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} for a variable's one term)" + (
             "" if e.heldout_rms_mm is None else
             f"; held-out RMS on its sensors {1e3 * e.heldout_rms_mm[0]:.3g} um without the terms, "
             f"{1e3 * e.heldout_rms_mm[1]:.3g} um with them"))
