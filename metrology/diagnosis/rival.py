@@ -11,7 +11,7 @@ search's level (rule 19, its multiplicity as the search's) are fitted *in place 
 with the base parameters, on the same k-fold by pose, and the per-pose held-out chi-squares are
 compared paired. Where a term predicts significantly better (rule 22), the cause is not named:
 the verdict becomes ``unexplained`` and the open search runs on the base residuals. A term that
-predicts better, but not significantly, leaves the cause named, its confidence ``ambiguous`` (from
+with fewer coefficients than the cause predicts better, but not significantly, leaves the cause named, its confidence ``ambiguous`` (from
 ``high`` or ``moderate``), the term said beside it and the search run on the base residuals (as crosstalk's tie, rule 12: the catalogue is the prior, its families
 the common causes, but the data do not tell them apart).
 
@@ -106,7 +106,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
             p, g = paired_gain_p(d), float(np.sum(d))
             if rules.empirical_better(p, len(tries)) and (best is None or p < best.p):
                 best = RivalTerm(s.label, names[i], t.key, p, g)
-            elif tie is None and rules.empirical_as_good(g, paired_gain_p(-d)):
+            elif tie is None and rules.empirical_as_good(g, paired_gain_p(-d), t.columns.shape[1], cause.columns.shape[1]):
                 tie = RivalTerm(s.label, names[i], t.key, p, g)
         if best is not None:
             found.append(best)

@@ -315,12 +315,14 @@ def empirical_better(p: float, n_compared: int) -> bool:
     return p < ALPHA_HELDOUT / max(int(n_compared), 1)
 
 
-def empirical_as_good(gain: float, p_worse: float) -> bool:
-    """22. Not significantly better, but the term's held-out gain over the cause is positive and it
-    is not significantly worse (at ``ALPHA_CONFOUND``): the cause stays named, ``ambiguous``, the
-    term said beside it (as rule 12's crosstalk tie). Reason: ``high``/``moderate`` claims the
-    catalogued family explains the residual, and a term outside it predicts them no worse."""
-    return gain > 0 and p_worse >= ALPHA_CONFOUND
+def empirical_as_good(gain: float, p_worse: float, k_term: int, k_cause: int) -> bool:
+    """22. Not significantly better, but a term of fewer coefficients (``k_term < k_cause``) whose
+    held-out gain over the cause is positive and which is not significantly worse (at
+    ``ALPHA_CONFOUND``): the cause stays named, ``ambiguous``, the term said beside it (as rule 12's
+    crosstalk tie). Reason: a simpler term outside the catalogue predicts the residual no worse, so
+    the richer curve's flexibility, not its family, may be what fits; one of as many coefficients
+    (a product of the cause's own variable with a near-constant) ties by chance half the time."""
+    return gain > 0 and p_worse >= ALPHA_CONFOUND and k_term < k_cause
 
 
 def room_for_another_term(n_found: int) -> bool:

@@ -141,8 +141,8 @@ def test_the_tails_and_the_catalogues_rival_rules():
     assert rules.search_tails_in_sample(0.001, 4, 0.04) and not rules.search_tails_in_sample(0.001, 4, 0.06)
     assert not rules.search_tails_in_sample(0.003, 4, 0.001)  # scatter within the noise: no tail
     assert rules.empirical_better(0.009, 5) and not rules.empirical_better(0.011, 5)
-    assert rules.empirical_as_good(3.0, 0.5) and not rules.empirical_as_good(-3.0, 0.5)
-    assert not rules.empirical_as_good(3.0, 0.01)
+    assert rules.empirical_as_good(3.0, 0.5, 1, 3) and not rules.empirical_as_good(-3.0, 0.5, 1, 3)
+    assert not rules.empirical_as_good(3.0, 0.01, 1, 3) and not rules.empirical_as_good(3.0, 0.5, 1, 1)
 
 
 def test_plate_waves_cover_the_spots_span_to_their_spacing():
