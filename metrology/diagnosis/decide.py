@@ -31,6 +31,7 @@ from metrology.diagnosis.heldout import HeldOut, Problem, kfold
 from metrology.diagnosis.judge import Judgement, judge
 from metrology.diagnosis.results import (Confidence, Decision, Diagnosis, Discrepancy, HeldOutFigures, Outcome, PlotData,
                                          Reason, Rival, StepFigures)
+from metrology.diagnosis.rival import empirical_rivals
 from metrology.diagnosis.select import flags_of, forward_select
 from metrology.diagnosis.stats import NoiseTests, Trend, battery_on, battery_rng, noise_tests, structure
 from metrology.diagnosis.thresholds import THRESHOLDS
@@ -89,9 +90,13 @@ def base_analysis(ds: Dataset, folds) -> BaseAnalysis:
     return BaseAnalysis(sigma, cov, calibrated, theta0, base, d0, tests, struct, ho_base, datum)
 
 
-def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng) -> tuple:
+def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps, rng, empirical=None) -> tuple:
     """The simulation of this data set under the base (and the extended) model beside the
-    measurement, and the held-out gains. Returns (Discrepancy, HeldOutFigures)."""
+    measurement, and the held-out gains. The extended model is the causes named (``best``) and the
+    open search's empirical terms where it took any (``empirical``, a
+    :class:`~metrology.diagnosis.search.Empirical`: its fitted terms added to the simulation, its
+    held-out residuals on their sensors; the normal deviation stays the causes'). Returns
+    (Discrepancy, HeldOutFigures)."""
     ds, b, folds = problem.ds, problem.b, problem.folds
     nominal, sigma, ho_base = ds.layout, b.sigma, b.heldout
     base_model = ExtendedModel(b.calibrated, ())
@@ -100,23 +105,35 @@ def side_by_side(problem: Problem, best: CandidateResult | None, flags, sim_reps
     base_normal = float(np.nanmean(ho_base.normal_dev))
     discrepancy = Discrepancy(list(nominal.names), sigma.tolist(), meas_rms.tolist(), sim_rms_b.tolist(), base_normal,
                               float(sim_nd_b), float(sim_nd_b_sd), sim_reps)
-    if best is None:
+    terms = empirical is not None and empirical.fitted is not None
+    if best is None and not terms:
         return discrepancy, HeldOutFigures(folds, ho_base.rms(), base_normal)
-    fm = best.fit.model(nominal)
-    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(problem, fm, rng, sim_reps)
-    discrepancy = replace(discrepancy, extended_model=best.label, simulated_extended_residual_rms_mm=sim_rms_e.tolist(),
+    fm = best.fit.model(nominal) if best is not None else base_model
+    label = best.label if best is not None else "base"
+    ho_e = best.heldout if best is not None else ho_base
+    S = list(best.fit.sensors) if best is not None else []
+    if terms:
+        label += " + empirical(" + ", ".join(dict.fromkeys(f"{t.sensor}: {t.key}" for t in empirical.terms
+                                                           if t.key != "tails")) + ")"
+        with_terms = np.flatnonzero(np.any(np.isfinite(empirical.heldout[1]), axis=0))
+        res = ho_e.residual.copy()
+        res[:, with_terms] = empirical.heldout[1][:, with_terms]
+        ho_e = HeldOut(res, ho_e.normal_dev)
+        S = sorted(set(S) | set(with_terms.tolist()))
+    sim_rms_e, sim_nd_e, sim_nd_e_sd = simulated_figures(problem, fm, rng, sim_reps,
+                                                         empirical.fitted if terms else None)
+    discrepancy = replace(discrepancy, extended_model=label, simulated_extended_residual_rms_mm=sim_rms_e.tolist(),
                           simulated_extended_heldout_normal_rad=float(sim_nd_e),
                           simulated_extended_heldout_normal_sd_rad=float(sim_nd_e_sd))
-    ho_e = best.heldout
     excl = flags  # the readings flagged gross by a named outliers cause (None if none is named)
-    S = list(best.fit.sensors)
+    p_ho = best.p_heldout if best is not None else min(t.p_heldout for t in empirical.terms)
     heldout = HeldOutFigures(
-        folds, ho_base.rms(None, excl), base_normal, model=best.label, extended_rms_mm=ho_e.rms(None, excl),
+        folds, ho_base.rms(None, excl), base_normal, model=label, extended_rms_mm=ho_e.rms(None, excl),
         rms_ratio=ho_base.rms(None, excl) / ho_e.rms(None, excl),
         base_rms_concerned_mm=ho_base.rms(S, excl), extended_rms_concerned_mm=ho_e.rms(S, excl),
         rms_ratio_concerned=ho_base.rms(S, excl) / ho_e.rms(S, excl),
         extended_normal_rad=float(np.nanmean(ho_e.normal_dev)),
-        normal_ratio=float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)), p_heldout=best.p_heldout)
+        normal_ratio=float(np.nanmean(ho_base.normal_dev) / np.nanmean(ho_e.normal_dev)), p_heldout=p_ho)
     return discrepancy, heldout
 
 
@@ -234,27 +251,30 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
     fitted = [s for s in chosen if not (rand and s.component.per_pose)]  # joint model, last step's held-out
     joint = replace(fitted[-1], fit=v.best.fit, label="+".join(s.label for s in fitted)) if fitted else (
         replace(v.best, heldout=b.heldout) if rand else None)
-    named_flags = flags_of(chosen)
-    notify(progress, 3, 5, "side-by-side simulation")
-    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng)
+    gross = np.zeros(ds.obs.d.shape, bool) if (named_flags := flags_of(chosen)) is None else named_flags
+    v, beaten = empirical_rivals(ds, b, v, chosen, gross, folds)  # rule 22: the catalogue against the search
+    if beaten and v.outcome != Outcome.NAMED:  # the sole cause is not named: the base model is judged
+        chosen, joint, named_flags = [], None, None
+        gross = np.zeros(ds.obs.d.shape, bool)
     scored = steps[0].scored
     datum = b.datum
     if datum is not None:
-        notify(progress, 4, 5, "datum check")
+        notify(progress, 3, 5, "datum check")
         datum, v = check_datum(ds, b, v, chosen, scored)
-    summary = verdict_summary(v, b.tests)
+    empirical = None
+    tied = any(r.decided == Decision.EMPIRICAL_TIE for r in v.reasons)
+    if rules.search_tried(v.cause, v.confidence) or tied:  # the catalogue does not explain: the open search
+        empirical = open_search(ds, b, v, gross, folds, base=tied)  # a tie: the rival beside the cause
+    notify(progress, 4, 5, "side-by-side simulation")
+    discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng, None if tied else empirical)
+    summary = verdict_summary(v, b.tests) + ("" if empirical is None else empirical_text(empirical))
     notify(progress, 5, 5, "done")
-    gross = np.zeros(ds.obs.d.shape, bool) if named_flags is None else named_flags  # left out of the held-out RMS
 
     def held(ho):
         return None if ho is None else np.where(gross, np.nan, ho.residual)
 
     plot = PlotData(b.fit, b.cov, b.d0, v.best, ds.layout.names, b.sigma, flags if named_flags is None else named_flags,
                     b.structure, held(b.heldout), held(None if joint is None else joint.heldout))
-    empirical = None
-    if rules.search_tried(v.cause, v.confidence):  # the catalogue does not explain: the open search
-        empirical = open_search(ds, b, v, gross, folds)
-        summary += empirical_text(empirical)
     return Diagnosis(empirical=empirical, reasons=v.reasons + (() if empirical is None else empirical.reasons),
                      cause=v.cause, sensors=v.sensors, confidence=v.confidence, summary=summary, named=v.named,
                      candidates=tuple(scored), tests_base=b.tests, tests_extended=v.tests_extended,
@@ -264,13 +284,15 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
                      detectable=detectable_sizes(steps[0].scored, b, np.isfinite(ds.obs.d).sum(axis=0), ds))
 
 
-def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds):
+def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds, base=False):
     """The open search (:func:`metrology.diagnosis.search.search`) on the residuals of the model the
-    verdict judged (the causes named; the base model where none is), the readings named gross left out."""
+    verdict judged (the causes named; the base model where none is, or where ``base``: a cause tied
+    with a term by rule 22, the search then says what predicts as well as the cause), the readings
+    named gross left out."""
     from metrology.core.model import jacobian_raw
     from metrology.diagnosis.search import search
 
-    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None else b.fit
+    fit = v.best.fit if v.outcome == Outcome.NAMED and v.best is not None and not base else b.fit
     zero, u = geometry(ds.layout, fit.theta)
     J = jacobian_raw(zero, u, ds.obs.normal, ds.obs.offset)
     return search(ds, b.cov, b.d0, np.where(gross, np.nan, fit.residual), b.sigma, J, folds)
@@ -283,7 +305,7 @@ def empirical_text(e) -> str:
                 f"({e.n_tried} terms tried)")
     return ("; outside the catalogue, an empirical model: " + "; ".join(
         f"{t.equation} (held-out chi-square gain {t.gain_chi2:.3g}, p = {t.p_heldout:.2g})" for t in e.terms)
-        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} each)" + (
+        + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} for a variable's one term)" + (
             "" if e.heldout_rms_mm is None else
             f"; held-out RMS on its sensors {1e3 * e.heldout_rms_mm[0]:.3g} um without the terms, "
             f"{1e3 * e.heldout_rms_mm[1]:.3g} um with them"))
@@ -337,6 +359,11 @@ def verdict_summary(v, tb) -> str:
     if v.best is None:
         return (f"{inconsistent} and no catalogued effect gives a significant held-out gain: structure outside the "
                 "catalogue" + lead + tail)
+    rival = [r for r in why if r.decided == Decision.EMPIRICAL_BETTER]
+    rival_text = "; ".join(f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) predicts held-out "
+                           f"poses better than {r.concerns[0]} (p = {r.value:.2g})" for r in rival)
+    if v.cause == Outcome.UNEXPLAINED and rival:
+        return f"{inconsistent}; {rival_text}: not named" + tail
     better = next((r for r in why if r.decided == Decision.CROSSTALK_BETTER), None)
     if v.cause == Outcome.UNEXPLAINED and better is not None:
         return (f"{v.best.label} gives a significant held-out gain, but {better.outcome} (crosstalk: predicts held-out "
@@ -359,6 +386,13 @@ def verdict_summary(v, tb) -> str:
         where = where or [max(te.sensors.items(), key=lambda kv: kv[1].chi2 / kv[1].dof)[0]]
         text += (f"; structure remains on {', '.join(where)} (battery p = {te.p_bonferroni:.2g}): another effect, "
                  "or a false alarm of the tests")
+    if rival:  # rule 22 on one of several causes
+        return text + f"; confidence ambiguous: {rival_text}" + tail
+    tied = [r for r in why if r.decided == Decision.EMPIRICAL_TIE]
+    if tied:
+        return text + "; confidence ambiguous: " + "; ".join(
+            f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) predicts held-out poses as "
+            f"well as {r.concerns[0]} (p = {r.value:.2g} that it predicts better)" for r in tied) + tail
     confidence = _last(why, Decision.CONFIDENCE).outcome  # rule 16's (before the datum's, rule 17)
     named = {c.label for c in v.causes}
     ties = [r for r in why if r.decided == Decision.CROSSTALK_TIE and r.concerns[0] in named]

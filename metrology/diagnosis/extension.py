@@ -100,13 +100,17 @@ def describe_named(f: Fit, problem: Problem, rng, which: int = 0, theta_ref=None
     return d
 
 
-def simulated_figures(problem: Problem, model: ExtendedModel, rng, reps):
-    """Simulation of ``problem``'s data set under ``model`` plus the stated noise, analysed with
-    the base model from its calibration: in-sample residual RMS per sensor (n,) mm and held-out
-    normal deviation mean (rad; ``problem.folds``-fold), averaged over ``reps`` draws."""
+def simulated_figures(problem: Problem, model: ExtendedModel, rng, reps, extra=None):
+    """Simulation of ``problem``'s data set under ``model`` (plus ``extra (p, n)`` mm where given: the
+    open search's empirical terms, :attr:`~metrology.diagnosis.search.Empirical.fitted`) plus the
+    stated noise, analysed with the base model from its calibration: in-sample residual RMS per
+    sensor (n,) mm and held-out normal deviation mean (rad; ``problem.folds``-fold), averaged over
+    ``reps`` draws."""
     nominal, obs, cov, sigma = problem.ds.layout, problem.ds.obs, problem.b.cov, problem.b.sigma
     k, theta0 = problem.folds, problem.b.theta0
     d_model = model.predict(obs.normal, obs.offset, cov)
+    if extra is not None:
+        d_model = d_model + np.where(np.isfinite(extra), extra, 0.0)
     rms, ndev = [], []
     for _ in range(reps):
         d = d_model + rng.normal(0.0, 1.0, d_model.shape) * sigma[None, :]

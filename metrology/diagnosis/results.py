@@ -67,6 +67,8 @@ class Decision(StrEnum):
     DATUM_PLANE_OFF = "datum plane off"  # 18: the plane the readings place is off its scan's beyond its covariance
     EMPIRICAL = "empirical term"  # 20-21: a term of the open search predicts held-out poses better: taken
     EMPIRICAL_NOT_HELD = "not held out"  # 20-21: passes in sample, does not predict held-out poses better
+    EMPIRICAL_BETTER = "empirical better"  # 22: a term of the vocabulary predicts a named cause's residual better
+    EMPIRICAL_TIE = "empirical tie"  # 22: a term predicts it better, not significantly: named, ambiguous
 
 
 @dataclass(frozen=True)

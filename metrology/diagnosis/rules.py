@@ -12,7 +12,7 @@ numerical tolerances of the solvers are not decision rules and stay with them.
 Order: gross readings (1), a candidate's significance (2), a step's choice (3-6), the selection's
 stop and scope (7-9), the verdict: each cause needed (10), judged on its sensors (11), not
 crosstalk (12), the random pose error (13), confidence (14-16), the datum cloud (17), the datum
-plane (18), the open search beyond the catalogue (19-21).
+plane (18), the open search beyond the catalogue (19-21), the catalogue against it (22).
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
            "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "MAX_EMPIRICAL", "search_tried",
-           "search_in_sample", "search_held_out", "room_for_another_term"]
+           "search_in_sample", "search_tails_in_sample", "search_held_out", "room_for_another_term",
+           "empirical_better", "empirical_as_good"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -280,15 +281,48 @@ def search_tried(cause: str, confidence) -> bool:
     return cause == Outcome.UNEXPLAINED or Confidence(confidence) == Confidence.PARTIAL
 
 
-def search_in_sample(p: float, n_tried: int) -> bool:
-    """19. A term passes in sample at ``ALPHA_CANDIDATES`` split over every term tried on every sensor
-    (Bonferroni over the search: the catalogue's level, its multiplicity accounted for)."""
-    return p < ALPHA_CANDIDATES / max(int(n_tried), 1)
+def search_in_sample(p: float, m: int) -> bool:
+    """19. A term passes in sample at ``ALPHA_CANDIDATES / m``, ``m`` its share of the search's
+    multiplicity (:func:`metrology.diagnosis.search.multiplicity`: split over the sensors, the
+    variables and each variable's terms; a weighted Bonferroni, so the search's family-wise level is
+    the catalogue's)."""
+    return p < ALPHA_CANDIDATES / max(int(m), 1)
+
+
+def search_tails_in_sample(p_scatter: float, n_sensors: int, p_shape: float) -> bool:
+    """21. The residuals' tails: their scatter beyond the stated noise (chi-square) at
+    ``ALPHA_CANDIDATES`` split over the sensors, and their shape heavier than a normal's (the
+    kurtosis test, one-sided) at ``ALPHA_HELDOUT``. Reason: the distribution is one hypothesis a
+    sensor, not a term of the vocabulary (split over the ~3000 terms, a tail that lifts the
+    chi-square far beyond the battery's level is not seen in 30-150 readings); the shape alone is
+    weak in so few readings, the stated noise is the core's scale; noise merely understated is
+    normal (its kurtosis 3). The held-out test (rule 20's level) guards the nulls' budget
+    (``benchmarks/study_outside.py --nulls``)."""
+    return p_scatter < ALPHA_CANDIDATES / max(int(n_sensors), 1) and p_shape < ALPHA_HELDOUT
 
 
 def search_held_out(p: float, gain: float) -> bool:
     """20, 21. The term predicts held-out poses better, at the catalogue's ``ALPHA_HELDOUT``."""
     return p < ALPHA_HELDOUT and gain > 0
+
+
+def empirical_better(p: float, n_compared: int) -> bool:
+    """22. A term of the vocabulary, fitted in place of a cause named on one sensor, predicts its
+    held-out poses significantly better (one-sided paired, at ``ALPHA_HELDOUT`` split over the terms
+    compared; :mod:`metrology.diagnosis.rival`): the cause is not named (alone: ``unexplained``, and
+    the search runs). Reason: a catalogued curve bends to an effect it does not describe; only as
+    well, the cause stays (the catalogue's families are the common causes)."""
+    return p < ALPHA_HELDOUT / max(int(n_compared), 1)
+
+
+def empirical_as_good(gain: float, p_worse: float, k_term: int, k_cause: int) -> bool:
+    """22. Not significantly better, but a term of fewer coefficients (``k_term < k_cause``) whose
+    held-out gain over the cause is positive and which is not significantly worse (at
+    ``ALPHA_CONFOUND``): the cause stays named, ``ambiguous``, the term said beside it (as rule 12's
+    crosstalk tie). Reason: a simpler term outside the catalogue predicts the residual no worse, so
+    the richer curve's flexibility, not its family, may be what fits; one of as many coefficients
+    (a product of the cause's own variable with a near-constant) ties by chance half the time."""
+    return gain > 0 and p_worse >= ALPHA_CONFOUND and k_term < k_cause
 
 
 def room_for_another_term(n_found: int) -> bool:

@@ -9,8 +9,8 @@ model the verdict judged, as the catalogue's candidates are (the rules are in
 
 - in sample, the F-test of the term's columns fitted with the sensor's base parameters (its
   Jacobian at the calibration, so the term is fitted jointly with them, to first order), at
-  ``ALPHA_CANDIDATES`` split over every term tried on every sensor (Bonferroni: the search's
-  multiplicity);
+  ``ALPHA_CANDIDATES`` split over the sensors, the variables and each variable's terms (a
+  weighted Bonferroni, :func:`multiplicity`: the search's multiplicity);
 - held out, the same k-fold by pose (interleaved folds): on each fold the base parameters and the
   term are fitted to the other poses and predict the held-out readings; the per-pose chi-square
   gain is tested one-sided and paired at ``ALPHA_HELDOUT``.
@@ -18,8 +18,8 @@ model the verdict judged, as the catalogue's candidates are (the rules are in
 Terms are added by forward selection (the passing term of the smallest in-sample p whose held-out
 gain is significant; at most ``MAX_EMPIRICAL`` terms), refitted jointly with each sensor's base
 parameters and reported as equations in units. The residuals' distribution is tested last, per
-sensor: a contaminated normal against the normal (in sample a likelihood ratio, held out the
-per-pose log-likelihood gain). The verdict keeps its cause (the family is unknown) and gains
+sensor: heavy tails (in sample the kurtosis test at the tails' own level, one test a sensor; held out
+a contaminated normal against the normal, by the per-pose log-likelihood gain). The verdict keeps its cause (the family is unknown) and gains
 :class:`Empirical`.
 """
 
@@ -35,7 +35,7 @@ from metrology.diagnosis.results import Decision, Param, Reason
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis.vocabulary import Term, terms_for
 
-__all__ = ["EmpiricalTerm", "Empirical", "search", "TRIES_PER_STEP", "MIN_READINGS"]
+__all__ = ["EmpiricalTerm", "Empirical", "search", "multiplicity", "TRIES_PER_STEP", "MIN_READINGS"]
 
 #: candidates passing in sample whose held-out test is tried at one step before the search stops
 TRIES_PER_STEP = 5
@@ -53,7 +53,7 @@ class EmpiricalTerm:
     their standard errors, fitted jointly with the sensor's base parameters; size : Param, the
     term's peak-to-valley over the poses (mm; for ``tails`` the contaminated fraction); gain_chi2 :
     float, its held-out chi-square gain (for ``tails``, twice the held-out log-likelihood gain);
-    p_heldout, p_insample : float; step : int; plot : dict or None, what its partial-residual figure
+    p_heldout, p_insample : float (for ``tails`` the larger of the scatter's and the shape's p); step : int; plot : dict or None, what its partial-residual figure
     draws (``x (m,)`` the term's variable on the sensor's readings: the column of a line, the phase
     in rad of a periodic term, the fitted term of a shape; ``partial (m,)`` mm, the residual with the
     term added back; ``fit (m,)`` mm, the term; ``xlabel``), not in ``--json``.
@@ -83,10 +83,15 @@ class EmpiricalTerm:
 class Empirical:
     """The search's result: ``terms`` (EmpiricalTerm, in the order chosen), ``variables`` (every
     variable they name, in order), ``gain_chi2`` (their held-out chi-square gains summed),
-    ``n_tried`` (the terms the in-sample level was split over), ``level`` (that split level),
+    ``n_tried`` (the terms the in-sample level was split over), ``level`` (the level of a variable
+with one term on one sensor: :func:`multiplicity`),
     ``reasons`` (rules 19-21 as they fired); ``heldout_rms_mm`` : (2,) float or None, mm, the
     k-fold held-out residual RMS on the sensors with a term other than ``tails``, without and with
-    the terms (the base parameters refitted on each fold either way)."""
+    the terms (the base parameters refitted on each fold either way); ``fitted`` : (p, n) float or
+    None, mm, the terms (other than ``tails``) fitted jointly with each sensor's base parameters, at
+    every pose (0 on a sensor without a term, NaN where no reading): what the side-by-side simulation
+    adds to the model; ``heldout`` : ``(without, with)`` (p, n) float each or None, mm, the k-fold
+    held-out residuals on the sensors with a term (NaN elsewhere). Neither is in ``--json``."""
 
     terms: tuple = ()
     variables: tuple = ()
@@ -95,6 +100,8 @@ class Empirical:
     level: float = 0.0
     reasons: tuple = field(default=(), repr=False)
     heldout_rms_mm: tuple | None = None
+    fitted: np.ndarray | None = field(default=None, repr=False, compare=False)
+    heldout: tuple | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         out = {"terms": [t.to_dict() for t in self.terms], "variables": list(self.variables),
@@ -187,13 +194,16 @@ def search(ds, cov, d0, residual, sigma, J, folds: int) -> Empirical:
     # a sensor with fewer readings than a fold's fit needs is not searched
     pool = {i: terms_for(ds.export, cov, d0, i, names, sens[i].fin) if sens[i].fin.sum() >= MIN_READINGS else []
             for i in range(n)}
-    n_tried = sum(len(v) for v in pool.values()) + n  # and the tails, one test a sensor
-    level = rules.ALPHA_CANDIDATES / n_tried
+    n_tried = sum(len(v) for v in pool.values())  # the tails are a family of their own (rule 21)
+    share = multiplicity(pool)
+    level = rules.ALPHA_CANDIDATES / max(min(share.values(), default=1), 1)  # a one-term variable's
     why, found = [], []
     scores = {i: {t.key: sens[i].f_test(t) for t in pool[i]} for i in range(n)}
     while rules.room_for_another_term(len(found)):
-        ranked = sorted(((p, i, t) for i in range(n) for t in pool[i] for p in (scores[i][t.key],)
-                         if rules.search_in_sample(p, n_tried)), key=lambda x: x[0])
+        ranked = sorted(((p * share[i, t.key], p, i, t) for i in range(n) for t in pool[i]
+                         for p in (scores[i][t.key],) if rules.search_in_sample(p, share[i, t.key])),
+                        key=lambda x: x[0])
+        ranked = [x[1:] for x in ranked]
         step = len(found) + 1
         took = None
         for p_in, i, t in ranked[:TRIES_PER_STEP]:
@@ -216,8 +226,48 @@ def search(ds, cov, d0, residual, sigma, J, folds: int) -> Empirical:
     terms = [_describe(sens[i], t, names[i], p_in, p_ho, g, step) for i, t, p_in, p_ho, g, step in found]
     terms += _tails(sens, names, n_tried, why, len(found))
     variables = tuple(dict.fromkeys(v for t in terms for v in t.variables))
+    fitted, held = _fitted(sens) if found else (None, None)
     return Empirical(tuple(terms), variables, float(sum(t.gain_chi2 for t in terms)), n_tried, level, tuple(why),
-                     _heldout_rms([sen for sen in sens if sen.taken]))
+                     _heldout_rms([sen for sen in sens if sen.taken]), fitted, held)
+
+
+def _fitted(sens) -> tuple:
+    """The terms taken on every sensor, fitted jointly with its base parameters ``(p, n)`` mm, and
+    the held-out residuals ``(without, with)`` on the sensors with terms (NaN elsewhere)."""
+    p, n = len(sens[0].r), len(sens)
+    fitted = np.zeros((p, n))
+    e0, e1 = np.full((p, n), np.nan), np.full((p, n), np.nan)
+    for i, sen in enumerate(sens):
+        fitted[~sen.fin, i] = np.nan
+        if not sen.taken:
+            continue
+        X = sen.design()
+        beta = np.linalg.lstsq(X, sen.r[sen.fin], rcond=1e-10)[0]
+        k0 = sen.X.shape[1]
+        T = np.column_stack([t.columns for t in sen.taken])
+        fitted[:, i] = np.where(sen.fin, T @ beta[k0:], np.nan)
+        e1[:, i] = sen.heldout(None)
+        taken, sen.taken = sen.taken, []
+        e0[:, i] = sen.heldout(None)
+        sen.taken = taken
+    return fitted, (e0, e1)
+
+
+def multiplicity(pool) -> dict:
+    """``(sensor, term key) -> m``: the in-sample level of a term is ``ALPHA_CANDIDATES / m`` (rule 19),
+    the level split equally over the sensors searched, on each over the variables its terms follow
+    (a term's ``variables``), and within a variable over its terms (a weighted Bonferroni: the
+    weights sum to one, so the search's family-wise level is the catalogue's). A variable scanned
+    over a thousand plane waves does not dilute the one line of another."""
+    from collections import Counter
+
+    live = {i: ts for i, ts in pool.items() if ts}
+    out = {}
+    for i, ts in live.items():
+        groups = Counter(t.variables for t in ts)
+        for t in ts:
+            out[i, t.key] = len(live) * len(groups) * groups[t.variables]
+    return out
 
 
 def _heldout_rms(with_terms) -> tuple | None:
@@ -281,18 +331,19 @@ def _describe(sen: _Sensor, t: Term, name, p_in, p_ho, gain, step) -> EmpiricalT
     return EmpiricalTerm(name, t.key, t.variables, eq, meaning, params, size, gain, p_ho, p_in, step, plot)
 
 
-def _mixture(z):
-    """Maximum-likelihood contaminated normal of ``z`` (unit stated noise): ``(q, s1, s2, loglik)``,
-    ``q`` the fraction of scale ``s2 > s1`` (EM from a robust start)."""
+def _mixture(z, core=None):
+    """Maximum-likelihood contaminated normal of ``z`` (unit stated noise): ``(q, s1, s2)``, ``q`` the
+    fraction of scale ``s2 > s1`` (EM from a robust start); ``core``: ``s1`` held there."""
     z2 = z**2
-    s1 = max(float(1.4826 * np.median(np.abs(z))), 1e-6)
+    s1 = float(core) if core is not None else max(float(1.4826 * np.median(np.abs(z))), 1e-6)
     s2, q = 3.0 * s1, 0.1
     for _ in range(200):
         a = (1 - q) * np.exp(-0.5 * z2 / s1**2) / s1
         b = q * np.exp(-0.5 * z2 / s2**2) / s2
         w = b / np.maximum(a + b, 1e-300)
         q = float(np.clip(np.mean(w), 1e-4, 0.9))
-        s1 = float(np.sqrt(max(np.sum((1 - w) * z2) / max(np.sum(1 - w), 1e-12), 1e-12)))
+        if core is None:
+            s1 = float(np.sqrt(max(np.sum((1 - w) * z2) / max(np.sum(1 - w), 1e-12), 1e-12)))
         s2 = float(np.sqrt(max(np.sum(w * z2) / max(np.sum(w), 1e-12), s1**2 * 1.0001)))
     return q, s1, s2
 
@@ -302,12 +353,16 @@ def _loglik(z, q, s1, s2):
 
 
 def _tails(sens, names, n_tried, why, step0) -> list:
-    """Rule 21: per sensor, the residuals (after the terms taken) as a contaminated normal against a
-    normal of their own scale; in sample the likelihood ratio (2 dof), held out the per-pose
-    log-likelihood gain on the same folds."""
+    """Rule 21: per sensor, the residuals' distribution (after the terms taken). In sample, their
+    scatter beyond the stated noise (the chi-square of the residuals, at the tails' own level: one
+    test a sensor) with a shape heavier than a normal's (the kurtosis test, one-sided, at
+    ``ALPHA_HELDOUT``: noise merely understated is normal); held out, a contaminated normal whose core
+    is the stated noise against a normal of the residuals' own scale, each fitted on the other
+    folds, by the per-pose log-likelihood gain."""
     from scipy import stats
 
     out = []
+    n_sens = sum(sen.fin.sum() >= MIN_READINGS for sen in sens)
     for i, sen in enumerate(sens):
         if sen.fin.sum() < MIN_READINGS:
             continue
@@ -315,19 +370,19 @@ def _tails(sens, names, n_tried, why, step0) -> list:
         fin = sen.fin & np.isfinite(e)
         y = sen.r[sen.fin]
         X = sen.design()
-        resid = y - X @ np.linalg.lstsq(X, y, rcond=1e-10)[0]
-        z = resid / sen.s
-        q, s1, s2 = _mixture(z)
-        s0 = float(np.sqrt(np.mean(z**2)))
-        lr = 2.0 * float(np.sum(_loglik(z, q, s1, s2)) - np.sum(_loglik(z, 0.0, s0, s0)))
-        p_in = float(stats.chi2.sf(max(lr, 0.0), 2))
-        if not rules.search_in_sample(p_in, n_tried):
+        beta, _, rank, _ = np.linalg.lstsq(X, y, rcond=1e-10)
+        z = (y - X @ beta) / sen.s
+        p_scatter = float(stats.chi2.sf(float(z @ z), max(len(z) - rank, 1)))
+        p_shape = float(stats.kurtosistest(z, alternative="greater").pvalue) if len(z) >= 8 else 1.0
+        p_in = max(p_scatter, p_shape)  # both tests pass: the larger is reported
+        if not rules.search_tails_in_sample(p_scatter, n_sens, p_shape):
             continue
+        q, s1, s2 = _mixture(z, core=1.0)
         d = np.full(len(sen.r), np.nan)
         for test in sen.folds:
             train = np.setdiff1d(np.flatnonzero(fin), test)
             zt = e[train] / sen.s
-            qt, a1, a2 = _mixture(zt)
+            qt, a1, a2 = _mixture(zt, core=1.0)
             st = float(np.sqrt(np.mean(zt**2)))
             zz = e[test] / sen.s
             d[test] = 2.0 * (_loglik(zz, qt, a1, a2) - _loglik(zz, 0.0, st, st))

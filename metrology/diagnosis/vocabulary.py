@@ -37,15 +37,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["VARIABLES", "Term", "terms_for", "variables_for", "FIELD_WAVELENGTHS_MM", "FIELD_DIRECTIONS",
-           "FREQUENCY_OVERSAMPLING"]
+__all__ = ["VARIABLES", "Term", "terms_for", "variables_for", "FIELD_MAX_ORDER", "FIELD_OVERSAMPLING",
+           "FIELD_MAX_WAVES", "FREQUENCY_OVERSAMPLING", "wave_vectors"]
 
 #: the vocabulary (see the module); the search names its terms' variables from these only
 VARIABLES = ("d", "delta_d", "sign_delta_d", "incidence", "time", "pose_index", "temperature", "temperature_rate",
              "spot", "d_other", "attitude", "tails")
-#: plane waves over the plate: wavelengths (mm) and directions (count over 180 deg)
-FIELD_WAVELENGTHS_MM = (30.0, 45.0, 70.0, 110.0, 170.0, 300.0)
-FIELD_DIRECTIONS = 12
+#: the plate's polynomial fields: orders 2 to this (order 4: 14 columns, a field of a few bumps)
+FIELD_MAX_ORDER = 4
+#: the plate's 2-D frequency scan: its grid step is the span's fundamental over this, per axis
+FIELD_OVERSAMPLING = 2
+#: at most this many plane waves are scanned (the grid coarsened to fit: the search's multiplicity)
+FIELD_MAX_WAVES = 1000
 #: the frequency scan's step is the span's fundamental over this
 FREQUENCY_OVERSAMPLING = 4
 
@@ -111,6 +114,36 @@ def _periods(x, fin):
     return [1.0 / f for f in freqs]
 
 
+def wave_vectors(xy) -> list:
+    """The 2-D frequency scan's wave vectors (1/mm) for spots ``xy (m, 2)`` mm: a grid of step
+    ``1 / (FIELD_OVERSAMPLING x span)`` per axis over the half plane, ``|k|`` from one wave over the
+    larger span to the spots' median nearest-neighbour spacing (scattered spots, not a grid; coarsened
+    until at most ``FIELD_MAX_WAVES`` remain)."""
+    if len(xy) < 4:
+        return []
+    span = np.ptp(xy, axis=0)
+    if np.any(span <= 0):
+        return []
+    dd = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(dd, np.inf)
+    nn = np.min(dd, axis=1)
+    h = float(np.median(nn[np.isfinite(nn) & (nn > 0)])) if np.any(nn > 0) else 0.0
+    if h <= 0:
+        return []
+    k_lo, k_hi = 1.0 / float(np.max(span)), 1.0 / h  # scattered spots alias little: down to their spacing
+    over = float(FIELD_OVERSAMPLING)
+    while True:
+        step = 1.0 / (over * span)
+        kx = np.arange(0.0, k_hi + 1e-12, step[0])
+        ky = np.arange(-np.floor(k_hi / step[1]), np.floor(k_hi / step[1]) + 1) * step[1]
+        KX, KY = np.meshgrid(kx, ky, indexing="ij")
+        k = np.hypot(KX, KY)
+        keep = (k >= k_lo) & (k <= k_hi) & ((KX > 0) | (KY > 0))
+        if keep.sum() <= FIELD_MAX_WAVES or over <= 0.5:
+            return list(zip(KX[keep].tolist(), KY[keep].tolist()))
+        over /= 1.25
+
+
 def terms_for(export, cov, d0, i, names, fin) -> list:
     """The candidate terms of sensor ``i`` (see the module); ``fin (p,)`` its finite readings."""
     v = variables_for(export, cov, d0, i)
@@ -137,13 +170,17 @@ def terms_for(export, cov, d0, i, names, fin) -> list:
             add(f"periodic({name}, P={P:.4g}{' ' + units[name] if units[name] else ''})", (name,),
                 np.column_stack([np.sin(w), np.cos(w)]), "periodic", name, units[name], P, units[name])
     s, t_ = cov.spot_st[:, i, 0], cov.spot_st[:, i, 1]
-    add("spot quadratic", ("spot",), np.column_stack([s, t_, s**2, s * t_, t_**2]), "shape",
-        "a quadratic field over the plate")
-    for lam in FIELD_WAVELENGTHS_MM:
-        for a in np.arange(FIELD_DIRECTIONS) * np.pi / FIELD_DIRECTIONS:
-            w = 2 * np.pi / lam * (np.cos(a) * s + np.sin(a) * t_)
-            add(f"spot wave({lam:g} mm, {np.degrees(a):.0f} deg)", ("spot",), np.column_stack([np.sin(w), np.cos(w)]),
-                "shape", f"a plane wave of {lam:g} mm over the plate")
+    sc = max(float(np.max(np.abs(np.column_stack([s, t_])[fin]))) if fin.any() else 1.0, 1e-9)
+    u, w_ = s / sc, t_ / sc  # unitless: the columns' sizes alike
+    for order in range(2, FIELD_MAX_ORDER + 1):
+        cols = [u**a * w_**(m - a) for m in range(1, order + 1) for a in range(m + 1)]
+        add(f"spot field(order {order})", ("spot",), np.column_stack(cols), "shape",
+            f"a polynomial field of order {order} over the plate")
+    for kx, ky in wave_vectors(np.column_stack([s, t_])[fin]):
+        w = 2 * np.pi * (kx * s + ky * t_)
+        lam, ang = 1.0 / float(np.hypot(kx, ky)), float(np.degrees(np.arctan2(ky, kx)))
+        add(f"spot wave({lam:.4g} mm, {ang:.0f} deg)", ("spot",), np.column_stack([np.sin(w), np.cos(w)]),
+            "shape", f"a plane wave of {lam:.4g} mm at {ang:.0f} deg over the plate")
     di = v["d"]
     for j in range(d0.shape[1]):
         if j == i:
