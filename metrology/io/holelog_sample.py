@@ -1,5 +1,6 @@
 """The first rows of a hole log's commanded positions, read alone: what the units rule
-(:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before any hole is measured.
+(:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before any hole is measured;
+and of its readings (:func:`first_readings`), what ``metro measure``'s reach rule holds against the head.
 
 Only the join's key (``point_id`` where the log has it, else ``hole_id``) and ``pose_x_mm``, ``pose_y_mm``,
 ``pose_z_mm`` are read, from the first partitions, at most :data:`SAMPLE_ROWS` rows: a median over a few
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["commanded_positions", "SAMPLE_ROWS", "POSITION_COLUMNS"]
+__all__ = ["commanded_positions", "first_readings", "SAMPLE_ROWS", "POSITION_COLUMNS"]
 
 #: rows read at most (the rule takes a median: a few thousand holes settle it)
 SAMPLE_ROWS = 4096
@@ -39,15 +40,31 @@ def commanded_positions(log, rows: int = SAMPLE_ROWS):
     return np.concatenate(keys), np.concatenate(xyz)
 
 
-def _read(part, key, rows):
-    """``(keys, positions)`` chunks of ``part``'s first ``rows`` rows (its key and position columns alone)."""
+def first_readings(log, columns, rows: int = SAMPLE_ROWS):
+    """The first ``rows`` rows of ``log``'s reading ``columns`` (``d_<sensor>``), ``(m, len(columns))`` float, as
+    written (mm by the log's contract; blank or not a number: NaN); None when no partition has them all."""
+    out, left = [], rows
+    for part in log.partitions:
+        if not all(c in log.file_columns(part) for c in columns):
+            continue
+        for _, d in _read(part, None, left, tuple(columns)):
+            out.append(d)
+            left -= len(d)
+        if left <= 0:
+            break
+    return np.concatenate(out) if out else None
+
+
+def _read(part, key, rows, numeric=POSITION_COLUMNS):
+    """``(keys, numbers)`` chunks of ``part``'s first ``rows`` rows (its ``key`` and ``numeric`` columns alone; no
+    key: None for the keys)."""
     import pyarrow as pa
 
-    columns = [key, *POSITION_COLUMNS]
+    columns = [*([key] if key else []), *numeric]
     if part.path.lower().endswith(".csv"):
         import pyarrow.csv as pcsv
 
-        types = {key: pa.string(), **{c: pa.string() for c in POSITION_COLUMNS}}
+        types = {c: pa.string() for c in columns}
         try:
             reader = pcsv.open_csv(part.path, read_options=pcsv.ReadOptions(block_size=1 << 20),
                                    convert_options=pcsv.ConvertOptions(include_columns=columns, column_types=types))
@@ -64,9 +81,9 @@ def _read(part, key, rows):
         if rows <= 0:
             return
         batch = batch.slice(0, rows)
-        k = np.asarray(batch.column(0).cast(pa.string()).to_pylist(), dtype=object)
-        p = np.column_stack([_numbers(batch.column(i)) for i in (1, 2, 3)])
-        rows -= len(k)
+        k = np.asarray(batch.column(0).cast(pa.string()).to_pylist(), dtype=object) if key else None
+        p = np.column_stack([_numbers(batch.column(i)) for i in range(len(columns) - len(numeric), len(columns))])
+        rows -= len(p)
         yield k, p
 
 

@@ -21,6 +21,43 @@ __all__ = ["MeasureReport", "MeasureOptions", "measure_files", "SCHEMA"]
 MISFIT_SHARE = 0.5
 
 
+#: the median hole's farthest spot (zero + reading x direction, TCS) may lie at most this many times the head's reach
+#: (its footprint radius + its stand-off, mm) from the TCS origin. A real head's spots lie within about one reach
+#: (the footprint at the stand-off, the sensors' range a few mm either side); readings in µm (x1000) put them some
+#: 700 reaches out, where the curvature allowance r^2/2R swallows the misfit and _check_fit never fires (issue 51)
+SPOT_REACH = 10.0
+
+
+def _spot_reach(layout, d) -> float:
+    """The median hole's farthest spot from the TCS origin (mm) for readings ``d (m, n)`` mm (NaN: none)."""
+    far = np.linalg.norm(layout.zero + d[:, :, None] * layout.direction, axis=2)  # (m, n) mm, TCS
+    far = np.max(np.where(np.isfinite(far), far, -np.inf), axis=1)
+    far = far[np.isfinite(far)]
+    return float(np.median(far)) if len(far) >= 5 else float("nan")
+
+
+def _check_reach(layout, log, shown_layout) -> None:
+    """Refuse (ValueError) a log whose first rows' readings (:func:`first_readings`) put the median hole's spots
+    beyond :data:`SPOT_REACH` reaches of the head (readings not in mm), before anything is measured. A head whose
+    reach is unknown (beams not converging on its tool axis, no range stated) is left to :func:`_check_fit`."""
+    from metrology.io.holelog_sample import first_readings
+    from metrology.jobs.measure_panel import footprint_mm, standoff_mm
+
+    d = first_readings(log, [f"d_{s}" for s in layout.names])
+    try:
+        reach = footprint_mm(layout) + standoff_mm(layout)
+    except ValueError:
+        return
+    if d is None or not (np.isfinite(reach) and reach > 0) or not _spot_reach(layout, d) > SPOT_REACH * reach:
+        return
+    far = _spot_reach(layout, d)
+    unit = "look like µm" if _spot_reach(layout, d / 1000) <= SPOT_REACH * reach else "are not in mm"
+    raise ValueError(f"{log.display}: the readings put the median hole's spots {far:,.0f} mm from the tool, "
+                     f"{far / reach:,.0f} times the reach of the head of {shown_layout} ({reach:.3g} mm: footprint "
+                     f"and stand-off): the readings {unit}: write the log's d_<sensor> columns in mm (or is this "
+                     f"layout another head's?)")
+
+
 def _check_fit(result, shown_layout, min_radius_mm, warn=None, warnings=None, surfaces=None) -> None:
     """Refuse (ValueError) results the data cannot support: most holes' readings disagreeing with
     one plane means the layout is not this head's (another head's file, a nominal layout on a head
@@ -226,6 +263,7 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     from metrology.measure.effects import check_log
 
     check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
+    _check_reach(layout, log, shown_layout)
     if surfaces is not None:
         check_join(log, surfaces, display_name(points))
     target = check_out(o.out, log.partitioned, o.distributed)

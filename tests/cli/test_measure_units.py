@@ -281,3 +281,34 @@ def test_another_heads_nominal_layout_is_refused_in_one_line(skins, tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}: the readings of 40 of 40 holes disagree"), r.stderr
     assert not out.exists()
+
+
+def test_a_log_whose_readings_are_in_um_is_refused_in_one_line(tmp_path):
+    """Issue 51: readings in µm (x1000) with a layout that states no range put the spots ~50 m out, where the 500 mm
+    curvature allowance swallowed the misfit (72 % of holes "conforms"): refused naming the unit, nothing written;
+    the same log in mm still measures."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
+    log, um = tmp_path / "log.csv", tmp_path / "log_um.csv"
+    r = runner.invoke(app, ["simulate-log", "--holes", "60", "--seed", "5", "--layout", TABLE6, "--true-layout",
+                            TABLE6, "--out", str(log)])
+    assert r.exit_code == 0, r.output
+    t = pcsv.read_csv(log)
+    pcsv.write_csv(pa.table({n: pc.multiply(t[n], 1000.0) if n.startswith("d_") else t[n] for n in t.column_names}),
+                   um)
+    layout = tmp_path / "no_range.toml"
+    with open(TABLE6) as fh:
+        layout.write_text("".join(line for line in fh if not line.startswith("range_mm")))
+    out = tmp_path / "o.csv"
+    for lay in (str(layout), TABLE6):
+        r = runner.invoke(app, ["measure", str(um), "--layout", lay, "--out", str(out)])
+        assert r.exit_code == 2, r.output
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {um}: the readings put the median hole's spots"), lines
+        assert "the readings look like µm: write the log's d_<sensor> columns in mm" in lines[0]
+        assert not out.exists()
+    r = runner.invoke(app, ["measure", str(log), "--layout", str(layout), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert set(pcsv.read_csv(out)["status"].to_pylist()) == {"conforms"}
