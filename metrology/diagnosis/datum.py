@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.effects import Covariates, PlaneForm
+from metrology.core.effects import PlaneForm
 from metrology.core.model import jacobian_raw
 from metrology.diagnosis.fit import Fit, FitData
 from metrology.diagnosis import rules

@@ -12,13 +12,12 @@ chosen; :mod:`metrology.diagnosis.select` runs the selection with them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 
 from metrology.diagnosis.candidates import CandidateResult, Reference, Scoring, score_candidate
-from metrology.diagnosis.fit import Fit, FitData, fit_any, residual_battery
-from metrology.diagnosis.heldout import HeldOut, kfold
+from metrology.diagnosis.fit import FitData, fit_any, residual_battery
+from metrology.diagnosis.heldout import kfold
 from metrology.diagnosis.stats import battery_on, paired_gain_p
 from metrology.diagnosis import rules
 

@@ -46,7 +46,6 @@ from metrology.diagnosis.members import (Reference, adequate_member, family_of, 
 from metrology.diagnosis.results import Decision, Reason
 from metrology.diagnosis.stats import paired_gain_p
 from metrology.diagnosis import rules
-from metrology.core.stats import robust_sigma
 
 __all__ = ["Step", "family_of", "refine_order", "richer_spline", "adequate_member", "forward_select", "Selection", "flag_given_rigid", "p_better", "needed", "weakly_supported"]
 

@@ -45,6 +45,9 @@ PANEL_COLUMNS = ("k1_per_mm", "k2_per_mm", "correction_deg", "panel_misfit_per_m
 #: holes on this machine, benchmarks/results/bench_plant.md), and a batch measured again one line
 #: at a time (an alarm in it) costs at most this many single-line measurements
 MAX_BATCH = 256
+#: batches of lines the reading thread may hold read ahead (a file followed from its start is not read
+#: into memory whole: the thread waits while this many batches wait to be measured)
+READ_AHEAD = 8
 #: rows fed to the drift watch between two snapshots of it (the watch is restored to its snapshot and
 #: the feeds since are fed again when a batch is measured again one line at a time)
 SNAPSHOT_ROWS = 4096
@@ -88,7 +91,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)
     fh = (stream or sys.stdin) if str(source) == "-" else open(source, newline="")
-    lines, cut = queue.SimpleQueue(), []
+    lines, cut = queue.Queue(maxsize=READ_AHEAD * max(int(max_batch), 1)), []
     reader = threading.Thread(target=_read, args=(fh, lines, cut), name="metro-follow-read", daemon=True)
     reader.start()
     run = _Run(layout, settings, name, on_hole, on_alarm, surfaces is not None)
@@ -102,7 +105,7 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
             item = _take(lines)
             if item is None:
                 break
-            batch = [item]
+            batch, error = [item], None
             while len(batch) < max_batch:  # every line already read: one batch
                 try:
                     item = lines.get_nowait()
@@ -111,12 +114,17 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
                 if item is None:
                     ended = True
                     break
-                batch.append(_checked(item))
+                if item[0] is None:  # the reader's error: the lines read before it are answered first
+                    error = item[1]
+                    break
+                batch.append(item)
             batch = [(k, text) for k, text in batch if not _blank(text)]
             if batch:
                 run.batch(batch)
                 if on_batch is not None:
                     on_batch()
+            if error is not None:
+                raise error
     finally:
         if fh is not sys.stdin and fh is not stream:
             fh.close()

@@ -24,7 +24,6 @@ from metrology.core.frames import plane_in_tcs
 from metrology.core.plane import plane_basis
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
-from metrology.core.plane import plane_basis
 
 __all__ = ["PoseSpec", "Poses", "random_poses", "simulate_readings", "datum_points"]
 

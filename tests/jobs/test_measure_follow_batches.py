@@ -60,3 +60,26 @@ def test_a_line_in_error_mid_batch_stops_after_the_lines_before_it(lines):
 def test_the_options_are_checked_as_measures_are(lines):
     with pytest.raises(ValueError, match="tolerance-deg"):
         follow_log("-", TABLE6, print, options=MeasureOptions(tolerance_deg=0.0), stream=io.StringIO("".join(lines)))
+
+
+class _BadAt(io.StringIO):
+    """A stream whose line ``at`` cannot be decoded (a byte not UTF-8 in a cell's live feed)."""
+
+    def __init__(self, text, at):
+        super().__init__(text)
+        self.at, self.n = at, 0
+
+    def readline(self, *a):
+        self.n += 1
+        if self.n == self.at:
+            raise UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte")
+        return super().readline(*a)
+
+
+@pytest.mark.parametrize("max_batch", [1, 64])
+def test_the_lines_before_a_read_error_are_answered_whatever_the_batch(lines, max_batch):
+    out = []
+    with pytest.raises(UnicodeDecodeError):
+        follow_log("-", TABLE6, lambda h: out.append(h), None, options=MeasureOptions(),
+                   stream=_BadAt("".join(lines), 34), max_batch=max_batch)
+    assert [h["line"] for h in out] == list(range(2, 34))  # the header is line 1; line 34 unreadable
