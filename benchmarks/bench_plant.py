@@ -49,7 +49,8 @@ def _log(tmp: Path, holes: int) -> Path:
     return log
 
 
-CLIENT = """
+#: the start both client scripts share: connected, subscribed, said so (the feeder waits for the word)
+_SUBSCRIBED = """
 import asyncio, sys, time, json
 sys.path.insert(0, {root!r})
 from tests.plant.opcua_client import connect, subscribe
@@ -57,7 +58,8 @@ async def main():
     c = await connect({url!r})
     _, col = await subscribe(c, period_ms={period})
     print("subscribed", flush=True)
-    n, last, seen = {n}, time.monotonic(), 0
+"""
+CLIENT = _SUBSCRIBED + """    n, last, seen = {n}, time.monotonic(), 0
     while len(col.results) < n and time.monotonic() - last < {idle}:  # until all came, or none for a while
         await asyncio.sleep(0.05)
         if len(col.results) != seen:
@@ -141,15 +143,7 @@ def live(tmp: Path, holes: int, per_s: float, period_ms: float = 5.0) -> dict:
             "stdout_answer_to_event": stats([(arrived[k] - answered[k]) * 1e3 for k in both])}
 
 
-COUNTER = """
-import asyncio, sys, time, json
-sys.path.insert(0, {root!r})
-from tests.plant.opcua_client import connect, subscribe
-async def main():
-    c = await connect({url!r})
-    _, col = await subscribe(c, period_ms={period})
-    print("subscribed", flush=True)
-    n = {n}
+COUNTER = _SUBSCRIBED + """    n = {n}
     end = time.monotonic() + {wait}
     while len(col.results) < n and time.monotonic() < end:
         await asyncio.sleep(0.05)
