@@ -47,10 +47,12 @@ async def _follow_with_client(log, tmp):
         _, col = await subscribe(client)
         metro.feed(log.read_text())
         rc, out, err = await asyncio.get_running_loop().run_in_executor(None, metro.finish)
-        seen = -1
-        while len(col.results) != seen:  # what the client's loop had not handled yet when metro ended
-            seen = len(col.results)
-            await asyncio.sleep(2.0)
+        # what the client's loop had not handled yet when metro ended: wait for the count stdout gives (a
+        # lost result still fails below, after the wait), not for a pause, which a loaded machine makes
+        expected = sum(1 for x in out.splitlines() if '"hole_id"' in x and '"line"' in x)
+        end = asyncio.get_running_loop().time() + 120.0
+        while len(col.results) < expected and asyncio.get_running_loop().time() < end:
+            await asyncio.sleep(0.2)
         return rc, out, err, col
     finally:
         metro.kill()
