@@ -57,16 +57,17 @@ def _h_and_H(nominal, i, comps, x, N, D, cov):
     return d + f, np.concatenate([J * g[:, None]] + cols, axis=1)
 
 
-def _pass(nominal, i, comps, obs, cov, rows, R, m0, P0, x_ref=None):
+def _pass(nominal, i, comps, obs, cov, rows, R, m0, P0, x_ref=None, Q=0.0):
     """One filterpy EKF pass over sensor ``i``'s readings ``rows`` from the prior ``N(m0, P0)``; linearised
-    at the running estimate (``x_ref`` None) or at every measurement at ``x_ref``."""
+    at the running estimate (``x_ref`` None) or at every measurement at ``x_ref``; ``Q`` the process noise
+    on every state (as :func:`metrology.calibration.estimators.ekf`'s)."""
     from filterpy.kalman import ExtendedKalmanFilter
 
     k = len(m0)
     kf = ExtendedKalmanFilter(dim_x=k, dim_z=1)
     kf.x = m0[:, None].copy()
     kf.P = P0.copy()
-    kf.Q = np.zeros((k, k))
+    kf.Q = Q * np.eye(k)
     kf.R = np.array([[R]])
     if x_ref is not None:
         h_ref, H_ref = _h_and_H(nominal, i, comps, x_ref, obs.normal[rows], obs.offset[rows], cov.select(rows))
@@ -85,8 +86,17 @@ def _pass(nominal, i, comps, obs, cov, rows, R, m0, P0, x_ref=None):
     return kf.x[:, 0].copy(), 0.5 * (kf.P + kf.P.T)
 
 
-def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_mm=None, P0_sigma=None,
-                      passes=10, tol=(1e-6, 1e-8), theta0=None):
+def _residual_cov(nominal, i, comps, obs, cov, rows, x):
+    """Sensor ``i``'s scatter (mm) and residual-scaled covariance over its chart and terms at the state ``x``."""
+    from metrology.calibration.uncertainty import residual_scaled_cov
+
+    h, H = _h_and_H(nominal, i, comps, x, obs.normal[rows], obs.offset[rows], cov.select(rows))
+    ok = np.isfinite(h) & np.all(np.isfinite(H), axis=1)
+    return residual_scaled_cov(H[ok], (obs.d[rows, i] - h)[ok])
+
+
+def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_mm=None, P0_sigma=None, Q=0.0,
+                      passes=10, tol=(1e-6, 1e-8), stderr="stated", theta0=None):
     """Fit the sensors of ``nominal`` and the layout's terms ``components`` by the filter ``method``
     (``ekf`` or ``iekf``) with the state extended by the terms.
 
@@ -97,7 +107,13 @@ def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_
     components : the layout's terms (each on one sensor, its values the prior's mean)
     prior : HeadTerms, the layout's terms with their covariance (the prior's covariance)
     P0_sigma : (float, float) or None, the chart's prior 1 sigma (mm, rad); None: the base filters'
+    Q : float, ``ekf`` only, the process noise on every state, as :func:`metrology.calibration.estimators.ekf`
+        (``iekf`` linearises each pass at the previous estimate with ``Q = 0``, as its base filter)
     passes, tol : ``iekf`` only, as :func:`metrology.calibration.estimators.iekf`
+    stderr : ``"stated"`` (default) the filter's ``P``; ``"residual"`` what least squares reports,
+        ``s^2 (J^T J)^-1`` over the sensor's chart and its fitted terms at the estimate, ``s`` the residuals'
+        scatter (:func:`metrology.calibration.uncertainty.residual_scaled_cov`), returned as its sigma (as
+        :func:`metrology.calibration.estimators.iekf`'s)
     theta0 : (n, 5) float or None, where identifiability is judged (the base calibration)
 
     Returns
@@ -111,6 +127,12 @@ def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_
 
     if method not in FILTER_METHODS:
         raise ValueError(f"method {method!r}: the filters whose state carries terms are {', '.join(FILTER_METHODS)}")
+    if stderr not in ("stated", "residual"):
+        raise ValueError(f"stderr {stderr!r}: expected 'stated' or 'residual'")
+    if not (np.isfinite(Q) and Q >= 0):
+        raise ValueError(f"Q must be a finite number >= 0, got {Q!r}")
+    if method == "iekf" and Q != 0:
+        raise ValueError(f"Q = {Q:g}: iekf takes no process noise (each pass the MAP estimate with Q = 0); use ekf")
     n, nb = nominal.n, 5 * nominal.n
     sigma = _sigma(nominal, sigma_mm)
     if not np.all(np.isfinite(sigma)):
@@ -140,13 +162,15 @@ def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_
             o += k
         mc = [comps[j] for j in mine]
         rows = _pose_order(obs, i)
-        x, P = _pass(nominal, i, mc, obs, cov, rows, sigma[i] ** 2, m0, P0)
+        x, P = _pass(nominal, i, mc, obs, cov, rows, sigma[i] ** 2, m0, P0, Q=Q)
         for _ in range(passes - 1 if method == "iekf" else 0):
             x_new, P = _pass(nominal, i, mc, obs, cov, rows, sigma[i] ** 2, m0, P0, x_ref=x)
             step, x = np.abs(x_new - x), x_new
             if np.all(step[:3] < tol[0]) and np.all(step[3:5] < tol[1]):
                 break
         theta[i] = x[:5]
+        if stderr == "residual":
+            sigma[i], P = _residual_cov(nominal, i, mc, obs, cov, rows, x)
         idx = list(range(5 * i, 5 * i + 5))
         o = 5
         for j in mine:
