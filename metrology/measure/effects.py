@@ -133,12 +133,13 @@ def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
     return tuple(np.where(np.isfinite(x), x, 0.0) for x in c), (gx, gy)
 
 
-def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:
+def apply_terms(layout, d, table=None, temp_c=None, what="the log", shape=None) -> Applied:
     """The readings ``d (N, n)`` mm of ``layout``'s sensors with its terms removed (:class:`Applied`).
 
     The temperature is ``temp_c (N,)`` deg C, else the ``temperature_c`` column of ``table`` (a
     pyarrow Table of the same rows) when a term needs it; a term whose covariate is missing raises
-    ValueError naming the column (``what`` names the source)."""
+    ValueError naming the column (``what`` names the source). ``shape (N, 3, 3)`` 1/mm TCS, each row's local
+    surface where the panel is known (``measure --panel``): each beam's incidence at its own spot."""
     terms = layout.effects
     if terms is None:
         return Applied(d, None, layout)
@@ -150,7 +151,7 @@ def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:
                              f"needs the temperature of every hole")
         col = table.column(TEMPERATURE_COLUMN)
         temp_c = np.asarray(col.cast("float64").to_numpy(zero_copy_only=False), float)
-    return Applied((corr := remove_terms(layout, d, temp_c, what)).d, corr, layout)
+    return Applied((corr := remove_terms(layout, d, temp_c, what, shape)).d, corr, layout)
 
 
 def check_log(layout, log) -> None:
@@ -176,6 +177,8 @@ def surface_normal(layout, d, shape, temp_c=None):
         return plain(layout, d, shape)
     d = np.asarray(d, float)
     single = d.ndim == 1
-    dd = apply_terms(layout, d.reshape(-1, layout.n), temp_c=None if temp_c is None else np.atleast_1d(temp_c),
-                     what="surface_normal").d
+    dd = d.reshape(-1, layout.n)
+    K = np.broadcast_to(np.asarray(shape, float).reshape(-1, 3, 3), (len(dd), 3, 3))  # each spot's incidence on it
+    dd = apply_terms(layout, dd, temp_c=None if temp_c is None else np.atleast_1d(temp_c), what="surface_normal",
+                     shape=K).d
     return plain(replace(layout, effects=None), dd[0] if single else dd, shape)

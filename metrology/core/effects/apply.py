@@ -39,6 +39,7 @@ import numpy as np
 from metrology.core.effects.base import Covariates
 
 __all__ = ["Corrected", "correct_readings", "covariates_for", "incidence_from_normal", "micro_normals", "remove_terms",
+           "spot_incidence",
            "INVERSION_STEPS", "INCIDENCE_PASSES", "UNKNOWN_COVARIATE"]
 
 #: fixed-point steps of the inversion: a 1 % gain leaves 1e-8 of its term after 4
@@ -163,12 +164,37 @@ def micro_normals(layout, d) -> np.ndarray:
     return n
 
 
-def remove_terms(layout, d, temp_c=None, what="readings") -> Corrected:
+def spot_incidence(layout, d, normal, shape) -> np.ndarray:
+    """``(N, n)``: |cos| of each beam's incidence on the surface at its own spot, the surface the plane of
+    unit normal ``normal (N, 3)`` (TCS, either sign; :func:`micro_normals`) through the row's spots, bent by
+    ``shape (N, 3, 3)`` 1/mm TCS (the local surface's shape operator square to the axis, positive where it
+    bends away from the head: :func:`metrology.measure.surface.fit_surface`'s ``K``). At the spot ``S_i``
+    (``q = S_i - c e_z``, ``c`` where the plane meets the axis) the surface's normal toward the head is
+    ``m + K q_t`` to first order (``q_t`` the part of ``q`` square to ``m``): on R 500 a spot 50 mm off the
+    axis sees the surface turned by 0.1 rad, which changes a 30 deg incidence's ``1 - cos`` by a third."""
+    E, u = layout.zero, layout.direction
+    s = 1.0 if np.mean(u[:, 2]) > 0 else -1.0
+    normal = np.asarray(normal, float)
+    m = -normal * np.sign(normal[:, 2:3] * s)  # toward the head (against the beams)
+    S = E[None] + np.asarray(d, float)[..., None] * u[None]  # (N, n, 3)
+    fin = np.isfinite(S[..., 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cnt = np.maximum(fin.sum(1), 1)
+        bar = np.where(fin[..., None], S, 0.0).sum(1) / cnt[:, None]  # (N, 3)
+        c = bar[:, 2] + (m[:, 0] * bar[:, 0] + m[:, 1] * bar[:, 1]) / m[:, 2]  # the plane through bar meets the axis
+        q = S - c[:, None, None] * np.array([0.0, 0.0, 1.0])
+        qt = q - np.einsum("hni,hi->hn", q, m)[..., None] * m[:, None, :]
+        nn = m[:, None, :] + np.einsum("hij,hnj->hni", np.asarray(shape, float), qt)
+        return np.abs(np.einsum("hni,ni->hn", nn, u)) / np.linalg.norm(nn, axis=2)
+
+
+def remove_terms(layout, d, temp_c=None, what="readings", shape=None) -> Corrected:
     """The readings ``d (N, n)`` mm of ``layout``'s sensors, one row a pose of the head at a surface, with
     the layout's terms removed (module docstring): ``temp_c (N,)`` deg C, each row's temperature (None: a
     temperature coefficient raises ValueError naming ``what``'s column); each beam's incidence from the row's
-    micro-plane. Where a row's covariate is not known, the readings of the sensors whose terms need it are
-    blanked (:data:`UNKNOWN_COVARIATE`). ``layout`` without terms: ``d`` itself."""
+    micro-plane, or at its spot on the local surface where ``shape (N, 3, 3)`` 1/mm TCS gives it (the panel
+    known: :func:`spot_incidence`). Where a row's covariate is not known, the readings of the sensors whose
+    terms need it are blanked (:data:`UNKNOWN_COVARIATE`). ``layout`` without terms: ``d`` itself."""
     d = np.asarray(d, float)
     terms = layout.effects
     if terms is None or not terms.components:
@@ -176,13 +202,15 @@ def remove_terms(layout, d, temp_c=None, what="readings") -> Corrected:
     needs = terms.needs()
     cos = None
     passes = INCIDENCE_PASSES if "incidence" in needs else 0
+    incidence = (lambda dd: incidence_from_normal(layout, micro_normals(layout, dd))) if shape is None else (
+        lambda dd: spot_incidence(layout, dd, micro_normals(layout, dd), shape))
     if passes:
-        cos = incidence_from_normal(layout, micro_normals(layout, d))
+        cos = incidence(d)
     temp = None if temp_c is None else np.where(np.isfinite(temp_c), temp_c, np.nan)
     for k in range(max(passes, 1)):
         corr = _correct_rows(terms, d, covariates_for(layout, len(d), temp, cos), what)
         if k + 1 < passes:
-            cos = incidence_from_normal(layout, micro_normals(layout, corr.d))
+            cos = incidence(corr.d)
     return corr
 
 
