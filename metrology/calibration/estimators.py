@@ -341,7 +341,8 @@ def _sequential(name, nominal, obs, sigma_mm, P0_sigma, Q, passes, tol, stderr="
     return _finish(name, nominal, obs, theta, cov, sigma, history=history)
 
 
-def ekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, Q=0.0) -> Calibration:
+def ekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, Q=0.0,
+        stderr="stated") -> Calibration:
     """filterpy EKF on the chart ``(x, y, z, a, b)`` with a consistent prior and ``h(x) = d(x)``.
 
     Parameters
@@ -352,8 +353,11 @@ def ekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAUL
         Prior 1-sigma of the zero-point error (mm) and of the direction tilt (rad).
     Q : float
         Process noise on every state (default 0: the parameters are constant).
+    stderr : ``"stated"`` (default, the filter's ``P``) or ``"residual"``, as :func:`iekf`'s.
     """
-    return _sequential("ekf", nominal, obs, sigma_mm, P0_sigma, Q, 1, (0.0, 0.0))
+    if stderr not in ("stated", "residual"):
+        raise ValueError(f"stderr {stderr!r}: expected 'stated' or 'residual'")
+    return _sequential("ekf", nominal, obs, sigma_mm, P0_sigma, Q, 1, (0.0, 0.0), stderr)
 
 
 def iekf(nominal: SensorLayout, obs: Observations, sigma_mm=None, P0_sigma=DEFAULT_P0_SIGMA, passes=10,

@@ -29,11 +29,13 @@ DEMO_STEPS = (
     ("5. Micro-plane against micro-sphere normals on a curved panel (R = 800 mm)",
      "normals {fx}/panel_cyl800.stl --layout {fx}/layout_table6.toml --grid 40 --tilt-deg 2 --seed 1 "
      "--plot {out}/panel_errors.png"),
-    ("6. Simulate a production log: 5000 holes drilled with the calibrated head, L3 knocked at hole 3000",
-     "simulate-log --layout {out}/calibrated.toml --holes 5000 --shift L3:0.015@3000 --seed 1 "
+    ("6. Simulate a production log: 5000 holes drilled with that head (its temperature coefficient drawn), "
+     "L3 knocked at hole 3000",
+     "simulate-log --layout {out}/calibrated_extended.toml --holes 5000 --shift L3:0.015@3000 --seed 1 "
      "--out {out}/hole_log.csv"),
-    ("7. Measure every hole on the flat panel: angle to the drill axis with U95, verdict, drift watch",
-     "measure {out}/hole_log.csv --layout {out}/calibrated.toml --min-radius-mm inf --out {out}/holes.csv"),
+    ("7. Measure every hole on the flat panel with the head's term removed from every reading (its covariance in "
+     "U95): angle to the drill axis with U95, verdict, drift watch",
+     "measure {out}/hole_log.csv --layout {out}/calibrated_extended.toml --min-radius-mm inf --out {out}/holes.csv"),
 )
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.sym3 import smallest_rotation
+from metrology.measure.commanded import cad_normal_tcs, commanded_turn
 from metrology.measure.normals import drill_axis
 
 __all__ = ["second_order_readings", "convention_spin", "beyond_second_order", "Beyond"]
@@ -83,9 +84,10 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0, refit=None):
         Rc = terms.tcs2panel
         ok0 = fit0.ok & _finite_rows(Rc)
         m = fit0.normal
-        with np.errstate(invalid="ignore", divide="ignore"):
-            e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2],
-                              drill_axis(layout)[2])
+        with np.errstate(invalid="ignore", divide="ignore"):  # a pose off the CAD's normal: metrology.measure.commanded
+            sa = drill_axis(layout)[2]
+            e = commanded_turn([[Rc[:, i, j] for j in range(3)] for i in range(3)], (m[:, 0], m[:, 1], m[:, 2]),
+                               cad_normal_tcs(terms.axes, sa), sa)
         y = [[np.where(ok0, e[i][j], float(i == j)) for j in range(3)] for i in range(3)]
         Y = np.empty((N, 3, 3))
         for i in range(3):

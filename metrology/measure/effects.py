@@ -2,11 +2,10 @@
 
 Where readings enter a batch (:func:`metrology.measure.holes.measure_batch`, the controller's
 :func:`metrology.measure.surface.surface_normal`, ``metro normals``) they pass through
-:func:`apply_terms`: the terms are removed (:func:`metrology.core.effects.apply.correct_readings`)
-with the covariates the log gives, the temperature from its ``temperature_c`` column and each beam's
-incidence from the hole's own micro-plane (:data:`INCIDENCE_PASSES` pass: the normal of the raw
-readings; a 50 um bias moves it by about 1 mrad over the spots' 50 mm, which moves ``tan^2`` of a
-30 deg incidence by 1.5e-3 of itself: 0.1 um of a 50 um term, so a second pass changes nothing).
+:func:`apply_terms`: the temperature from the log's ``temperature_c`` column, and the terms removed by
+:func:`metrology.core.effects.apply.remove_terms`, the one implementation ``metro normals`` uses too
+(each beam's incidence from the hole's own micro-plane of the raw readings; a row whose covariate is
+not known has its term-bearing readings blanked).
 
 **The terms in U95** (the Budget source ``"effects"``): the parameters ``theta`` of the terms
 were estimated with the sensors' chart parameters ``beta`` (jointly, by ``diagnose --out`` or
@@ -36,13 +35,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from metrology.core.effects.apply import Corrected, correct_readings, covariates_for, incidence_from_normal
+from metrology.core.effects.apply import INCIDENCE_PASSES, Corrected, micro_normals, remove_terms
 from metrology.core.model import direction_basis
 
 __all__ = ["EFFECTS", "Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "effects_slope_cov", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
 
-#: passes of the incidence: the normal of the readings, the incidence, the corrected readings
-INCIDENCE_PASSES = 1
 #: the calibration's covariance given the terms is taken as block diagonal (sensors independent) when the
 #: layout's is and its cross-sensor entries are below this share of its largest (rounding of the joint fit)
 OFF_BLOCK_RTOL = 1e-9
@@ -50,26 +47,6 @@ OFF_BLOCK_RTOL = 1e-9
 EFFECTS = "effects"
 #: the hole log's column a temperature coefficient reads (deg C)
 TEMPERATURE_COLUMN = "temperature_c"
-
-
-def micro_normals(layout, d) -> np.ndarray:
-    """``(N, 3)`` unit, TCS: the least-squares plane ``z = c + g_x x + g_y y`` through the finite
-    projection points of each row of ``d (N, n)`` mm (NaN with fewer than 3), along the beams."""
-    w = np.isfinite(d).T.astype(float)  # (n, N), sensor-major as hole_normals
-    dT = np.where(w > 0, d.T, 0.0)
-    E, u = layout.zero, layout.direction
-    x, y, z = (E[:, k, None] + dT * u[:, k, None] for k in range(3))
-    cnt = np.maximum(w.sum(0), 1.0)
-    xc, yc, zc = (v - (w * v).sum(0) / cnt for v in (x, y, z))
-    sxx, syy, sxy = (w * xc * xc).sum(0), (w * yc * yc).sum(0), (w * xc * yc).sum(0)
-    sxz, syz = (w * xc * zc).sum(0), (w * yc * zc).sum(0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        det = sxx * syy - sxy * sxy
-        gx, gy = (syy * sxz - sxy * syz) / det, (sxx * syz - sxy * sxz) / det
-    s = 1.0 if np.mean(u[:, 2]) > 0 else -1.0
-    n = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (s / np.sqrt(1.0 + gx * gx + gy * gy))[:, None]
-    n[w.sum(0) < 3] = np.nan
-    return n
 
 
 @dataclass(frozen=True)
@@ -156,12 +133,13 @@ def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
     return tuple(np.where(np.isfinite(x), x, 0.0) for x in c), (gx, gy)
 
 
-def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:
+def apply_terms(layout, d, table=None, temp_c=None, what="the log", shape=None) -> Applied:
     """The readings ``d (N, n)`` mm of ``layout``'s sensors with its terms removed (:class:`Applied`).
 
     The temperature is ``temp_c (N,)`` deg C, else the ``temperature_c`` column of ``table`` (a
     pyarrow Table of the same rows) when a term needs it; a term whose covariate is missing raises
-    ValueError naming the column (``what`` names the source)."""
+    ValueError naming the column (``what`` names the source). ``shape (N, 3, 3)`` 1/mm TCS, each row's local
+    surface where the panel is known (``measure --panel``): each beam's incidence at its own spot."""
     terms = layout.effects
     if terms is None:
         return Applied(d, None, layout)
@@ -173,40 +151,7 @@ def apply_terms(layout, d, table=None, temp_c=None, what="the log") -> Applied:
                              f"needs the temperature of every hole")
         col = table.column(TEMPERATURE_COLUMN)
         temp_c = np.asarray(col.cast("float64").to_numpy(zero_copy_only=False), float)
-    N = len(d)
-    cos = None
-    passes = INCIDENCE_PASSES if "incidence" in needs else 0
-    if passes:
-        cos = incidence_from_normal(layout, micro_normals(layout, d))
-    temp = None if temp_c is None else np.where(np.isfinite(temp_c), temp_c, np.nan)
-    for k in range(max(passes, 1)):
-        cov = covariates_for(layout, N, temp, cos)
-        corr = _correct_rows(terms, d, cov, what)
-        if k + 1 < passes:
-            cos = incidence_from_normal(layout, micro_normals(layout, corr.d))
-    return Applied(corr.d, corr, layout)
-
-
-def _correct_rows(terms, d, cov, what):
-    """:func:`correct_readings` where the covariates are known; a row whose temperature is blank, or
-    whose incidence cannot be found (fewer than 3 readings), has its term-bearing readings blanked (no
-    reading the model cannot place): the hole is then measured on the others or not at all."""
-    ok_t = np.isfinite(cov.temp_c) if "temperature_c" in terms.needs() else np.ones(len(d), bool)
-    ok_c = np.ones(d.shape, bool)
-    if "incidence" in terms.needs():
-        ok_c = np.isfinite(cov.cos_inc)
-    ok = ok_t[:, None] & ok_c
-    if ok.all():
-        return correct_readings(terms, d, cov, what)
-    if "temperature_c" in terms.needs() and not ok_t.any():
-        correct_readings(terms, d, cov, what)  # raises, naming the column
-    cols = np.zeros(d.shape[1], bool)
-    for c in terms.components:
-        cols[c.sensors[0]] = True
-    dd = np.where(ok | ~cols[None], d, np.nan)
-    safe = replace(cov, temp_c=np.where(np.isfinite(cov.temp_c), cov.temp_c, 20.0),
-                   cos_inc=np.where(np.isfinite(cov.cos_inc), cov.cos_inc, 1.0))
-    return correct_readings(terms, dd, safe, what)
+    return Applied((corr := remove_terms(layout, d, temp_c, what, shape)).d, corr, layout)
 
 
 def check_log(layout, log) -> None:
@@ -232,6 +177,8 @@ def surface_normal(layout, d, shape, temp_c=None):
         return plain(layout, d, shape)
     d = np.asarray(d, float)
     single = d.ndim == 1
-    dd = apply_terms(layout, d.reshape(-1, layout.n), temp_c=None if temp_c is None else np.atleast_1d(temp_c),
-                     what="surface_normal").d
+    dd = d.reshape(-1, layout.n)
+    K = np.broadcast_to(np.asarray(shape, float).reshape(-1, 3, 3), (len(dd), 3, 3))  # each spot's incidence on it
+    dd = apply_terms(layout, dd, temp_c=None if temp_c is None else np.atleast_1d(temp_c), what="surface_normal",
+                     shape=K).d
     return plain(replace(layout, effects=None), dd[0] if single else dd, shape)

@@ -335,13 +335,14 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     import pyarrow as pa
 
     names = layout.names
-    d = (applied := apply_terms(layout, _readings(table, names), table)).d  # the layout's head terms removed
-    N = len(d)
     surf = settings.surfaces
     placed = None if surf is None else place(surf, table, layout)
+    shape = None if placed is None else placed.shape  # an incidence term: at each spot of the known surface
+    d = (applied := apply_terms(layout, _readings(table, names), table, shape=shape)).d  # the head terms removed
+    N = len(d)
     before = _measure(applied.normals_layout, d, settings, placed, effects=applied)
     if all(f"d_{s}_after" in table.column_names for s in names):
-        da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table)).d
+        da = (applied_after := apply_terms(layout, _readings(table, names, "_after"), table, shape=shape)).d
         after = _measure(applied_after.normals_layout, da, settings,
                          None if placed is None else placed.after(before.extra.turn), effects=applied_after)
         judge_after = np.isfinite(da).any(1)

@@ -4,9 +4,8 @@ The true head's terms act on the distances the beams travel (:func:`with_terms`)
 from the caller (``metro normals`` takes them from the forward simulator's physics,
 :func:`metrology.sim.head_terms.properties_from_terms`), given each beam's true distance and its
 incidence angle on the face it hit (:func:`beam_incidence`). The estimating layout's terms are
-removed from the readings before the micro-plane or micro-sphere is fitted (:func:`corrected`), the
-incidence taken from the micro-plane of the raw readings, as ``metro measure`` does
-(:mod:`metrology.measure.effects`). A temperature coefficient needs each reading's temperature,
+removed from the readings before the micro-plane or micro-sphere is fitted (:func:`corrected`) by the
+one implementation ``metro measure`` uses (:func:`metrology.core.effects.apply.remove_terms`). A temperature coefficient needs each reading's temperature,
 which ``normals`` has not: refused (:func:`check_terms`).
 """
 
@@ -51,18 +50,13 @@ def with_terms(d, offsets, caster, layout, R, tri):
 
 
 def corrected(layout, d) -> np.ndarray:
-    """``(m, n)`` mm: the readings ``d`` with ``layout``'s terms removed (``d`` itself without terms)."""
+    """``(m, n)`` mm: the readings ``d`` with ``layout``'s terms removed (``d`` itself without terms), by
+    :func:`metrology.core.effects.apply.remove_terms`, as ``metro measure`` removes them: each beam's
+    incidence from the pose's micro-plane of the raw readings; a pose with fewer than 3 readings (no plane,
+    no incidence) has its term-bearing readings blanked. A temperature coefficient is refused before
+    (:func:`check_terms`)."""
     if layout.effects is None:
         return d
-    from metrology.core.effects.apply import correct_readings, covariates_for, incidence_from_normal
-    from metrology.core.normals import micro_plane_normal
+    from metrology.core.effects.apply import remove_terms
 
-    cos = None
-    if "incidence" in layout.effects.needs():
-        n = np.full((len(d), 3), np.nan)
-        ok = np.all(np.isfinite(d), axis=1)
-        if np.any(ok):
-            n[ok] = micro_plane_normal(layout.zero, layout.direction, d[ok])
-        cos = incidence_from_normal(layout, n)
-        cos = np.where(np.isfinite(cos), cos, 1.0)  # a pose without a normal has no reading to correct
-    return correct_readings(layout.effects, d, covariates_for(layout, len(d), None, cos), "metro normals").d
+    return remove_terms(layout, d, None, "metro normals").d

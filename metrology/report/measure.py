@@ -111,7 +111,8 @@ def measure_text(report) -> str:
                "judged angle: none (no hole was judged)"),
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " (the layout has no calibration covariance)") + _panel_terms(report)
-              + ", 95 %"]
+              + (f" + the head's terms ({', '.join(report.effects)}), removed from every reading" if report.effects
+                 else "") + ", 95 %"]
     ch = report.chart
     lines += ["", f"drift watch: two-sided CUSUM on the redundant reading's misfit per cell (k {ch.k}, "
                   f"h {ch.h}, in-control ARL {ch.arl0_holes:,.0f} holes; a shift of 1 scale is "

@@ -70,6 +70,9 @@ def test_demo_runs_from_an_empty_folder_on_the_shipped_data(tmp_path, monkeypatc
     for step in ("fit-plane", "calibrate", "validate", "diagnose", "normals"):
         assert f"$ metro {step}" in r.output
     assert "cause:" in r.output and "recommendation:" in r.output
+    # the round trip: diagnose --out, calibrate --layout, measure --layout removing the term from every reading
+    assert "--out" in r.output and "--layout" in r.output
+    assert "the head's terms (drift.L3@temp), removed from every reading" in r.output
     for name in ("plane.json", "calibrated.toml", "validation.png", "panel_errors.png", "diagnose/residuals_base.png",
                  "diagnose/residuals_named.png", "calibration/convergence.png"):
         assert (tmp_path / "metro-demo" / name).stat().st_size > 0

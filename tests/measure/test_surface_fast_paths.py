@@ -103,6 +103,19 @@ def _old_convention_spin(Rc, m, s):
     return np.swapaxes(Qm, 1, 2) @ X @ Qm
 
 
+def _plain_commanded_turn(Rc, m, nt, s):
+    """commanded_turn's products (metrology/measure/commanded.py): the head ``R_c Q(m -> n_t)`` kept at the
+    commanded spin in the cell's convention at its axis, ``Z = R_c^T R``, and ``Y = Q(n_t -> sg e_z) Z Q_m``."""
+    sg = np.broadcast_to(np.array([0.0, 0.0, -s]), m.shape)
+    R = Rc @ _old_smallest(m, nt)
+    a, f = R[:, :, 2] * s, Rc[:, :, 2] * s
+    flip = np.array([1.0, -s, -s])
+    down = np.broadcast_to(np.array([0.0, 0.0, -1.0]), m.shape)
+    spin_c = np.swapaxes(_old_smallest(down, f) * flip, 1, 2) @ Rc
+    Z = np.swapaxes(Rc, 1, 2) @ (_old_smallest(down, a) * flip) @ spin_c
+    return _old_smallest(nt, sg) @ Z @ _old_smallest(sg, m)
+
+
 def _poses_and_normals(rng, h, s):
     """Commanded poses (the cell's convention at CAD normals up to 30 deg off the panel's z, spun and
     tilted a little) and measured normals a few degrees off the drill axis."""
@@ -141,13 +154,18 @@ def test_beyond_turns_the_shape_and_axes_and_corrects_the_readings_as_the_plain_
     Rc, _ = _poses_and_normals(rng, h, sa)
     d = lay.range_mm.mean(1)[None] + rng.normal(0.0, 1.0, (h, lay.n))
     K = _tangent_shapes(rng, h)
+    # the local axes tangent at the CAD's normal, which the commanded pose holds 0.02 rad off its axis
+    nt = rng.normal(0.0, 0.03, (h, 3)) + [0.0, 0.0, -sa]
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
     axes = rng.normal(size=(h, 2, 3))
-    axes /= np.linalg.norm(axes, axis=2, keepdims=True)
+    axes[:, 0] -= np.einsum("hi,hi->h", axes[:, 0], nt)[:, None] * nt
+    axes[:, 0] /= np.linalg.norm(axes[:, 0], axis=1, keepdims=True)
+    axes[:, 1] = np.cross(nt, axes[:, 0])
     higher = rng.normal(0.0, 1e-5, (h, 9))
     fit0 = fit_surface(lay, d, K, full=False)
-    for terms in (Beyond(axes, higher, Rc), Beyond(axes, higher, None, _old_convention_spin(Rc, fit0.normal, sa))):
+    Yr = _plain_commanded_turn(Rc, fit0.normal, nt, sa)
+    for terms in (Beyond(axes, higher, Rc), Beyond(axes, higher, None, Yr)):
         d2, kt, Y = beyond_second_order(lay, d, K, terms, fit0)
-        Yr = _old_convention_spin(Rc, fit0.normal, sa)
         np.testing.assert_allclose(Y, Yr, rtol=0, atol=2e-15)
         KY = np.swapaxes(Yr, 1, 2) @ K @ Yr
         for e, (i, j) in zip(kt, ((0, 0), (0, 1), (1, 1))):
