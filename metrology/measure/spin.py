@@ -208,7 +208,10 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     where the spin's share of U95 is under :data:`SPIN_READ_SHARE` stay ``h0, e0``; where the spin's estimate is
     no better than ``+-spin``, or lies beyond it by more than its doubt, they are judged at the convention with
     ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`). ``read``
-    False (no redundant reading): the convention with ``+-spin``, its term from the ends."""
+    False (no redundant reading): the convention with ``+-spin``, its term from the ends.
+
+    A hole judged at the convention is ``h0``'s (the same fit: the shape unturned, ``+-spin``), and its end at
+    ``+spin`` the fit the read already made; the other fits go in one call (:func:`_fits`)."""
     a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
     r = np.flatnonzero((a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95)) & (spin <= SPIN_ENDS_MAX))
     if not r.size:
@@ -216,17 +219,18 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     dd, shape, u_shape, spin, higher = dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r)
     zero = np.zeros(r.size)
 
-    def fit(psi, width):
-        K, hi = _spun(shape, higher, psi)
-        return _fit(sub, dd, K, u_shape, width, hi)
+    def fit(k, psi, width):  # the holes k (an index into r) turned by psi (rad), the spin's doubt width
+        K, hi = _spun(shape[k], None if higher is None else higher.rows(k), psi)
+        return _fit(sub, dd[k], K, u_shape[k], width, hi)
 
     r0 = h0.residual[r]
     if not read:  # no redundant reading: the convention, its term from the spin's ends
-        psi, width, reach = zero, spin, zero
+        psi, width, reach, h1 = zero, spin, zero, None
     else:
-        psi, width, reach = _estimate(fit, r0, spin, zero)
-    h, e = fit(psi, width)
-    hp, hm = fit(psi + width, zero)[0], fit(psi - width, zero)[0]
+        psi, width, reach, h1 = _estimate(fit, r0, spin)
+    u = np.flatnonzero(width < spin)  # the spin read: judged at it
+    c = np.flatnonzero(width >= spin)  # the convention with +-spin
+    (h, e), hp, hm = _fits(fit, u, c, psi, width, spin, h1, _rows(h0, r), e0.rows(r))
     h = _spin_ends(h, hp, hm)
     e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
     if h0.misfit_bound is not None:  # rule 2: the most the spin within +-spin moves the misfit, beyond its first order
@@ -238,24 +242,54 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     return _put(h0, r, h), _with(e0, r, e)
 
 
-def _estimate(fit, r0, spin, zero):
-    """``(psi, width, reach)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and its
-    doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; and how far the misfit moves to the
-    spin's ends (h,) mm."""
-    h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
+def _fits(fit, u, c, psi, width, spin, h1, hc, ec):
+    """``((h, e), hp, hm)`` of the holes ``u`` (the spin read: at ``psi`` with ``width``, and at ``psi +- width``) and
+    ``c`` (the convention: ``hc, ec``, at ``+-spin``; ``h1`` the fit at ``+spin`` where the read made it), in order
+    ``0..len(psi)``: one call of ``fit`` for the fits not yet made."""
+    from metrology.measure.surface import PanelFit
+
+    zero = np.zeros(len(psi))
+    k = [u, u, u, c] + ([c] if h1 is None else [])
+    P = [psi[u], psi[u] + width[u], psi[u] - width[u], -spin[c]] + ([spin[c]] if h1 is None else [])
+    W = [width[u], zero[u], zero[u], zero[c]] + ([zero[c]] if h1 is None else [])
+    ha, ea = fit(np.concatenate(k), np.concatenate(P), np.concatenate(W))
+    cut = np.cumsum([len(x) for x in k])[:-1]
+    parts = [np.arange(a, b) for a, b in zip(np.r_[0, cut], np.r_[cut, len(ea.correction)])]
+    order = np.argsort(np.concatenate([u, c]), kind="stable")
+
+    def joined(hu, hc):  # (u then c) in hole order
+        return _rows(concat_normals([hu, hc]), order)
+
+    h = joined(_rows(ha, parts[0]), hc)
+    e = PanelFit.concat([ea.rows(parts[0]), ec]).rows(order)
+    hp = joined(_rows(ha, parts[1]), _rows(ha, parts[4]) if h1 is None else _rows(h1, c))
+    hm = joined(_rows(ha, parts[2]), _rows(ha, parts[3]))
+    return (h, e), hp, hm
+
+
+def _estimate(fit, r0, spin):
+    """``(psi, width, reach, h1)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and
+    its doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; how far the misfit moves to the
+    spin's ends (h,) mm; and the fit at ``+spin`` (HoleNormals). The secant steps only where the doubt admits a read
+    (it comes from the first slope)."""
+    every = np.arange(len(r0))
+    zero = np.zeros(len(r0))
+    h1, _ = fit(every, spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = (h1.residual - r0) / spin
         u_psi = h1.residual_sd / np.abs(slope)
         psi = -r0 / slope
-        for _ in range(SPIN_READ_STEPS - 1):
-            p = np.clip(np.nan_to_num(psi), -spin, spin)
-            hp, _ = fit(p, zero)
-            slope = np.where(np.abs(p) > 1e-3 * spin, (hp.residual - r0) / np.where(p == 0, 1.0, p), slope)
-            psi = p - hp.residual / slope
         width = SPIN_READ_WIDTH * u_psi
+        may = np.flatnonzero(np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin))
+        for _ in range(SPIN_READ_STEPS - 1 if may.size else 0):
+            p = np.clip(np.nan_to_num(psi[may]), -spin[may], spin[may])
+            hp, _ = fit(may, p, zero[may])
+            slope[may] = np.where(np.abs(p) > 1e-3 * spin[may], (hp.residual - r0[may]) / np.where(p == 0, 1.0, p),
+                                  slope[may])
+            psi[may] = p - hp.residual / slope[may]
     use = np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin) & (np.abs(psi) <= spin + width)
     reach = np.fmax(np.abs(h1.residual - r0), np.abs(slope) * spin)  # mm: the misfit's move to the spin's ends
-    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach
+    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach, h1
 
 
 def _spin_ends(h, hp, hm):
