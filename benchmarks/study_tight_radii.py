@@ -162,7 +162,7 @@ def run(args):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
             acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b", "hit_p", "err_p", "err_c", "u_p", "true_b",
-                                   "ang_b")}
+                                   "ang_b", "bound")}
             disagree, refused, reasons, n_all = 0, 0, Counter(), 0
             for c in range(args.calibrations):
                 true = perturb_layout(rng, nominal)
@@ -203,6 +203,7 @@ def run(args):
                 acc["u_b"].append(ub[okb])
                 acc["true_b"].append(ch.true_angle[okb])
                 acc["ang_b"].append(b.angle_before[okb])
+                acc["bound"].append(b.spin_bound[okb] if b.spin_bound is not None else np.zeros(int(okb.sum()), bool))
                 if args.no_pose:  # U95 on the same logs with the pose (nan where it judged none)
                     acc["u_p"].append(np.where(okp, up, np.nan)[okb])
                 acc["judged"].append(judged)
@@ -239,9 +240,9 @@ def run(args):
     return out
 
 
-#: the spin's share of U95^2 beyond which choice "B" leaves a hole `not_measured` (the rule measured here against
-#: judging every hole with its wide U95, choice "A")
-SPIN_SHARES = (0.5, 0.75)
+#: the spin's share of U95^2 (``1 - (U95 with the pose / U95)^2`` on the same log) beyond which choice "B<share>" leaves
+#: a hole `not_measured`; choice "B" is metro's own count (``HoleBatch.spin_bound``, measure.spin.SPIN_BOUND_SHARE)
+SPIN_SHARES = (0.75,)
 
 
 def verdicts(angle, U, tol):
@@ -251,15 +252,15 @@ def verdicts(angle, U, tol):
 
 
 def choices(cat, tol):
-    """Judge every hole with its U95 (A) or leave `not_measured` those whose U95^2 the spin's term holds more than a
-    share of (B, per :data:`SPIN_SHARES`; the spin's share ``1 - (U95 with the pose / U95)^2`` on the same log): per
+    """Judge every hole with its U95 (A) or leave `not_measured` those whose U95 rests on the spin's bound (B: metro's
+    ``spin_bound``; B<share>: the spin's share of U95^2 beyond :data:`SPIN_SHARES`): per
     choice the share judged, U95 coverage, median error (deg), decisive verdicts, and wrong ones at ``tol`` (rad:
     FAIL on a hole truly within tolerance, CONFORMS on one truly out)."""
     err, U, true, ang = np.abs(cat["ang_b"] - cat["true_b"]), cat["u_b"], cat["true_b"], cat["ang_b"]
     with np.errstate(invalid="ignore"):
         share = np.nan_to_num(1.0 - (cat["u_p"] / U) ** 2, nan=0.0)
     out = {}
-    for name, keep in [("A", np.ones(len(U), bool))] + [(f"B{x:g}", share <= x) for x in SPIN_SHARES]:
+    for name, keep in [("A", np.ones(len(U), bool)), ("B", ~cat["bound"])] + [(f"B{x:g}", share <= x) for x in SPIN_SHARES]:
         ok, fail = verdicts(ang[keep], U[keep], tol)
         out[name] = {"judged": float(keep.mean()), "coverage": float((err[keep] <= U[keep]).mean()) if keep.any() else None,
                      "median_err_deg": float(np.degrees(np.median(err[keep]))) if keep.any() else None,

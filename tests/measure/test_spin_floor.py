@@ -74,6 +74,8 @@ def test_three_sensors_without_the_pose_give_the_centre_estimators_angle_on_r50(
          for k, log in (("bare", bare), ("centre", log_table(centre)), ("pose", posed))}
     err = {k: np.abs(v.angle_before - ch.true_angle) for k, v in b.items()}
     assert np.isfinite(err["bare"]).all() and b["bare"].on_convention.all()
+    # the summary's count: most holes' U95 rests on the spin's bound here, none with the pose
+    assert b["bare"].spin_bound.mean() > 0.3 and not b["pose"].spin_bound.any()
     # the angle without the pose is the one at the spin's centre (the stated convention's middle)
     np.testing.assert_allclose(b["bare"].angle_before, b["centre"].angle_before, rtol=0, atol=np.radians(1e-4))
     # and the spin costs: the oracle (the pose) is better by far on R 50, so no estimator without it reaches it
