@@ -61,17 +61,20 @@ SPIN_READ_WIDTH = 2.0
 SPIN_READ_SHARE = 0.1
 #: the spin read is used where its doubt (+- SPIN_READ_WIDTH u_psi) is under this fraction of +-spin: a misfit that
 #: barely moves with the spin (the Table 2 head on R 50: 2-7 um per deg against its 5 um sd) reads it off by 1-2 deg
-#: where the sd said 0.4-0.8 (the misfit's other terms at a tight radius, and its curvature in the spin, are as large
-#: as the spin's): there the convention with +-spin is kept (benchmarks/results/tight_radii.md)
+#: where the sd said 0.4-0.8: its spots lie on the TCS axes, and a cylinder along an arm turned by psi moves their
+#: misfit as cos 2 psi, even in the spin (its curvature x spin is 2.8x its slope), so neither one hole nor a run of
+#: them pooled reads it (benchmarks/study_spin_pool.py): there the convention with +-spin is kept
+#: (benchmarks/results/tight_radii.md)
 SPIN_READ_MAX = 0.25
-#: a hole judged with its spin on the convention's bound (not read: no redundant reading, or one that does not see
-#: the spin) is counted as resting on the bound where the spin's term holds over this share of its U95^2 (the trace of
-#: the tilt's covariance): the summary names how many, with the fix (log the commanded pose). Such holes are
-#: **judged** with that U95, never left `not_measured` for it: the alternative, `not_measured` beyond this share, was
-#: measured on the study's no-pose rows (benchmarks/results/tight_radii.md): it left 23-73 % of the holes judged where
-#: it acted (Table 2 on R 50 along, the 3-sensor ring on R 50), removed no false FAIL (there were none) and 3 false
-#: CONFORMs in 12,000 holes, and its median error among the rest fell only to the floor of the holes kept; U95 holds
-#: either way (coverage 92.2-97.8 %), and a verdict with a U95 that holds is what a metrology engineer can use
+#: a hole judged with its spin on the convention's bound (not read: no redundant reading, or one blind to the spin,
+#: as Table 2's cross on a cylinder along an arm) is counted as resting on the bound where the spin's term holds over
+#: this share of its U95^2 (the trace of the tilt's covariance): the summary names how many, with the fix (log the
+#: commanded pose). Such holes are **judged** with that U95, never left `not_measured` for it. Measured on the study's
+#: 40 no-pose rows (flat included; 14,400 holes judged, benchmarks/results/tight_radii.md): leaving them `not_measured` would judge
+#: 76 % (none of Table 2 on R 50 along, none of the 3-sensor ring on R 50), give 10,745 decisive verdicts at a 1 deg
+#: tolerance against 14,031, false FAILs 0 against 0, false CONFORMs 2 against 3; U95 holds either way (92.2-97.8 %).
+#: Without the pose the error there is the floor of any estimator that knows only the bound (the pose at the
+#: spin's centre gives the same), so refusing those holes buys no accuracy, only fewer verdicts
 SPIN_BOUND_SHARE = 0.5
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
