@@ -272,26 +272,27 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
 def _fits(fit, u, c, psi, width, spin, h1, hc, ec):
     """``((h, e), hp, hm)`` of the holes ``u`` (the spin read: at ``psi`` with ``width``, and at ``psi +- width``) and
     ``c`` (the convention: ``hc, ec``, at ``+-spin``; ``h1`` the fit at ``+spin`` where the read made it), in order
-    ``0..len(psi)``: one call of ``fit`` for the fits not yet made."""
+    ``0..len(psi)``: only the fits not yet made (one call each: a call's rows stay near the cache's size)."""
     from metrology.measure.surface import PanelFit
 
     zero = np.zeros(len(psi))
-    k = [u, u, u, c] + ([c] if h1 is None else [])
-    P = [psi[u], psi[u] + width[u], psi[u] - width[u], -spin[c]] + ([spin[c]] if h1 is None else [])
-    W = [width[u], zero[u], zero[u], zero[c]] + ([zero[c]] if h1 is None else [])
-    ha, ea = fit(np.concatenate(k), np.concatenate(P), np.concatenate(W))
-    cut = np.cumsum([len(x) for x in k])[:-1]
-    parts = [np.arange(a, b) for a, b in zip(np.r_[0, cut], np.r_[cut, len(ea.correction)])]
     order = np.argsort(np.concatenate([u, c]), kind="stable")
 
     def joined(hu, hc):  # (u then c) in hole order
         return _rows(concat_normals([hu, hc]), order)
 
-    h = joined(_rows(ha, parts[0]), hc)
-    e = PanelFit.concat([ea.rows(parts[0]), ec]).rows(order)
-    hp = joined(_rows(ha, parts[1]), _rows(ha, parts[4]) if h1 is None else _rows(h1, c))
-    hm = joined(_rows(ha, parts[2]), _rows(ha, parts[3]))
-    return (h, e), hp, hm
+    if u.size:
+        hu, eu = fit(u, psi[u], width[u])
+        hpu, hmu = fit(u, psi[u] + width[u], zero[u])[0], fit(u, psi[u] - width[u], zero[u])[0]
+    else:
+        hu, eu = _rows(hc, u), ec.rows(u)
+        hpu = hmu = hu
+    if not c.size:
+        return (hu, eu), hpu, hmu
+    hmc = fit(c, -spin[c], zero[c])[0]
+    hpc = fit(c, spin[c], zero[c])[0] if h1 is None else _rows(h1, c)
+    e = PanelFit.concat([eu, ec]).rows(order)
+    return (joined(hu, hc), e), joined(hpu, hpc), joined(hmu, hmc)
 
 
 def _estimate(fit, r0, spin):
