@@ -238,7 +238,7 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     False (no redundant reading): the convention with ``+-spin``, its term from the ends.
 
     A hole judged at the convention is ``h0``'s (the same fit: the shape unturned, ``+-spin``), and its end at
-    ``+spin`` the fit the read already made; the other fits go in one call (:func:`_fits`)."""
+    ``+spin`` the fit the read already made (:func:`_fits`)."""
     a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
     r = np.flatnonzero((a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95)) & (spin <= SPIN_ENDS_MAX))
     if not r.size:
