@@ -74,9 +74,37 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
     return HoleTable(name, tuple(f"H{i:04d}" for i in range(m)), P, feed)
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0):
+def spin_path(rng, along: str, spin_deg: float, drift_holes: float):
+    """The head's spin along the log (``LogSpec.spin_path``): ``hole`` None (uniform per hole, as the simulator
+    draws it); ``run`` one spin for the whole log, uniform within +-spin; ``drift`` a sine of amplitude spin and
+    period ``drift_holes`` holes, its phase drawn."""
+    spin = np.radians(spin_deg)
+    if along == "run":
+        v = float(rng.uniform(-spin, spin))
+        return lambda hole: np.full(len(hole), v)
+    if along == "drift":
+        phase = float(rng.uniform(0.0, 2 * np.pi))
+        return lambda hole: spin * np.sin(2 * np.pi * np.asarray(hole) / drift_holes + phase)
+    return None
+
+
+def centre_pose(spec, ch):
+    """The log's commanded pose with the head's spin at the convention's centre (0): what an estimator that knows
+    only that the spin lies within +-spin takes (the floor without a redundant reading)."""
+    from dataclasses import replace
+
+    from metrology.sim.forward.log import _head, rotation_vector
+    from metrology.sim.forward.log_write import log_table
+
+    s = spec.axis_sign
+    feed = spec.table.feed[np.asarray(ch.hole) % spec.table.m]
+    return log_table(replace(ch, pose_rotvec=rotation_vector(_head(feed, np.array([1.0, -s, -s]), np.zeros(len(feed))))))
+
+
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0, path=None):
     """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
-    the pose and ``same``, also the log with its pose and its surfaces."""
+    the pose and ``same``, also the log with its pose, its surfaces, and the log with its pose at the spin's centre
+    (:func:`centre_pose`); ``path`` the spin along the log (:func:`spin_path`)."""
     from dataclasses import replace
 
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
@@ -88,7 +116,8 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin
     from tests.measure.panel_fixtures import panel_mesh
 
     table = crest_table(panel, 100.0, holes)
-    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(spin_deg))
+    spec = LogSpec(true_layout=true, cell_layout=cal, panel=panel, table=table, spin_rad=np.radians(spin_deg),
+                   spin_path=path)
     ch = next(simulate_cell(spec, int(rng.integers(2**31)), 0, holes, chunk_holes=holes))
     log = log_table(ch)
     if not pose:
@@ -97,7 +126,7 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin
     surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
     if not pose and same:  # the same log with its pose, measured as such (the spin's cost, on the same draws)
-        return ch, log, surf, log_table(ch), replace(surf, spin=0.0)
+        return ch, log, surf, log_table(ch), replace(surf, spin=0.0), centre_pose(spec, ch)
     return ch, log, surf
 
 
@@ -121,8 +150,9 @@ def run(args):
     radii = [float(r) for r in args.radii.split(",") if r]
     lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
-    print(HEADER + (" same logs with the pose: coverage % | median error [deg] |" if args.no_pose else ""))
-    print("|" + "---|" * (13 if args.no_pose else 11))
+    print(HEADER + (" same logs with the pose: coverage % | median error [deg] | with the pose at the spin's centre: "
+                    "median error [deg] |" if args.no_pose else ""))
+    print("|" + "---|" * (14 if args.no_pose else 11))
     for hi, (hname, nominal) in enumerate(heads.items()):
         if hname not in args.heads.split(","):
             continue
@@ -131,7 +161,8 @@ def run(args):
         for pi, (label, R, orient) in enumerate(cases):
             t0 = time.perf_counter()
             rng = np.random.default_rng([args.seed, hi, pi])
-            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b", "hit_p", "err_p")}
+            acc = {k: [] for k in ("hit_b", "hit_a", "err", "judged", "u_b", "hit_p", "err_p", "err_c", "u_p", "true_b",
+                                   "ang_b", "bound")}
             disagree, refused, reasons, n_all = 0, 0, Counter(), 0
             for c in range(args.calibrations):
                 true = perturb_layout(rng, nominal)
@@ -146,8 +177,9 @@ def run(args):
                     panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
+                path = spin_path(rng, args.spin_along, args.sim_spin_deg, args.drift_holes)
                 got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose,
-                              spin_deg=args.sim_spin_deg)
+                              spin_deg=args.sim_spin_deg, path=path)
                 ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
                 if args.no_pose:  # the same log with its pose
@@ -157,6 +189,8 @@ def run(args):
                     ep = np.abs(bp.angle_before - ch.true_angle)
                     acc["hit_p"].append(ep[okp] <= up[okp])
                     acc["err_p"].append(ep[okp])
+                    bc = measure_batch(cal, got[5], Settings(surfaces=got[4]))  # the pose at the spin's centre: the floor
+                    acc["err_c"].append(np.abs(bc.angle_before - ch.true_angle)[np.isfinite(bc.angle_before)])
                 t = b.columns
                 ub = np.radians(t.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
                 ua = np.radians(t.column("U95_after_deg").to_numpy(zero_copy_only=False).astype(float))
@@ -167,6 +201,11 @@ def run(args):
                 acc["hit_a"].append(np.abs(b.angle_after - ch.true_after)[oka] <= ua[oka])
                 acc["err"].append(np.abs(b.angle_before - ch.true_angle)[okb])
                 acc["u_b"].append(ub[okb])
+                acc["true_b"].append(ch.true_angle[okb])
+                acc["ang_b"].append(b.angle_before[okb])
+                acc["bound"].append(b.spin_bound[okb] if b.spin_bound is not None else np.zeros(int(okb.sum()), bool))
+                if args.no_pose:  # U95 on the same logs with the pose (nan where it judged none)
+                    acc["u_p"].append(np.where(okp, up, np.nan)[okb])
                 acc["judged"].append(judged)
                 n_all += len(judged)
                 dis = int(b.disagree.sum())
@@ -194,8 +233,41 @@ def run(args):
             if args.no_pose and cat["hit_p"].size:  # the same logs with their pose
                 row["coverage_pose_same"] = float(cat["hit_p"].mean())
                 row["median_err_pose_same_deg"] = float(np.degrees(np.median(cat["err_p"])))
+                row["median_err_centre_deg"] = float(np.degrees(np.median(cat["err_c"])))
+                row["choices"] = choices(cat, np.radians(args.tol_deg))
             out["rows"].append(row)
             print(line(row), flush=True)
+    return out
+
+
+#: the spin's share of U95^2 (``1 - (U95 with the pose / U95)^2`` on the same log) beyond which choice "B<share>" leaves
+#: a hole `not_measured`; choice "B" is metro's own count (``HoleBatch.spin_bound``, measure.spin.SPIN_BOUND_SHARE)
+SPIN_SHARES = (0.75,)
+
+
+def verdicts(angle, U, tol):
+    """(conforms, fails) bool arrays, ISO 14253-1 (rule 4): conforms where angle + U95 <= tol, fails where
+    angle - U95 > tol (the rest undecided)."""
+    return angle + U <= tol, angle - U > tol
+
+
+def choices(cat, tol):
+    """Judge every hole with its U95 (A) or leave `not_measured` those whose U95 rests on the spin's bound (B: metro's
+    ``spin_bound``; B<share>: the spin's share of U95^2 beyond :data:`SPIN_SHARES`): per
+    choice the share judged, U95 coverage, median error (deg), decisive verdicts, and wrong ones at ``tol`` (rad:
+    FAIL on a hole truly within tolerance, CONFORMS on one truly out)."""
+    err, U, true, ang = np.abs(cat["ang_b"] - cat["true_b"]), cat["u_b"], cat["true_b"], cat["ang_b"]
+    with np.errstate(invalid="ignore"):
+        share = np.nan_to_num(1.0 - (cat["u_p"] / U) ** 2, nan=0.0)
+    out = {}
+    for name, keep in [("A", np.ones(len(U), bool)), ("B", ~cat["bound"])] + [(f"B{x:g}", share <= x) for x in SPIN_SHARES]:
+        ok, fail = verdicts(ang[keep], U[keep], tol)
+        out[name] = {"judged": float(keep.mean()), "coverage": float((err[keep] <= U[keep]).mean()) if keep.any() else None,
+                     "median_err_deg": float(np.degrees(np.median(err[keep]))) if keep.any() else None,
+                     "decisive": int(ok.sum() + fail.sum()), "false_fail": int((fail & (true[keep] <= tol)).sum()),
+                     "false_conform": int((ok & (true[keep] > tol)).sum()),
+                     "truly_within": int((true[keep] <= tol).sum())}
+    out["spin_share_median"] = float(np.median(share))
     return out
 
 
@@ -207,8 +279,8 @@ def line(r):
     return (f"| {r['head']} | {r['panel']} | {r['judged']} / {r['holes']} ({100 * r['share_judged']:.0f} %) | "
             f"{100 * r['coverage_before']:.1f} | {100 * r['coverage_after']:.1f} | {r['median_err_deg']:.4f} | "
             f"{r['err_over_flat']:.2f} | {r['median_U95_deg']:.4f} | {r['disagree']} | {r['logs_refused']} / {r['logs']} | "
-            f"{r['seconds']:.0f} |" + (f" {100 * r['coverage_pose_same']:.1f} | {r['median_err_pose_same_deg']:.4f} |"
-                                       if "coverage_pose_same" in r else ""))
+            f"{r['seconds']:.0f} |" + (f" {100 * r['coverage_pose_same']:.1f} | {r['median_err_pose_same_deg']:.4f} | "
+                                       f"{r['median_err_centre_deg']:.4f} |" if "coverage_pose_same" in r else ""))
 
 
 def main(argv=None):
@@ -227,6 +299,11 @@ def main(argv=None):
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
     ap.add_argument("--sim-spin-deg", type=float, default=2.0,
                     help="the head's true spin about the tool axis, uniform within +-this (measured as +-2 without the pose)")
+    ap.add_argument("--spin-along", choices=("hole", "run", "drift"), default="hole",
+                    help="the true spin: drawn per hole (the simulator's default), one per log, or drifting along it")
+    ap.add_argument("--drift-holes", type=float, default=400.0, help="--spin-along drift: its period, holes")
+    ap.add_argument("--tol-deg", type=float, default=1.0,
+                    help="the tolerance the choices' verdicts are counted at (on the angle before; true angles 0.5-5 deg)")
     ap.add_argument("--seed", type=int, default=53)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)

@@ -397,7 +397,8 @@ def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_la
     s = result.summary
     return KnownSurfaces(surfaces.source, len(surfaces.ids), o.position_error_mm, o.form_tolerance_mm,
                          DEFAULT_SPIN_DEG if o.spin_deg is None else o.spin_deg, surfaces.spin_stated,
-                         s.on_convention, s.spin_free, OffCad(**s.off_cad_figures()), CadCheck(**s.vs_cad_figures()))
+                         s.on_convention, s.spin_free, OffCad(**s.off_cad_figures()), CadCheck(**s.vs_cad_figures()),
+                         s.spin_bound)
 
 
 def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None:

@@ -138,6 +138,7 @@ class KnownSurfaces:
     spin_on_convention_holes, spin_free_holes : int, holes judged with the spin in the cell's convention, and
         with a U95 over every spin
     off_cad : OffCad; cad : CadCheck
+    spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2
     """
 
     source: str
@@ -150,6 +151,7 @@ class KnownSurfaces:
     spin_free_holes: int
     off_cad: OffCad
     cad: CadCheck
+    spin_bound_holes: int = 0
 
     #: each hole's surface known; the bound is not assumed
     known, assumed = True, False
@@ -159,6 +161,7 @@ class KnownSurfaces:
                 "position_error_mm": self.position_error_mm, "form_tolerance_mm": self.form_tolerance_mm,
                 "spin_deg": self.spin_deg, "spin_stated": self.spin_stated, "spin_convention": SPIN_CONVENTION,
                 "spin_on_convention_holes": self.spin_on_convention_holes, "spin_free_holes": self.spin_free_holes,
+                "spin_bound_holes": self.spin_bound_holes,
                 **self.off_cad.to_dict(), **self.cad.to_dict()}
 
 
@@ -232,6 +235,9 @@ class MeasureReport:
                                     f"(+-{cv.spin_deg:g} deg{'' if cv.spin_stated else ', confirmed by the redundant reading'}; "
                                     f"log the commanded pose to know it)", cv.spin_on_convention_holes, None, "holes",
                                     True, gate=False))
+                checks.append(Check("head's spin not read (no redundant reading, or one blind to it): holes whose U95 "
+                                    f"rests on the +-{cv.spin_deg:g} deg bound (over half of it; log the commanded pose)",
+                                    cv.spin_bound_holes, None, "holes", True, gate=False))
                 checks.append(Check("head's spin not known: holes judged with a U95 over every spin",
                                     cv.spin_free_holes, None, "holes", True, gate=False))
             o, c = cv.off_cad, cv.cad

@@ -90,6 +90,8 @@ class HoleBatch:
     on_convention : (N,) bool or None, with the panel known: judged with the head's spin taken from the cell's
         convention (no pose in the log)
     cell, panel : Labels, each hole's cell and panel
+    spin_bound : (N,) bool or None, of ``on_convention``: the spin not read, its bound over
+        :data:`metrology.measure.spin.SPIN_BOUND_SHARE` of U95^2
     """
 
     columns: "pa.Table"
@@ -105,6 +107,7 @@ class HoleBatch:
     on_convention: np.ndarray | None = None
     cell: Labels | None = None
     panel: Labels | None = None
+    spin_bound: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)

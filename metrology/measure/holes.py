@@ -122,6 +122,7 @@ class _Measured:
     extra: "PanelFit | None" = None  # with the panel known: correction, panel_misfit, panel_misfit_z, turn
     spin_free: np.ndarray | None = None  # (N,) bool, with the panel known: judged with the spin not known
     convention: np.ndarray | None = None  # (N,) bool, with the panel known: the spin in the cell's convention
+    spin_bound: np.ndarray | None = None  # (N,) bool, of those: the spin's bound over half U95^2 (measure.spin)
 
 
 #: rows per call of the per-hole maths (the normals, the misfit's moment): its temporaries stay in
@@ -147,7 +148,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, placed: "Placed | None
         from metrology.measure.surface import PanelFit
 
         out.extra = PanelFit.blank(N)
-        out.spin_free, out.convention = np.zeros(N, bool), np.zeros(N, bool)
+        out.spin_free, out.convention, out.spin_bound = np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -188,7 +189,7 @@ def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings,
                       None if placed.higher is None else placed.higher.rows(rs), placed.convention[rs], placed.stated)
     h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
     out.extra.put(rs, j.extra)
-    out.spin_free[rs], out.convention[rs] = j.free, j.convention
+    out.spin_free[rs], out.convention[rs], out.spin_bound[rs] = j.free, j.convention, j.bound
     for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
         prior = out.reason.get(int(rows[i]))
         out.reason[int(rows[i])] = (prior + "; " if prior else "") + (
@@ -392,16 +393,16 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if after is not None:
         unknown = nm & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
-    spin_free = on_convention = None
+    spin_free = on_convention = spin_bound = None
     if placed is not None:  # how each judged hole's spin was taken
-        spin_free = np.where(judge_after, after.spin_free, before.spin_free) if after is not None else before.spin_free
-        on_convention = (np.where(judge_after, after.convention, before.convention) if after is not None
-                         else before.convention)
-        spin_free, on_convention = spin_free & ~nm, on_convention & ~nm
+        spin_free, on_convention, spin_bound = (
+            (np.where(judge_after, getattr(after, f), getattr(before, f)) if after is not None else getattr(before, f))
+            & ~nm for f in ("spin_free", "convention", "spin_bound"))
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,
                      spin_free, on_convention,
-                     *(Labels(*text_codes(out.column(c))) if c in out.column_names else None for c in (CELL, PANEL)))
+                     *(Labels(*text_codes(out.column(c))) if c in out.column_names else None for c in (CELL, PANEL)),
+                     spin_bound=spin_bound)
 
 
 def _verdict(judged, judged_u, tol, sound) -> np.ndarray:

@@ -26,7 +26,7 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   the redundant reading's gross-reading allowance takes the most it moves the misfit.
 
 The reason column says which holes were judged with the spin not known, the summary how many rest on
-the convention.
+the convention, and of those how many on its bound (:data:`SPIN_BOUND_SHARE`).
 """
 
 from __future__ import annotations
@@ -61,9 +61,21 @@ SPIN_READ_WIDTH = 2.0
 SPIN_READ_SHARE = 0.1
 #: the spin read is used where its doubt (+- SPIN_READ_WIDTH u_psi) is under this fraction of +-spin: a misfit that
 #: barely moves with the spin (the Table 2 head on R 50: 2-7 um per deg against its 5 um sd) reads it off by 1-2 deg
-#: where the sd said 0.4-0.8 (the misfit's other terms at a tight radius, and its curvature in the spin, are as large
-#: as the spin's): there the convention with +-spin is kept (benchmarks/results/tight_radii.md)
+#: where the sd said 0.4-0.8: its spots lie on the TCS axes, and a cylinder along an arm turned by psi moves their
+#: misfit as cos 2 psi, even in the spin (its curvature x spin is 2.8x its slope), so neither one hole nor a run of
+#: them pooled reads it (benchmarks/study_spin_pool.py): there the convention with +-spin is kept
+#: (benchmarks/results/tight_radii.md)
 SPIN_READ_MAX = 0.25
+#: a hole judged with its spin on the convention's bound (not read: no redundant reading, or one blind to the spin,
+#: as Table 2's cross on a cylinder along an arm) is counted as resting on the bound where the spin's term holds over
+#: this share of its U95^2 (the trace of the tilt's covariance): the summary names how many, with the fix (log the
+#: commanded pose). Such holes are **judged** with that U95, never left `not_measured` for it. Measured on the study's
+#: 40 no-pose rows (flat included; 14,400 holes judged, benchmarks/results/tight_radii.md): leaving them `not_measured` would judge
+#: 76 % (none of Table 2 on R 50 along, none of the 3-sensor ring on R 50), give 10,745 decisive verdicts at a 1 deg
+#: tolerance against 14,031, false FAILs 0 against 0, false CONFORMs 2 against 3; U95 holds either way (92.2-97.8 %).
+#: Without the pose the error there is the floor of any estimator that knows only the bound (the pose at the
+#: spin's centre gives the same), so refusing those holes buys no accuracy, only fewer verdicts
+SPIN_BOUND_SHARE = 0.5
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)
@@ -84,6 +96,7 @@ class SpinJudged:
     free : (m,) bool, judged with the spin not known (a U95 over every spin)
     convention : (m,) bool, judged with the spin in the cell's convention (no pose: the convention assumed)
     z : (m,) float, the convention's misfit in sigmas where the test refused it (NaN elsewhere)
+    bound : (m,) bool, on the convention with the spin not read, its term over :data:`SPIN_BOUND_SHARE` of U95^2
     """
 
     normals: HoleNormals
@@ -91,6 +104,16 @@ class SpinJudged:
     free: np.ndarray
     convention: np.ndarray
     z: np.ndarray
+    bound: np.ndarray
+
+
+def _spin_share(h) -> np.ndarray:
+    """(m,) float, the spin's share of the tilt's variance (trace) in ``h``'s budget (0 where none)."""
+    if h.budget is None:
+        return np.zeros(len(h.angle))
+    c, t = h.budget.source(SPIN).cov, h.budget.cov
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.nan_to_num((c[:, 0] + c[:, 2]) / (t[:, 0] + t[:, 2]))
 
 
 def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
@@ -145,7 +168,8 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
             hc, ec = _read_spin(sub, dd[c], shape[c], u_shape[c], spin[c], None if higher is None else higher.rows(c),
                                 _rows(h, c), extra.rows(c), read=False)
             h, extra = _put(h, c, hc, everything=True), _with(extra, c, ec)
-        return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan)
+        return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan,
+                          convention & (_spin_share(h) > SPIN_BOUND_SHARE))
     a = np.flatnonzero(~free0)
     parts = []
     z = nan.copy()
@@ -174,8 +198,11 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     if b.size:
         h, extra = _fit(sub, dd[b], shape[b], u_shape[b], spin[b], None, free=True)
         parts.append((b, h, extra))
+    share = np.zeros(m)
+    for idx, hp, _ in parts:
+        share[idx] = _spin_share(hp)
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
-    return SpinJudged(h, extra, free, convention & ~free, z)
+    return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE))
 
 
 def _within_reach(sub, dd, shape, u_shape, spin, higher, r0):
@@ -208,7 +235,10 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     where the spin's share of U95 is under :data:`SPIN_READ_SHARE` stay ``h0, e0``; where the spin's estimate is
     no better than ``+-spin``, or lies beyond it by more than its doubt, they are judged at the convention with
     ``+-spin``; either way the spin's term is taken from the fits at its ends (:func:`_spin_ends`). ``read``
-    False (no redundant reading): the convention with ``+-spin``, its term from the ends."""
+    False (no redundant reading): the convention with ``+-spin``, its term from the ends.
+
+    A hole judged at the convention is ``h0``'s (the same fit: the shape unturned, ``+-spin``), and its end at
+    ``+spin`` the fit the read already made (:func:`_fits`)."""
     a0 = h0.budget.source(SPIN).half_width if h0.budget is not None else np.full(len(dd), np.inf)
     r = np.flatnonzero((a0 > SPIN_READ_SHARE * np.nan_to_num(h0.U95)) & (spin <= SPIN_ENDS_MAX))
     if not r.size:
@@ -216,17 +246,18 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     dd, shape, u_shape, spin, higher = dd[r], shape[r], u_shape[r], spin[r], None if higher is None else higher.rows(r)
     zero = np.zeros(r.size)
 
-    def fit(psi, width):
-        K, hi = _spun(shape, higher, psi)
-        return _fit(sub, dd, K, u_shape, width, hi)
+    def fit(k, psi, width):  # the holes k (an index into r) turned by psi (rad), the spin's doubt width
+        K, hi = _spun(shape[k], None if higher is None else higher.rows(k), psi)
+        return _fit(sub, dd[k], K, u_shape[k], width, hi)
 
     r0 = h0.residual[r]
     if not read:  # no redundant reading: the convention, its term from the spin's ends
-        psi, width, reach = zero, spin, zero
+        psi, width, reach, h1 = zero, spin, zero, None
     else:
-        psi, width, reach = _estimate(fit, r0, spin, zero)
-    h, e = fit(psi, width)
-    hp, hm = fit(psi + width, zero)[0], fit(psi - width, zero)[0]
+        psi, width, reach, h1 = _estimate(fit, r0, spin)
+    u = np.flatnonzero(width < spin)  # the spin read: judged at it
+    c = np.flatnonzero(width >= spin)  # the convention with +-spin
+    (h, e), hp, hm = _fits(fit, u, c, psi, width, spin, h1, _rows(h0, r), e0.rows(r))
     h = _spin_ends(h, hp, hm)
     e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
     if h0.misfit_bound is not None:  # rule 2: the most the spin within +-spin moves the misfit, beyond its first order
@@ -238,24 +269,55 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     return _put(h0, r, h), _with(e0, r, e)
 
 
-def _estimate(fit, r0, spin, zero):
-    """``(psi, width, reach)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and its
-    doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; and how far the misfit moves to the
-    spin's ends (h,) mm."""
-    h1, _ = fit(spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
+def _fits(fit, u, c, psi, width, spin, h1, hc, ec):
+    """``((h, e), hp, hm)`` of the holes ``u`` (the spin read: at ``psi`` with ``width``, and at ``psi +- width``) and
+    ``c`` (the convention: ``hc, ec``, at ``+-spin``; ``h1`` the fit at ``+spin`` where the read made it), in order
+    ``0..len(psi)``: only the fits not yet made (one call each: a call's rows stay near the cache's size)."""
+    from metrology.measure.surface import PanelFit
+
+    zero = np.zeros(len(psi))
+    order = np.argsort(np.concatenate([u, c]), kind="stable")
+
+    def joined(hu, hc):  # (u then c) in hole order
+        return _rows(concat_normals([hu, hc]), order)
+
+    if u.size:
+        hu, eu = fit(u, psi[u], width[u])
+        hpu, hmu = fit(u, psi[u] + width[u], zero[u])[0], fit(u, psi[u] - width[u], zero[u])[0]
+    else:
+        hu, eu = _rows(hc, u), ec.rows(u)
+        hpu = hmu = hu
+    if not c.size:
+        return (hu, eu), hpu, hmu
+    hmc = fit(c, -spin[c], zero[c])[0]
+    hpc = fit(c, spin[c], zero[c])[0] if h1 is None else _rows(h1, c)
+    e = PanelFit.concat([eu, ec]).rows(order)
+    return (joined(hu, hc), e), joined(hpu, hpc), joined(hmu, hmc)
+
+
+def _estimate(fit, r0, spin):
+    """``(psi, width, reach, h1)``: the spin the misfit ``r0`` at the convention's gives (secant steps on ``fit``) and
+    its doubt, (h,) rad, where :data:`SPIN_READ_MAX` admits it, else ``0, spin``; how far the misfit moves to the
+    spin's ends (h,) mm; and the fit at ``+spin`` (HoleNormals). The secant steps only where the doubt admits a read
+    (it comes from the first slope)."""
+    every = np.arange(len(r0))
+    zero = np.zeros(len(r0))
+    h1, _ = fit(every, spin, zero)  # the misfit at +spin, and its sd without the spin's doubt
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = (h1.residual - r0) / spin
         u_psi = h1.residual_sd / np.abs(slope)
         psi = -r0 / slope
-        for _ in range(SPIN_READ_STEPS - 1):
-            p = np.clip(np.nan_to_num(psi), -spin, spin)
-            hp, _ = fit(p, zero)
-            slope = np.where(np.abs(p) > 1e-3 * spin, (hp.residual - r0) / np.where(p == 0, 1.0, p), slope)
-            psi = p - hp.residual / slope
         width = SPIN_READ_WIDTH * u_psi
+        may = np.flatnonzero(np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin))
+        for _ in range(SPIN_READ_STEPS - 1 if may.size else 0):
+            p = np.clip(np.nan_to_num(psi[may]), -spin[may], spin[may])
+            hp, _ = fit(may, p, zero[may])
+            slope[may] = np.where(np.abs(p) > 1e-3 * spin[may], (hp.residual - r0[may]) / np.where(p == 0, 1.0, p),
+                                  slope[may])
+            psi[may] = p - hp.residual / slope[may]
     use = np.isfinite(psi) & np.isfinite(width) & (width < SPIN_READ_MAX * spin) & (np.abs(psi) <= spin + width)
     reach = np.fmax(np.abs(h1.residual - r0), np.abs(slope) * spin)  # mm: the misfit's move to the spin's ends
-    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach
+    return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach, h1
 
 
 def _spin_ends(h, hp, hm):

@@ -185,7 +185,8 @@ class FleetSummary:
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
     unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
-        (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known)
+        (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known);
+        spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read)
     """
 
     tolerance_deg: float
@@ -198,6 +199,7 @@ class FleetSummary:
     unknown_after: int = 0
     on_convention: int = 0
     spin_free: int = 0
+    spin_bound: int = 0
     off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
                                                    "max_hole": None})
     vs_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_abs_mm": 0.0, "max_mm": 0.0,
@@ -294,6 +296,7 @@ class FleetSummary:
         self.unknown_after += int(batch.unknown_after.sum()) if batch.unknown_after is not None else 0
         self.on_convention += int(batch.on_convention.sum()) if batch.on_convention is not None else 0
         self.spin_free += int(batch.spin_free.sum()) if batch.spin_free is not None else 0
+        self.spin_bound += int(batch.spin_bound.sum()) if batch.spin_bound is not None else 0
         self._off_cad(t)
         self._vs_cad(t)
         self._worst(batch, judged, ok)
@@ -327,6 +330,7 @@ class FleetSummary:
         self.unknown_after += other.unknown_after
         self.on_convention += other.on_convention
         self.spin_free += other.spin_free
+        self.spin_bound += other.spin_bound
         o, p = self.off_cad, other.off_cad
         o["checked"] += p["checked"]
         o["holes"] += p["holes"]

@@ -9,7 +9,8 @@ Per hole (panel frame, mm; see :mod:`.panels`; TCS conventions in :mod:`.log_spe
    square to ``n``, ``e2 = n x e1``), and the TCS's ``k`` maps to ``a = -m`` (toward the panel).
 3. The head's rotation ``tcs2panel = Q(-e_z -> a) F Rz(psi)``: ``F`` turns ``k`` onto ``-e_z``
    (the identity when ``s = -1``, ``diag(1, -1, -1)`` when ``s = +1``), ``Rz(psi)`` is the spin
-   (uniform on ``[-spin, spin]``, default 0, so that the TCS ``x, y`` stay near the panel's
+   (uniform on ``[-spin, spin]`` per hole, default 0, or :attr:`LogSpec.spin_path` along the log,
+   so that the TCS ``x, y`` stay near the panel's
    ``x, y``), and ``Q(v -> w)`` is the smallest rotation taking ``v`` to ``w`` (Rodrigues). The
    TCS origin is ``O = P - D a``: the tool axis meets the panel at ``P`` at the stand-off ``D``
    (:attr:`LogSpec.standoff_distance_mm`).
@@ -206,6 +207,15 @@ def rotation_vector(R):
     return q[:, 1:] * scale[:, None]
 
 
+def _spin(rng, spec, hole):
+    """(h,) rad, the head's spin about the tool axis at the cell's holes ``hole (h,)``: ``spec.spin_path(hole)`` where
+    given (a spin constant over the run, or drifting with it), else uniform on ``[-spin, spin]`` per hole."""
+    if spec.spin_path is not None:
+        return np.asarray(spec.spin_path(hole), float)
+    h = len(hole)
+    return rng.uniform(-spec.spin_rad, spec.spin_rad, size=h) if spec.spin_rad > 0 else np.zeros(h)
+
+
 def _head(a, flip, psi):
     """``tcs2panel = Q(-e_z -> a) F Rz(psi)`` for tool axes ``a (h, 3)`` (toward the panel)."""
     R = rotation_taking_axis(-1.0, a) * flip
@@ -308,7 +318,7 @@ class _Geometry:
         P = spec.panel.sample(rng, h, spec.patch_half_mm)
         theta = rng.uniform(*spec.angle_rad, size=h)
         phi = rng.uniform(0.0, 2 * math.pi, size=h)
-        psi = rng.uniform(-spec.spin_rad, spec.spin_rad, size=h) if spec.spin_rad > 0 else np.zeros(h)
+        psi = _spin(rng, spec, hole)
         time_s = np.round(spec.start_time_s + (hole + 0.4 * rng.random(h)) * self.hole_s, 3)  # logged to the ms
         t_mean, t_swing, t_sigma = spec.temperature_c
         temp = (t_mean + t_swing * np.sin(2 * math.pi * (time_s % 86400.0) / 86400.0 - 0.75 * math.pi)
@@ -347,7 +357,7 @@ class _Geometry:
         N, f = tab.points[row], tab.feed[row]
         theta = rng.uniform(*spec.angle_rad, size=h)
         phi = rng.uniform(0.0, 2 * math.pi, size=h)
-        psi = rng.uniform(-spec.spin_rad, spec.spin_rad, size=h) if spec.spin_rad > 0 else np.zeros(h)
+        psi = _spin(rng, spec, hole)
         time_s = np.round(spec.start_time_s + (hole + 0.4 * rng.random(h)) * self.hole_s, 3)
         t_mean, t_swing, t_sigma = spec.temperature_c
         temp = (t_mean + t_swing * np.sin(2 * math.pi * (time_s % 86400.0) / 86400.0 - 0.75 * math.pi)

@@ -111,6 +111,8 @@ class LogSpec:
     standoff_mm : float or None, mm, the mean reading on a flat surface square to the tool axis, which
         fixes where the TCS sits on the axis; None: the mean of the middles of ``range_mm``
     spin_rad : float, rad, the head's turn about the tool axis is uniform on [-spin, spin]
+    spin_path : callable or None, ``spin_path(hole (h,) int) -> (h,) rad``: the head's turn at the cell's hole
+        ``hole`` (a spin constant over the run, or drifting along it); None: uniform on [-spin, spin], hole by hole
     patch_half_mm : float, mm, drilling points are uniform over ``|x|, |y| <= patch_half_mm`` of the panel
     holes_per_hour : float, the cell's rate; hole ``j`` is at ``start_time_s + (j + 0.4 U) 3600 / rate`` s
     start_time_s : float, s since the Unix epoch (UTC)
@@ -139,6 +141,7 @@ class LogSpec:
     noise_mm: float | None = None
     standoff_mm: float | None = None
     spin_rad: float = 0.0
+    spin_path: object = None
     patch_half_mm: float = 200.0
     holes_per_hour: float = 600.0
     start_time_s: float = START_TIME_S
