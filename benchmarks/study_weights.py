@@ -6,8 +6,9 @@ The spots' heights along the normal are independent (block-diagonal calibration)
 
 (``m = (-g_x, -g_y, 1)``, ``r_i = (m, d_i m.e1_i, d_i m.e2_i)``, :mod:`metrology.measure.terms`). Gauss-Markov
 weighs each by ``1 / v_i``. Compared on the same holes (paired): the micro-plane unweighted (metro before
-issue 49), weighted by the noise alone (the panel path before issue 49), and Gauss-Markov with ``v_i`` taken
-at the head square to the panel (``m = e_z``: fixed, one solve) or at the unweighted fit's normal (two solves).
+issue 49), weighted
+by the noise alone (``v_i = sigma_i^2 (m . u_i)^2``) and by noise and calibration, each with ``v_i`` taken at the head
+square to the panel (``m = e_z``: fixed, one solve) or at the unweighted fit's normal (two solves).
 
 Heads: the paper's Table 2 (turned to beams +z, as benchmarks/study_measure.py) and Table 6, random 4-sensor
 rings (metrology.sim.forward.draw_head: inclinations 15-35 deg, skew), a random 3-sensor ring (control: three
@@ -35,7 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _one_blas_thread  # noqa: E402,F401
 
-WEIGHTINGS = ("unweighted", "noise", "gauss-markov at e_z", "gauss-markov at the fit")
+WEIGHTINGS = ("unweighted", "noise at e_z", "noise at the fit", "noise + calibration at e_z",
+              "noise + calibration at the fit")
 
 
 def _fit(layout, d, v):
@@ -74,14 +76,12 @@ def measure(layout, d, weighting):
     dT = np.ascontiguousarray(d.T)
     N = len(d)
     g, A0, A1 = _fit(layout, d, None)
-    if weighting == "noise":
-        for _ in range(2):
-            _, mu = _variance(layout, cov, dT, g, sigma)
-            g, A0, A1 = _fit(layout, d, (mu * sigma[:, None]) ** 2)
-    elif weighting == "gauss-markov at e_z":
-        g, A0, A1 = _fit(layout, d, _variance(layout, cov, dT, np.zeros((N, 2)), sigma)[0])
-    elif weighting == "gauss-markov at the fit":
-        g, A0, A1 = _fit(layout, d, _variance(layout, cov, dT, g, sigma)[0])
+    if weighting.startswith("noise at"):
+        _, mu = _variance(layout, cov, dT, g if weighting.endswith("fit") else np.zeros((N, 2)), sigma)
+        g, A0, A1 = _fit(layout, d, (mu * sigma[:, None]) ** 2)
+    elif weighting.startswith("noise + calibration"):
+        g, A0, A1 = _fit(layout, d, _variance(layout, cov, dT, g if weighting.endswith("fit") else np.zeros((N, 2)),
+                                              sigma)[0])
     gx, gy = g[:, 0], g[:, 1]
     _, mu = _variance(layout, cov, dT, g, sigma)
     cal, _ = calibration_source(layout, cov, dT, (-gx, -gy, 1.0), A0, A1)
@@ -115,7 +115,7 @@ def run(args):
     rng = np.random.default_rng(args.seed)
     range_mm = np.array([30.0, 70.0])
     rows = []
-    print("| head | weighting | median error [deg] | RMS error [deg] | RMS error / unweighted's (same holes) | "
+    print("| head | weighting | median error [deg] | RMS error [deg] | RMS error / unweighted's (same holes; ± s.e. over calibrations) | "
           "coverage % | median U95 [deg] | holes |")
     print("|---|---|---|---|---|---|---|---|")
     for hname, nominal in heads(rng, args.rings).items():
@@ -143,14 +143,17 @@ def run(args):
         base = np.concatenate(err["unweighted"])
         for w in WEIGHTINGS:
             e = np.concatenate(err[w])
+            # the ratio per calibration (its holes share it), before and after in turn: its mean's standard error
+            per = np.array([np.sqrt(np.mean(a * a) / np.mean(b * b)) for a, b in zip(err[w], err["unweighted"])])
             row = {"head": hname, "weighting": w, "median_err_deg": float(np.degrees(np.median(e))),
                    "rms_err_deg": float(np.degrees(np.sqrt(np.mean(e * e)))),
                    "rms_ratio": float(np.sqrt(np.mean(e * e) / np.mean(base * base))),
+                   "ratio_se": float(per.std(ddof=1) / np.sqrt(len(per))),
                    "coverage": float(np.concatenate(hit[w]).mean()),
                    "median_U95_deg": float(np.degrees(np.median(np.concatenate(u95[w])))), "holes": int(e.size),
                    "seconds": round(time.perf_counter() - t0, 1)}
             rows.append(row)
-            print(f"| {hname} | {w} | {row['median_err_deg']:.5f} | {row['rms_err_deg']:.5f} | {row['rms_ratio']:.4f} | "
+            print(f"| {hname} | {w} | {row['median_err_deg']:.5f} | {row['rms_err_deg']:.5f} | {row['rms_ratio']:.4f} ± {row['ratio_se']:.4f} | "
                   f"{100 * row['coverage']:.1f} | {row['median_U95_deg']:.5f} | {row['holes']} |", flush=True)
     return rows
 

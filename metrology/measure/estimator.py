@@ -14,19 +14,16 @@ panel's fit is the micro-plane's to the last bit, whatever the steps (the panel 
 the micro-plane's, tests/measure/test_budget.py checks it with ``==``). The first step is the micro-plane (``K``
 left out: from ``c = 0`` it would be read far from the spots); the micro-plane stops there.
 
-**Weights** (Gauss-Markov). A reading error moves spot ``i``'s height by ``(G_i . u_i) delta d_i``, a
-calibration error by ``r_i . delta theta_i`` (:mod:`metrology.measure.terms`), independent between sensors
-(the calibration's covariance per sensor, its 5 x 5 blocks ``C_ii``), so
-
-    v_i = sigma_i^2 (G_i . u_i)^2 + r_i^T C_ii r_i,        w_i = 1 / v_i,
-
-taken at the head square to the panel (``G = e_z``; ``r_i = (e_z, d_i e_z.e1_i, d_i e_z.e2_i)``): one set of
-weights per hole, fixed over the steps, so the estimator is linear in the heights and its map ``A = dg / dh``
-the budget propagates is exact. At the tilts metro measures (<= 5 deg) ``G . u_i`` differs from ``u_z,i`` by
-< 5 %: taking the weights at the fit instead changed the angle's RMS error by < 0.1 %
-(benchmarks/results/measure_weights_issue49.md). Where a hole's readings give no variance (no stated noise,
-no calibration covariance) its spots weigh the same. The paper's Eqs. 18-19 weigh the four corners alike: they
-stay in :mod:`metrology.core.normals` (``metro normals``, the paper's reproduction).
+**Weights** (Gauss-Markov, the reading noise). A reading error moves spot ``i``'s height by
+``(G_i . u_i) delta d_i``: its variance ``sigma_i^2 (G_i . u_i)^2``, taken at the head square to the panel
+(``G = e_z``), so ``w_i = 1 / (sigma_i u_z,i)^2``: one weight per sensor, fixed over the steps (the estimator is
+linear in the heights, and its map ``A = dg / dh`` the budget propagates is exact). The calibration's share of a
+spot's variance (``r_i^T C_ii r_i``, :mod:`metrology.measure.terms`) stays out of the weights, and so does the
+tilt's (``G`` at the fit): measured on forward-simulated heads neither lowers the angle's error (with a poor
+calibration the calibration term raised it by up to 0.5 %), while a sensor 3x noisier than the others weighed
+down lowers it by 24-28 %, coverage kept (benchmarks/results/measure_weights_issue49.md). The paper's Eqs. 18-19
+weigh the four corners alike: they stay in :mod:`metrology.core.normals` (``metro normals``, the paper's
+reproduction).
 """
 
 from __future__ import annotations
@@ -35,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.model import direction_basis
 from metrology.core.sym3 import inv3, null_vector_cols, turned_tangent
 
 __all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "drill_axis", "PLANE_STEPS"]
@@ -84,14 +80,14 @@ class SurfaceFit:
     Kt: np.ndarray | None
 
 
-def spot_weights(layout, dT, sigma_mm=None, covariance=None, valid=None):
-    """(n, h) or (n, 1) float, 1/mm^2: each spot's Gauss-Markov weight ``1 / v_i`` at ``G = e_z`` (module docstring).
+def spot_weights(layout, sigma_mm=None, valid=None):
+    """(n, 1) or (n, h) float, 1/mm^2: each spot's weight ``1 / (sigma_i u_z,i)^2`` (module docstring).
 
     Parameters
     ----------
-    layout : SensorLayout, n sensors; dT : (n, h) float, mm, the readings (finite: blanks set to any number)
-    sigma_mm : (n,) float, mm, or None (the layout's ``noise_mm``; an unknown one takes the mean of the known)
-    covariance : (5n, 5n) float, mm and rad, or None (the layout's; None: the noise alone)
+    layout : SensorLayout, n sensors
+    sigma_mm : (n,) float, mm, or None (the layout's ``noise_mm``); an unknown one takes the mean of the known, none
+        known (or a 0): every spot weighs the same
     valid : (n, h) bool or None, False for a blank (weight 0)
     """
     n = layout.n
@@ -99,19 +95,8 @@ def spot_weights(layout, dT, sigma_mm=None, covariance=None, valid=None):
     good = np.isfinite(sig)
     if not good.all():
         sig = np.where(good, sig, np.mean(sig[good]) if good.any() else 0.0)
-    u = layout.direction
-    v = ((sig * u[:, 2]) ** 2)[:, None]  # (n, 1), mm^2: the noise along e_z
-    cov = layout.covariance if covariance is None else np.asarray(covariance, float)
-    if cov is not None:  # r_i = (0, 0, 1, d e1_z, d e2_z): r^T C_ii r = a + 2 b d + c d^2 per sensor
-        e = direction_basis(u)  # (n, 2, 3)
-        e1, e2 = e[:, 0, 2], e[:, 1, 2]
-        B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])
-        a = B[:, 2, 2]
-        b = B[:, 2, 3] * e1 + B[:, 2, 4] * e2
-        c = B[:, 3, 3] * e1 * e1 + 2.0 * B[:, 3, 4] * e1 * e2 + B[:, 4, 4] * e2 * e2
-        v = v + a[:, None] + dT * (2.0 * b[:, None] + dT * c[:, None])
-    pos = np.all(v > 0, axis=0) & np.all(np.isfinite(v), axis=0)  # per hole: every spot has a variance
-    w = np.where(pos, 1.0 / np.where(pos, v, 1.0), 1.0)
+    v = (sig * layout.direction[:, 2]) ** 2  # mm^2: the reading noise along e_z
+    w = (1.0 / v if np.all(v > 0) else np.ones(n))[:, None]
     return w if valid is None else w * valid
 
 
@@ -125,7 +110,7 @@ def _solve(wx, wy, wz, x, y, Gz, yt):
             (i00, i01, i02, i11, i12, i22))
 
 
-def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, covariance=None, full: bool = True):
+def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, full: bool = True):
     """The tilt of each hole: the micro-plane (``shape`` None), or the local surface's pose with its shape known.
 
     Parameters
@@ -136,7 +121,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, cov
         the TCS ``xy`` plane (the head square to the panel), or its entries ``(00, 01, 11)`` as a tuple of (h,)
         arrays (the only ones the fit takes); turned onto the fitted tangent plane
     steps : int >= 1, the first the micro-plane, the rest with ``K`` (none without a shape)
-    sigma_mm, covariance : the weights' (:func:`spot_weights`)
+    sigma_mm : (n,) float, mm, or None: the reading noise the weights take (:func:`spot_weights`)
     full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``w``, ``null``, ``h_res``, ``Kt``)
 
     Returns
@@ -164,7 +149,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, cov
     whole = bool(valid.all())
     if not whole:
         dT = np.where(valid, dT, 0.0)
-    w = spot_weights(layout, dT, sigma_mm, covariance, None if whole else valid)
+    w = spot_weights(layout, sigma_mm, None if whole else valid)
     E, u = layout.zero, layout.direction
     x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
     y = E[:, 1, None] + dT * u[:, 1, None]
@@ -224,7 +209,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, cov
         Kt = np.array([[k[0], k[1], k[2]], [k[1], k[3], k[4]], [k[2], k[4], k[5]]]).transpose(2, 0, 1)  # K_m, (h, 3, 3)
     G = np.stack([Gx, Gy, Gzz]).transpose(2, 1, 0)  # (h, n, 3), views of (3, n, h)
     q = np.stack([x, y, zq]).transpose(2, 1, 0)
-    null = null_vector_cols(x, y, -Gzz) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
+    null = null_vector_cols(x, y, Gzz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
     return SurfaceFit(normal, g, c, ok, plane, A.transpose(2, 0, 1), G, q, np.broadcast_to(w, x.shape).T, null,
                       hres.T, Kt)
 

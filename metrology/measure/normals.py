@@ -168,7 +168,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     N = len(d)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = reading_sigma(layout, sigma_mm)
-    fit = fit_tilt(layout, d, None, PLANE_STEPS, sigma_mm, cov)
+    fit = fit_tilt(layout, d, None, PLANE_STEPS, sigma_mm)
     if not fit.ok.all():
         raise ValueError("the projection points of a hole are collinear: no plane")
     dT = np.ascontiguousarray(d.T)

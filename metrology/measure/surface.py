@@ -18,8 +18,9 @@ the surface ``m.(p - c e_z) = -1/2 (Tq)^T K_m (Tq)`` (to second order in the dis
 ``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
 micro-plane of :mod:`metrology.measure.normals`, which is the first of :data:`GN_STEPS` steps;
 the rest are Gauss-Newton steps with ``K`` (the Jacobian's ``c`` column carries the curvature's
-slope; what is left out of it is of order ``|K| |m.q|``), weighted by the readings' noise along
-the normal, vectorised over holes.
+slope; what is left out of it is of order ``|K| |m.q|``), vectorised over holes. Both are one
+estimator, :func:`metrology.measure.estimator.fit_tilt` (its weights and why: there): on a flat
+panel this fit, and its budget, are the micro-plane's to the last bit.
 
 With 3 sensors the three readings fix the three unknowns (the curvature comes from the panel
 only); with 4 the redundant reading is the check: its misfit ``rho_4 = q.h`` (``q`` the unit
@@ -80,8 +81,7 @@ PRELIMINARY_STEPS = 2
 SLICE_ROWS = 16384
 
 
-def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True,
-                covariance=None) -> SurfaceFit:
+def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
     """Fit the local surface's pose (see the module docstring) to each hole's readings:
     :func:`metrology.measure.estimator.fit_tilt` with the shape, the estimator of the micro-plane too.
 
@@ -93,11 +93,11 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
         TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane; or its
         entries ``(00, 01, 11)`` as a tuple of (h,) arrays (the only ones the fit takes)
     steps : int >= 1, the first gives the micro-plane, the rest are Gauss-Newton with ``K``
-    sigma_mm, covariance : the reading noise and the calibration's covariance the weights take (default the layout's)
+    sigma_mm : (n,) float, mm, the reading noise the weights take (default the layout's)
     full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None,
         and the pass that only evaluates them at the solution is not run: the same ``normal``, ``g``, ``c``)
     """
-    return fit_tilt(layout, d, shape, steps, sigma_mm, covariance, full)
+    return fit_tilt(layout, d, shape, steps, sigma_mm, full)
 
 
 def surface_normal(layout, d, shape):
@@ -213,11 +213,10 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         shape, beyond = (mean, np.zeros(N), mean), None
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     if beyond is not None:
-        fit0 = fit_surface(layout, d, shape, PRELIMINARY_STEPS, sigma_mm, False, cov)
+        fit0 = fit_surface(layout, d, shape, PRELIMINARY_STEPS, sigma_mm, full=False)
         d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0,  # (a tight radius: once more from a fit)
-                                          lambda dd, kk: fit_surface(layout, dd, kk, TIGHT_STEPS, sigma_mm, False, cov))
-    fit = fit_surface(layout, d, shape, GN_STEPS if beyond is None or beyond.higher.shape[1] <= 9 else TIGHT_STEPS, sigma_mm,
-                      covariance=cov)
+                                          lambda dd, kk: fit_surface(layout, dd, kk, TIGHT_STEPS, sigma_mm, full=False))
+    fit = fit_surface(layout, d, shape, GN_STEPS if beyond is None or beyond.higher.shape[1] <= 9 else TIGHT_STEPS, sigma_mm)
     sigma = reading_sigma(layout, sigma_mm)
     axis = drill_axis(layout)
     g = fit.g
