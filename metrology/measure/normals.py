@@ -1,19 +1,22 @@
 """Each hole's normal, its angle to the drill axis and their first-order (GUM) uncertainty.
 
 At a drilling point the cell reads its sensors; the projection points ``S_i = E_i + d_i u_i``
-(Eq. 17, mm, TCS) lie on the panel. metro fits the micro-plane through them by least squares
-as a graph over the TCS ``xy`` plane,
+(Eq. 17, mm, TCS) lie on the panel. metro fits the micro-plane through them by weighted least
+squares as a graph over the TCS ``xy`` plane,
 
     z = c + g_x x + g_y y,        n = +-(-g_x, -g_y, 1) / sqrt(1 + g_x^2 + g_y^2),
 
-(the plane through the points for 3 sensors; for 4 it agrees with Eqs. 18-19 to first order in
-the points' misfit) and orients ``n`` along the drill axis (the TCS ``z`` axis signed the way
+each point weighted by ``1 / (sigma_i u_z,i)^2``, its reading noise along the drill axis
+(:mod:`metrology.measure.estimator`, the panel path's estimator too). With 3 sensors it is the plane
+through the points; with 4 it departs from the paper's Eqs. 18-19, which weigh the four corners alike
+(they stay in :mod:`metrology.core.normals`): a noisier sensor weighs less, which lowers the angle's
+error (the module above says by how much). It orients ``n`` along the drill axis (the TCS ``z`` axis signed the way
 the beams point, ``n . axis > 0``): the direction the cell turns the drill onto (Eqs. 20-22).
 The angle between the drill axis and the normal is ``alpha = atan(|g|)``.
 
 **Uncertainty.** To first order only the displacement of each point along the normal matters:
 with ``m = (-g_x, -g_y, 1)`` and ``h_i = m . dS_i``, ``dg = P h`` where ``P`` (2, n) is the
-least-squares map from heights to slopes. A reading error moves ``S_i`` by ``u_i dd_i``; a
+weighted least-squares map from heights to slopes. A reading error moves ``S_i`` by ``u_i dd_i``; a
 calibration error by ``dE_i + d_i (a e1_i + b e2_i)`` (the chart of
 :mod:`metrology.core.model`, centred on the calibrated beam). So
 
