@@ -34,7 +34,7 @@ import numpy as np
 
 from metrology.core.sym3 import inv3, null_vector_cols, turned_tangent
 
-__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "drill_axis", "PLANE_STEPS"]
+__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "spot_slopes", "drill_axis", "PLANE_STEPS"]
 
 #: steps of the micro-plane: one weighted solve (the weights do not depend on the fit)
 PLANE_STEPS = 1
@@ -57,8 +57,8 @@ class SurfaceFit:
     plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the first step)
     (the rest are None unless ``full``)
     A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
-    G : (h, n, 3) float, ``dh_i / dS_i``
-    q : (h, n, 3) float, mm, ``S_i - c e_z``
+    G : (h, n, 3) float, ``dh_i / dS_i`` (None for the micro-plane: :func:`spot_slopes`)
+    q : (h, n, 3) float, mm, ``S_i - c e_z`` (None for the micro-plane)
     w : (h, n) float, the weights (0 for a blank)
     null : (h, n) float or None, n = 4: the unit vector orthogonal to the Jacobian's columns
     h_res : (h, n) float, mm, the heights' misfit at the solution
@@ -200,16 +200,24 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         A[r] -= wz * a2
     zq = z - c
     hres = zq - gx * x - gy * y  # the heights' misfit (and the curvature's height)
-    if k is None:
-        Gx, Gy, Gzz = np.broadcast_to(-gx, x.shape), np.broadcast_to(-gy, x.shape), np.ones_like(x)
-        Kt = None
+    if k is None:  # the micro-plane: G = (-g_x, -g_y, 1) at every spot (spot_slopes), the spots as read
+        G = q = Kt = None
+        null = null_vector_cols(x, y, np.ones_like(x)) if n == 4 else None
     else:
-        Gx, Gy, Gzz = kx - gx, ky - gy, Gz
         hres = hres + e
         Kt = np.array([[k[0], k[1], k[2]], [k[1], k[3], k[4]], [k[2], k[4], k[5]]]).transpose(2, 0, 1)  # K_m, (h, 3, 3)
-    G = np.stack([Gx, Gy, Gzz]).transpose(2, 1, 0)  # (h, n, 3), views of (3, n, h)
-    q = np.stack([x, y, zq]).transpose(2, 1, 0)
-    null = null_vector_cols(x, y, Gzz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
+        G = np.stack([kx - gx, ky - gy, Gz]).transpose(2, 1, 0)  # (h, n, 3), views of (3, n, h)
+        q = np.stack([x, y, zq]).transpose(2, 1, 0)
+        null = null_vector_cols(x, y, Gz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
     return SurfaceFit(normal, g, c, ok, plane, A.transpose(2, 0, 1), G, q, np.broadcast_to(w, x.shape).T, null,
                       hres.T, Kt)
+
+
+def spot_slopes(fit: SurfaceFit):
+    """``G_i = dh_i / dS_i`` of a full fit by component, ``(G_x, G_y, G_z)``, each (n, h) or broadcasting to it:
+    the surface's own slope at each spot, or the micro-plane's ``(-g_x, -g_y, 1)`` (the same numbers a flat
+    panel's surface fit holds: ``0 - g_x`` is ``-g_x``)."""
+    if fit.G is None:
+        return -fit.g[:, 0], -fit.g[:, 1], 1.0
+    return tuple(fit.G.transpose(2, 1, 0))
 

@@ -177,7 +177,8 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     dT = np.ascontiguousarray(d.T)
     A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, dT, cov, sigma)
     gx, gy = fit.g[:, 0], fit.g[:, 1]
-    x, y = fit.q[:, :, 0].T, fit.q[:, :, 1].T  # (n, N), mm, TCS: the spots
+    E, u = layout.zero, layout.direction
+    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]  # (n, N), mm, TCS: the spots
     # the curvature bias bound: the worst one-signed quadric panel of radii >= min_radius_mm along the
     # angle's gradient; near 0, a round spread of the rectangular variance per axis (a worst case), stated
     # in angle (rad^2): the budget's slopes^2 are that times (1 + |g|^2)^2

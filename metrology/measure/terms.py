@@ -22,6 +22,7 @@ import numpy as np
 
 from metrology.core.model import direction_basis
 from metrology.measure.budget import CALIBRATION, READING_NOISE, Source
+from metrology.measure.estimator import spot_slopes
 
 __all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "reading_sources", "redundancy",
            "Redundancy"]
@@ -100,7 +101,7 @@ def reading_sources(layout, fit, dT, cov, sigma):
     entries and each spot's calibration variance ``q_cal`` (n, N) (0 without ``cov``); ``dT`` (n, N) mm the
     readings, ``cov`` (5n, 5n) or None, ``sigma`` (n,) mm."""
     A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T
-    Gx, Gy, Gz = fit.G.transpose(2, 1, 0)  # (n, N) each
+    Gx, Gy, Gz = spot_slopes(fit)  # (n, N) each, or broadcasting to it
     u = layout.direction
     Gu = Gx * u[:, 0, None] + Gy * u[:, 1, None] + Gz * u[:, 2, None]
     noise = noise_source(A0, A1, Gu, sigma)
