@@ -4,6 +4,13 @@
 #
 #   benchmarks/golden_measure.sh WORKDIR OUTDIR     # makes the logs in WORKDIR once, the outputs in OUTDIR
 #   diff -r OUT_BEFORE OUT_AFTER
+#   python benchmarks/golden_diff.py OUT_BEFORE OUT_AFTER   # how far they differ, per table and column
+#
+# Expected changes (everything else byte-identical but for the tree's path in the warnings):
+# - issue 49, one estimator (metrology/measure/estimator.py, benchmarks/results/measure_weights_issue49.md):
+#   4-sensor holes weighted by 1/(sigma u_z)^2; calflat's U95 by <= 9e-4 deg, --panel/--points angles by
+#   <= 1e-3 deg and their fit_residual_um's sign flipped (one sign, the micro-plane's); equal weights (flat,
+#   part1, dask) and 3 sensors by rounding (<= 2e-14 deg); no status changes.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

@@ -231,7 +231,7 @@ class DfqHoles:
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        from metrology.io.holelog import time_seconds
+        from metrology.io.holelog import table_key, time_seconds
 
         m = table.num_rows
         if m == 0:
@@ -248,8 +248,7 @@ class DfqHoles:
         if self.single:
             index = np.ones(m, np.int64)
         else:
-            key = "point_id" if "point_id" in table.column_names else "hole_id"  # a pass's hole: ID#k, its point ID
-            ids = table.column(key).cast(pa.string()).to_pylist()
+            ids = table.column(table_key(table.column_names)).cast(pa.string()).to_pylist()  # a pass's hole: its point ID
             index = np.fromiter((self._feature(h) for h in ids), np.int64, m)
         if "cell" in table.column_names:
             names = table.column("cell").cast(pa.string()).to_pylist()

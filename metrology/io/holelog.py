@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["HoleLog", "CsvLog", "ParquetLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
-           "CELL", "PANEL", "NUMERIC", "text_codes", "time_seconds"]
+           "CELL", "PANEL", "NUMERIC", "HOLE_ID", "POINT_ID", "POSE_ROTATION", "POSE_POSITION", "table_key", "text_codes",
+           "time_seconds"]
 
 #: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
 BATCH_ROWS = 1 << 18
@@ -38,6 +39,18 @@ READING_RE = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*$|^(?i:nan)$"
 TIME_S, CELL, PANEL = "_metro_time_s", "_metro_cell", "_metro_panel"
 #: the columns metro adds to a batch for its own use
 INTERNAL = (TIME_S, CELL, PANEL)
+#: each row's hole; and, in a log drilled from a hole table more than once, the table's own id of the row's hole
+HOLE_ID, POINT_ID = "hole_id", "point_id"
+#: the robot's commanded pose (metrology/sim/forward/log_write.py): ``tcs2panel`` as a rotation vector (deg) and the
+#: TCS origin in the panel frame (mm)
+POSE_ROTATION = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg")
+POSE_POSITION = ("pose_x_mm", "pose_y_mm", "pose_z_mm")
+
+
+def table_key(names) -> str:
+    """The column of a log with columns ``names`` that names each row's hole in the hole table: ``point_id``
+    where the log has it, else ``hole_id``."""
+    return POINT_ID if POINT_ID in names else HOLE_ID
 
 
 @dataclass(frozen=True)
@@ -289,7 +302,7 @@ def _csv_types(log, names):
 
 
 #: the log's columns of numbers besides the readings (the one result schema: float64 whatever the format)
-NUMERIC = ("temperature_c", "pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")
+NUMERIC = ("temperature_c", *POSE_ROTATION, *POSE_POSITION)
 
 
 def _numeric(name: str) -> bool:

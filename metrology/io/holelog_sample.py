@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["commanded_positions", "first_readings", "SAMPLE_ROWS", "POSITION_COLUMNS"]
+from metrology.io.holelog import POSE_POSITION, CsvLog, table_key
+
+__all__ = ["commanded_positions", "first_readings", "SAMPLE_ROWS"]
 
 #: rows read at most (the rule takes a median: a few thousand holes settle it)
 SAMPLE_ROWS = 4096
-#: the commanded TCS origin in the panel frame, mm (:data:`metrology.measure.pose.POSE_COLUMNS`)
-POSITION_COLUMNS = ("pose_x_mm", "pose_y_mm", "pose_z_mm")
 
 
 def commanded_positions(log, rows: int = SAMPLE_ROWS):
@@ -26,10 +26,9 @@ def commanded_positions(log, rows: int = SAMPLE_ROWS):
     keys, xyz, left = [], [], rows
     for part in log.partitions:
         names = log.file_columns(part)
-        if not all(c in names for c in POSITION_COLUMNS):
+        if not all(c in names for c in POSE_POSITION):
             continue
-        key = "point_id" if "point_id" in names else "hole_id"
-        for k, p in _read(part, key, left):
+        for k, p in _read(log, part, table_key(names), left):
             keys.append(k)
             xyz.append(p)
             left -= len(k)
@@ -47,7 +46,7 @@ def first_readings(log, columns, rows: int = SAMPLE_ROWS):
     for part in log.partitions:
         if not all(c in log.file_columns(part) for c in columns):
             continue
-        for _, d in _read(part, None, left, tuple(columns)):
+        for _, d in _read(log, part, None, left, tuple(columns)):
             out.append(d)
             left -= len(d)
         if left <= 0:
@@ -55,18 +54,19 @@ def first_readings(log, columns, rows: int = SAMPLE_ROWS):
     return np.concatenate(out) if out else None
 
 
-def _read(part, key, rows, numeric=POSITION_COLUMNS):
+def _read(log, part, key, rows, numeric=POSE_POSITION):
     """``(keys, numbers)`` chunks of ``part``'s first ``rows`` rows (its ``key`` and ``numeric`` columns alone; no
-    key: None for the keys)."""
+    key: None for the keys), read as the log's reader reads the partition (a CSV file, or lines in memory:
+    ``CsvLog.readable``; else Parquet)."""
     import pyarrow as pa
 
     columns = [*([key] if key else []), *numeric]
-    if part.path.lower().endswith(".csv"):
+    if isinstance(log, CsvLog):
         import pyarrow.csv as pcsv
 
         types = {c: pa.string() for c in columns}
         try:
-            reader = pcsv.open_csv(part.path, read_options=pcsv.ReadOptions(block_size=1 << 20),
+            reader = pcsv.open_csv(log.readable(part), read_options=pcsv.ReadOptions(block_size=1 << 20),
                                    convert_options=pcsv.ConvertOptions(include_columns=columns, column_types=types))
         except (pa.ArrowInvalid, OSError):
             return  # the log's reader names what is wrong with the file

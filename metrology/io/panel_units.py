@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from metrology.io.holelog import POSE_POSITION
+
 __all__ = ["check_panel_units", "pose_rows", "log_positions", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
            "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES", "FLAT_DEPTH"]
 
@@ -49,8 +51,6 @@ POSE_REACH = 4.0
 #: the units tried when the numbers do not read as mm: name -> mm per unit
 CANDIDATES = {"in": 25.4, "m": 1000.0, "cm": 10.0}
 NAMES = {"in": "inches", "m": "metres", "cm": "centimetres"}
-#: the log's columns of the commanded position
-POSE_POSITION = ("pose_x_mm", "pose_y_mm", "pose_z_mm")
 
 
 def nearest_spacing(points) -> float:

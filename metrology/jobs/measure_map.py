@@ -27,8 +27,9 @@ class HoleAngles:
     def write(self, table) -> None:
         import pyarrow as pa
 
-        key = "point_id" if "point_id" in table.column_names else "hole_id"
-        rows = self.surfaces.rows(table.column(key).cast(pa.string()))
+        from metrology.io.holelog import table_key
+
+        rows = self.surfaces.rows(table.column(table_key(table.column_names)).cast(pa.string()))
 
         def num(c):
             return table.column(c).to_numpy(zero_copy_only=False).astype(float)

@@ -176,10 +176,12 @@ def check_join(log, surfaces, table_display) -> None:
     import pyarrow as pa
     import pyarrow.compute as pc
 
+    from metrology.io.holelog import HOLE_ID, table_key
+
     known = pa.array(surfaces.ids, pa.string())
-    rows, first, key = 0, None, "hole_id"
+    rows, first, key = 0, None, HOLE_ID
     for part in log.partitions:
-        key = "point_id" if "point_id" in log.columns(part) else "hole_id"
+        key = table_key(log.columns(part))
         for col in _key_column(log, part, key):
             col = col.cast(pa.string())
             if len(col) and pc.any(pc.is_in(col, value_set=known)).as_py():

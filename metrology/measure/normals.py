@@ -1,19 +1,22 @@
 """Each hole's normal, its angle to the drill axis and their first-order (GUM) uncertainty.
 
 At a drilling point the cell reads its sensors; the projection points ``S_i = E_i + d_i u_i``
-(Eq. 17, mm, TCS) lie on the panel. metro fits the micro-plane through them by least squares
-as a graph over the TCS ``xy`` plane,
+(Eq. 17, mm, TCS) lie on the panel. metro fits the micro-plane through them by weighted least
+squares as a graph over the TCS ``xy`` plane,
 
     z = c + g_x x + g_y y,        n = +-(-g_x, -g_y, 1) / sqrt(1 + g_x^2 + g_y^2),
 
-(the plane through the points for 3 sensors; for 4 it agrees with Eqs. 18-19 to first order in
-the points' misfit) and orients ``n`` along the drill axis (the TCS ``z`` axis signed the way
+each point weighted by ``1 / (sigma_i u_z,i)^2``, its reading noise along the drill axis
+(:mod:`metrology.measure.estimator`, the panel path's estimator too). With 3 sensors it is the plane
+through the points; with 4 it departs from the paper's Eqs. 18-19, which weigh the four corners alike
+(they stay in :mod:`metrology.core.normals`): a noisier sensor weighs less, which lowers the angle's
+error (the module above says by how much). It orients ``n`` along the drill axis (the TCS ``z`` axis signed the way
 the beams point, ``n . axis > 0``): the direction the cell turns the drill onto (Eqs. 20-22).
 The angle between the drill axis and the normal is ``alpha = atan(|g|)``.
 
 **Uncertainty.** To first order only the displacement of each point along the normal matters:
 with ``m = (-g_x, -g_y, 1)`` and ``h_i = m . dS_i``, ``dg = P h`` where ``P`` (2, n) is the
-least-squares map from heights to slopes. A reading error moves ``S_i`` by ``u_i dd_i``; a
+weighted least-squares map from heights to slopes. A reading error moves ``S_i`` by ``u_i dd_i``; a
 calibration error by ``dE_i + d_i (a e1_i + b e2_i)`` (the chart of
 :mod:`metrology.core.model`, centred on the calibrated beam). So
 
@@ -65,19 +68,15 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2, one_sign2
-from metrology.measure.budget import CALIBRATION, CURVATURE, SMALL_ANGLE_SIGMAS, Budget, Kind, Source, angle_gradient, combine
+from metrology.measure.budget import CURVATURE, READING_NOISE, SMALL_ANGLE_SIGMAS, Budget, Kind, Source, angle_gradient, combine
+from metrology.measure.estimator import PLANE_STEPS, drill_axis, fit_tilt
 from metrology.measure.magnitude import K95
-from metrology.measure.terms import calibration_source, noise_source, reading_sigma, redundancy
+from metrology.measure.terms import reading_sigma, reading_sources, redundancy
 
 __all__ = ["HoleNormals", "hole_normals", "concat_normals", "drill_axis", "K95", "K95_2D", "SMALL_ANGLE_SIGMAS"]
 
 #: radius, in standard deviations, of the 95 % disc of an isotropic 2-D normal: sqrt(chi2_2(0.95))
 K95_2D = 2.447746830680816
-
-
-def drill_axis(layout: SensorLayout) -> np.ndarray:
-    """(3,) float, unit, TCS: the TCS ``z`` axis signed the way the beams point (the drill axis)."""
-    return np.array([0.0, 0.0, 1.0 if np.mean(layout.direction[:, 2]) > 0 else -1.0])
 
 
 @dataclass(frozen=True)
@@ -163,68 +162,54 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     Returns
     -------
     HoleNormals
+
+    The fit is :func:`metrology.measure.estimator.fit_tilt` without a shape (the estimator of the panel
+    path too), its budget's reading noise and calibration :func:`metrology.measure.terms.reading_sources`.
     """
     n = layout.n
     d = np.asarray(d, dtype=float).reshape(-1, n)
     N = len(d)
     cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = reading_sigma(layout, sigma_mm)
-    E, u = layout.zero, layout.direction
-    # sensor-major (n, N) arrays: a sum over the sensors is a sum of contiguous rows
-    dT = np.ascontiguousarray(d.T)
-    x = E[:, 0, None] + dT * u[:, 0, None]  # projection points, mm, TCS
-    y = E[:, 1, None] + dT * u[:, 1, None]
-    z = E[:, 2, None] + dT * u[:, 2, None]
-    xc, yc, zc = x - x.mean(0), y - y.mean(0), z - z.mean(0)
-    sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
-    sxz, syz = (xc * zc).sum(0), (yc * zc).sum(0)
-    det = sxx * syy - sxy * sxy
-    if np.any(det <= 0):
+    fit = fit_tilt(layout, d, None, PLANE_STEPS, sigma_mm)
+    if not fit.ok.all():
         raise ValueError("the projection points of a hole are collinear: no plane")
-    gx = (syy * sxz - sxy * syz) / det
-    gy = (sxx * syz - sxy * sxz) / det
-    # P_i: the slopes' change per unit height of point i
-    px = (syy * xc - sxy * yc) / det
-    py = (sxx * yc - sxy * xc) / det
-    axis = drill_axis(layout)
-    g2 = gx * gx + gy * gy
-    r = np.sqrt(1.0 + g2)
-    normal = np.stack([-gx, -gy, np.ones_like(gx)], axis=1) * (axis[2] / r)[:, None]
-    mu = u[:, 2, None] - gx * u[:, 0, None] - gy * u[:, 1, None]  # m . u_i
-    noise = noise_source(px, py, mu, sigma)
-    if cov is not None:
-        cal, q_cal = calibration_source(layout, cov, dT, (-gx, -gy, 1.0), px, py)
-    else:
-        cal, q_cal = Source(CALIBRATION, np.zeros((N, 3))), 0.0
+    dT = np.ascontiguousarray(d.T)
+    A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, dT, cov, sigma)
+    gx, gy = fit.g[:, 0], fit.g[:, 1]
+    E, u = layout.zero, layout.direction
+    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]  # (n, N), mm, TCS: the spots
     # the curvature bias bound: the worst one-signed quadric panel of radii >= min_radius_mm along the
     # angle's gradient; near 0, a round spread of the rectangular variance per axis (a worst case), stated
     # in angle (rad^2): the budget's slopes^2 are that times (1 + |g|^2)^2
     curve = np.zeros((N, 3))
     if np.isfinite(min_radius_mm):
+        g2 = gx * gx + gy * gy
         cx, cy = angle_gradient(gx, gy)
-        bound = _one_sign(cx * px + cy * py, x, y) / (2.0 * min_radius_mm)
-        b2 = (_one_sign(px, x, y) ** 2 + _one_sign(py, x, y) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
+        bound = _one_sign(cx * A0 + cy * A1, x, y) / (2.0 * min_radius_mm)
+        b2 = (_one_sign(A0, x, y) ** 2 + _one_sign(A1, x, y) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
         curve[:, 0] = curve[:, 2] = b2 * (1.0 + g2) ** 2
     else:
         bound = np.zeros(N)
-    budget = Budget(np.stack([gx, gy], axis=1), (noise, cal, Source(CURVATURE, curve, Kind.BOUND, bound)))
+    budget = Budget(fit.g.copy(), (noise, cal, Source(CURVATURE, curve, Kind.BOUND, bound)))
     un = combine(budget)
     if n == 4:
-        q = _null_vector_4(xc, yc)  # (4, N), unit, orthogonal to 1, x, y
-        red = redundancy(q, zc, mu, sigma, q_cal)
-        moment = np.empty((N, 3))
-        moment[:, 0], moment[:, 1], moment[:, 2] = (q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)
+        q = fit.null.T  # (4, N), unit, orthogonal to 1, x, y
+        red = redundancy(q, fit.h_res.T, Gu, sigma, q_cal)
+        moment = np.empty((N, 3))  # q is orthogonal to 1, x, y: the spots' centroid drops out
+        moment[:, 0], moment[:, 1], moment[:, 2] = (q * x * x).sum(0), (q * y * y).sum(0), (q * x * y).sum(0)
         twist = nuclear2(moment[:, 0], moment[:, 2], moment[:, 1])
     else:
-        red = redundancy(None, zc - gx * xc - gy * yc, mu, sigma, q_cal)
+        red = redundancy(None, fit.h_res.T, Gu, sigma, q_cal)
         twist = moment = None
-    return HoleNormals(normal, un.angle, un.u, un.U95, un.share[:, 0], red.residual, red.residual_z, red.signature,
-                       bound, twist, red.sd, red.noise_sd, budget, moment=moment)
+    return HoleNormals(-fit.normal, un.angle, un.u, un.U95, un.of(READING_NOISE), red.residual, red.residual_z,
+                       red.signature, bound, twist, red.sd, red.noise_sd, budget, moment=moment)
 
 
 def _one_sign(w, x, y):
     """(N,) :func:`metrology.core.sym2.one_sign2` of ``sum_i w_i r_i r_i^T`` (``w, x, y`` (n, N))."""
     return one_sign2((w * x * x).sum(0), (w * x * y).sum(0), (w * y * y).sum(0))
+
 
 
 def _null_vector_4(xc, yc):

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from metrology.io.holelog import table_key
 from metrology.measure.beyond import Beyond
 from metrology.measure.normals import drill_axis
 from metrology.measure.pose import read_pose
@@ -65,7 +66,7 @@ def place(surf: "HoleSurfaces", table, layout: "SensorLayout") -> Placed:
     N = table.num_rows
     # the table's own id: ``point_id`` where the log has it (a hole table drilled more than once
     # gives each pass its own hole_id, ``ID#k``: metrology/sim/forward/log_write.py), else hole_id
-    key = "point_id" if "point_id" in table.column_names else "hole_id"
+    key = table_key(table.column_names)
     table_row = surf.rows(table.column(key).cast(pa.string()))
     have = table_row >= 0
     shape, u_shape = np.zeros((N, 3, 3)), np.zeros(N)

@@ -11,10 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from metrology.core.sym3 import smallest_eigvec
+from metrology.io.holelog import POSE_POSITION, POSE_ROTATION
 
 __all__ = ["POSE_COLUMNS", "read_pose", "against_cad"]
 
-POSE_COLUMNS = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")
+POSE_COLUMNS = POSE_ROTATION + POSE_POSITION
 
 
 def read_pose(table):

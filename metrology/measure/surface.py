@@ -18,8 +18,9 @@ the surface ``m.(p - c e_z) = -1/2 (Tq)^T K_m (Tq)`` (to second order in the dis
 ``h_i`` is ``rho`` times the point's height over it along ``m``). With ``K = 0`` the fit is the
 micro-plane of :mod:`metrology.measure.normals`, which is the first of :data:`GN_STEPS` steps;
 the rest are Gauss-Newton steps with ``K`` (the Jacobian's ``c`` column carries the curvature's
-slope; what is left out of it is of order ``|K| |m.q|``), weighted by the readings' noise along
-the normal, vectorised over holes.
+slope; what is left out of it is of order ``|K| |m.q|``), vectorised over holes. Both are one
+estimator, :func:`metrology.measure.estimator.fit_tilt` (its weights and why: there): on a flat
+panel this fit, and its budget, are the micro-plane's to the last bit.
 
 With 3 sensors the three readings fix the three unknowns (the curvature comes from the panel
 only); with 4 the redundant reading is the check: its misfit ``rho_4 = q.h`` (``q`` the unit
@@ -55,13 +56,12 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import eig2
-from metrology.core.sym3 import full as _full, inv3 as _inv3, null_vector_cols as _null_vector_cols
-from metrology.core.sym3 import turned_tangent as _turned_tangent
 from metrology.measure.beyond import beyond_second_order
-from metrology.measure.budget import CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Source, combine
-from metrology.measure.normals import HoleNormals, drill_axis
+from metrology.measure.budget import PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Source, combine
+from metrology.measure.estimator import SurfaceFit, drill_axis, fit_tilt
+from metrology.measure.normals import HoleNormals
 from metrology.measure.panel_terms import PanelTerms, free_spin, panel_sources, shape_basis
-from metrology.measure.terms import calibration_source, noise_source, reading_sigma, redundancy
+from metrology.measure.terms import reading_sigma, reading_sources, redundancy
 from metrology.measure.remainder import TIGHT_STEPS, surface_remainder
 
 __all__ = ["surface_normal", "fit_surface", "surface_hole_normals", "SurfaceFit", "PanelTerms", "PanelFit", "GN_STEPS"]
@@ -81,42 +81,9 @@ PRELIMINARY_STEPS = 2
 SLICE_ROWS = 16384
 
 
-@dataclass(frozen=True)
-class SurfaceFit:
-    """The local surface's pose fitted to the readings.
-
-    Attributes
-    ----------
-    normal : (h, 3) float, unit, TCS, toward the head (NaN where not ok)
-    g : (h, 2) float, the slopes ``(g_x, g_y)``; c : (h,) float, mm, the offset along the TCS z axis
-    ok : (h,) bool, 3+ finite readings and a well-posed fit
-    plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the start)
-    (the rest are None unless ``fit_surface(full=True)``)
-    A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
-    G : (h, n, 3) float, ``dh_i / dS_i``
-    q : (h, n, 3) float, mm, ``S_i - c e_z``
-    w : (h, n) float, the weights used (0 for a blank)
-    null : (h, n) float or None, n = 4: the unit vector orthogonal to the Jacobian's columns
-    h_res : (h, n) float, mm, the heights' misfit at the solution
-    Kt : (h, 3, 3) float, 1/mm, the shape operator turned onto the fitted tangent plane (``K_m``)
-    """
-
-    normal: np.ndarray
-    g: np.ndarray
-    c: np.ndarray
-    ok: np.ndarray
-    plane_normal: np.ndarray | None
-    A: np.ndarray | None
-    G: np.ndarray | None
-    q: np.ndarray | None
-    w: np.ndarray | None
-    null: np.ndarray | None
-    h_res: np.ndarray | None
-    Kt: np.ndarray | None
-
-
 def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=None, full: bool = True) -> SurfaceFit:
-    """Fit the local surface's pose (see the module docstring) to each hole's readings.
+    """Fit the local surface's pose (see the module docstring) to each hole's readings:
+    :func:`metrology.measure.estimator.fit_tilt` with the shape, the estimator of the micro-plane too.
 
     Parameters
     ----------
@@ -125,116 +92,12 @@ def fit_surface(layout: SensorLayout, d, shape, steps: int = GN_STEPS, sigma_mm=
     shape : (h, 3, 3) float, 1/mm, TCS, the shape operator at each hole (0: flat), tangent to the
         TCS ``xy`` plane (the head square to the panel); turned onto the fitted tangent plane; or its
         entries ``(00, 01, 11)`` as a tuple of (h,) arrays (the only ones the fit takes)
-    steps : int, steps from g = 0 (the first gives the micro-plane, the rest are Gauss-Newton with ``K``)
-    sigma_mm : (n,) float, mm, reading noise for the weights (default the layout's; equal when unknown)
+    steps : int >= 1, the first gives the micro-plane, the rest are Gauss-Newton with ``K``
+    sigma_mm : (n,) float, mm, the reading noise the weights take (default the layout's)
     full : bool, also the arrays the uncertainty needs (``A``, ``G``, ``q``, ``null``, ``Kt``; else None,
         and the pass that only evaluates them at the solution is not run: the same ``normal``, ``g``, ``c``)
-
-    Sensor-major ``(n, h)`` arrays and explicit 3 x 3 algebra: a sum over the sensors is a sum of
-    contiguous rows (as :func:`metrology.measure.normals.hole_normals`).
     """
-    n = layout.n
-    d = np.asarray(d, float).reshape(-1, n)
-    h = len(d)
-    # square to the drill axis (as given): its entries in the TCS xy plane; K_m = Q K Q^T then has
-    # K_m m = 0, so K_m T q = T K_m q = K_m q and (Tq)^T K_m (Tq) = q^T K_m q (no projections per step)
-    if isinstance(shape, tuple):  # those entries given
-        K3 = tuple(np.broadcast_to(np.asarray(k, float), (h,)) for k in shape)
-        K = None
-    else:
-        K = np.broadcast_to(np.asarray(shape, float), (h, 3, 3))
-        K3 = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (1, 1)))  # read every step
-    s = drill_axis(layout)[2]
-    sg = -s
-    sig = layout.noise_mm if sigma_mm is None else np.broadcast_to(np.asarray(sigma_mm, float), (n,))
-    good = np.isfinite(sig) & (sig > 0)
-    if not good.all():
-        sig = np.where(good, sig, np.nanmean(np.where(good, sig, np.nan)) if good.any() else 1.0)
-    is2 = 1.0 / (sig * sig)[:, None]  # 1 / sigma^2, (n, 1)
-    dT = np.ascontiguousarray(d.T)
-    valid = np.isfinite(dT)
-    whole = bool(valid.all())
-    if not whole:
-        dT = np.where(valid, dT, 0.0)
-    E, u = layout.zero, layout.direction
-    x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
-    y = E[:, 1, None] + dT * u[:, 1, None]
-    z = E[:, 2, None] + dT * u[:, 2, None]
-    ok = valid.sum(0) >= 3
-    u0, u1, u2 = u[:, 0, None], u[:, 1, None], u[:, 2, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # step 0 from g = 0, c = 0 with K left out: the weighted micro-plane (rho = 1, h_i = z_i, jc = -1, Gu = u_z)
-        w = is2 / (u2 * u2) * valid if not whole else is2 / (u2 * u2)  # (n, h), or (n, 1): each sensor's
-        wx, wy = w * x, w * y
-        i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), wx.sum(0), (wy * y).sum(0), wy.sum(0), w.sum(0))
-        b0, b1, b2 = -(wx * z).sum(0), -(wy * z).sum(0), -(w * z).sum(0)
-        gx = -(i00 * b0 + i01 * b1 + i02 * b2)
-        gy = -(i01 * b0 + i11 * b1 + i12 * b2)
-        c = -(i02 * b0 + i12 * b1 + i22 * b2)
-        gx0, gy0 = gx, gy
-        # Gauss-Newton with K; the last pass only evaluates at the solution, for the uncertainty: without
-        # it (full=False) ``ok`` takes the matrix inverted for the last update. G first, the height from it:
-        # ``zq - g.q + sigma rho q^T K_m q / 2 = ((G_x - g_x) x + (G_y - g_y) y + (G_z + 1) zq) / 2``; jc = -G_z
-        for it in range(1, steps + 1 if full else steps):
-            rho = np.sqrt(1.0 + gx * gx + gy * gy)
-            mx, my, mz = -sg * gx / rho, -sg * gy / rho, sg / rho
-            zq = z - c
-            k00, k01, k02, k11, k12, k22 = _turned_tangent(K3, mx, my, mz, sg)  # K on the fitted tangent plane
-            sc = sg * rho
-            s00, s01, s02, s11, s12, s22 = sc * k00, sc * k01, sc * k02, sc * k11, sc * k12, sc * k22
-            Gx = s00 * x + s01 * y + s02 * zq - gx  # (-g_x, -g_y, 1) + sigma rho K_m q
-            Gy = s01 * x + s11 * y + s12 * zq - gy
-            Gz = s02 * x + s12 * y + s22 * zq + 1.0
-            hres = 0.5 * (x * (Gx - gx) + y * (Gy - gy) + zq * (Gz + 1.0))
-            Gu = Gx * u0 + Gy * u1 + Gz * u2
-            w = is2 / (Gu * Gu)
-            if not whole:
-                w = np.where(valid, w, 0.0)
-            wx, wy, wz = w * x, w * y, w * Gz
-            i00, i01, i02, i11, i12, i22 = _inv3((wx * x).sum(0), (wx * y).sum(0), (wz * x).sum(0), (wy * y).sum(0), (wz * y).sum(0),
-                                                 (wz * Gz).sum(0))
-            if it == steps:
-                break
-            b0, b1, b2 = -(wx * hres).sum(0), -(wy * hres).sum(0), -(wz * hres).sum(0)
-            gx = gx - (i00 * b0 + i01 * b1 + i02 * b2)
-            gy = gy - (i01 * b0 + i11 * b1 + i12 * b2)
-            c = c - (i02 * b0 + i12 * b1 + i22 * b2)
-    if steps == 0:
-        rho = np.ones(h)
-        mx, my, mz = np.zeros(h), np.zeros(h), np.full(h, sg)
-        zq, hres, Gz = z, z, np.ones_like(x)
-        wz = w = np.broadcast_to(w, x.shape)  # every hole's weights; w G_z = w
-    ok = ok & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
-    rho = np.sqrt(1.0 + gx * gx + gy * gy)
-    f = sg / rho
-    normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
-    normal[~ok] = np.nan
-    g = np.array([gx, gy]).T  # (h, 2), a view of (2, h)
-    if not full:
-        return SurfaceFit(normal, g, c, ok, None, None, None, None, None, None, None, None)
-    A = np.empty((3, n, h))  # A = M^-1 J^T W, J = (-x, -y, jc), jc = -G_z: J^T W = -(w x, w y, w G_z)
-    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
-        np.multiply(wx, -a0, out=A[r])
-        A[r] -= wy * a1
-        A[r] -= wz * a2
-    A, jc = A.transpose(2, 0, 1), -Gz  # (h, 3, n), a view
-    G = np.stack([Gx, Gy, Gz]).transpose(2, 1, 0) if steps > 0 else None  # views of (3, n, h)
-    q = np.stack([x, y, zq]).transpose(2, 1, 0)
-    null = _null_vector_cols(x, y, jc) if n == 4 else None  # the columns' signs: det(-a, -b, c) = det(a, b, c)
-    if steps > 0:
-        Kt = np.array([[k00, k01, k02], [k01, k11, k12], [k02, k12, k22]]).transpose(2, 0, 1)  # K_m = T K_m T, (h, 3, 3)
-        f = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
-        plane = np.array([-gx0 * f, -gy0 * f, f]).T
-    else:  # the micro-plane: K projected onto it, T K T
-        if K is None:
-            K = _full((K3[0], K3[1], np.zeros(h), K3[2], np.zeros(h), np.zeros(h)))
-        m = np.stack([mx, my, mz], axis=1)
-        Km = np.einsum("hij,hj->hi", K, m)
-        mKm = (m * Km).sum(1)
-        Kt = (K - m[:, :, None] * Km[:, None, :] - Km[:, :, None] * m[:, None, :]
-              + mKm[:, None, None] * m[:, :, None] * m[:, None, :])
-        plane = normal.copy()
-    return SurfaceFit(normal, g, c, ok, plane, A, G, q, w.T, null, hres.T, Kt)
+    return fit_tilt(layout, d, shape, steps, sigma_mm, full)
 
 
 def surface_normal(layout, d, shape):
@@ -348,28 +211,22 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
         mean = 0.5 * (k00 + k11)
         dev = np.sqrt(0.25 * (k00 - k11) ** 2 + k01 * k01)
         shape, beyond = (mean, np.zeros(N), mean), None
+    cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     if beyond is not None:
-        fit0 = fit_surface(layout, d, shape, steps=PRELIMINARY_STEPS, sigma_mm=sigma_mm, full=False)
+        fit0 = fit_surface(layout, d, shape, PRELIMINARY_STEPS, sigma_mm, full=False)
         d, shape, Y = beyond_second_order(layout, d, shape, beyond, fit0,  # (a tight radius: once more from a fit)
                                           lambda dd, kk: fit_surface(layout, dd, kk, TIGHT_STEPS, sigma_mm, full=False))
     fit = fit_surface(layout, d, shape, GN_STEPS if beyond is None or beyond.higher.shape[1] <= 9 else TIGHT_STEPS, sigma_mm)
-    cov = layout.covariance if covariance is None else np.asarray(covariance, float)
     sigma = reading_sigma(layout, sigma_mm)
     axis = drill_axis(layout)
     g = fit.g
     gx, gy = g[:, 0], g[:, 1]
     g2 = gx * gx + gy * gy
     normal = -fit.normal  # along the drill axis
-    # sensor-major (n, N) arrays (the fit's own layout: each sum over the sensors a sum of contiguous rows)
-    A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T  # (n, N): the tilt's change per unit change of each height
-    Gx, Gy, Gz = fit.G.transpose(2, 1, 0)  # (n, N)
+    # sensor-major (n, N) arrays (the fit's own layout: each sum over the sensors a sum of contiguous rows); the
+    # reading noise and calibration as the micro-plane's (one code: a flat panel gives its budget exactly)
+    A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, np.ascontiguousarray(d.T), cov, sigma)
     u = layout.direction
-    Gu = Gx * u[:, 0, None] + Gy * u[:, 1, None] + Gz * u[:, 2, None]  # (n, N)
-    noise = noise_source(A0, A1, Gu, sigma)
-    if cov is not None:
-        cal, q_cal = calibration_source(layout, cov, d.T, (Gx, Gy, Gz), A0, A1)
-    else:
-        cal, q_cal = Source(CALIBRATION, np.zeros((N, 3))), np.zeros((n, N))
     shape_src, spin_src, rho_var = panel_sources(fit, g2, axis, terms, A0, A1)
     rho_bound = None
     if free:

@@ -22,8 +22,10 @@ import numpy as np
 
 from metrology.core.model import direction_basis
 from metrology.measure.budget import CALIBRATION, READING_NOISE, Source
+from metrology.measure.estimator import spot_slopes
 
-__all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "redundancy", "Redundancy"]
+__all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "reading_sources", "redundancy",
+           "Redundancy"]
 
 
 def reading_sigma(layout, sigma_mm=None) -> np.ndarray:
@@ -89,6 +91,25 @@ def calibration_source(layout, cov, dT, G, A0, A1):
     cx, cy = Sx @ cov, Sy @ cov
     C = np.stack([np.einsum("ij,ij->i", cx, Sx), np.einsum("ij,ij->i", cx, Sy), np.einsum("ij,ij->i", cy, Sy)], axis=1)
     return Source(CALIBRATION, C), q
+
+
+def reading_sources(layout, fit, dT, cov, sigma):
+    """What both fitters build from a full :class:`metrology.measure.estimator.SurfaceFit` (one code: a flat
+    panel's budget is the micro-plane's to the last bit): ``(A0, A1, Gu, noise, calibration, q_cal)``.
+
+    ``A0, A1`` (n, N) the tilt's change per unit height, ``Gu`` (n, N) ``G_i . u_i``, the two :class:`Source`
+    entries and each spot's calibration variance ``q_cal`` (n, N) (0 without ``cov``); ``dT`` (n, N) mm the
+    readings, ``cov`` (5n, 5n) or None, ``sigma`` (n,) mm."""
+    A0, A1 = fit.A[:, 0, :].T, fit.A[:, 1, :].T
+    Gx, Gy, Gz = spot_slopes(fit)  # (n, N) each, or broadcasting to it
+    u = layout.direction
+    Gu = Gx * u[:, 0, None] + Gy * u[:, 1, None] + Gz * u[:, 2, None]
+    noise = noise_source(A0, A1, Gu, sigma)
+    if cov is not None:
+        cal, q_cal = calibration_source(layout, cov, dT, (Gx, Gy, Gz), A0, A1)
+    else:
+        cal, q_cal = Source(CALIBRATION, np.zeros((A0.shape[1], 3))), np.zeros(A0.shape)
+    return A0, A1, Gu, noise, cal, q_cal
 
 
 @dataclass(frozen=True)

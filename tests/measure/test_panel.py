@@ -169,9 +169,11 @@ def test_flat_panel_keeps_the_flat_u95(tmp_path):
     assert r.exit_code in (0, 1), r.output
     r0, out0 = _measure(tmp_path, log, "--min-radius-mm", "inf", name="f.csv")
     assert r0.exit_code in (0, 1), r0.output
-    u_panel = np.nanmedian(_f(_read(out), "U95_angle_deg"))
-    u_flat = np.nanmedian(_f(_read(out0), "U95_angle_deg"))
-    assert u_panel <= 1.05 * u_flat, (u_panel, u_flat)
+    # one estimator and one budget (measure/estimator, measure/budget): the panel path on a flat panel IS the
+    # micro-plane, to the last bit, through the whole command (its CAD a mesh, the table, the spin's term)
+    for c in ("angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg"):
+        np.testing.assert_array_equal(_f(_read(out), c), _f(_read(out0), c))
+    assert np.isfinite(_f(_read(out), "U95_angle_deg")).all()
     np.testing.assert_allclose(_f(_read(out), "k1_per_mm"), 0.0, atol=1e-7)
 
 

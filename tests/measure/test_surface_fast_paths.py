@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from metrology.core.sym3 import turned as _turned
+from metrology.core.sym3 import full as _full, turned as _turned, turned_tangent as _turned_tangent
 from metrology.io.layout import load_layout
 from metrology.measure.panel import HoleSurfaces
-from metrology.measure.surface import SLICE_ROWS, _full, _turned_tangent, fit_surface, surface_normal
+from metrology.measure.surface import SLICE_ROWS, fit_surface, surface_normal
 
 
 ROOT = Path(__file__).resolve().parents[2]
