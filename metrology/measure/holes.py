@@ -379,7 +379,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                                                      *((after.angle, after.U95) if after is not None else (nan, nan)))
     before_angle, before_u = blanked(nm & ~judge_after, before.angle, before.U95)  # not measured: blank (docs)
     out = result_table(layout, table, ids, code,
-                       reason_column(verdict_reasons(code, judge_after, judged, judged_u, settings.tolerance), reason),
+                       reason_column(verdict_reasons(code, judge_after), reason),
                        before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
     full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
