@@ -84,7 +84,7 @@ class HoleLog:
     sensors: tuple
     batch_rows: int = BATCH_ROWS
     display: str = ""
-    skip: tuple = ()
+    skip: tuple = field(default=(), kw_only=True)
 
     @property
     def partitioned(self) -> bool:
