@@ -1,5 +1,6 @@
 """What the output contract of ``metro measure`` costs alone: the plain pyarrow+numpy micro-plane script
-(``bench_measure.BASELINE``) against the same script reading every column of the log and writing every column
+(``bench_measure.BASELINE``) against the same script reading the columns of the log ``metro measure`` reads (all but
+the commanded pose and the temperature, without a panel or a head term that needs them) and writing every column
 ``metro measure`` writes (its 13 result columns, the reason one fixed text per row, the log's columns that name
 the hole passed through: ``hole_id``, ``time``, ``cell``, ``panel``; dictionaries for the text columns, floats
 plain, the rest zstd, as ``metrology.io.holeout.parquet_options``), no uncertainty, verdict, drift watch or
@@ -23,7 +24,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_measure import BASELINE, RUN, _ENV  # noqa: E402
 
-FLOOR = BASELINE.replace('columns=["hole_id", *sum(sets, [])]', 'columns=None').replace(
+#: the columns metro reads of a log without a panel: all but its numeric inputs it does not need (the commanded pose,
+#: the temperature): ``metrology.jobs.measure._unread``
+READ = '''columns=[c for c in pf.schema_arrow.names if c != "temperature_c" and not c.startswith("pose_")]'''
+FLOOR = BASELINE.replace('columns=["hole_id", *sum(sets, [])]', READ).replace(
     '''    t = pa.table(cols)
     if writer is None:
         writer = pq.ParquetWriter(out, t.schema)''',

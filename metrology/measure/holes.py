@@ -302,7 +302,8 @@ def _duplicates(ids):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    if len(pc.unique(ids)) == len(ids):  # the usual: no repeat (a hash of each id, no counts)
+    if len(ids) < 2 or pc.all(pc.greater(ids.slice(1), ids.slice(0, len(ids) - 1))).as_py() \
+            or len(pc.unique(ids)) == len(ids):  # the usual: ids rising (0.006 s per 1e6, a hash 0.21 s) or no repeat
         return np.zeros(0, int), np.zeros(0, int)
     counts = pc.value_counts(ids)
     repeated = counts.field("values").filter(pc.greater(counts.field("counts"), 1))
