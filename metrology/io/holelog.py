@@ -76,7 +76,7 @@ class HoleLog:
     batch_rows : int, rows per batch at most
     display : str, how outputs and errors name the log
     skip : tuple of str, columns of a Parquet file left unread (what the run does not need: the commanded
-        pose without a panel; reading a 1e6-hole log's 7 such columns cost 0.6 s of CPU)
+        pose without a panel; reading a 1e6-hole log's 7 such columns cost 0.2-0.5 s of CPU)
     """
 
     source: str

@@ -83,8 +83,9 @@ def clear_stale(path: Path) -> None:
 def parquet_options(schema) -> dict:
     """How a results file is encoded, column by column: dictionaries for the text columns only (a float
     column of measurements has no repeats: trying a dictionary for it costs time for nothing); zstd for
-    every column but the floats, which are stored plain (their mantissas are noise: zstd saved 12 % of
-    their bytes for a third of the write's CPU; benchmarks/results/measure_verdicts_issue49_r3.md)."""
+    every column but the floats, which are stored plain (their mantissas are noise: on a 1e6-hole results file
+    zstd on them saved 57.6 -> 50.7 MB for 0.29-0.34 -> 0.36-0.49 s of the write's CPU;
+    benchmarks/results/measure_verdicts_issue49_r3.md)."""
     import pyarrow as pa
 
     text = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_dictionary(f.type)]
