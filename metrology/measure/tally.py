@@ -20,9 +20,6 @@ OFF_CAD_SIGMAS = 4.0
 #: CAD's along its normal (mm) counts as off its CAD there (on its CAD the bundled panels read within
 #: 0.01 mm: tests/measure/test_panel_bundled.py)
 CAD_OFFSET_MM = 0.05
-#: the measured normal (turned by the commanded pose) against the CAD's is reported (mean, largest) but
-#: counts no hole off its CAD: it holds the robot's own orientation error as well, which on the forward
-#: simulator's default logs (true angles 0.5-5 deg before the adjustment) is every hole's 0.5-5 deg
 
 
 class GroupKey(NamedTuple):
@@ -143,7 +140,9 @@ class OffCadSums:
 class CadSums:
     """With the log's commanded pose: holes checked against the CAD, those off it (``|offset|`` over
     :data:`CAD_OFFSET_MM`), the sums of ``|offset|`` (mm) and of the normal's angle to the CAD's (deg), and the
-    largest of each with its hole."""
+    largest of each with its hole. The angle counts no hole off its CAD: it holds the robot's own orientation
+    error as well, which on the forward simulator's default logs (true angles 0.5-5 deg before the adjustment)
+    is every hole's 0.5-5 deg."""
 
     checked: int = 0
     holes: int = 0
