@@ -1,8 +1,10 @@
 """What the output contract of ``metro measure`` costs alone: the plain pyarrow+numpy micro-plane script
-(``bench_measure.BASELINE``) against the same script reading every column of the log and writing every column
-``metro measure`` writes (its 13 result columns, a reason of a failing hole's length on every row, the log's
-columns passed through; zstd and dictionaries for the text columns as ``metro`` writes them), no uncertainty,
-verdict, drift watch or summary: the floor a ratio of ``metro measure`` to the plain script stands on.
+(``bench_measure.BASELINE``) against the same script reading the columns of the log ``metro measure`` reads (all but
+the commanded pose and the temperature, without a panel or a head term that needs them) and writing every column
+``metro measure`` writes (its 13 result columns, the reason one fixed text per row, the log's columns that name
+the hole passed through: ``hole_id``, ``time``, ``cell``, ``panel``; dictionaries for the text columns, floats
+plain, the rest zstd, as ``metrology.io.holeout.parquet_options``), no uncertainty, verdict, drift watch or
+summary: the floor a ratio of ``metro measure`` to the plain script stands on.
 
     python benchmarks/measure_io_floor.py LOG.parquet LAYOUT.toml [--repeat 4]
 
@@ -22,25 +24,27 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_measure import BASELINE, RUN, _ENV  # noqa: E402
 
-FLOOR = BASELINE.replace('columns=["hole_id", *sum(sets, [])]', 'columns=None').replace(
+#: the columns metro reads of a log without a panel: all but its numeric inputs it does not need (the commanded pose,
+#: the temperature): ``metrology.jobs.measure._unread``
+READ = '''columns=[c for c in pf.schema_arrow.names if c != "temperature_c" and not c.startswith("pose_")]'''
+FLOOR = BASELINE.replace('columns=["hole_id", *sum(sets, [])]', READ).replace(
     '''    t = pa.table(cols)
     if writer is None:
         writer = pq.ParquetWriter(out, t.schema)''',
-    '''    import pyarrow.compute as pc
-    n = len(cols["normal_x"])
+    '''    n = len(cols["normal_x"])
     for k in ("angle_deg", "U95_angle_deg", "angle_after_deg", "U95_after_deg", "fit_residual_um",
               "fit_residual_after_um"):
         cols[k] = cols["normal_x"]
     cols["sensors_used"] = pa.array(np.full(n, "L1 L2 L3 L4", dtype=object), pa.string())
     cols["status"] = pa.array(np.full(n, "fails", dtype=object), pa.string())
-    cols["reason"] = pc.binary_join_element_wise(b.column("hole_id"), " deg - U95 0.0123 deg > tolerance 0.1 deg as", "")
-    for k in b.schema.names:
-        if k not in cols and not k.startswith("d_"):
-            cols[k] = b.column(k)
+    cols["reason"] = pa.array(["as measured: angle - U95 > tolerance"], pa.string()).take(np.zeros(n, np.int8))
+    for k in ("time", "cell", "panel"):
+        cols[k] = b.column(k)
     t = pa.table(cols)
     if writer is None:
         text = [f.name for f in t.schema if pa.types.is_string(f.type)]
-        writer = pq.ParquetWriter(out, t.schema, compression="zstd", use_dictionary=text)''')
+        comp = {f.name: "none" if pa.types.is_floating(f.type) else "zstd" for f in t.schema}
+        writer = pq.ParquetWriter(out, t.schema, compression=comp, use_dictionary=text)''')
 
 
 def cpu(cmd) -> float:

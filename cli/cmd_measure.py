@@ -198,6 +198,8 @@ def register(app: typer.Typer) -> None:
 
     def _run(log, layout, options):
         from metrology.jobs.measure import measure_files
+        from metrology.measure.run import tune_allocator
 
+        tune_allocator()  # this process is metro's: glibc's heap kept for the batches (its docstring)
         with progress_bar("measure") as progress:
             return measure_files(log, layout, options, warn=warn, progress=progress)

@@ -263,6 +263,7 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     from metrology.measure.effects import check_log
 
     check_log(layout, log)  # a covariate the layout's head terms need, named before any hole is measured
+    log = _unread(log, layout, surfaces)
     _check_reach(layout, log, shown_layout)
     if surfaces is not None:
         check_join(log, surfaces, display_name(points))
@@ -338,6 +339,21 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
     if o.report_html is not None:
         _write_report_html(o, report, log_path, layout_path)
     return report
+
+
+def _unread(log, layout, surfaces):
+    """``log`` with the columns this run does not read (:attr:`~metrology.io.holelog.HoleLog.skip`): metro's
+    numeric inputs (:data:`~metrology.io.holelog.NUMERIC`; not written to the results) but the commanded pose
+    with the panel known and the temperature a head term needs."""
+    import dataclasses
+
+    from metrology.io.holelog import NUMERIC
+    from metrology.measure.pose import POSE_COLUMNS
+
+    need = set(POSE_COLUMNS) if surfaces is not None else set()
+    if layout.effects is not None:
+        need |= set(layout.effects.needs())
+    return dataclasses.replace(log, skip=tuple(c for c in NUMERIC if c not in need))
 
 
 def _panel_options(o: MeasureOptions, layout_path) -> tuple:

@@ -10,6 +10,7 @@ from metrology.core.verdict import Check, Verdict
 
 if TYPE_CHECKING:
     from metrology.measure.run import MeasureResult
+    from metrology.measure.tally import Counts
 
 __all__ = ["MeasureReport", "Sources", "ChartSettings", "RadiusBound", "KnownSurfaces", "OffCad", "CadCheck", "SCHEMA"]
 
@@ -201,7 +202,8 @@ class MeasureReport:
     panel_map: object = None
 
     @property
-    def counts(self) -> dict:
+    def counts(self) -> "Counts":
+        """Holes by status (:class:`~metrology.measure.tally.Counts`)."""
         return self.result.summary.counts()
 
     @property
@@ -211,13 +213,13 @@ class MeasureReport:
         # run did not persist (chart.PERSIST_Z: a false alarm or a transient knock) is shown, never gated
         alarms = sum(1 for a in self.result.alarms if a.persisted)
         transient = len(self.result.alarms) - alarms
-        checks = [Check("drilling tolerance: holes that fail", c["fails"], 0, "holes", c["fails"] == 0),
-                  Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c["undecided"], 0,
-                        "holes", c["undecided"] == 0),
+        checks = [Check("drilling tolerance: holes that fail", c.fails, 0, "holes", c.fails == 0),
+                  Check("drilling tolerance: holes undecided (U95 straddles the tolerance)", c.undecided, 0,
+                        "holes", c.undecided == 0),
                   Check("drilling tolerance: holes whose drilled angle is not known (not measured after the adjustment, "
                         "the readings before it not sound: re-inspect)", self.result.summary.unknown_after, 0, "holes",
                         self.result.summary.unknown_after == 0),
-                  Check("measurement: holes not measured", c["not_measured"], None, "holes", True, gate=False),
+                  Check("measurement: holes not measured", c.not_measured, None, "holes", True, gate=False),
                   Check("drift watch: alarms whose change persisted (recalibrate)", alarms, 0, "alarms", alarms == 0,
                         gate=self.fail_on_drift),
                   Check("drift watch: alarms whose run did not persist (check the head)", transient, None, "alarms",
@@ -258,9 +260,10 @@ class MeasureReport:
 
     def to_dict(self) -> dict:
         s = self.result.summary
-        groups = [{"cell": cell, "panel": panel, "day": day, "counts": s.counts(grp), **s.figures(grp)}
-                  for (cell, panel, day), grp in sorted(s.groups.items())]
-        series = [{"cell": cell, "counts": s.counts(grp), **s.figures(grp)} for cell, grp in sorted(s.series.items())]
+        groups = [{"cell": key.cell, "panel": key.panel, "day": key.day, "counts": s.counts(grp).to_dict(),
+                   **s.figures(grp).to_dict()} for key, grp in sorted(s.groups.items())]
+        series = [{"cell": cell, "counts": s.counts(grp).to_dict(), **s.figures(grp).to_dict()}
+                  for cell, grp in sorted(s.series.items())]
         return {
             "schema": SCHEMA,
             "sources": self.sources.to_dict(),
@@ -276,14 +279,14 @@ class MeasureReport:
             "holes": self.result.rows,
             "partitions": self.result.partitions,
             "partitions_written": self.result.written,
-            "counts": self.counts,
+            "counts": self.counts.to_dict(),
             "counts_detail": {"unknown_after": s.unknown_after},
-            "fleet": s.figures(s.total()),
+            "fleet": s.figures(s.total()).to_dict(),
             "cells": series,
             "groups": groups,
             "drift": {"chart": self.chart.to_dict(), "cells_charted": sorted(self.result.watch.charts),
                       "alarms": [a.to_dict() for a in self.result.alarms]},
-            "worst": list(s.worst),
+            "worst": [w.to_dict() for w in s.worst],
             "warnings": list(self.warnings),
             "verdict": self.verdict.to_dict(),
         }

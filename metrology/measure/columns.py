@@ -1,6 +1,6 @@
 """The per-hole table ``metro measure`` writes: :data:`OUTPUT_COLUMNS` in the file's units (angles in deg,
 the misfit in µm, a figure not known blank), with the panel's columns where the panel is known, then the
-log's own columns passed through (not the readings)."""
+log's columns that name the hole (:func:`passes_through`; not metro's inputs: readings, temperature, pose)."""
 
 from __future__ import annotations
 
@@ -8,17 +8,26 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from metrology.io.holelog import NUMERIC
 from metrology.measure.batch import STATUSES
 
 if TYPE_CHECKING:
     from metrology.core.layout import SensorLayout
     from metrology.measure.placement import Placed
 
-__all__ = ["OUTPUT_COLUMNS", "result_table"]
+__all__ = ["OUTPUT_COLUMNS", "result_table", "passes_through"]
 
 #: the per-hole columns metro writes, in order (before the columns passed through)
 OUTPUT_COLUMNS = ("hole_id", "normal_x", "normal_y", "normal_z", "angle_deg", "U95_angle_deg", "angle_after_deg",
                   "U95_after_deg", "fit_residual_um", "fit_residual_after_um", "sensors_used", "status", "reason")
+
+
+def passes_through(name: str) -> bool:
+    """Whether the log's column ``name`` is written to the results: the hole's identity and labels (``hole_id``,
+    ``time``, ``cell``, ``panel``, ``point_id``, hive keys, a column of the cell's own) are; what metro reads as
+    its input is not (the readings ``d_*``, ``temperature_c``, the commanded pose ``pose_*``): it stays in the log,
+    joined to the results by ``hole_id`` or by row (the results keep the log's row order, one row per hole)."""
+    return not name.startswith("d_") and name not in NUMERIC
 
 
 def _num(x):
@@ -90,6 +99,6 @@ def result_table(layout: "SensorLayout", table, ids, code, reason, before, after
             cols["normal_vs_cad_deg"] = _num(np.degrees(vs_cad))
             cols["cad_offset_mm"] = _num(offset)
     for k in table.column_names:
-        if k not in cols and not k.startswith("d_"):
+        if k not in cols and passes_through(k):
             cols[k] = table.column(k)
     return pa.table(cols)

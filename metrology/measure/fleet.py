@@ -17,7 +17,7 @@ from typing import Iterator
 from metrology.core.layout import SensorLayout
 from metrology.io.holelog import HoleLog
 from metrology.measure.holes import Settings
-from metrology.measure.run import Feed, Piece, Watch, measure_partition, tune_allocator
+from metrology.measure.run import Feed, Piece, Watch, measure_partition
 
 __all__ = ["connect", "DaskEngine", "QUIET_CLUSTER", "WORKER_PRELOAD"]
 
@@ -70,6 +70,7 @@ def connect(workers: int | None = None, scheduler: str | None = None):
         except (OSError, TimeoutError) as exc:
             raise ValueError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from None
         with client:
+            client.register_plugin(_tuned_heap())
             yield client
         return
     import dask.config
@@ -81,7 +82,25 @@ def connect(workers: int | None = None, scheduler: str | None = None):
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                          scheduler_kwargs=_NO_PORT_8787) as cluster, \
             Client(cluster) as client:
+        client.register_plugin(_tuned_heap())
         yield client
+
+
+def _tuned_heap():
+    """A worker plugin that keeps glibc's heap on every worker of the cluster, those that join later too
+    (:func:`metrology.measure.run.tune_allocator`: a worker started by Dask's nanny maps every batch array
+    otherwise); the setup of the workers' processes, never of the library's calls."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class TunedHeap(WorkerPlugin):
+        name = "metro-tuned-heap"
+
+        def setup(self, worker):
+            from metrology.measure.run import tune_allocator
+
+            tune_allocator()
+
+    return TunedHeap()
 
 
 #: the module the forkserver imports before it forks a LocalCluster's workers (:func:`_forkserver`)
@@ -117,7 +136,6 @@ def _task(log, part, layout, settings, output, rows):
     the client (``rows``: a one-file output)."""
     import pyarrow as pa
 
-    tune_allocator()  # a worker started by Dask's nanny maps every batch array otherwise (run.tune_allocator)
     pieces = list(measure_partition(log, part, layout, settings, output=output, rows=rows))
     summary = pieces[0].summary
     for p in pieces[1:]:

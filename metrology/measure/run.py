@@ -41,7 +41,12 @@ def tune_allocator() -> None:
     ``MALLOC_TRIM_THRESHOLD_=65536``, which fixes glibc's mmap threshold at 128 kB: every array of a
     batch then costs page faults, and a partition took 0.66 s of CPU instead of 0.21 s (0.17 s with
     this setting; 125 000 holes, this machine). Arrow's buffers are taken from the same heap. A no-op where
-    the C library is not glibc."""
+    the C library is not glibc.
+
+    It changes the whole process (glibc's thresholds, pyarrow's default memory pool), so the library never
+    calls it: the edges that own a process do (``metro measure``'s command, the Dask workers' setup,
+    :func:`metrology.measure.fleet.connect`, and the forkserver they are forked from,
+    :mod:`metrology.measure.preload`)."""
     global _TUNED
     if _TUNED:
         return
@@ -298,7 +303,6 @@ class OneProcess:
 
     def pieces(self, log: HoleLog, layout: SensorLayout, settings: Settings, output=None, rows: bool = False,
                by_panel: bool = False) -> Iterator[Piece]:
-        tune_allocator()
         for part in log.partitions:
             yield from measure_partition(log, part, layout, settings, output=output, rows=rows)
 

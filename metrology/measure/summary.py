@@ -22,24 +22,16 @@ import numpy as np
 
 from metrology.io.holelog import CELL, PANEL, TIME_S, text_codes
 from metrology.measure.holes import CODE, STATUSES, HoleBatch, Status
+from metrology.measure.tally import (CAD_OFFSET_MM, OFF_CAD_SIGMAS, CadSums, Counts, Figures, GroupKey, OffCadSums,
+                                     Quantiles, WorstHole)
 
-__all__ = ["FleetSummary", "Group", "EDGES_DEG", "WORST"]
+__all__ = ["FleetSummary", "Group", "GroupKey", "Counts", "Quantiles", "Figures", "WorstHole", "OffCadSums", "CadSums",
+           "EDGES_DEG", "WORST"]
 
 #: histogram edges of the angle, deg: 1e-4 to 90 deg in geometric steps (and 0 below)
 EDGES_DEG = np.concatenate([[0.0], np.geomspace(1e-4, 90.0, 801)])
 #: the worst holes kept for the report
 WORST = 20
-#: with the panel known: a hole whose redundant reading misses the CAD's surface by more than this
-#: many sigmas (noise, calibration, the panel's stated uncertainty; two-sided p ~ 6e-5) counts as
-#: a panel off its CAD there
-OFF_CAD_SIGMAS = 4.0
-#: with the robot's commanded pose in the log: a hole whose readings put the surface this far off the
-#: CAD's along its normal (mm) counts as off its CAD there (on its CAD the bundled panels read within
-#: 0.01 mm: tests/measure/test_panel_bundled.py)
-CAD_OFFSET_MM = 0.05
-#: the measured normal (turned by the commanded pose) against the CAD's is reported (mean, largest) but
-#: counts no hole off its CAD: it holds the robot's own orientation error as well, which on the forward
-#: simulator's default logs (true angles 0.5-5 deg before the adjustment) is every hole's 0.5-5 deg
 _STATUSES = tuple(str(s) for s in STATUSES)  # the codes' order (holes.CODE)
 #: Ppk's percentiles (ISO 22514-2: the median and the upper 0.135 % point, a normal's +3 sigma)
 PPK_Q = (0.5, 0.99865)
@@ -100,7 +92,7 @@ def _bins(angle_deg):
 
 
 def _groups(batch):
-    """Each row's group (N,) int and the groups' keys ``(cell, panel, day)`` (day: UTC date)."""
+    """Each row's group (N,) int and the groups' keys (:class:`GroupKey`)."""
     import datetime as dt
 
     t = batch.columns
@@ -115,7 +107,7 @@ def _groups(batch):
     for c in uniq:
         cp, dd = divmod(int(c), nd)
         ck, pk = divmod(cp, len(panels))
-        keys.append((cells[ck], panels[pk], (dt.date(1970, 1, 1) + dt.timedelta(days=d0 + dd)).isoformat()))
+        keys.append(GroupKey(cells[ck], panels[pk], (dt.date(1970, 1, 1) + dt.timedelta(days=d0 + dd)).isoformat()))
     return g.reshape(-1), keys
 
 
@@ -179,14 +171,15 @@ class FleetSummary:
     Attributes
     ----------
     tolerance_deg : float
-    groups : dict, (cell, panel, day) -> Group (no histograms)
-    series : dict, cell -> Group (with histograms)
-    worst : list of dict, the :data:`WORST` holes with the largest judged angle
+    groups : dict, GroupKey -> Group (no histograms)
+    series : dict, cell (str) -> Group (with histograms)
+    worst : list of WorstHole, the :data:`WORST` holes with the largest judged angle, the worst first
     judged_after, judged_before : int, holes judged on the angle after / before the adjustment
     unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
         (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known);
         spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read)
+    off_cad : OffCadSums, with the panel known; vs_cad : CadSums, with the log's commanded pose
     """
 
     tolerance_deg: float
@@ -200,66 +193,28 @@ class FleetSummary:
     on_convention: int = 0
     spin_free: int = 0
     spin_bound: int = 0
-    off_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_per_mm": 0.0, "max_per_mm": 0.0,
-                                                   "max_hole": None})
-    vs_cad: dict = field(default_factory=lambda: {"checked": 0, "holes": 0, "sum_abs_mm": 0.0, "max_mm": 0.0,
-                                                  "max_mm_hole": None, "sum_deg": 0.0, "max_deg": 0.0,
-                                                  "max_deg_hole": None})
-
-    def _vs_cad(self, t) -> None:
-        if "cad_offset_mm" not in t.column_names:
-            return
-        off = t.column("cad_offset_mm").to_numpy(zero_copy_only=False).astype(float)
-        ang = t.column("normal_vs_cad_deg").to_numpy(zero_copy_only=False).astype(float)
-        f = np.isfinite(off) & np.isfinite(ang)
-        o = self.vs_cad
-        o["checked"] += int(f.sum())
-        o["holes"] += int((f & (np.abs(np.nan_to_num(off)) > CAD_OFFSET_MM)).sum())
-        o["sum_abs_mm"] += float(np.abs(off[f]).sum())
-        o["sum_deg"] += float(ang[f].sum())
-        if f.any():
-            i = int(np.flatnonzero(f)[np.argmax(np.abs(off[f]))])
-            if abs(off[i]) > abs(o["max_mm"]):
-                o["max_mm"], o["max_mm_hole"] = float(off[i]), t.column("hole_id")[i].as_py()
-            i = int(np.flatnonzero(f)[np.argmax(ang[f])])
-            if ang[i] > o["max_deg"]:
-                o["max_deg"], o["max_deg_hole"] = float(ang[i]), t.column("hole_id")[i].as_py()
+    off_cad: OffCadSums = field(default_factory=OffCadSums)
+    vs_cad: CadSums = field(default_factory=CadSums)
 
     def vs_cad_figures(self) -> dict:
         """The against-the-CAD figures for the JSON (with the log's commanded pose): holes checked,
         holes off (|cad_offset| > CAD_OFFSET_MM), mean |offset| (mm),
         largest offset (signed, mm) and angle (deg) with their holes."""
         o = self.vs_cad
-        n = o["checked"]
-        return {"cad_checked": n, "cad_off_holes": o["holes"], "cad_offset_limit_mm": CAD_OFFSET_MM,
-                "cad_offset_mean_abs_mm": o["sum_abs_mm"] / n if n else 0.0,
-                "cad_offset_max_mm": o["max_mm"], "cad_offset_max_hole": o["max_mm_hole"],
-                "normal_vs_cad_mean_deg": o["sum_deg"] / n if n else 0.0, "normal_vs_cad_max_deg": o["max_deg"],
-                "normal_vs_cad_max_hole": o["max_deg_hole"]}
+        n = o.checked
+        return {"cad_checked": n, "cad_off_holes": o.holes, "cad_offset_limit_mm": CAD_OFFSET_MM,
+                "cad_offset_mean_abs_mm": o.sum_abs_mm / n if n else 0.0,
+                "cad_offset_max_mm": o.max_mm, "cad_offset_max_hole": o.max_mm_hole,
+                "normal_vs_cad_mean_deg": o.sum_deg / n if n else 0.0, "normal_vs_cad_max_deg": o.max_deg,
+                "normal_vs_cad_max_hole": o.max_deg_hole}
 
-    def _off_cad(self, t) -> None:
-        if "panel_misfit_z" not in t.column_names:
-            return
-        z = t.column("panel_misfit_z").to_numpy(zero_copy_only=False).astype(float)
-        size = t.column("panel_misfit_per_mm").to_numpy(zero_copy_only=False).astype(float)
-        f = np.isfinite(z)
-        off = f & (np.abs(np.nan_to_num(z)) > OFF_CAD_SIGMAS)
-        o = self.off_cad
-        o["checked"] += int(f.sum())
-        o["holes"] += int(off.sum())
-        o["sum_per_mm"] += float(size[off].sum())
-        if off.any():
-            i = int(np.flatnonzero(off)[np.argmax(size[off])])
-            if size[i] > o["max_per_mm"]:
-                o["max_per_mm"], o["max_hole"] = float(size[i]), t.column("hole_id")[i].as_py()
-
-    def off_cad_figures(self, sigmas=None) -> dict:
+    def off_cad_figures(self) -> dict:
         """The panel-off-CAD figures for the JSON: holes checked (4 sensors), holes off, mean and
         largest size (1/mm: the shape change the redundant reading sees)."""
         o = self.off_cad
-        return {"off_cad_sigmas": OFF_CAD_SIGMAS, "off_cad_checked": o["checked"], "off_cad_holes": o["holes"],
-                "off_cad_mean_per_mm": o["sum_per_mm"] / o["holes"] if o["holes"] else 0.0,
-                "off_cad_max_per_mm": o["max_per_mm"], "off_cad_max_hole": o["max_hole"]}
+        return {"off_cad_sigmas": OFF_CAD_SIGMAS, "off_cad_checked": o.checked, "off_cad_holes": o.holes,
+                "off_cad_mean_per_mm": o.sum_per_mm / o.holes if o.holes else 0.0,
+                "off_cad_max_per_mm": o.max_per_mm, "off_cad_max_hole": o.max_hole}
 
     def add(self, batch: HoleBatch) -> None:
         """Count one measured batch in."""
@@ -297,8 +252,8 @@ class FleetSummary:
         self.on_convention += int(batch.on_convention.sum()) if batch.on_convention is not None else 0
         self.spin_free += int(batch.spin_free.sum()) if batch.spin_free is not None else 0
         self.spin_bound += int(batch.spin_bound.sum()) if batch.spin_bound is not None else 0
-        self._off_cad(t)
-        self._vs_cad(t)
+        self.off_cad = self.off_cad.merged(OffCadSums.of(t))
+        self.vs_cad = self.vs_cad.merged(CadSums.of(t))
         self._worst(batch, judged, ok)
 
     def _worst(self, batch, judged, ok) -> None:
@@ -313,11 +268,11 @@ class FleetSummary:
         top = cand[np.argsort(-judged[cand], kind="stable")[:WORST]]
         t = batch.columns
         for i in top:
-            self.worst.append({"hole_id": t.column("hole_id")[int(i)].as_py(), "cell": t.column(CELL)[int(i)].as_py(),
-                               "panel": t.column(PANEL)[int(i)].as_py(), "time_s": float(t.column(TIME_S)[int(i)].as_py()),
-                               "angle_deg": float(judged[i]), "U95_deg": float(np.degrees(batch.judged_u95[i])),
-                               "status": _STATUSES[int(batch.status[i])]})
-        self.worst = sorted(self.worst, key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
+            self.worst.append(WorstHole(t.column("hole_id")[int(i)].as_py(), t.column(CELL)[int(i)].as_py(),
+                                        t.column(PANEL)[int(i)].as_py(), float(t.column(TIME_S)[int(i)].as_py()),
+                                        float(judged[i]), float(np.degrees(batch.judged_u95[i])),
+                                        _STATUSES[int(batch.status[i])]))
+        self.worst = sorted(self.worst, key=WorstHole.order)[:WORST]
 
     def merge(self, other: "FleetSummary") -> None:
         for k, grp in other.groups.items():
@@ -331,21 +286,9 @@ class FleetSummary:
         self.on_convention += other.on_convention
         self.spin_free += other.spin_free
         self.spin_bound += other.spin_bound
-        o, p = self.off_cad, other.off_cad
-        o["checked"] += p["checked"]
-        o["holes"] += p["holes"]
-        o["sum_per_mm"] += p["sum_per_mm"]
-        if p["max_per_mm"] > o["max_per_mm"]:
-            o["max_per_mm"], o["max_hole"] = p["max_per_mm"], p["max_hole"]
-        o, p = self.vs_cad, other.vs_cad
-        for k in ("checked", "holes", "sum_abs_mm", "sum_deg"):
-            o[k] += p[k]
-        if abs(p["max_mm"]) > abs(o["max_mm"]):
-            o["max_mm"], o["max_mm_hole"] = p["max_mm"], p["max_mm_hole"]
-        if p["max_deg"] > o["max_deg"]:
-            o["max_deg"], o["max_deg_hole"] = p["max_deg"], p["max_deg_hole"]
-        self.worst = sorted(self.worst + other.worst,
-                            key=lambda w: (-w["angle_deg"], w["cell"], w["time_s"], w["hole_id"]))[:WORST]
+        self.off_cad = self.off_cad.merged(other.off_cad)
+        self.vs_cad = self.vs_cad.merged(other.vs_cad)
+        self.worst = sorted(self.worst + other.worst, key=WorstHole.order)[:WORST]
 
     # ------------------------------------------------------------------ figures
     def total(self) -> Group:
@@ -354,22 +297,23 @@ class FleetSummary:
             out.merge(grp)
         return out
 
-    def counts(self, grp: Group | None = None) -> dict:
+    def counts(self, grp: Group | None = None) -> Counts:
+        """Holes by status, of ``grp`` (None: the whole log)."""
         grp = self.total() if grp is None else grp
-        return {s: int(c) for s, c in zip(_STATUSES, grp.counts)}
+        return Counts(*(int(c) for c in grp.counts))
 
-    def figures(self, grp: Group) -> dict:
+    def figures(self, grp: Group) -> Figures:
         """Quantiles (deg) of the angle before and after; the judged angle's mean, s and (a cell, the
         fleet: groups with a histogram) Ppk with its 95 % interval."""
         mean = grp.total / grp.n if grp.n else float("nan")
         var = (grp.total_sq - grp.n * mean * mean) / (grp.n - 1) if grp.n > 1 else float("nan")
         sd = float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else float("nan")
         qs = (0.5, 0.95, 0.99, 0.999)
-        out = {"measured": grp.n, "mean_deg": mean, "sd_deg": sd}
+        p = ci = cap = before = after = None
         if grp.hist_judged is not None:
             p, ci = ppk(grp.hist_judged, self.tolerance_deg)
-            out.update({"ppk": p, "ppk_ci95": list(ci), "capability": CAPABILITY})
+            cap = CAPABILITY
         if grp.hist_before is not None:
-            out["quantiles_before_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_before, q) for q in qs}
-            out["quantiles_after_deg"] = {f"p{q * 100:g}": quantile_deg(grp.hist_after, q) for q in qs}
-        return out
+            before = Quantiles(*(quantile_deg(grp.hist_before, q) for q in qs))
+            after = Quantiles(*(quantile_deg(grp.hist_after, q) for q in qs))
+        return Figures(grp.n, mean, sd, p, ci, cap, before, after)

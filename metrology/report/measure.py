@@ -39,19 +39,20 @@ def _alarm_words(a) -> str:
                f"then returned ({a.size_um:+.2f} µm)") + f": {a.advice}")  # the advice says whether it persisted
 
 
-def _ppk(fig: dict, short: bool = False) -> str:
-    """The judged angle's Ppk with its 95 % interval, or why there is none."""
-    p = fig.get("ppk", float("nan"))
+def _ppk(fig, short: bool = False) -> str:
+    """The judged angle's Ppk (``fig``: :class:`~metrology.measure.tally.Figures`) with its 95 % interval, or why
+    there is none."""
+    p = float("nan") if fig.ppk is None else fig.ppk
     if not np.isfinite(p):
         from metrology.measure.summary import MIN_PPK_HOLES
 
         return "-" if short else f"Ppk - (fewer than {MIN_PPK_HOLES:,} holes)"
-    lo, hi = fig["ppk_ci95"]
+    lo, hi = fig.ppk_ci95
     return f"{p:.3g} [{lo:.3g}, {hi:.3g}]" if short else f"Ppk {p:.3g} (95 % CI {lo:.3g} to {hi:.3g})"
 
 
-def _q(fig: dict, which: str, key: str) -> str:
-    v = fig[f"quantiles_{which}_deg"][key]
+def _q(fig, which: str, key: str) -> str:
+    v = getattr(getattr(fig, f"quantiles_{which}_deg"), key)
     return "-" if not np.isfinite(v) else f"{v:.4g}"
 
 
@@ -89,7 +90,7 @@ def measure_text(report) -> str:
     fig = s.figures(s.total())
     lines = [f"metro measure: {report.result.rows:,} holes of {report.sources.log} "
              f"({report.result.partitions} partition(s)), layout {report.sources.layout}, {report.engine}",
-             f"{c['fails']:,} holes fail, {c['undecided']:,} undecided against a tolerance of "
+             f"{c.fails:,} holes fail, {c.undecided:,} undecided against a tolerance of "
              f"{report.tolerance_deg:g} deg (ISO 14253-1 decision rule with U95)",
              f"judged: {_judged(report)}",
              *([f"resumed: {report.result.partitions - report.result.written} of {report.result.partitions} "
@@ -99,15 +100,15 @@ def measure_text(report) -> str:
              "",
              f"{'status':<14}{'holes':>14}{'share':>9}"]
     for k in ("conforms", "fails", "undecided", "not_measured"):
-        lines.append(f"{k:<14}{c[k]:>14,}{100 * c[k] / total:>8.2f}%")
+        lines.append(f"{k:<14}{getattr(c, k):>14,}{100 * getattr(c, k) / total:>8.2f}%")
     lines += ["",
               f"angle before the adjustment [deg]: median {_q(fig, 'before', 'p50')}, p95 {_q(fig, 'before', 'p95')}, "
-              f"p99.9 {_q(fig, 'before', 'p99.9')}",
+              f"p99.9 {_q(fig, 'before', 'p99_9')}",
               f"angle after the adjustment [deg]:  median {_q(fig, 'after', 'p50')}, p95 {_q(fig, 'after', 'p95')}, "
-              f"p99.9 {_q(fig, 'after', 'p99.9')}",
-              (f"judged angle: mean {fig['mean_deg']:.4g} deg, s {fig['sd_deg']:.3g} deg; {_ppk(fig)} against "
+              f"p99.9 {_q(fig, 'after', 'p99_9')}",
+              (f"judged angle: mean {fig.mean_deg:.4g} deg, s {fig.sd_deg:.3g} deg; {_ppk(fig)} against "
                f"{report.tolerance_deg:g} deg (ISO 22514-2 percentile method, one-sided upper: (tol - X50) / "
-               f"(X99.865 - X50); the angle is bounded below by 0, not normal)" if np.isfinite(fig["mean_deg"]) else
+               f"(X99.865 - X50); the angle is bounded below by 0, not normal)" if np.isfinite(fig.mean_deg) else
                "judged angle: none (no hole was judged)"),
               "uncertainty: reading noise" + (" + the calibration's covariance" if report.has_covariance else
                                               " (the layout has no calibration covariance)") + _panel_terms(report)
@@ -212,8 +213,8 @@ def measure_section(report):
     s = report.result.summary
     c = report.counts
     v = report.verdict
-    head = (f"{c['conforms']:,} of {report.result.rows:,} holes conform, {c['fails']:,} fail, {c['undecided']:,} are "
-            f"undecided and {c['not_measured']:,} were not measured, against {report.tolerance_deg:g} deg (ISO 14253-1, U95)")
+    head = (f"{c.conforms:,} of {report.result.rows:,} holes conform, {c.fails:,} fail, {c.undecided:,} are "
+            f"undecided and {c.not_measured:,} were not measured, against {report.tolerance_deg:g} deg (ISO 14253-1, U95)")
     alarms = report.result.alarms
     kept = sum(1 for a in alarms if a.persisted)
     cause = ("no drift alarm" if not alarms else
@@ -230,8 +231,8 @@ def measure_section(report):
     for cell, grp in sorted(s.series.items())[:_MAX_GROUP_ROWS]:
         f = s.figures(grp)
         k = s.counts(grp)
-        counts.append((cell or "-", f"{sum(k.values()):,}", f"{k['conforms']:,}", f"{k['fails']:,}",
-                       f"{k['undecided']:,}", f"{k['not_measured']:,}"))
+        counts.append((cell or "-", f"{k.total:,}", f"{k.conforms:,}", f"{k.fails:,}", f"{k.undecided:,}",
+                       f"{k.not_measured:,}"))
         angles.append((cell or "-", _q(f, "before", "p50"), _q(f, "after", "p50"), _q(f, "after", "p99"),
                        _ppk(f, short=True)))
     note = (f"{len(s.series) - _MAX_GROUP_ROWS} more in --json" if len(s.series) > _MAX_GROUP_ROWS else
@@ -241,8 +242,8 @@ def measure_section(report):
               Table("The angle per cell [deg]: quantiles before and after the adjustment; the judged angle's Ppk "
                     "(ISO 22514-2 percentile method, one-sided upper) with its 95 % bootstrap interval",
                     ("cell", "p50 before", "p50 after", "p99 after", "Ppk [95 % CI]"), tuple(angles))]
-    worst = tuple((w["hole_id"], f"{w['cell'] or '-'} {w['panel'] or '-'}", _when(w["time_s"]), f"{w['angle_deg']:.4f}",
-                   f"{w['U95_deg']:.4f}", w["status"]) for w in s.worst)
+    worst = tuple((w.hole_id, f"{w.cell or '-'} {w.panel or '-'}", _when(w.time_s), f"{w.angle_deg:.4f}",
+                   f"{w.U95_deg:.4f}", w.status) for w in s.worst)
     tables.append(Table("The worst holes: the largest judged angle", ("hole", "cell, panel", "time [UTC]", "angle [deg]",
                                                                        "U95 [deg]", "status"), worst))
     if alarms:
@@ -265,7 +266,7 @@ def measure_section(report):
                                               "in the log."))
     limits = _limits(report)
     nxt = ["Recalibrate the head (metro plan, metro calibrate) before drilling on."] if alarms else []
-    if c["undecided"]:
+    if c.undecided:
         nxt.append("Undecided holes: the measurement's U95 straddles the tolerance; inspect them or tighten U95 "
                    "(a better calibration lowers its share).")
     return Section("Hole measurement (metro measure)",

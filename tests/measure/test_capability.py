@@ -37,20 +37,20 @@ def _summary(holes, seed, tol_deg=0.05):
 def test_ppk_is_the_percentile_method_on_the_judged_angle_with_its_interval():
     s, j = _summary(20000, 1)
     f = s.figures(s.total())
-    assert "cpk" not in f  # a normal-theory index of a folded angle means nothing
+    assert "cpk" not in f.to_dict()  # a normal-theory index of a folded angle means nothing
     p50, p99865 = np.quantile(j, [0.5, 0.99865])
-    assert f["ppk"] == pytest.approx((0.05 - p50) / (p99865 - p50), rel=0.05)
-    lo, hi = f["ppk_ci95"]
-    assert lo < f["ppk"] < hi and hi - lo < 0.5 * f["ppk"]
-    assert "22514-2" in f["capability"]
+    assert f.ppk == pytest.approx((0.05 - p50) / (p99865 - p50), rel=0.05)
+    lo, hi = f.ppk_ci95
+    assert lo < f.ppk < hi and hi - lo < 0.5 * f.ppk
+    assert "22514-2" in f.capability
     # same data, same interval (the bootstrap's Generator is seeded)
-    assert s.figures(s.total())["ppk_ci95"] == f["ppk_ci95"]
+    assert s.figures(s.total()).ppk_ci95 == f.ppk_ci95
 
 
 def test_ppk_is_not_given_on_too_few_holes():
     s, _ = _summary(300, 3)
     f = s.figures(s.total())
-    assert np.isnan(f["ppk"]) and all(np.isnan(f["ppk_ci95"]))
+    assert np.isnan(f.ppk) and all(np.isnan(f.ppk_ci95))
 
 
 def test_the_interval_covers_the_process_ppk():
@@ -62,6 +62,6 @@ def test_the_interval_covers_the_process_ppk():
     held = 0
     for seed in range(6):
         s, _ = _summary(20000, 10 + seed)
-        lo, hi = s.figures(s.total())["ppk_ci95"]
+        lo, hi = s.figures(s.total()).ppk_ci95
         held += lo <= truth <= hi
     assert held >= 5

@@ -92,7 +92,7 @@ def test_holes_whose_drilled_angle_is_unknown_fail_the_verdict(tmp_path):
     rep = measure_files(tmp_path / "log.csv", tmp_path / "L.toml", MeasureOptions(out=tmp_path / "h.csv"))
     assert (chunk.true_after > TOL).sum() > 5
     s = rep.result.summary
-    assert s.unknown_after > 0 and s.unknown_after <= rep.counts["not_measured"]
+    assert s.unknown_after > 0 and s.unknown_after <= rep.counts.not_measured
     check = [c for c in rep.verdict.checks if "drilled angle is not known" in c.name]
     assert len(check) == 1 and check[0].value == s.unknown_after and not rep.verdict.passed
     assert "unknown_after" in str(rep.to_dict()["counts_detail"])
