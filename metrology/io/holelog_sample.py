@@ -1,6 +1,7 @@
-"""The first rows of a hole log's commanded positions, read alone: what the units rule
-(:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before any hole is measured;
-and of its readings (:func:`first_readings`), what ``metro measure``'s reach rule holds against the head.
+"""The first rows of a hole log's commanded positions, read alone (of its files, or of the lines ``--follow`` holds
+first): what the units rule (:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before
+any hole is measured; and of its readings (:func:`first_readings`), what ``metro measure``'s reach rule holds
+against the head.
 
 Only the join's key (``point_id`` where the log has it, else ``hole_id``) and ``pose_x_mm``, ``pose_y_mm``,
 ``pose_z_mm`` are read, from the first partitions, at most :data:`SAMPLE_ROWS` rows: a median over a few
@@ -29,7 +30,7 @@ def commanded_positions(log, rows: int = SAMPLE_ROWS):
         if not all(c in names for c in POSITION_COLUMNS):
             continue
         key = "point_id" if "point_id" in names else "hole_id"
-        for k, p in _read(part, key, left):
+        for k, p in _read(log, part, key, left):
             keys.append(k)
             xyz.append(p)
             left -= len(k)
@@ -47,7 +48,7 @@ def first_readings(log, columns, rows: int = SAMPLE_ROWS):
     for part in log.partitions:
         if not all(c in log.file_columns(part) for c in columns):
             continue
-        for _, d in _read(part, None, left, tuple(columns)):
+        for _, d in _read(log, part, None, left, tuple(columns)):
             out.append(d)
             left -= len(d)
         if left <= 0:
@@ -55,18 +56,21 @@ def first_readings(log, columns, rows: int = SAMPLE_ROWS):
     return np.concatenate(out) if out else None
 
 
-def _read(part, key, rows, numeric=POSITION_COLUMNS):
+def _read(log, part, key, rows, numeric=POSITION_COLUMNS):
     """``(keys, numbers)`` chunks of ``part``'s first ``rows`` rows (its ``key`` and ``numeric`` columns alone; no
-    key: None for the keys)."""
+    key: None for the keys): a CSV log's file, or the lines it holds in memory (``--follow``'s first lines,
+    :class:`metrology.io.loglines.LinesLog`), or a Parquet file."""
     import pyarrow as pa
 
+    from metrology.io.holelog import CsvLog
+
     columns = [*([key] if key else []), *numeric]
-    if part.path.lower().endswith(".csv"):
+    if isinstance(log, CsvLog):
         import pyarrow.csv as pcsv
 
         types = {c: pa.string() for c in columns}
         try:
-            reader = pcsv.open_csv(part.path, read_options=pcsv.ReadOptions(block_size=1 << 20),
+            reader = pcsv.open_csv(log.readable(part), read_options=pcsv.ReadOptions(block_size=1 << 20),
                                    convert_options=pcsv.ConvertOptions(include_columns=columns, column_types=types))
         except (pa.ArrowInvalid, OSError):
             return  # the log's reader names what is wrong with the file
