@@ -17,8 +17,9 @@ report and width it checks, and prints one line:
   have no script, so any console message is an error), and no request from the page to an
   ``http(s)`` URL in Chromium's network log (``--log-net-log``; Chromium's own background
   requests are told apart by their network partition);
-* the layout, measured in Chromium on a copy of the page with a measuring script added
-  (``--dump-dom``; the report itself has none): no clipped text, i.e. no text block (``pre``,
+* the layout, measured in the same Chromium run (one a report and width: the screenshot, the console,
+  the network log and ``--dump-dom`` of a copy of the page with a measuring script added, the report
+  itself has none; the script writes nothing to the console and asks for nothing): no clipped text, i.e. no text block (``pre``,
   ``p``, ``li``, a table cell, a ``div`` such as a table's scroll box) whose ``scrollWidth``
   exceeds its ``clientWidth``, and a page no wider than the window; and at widths of 1280 px
   and more, no figure whose smallest text shows below ``--min-figure-pt`` (9 pt), and at every
@@ -125,23 +126,23 @@ def drawn_at(text: str, width: int, height: int) -> str:
             f'srcdoc="{html_lib.escape(text, quote=True)}"></iframe></body></html>')
 
 
-def browse(report: Path, shot: Path, width: int, height: int, chromium: str) -> list:
-    """Screenshot ``report`` in headless Chromium; return the console lines and requests seen."""
+def browse(report: Path, shot: Path, width: int, height: int, chromium: str, min_pt: float = 9.0,
+           min_px: float = 9.0) -> list:
+    """``report`` in one headless Chromium run at ``width`` px: its screenshot, and the console lines, the
+    requests and the layout's problems (:func:`layout_problems`) seen (list of str; empty when none)."""
     with tempfile.TemporaryDirectory() as profile:
         netlog = Path(profile) / "net.json"
-        page = report.resolve()
-        if width < MIN_WINDOW:
-            page = Path(profile) / report.name
-            page.write_text(drawn_at(report.read_text(encoding="utf-8"), width, height), encoding="utf-8")
+        page = measuring_copy(report, Path(profile), width, height)
         cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}/p", f"--log-net-log={netlog}",
-               f"--screenshot={shot}", f"--window-size={max(width, MIN_WINDOW)},{height}", page.as_uri()]
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+               "--virtual-time-budget=10000", f"--screenshot={shot}", "--dump-dom",
+               f"--window-size={max(width, MIN_WINDOW)},{height}", page.as_uri()]
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
         problems = [f"console: {line.split('CONSOLE', 1)[1][:100]}" for line in r.stderr.splitlines()
                     if ":CONSOLE" in line]
         problems += [f"request: {u[:80]}" for u in _requests(netlog)]
         if r.returncode != 0 or not shot.exists():
             problems.append(f"chromium exit {r.returncode}, no screenshot")
-    return problems
+    return problems + layout_problems(r.stdout, r.returncode, width, min_pt, min_px)
 
 
 #: the longest word (characters between spaces) that must never break across lines: ids, times,
@@ -207,28 +208,32 @@ window.addEventListener("load", () => {
   }
   const pre = document.createElement("pre");
   pre.id = "metro-check";
+  pre.hidden = true;  // in the dumped DOM, not in the screenshot
   pre.textContent = JSON.stringify(out);
   (window.parent !== window ? window.parent.document : document).body.appendChild(pre);
 });
 </script>"""
 
 
-def measure(report: Path, width: int, height: int, chromium: str, min_pt: float, min_px: float = 9.0) -> list:
-    """Clipped text blocks and small figure text of ``report`` at ``width`` px (list of str)."""
+def measuring_copy(report: Path, folder: Path, width: int, height: int) -> Path:
+    """A copy of ``report`` in ``folder`` with the measuring script (:data:`MEASURE`) added, drawn ``width`` px wide
+    (:func:`drawn_at`)."""
+    text = report.read_text(encoding="utf-8")
+    copy = folder / report.name
+    script = MEASURE.replace("WORD_CHARS", str(WORD_CHARS))
+    copy.write_text(drawn_at(text.replace("</body>", script + "\n</body>"), width, height), encoding="utf-8")
+    return copy
+
+
+def layout_problems(dom: str, returncode: int, width: int, min_pt: float, min_px: float = 9.0) -> list:
+    """Clipped text blocks and small figure text, from the measuring script's result in the page's dumped ``dom``
+    at ``width`` px (list of str)."""
     import html as html_lib
     import re
 
-    text = report.read_text(encoding="utf-8")
-    with tempfile.TemporaryDirectory() as tmp:
-        copy = Path(tmp) / report.name
-        script = MEASURE.replace("WORD_CHARS", str(WORD_CHARS))
-        copy.write_text(drawn_at(text.replace("</body>", script + "\n</body>"), width, height), encoding="utf-8")
-        cmd = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp}/p", "--virtual-time-budget=10000",
-               f"--window-size={max(width, MIN_WINDOW)},{height}", "--dump-dom", copy.as_uri()]
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
-    m = re.search(r'<pre id="metro-check">(.*?)</pre>', r.stdout, re.S)
+    m = re.search(r'<pre id="metro-check"[^>]*>(.*?)</pre>', dom, re.S)
     if m is None:
-        return [f"layout not measured (chromium exit {r.returncode})"]
+        return [f"layout not measured (chromium exit {returncode})"]
     d = json.loads(html_lib.unescape(m.group(1)))
     out = [f"clipped: {c}" for c in d["clipped"]]
     out += [f"figure: {c}" for c in d.get("ink", [])]
@@ -282,8 +287,7 @@ def main(argv=None) -> int:
             if args.shots:
                 args.shots.mkdir(parents=True, exist_ok=True)
             problems = (static_problems(rep.read_text(encoding="utf-8"))
-                        + browse(rep, shot, width, args.height, chromium)
-                        + measure(rep, width, args.height, chromium, args.min_figure_pt, args.min_figure_px))
+                        + browse(rep, shot, width, args.height, chromium, args.min_figure_pt, args.min_figure_px))
             failed += bool(problems)
             print(f"{'FAIL' if problems else 'ok  '} {rep} at {width} px ({rep.stat().st_size // 1024} KiB) -> {shot}"
                   + "".join(f"\n      {p}" for p in problems))

@@ -1,6 +1,7 @@
-"""The first rows of a hole log's commanded positions, read alone: what the units rule
-(:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before any hole is measured;
-and of its readings (:func:`first_readings`), what ``metro measure``'s reach rule holds against the head.
+"""The first rows of a hole log's commanded positions, read alone (of its files, or of the lines ``--follow`` holds
+first): what the units rule (:func:`metrology.io.panel_units.check_panel_units`) holds against the hole table before
+any hole is measured; and of its readings (:func:`first_readings`), what ``metro measure``'s reach rule holds
+against the head.
 
 Only the join's key (``point_id`` where the log has it, else ``hole_id``) and ``pose_x_mm``, ``pose_y_mm``,
 ``pose_z_mm`` are read, from the first partitions, at most :data:`SAMPLE_ROWS` rows: a median over a few

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from metrology.io.holelog import NUMERIC, CsvLog, Partition, batch_of
 
-__all__ = ["LinesLog", "read_lines", "check_header", "header_line"]
+__all__ = ["LinesLog", "lines_log", "read_lines", "check_header", "header_line"]
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,10 @@ def header_line(header) -> str:
     return buf.getvalue()
 
 
-def _log(header, lines, numbers, sensors, display) -> LinesLog:
+def lines_log(header, lines, numbers, sensors, display) -> LinesLog:
+    """``lines`` (str, each ending with its newline) under ``header`` as a hole log held in memory, line ``numbers``
+    (int) of the stream ``display``: what the readers of a log's first rows
+    (:mod:`metrology.io.holelog_sample`) read as they read a file."""
     text = (header_line(header) + "".join(lines)).encode("utf-8")
     return LinesLog(display, (Partition(display, display, {}),), tuple(sensors), max(len(numbers), 1), display,
                     tuple(header), text, tuple(numbers))
@@ -72,7 +75,7 @@ def read_lines(header, lines, numbers, sensors, display: str):
     not what its column holds."""
     import pyarrow as pa
 
-    log = _log(header, lines, numbers, sensors, display)
+    log = lines_log(header, lines, numbers, sensors, display)
     tables = [t for t, _ in log.batches(log.partitions[0])]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables)
     if table.num_rows != len(numbers):  # pyarrow skipped a line (empty) or read one as two: name the lines

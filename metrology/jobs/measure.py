@@ -26,6 +26,8 @@ MISFIT_SHARE = 0.5
 #: (the footprint at the stand-off, the sensors' range a few mm either side); readings in µm (x1000) put them some
 #: 700 reaches out, where the curvature allowance r^2/2R swallows the misfit and _check_fit never fires (issue 51)
 SPOT_REACH = 10.0
+#: the reach rule's median needs this many holes with readings (fewer: not judged); ``--follow`` holds as many lines
+REACH_HOLES = 5
 
 
 def _spot_reach(layout, d) -> float:
@@ -33,7 +35,7 @@ def _spot_reach(layout, d) -> float:
     far = np.linalg.norm(layout.zero + d[:, :, None] * layout.direction, axis=2)  # (m, n) mm, TCS
     far = np.max(np.where(np.isfinite(far), far, -np.inf), axis=1)
     far = far[np.isfinite(far)]
-    return float(np.median(far)) if len(far) >= 5 else float("nan")
+    return float(np.median(far)) if len(far) >= REACH_HOLES else float("nan")
 
 
 def _check_reach(layout, log, shown_layout) -> None:

@@ -21,6 +21,14 @@ The answers are those of one line at a time, in the same order:
 - a line in error stops the run with its one-line error (naming the line) after every line before
   it has been answered.
 
+The first :data:`UNIT_LINES` lines (or fewer, when the stream ends or a line in error comes first)
+are held unanswered and checked as ``metro measure`` checks a log's first rows: the readings' unit
+(the reach rule, :data:`metrology.jobs.measure.SPOT_REACH`) and, with a hole table, the commanded
+positions' (:func:`metrology.jobs.measure_panel.check_units`), by the same functions on the lines
+held in memory (:func:`metrology.io.loglines.lines_log`). A log in another unit is refused with
+the batch run's one-line message before any hole is answered; the first answers wait for the
+fifth line.
+
 ``on_hole(dict)`` receives each hole's answer, ``on_alarm(dict)`` each alarm as it is raised,
 ``on_batch()`` (if given) the end of each batch's answers (where the caller flushes).
 """
@@ -36,7 +44,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FollowSummary", "follow_log", "PANEL_COLUMNS", "MAX_BATCH", "SNAPSHOT_ROWS"]
+from metrology.jobs.measure import REACH_HOLES
+
+__all__ = ["FollowSummary", "follow_log", "PANEL_COLUMNS", "MAX_BATCH", "SNAPSHOT_ROWS", "UNIT_LINES"]
 
 #: the per-hole columns of a run with the panel known, each in the hole's JSON line as in the table
 PANEL_COLUMNS = ("k1_per_mm", "k2_per_mm", "correction_deg", "panel_misfit_per_mm", "panel_misfit_z",
@@ -51,6 +61,10 @@ READ_AHEAD = 8
 #: rows fed to the drift watch between two snapshots of it (the watch is restored to its snapshot and
 #: the feeds since are fed again when a batch is measured again one line at a time)
 SNAPSHOT_ROWS = 4096
+#: the first lines held and checked for their units before any is answered (module docstring): the reach rule's
+#: median needs as many holes; a stream cannot wait for the batch run's 4,096 rows, and one line alone would let one
+#: gross reading (a sensor's no-reading code) refuse a run whose unit is right
+UNIT_LINES = REACH_HOLES
 
 
 @dataclass(frozen=True)
@@ -76,17 +90,17 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
     from metrology.jobs.measure import MeasureOptions, _panel_options
-    from metrology.jobs.measure_panel import hole_surfaces
+    from metrology.jobs.measure_panel import surfaces_and_units
     from metrology.measure.holes import Settings
 
     o, _ = _panel_options(MeasureOptions() if options is None else options, layout_path)
     layout = load_layout(layout_path)
     if o.panel is not None and o.points is None:
         raise ValueError(f"--panel {display_name(o.panel)}: give the hole table too (--points HOLES.csv)")
-    surfaces = None
-    if o.points is not None:
-        surfaces = hole_surfaces(layout, o.panel, o.points, o.position_error_mm, o.form_tolerance_mm, o.spin_deg,
-                                 o.units)
+    surfaces, check_units = None, None
+    if o.points is not None:  # the panel and the table checked now; the log's positions on its first lines
+        surfaces, check_units = surfaces_and_units(layout, o.panel, o.points, o.position_error_mm,
+                                                   o.form_tolerance_mm, o.spin_deg, o.units)
     settings = Settings(tolerance=float(np.radians(o.tolerance_deg)), min_radius_mm=float(o.min_radius_mm),
                         surfaces=surfaces)
     name = "<stdin>" if str(source) == "-" else str(source)
@@ -100,7 +114,14 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
         if first is None or not first[1].strip():
             raise ValueError(f"{name}: no header line (hole_id, time, d_<sensor>...)")
         run.start(first[1])
-        ended = False
+        held, ended, error = _hold(lines, UNIT_LINES)
+        run.check(held, check_units, display_name(layout_path))
+        for i in range(0, len(held), max(int(max_batch), 1)):
+            run.batch(held[i:i + max(int(max_batch), 1)])
+        if held and on_batch is not None:
+            on_batch()
+        if error is not None:
+            raise error
         while not ended:
             item = _take(lines)
             if item is None:
@@ -150,6 +171,21 @@ def _read(fh, lines, cut) -> None:
     lines.put(None)
 
 
+def _hold(lines, n):
+    """``(held, ended, error)``: the first ``n`` lines that are not blank, read (fewer: the stream ``ended``, or the
+    reader's ``error`` came first)."""
+    held = []
+    while len(held) < n:
+        item = lines.get()
+        if item is None:
+            return held, True, None
+        if item[0] is None:
+            return held, False, item[1]
+        if not _blank(item[1]):
+            held.append(item)
+    return held, False, None
+
+
 def _take(lines):
     return _checked(lines.get())
 
@@ -189,6 +225,31 @@ class _Run:
 
         self.header = tuple(h.strip() for h in next(csv.reader([line]), []))
         check_header(self.header, self.layout.names, self.name)
+
+    def check(self, items, check_units, shown_layout) -> None:
+        """The first lines held to ``metro measure``'s checks of a log's first rows (module docstring): the commanded
+        positions against the table (``check_units(log)``, None: no table), the readings' reach; ValueError, one
+        line. The lines before the first that cannot be read are checked (that one stops the run when answered)."""
+        from metrology.io.loglines import lines_log, read_lines
+        from metrology.jobs.measure import _check_reach
+
+        def readable(part):
+            try:
+                read_lines(self.header, [t for _, t in part], [k for k, _ in part], self.layout.names, self.name)
+            except ValueError:
+                return False
+            return True
+
+        n = len(items)
+        while n and not readable(items[:n]):
+            n -= 1
+        if not n:
+            return
+        log = lines_log(self.header, [t for _, t in items[:n]], [k for k, _ in items[:n]], self.layout.names,
+                        self.name)
+        if check_units is not None:
+            check_units(log)
+        _check_reach(self.layout, log, shown_layout)
 
     def batch(self, items) -> None:
         """Measure ``items`` ((line number, text), in order) and answer them (module docstring)."""

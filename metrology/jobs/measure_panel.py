@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["layout_panel", "footprint_mm", "standoff_mm", "read_table_in_mm", "check_units", "hole_surfaces",
-           "panel_hole_surfaces", "check_join", "CadPanel"]
+           "surfaces_and_units", "panel_hole_surfaces", "check_join", "CadPanel"]
 
 
 def layout_panel(layout_path) -> dict:
@@ -119,7 +119,14 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     ``units`` (mm, cm, m, in): the unit of the panel file and the table (None: the panel's own, the table mm).
     Refused (ValueError) when the two, with the commanded positions of ``log`` (an opened hole log, or None),
     do not read as mm against the head (:func:`check_units`)."""
+    return surfaces_and_units(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units, log)[0]
+
+
+def surfaces_and_units(layout, panel, points, position_error_mm, form_tolerance_mm, spin_deg, units=None, log=None):
+    """``(surfaces, check)``: :func:`hole_surfaces`, and ``check(log)``, :func:`check_units` of the panel and the
+    table as loaded here with the commanded positions of a log opened later (``--follow``'s first lines)."""
     from dataclasses import replace
+    from functools import partial
 
     from metrology.measure.panel import TableNormals
     from metrology.measure.spin import DEFAULT_SPIN_DEG
@@ -133,16 +140,19 @@ def hole_surfaces(layout, panel, points, position_error_mm, form_tolerance_mm, s
     table = read_table_in_mm(points, units)
     foot = footprint_mm(layout)
     if panel is None:
-        check_units(layout, None, table, None, points, units, log)
+        check = partial(check_units, layout, None, table, None, points, units)
+        check(log)
         source = TableNormals()
     else:
         from metrology.io.names import display_name
         from metrology.panel.mesh import load_panel
 
         loaded = load_panel(panel, units)
-        check_units(layout, loaded, table, panel, points, units, log)
+        check = partial(check_units, layout, loaded, table, panel, points, units)
+        check(log)
         source = CadPanel(loaded, position_error_mm, display_name(panel))
-    return replace(source.surfaces(table, foot, form_tolerance_mm, float(np.radians(spin_deg))), spin_stated=stated)
+    surfaces = source.surfaces(table, foot, form_tolerance_mm, float(np.radians(spin_deg)))
+    return replace(surfaces, spin_stated=stated), check
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from metrology.io.data import data_path
+from metrology.jobs.measure_follow import UNIT_LINES
 from tests.plant.opcua_client import Metro, connect, free_port, subscribe
 
 asyncua = pytest.importorskip("asyncua")
@@ -125,10 +126,10 @@ def test_the_calibration_is_readable_and_nothing_is_writable(knocked, tmp_path):
     metro = Metro(["measure", "-", "--layout", str(TABLE6), "--follow", "--opcua", url], tmp_path, ROOT)
     proc = metro.proc
     try:
-        head = "\n".join(knocked.read_text().splitlines()[:6]) + "\n"
+        head = "\n".join(knocked.read_text().splitlines()[:1 + UNIT_LINES]) + "\n"
         proc.stdin.write(head)
         proc.stdin.flush()
-        for _ in range(5):  # the fifth hole's answer on stdout: the cell's node exists
+        for _ in range(UNIT_LINES):  # the held lines' answers on stdout: the cell's node exists
             assert proc.stdout.readline()
         sha, value, denied = asyncio.run(_read_space(url, proc))
         proc.stdin.close()
@@ -302,9 +303,10 @@ def test_with_certificate_and_users_only_a_user_over_an_encrypted_channel_gets_i
                    "--opcua-key", str(key), "--opcua-users", str(tmp_path / "users")], tmp_path, ROOT)
     proc = metro.proc
     try:
-        proc.stdin.write("".join(knocked.read_text().splitlines(keepends=True)[:4]))
+        # the header and 5 holes: --follow answers once it has the lines its units check holds (UNIT_LINES)
+        proc.stdin.write("".join(knocked.read_text().splitlines(keepends=True)[:1 + UNIT_LINES]))
         proc.stdin.flush()
-        for _ in range(3):
+        for _ in range(UNIT_LINES):
             assert proc.stdout.readline()
         refused, sha = asyncio.run(_secure_session(url, proc, ccert, ckey, "cell1", "secret"))
         proc.stdin.close()
