@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 
 from metrology.io.holelog import HOLE_ID, NUMERIC, POINT_ID, POSE_POSITION, POSE_ROTATION, open_log, table_key
 from metrology.io.holelog_sample import commanded_positions, first_readings
-from metrology.io.loglines import _log
+from metrology.io.loglines import lines_log
 
 HEADER = ("hole_id", "time", "d_L1", "d_L2", "d_L3", "point_id", "pose_x_mm", "pose_y_mm", "pose_z_mm")
 ROWS = [("h1", "0", "50.1", "50.2", "50.3", "P7", "1.5", "-2", "300"),
@@ -34,7 +34,7 @@ def test_the_first_rows_read_by_the_logs_reader_whatever_its_file(tmp_path):
         np.testing.assert_array_equal(first_readings(log, ["d_L1", "d_L2"]), [[50.1, 50.2], [49.9, np.nan]])
     # lines a stream gave (measure --follow): no file at all, the CSV reader reads them from memory
     lines = [",".join(r) + "\n" for r in ROWS]
-    live = _log(HEADER, lines, (2, 3), ("L1", "L2", "L3"), "<stdin>")
+    live = lines_log(HEADER, lines, (2, 3), ("L1", "L2", "L3"), "<stdin>")
     _expect(commanded_positions(live))
     np.testing.assert_array_equal(first_readings(live, ["d_L3"]), [[50.3], [50.0]])
 
