@@ -26,8 +26,11 @@ are held unanswered and checked as ``metro measure`` checks a log's first rows: 
 (the reach rule, :data:`metrology.jobs.measure.SPOT_REACH`) and, with a hole table, the commanded
 positions' (:func:`metrology.jobs.measure_panel.check_units`), by the same functions on the lines
 held in memory (:func:`metrology.io.loglines.lines_log`). A log in another unit is refused with
-the batch run's one-line message before any hole is answered; the first answers wait for the
-fifth line.
+the batch run's one-line message before any hole is answered. A line is held no longer than
+:data:`UNIT_WAIT_S` after the first: where the lines come slower (a cell's holes seconds apart), the
+lines held are checked as a log of as few rows is (the reach rule needs :data:`UNIT_LINES` holes)
+and answered, and the checks run again on the first :data:`UNIT_LINES` lines when they have come,
+before that line is answered: a refusal then stops the run after the answers already given.
 
 ``on_hole(dict)`` receives each hole's answer, ``on_alarm(dict)`` each alarm as it is raised,
 ``on_batch()`` (if given) the end of each batch's answers (where the caller flushes).
@@ -40,6 +43,7 @@ import dataclasses
 import queue
 import sys
 import threading
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +69,9 @@ SNAPSHOT_ROWS = 4096
 #: median needs as many holes; a stream cannot wait for the batch run's 4,096 rows, and one line alone would let one
 #: gross reading (a sensor's no-reading code) refuse a run whose unit is right
 UNIT_LINES = REACH_HOLES
+#: seconds a held line waits for the rest of the first :data:`UNIT_LINES` (module docstring): a cell's holes come
+#: seconds apart, and a client that waits for each answer before it sends the next line must get its first answers
+UNIT_WAIT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -114,8 +121,9 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
         if first is None or not first[1].strip():
             raise ValueError(f"{name}: no header line (hole_id, time, d_<sensor>...)")
         run.start(first[1])
-        held, ended, error = _hold(lines, UNIT_LINES)
+        held, ended, error = _hold(lines, UNIT_LINES, UNIT_WAIT_S)
         run.check(held, check_units, display_name(layout_path))
+        unchecked = list(held) if len(held) < UNIT_LINES and not ended and error is None else None
         for i in range(0, len(held), max(int(max_batch), 1)):
             run.batch(held[i:i + max(int(max_batch), 1)])
         if held and on_batch is not None:
@@ -140,6 +148,11 @@ def follow_log(source, layout_path, on_hole, on_alarm=None, options=None, stream
                     break
                 batch.append(item)
             batch = [(k, text) for k, text in batch if not _blank(text)]
+            if unchecked is not None and batch:  # the held lines' wait ran out: the first UNIT_LINES checked again
+                unchecked += batch
+                if len(unchecked) >= UNIT_LINES or ended:
+                    run.check(unchecked[:UNIT_LINES], check_units, display_name(layout_path))
+                    unchecked = None
             if batch:
                 run.batch(batch)
                 if on_batch is not None:
@@ -171,18 +184,22 @@ def _read(fh, lines, cut) -> None:
     lines.put(None)
 
 
-def _hold(lines, n):
-    """``(held, ended, error)``: the first ``n`` lines that are not blank, read (fewer: the stream ``ended``, or the
-    reader's ``error`` came first)."""
-    held = []
+def _hold(lines, n, wait_s):
+    """``(held, ended, error)``: the first ``n`` lines that are not blank, read (fewer: the stream ``ended``, the
+    reader's ``error`` came first, or ``wait_s`` seconds passed since the first was held)."""
+    held, end = [], None
     while len(held) < n:
-        item = lines.get()
+        try:
+            item = lines.get(timeout=None if end is None else max(end - time.monotonic(), 0.0))
+        except queue.Empty:
+            return held, False, None
         if item is None:
             return held, True, None
         if item[0] is None:
             return held, False, item[1]
         if not _blank(item[1]):
             held.append(item)
+            end = time.monotonic() + wait_s if end is None else end
     return held, False, None
 
 
