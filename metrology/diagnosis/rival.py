@@ -34,6 +34,10 @@ __all__ = ["RivalTerm", "empirical_rivals", "TRIES"]
 
 #: the terms (smallest in-sample p first, passing rule 19's level) compared with each cause
 TRIES = 5
+#: the vocabulary's variables a catalogued cause follows, by the covariate of its figure (its
+#: ``plot_key``): a term of none of them is of another family (rule 22's indistinguishable term)
+OWN_VARIABLES = {"d_mm": ("d",), "incidence_deg": ("incidence",), "time_h": ("time", "pose_index"),
+                 "temp_c": ("temperature",), "pose_index": ("pose_index", "time"), "spot_s_mm": ("spot",)}
 
 
 @dataclass(frozen=True)
@@ -42,13 +46,16 @@ class RivalTerm:
 
     cause : str, the cause's label; sensor : str; term : str, the term's key; p : float, the
     one-sided paired p that the term predicts held-out poses better than the cause; gain : float,
-    the per-pose held-out chi-square difference summed (> 0: the term better)."""
+    the per-pose held-out chi-square difference summed (> 0: the term better); rule : str, the rule
+    that tied it (``empirical_as_good`` or ``empirical_indistinguishable``; a term found better, the
+    first's name is unused)."""
 
     cause: str
     sensor: str
     term: str
     p: float
     gain: float
+    rule: str = "empirical_as_good"
 
 
 def _cause_columns(component, d0, cov, i):
@@ -97,6 +104,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
         if not scored:
             continue
         cause = Term("cause", (), _cause_columns(s.component, b.d0, b.cov, i), "shape", s.label)
+        own = set(OWN_VARIABLES.get(s.component.plot_key, ()))
         e_c = sen.heldout(cause.columns)
         best = tie = None
         tries = scored[:TRIES]
@@ -108,13 +116,16 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
                 best = RivalTerm(s.label, names[i], t.key, p, g)
             elif tie is None and rules.empirical_as_good(g, paired_gain_p(-d), t.columns.shape[1], cause.columns.shape[1]):
                 tie = RivalTerm(s.label, names[i], t.key, p, g)
+            elif tie is None and rules.empirical_indistinguishable(paired_gain_p(-d), t.columns.shape[1],
+                                                                   cause.columns.shape[1], bool(own & set(t.variables))):
+                tie = RivalTerm(s.label, names[i], t.key, p, g, "empirical_indistinguishable")
         if best is not None:
             found.append(best)
             why.append(Reason(22, "empirical_better", Decision.EMPIRICAL_BETTER, (s.label, f"{best.sensor}: {best.term}"),
                               "p_better", best.p, rules.ALPHA_HELDOUT / len(tries), best.gain))
         elif tie is not None:
             ties.append(tie)
-            why.append(Reason(22, "empirical_as_good", Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
+            why.append(Reason(22, tie.rule, Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
                               "p_better", tie.p, rules.ALPHA_HELDOUT / len(tries), tie.gain))
     if not found:
         if not ties:
