@@ -262,8 +262,9 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
         notify(progress, 3, 5, "datum check")
         datum, v = check_datum(ds, b, v, chosen, scored)
     empirical = None
-    tied = any(r.decided == Decision.EMPIRICAL_TIE for r in v.reasons) or (
-        v.outcome == Outcome.NAMED and rules.search_beside(v.confidence))  # a rival: the search beside the cause
+    named = {c.label for c in v.causes}
+    tied = v.outcome == Outcome.NAMED and rules.search_beside(v.confidence, any(  # a rival: the search beside the cause
+        r.decided in (Decision.EMPIRICAL_TIE, Decision.CROSSTALK_TIE) and r.concerns[0] in named for r in v.reasons))
     if rules.search_tried(v.cause, v.confidence) or tied:  # the catalogue does not explain: the open search
         empirical = open_search(ds, b, v, gross, folds, base=tied)  # a tie: the rival beside the cause
     notify(progress, 4, 5, "side-by-side simulation")

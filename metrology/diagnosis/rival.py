@@ -34,10 +34,11 @@ __all__ = ["RivalTerm", "empirical_rivals", "TRIES"]
 
 #: the terms (smallest in-sample p first, passing rule 19's level) compared with each cause
 TRIES = 5
-#: the vocabulary's variables a catalogued cause follows, by the covariate of its figure (its
-#: ``plot_key``): a term of none of them is of another family (rule 22's indistinguishable term)
-OWN_VARIABLES = {"d_mm": ("d",), "incidence_deg": ("incidence",), "time_h": ("time", "pose_index"),
-                 "temp_c": ("temperature",), "pose_index": ("pose_index", "time"), "spot_s_mm": ("spot",)}
+#: the vocabulary's variables the curves of a catalogued family are made of (a drift's, in time or in
+#: temperature, are the run's clock as well: a warm-up moves both): a term of none of them is of
+#: another family (rule 22's ``empirical_indistinguishable``)
+OWN_VARIABLES = {"scale": ("d",), "nonlinearity": ("d",), "incidence": ("incidence",),
+                 "drift": ("time", "pose_index", "temperature"), "shift": ("time", "pose_index")}
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
     from metrology.core.model import jacobian_raw
     from metrology.diagnosis.fit import geometry
     from metrology.diagnosis.search import MIN_READINGS, _Sensor, multiplicity
-    from metrology.diagnosis.vocabulary import Term, terms_for
+    from metrology.diagnosis.vocabulary import VARIABLES, Term, terms_for
 
     if v.outcome != Outcome.NAMED:
         return v, ()
@@ -104,7 +105,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
         if not scored:
             continue
         cause = Term("cause", (), _cause_columns(s.component, b.d0, b.cov, i), "shape", s.label)
-        own = set(OWN_VARIABLES.get(s.component.plot_key, ()))
+        own = set(OWN_VARIABLES.get(s.component.name, VARIABLES))  # a family not listed: every variable its own
         e_c = sen.heldout(cause.columns)
         best = tie = None
         tries = scored[:TRIES]
@@ -116,8 +117,8 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
                 best = RivalTerm(s.label, names[i], t.key, p, g)
             elif tie is None and rules.empirical_as_good(g, paired_gain_p(-d), t.columns.shape[1], cause.columns.shape[1]):
                 tie = RivalTerm(s.label, names[i], t.key, p, g)
-            elif tie is None and rules.empirical_indistinguishable(paired_gain_p(-d), t.columns.shape[1],
-                                                                   cause.columns.shape[1], bool(own & set(t.variables))):
+            elif tie is None and rules.empirical_indistinguishable(g, t.columns.shape[1], cause.columns.shape[1],
+                                                                   bool(own & set(t.variables))):
                 tie = RivalTerm(s.label, names[i], t.key, p, g, "empirical_indistinguishable")
         if best is not None:
             found.append(best)

@@ -284,11 +284,13 @@ def search_tried(cause: str, confidence) -> bool:
     return cause == Outcome.UNEXPLAINED or Confidence(confidence) in (Confidence.PARTIAL, Confidence.AMBIGUOUS)
 
 
-def search_beside(confidence) -> bool:
+def search_beside(confidence, rival_ties: bool = False) -> bool:
     """19. The search runs on the base residuals, its terms beside the cause and not in the model, where
-    the cause is ``ambiguous``: the rival predicts as well as the cause, so what the search finds is
-    what the cause's fit took, not structure left beside it."""
-    return Confidence(confidence) == Confidence.AMBIGUOUS
+    the cause is ``ambiguous``, or a rival outside the catalogue ties with a cause named
+    (``rival_ties``: crosstalk, rule 12, or a term, rule 22; the verdict may be ``partial``): the
+    rival predicts as well as the cause, so what the search should name is what the cause's fit
+    took, not only the structure left beside it."""
+    return rival_ties or Confidence(confidence) == Confidence.AMBIGUOUS
 
 
 def search_in_sample(p: float, m: int) -> bool:
@@ -335,16 +337,17 @@ def empirical_as_good(gain: float, p_worse: float, k_term: int, k_cause: int) ->
     return gain > 0 and p_worse >= ALPHA_CONFOUND and k_term < k_cause
 
 
-def empirical_indistinguishable(p_cause_better: float, k_term: int, k_cause: int, own_variable: bool) -> bool:
-    """22. A term of a variable the cause does not follow (``own_variable`` False: none of the term's
-    variables is the cause's covariate), of no more coefficients, that the cause does not predict
-    significantly better held out (one-sided paired, at ``ALPHA_CONFOUND``): the cause stays named,
-    ``ambiguous``, the term said beside it. Reason: rule 15 makes a catalogued family that predicts as
-    well a confounder; a term of another variable is another family, outside the catalogue (a zero
-    that follows ``dT/dt`` through a warm-up, where ``dT/dt`` is affine in ``T``, was named ``drift``
-    ``high``, issue 54). A term of the cause's own variable (a product with a near-constant) is the
-    cause in another dress and stays under :func:`empirical_as_good`."""
-    return not own_variable and k_term <= k_cause and p_cause_better >= ALPHA_CONFOUND
+def empirical_indistinguishable(gain: float, k_term: int, k_cause: int, own_variable: bool) -> bool:
+    """22. A term of a variable the cause's family does not follow (``own_variable`` False: none of the
+    term's variables is one the family's curves are made of), of no more coefficients, that predicts
+    the cause's held-out poses better, not significantly (``gain > 0``: it explains more of their
+    variance): the cause stays named, ``ambiguous``, the term said beside it. Reason: rule 15 makes
+    a catalogued family that predicts as well a confounder; a term of another variable is another
+    family, outside the catalogue (a zero that follows ``dT/dt`` through a warm-up, where ``dT/dt``
+    is nearly affine in ``T``, was named ``drift`` ``high``, issue 54). A term of the family's own
+    variables (a product of the run's time with a near-constant, against a drift) is the cause in
+    another dress and ties by chance half the time: only :func:`empirical_as_good` weighs it."""
+    return not own_variable and k_term <= k_cause and gain > 0
 
 
 def room_for_another_term(n_found: int) -> bool:
