@@ -262,12 +262,14 @@ def _diagnose_on(ds: Dataset, folds, sim_reps, seed, progress) -> Diagnosis:
         notify(progress, 3, 5, "datum check")
         datum, v = check_datum(ds, b, v, chosen, scored)
     empirical = None
-    tied = any(r.decided == Decision.EMPIRICAL_TIE for r in v.reasons)
+    named = {c.label for c in v.causes}
+    tied = v.outcome == Outcome.NAMED and rules.search_beside(v.confidence, any(  # a rival: the search beside the cause
+        r.decided in (Decision.EMPIRICAL_TIE, Decision.CROSSTALK_TIE) and r.concerns[0] in named for r in v.reasons))
     if rules.search_tried(v.cause, v.confidence) or tied:  # the catalogue does not explain: the open search
         empirical = open_search(ds, b, v, gross, folds, base=tied)  # a tie: the rival beside the cause
     notify(progress, 4, 5, "side-by-side simulation")
     discrepancy, heldout = side_by_side(problem, joint, named_flags, sim_reps, rng, None if tied else empirical)
-    summary = verdict_summary(v, b.tests) + ("" if empirical is None else empirical_text(empirical))
+    summary = verdict_summary(v, b.tests) + ("" if empirical is None else empirical_text(empirical, tied))
     notify(progress, 5, 5, "done")
 
     def held(ho):
@@ -298,12 +300,15 @@ def open_search(ds, b: BaseAnalysis, v: Judgement, gross, folds, base=False):
     return search(ds, b.cov, b.d0, np.where(gross, np.nan, fit.residual), b.sigma, J, folds)
 
 
-def empirical_text(e) -> str:
-    """The summary's sentence on the open search's terms (none: what was tried)."""
+def empirical_text(e, beside: bool = False) -> str:
+    """The summary's sentence on the open search's terms (none: what was tried); ``beside``: run on the
+    base residuals beside an ambiguous cause (rule 19), its terms what the cause's fit took."""
     if not e.terms:
         return (f"; the open search found no term of the run's variables that predicts held-out poses better "
                 f"({e.n_tried} terms tried)")
-    return ("; outside the catalogue, an empirical model: " + "; ".join(
+    lead = ("; beside the cause, the open search on the base residuals: " if beside else
+            "; outside the catalogue, an empirical model: ")
+    return (lead + "; ".join(
         f"{t.equation} (held-out chi-square gain {t.gain_chi2:.3g}, p = {t.p_heldout:.2g})" for t in e.terms)
         + f" ({e.n_tried} terms tried, in-sample level {e.level:.2g} for a variable's one term)" + (
             "" if e.heldout_rms_mm is None else

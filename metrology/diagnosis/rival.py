@@ -34,6 +34,11 @@ __all__ = ["RivalTerm", "empirical_rivals", "TRIES"]
 
 #: the terms (smallest in-sample p first, passing rule 19's level) compared with each cause
 TRIES = 5
+#: the vocabulary's variables the curves of a catalogued family are made of (a drift's, in time or in
+#: temperature, are the run's clock as well: a warm-up moves both): a term of none of them is of
+#: another family (rule 22's ``empirical_indistinguishable``)
+OWN_VARIABLES = {"scale": ("d",), "nonlinearity": ("d",), "incidence": ("incidence",),
+                 "drift": ("time", "pose_index", "temperature"), "shift": ("time", "pose_index")}
 
 
 @dataclass(frozen=True)
@@ -42,13 +47,16 @@ class RivalTerm:
 
     cause : str, the cause's label; sensor : str; term : str, the term's key; p : float, the
     one-sided paired p that the term predicts held-out poses better than the cause; gain : float,
-    the per-pose held-out chi-square difference summed (> 0: the term better)."""
+    the per-pose held-out chi-square difference summed (> 0: the term better); rule : str, the rule
+    that tied it (``empirical_as_good`` or ``empirical_indistinguishable``; a term found better, the
+    first's name is unused)."""
 
     cause: str
     sensor: str
     term: str
     p: float
     gain: float
+    rule: str = "empirical_as_good"
 
 
 def _cause_columns(component, d0, cov, i):
@@ -65,7 +73,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
     from metrology.core.model import jacobian_raw
     from metrology.diagnosis.fit import geometry
     from metrology.diagnosis.search import MIN_READINGS, _Sensor, multiplicity
-    from metrology.diagnosis.vocabulary import Term, terms_for
+    from metrology.diagnosis.vocabulary import VARIABLES, Term, terms_for
 
     if v.outcome != Outcome.NAMED:
         return v, ()
@@ -97,6 +105,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
         if not scored:
             continue
         cause = Term("cause", (), _cause_columns(s.component, b.d0, b.cov, i), "shape", s.label)
+        own = set(OWN_VARIABLES.get(s.component.name, VARIABLES))  # a family not listed: every variable its own
         e_c = sen.heldout(cause.columns)
         best = tie = None
         tries = scored[:TRIES]
@@ -108,13 +117,16 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
                 best = RivalTerm(s.label, names[i], t.key, p, g)
             elif tie is None and rules.empirical_as_good(g, paired_gain_p(-d), t.columns.shape[1], cause.columns.shape[1]):
                 tie = RivalTerm(s.label, names[i], t.key, p, g)
+            elif tie is None and rules.empirical_indistinguishable(g, t.columns.shape[1], cause.columns.shape[1],
+                                                                   bool(own & set(t.variables))):
+                tie = RivalTerm(s.label, names[i], t.key, p, g, "empirical_indistinguishable")
         if best is not None:
             found.append(best)
             why.append(Reason(22, "empirical_better", Decision.EMPIRICAL_BETTER, (s.label, f"{best.sensor}: {best.term}"),
                               "p_better", best.p, rules.ALPHA_HELDOUT / len(tries), best.gain))
         elif tie is not None:
             ties.append(tie)
-            why.append(Reason(22, "empirical_as_good", Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
+            why.append(Reason(22, tie.rule, Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
                               "p_better", tie.p, rules.ALPHA_HELDOUT / len(tries), tie.gain))
     if not found:
         if not ties:

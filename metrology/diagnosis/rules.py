@@ -28,7 +28,7 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
            "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "MAX_EMPIRICAL", "search_tried",
            "search_in_sample", "search_tails_in_sample", "search_held_out", "room_for_another_term",
-           "empirical_better", "empirical_as_good"]
+           "empirical_better", "empirical_as_good", "empirical_indistinguishable", "search_beside"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -276,9 +276,21 @@ MAX_EMPIRICAL = 3
 
 def search_tried(cause: str, confidence) -> bool:
     """19. The vocabulary is searched where the residuals stay inconsistent with the noise: the verdict
-    ``unexplained``, or a cause named that leaves structure (``partial``). Reason: elsewhere the
-    catalogue explains the data, and a search run on every data set would spend the nulls' budget."""
-    return cause == Outcome.UNEXPLAINED or Confidence(confidence) == Confidence.PARTIAL
+    ``unexplained``, or a cause named that leaves structure (``partial``); and where a cause is named
+    that the data cannot tell from a rival (``ambiguous``: rules 12, 15, 22), on the base residuals,
+    its terms said beside the cause (the rival's variables; issue 54: an incidence-times-distance
+    effect named ``scale``, crosstalk tying, was never searched). Reason: elsewhere the catalogue
+    explains the data, and a search run on every data set would spend the nulls' budget."""
+    return cause == Outcome.UNEXPLAINED or Confidence(confidence) in (Confidence.PARTIAL, Confidence.AMBIGUOUS)
+
+
+def search_beside(confidence, rival_ties: bool = False) -> bool:
+    """19. The search runs on the base residuals, its terms beside the cause and not in the model, where
+    the cause is ``ambiguous``, or a rival outside the catalogue ties with a cause named
+    (``rival_ties``: crosstalk, rule 12, or a term, rule 22; the verdict may be ``partial``): the
+    rival predicts as well as the cause, so what the search should name is what the cause's fit
+    took, not only the structure left beside it."""
+    return rival_ties or Confidence(confidence) == Confidence.AMBIGUOUS
 
 
 def search_in_sample(p: float, m: int) -> bool:
@@ -323,6 +335,19 @@ def empirical_as_good(gain: float, p_worse: float, k_term: int, k_cause: int) ->
     the richer curve's flexibility, not its family, may be what fits; one of as many coefficients
     (a product of the cause's own variable with a near-constant) ties by chance half the time."""
     return gain > 0 and p_worse >= ALPHA_CONFOUND and k_term < k_cause
+
+
+def empirical_indistinguishable(gain: float, k_term: int, k_cause: int, own_variable: bool) -> bool:
+    """22. A term of a variable the cause's family does not follow (``own_variable`` False: none of the
+    term's variables is one the family's curves are made of), of no more coefficients, that predicts
+    the cause's held-out poses better, not significantly (``gain > 0``: it explains more of their
+    variance): the cause stays named, ``ambiguous``, the term said beside it. Reason: rule 15 makes
+    a catalogued family that predicts as well a confounder; a term of another variable is another
+    family, outside the catalogue (a zero that follows ``dT/dt`` through a warm-up, where ``dT/dt``
+    is nearly affine in ``T``, was named ``drift`` ``high``, issue 54). A term of the family's own
+    variables (a product of the run's time with a near-constant, against a drift) is the cause in
+    another dress and ties by chance half the time: only :func:`empirical_as_good` weighs it."""
+    return not own_variable and k_term <= k_cause and gain > 0
 
 
 def room_for_another_term(n_found: int) -> bool:
