@@ -394,18 +394,17 @@ def verdict_summary(v, tb) -> str:
     if rival:  # rule 22 on one of several causes
         return text + f"; confidence ambiguous: {rival_text}" + tail
     tied = [r for r in why if r.decided == Decision.EMPIRICAL_TIE]
-    if tied:
-        return text + "; confidence ambiguous: " + "; ".join(
-            f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) predicts held-out poses as "
-            f"well as {r.concerns[0]} (p = {r.value:.2g} that it predicts better)" for r in tied) + tail
     confidence = _last(why, Decision.CONFIDENCE).outcome  # rule 16's (before the datum's, rule 17)
     named = {c.label for c in v.causes}
     ties = [r for r in why if r.decided == Decision.CROSSTALK_TIE and r.concerns[0] in named]
-    if ties and confidence == Confidence.AMBIGUOUS:
-        return text + ("; confidence ambiguous: " + "; ".join(
-            f"{', '.join(r.concerns[1:])} (a shift in proportion to another sensor's distance, "
-            f"crosstalk, outside the catalogue) predicts held-out poses as well as {r.concerns[0]}" for r in ties)
-            + f"; poses that separate them: {', '.join(dict.fromkeys(r.outcome for r in ties))}") + tail
+    ties = ties if ties and (tied or confidence == Confidence.AMBIGUOUS) else []
+    if tied or ties:  # rule 22's search terms and rule 12's crosstalk, each rival named, and the poses that separate
+        return text + "; confidence ambiguous: " + "; ".join([
+            *(f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) predicts held-out poses as "
+              f"well as {r.concerns[0]} (p = {r.value:.2g} that it predicts better)" for r in tied),
+            *(f"{', '.join(r.concerns[1:])} (a shift in proportion to another sensor's distance, crosstalk, outside "
+              f"the catalogue) predicts held-out poses as well as {r.concerns[0]}" for r in ties)]) + (
+            f"; poses that separate them: {', '.join(dict.fromkeys(r.outcome for r in ties))}" if ties else "") + tail
     weak = [r for r in why if r.decided == Decision.WEAK] if confidence == Confidence.MODERATE else []
     if weak:
         return text + (f"; confidence moderate: weak held-out evidence for "
