@@ -8,29 +8,16 @@ import json
 import os
 import threading
 
-import pytest
-from typer.testing import CliRunner
-
-from cli.main import app
 from metrology.io.data import data_path
 from metrology.jobs import measure_follow
 from metrology.jobs.measure_follow import UNIT_LINES, follow_log
+from tests.jobs.test_measure_follow_batches import lines  # noqa: F401 - the module's 40-hole log, a fixture
 
-runner = CliRunner()
 TABLE6 = str(data_path("measured", "nominal.toml"))
 
 
-@pytest.fixture(scope="module")
-def lines(tmp_path_factory):
-    log = tmp_path_factory.mktemp("wait") / "log.csv"
-    r = runner.invoke(app, ["simulate-log", "--out", str(log), "--holes", "12", "--seed", "53", "--layout", TABLE6,
-                            "--true-layout", TABLE6, "--no-truth"])
-    assert r.exit_code == 0, r.output
-    return log.read_text().splitlines(keepends=True)
-
-
-def _um(lines):
-    rows = list(csv.reader(lines))
+def _um(text):
+    rows = list(csv.reader(text))
     cols = [i for i, c in enumerate(rows[0]) if c.startswith("d_")]
     for r in rows[1:]:
         for i in cols:
@@ -40,8 +27,8 @@ def _um(lines):
     return out.getvalue().splitlines(keepends=True)
 
 
-def _slow(lines, monkeypatch):
-    """Follow ``lines`` through a pipe: the header and one hole, then (once that hole is answered, or after 60 s)
+def _slow(text, monkeypatch):
+    """Follow ``text`` (lines) through a pipe: the header and one hole, then (once that hole is answered, or after 60 s)
     the rest. (answers, error or None, whether the first hole was answered before the rest was sent)."""
     monkeypatch.setattr(measure_follow, "UNIT_WAIT_S", 0.3)
     r, w = os.pipe()
@@ -54,10 +41,10 @@ def _slow(lines, monkeypatch):
 
     def write():
         with os.fdopen(w, "w") as fh:
-            fh.write("".join(lines[:2]))
+            fh.write("".join(text[:2]))
             fh.flush()
             waited["alone"] = first.wait(60.0)
-            fh.write("".join(lines[2:]))
+            fh.write("".join(text[2:]))
 
     waited = {}
     writer = threading.Thread(target=write, daemon=True)
@@ -72,7 +59,7 @@ def _slow(lines, monkeypatch):
     return answers, error, waited["alone"]
 
 
-def test_a_line_that_comes_alone_is_answered_before_the_next_is_sent(lines, monkeypatch):
+def test_a_line_that_comes_alone_is_answered_before_the_next_is_sent(lines, monkeypatch):  # noqa: F811
     answers, error, alone = _slow(lines, monkeypatch)
     assert alone, "the first hole waited for the next lines"
     assert error is None and len(answers) == len(lines) - 1
@@ -81,7 +68,7 @@ def test_a_line_that_comes_alone_is_answered_before_the_next_is_sent(lines, monk
     assert json.dumps(answers) == json.dumps(fast)  # the same answers as a stream that came at once
 
 
-def test_readings_in_um_are_refused_when_the_checked_lines_have_come(lines, monkeypatch):
+def test_readings_in_um_are_refused_when_the_checked_lines_have_come(lines, monkeypatch):  # noqa: F811
     um = _um(lines)
     answers, error, alone = _slow(um, monkeypatch)
     assert alone and len(answers) == 1  # one hole cannot tell the unit (the reach rule needs UNIT_LINES)
