@@ -291,8 +291,8 @@ def _fits(fit, u, c, psi, width, spin, h1, hc, ec):
         return (hu, eu), hpu, hmu
     hmc = fit(c, -spin[c], zero[c])[0]
     hpc = fit(c, spin[c], zero[c])[0] if h1 is None else _rows(h1, c)
-    e = PanelFit.concat([eu, ec]).rows(order)
-    return (joined(hu, hc), e), joined(hpu, hpc), joined(hmu, hmc)
+    e = PanelFit.concat([eu, ec.rows(c)]).rows(order)  # hc, ec: every hole's; the convention's are the rows c
+    return (joined(hu, _rows(hc, c)), e), joined(hpu, hpc), joined(hmu, hmc)
 
 
 def _estimate(fit, r0, spin):

@@ -22,18 +22,30 @@ TABLE6 = data_path("measured/nominal.toml")
 def _measured(n_sensors, spin_deg, stated=None, holes=1200, seed=5, pose=False):
     """A barrel R 600 (axis at 30 deg) drilled by the Table 6 head (or its first 3 sensors) whose spin is
     uniform within +-spin_deg; measured with the CAD, the log without (or with) its commanded pose."""
+    from metrology.measure.holes import measure_batch
+
+    lay, table, settings, ch = _inputs(n_sensors, spin_deg, stated, holes, seed, pose)
+    b = measure_batch(lay, table, settings)
+    U = np.radians(b.columns.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
+    ok = np.isfinite(b.angle_before) & np.isfinite(U)
+    covered = np.abs(b.angle_before - ch.true_angle)[ok] <= U[ok]
+    return b, covered
+
+
+def _inputs(n_sensors, spin_deg, stated=None, holes=1200, seed=5, pose=False, radius_mm=600.0):
+    """``(layout, log table, Settings, the forward simulator's cell)`` of :func:`_measured`."""
     import pyarrow as pa
 
     from metrology.io.holelog import CELL, PANEL, TIME_S
     from metrology.jobs.measure_panel import panel_hole_surfaces
-    from metrology.measure.holes import Settings, measure_batch
+    from metrology.measure.holes import Settings
     from metrology.measure.panel import HoleTable
     from metrology.panel.mesh import Panel
 
     lay = load_layout(TABLE6)
     if n_sensors == 3:
         lay = lay.subset(("L1", "L2", "L3"))
-    panel = make_panel("cylinder", 600.0, axis=(np.cos(0.5), np.sin(0.5), 0.0))
+    panel = make_panel("cylinder", radius_mm, axis=(np.cos(0.5), np.sin(0.5), 0.0))
     spec = LogSpec(lay, lay, panel, resolution_mm=0.0, patch_half_mm=40.0, spin_rad=np.radians(spin_deg))
     ch = next(simulate_cell(spec, seed, 0, holes, holes))
     ids = tuple(f"h{i}" for i in range(holes))
@@ -49,11 +61,30 @@ def _measured(n_sensors, spin_deg, stated=None, holes=1200, seed=5, pose=False):
         for j, ax in enumerate("xyz"):
             cols[f"pose_r{ax}_deg"] = np.degrees(ch.pose_rotvec[:, j])
             cols[f"pose_{ax}_mm"] = ch.pose_origin[:, j]
-    b = measure_batch(lay, pa.table(cols), Settings(surfaces=surf))
-    U = np.radians(b.columns.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
-    ok = np.isfinite(b.angle_before) & np.isfinite(U)
-    covered = np.abs(b.angle_before - ch.true_angle)[ok] <= U[ok]
-    return b, covered
+    return lay, pa.table(cols), Settings(surfaces=surf), ch
+
+
+def test_a_holes_figures_do_not_depend_on_the_holes_beside_it_when_some_spins_are_read_and_some_not():
+    """A batch where the spin is read at some holes and left at the convention at others (R 150, spin within
+    +-10 deg): each hole's angle and U95 are the same as in the batch taken in reverse order (the read holes' and the
+    convention's fits put back in hole order, not shifted onto a neighbour's)."""
+    from metrology.measure import spin
+    from metrology.measure.holes import measure_batch
+
+    lay, table, settings, _ = _inputs(4, 10.0, holes=60, radius_mm=150.0)
+    calls = []
+    fits = spin._fits
+    try:
+        spin._fits = lambda fit, u, c, *a: calls.append((len(u), len(c))) or fits(fit, u, c, *a)
+        b = measure_batch(lay, table, settings)
+    finally:
+        spin._fits = fits
+    assert calls and all(nu and nc for nu, nc in calls), calls  # both kinds in one call: what the test is about
+    back = measure_batch(lay, table.take(np.arange(len(table))[::-1]), settings)
+    for name in ("angle_deg", "U95_angle_deg"):
+        got = b.columns.column(name).to_numpy(zero_copy_only=False)
+        rev = back.columns.column(name).to_numpy(zero_copy_only=False)[::-1]
+        np.testing.assert_array_equal(got, rev, err_msg=name)
 
 
 def test_four_sensors_free_spin_no_pose_the_convention_is_refused_where_it_fails_and_u95_holds():
