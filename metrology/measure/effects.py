@@ -21,9 +21,9 @@ the small difference. The joint covariance is split instead into two positive pa
                                                   "calibration"),
     var_effects = v^T C_tt v,   v = a_t + C_tt^-1 C_tb a_b,
 
-with ``w_i`` the angle's change per unit height of point ``i`` (``c^T P_i``,
-:mod:`metrology.measure.normals`), ``r_i`` the base chart's height rows, ``a_t = sum_i w_i (m.u_i)
-J_i`` and ``a_b = (w_i r_i)_i``: their sum is the joint covariance propagated exactly. The
+with ``w_i`` the angle's change per unit height of point ``i`` (``c^T P_i``, ``P`` the
+micro-plane estimator's own map, :func:`metrology.measure.estimator.fit_tilt`, with its weights),
+``r_i`` the base chart's height rows, ``a_t = sum_i w_i (m.u_i) J_i`` and ``a_b = (w_i r_i)_i``: their sum is the joint covariance propagated exactly. The
 terms' part enters each hole's budget as the source ``"effects"`` (its 2 x 2 covariance of the
 slopes, :func:`effects_slope_cov`), and :func:`metrology.measure.budget.combine` makes the angle's
 U95 from every source, as for any other.
@@ -110,16 +110,16 @@ def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
     ``layout``'s sensors, normals ``normal (N, 3)``, sensitivities ``jac (N, n, k)`` mm per parameter,
     the terms' covariance ``C_tt (k, k)`` and ``gain (k, 5n)``, ``C_tt^-1 C_tb`` on these sensors' chart
     parameters. Also returns ``(g_x, g_y)``."""
-    E, u = layout.zero, layout.direction
+    from metrology.measure.estimator import fit_tilt
+
+    u = layout.direction
     nz = normal[:, 2]
     gx, gy = -normal[:, 0] / nz, -normal[:, 1] / nz
     dT = d.T  # (n, N)
-    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]
-    xc, yc = x - x.mean(0), y - y.mean(0)
-    sxx, syy, sxy = (xc * xc).sum(0), (yc * yc).sum(0), (xc * yc).sum(0)
-    det = sxx * syy - sxy * sxy
     e = direction_basis(u)  # (n, 2, 3)
-    P = ((syy * xc - sxy * yc) / det, (sxx * yc - sxy * xc) / det)  # P_i: slope per unit height of point i
+    # P_i: the slopes' change per unit height of point i, the micro-plane estimator's own map (its weights), (n, N)
+    A = fit_tilt(layout, d).A  # (N, 3, n): the pose's change per unit change of each height, sign opposite
+    P = (-A[:, 0, :].T, -A[:, 1, :].T)
     v = [np.zeros((len(d), jac.shape[2])), np.zeros((len(d), jac.shape[2]))]
     # only the sensors the terms act on or correlate with (a term's own sensor, in a joint fit) contribute
     for i in sorted(set(np.flatnonzero(np.any(gain != 0, axis=0)) // 5) | set(np.flatnonzero(np.any(jac != 0, axis=(0, 2))))):
