@@ -23,7 +23,8 @@ the small difference. The joint covariance is split instead into two positive pa
 
 with ``w_i`` the angle's change per unit height of point ``i`` (``c^T P_i``, ``P`` the
 micro-plane estimator's own map, :func:`metrology.measure.estimator.fit_tilt`, with its weights),
-``r_i`` the base chart's height rows, ``a_t = sum_i w_i (m.u_i) J_i`` and ``a_b = (w_i r_i)_i``: their sum is the joint covariance propagated exactly. The
+``r_i`` the base chart's height rows, ``a_t = sum_i w_i (m.u_i) J_i`` and ``a_b = (w_i r_i)_i``:
+their sum is the joint covariance propagated exactly. The
 terms' part enters each hole's budget as the source ``"effects"`` (its 2 x 2 covariance of the
 slopes, :func:`effects_slope_cov`), and :func:`metrology.measure.budget.combine` makes the angle's
 U95 from every source, as for any other.

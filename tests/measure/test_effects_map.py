@@ -21,7 +21,8 @@ def test_the_effects_source_moves_the_slopes_as_the_weighted_fit_does():
     E, u = lay.zero, lay.direction
     ab = rng.uniform(-0.035, 0.035, size=(5, 2))
     z0 = E[:, 2].mean() + 50.0 * u[:, 2].mean()
-    d = (z0 + ab[:, :1] * E[:, 0] + ab[:, 1:] * E[:, 1] - E[:, 2]) / (u[:, 2] - ab[:, :1] * u[:, 0] - ab[:, 1:] * u[:, 1])
+    a, b = ab[:, :1], ab[:, 1:]
+    d = (z0 + a * E[:, 0] + b * E[:, 1] - E[:, 2]) / (u[:, 2] - a * u[:, 0] - b * u[:, 1])
     base = fit_tilt(lay, d)
     s = 0.002  # mm: one term's standard uncertainty, a reading offset of one sensor
     delta = 1e-4
