@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from metrology.measure.budget import SPIN
+from metrology.measure.budget import SPIN, combine
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ SPIN_READ_SHARE = 0.1
 SPIN_READ_MAX = 0.25
 #: a hole judged with its spin on the convention's bound (not read: no redundant reading, or one blind to the spin,
 #: as Table 2's cross on a cylinder along an arm) is counted as resting on the bound where the spin's term holds over
-#: this share of its U95^2 (the trace of the tilt's covariance): the summary names how many, with the fix (log the
+#: this share of its U95^2 (of the angle's variance, budget.combine): the summary names how many, with the fix (log the
 #: commanded pose). Such holes are **judged** with that U95, never left `not_measured` for it. Measured on the study's
 #: 40 no-pose rows (flat included; 14,400 holes judged, benchmarks/results/tight_radii.md): leaving them `not_measured` would judge
 #: 76 % (none of Table 2 on R 50 along, none of the 3-sensor ring on R 50), give 10,745 decisive verdicts at a 1 deg
@@ -108,12 +108,13 @@ class SpinJudged:
 
 
 def _spin_share(h) -> np.ndarray:
-    """(m,) float, the spin's share of the tilt's variance (trace) in ``h``'s budget (0 where none)."""
+    """(m,) float, the spin's share of the angle's variance, ``u_spin^2 / u^2`` (:func:`metrology.measure.budget.
+    combine`; a spin that moves the tilt across the angle's gradient does not count), 0 where there is no budget."""
     if h.budget is None:
         return np.zeros(len(h.angle))
-    c, t = h.budget.source(SPIN).cov, h.budget.cov
+    un = combine(h.budget)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.nan_to_num((c[:, 0] + c[:, 2]) / (t[:, 0] + t[:, 2]))
+        return np.nan_to_num((un.of(SPIN) / un.u) ** 2)
 
 
 def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
@@ -326,7 +327,7 @@ def _spin_ends(h, hp, hm):
     term (:func:`metrology.measure.panel_terms.panel_sources`) turns the shape alone: where the footprint is large
     against the radius the CAD's terms beyond second order turn too, and the change is not linear in the spin. The
     larger of the two is kept."""
-    from metrology.measure.budget import Budget, combine
+    from metrology.measure.budget import Budget
 
     b = h.budget
     g = b.tilt
