@@ -1,6 +1,7 @@
 """What :func:`metrology.measure.surface.fit_surface`'s second-order local surface leaves out, from the
 CAD: the panel's height beyond second order at the spots (:func:`second_order_readings`) and the
-head's spin about the tool axis at its measured axis in the cell's convention (:func:`convention_spin`).
+head's spin about the tool axis at its measured axis in the cell's convention
+(:func:`metrology.measure.commanded.commanded_turn`).
 Both are applied by :func:`metrology.measure.surface.surface_hole_normals` before its fit (one more
 fit of the readings), where :class:`metrology.measure.surface.PanelTerms` carries them.
 
@@ -15,11 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.core.sym3 import smallest_rotation
 from metrology.measure.commanded import cad_normal_tcs, commanded_turn
 from metrology.measure.normals import drill_axis
 
-__all__ = ["second_order_readings", "convention_spin", "beyond_second_order", "Beyond"]
+__all__ = ["second_order_readings", "beyond_second_order", "Beyond"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ def beyond_second_order(layout, d, shape, terms: Beyond, fit0, refit=None):
     - ``terms.tcs2panel (N, 3, 3)``: the head's rotation the shape (and ``axes``) were put into the
       TCS with (the commanded pose, or the cell's convention at the CAD's normal; columns the TCS axes
       in the panel frame): the head's spin at its measured axis in the cell's convention
-      (:func:`convention_spin`); or ``terms.turn (N, 3, 3)`` that turn given (the head after the
+      (:func:`metrology.measure.commanded.commanded_turn`); or ``terms.turn (N, 3, 3)`` that turn given (the head after the
       cell's adjustment is the head before it turned by the smallest rotation in the TCS: it keeps the
       spin found before; NaN rows: none);
     - ``terms.axes (N, 2, 3)`` unit TCS, ``terms.higher (N, 9)``: the CAD's height beyond second order
@@ -127,53 +127,6 @@ def _finite_rows(X):
     X = X.reshape(len(X), int(np.prod(X.shape[1:])))  # (h, k), also h = 0
     with np.errstate(invalid="ignore", over="ignore"):
         return np.isfinite(X @ np.ones(X.shape[1]))
-
-
-def _spin_entries(Rc, mx, my, mz, s: float):
-    """:func:`convention_spin` entry by entry: ``Rc[i][j]`` and ``mx, my, mz`` (h,) arrays; returns ``Y[i][j]``.
-
-    ``Y = Q_m^T X Q_m = R_c^T Q(-e_z -> a) Q(-e_z -> f)^T R_c Q_m`` (``F F = I``, ``R = R_c Q_m^T``),
-    and a smallest rotation turned is the smallest rotation between the turned vectors:
-    ``R_c^T Q(v -> w) R_c = Q(R_c^T v -> R_c^T w)``, with ``R_c^T a = s Q_m^T e_z = (m_x, m_y, -m_z)``
-    and ``R_c^T f = s e_z``: ``Y = Q(-r -> b) Q(-r -> s e_z)^T Q_m``, ``r = R_c^T e_z`` (the panel's
-    ``z`` in the TCS: ``R_c``'s last row), ``b = (m_x, m_y, -m_z)``."""
-    rx, ry, rz = Rc[2][0], Rc[2][1], Rc[2][2]
-    bz = -mz
-    # A = Q(-r -> b): k = -r x b, c = -r . b
-    A = smallest_rotation(rz * my - ry * bz, rx * bz - rz * mx, ry * mx - rx * my, -(rx * mx + ry * my + rz * bz))
-    # B = Q(-r -> s e_z): k = -s (r_y, -r_x, 0), c = -s r_z
-    B = smallest_rotation(-s * ry, s * rx, 0.0, -s * rz)
-    # Q_m = Q(sg e_z -> m), sg = -s: I + [v]x + [v]x^2 / (1 + sg m_z), v = sg e_z x m = (-sg m_y, sg m_x, 0)
-    sg = -s
-    Q = smallest_rotation(-sg * my, sg * mx, 0.0, sg * mz)
-    M = [[A[i][0] * B[j][0] + A[i][1] * B[j][1] + A[i][2] * B[j][2] for j in range(3)] for i in range(3)]  # A B^T
-    return [[M[i][0] * Q[0][j] + M[i][1] * Q[1][j] + M[i][2] * Q[2][j] for j in range(3)] for i in range(3)]
-
-
-def convention_spin(tcs2panel, m, s: float):
-    """``Y (h, 3, 3)``: the turn about the drill axis that puts the head's spin where the cell's
-    convention has it at the head's measured axis.
-
-    The fit turns the shape, given square to the axis under ``tcs2panel`` (``R_c``), onto the measured
-    normal ``m`` (TCS, toward the head) by the smallest rotation ``Q_m`` (``sigma e_z -> m``): the head
-    ``R = R_c Q_m^T``. The cell holds the commanded spin ``psi_c`` in its convention (metrology/sim/forward/log.py
-    step 3; :func:`metrology.measure.panel.tcs2panel_nominal`): at the axis ``a = R s e_z`` its head is
-    ``Q(-e_z -> a) F Rz(psi_c)``, not ``R``. The two differ by a spin about the axis, the holonomy of the
-    tilt: ``theta beta / 2`` or so for a tilt ``theta`` off an axis ``beta`` from the panel's ``z``
-    (0.3 deg at 5 and 7.6 deg, the nacelle's table), which turns a shape of unequal curvatures (a
-    saddle: ``2 delta_psi / R``). ``Y = Q_m^T X Q_m`` with ``X = R^T Q(-e_z -> a) F Rz(psi_c)``; the
-    shape square to the axis becomes ``Y^T K Y``.
-
-    ``tcs2panel (h, 3, 3)``, ``m (h, 3)`` unit TCS, ``s`` the drill axis's sign. Entry by entry over
-    the holes (:func:`_spin_entries`, the closed form of the products)."""
-    Rc = np.asarray(tcs2panel, float)
-    m = np.asarray(m, float)
-    e = _spin_entries([[Rc[:, i, j] for j in range(3)] for i in range(3)], m[:, 0], m[:, 1], m[:, 2], s)
-    Y = np.empty((len(m), 3, 3))
-    for i in range(3):
-        for j in range(3):
-            Y[:, i, j] = e[i][j]
-    return Y
 
 
 #: the Taylor factors of ``higher``'s nine terms (:func:`second_order_readings`)

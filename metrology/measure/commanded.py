@@ -1,8 +1,8 @@
 """The head's turn about its axis, from the robot's commanded pose, for a pose whose tool axis is off the
 CAD's normal at the hole.
 
-:func:`metrology.measure.beyond.convention_spin` takes the head as its commanded pose ``R_c`` tilted
-onto the measured normal: the cell keeps its convention's spin at the head's actual axis (the
+The cell's convention in closed form (``convention_spin``, what metro applied before; kept as the reference in
+tests/measure/test_commanded.py) takes the head as its commanded pose ``R_c`` tilted onto the measured normal: the cell keeps its convention's spin at the head's actual axis (the
 forward simulator's hole-table logs: commanded square to the CAD, the robot's attitude error
 kept in the convention). It reads the actual axis in the commanded TCS as ``(m_x, m_y, -m_z)``,
 which holds where the commanded axis is the CAD's normal (``R_c^T n = sigma e_z``). Where it is not
@@ -20,7 +20,7 @@ it is: the head is ``R_c`` tilted by the smallest rotation taking the measured n
 cell's convention at that axis, ``Z = R_c^T Q(-e_z -> a) F F Q(-e_z -> f)^T R_c = Q(-r -> b)
 Q(-r -> s e_z)^T``, and the shape, given square to the axis by ``Q_t = Q(n_t -> sigma e_z)``
 (:meth:`metrology.measure.panel.HoleSurfaces.shape_pose`), turned by ``Y = Q_t Z Q_m``. Where
-``n_t = sigma e_z`` it is :func:`~metrology.measure.beyond.convention_spin`'s ``Y``; where the head is
+``n_t = sigma e_z`` it is ``convention_spin``'s ``Y``; where the head is
 its commanded pose (``m = n_t``) it is the identity.
 """
 

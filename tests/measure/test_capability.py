@@ -2,7 +2,6 @@
 distribution), so metro gives the ISO 22514-2 percentile-based Ppk against the one upper limit,
 with a bootstrap confidence interval. On logs of the independent forward simulator."""
 
-from dataclasses import replace
 
 import numpy as np
 import pytest

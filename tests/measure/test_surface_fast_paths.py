@@ -130,7 +130,7 @@ def _poses_and_normals(rng, h, s):
 
 
 def test_the_spin_convention_in_closed_form_is_the_matrix_products():
-    from metrology.measure.beyond import convention_spin
+    from tests.measure.test_commanded import convention_spin  # the convention's closed form, now a reference
 
     rng = np.random.default_rng(10)
     for s in (1.0, -1.0):
