@@ -77,8 +77,12 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
 def spin_path(rng, along: str, spin_deg: float, drift_holes: float):
     """The head's spin along the log (``LogSpec.spin_path``): ``hole`` None (uniform per hole, as the simulator
     draws it); ``run`` one spin for the whole log, uniform within +-spin; ``drift`` a sine of amplitude spin and
-    period ``drift_holes`` holes, its phase drawn."""
+    period ``drift_holes`` holes, its phase drawn; ``bound`` one spin for the whole log at a bound (+-spin, its sign
+    drawn: a cell held at the edge of its convention)."""
     spin = np.radians(spin_deg)
+    if along == "bound":
+        v = float(spin * rng.choice((-1.0, 1.0)))
+        return lambda hole: np.full(len(hole), v)
     if along == "run":
         v = float(rng.uniform(-spin, spin))
         return lambda hole: np.full(len(hole), v)
@@ -138,7 +142,12 @@ def _reason_key(r: str) -> str:
 
 
 def run(args):
+    from metrology.measure import spin as spin_rules
     from metrology.measure.batch import CODE, Status
+    from metrology.measure.budget import Kind
+
+    if args.spin_model:  # a candidate rule, measured against metro's own (benchmarks/results/tight_radii.md)
+        spin_rules.SPIN_BOUND_MODEL = Kind(args.spin_model)
     from metrology.measure.holes import Settings, measure_batch
     from metrology.sim.forward import perturb_layout
     from metrology.sim.forward.panels import make_panel
@@ -229,7 +238,10 @@ def run(args):
                    "median_err_deg": med, "err_over_flat": med / flat_err.get(hname, np.nan),
                    "median_U95_deg": float(np.degrees(np.median(cat["u_b"]))) if cat["u_b"].size else float("nan"),
                    "disagree": disagree, "logs_refused": refused, "logs": args.calibrations,
-                   "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1)}
+                   "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1),
+                   "spin_model": args.spin_model or "metro's", "spin_along": args.spin_along,
+                   "holes_on_bound": int(cat["bound"].sum()),
+                   "coverage_on_bound": float(cat["hit_b"][cat["bound"].astype(bool)].mean()) if cat["bound"].any() else None}
             if args.no_pose and cat["hit_p"].size:  # the same logs with their pose
                 row["coverage_pose_same"] = float(cat["hit_p"].mean())
                 row["median_err_pose_same_deg"] = float(np.degrees(np.median(cat["err_p"])))
@@ -299,8 +311,12 @@ def main(argv=None):
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
     ap.add_argument("--sim-spin-deg", type=float, default=2.0,
                     help="the head's true spin about the tool axis, uniform within +-this (measured as +-2 without the pose)")
-    ap.add_argument("--spin-along", choices=("hole", "run", "drift"), default="hole",
-                    help="the true spin: drawn per hole (the simulator's default), one per log, or drifting along it")
+    ap.add_argument("--spin-along", choices=("hole", "run", "drift", "bound"), default="hole",
+                    help="the true spin: drawn per hole (the simulator's default), one per log, drifting along it, or "
+                         "one per log at a bound")
+    ap.add_argument("--spin-model", choices=("uniform", "arcsine", "edge"), default=None,
+                    help="what U95 takes of a spin known only by its bound (a candidate: overrides "
+                         "metrology.measure.spin.SPIN_BOUND_MODEL for this run; default metro's own)")
     ap.add_argument("--drift-holes", type=float, default=400.0, help="--spin-along drift: its period, holes")
     ap.add_argument("--tol-deg", type=float, default=1.0,
                     help="the tolerance the choices' verdicts are counted at (on the angle before; true angles 0.5-5 deg)")

@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from metrology.measure.budget import SPIN, combine
+from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL, Kind, combine
+from metrology.measure.magnitude import SPREAD_VARIANCE
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -76,6 +77,18 @@ SPIN_READ_MAX = 0.25
 #: Without the pose the error there is the floor of any estimator that knows only the bound (the pose at the
 #: spin's centre gives the same), so refusing those holes buys no accuracy, only fewer verdicts
 SPIN_BOUND_SHARE = 0.5
+#: what U95 takes of a spin known only by its bound (the convention's +-spin, not read: a 3-sensor head, or a redundant
+#: reading blind to the spin): :attr:`~metrology.measure.budget.Kind.EDGE`, **any distribution within the bound**, its U95
+#: the least that holds 95 % wherever in the bound the spin sits (the worst case: at a bound; ``a + 1.645 sigma`` where
+#: the spin's reach ``a`` dominates). The spin is a cell's systematic (its orientation for a run, or drifting along it),
+#: not drawn afresh per hole, and nothing in a log says where in the bound it sits: the data cannot tell a spread from
+#: a spin held near the bound. Measured on the study's no-pose rows where holes rest on the bound
+#: (benchmarks/results/tight_radii.md, "the U95 on the spin's bound"): uniform (GUM 4.3.7) holds where the spin is
+#: spread (uniform per hole or per log) and falls to 82-90 % for a sine drift, under 80 % for a spin held at the bound;
+#: arcsine (JCGM 101 6.4.6, a sine between the bounds) holds the drift and not the held spin; EDGE holds 95 % or more in
+#: every scenario, 95 % on a spin held at the bound, and over-covers a spin spread over it (99 %+): the side a conformity
+#: verdict (ISO 14253-1) can take, the other costing false CONFORMs. The spin read keeps its uniform doubt (SPIN_READ)
+SPIN_BOUND_MODEL = Kind.EDGE
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)
@@ -122,7 +135,7 @@ def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
     from metrology.measure.surface import PanelFit, PanelTerms, surface_hole_normals
 
     def part(s):
-        return surface_hole_normals(sub, dd[s], shape[s], PanelTerms(u_shape[s], spin[s], free),
+        return surface_hole_normals(sub, dd[s], shape[s], PanelTerms(u_shape[s], spin[s], free, SPIN_BOUND_MODEL),
                                     beyond=None if higher is None or free else higher.rows(s))
 
     parts = [part(slice(i, i + CACHE_ROWS)) for i in range(0, len(dd), CACHE_ROWS)]
@@ -259,7 +272,7 @@ def _read_spin(sub, dd, shape, u_shape, spin, higher, h0, e0, read=True):
     u = np.flatnonzero(width < spin)  # the spin read: judged at it
     c = np.flatnonzero(width >= spin)  # the convention with +-spin
     (h, e), hp, hm = _fits(fit, u, c, psi, width, spin, h1, _rows(h0, r), e0.rows(r))
-    h = _spin_ends(h, hp, hm)
+    h = _spin_ends(h, hp, hm, width < spin)
     e.panel_misfit[:], e.panel_misfit_z[:] = e0.panel_misfit[r], e0.panel_misfit_z[r]
     if h0.misfit_bound is not None:  # rule 2: the most the spin within +-spin moves the misfit, beyond its first order
         at_ends = np.fmax(np.abs(hp.residual - r0), np.abs(hm.residual - r0))
@@ -321,12 +334,13 @@ def _estimate(fit, r0, spin):
     return np.clip(np.where(use, psi, 0.0), -spin, spin), np.where(use, width, spin), reach, h1
 
 
-def _spin_ends(h, hp, hm):
+def _spin_ends(h, hp, hm, read):
     """``h`` with its spin's term from the fits at the spin's ends ``hp, hm`` (HoleNormals of the same holes): the
-    angle's larger change to either end, uniform along it (the tilt's larger change its 2-D spread). The first-order
-    term (:func:`metrology.measure.panel_terms.panel_sources`) turns the shape alone: where the footprint is large
-    against the radius the CAD's terms beyond second order turn too, and the change is not linear in the spin. The
-    larger of the two is kept."""
+    angle's larger change to either end, spread along it as the bound's kind (:data:`SPIN_BOUND_MODEL`; uniform where
+    the spin was read, ``read (h,) bool``: its term then the source :data:`~metrology.measure.budget.SPIN_READ`), the
+    tilt's larger change its 2-D spread. The first-order term (:func:`metrology.measure.panel_terms.panel_sources`)
+    turns the shape alone: where the footprint is large against the radius the CAD's terms beyond second order turn
+    too, and the change is not linear in the spin. The larger of the two is kept."""
     from metrology.measure.budget import Budget
 
     b = h.budget
@@ -335,14 +349,18 @@ def _spin_ends(h, hp, hm):
     d = np.where(((dp * dp).sum(1) >= (dm * dm).sum(1))[:, None], dp, dm)
     a = np.fmax(np.abs(hp.angle - h.angle), np.abs(hm.angle - h.angle))  # rad, the angle's change to the farther end
     a = np.where(np.isfinite(a), a, 0.0)
-    src = b.source(SPIN)
+    src, rsrc = b.source(SPIN), b.source(SPIN_READ)
+    v = SPREAD_VARIANCE[src.kind.value]  # the fits' spin source is the bound's kind
     more = a > src.half_width
-    cov = np.where(more[:, None], np.stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2], 1) / 3.0, src.cov)
-    spin_src = replace(src, cov=cov, half_width=np.where(more, a, src.half_width))
-    b = Budget(g, tuple(spin_src if s.name == SPIN else s for s in b.sources))
+    cov = np.where(more[:, None], np.stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2], 1) * v, src.cov)
+    hw = np.where(more, a, src.half_width)
+    r = read[:, None]
+    spin_src = replace(src, cov=np.where(r, 0.0, cov), half_width=np.where(read, 0.0, hw))
+    read_src = replace(rsrc, cov=np.where(r, cov / (3.0 * v), rsrc.cov), half_width=np.where(read, hw, rsrc.half_width))
+    b = Budget(g, tuple(spin_src if s.name == SPIN else read_src if s.name == SPIN_READ else s for s in b.sources))
     un = combine(b)
     bad = ~np.isfinite(h.angle)
-    panel = np.sqrt(h.curvature_bound ** 2 - src.half_width ** 2 / 3.0 + spin_src.half_width ** 2 / 3.0) \
+    panel = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2 + un.of(SURFACE_MODEL) ** 2) \
         if h.curvature_bound is not None else None
     return replace(h, u_angle=np.where(bad, np.nan, un.u), U95=np.where(bad, np.nan, un.U95), budget=b,
                    curvature_bound=panel)
