@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -105,7 +106,28 @@ def centre_pose(spec, ch):
     return log_table(replace(ch, pose_rotvec=rotation_vector(_head(feed, np.array([1.0, -s, -s]), np.zeros(len(feed))))))
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0, path=None):
+def step_cad(panel, folder):
+    """The simulator's cylinder (axis through ``(0, 0, -R)`` along ``x`` or ``y``, 400 mm long) written as a STEP
+    B-rep by OpenCASCADE and loaded as ``metro measure --panel`` loads a STEP (``--cad step``: the B-rep path)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    from metrology.panel.mesh import load_panel
+
+    R, a = panel.radius_mm, np.asarray(panel.axis, float)
+    start = -200.0 * a + np.array([0.0, 0.0, -R])
+    shape = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(*start), gp_Dir(*a)), R, 400.0).Shape()
+    w = STEPControl_Writer()
+    w.Transfer(shape, STEPControl_AsIs)
+    path = Path(folder) / f"cylinder_R{R:g}_{'x' if a[0] else 'y'}.step"
+    if w.Write(str(path)) != IFSelect_RetDone:
+        raise RuntimeError(f"OpenCASCADE could not write {path}")
+    return load_panel(path)
+
+
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0, path=None, cad=None):
     """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
     the pose and ``same``, also the log with its pose, its surfaces, and the log with its pose at the spin's centre
     (:func:`centre_pose`); ``path`` the spin along the log (:func:`spin_path`)."""
@@ -126,8 +148,8 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin
     log = log_table(ch)
     if not pose:
         log = log.drop_columns([c for c in log.column_names if c.startswith("pose_")])
-    mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
-    surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
+    cad = cad or Panel(panel_mesh(panel, half_mm=160.0, step_mm=mesh_step))
+    surf = panel_hole_surfaces(cad, HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
     if not pose and same:  # the same log with its pose, measured as such (the spin's cost, on the same draws)
         return ch, log, surf, log_table(ch), replace(surf, spin=0.0), centre_pose(spec, ch)
@@ -159,6 +181,7 @@ def run(args):
     radii = [float(r) for r in args.radii.split(",") if r]
     lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
+    folder = tempfile.mkdtemp(prefix="tight_radii_step_")
     print(HEADER + (" same logs with the pose: coverage % | median error [deg] | with the pose at the spin's centre: "
                     "median error [deg] |" if args.no_pose else ""))
     print("|" + "---|" * (14 if args.no_pose else 11))
@@ -186,9 +209,11 @@ def run(args):
                     panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
+                if args.cad == "step" and c == 0:
+                    cad = step_cad(panel, folder) if R is not None and not label.startswith("torus") else None
                 path = spin_path(rng, args.spin_along, args.sim_spin_deg, args.drift_holes)
                 got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose,
-                              spin_deg=args.sim_spin_deg, path=path)
+                              spin_deg=args.sim_spin_deg, path=path, cad=cad if args.cad == "step" else None)
                 ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
                 if args.no_pose:  # the same log with its pose
@@ -314,6 +339,8 @@ def main(argv=None):
     ap.add_argument("--spin-along", choices=("hole", "run", "drift", "bound"), default="hole",
                     help="the true spin: drawn per hole (the simulator's default), one per log, drifting along it, or "
                          "one per log at a bound")
+    ap.add_argument("--cad", choices=("mesh", "step"), default="mesh",
+                    help="the CAD: a grid mesh of the simulator's surface, or its STEP B-rep (cylinders; OpenCASCADE)")
     ap.add_argument("--spin-model", choices=("uniform", "arcsine", "edge"), default=None,
                     help="what U95 takes of a spin known only by its bound (a candidate: overrides "
                          "metrology.measure.spin.SPIN_BOUND_MODEL for this run; default metro's own)")
