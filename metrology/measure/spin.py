@@ -43,7 +43,7 @@ from metrology.measure.normals import HoleNormals, concat_normals
 if TYPE_CHECKING:
     from metrology.measure.surface import PanelFit
 
-__all__ = ["SPIN_SIGMAS", "DEFAULT_SPIN_DEG", "SpinJudged", "panel_normals"]
+__all__ = ["SPIN_SIGMAS", "DEFAULT_SPIN_DEG", "SPIN_BOUND_MODEL", "SPIN_BOUND_NOTE", "SpinJudged", "panel_normals"]
 
 #: a redundant reading's misfit to the CAD's surface beyond this many of its standard deviations, the
 #: head's spin in the cell's convention: the convention does not hold at that hole (two-sided p = 6e-5
@@ -89,6 +89,9 @@ SPIN_BOUND_SHARE = 0.5
 #: every scenario, 95 % on a spin held at the bound, and over-covers a spin spread over it (99 %+): the side a conformity
 #: verdict (ISO 14253-1) can take, the other costing false CONFORMs. The spin read keeps its uniform doubt (SPIN_READ)
 SPIN_BOUND_MODEL = Kind.EDGE
+#: the reason column's note on a hole whose U95 rests on the spin's bound (:data:`SPIN_BOUND_SHARE`): what it assumes
+SPIN_BOUND_NOTE = ("U95 rests on the bound of the head's spin (not read): it holds for any spin within the bound, "
+                   "wherever it sits (log the robot's commanded pose to know it)")
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)

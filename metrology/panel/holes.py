@@ -217,7 +217,7 @@ def _brep_beyond(surface, P, n, e1, e2, rho, hess, higher, miss):
     mesh path fits them to its vertices; elsewhere ``higher`` (the ray-cast cubic's) and no remainder."""
     from types import SimpleNamespace
 
-    from metrology.panel.footprint import NEEDED_MM, remainder_terms
+    from metrology.panel.footprint import NEEDED_MM, extra_exponents, remainder_terms
 
     E = np.stack([e1, e2], axis=1)
     k = principal_curvatures(np.nan_to_num(-np.einsum("mai,mij,mbj->mab", E, hess, E)))
@@ -225,19 +225,20 @@ def _brep_beyond(surface, P, n, e1, e2, rho, hess, higher, miss):
     u_height = np.zeros(len(P))
     if need.size == 0 or not hasattr(surface, "disc_points"):
         return higher, u_height
-    cloud = SimpleNamespace(mesh=SimpleNamespace(vertices=surface.disc_points(P[need], n[need], e1[need], e2[need],
-                                                                                rho)))
-    vcoef, _, vok = _vertex_cubic(cloud, P[need], n[need], e1[need], e2[need], rho)
-    extra, u_need = remainder_terms(cloud, P[need], n[need], e1[need], e2[need], rho,
-                                    np.where(vok[:, None], vcoef, np.nan), k[need])
     higher = higher.copy()
-    higher[need[vok]] = vcoef[vok, 6:]
-    u_height[need] = u_need
-    if extra is not None:
-        full = np.zeros((len(P), extra.shape[1]))
-        full[need] = extra
-        higher = np.concatenate([higher, full], axis=1)
-    return higher, u_height
+    full = np.zeros((len(P), len(extra_exponents())))
+    for i, pts in zip(need, surface.disc_points(P[need], n[need], e1[need], e2[need], rho)):
+        one = slice(i, i + 1)  # each hole on its own points (two holes' samplings mixed leave lines of equal t)
+        cloud = SimpleNamespace(mesh=SimpleNamespace(vertices=pts))
+        vcoef, _, vok = _vertex_cubic(cloud, P[one], n[one], e1[one], e2[one], rho)
+        extra, u_one = remainder_terms(cloud, P[one], n[one], e1[one], e2[one], rho,
+                                       np.where(vok[:, None], vcoef, np.nan), k[one])
+        if vok[0]:
+            higher[i] = vcoef[0, 6:]
+        if extra is not None:
+            full[i] = extra[0]
+        u_height[i] = u_one[0]
+    return np.concatenate([higher, full], axis=1), u_height
 
 
 def _vertex_cubic(panel, P, n, e1, e2, rho):
