@@ -1,6 +1,7 @@
 """What the panel adds to a hole's budget with its local surface known: the uncertainty of its shape
-operator and the head's spin about the tool axis (uniform within ``+-spin`` in the cell's convention, or
-not known: a bound over every spin), as :class:`metrology.measure.budget.Source` entries, and what they
+operator and the head's spin about the tool axis (within ``+-spin`` in the cell's convention, shaped as
+:data:`metrology.measure.spin.SPIN_BOUND_MODEL`, or not known: a bound over every spin), as
+:class:`metrology.measure.budget.Source` entries, and what they
 do to the redundant reading's misfit (:func:`metrology.measure.surface.surface_hole_normals`).
 
 The heights move with an error ``delta K`` of the shape operator by ``sigma rho 1/2 (Tq)^T delta K (Tq)``

@@ -20,6 +20,9 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   misfit at the convention's spin with its doubt, and allows the most the spin moves it (to its ends);
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
+- **on the convention, the spin not read** (3 readings, or a redundant reading blind to the spin): the
+  spin's term is its bound taken as any distribution within it (:data:`SPIN_BOUND_MODEL`: U95 holds
+  wherever in the bound the spin sits; docs/spin.md);
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
   isotropic part (the mean curvature, the same at every spin) is fitted, and its deviatoric part, of
   known size ``(k1 - k2) / 2`` and unknown direction, enters the budget as a bound over every spin;
