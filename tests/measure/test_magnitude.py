@@ -211,8 +211,10 @@ def test_with_the_commanded_pose_the_heads_spin_leaves_u95():
     posed = ok & (np.arange(len(ok)) >= 100)
     cover0 = np.mean(np.abs(a0 - t0)[ok] <= U0[ok])
     cover1 = np.mean(np.abs(a1 - t1)[posed] <= U1[posed])
-    # without the pose the uniform spin dominates U95 (94.4 % here; K95 on the combined u gave 97.6 %)
-    assert 0.935 <= cover0 <= 0.965, cover0
+    # without the pose the spin's bound dominates U95, taken as any spin within it (measure.spin.SPIN_BOUND_MODEL):
+    # it holds, and over-covers a spin the simulator draws uniformly per hole (99.4 % here; as a uniform 94.4 %, which
+    # a spin drifting or held near the bound under-covers: docs/spin.md)
+    assert 0.95 <= cover0 <= 0.997, cover0
     # with it: 93.7 % here (2900 holes, +-0.4 %; the same head unspun 94.5 %: the ring's 3 spots 50 mm
     # out on R 500 see the surface's 4th-order term, which the fit leaves out)
     assert 0.925 <= cover1 <= 0.965, cover1
