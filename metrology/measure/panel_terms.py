@@ -125,7 +125,8 @@ def panel_sources(fit, g2, axis, terms, A0, A1):
             v = np.einsum("hin,hn->hi", fit.A[:, :2, :], dh)
             f = spin ** 2 / 3.0
             fk = spin ** 2 * SPREAD_VARIANCE[kind.value]  # the 2-D spread of the spin's variance as its kind
-            C_spin[:, 0], C_spin[:, 1], C_spin[:, 2] = v[:, 0] * v[:, 0] * fk, v[:, 0] * v[:, 1] * fk, v[:, 1] * v[:, 1] * fk
+            C_spin[:, 0], C_spin[:, 1], C_spin[:, 2] = (v[:, 0] * v[:, 0] * fk, v[:, 0] * v[:, 1] * fk,
+                                                        v[:, 1] * v[:, 1] * fk)
             c0, c1 = angle_gradient(fit.g[:, 0], fit.g[:, 1])
             a_spin = np.abs(c0 * v[:, 0] + c1 * v[:, 1]) * spin  # rad, the angle at the spin's end
             if fit.null is not None:  # the spin turns the shape's twist: the redundant reading sees it

@@ -78,21 +78,21 @@ SPIN_READ_MAX = 0.25
 #: 76 % (none of Table 2 on R 50 along, none of the 3-sensor ring on R 50), give 10,745 decisive verdicts at a 1 deg
 #: tolerance against 14,031, false FAILs 0 against 0, false CONFORMs 2 against 3; U95 holds either way (92.2-97.8 %).
 #: Without the pose the error there is the floor of any estimator that knows only the bound (the pose at the
-#: spin's centre gives the same), so refusing those holes buys no accuracy, only fewer verdicts. (Measured with the bound
-#: taken as uniform; as any distribution within it, SPIN_BOUND_MODEL, its variance is three times the uniform's and more
-#: holes count: Table 2 on R 50 along 410 of 720 against 317, the 3-sensor ring 657 against 332.)
+#: spin's centre gives the same), so refusing those holes buys no accuracy, only fewer verdicts. (Measured with the
+#: bound taken as uniform; as any distribution within it, SPIN_BOUND_MODEL, its variance is three times the uniform's
+#: and more holes count: Table 2 on R 50 along 410 of 720 against 317, the 3-sensor ring 657 against 332.)
 SPIN_BOUND_SHARE = 0.5
 #: what U95 takes of a spin known only by its bound (the convention's +-spin, not read: a 3-sensor head, or a redundant
-#: reading blind to the spin): :attr:`~metrology.measure.budget.Kind.EDGE`, **any distribution within the bound**, its U95
-#: the least that holds 95 % wherever in the bound the spin sits (the worst case: at a bound; ``a + 1.645 sigma`` where
+#: reading blind to the spin): :attr:`~metrology.measure.budget.Kind.EDGE`, **any distribution within the bound**, its
+#: U95 the least that holds 95 % wherever in the bound the spin sits (the worst case: at a bound; ``a + 1.645 sigma`` where
 #: the spin's reach ``a`` dominates). The spin is a cell's systematic (its orientation for a run, or drifting along it),
-#: not drawn afresh per hole, and nothing in a log says where in the bound it sits: the data cannot tell a spread from
-#: a spin held near the bound. Measured on the study's no-pose rows where holes rest on the bound
-#: (benchmarks/results/tight_radii.md, "the U95 on the spin's bound"): uniform (GUM 4.3.7) holds where the spin is
-#: spread (uniform per hole or per log) and falls to 82-90 % for a sine drift, under 80 % for a spin held at the bound;
-#: arcsine (JCGM 101 6.4.6, a sine between the bounds) holds the drift and not the held spin; EDGE holds 95 % or more in
-#: every scenario, 95 % on a spin held at the bound, and over-covers a spin spread over it (99 %+): the side a conformity
-#: verdict (ISO 14253-1) can take, the other costing false CONFORMs. The spin read keeps its uniform doubt (SPIN_READ)
+#: not drawn afresh per hole, and nothing in such a log says where in the bound it sits. Measured on Table 2 and the
+#: 3-sensor ring on R 50 along and across without the pose (12 logs x 60 holes a row; benchmarks/results/tight_radii.md,
+#: "the U95 on the spin's bound"): uniform (GUM 4.3.7) covers 95.0-97.5 % where the spin is spread (per hole, per log),
+#: 90.0-92.8 % on a sine drift, 85.1-89.6 % on a spin held at the bound; arcsine (JCGM 101 6.4.6) 94.0-96.7 % on the
+#: drift, 91.8-93.6 % held; EDGE 96.4-98.9 % held or drifting and 98.8-99.3 % spread. No shape meets 95 +- 1.5 % in all
+#: four; EDGE is the one at or above 95 % in each, the side a conformity verdict (ISO 14253-1) can take (a U95 too small
+#: makes false CONFORMs, one too large fewer decisive verdicts). The spin read keeps its uniform doubt (SPIN_READ)
 SPIN_BOUND_MODEL = Kind.EDGE
 #: the reason column's note on a hole whose U95 rests on the spin's bound (:data:`SPIN_BOUND_SHARE`): what it assumes
 SPIN_BOUND_NOTE = ("U95 rests on the bound of the head's spin (not read): it holds for any spin within the bound, "

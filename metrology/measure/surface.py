@@ -235,7 +235,8 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, read_src, Source(SURFACE_MODEL, rem.cov)))
     un = combine(budget)
     angle, u_angle, U95 = un.angle, un.u, un.U95
-    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2 + un.of(SURFACE_MODEL) ** 2)
+    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2
+                          + un.of(SURFACE_MODEL) ** 2)
     misfit = np.full(N, np.nan)
     misfit_z = np.full(N, np.nan)
     twist = None

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SPIN_READ, SURFACE_MODEL, Budget, Kind,
-                                      Source, combine)
+from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SPIN_READ, SURFACE_MODEL,
+                                      Budget, Kind, Source, combine)
 from metrology.measure.magnitude import K95, normal_spread_u95, normal_uniform_u95
 from metrology.measure.normals import hole_normals
 from metrology.measure.surface import surface_hole_normals

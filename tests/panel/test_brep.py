@@ -137,7 +137,7 @@ def test_a_tight_radius_on_a_step_takes_its_brep_beyond_second_order(tmp_path):
     step = _step_cylinder(tmp_path / "cyl50.step", R, (1.0, 0.0, 0.0))
     panel = Panel(panel_mesh(cad, half_mm=120.0, step_mm=2.0), "cyl50.stl", surface=BRepSurface(step))
     rng = np.random.default_rng(53)
-    xy = np.column_stack([rng.uniform(-40.0, 40.0, 6), np.r_[0.0, 0.0, 0.0, rng.uniform(-8.0, 8.0, 3)]])  # 3 on the crest
+    xy = np.column_stack([rng.uniform(-40.0, 40.0, 6), np.r_[0.0, 0.0, 0.0, rng.uniform(-8.0, 8.0, 3)]])  # 3 on a line
     P = np.column_stack([xy, cad.height(xy[:, 0], xy[:, 1])])
     f = panel_surfaces(panel, HoleTable(tuple(map(str, range(6))), P, -cad.normal_at(P), "holes.csv"), 25.0)
     assert f["higher"].shape == (6, 9 + len(extra_exponents()))
