@@ -173,7 +173,8 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         Kr = np.where(vok[:, None, None], Kv, Kl)
     else:  # the B-rep: beyond second order from its own faces' points over the disc, where the footprint needs it
         higher, u_height = _brep_beyond(panel.surface, P, n, e1, e2, rho, hess, higher, miss.any(1))
-        Kr = Kl
+        E = np.stack([e1, e2], axis=1)  # the curvature a missing sample's reason names: the B-rep's own
+        Kr = -np.einsum("mai,mij,mbj->mab", E, hess, E)
     c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0

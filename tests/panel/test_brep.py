@@ -156,3 +156,21 @@ def test_a_tight_radius_on_a_step_takes_its_brep_beyond_second_order(tmp_path):
         origin = P[i] + s_[:, None] * E[i, 0] + t_[:, None] * E[i, 1] + 100.0 * n[i]
         true = 100.0 - cad.intersect(origin, np.broadcast_to(-n[i], origin.shape))  # the simulator's height along n
         assert np.max(np.abs(model - true)) < 1e-3, (i, np.max(np.abs(model - true)))
+
+
+def test_a_step_footprint_past_the_crest_is_named_so(tmp_path):
+    """R 20 under a 25 mm footprint (its disc 31 mm): the hole's problem names the crest, with the B-rep's own radius
+    (before, the ray-cast curvature of the missing samples, 0: "runs off the panel's edge", the wrong cause)."""
+    from metrology.measure.panel import HoleTable
+    from metrology.panel.brep import BRepSurface
+    from metrology.panel.holes import panel_surfaces
+    from metrology.panel.mesh import Panel
+    from metrology.sim.forward.panels import make_panel
+    from tests.measure.panel_fixtures import panel_mesh
+
+    cad = make_panel("cylinder", 20.0, axis=(1.0, 0.0, 0.0))
+    panel = Panel(panel_mesh(cad, half_mm=120.0, step_mm=2.0), "cyl20.stl",
+                  surface=BRepSurface(_step_cylinder(tmp_path / "cyl20.step", 20.0, (1.0, 0.0, 0.0))))
+    P = np.array([[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
+    f = panel_surfaces(panel, HoleTable(("a", "b"), P, -cad.normal_at(P), "holes.csv"), 25.0)
+    assert all("past the crest of the surface's radius 20 mm" in p for p in f["problem"]), list(f["problem"])
