@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -77,8 +78,12 @@ def crest_table(panel, span_mm: float, m: int, name="holes"):
 def spin_path(rng, along: str, spin_deg: float, drift_holes: float):
     """The head's spin along the log (``LogSpec.spin_path``): ``hole`` None (uniform per hole, as the simulator
     draws it); ``run`` one spin for the whole log, uniform within +-spin; ``drift`` a sine of amplitude spin and
-    period ``drift_holes`` holes, its phase drawn."""
+    period ``drift_holes`` holes, its phase drawn; ``bound`` one spin for the whole log at a bound (+-spin, its sign
+    drawn: a cell held at the edge of its convention)."""
     spin = np.radians(spin_deg)
+    if along == "bound":
+        v = float(spin * rng.choice((-1.0, 1.0)))
+        return lambda hole: np.full(len(hole), v)
     if along == "run":
         v = float(rng.uniform(-spin, spin))
         return lambda hole: np.full(len(hole), v)
@@ -101,7 +106,28 @@ def centre_pose(spec, ch):
     return log_table(replace(ch, pose_rotvec=rotation_vector(_head(feed, np.array([1.0, -s, -s]), np.zeros(len(feed))))))
 
 
-def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0, path=None):
+def step_cad(panel, folder):
+    """The simulator's cylinder (axis through ``(0, 0, -R)`` along ``x`` or ``y``, 400 mm long) written as a STEP
+    B-rep by OpenCASCADE and loaded as ``metro measure --panel`` loads a STEP (``--cad step``: the B-rep path)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    from metrology.panel.mesh import load_panel
+
+    R, a = panel.radius_mm, np.asarray(panel.axis, float)
+    start = -200.0 * a + np.array([0.0, 0.0, -R])
+    shape = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(*start), gp_Dir(*a)), R, 400.0).Shape()
+    w = STEPControl_Writer()
+    w.Transfer(shape, STEPControl_AsIs)
+    path = Path(folder) / f"cylinder_R{R:g}_{'x' if a[0] else 'y'}.step"
+    if w.Write(str(path)) != IFSelect_RetDone:
+        raise RuntimeError(f"OpenCASCADE could not write {path}")
+    return load_panel(path)
+
+
+def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin_deg=2.0, path=None, cad=None):
     """``(chunk, log table, HoleSurfaces)``: ``holes`` holes on ``panel``'s crest measured with a grid mesh; without
     the pose and ``same``, also the log with its pose, its surfaces, and the log with its pose at the spin's centre
     (:func:`centre_pose`); ``path`` the spin along the log (:func:`spin_path`)."""
@@ -122,8 +148,8 @@ def one_log(rng, panel, true, cal, holes, mesh_step, pose=True, same=False, spin
     log = log_table(ch)
     if not pose:
         log = log.drop_columns([c for c in log.column_names if c.startswith("pose_")])
-    mesh = panel_mesh(panel, half_mm=160.0, step_mm=mesh_step)
-    surf = panel_hole_surfaces(Panel(mesh), HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
+    cad = cad or Panel(panel_mesh(panel, half_mm=160.0, step_mm=mesh_step))
+    surf = panel_hole_surfaces(cad, HoleTable(table.ids, table.points, table.feed, "holes"), footprint_mm(cal),
                                0.5, 0.0, 0.0 if pose else np.radians(2.0))
     if not pose and same:  # the same log with its pose, measured as such (the spin's cost, on the same draws)
         return ch, log, surf, log_table(ch), replace(surf, spin=0.0), centre_pose(spec, ch)
@@ -138,7 +164,12 @@ def _reason_key(r: str) -> str:
 
 
 def run(args):
+    from metrology.measure import spin as spin_rules
     from metrology.measure.batch import CODE, Status
+    from metrology.measure.budget import Kind
+
+    if args.spin_model:  # a candidate rule, measured against metro's own (benchmarks/results/tight_radii.md)
+        spin_rules.SPIN_BOUND_MODEL = Kind(args.spin_model)
     from metrology.measure.holes import Settings, measure_batch
     from metrology.sim.forward import perturb_layout
     from metrology.sim.forward.panels import make_panel
@@ -150,6 +181,7 @@ def run(args):
     radii = [float(r) for r in args.radii.split(",") if r]
     lips = [float(r) for r in args.lips.split(",") if r]
     flat_err = {}
+    folder = tempfile.mkdtemp(prefix="tight_radii_step_")
     print(HEADER + (" same logs with the pose: coverage % | median error [deg] | with the pose at the spin's centre: "
                     "median error [deg] |" if args.no_pose else ""))
     print("|" + "---|" * (14 if args.no_pose else 11))
@@ -177,9 +209,11 @@ def run(args):
                     panel = TorusPanel(R, args.lip_ring, orient)
                 else:
                     panel = make_panel("cylinder", R, axis=(1.0, 0.0, 0.0) if orient == "along" else (0.0, 1.0, 0.0))
+                if args.cad == "step" and c == 0:
+                    cad = step_cad(panel, folder) if R is not None and not label.startswith("torus") else None
                 path = spin_path(rng, args.spin_along, args.sim_spin_deg, args.drift_holes)
                 got = one_log(rng, panel, true, cal, args.holes, args.mesh_step, pose=not args.no_pose, same=args.no_pose,
-                              spin_deg=args.sim_spin_deg, path=path)
+                              spin_deg=args.sim_spin_deg, path=path, cad=cad if args.cad == "step" else None)
                 ch, log, surf = got[:3]
                 b = measure_batch(cal, log, Settings(surfaces=surf))
                 if args.no_pose:  # the same log with its pose
@@ -229,7 +263,10 @@ def run(args):
                    "median_err_deg": med, "err_over_flat": med / flat_err.get(hname, np.nan),
                    "median_U95_deg": float(np.degrees(np.median(cat["u_b"]))) if cat["u_b"].size else float("nan"),
                    "disagree": disagree, "logs_refused": refused, "logs": args.calibrations,
-                   "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1)}
+                   "not_measured_reasons": dict(reasons.most_common(6)), "seconds": round(time.perf_counter() - t0, 1),
+                   "spin_model": args.spin_model or "metro's", "spin_along": args.spin_along,
+                   "holes_on_bound": int(cat["bound"].sum()),
+                   "coverage_on_bound": float(cat["hit_b"][cat["bound"].astype(bool)].mean()) if cat["bound"].any() else None}
             if args.no_pose and cat["hit_p"].size:  # the same logs with their pose
                 row["coverage_pose_same"] = float(cat["hit_p"].mean())
                 row["median_err_pose_same_deg"] = float(np.degrees(np.median(cat["err_p"])))
@@ -299,8 +336,14 @@ def main(argv=None):
     ap.add_argument("--no-pose", action="store_true", help="the log without the commanded pose")
     ap.add_argument("--sim-spin-deg", type=float, default=2.0,
                     help="the head's true spin about the tool axis, uniform within +-this (measured as +-2 without the pose)")
-    ap.add_argument("--spin-along", choices=("hole", "run", "drift"), default="hole",
-                    help="the true spin: drawn per hole (the simulator's default), one per log, or drifting along it")
+    ap.add_argument("--spin-along", choices=("hole", "run", "drift", "bound"), default="hole",
+                    help="the true spin: drawn per hole (the simulator's default), one per log, drifting along it, or "
+                         "one per log at a bound")
+    ap.add_argument("--cad", choices=("mesh", "step"), default="mesh",
+                    help="the CAD: a grid mesh of the simulator's surface, or its STEP B-rep (cylinders; OpenCASCADE)")
+    ap.add_argument("--spin-model", choices=("uniform", "arcsine", "edge"), default=None,
+                    help="what U95 takes of a spin known only by its bound (a candidate: overrides "
+                         "metrology.measure.spin.SPIN_BOUND_MODEL for this run; default metro's own)")
     ap.add_argument("--drift-holes", type=float, default=400.0, help="--spin-along drift: its period, holes")
     ap.add_argument("--tol-deg", type=float, default=1.0,
                     help="the tolerance the choices' verdicts are counted at (on the angle before; true angles 0.5-5 deg)")

@@ -139,7 +139,8 @@ class KnownSurfaces:
     spin_on_convention_holes, spin_free_holes : int, holes judged with the spin in the cell's convention, and
         with a U95 over every spin
     off_cad : OffCad; cad : CadCheck
-    spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2
+    spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2 (their U95 for
+        any spin within the bound: ``spin_bound_model`` "edge", :data:`metrology.measure.spin.SPIN_BOUND_MODEL`)
     """
 
     source: str
@@ -158,11 +159,13 @@ class KnownSurfaces:
     known, assumed = True, False
 
     def to_dict(self) -> dict:
+        from metrology.measure.spin import SPIN_BOUND_MODEL
+
         return {"assumed": False, "source": self.source, "holes": self.holes,
                 "position_error_mm": self.position_error_mm, "form_tolerance_mm": self.form_tolerance_mm,
                 "spin_deg": self.spin_deg, "spin_stated": self.spin_stated, "spin_convention": SPIN_CONVENTION,
                 "spin_on_convention_holes": self.spin_on_convention_holes, "spin_free_holes": self.spin_free_holes,
-                "spin_bound_holes": self.spin_bound_holes,
+                "spin_bound_holes": self.spin_bound_holes, "spin_bound_model": SPIN_BOUND_MODEL.value,
                 **self.off_cad.to_dict(), **self.cad.to_dict()}
 
 
@@ -238,7 +241,8 @@ class MeasureReport:
                                     f"log the commanded pose to know it)", cv.spin_on_convention_holes, None, "holes",
                                     True, gate=False))
                 checks.append(Check("head's spin not read (no redundant reading, or one blind to it): holes whose U95 "
-                                    f"rests on the +-{cv.spin_deg:g} deg bound (over half of it; log the commanded pose)",
+                                    f"rests on the +-{cv.spin_deg:g} deg bound (over half of it; it holds for any spin "
+                                    "within the bound, wherever it sits; log the commanded pose)",
                                     cv.spin_bound_holes, None, "holes", True, gate=False))
                 checks.append(Check("head's spin not known: holes judged with a U95 over every spin",
                                     cv.spin_free_holes, None, "holes", True, gate=False))

@@ -7,9 +7,10 @@ Both fitters (:func:`metrology.measure.normals.hole_normals`, the micro-plane, a
 
 - far from ``alpha = 0``: the angle's standard uncertainty ``u = sqrt(sum_j u_j^2)``, ``u_j^2 = c^T C_j c``
   for a normal source (``c = d alpha / d g``), ``a_j^2 / 3`` for a bounded one (half-width ``a_j`` along
-  the angle, rectangular: GUM 4.3.7); ``U95 = K95 u`` (the linear rule), or, with a :attr:`Kind.UNIFORM`
-  source (a true uniform spread, the head's spin), the 95 % half-width of a normal plus a uniform on
-  ``+-a`` (:func:`metrology.measure.magnitude.normal_uniform_u95`);
+  the angle, rectangular: GUM 4.3.7); ``U95 = K95 u`` (the linear rule), or, with a spread within ``+-a``
+  (:attr:`Kind.UNIFORM`: the head's spin read; :attr:`Kind.ARCSINE`; :attr:`Kind.EDGE`: any distribution, the
+  head's spin on the convention's bound), the 95 % half-width of a normal plus that spread (its variance
+  ``a^2 / 3``, ``a^2 / 2``, ``a^2``: :func:`metrology.measure.magnitude.normal_spread_u95`);
 - near ``alpha = 0`` (below :data:`SMALL_ANGLE_SIGMAS` standard deviations) the angle is the length of
   the 2-D tilt, not normal: ``u`` is the tilt's major-axis standard deviation and U95 the half-width
   holding 95 % of its length (Rice and its anisotropic generalisation,
@@ -31,10 +32,11 @@ from enum import StrEnum
 import numpy as np
 
 from metrology.core.sym2 import eig2
-from metrology.measure.magnitude import K95, X_MAX, magnitude_u95, normal_uniform_u95
+from metrology.measure.magnitude import K95, SPREAD_VARIANCE, X_MAX, magnitude_u95, normal_spread_u95
 
 __all__ = ["Kind", "Source", "Budget", "Uncertainty", "combine", "angle_gradient", "SMALL_ANGLE_SIGMAS", "READING_NOISE",
-           "CALIBRATION", "DATUM", "PANEL_SHAPE", "SPIN", "CURVATURE", "SURFACE_MODEL"]
+           "CALIBRATION", "DATUM", "PANEL_SHAPE", "SPIN", "SPIN_READ", "CURVATURE",
+           "SURFACE_MODEL"]
 
 #: below this many standard uncertainties the angle's distribution is not close to normal (it is the
 #: length of a 2-D vector): u is the 2-D spread's major axis (and with a bound, U95 the length's half-width)
@@ -46,6 +48,8 @@ CALIBRATION = "calibration"
 DATUM = "datum"
 PANEL_SHAPE = "panel shape"
 SPIN = "spin"
+#: the head's spin where it was read from the redundant reading (its estimate's doubt: uniform, not the bound's shape)
+SPIN_READ = "spin read"
 CURVATURE = "curvature"
 #: what the panel's local surface model leaves over a footprint large against the radius (truncation, faceting,
 #: the drill point's position error: :mod:`metrology.measure.remainder`)
@@ -56,7 +60,9 @@ class Kind(StrEnum):
     """How a source's error is distributed."""
 
     NORMAL = "normal"  # Gaussian, of covariance ``cov``
-    UNIFORM = "uniform"  # uniform within +-half_width along the angle (the head's spin): normal-plus-uniform U95
+    UNIFORM = "uniform"  # uniform within +-half_width along the angle (the head's spin read): normal-plus-uniform U95
+    ARCSINE = "arcsine"  # a sine between +-half_width (U-shaped: JCGM 101 6.4.6): normal-plus-arcsine U95
+    EDGE = "edge"  # within +-half_width, any distribution: its worst case (at a bound), variance half_width^2
     BOUND = "bound"  # a worst case over what is not known (the micro-plane's panel curvature): rectangular in u
 
 
@@ -194,27 +200,33 @@ def combine(budget: Budget) -> Uncertainty:
     cx, cy = angle_gradient(gx, gy)
     N = len(g)
     share2 = np.empty((N, len(budget.sources)))
-    uniform = np.zeros(N)
+    spreads = {}  # Kind -> (N,) rad, the half-widths of the spreads within bounds
     bounded = np.zeros(N, bool)
     for j, s in enumerate(budget.sources):
         if s.kind is Kind.NORMAL:
             C = s.cov
             share2[:, j] = cx * cx * C[:, 0] + 2 * cx * cy * C[:, 1] + cy * cy * C[:, 2]
         else:
-            share2[:, j] = s.half_width ** 2 / 3.0
-            if s.kind is Kind.UNIFORM:
-                uniform = uniform + s.half_width
-            else:
+            share2[:, j] = s.half_width ** 2 * (1.0 / 3.0 if s.kind is Kind.BOUND else SPREAD_VARIANCE[s.kind.value])
+            if s.kind is Kind.BOUND:
                 bounded |= s.half_width > 0
+            else:
+                spreads[s.kind] = spreads.get(s.kind, 0.0) + s.half_width
     var = share2[:, 0].copy()
     for j in range(1, share2.shape[1]):
         var += share2[:, j]
     u = np.sqrt(var)
     U95 = K95 * u
-    spread = uniform > 0  # a uniform share: the 95 % half-width of the normal plus the uniform
-    if spread.any():
-        U95[spread] = normal_uniform_u95(np.sqrt(np.maximum(var[spread] - uniform[spread] ** 2 / 3.0, 0.0)),
-                                         uniform[spread])
+    # a spread within bounds: the 95 % half-width of the normal plus the spread, the bounds of every spread added and
+    # taken as the widest shape present (edge, then arcsine, then uniform: the safe side where a hole has several)
+    a = sum(spreads.values(), np.zeros(N))
+    rest = np.sqrt(np.maximum(var - sum(h ** 2 * SPREAD_VARIANCE[k.value] for k, h in spreads.items()), 0.0))
+    done = np.zeros(N, bool)
+    for kind in (Kind.EDGE, Kind.ARCSINE, Kind.UNIFORM):
+        take = ~done & (spreads[kind] > 0) if kind in spreads else done & False
+        if take.any():
+            U95[take] = normal_spread_u95(rest[take], a[take], kind.value)
+            done |= take
     # near 0 the angle is the length of the 2-D tilt (metrology.measure.magnitude)
     C = budget.cov
     scale = (1.0 + g2) ** 2

@@ -182,7 +182,7 @@ def _measure(layout: SensorLayout, d, settings: Settings, placed: "Placed | None
 def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings, effects) -> None:
     """The holes ``rows`` read by the sensors ``mask`` (sub-layout ``sub``, readings ``dd``) measured with their
     local surface known (:func:`metrology.measure.spin.panel_normals`), rule 1b and 2 applied, into ``out``."""
-    from metrology.measure.spin import panel_normals
+    from metrology.measure.spin import SPIN_BOUND_NOTE, panel_normals
 
     rs = _of(rows)
     j = panel_normals(sub, dd, placed.shape[rs], placed.u_shape[rs], placed.spin[rs],
@@ -197,6 +197,9 @@ def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings,
             f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
             "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
             ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
+    for i in np.flatnonzero(j.bound).tolist():  # what such a U95 assumes (measure.spin.SPIN_BOUND_MODEL), said per hole
+        prior = out.reason.get(int(rows[i]))
+        out.reason[int(rows[i])] = (prior + "; " if prior else "") + SPIN_BOUND_NOTE
     past = past_footprint(j.extra.spot_turn, j.extra.incidence)  # rule 1b
     _store(out, rows, mask, sub, dd, h, settings, micro=False, past=past)
     for i in np.flatnonzero(past).tolist():  # rare: a loop

@@ -44,7 +44,8 @@ import numpy as np
 
 from metrology.core.sym2 import eig2
 
-__all__ = ["K95", "major_sd", "magnitude_u95", "normal_uniform_u95", "compute_table", "X_MAX", "TABLE_FILE"]
+__all__ = ["K95", "major_sd", "magnitude_u95", "normal_uniform_u95", "normal_spread_u95", "SPREAD_VARIANCE",
+           "compute_table", "X_MAX", "TABLE_FILE"]
 
 #: the 95 % quantile of |N(0, 1)|, the coverage factor of a normal (re-exported by measure.normals)
 K95 = 1.959963984540054
@@ -235,6 +236,65 @@ def normal_uniform_u95(sigma, a):
         t = a / np.sqrt(sigma * sigma + a * a)
     t = np.where(np.isfinite(t), t, 0.0)
     return np.interp(t, t_grid, k) * np.sqrt(sigma * sigma + a * a / 3.0)
+
+
+#: the variance of an error within ``+-a`` over ``a^2``, by what is known of it: ``uniform`` spread evenly (GUM 4.3.7),
+#: ``arcsine`` a sine between the bounds (U-shaped: JCGM 101 6.4.6), ``edge`` any distribution within them (its worst
+#: case: all of it at a bound; a^2 is the largest variance any distribution within +-a has)
+SPREAD_VARIANCE = {"uniform": 1.0 / 3.0, "arcsine": 0.5, "edge": 1.0}
+#: nodes of the arcsine's mean over its phase (midpoints; q within 1e-4 of 8192 nodes on the table's grid)
+ARCSINE_NODES = 2048
+
+
+def _spread_p(q, s, a, shape):
+    """P(|X + Y| <= q), X ~ N(0, s^2), Y within [-a, a] as ``shape`` (:data:`SPREAD_VARIANCE`): uniform, arcsine
+    (``a sin theta``, theta uniform), or edge (the worst case: ``Y = a``, where the probability is the least for a
+    symmetric unimodal X). Arrays of one shape, ``s > 0``."""
+    from scipy.special import ndtr
+
+    if shape == "uniform":
+        return _normal_uniform_p(q, s, np.where(a > 0, a, 1e-300))
+    if shape == "edge":
+        return ndtr((q - a) / s) - ndtr((-q - a) / s)
+    y = a[..., None] * np.sin(np.pi * ((np.arange(ARCSINE_NODES) + 0.5) / ARCSINE_NODES - 0.5))
+    qq, ss = q[..., None], s[..., None]
+    return (ndtr((qq - y) / ss) - ndtr((-qq - y) / ss)).mean(-1)
+
+
+@functools.lru_cache(maxsize=4)
+def _spread_table(shape):
+    """``k(phi)`` on 401 points of ``phi = atan2(a, s)`` in ``[0, pi/2]``: ``q = k sqrt(s^2 + v a^2)`` (v the shape's
+    variance, :data:`SPREAD_VARIANCE`); ``phi = pi/2`` (no normal part) from the spread's own 95 % half-width
+    (uniform 0.95 a, arcsine ``a sin(0.95 pi / 2)``, edge a)."""
+    phi = np.linspace(0.0, 0.5 * np.pi, 401)
+    a, s = np.sin(phi), np.cos(phi)
+    v = SPREAD_VARIANCE[shape]
+    u = np.sqrt(s * s + v * a * a)
+    inner = phi < 0.5 * np.pi
+    lo, hi = np.zeros(inner.sum()), np.full(inner.sum(), 4.0)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        low = _spread_p(mid * u[inner], s[inner], a[inner], shape) < 0.95
+        lo, hi = np.where(low, mid, lo), np.where(low, hi, mid)
+    k = np.empty_like(phi)
+    k[inner] = 0.5 * (lo + hi)
+    k[~inner] = {"uniform": 0.95, "arcsine": np.sin(0.475 * np.pi), "edge": 1.0}[shape] / np.sqrt(v)
+    return phi, k
+
+
+def normal_spread_u95(sigma, a, shape):
+    """U95 of the sum of a normal error (standard deviation ``sigma``) and one within ``[-a, a]`` distributed as
+    ``shape`` (``uniform``, ``arcsine``, or ``edge``: any distribution within the bounds, its U95 the least that
+    holds 95 % whatever it is; :data:`SPREAD_VARIANCE`), arrays of one unit: the half-width ``q`` with
+    ``P(|X + Y| <= q) >= 0.95``. ``edge`` runs from ``K95 sigma`` to ``a + 1.645 sigma`` (``a`` large); the
+    uniform's is :func:`normal_uniform_u95`."""
+    if shape == "uniform":
+        return normal_uniform_u95(sigma, a)
+    sigma = np.asarray(sigma, float)
+    a = np.abs(np.asarray(a, float))
+    phi_grid, k = _spread_table(shape)
+    phi = np.arctan2(a, sigma)
+    return np.interp(phi, phi_grid, k) * np.sqrt(sigma * sigma + SPREAD_VARIANCE[shape] * a * a)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """What the panel adds to a hole's budget with its local surface known: the uncertainty of its shape
-operator and the head's spin about the tool axis (uniform within ``+-spin`` in the cell's convention, or
-not known: a bound over every spin), as :class:`metrology.measure.budget.Source` entries, and what they
+operator and the head's spin about the tool axis (within ``+-spin`` in the cell's convention, shaped as
+:data:`metrology.measure.spin.SPIN_BOUND_MODEL`, or not known: a bound over every spin), as
+:class:`metrology.measure.budget.Source` entries, and what they
 do to the redundant reading's misfit (:func:`metrology.measure.surface.surface_hole_normals`).
 
 The heights move with an error ``delta K`` of the shape operator by ``sigma rho 1/2 (Tq)^T delta K (Tq)``
@@ -16,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from metrology.core.sym2 import eig2
-from metrology.measure.budget import PANEL_SHAPE, SPIN, Kind, Source, angle_gradient
+from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, Kind, Source, angle_gradient
+from metrology.measure.magnitude import SPREAD_VARIANCE
 
 __all__ = ["PanelTerms", "panel_sources", "free_spin", "shape_basis"]
 
@@ -30,7 +32,9 @@ class PanelTerms:
     u_shape : (h,) float, 1/mm, standard uncertainty of each component of the shape operator
         (mesh fit, position error along the surface, form tolerance; combined)
     spin : float or (h,) float, rad, the head's spin about the tool axis relative to the panel is
-        within ``+-spin`` (uniform); 0 where the robot's commanded pose gives it
+        within ``+-spin``; 0 where the robot's commanded pose gives it
+    spin_kind : Kind, what is known of the spin within ``+-spin`` (:attr:`~metrology.measure.budget.Kind.UNIFORM`,
+        ``ARCSINE`` or ``EDGE``: any distribution; :data:`metrology.measure.spin.SPIN_BOUND_MODEL` on the convention)
     free : bool, the head's spin is not known at all (no pose, and no convention that holds): the
         shape's isotropic part (its mean curvature, the same at every spin) is fitted and its deviatoric
         part, of known size ``(k1 - k2) / 2`` and unknown direction, enters as a bound over every spin
@@ -41,6 +45,7 @@ class PanelTerms:
     u_shape: np.ndarray
     spin: float | np.ndarray = 0.0
     free: bool = False
+    spin_kind: Kind = Kind.UNIFORM
 
 
 def _tangent_basis(mx, my, mz):
@@ -92,9 +97,12 @@ def free_spin(fit, g2, axis, dev, A0, A1):
 
 
 def panel_sources(fit, g2, axis, terms, A0, A1):
-    """The panel's sources (its shape's uncertainty, normal; the head's spin, uniform within ``+-spin``)
-    and the variance the spin gives the redundant reading's misfit (N,) mm^2 (0 without a spin)."""
+    """The panel's sources (its shape's uncertainty, normal; the head's spin within ``+-spin``, shaped as
+    ``terms.spin_kind``; the spin read, empty here: :func:`metrology.measure.spin.panel_normals` fills it) and the
+    variance the spin gives the redundant reading's misfit (N,) mm^2 (0 without a spin; the uniform's: the convention's
+    test takes the misfit's reach to the spin's ends apart, ``spin._within_reach``)."""
     N = len(g2)
+    kind = Kind.UNIFORM if terms is None else terms.spin_kind
     C_shape, C_spin = np.zeros((N, 3)), np.zeros((N, 3))
     a_spin = np.zeros(N)
     rho_var = 0.0
@@ -116,9 +124,12 @@ def panel_sources(fit, g2, axis, terms, A0, A1):
             dh = sc * 0.5 * np.einsum("hni,hij,hnj->hn", fit.q, dK, fit.q)
             v = np.einsum("hin,hn->hi", fit.A[:, :2, :], dh)
             f = spin ** 2 / 3.0
-            C_spin[:, 0], C_spin[:, 1], C_spin[:, 2] = v[:, 0] * v[:, 0] * f, v[:, 0] * v[:, 1] * f, v[:, 1] * v[:, 1] * f
+            fk = spin ** 2 * SPREAD_VARIANCE[kind.value]  # the 2-D spread of the spin's variance as its kind
+            C_spin[:, 0], C_spin[:, 1], C_spin[:, 2] = (v[:, 0] * v[:, 0] * fk, v[:, 0] * v[:, 1] * fk,
+                                                        v[:, 1] * v[:, 1] * fk)
             c0, c1 = angle_gradient(fit.g[:, 0], fit.g[:, 1])
             a_spin = np.abs(c0 * v[:, 0] + c1 * v[:, 1]) * spin  # rad, the angle at the spin's end
             if fit.null is not None:  # the spin turns the shape's twist: the redundant reading sees it
                 rho_var = (fit.null * dh).sum(1) ** 2 * f
-    return Source(PANEL_SHAPE, C_shape), Source(SPIN, C_spin, Kind.UNIFORM, a_spin), rho_var
+    return (Source(PANEL_SHAPE, C_shape), Source(SPIN, C_spin, kind, a_spin),
+            Source(SPIN_READ, np.zeros((N, 3)), Kind.UNIFORM, np.zeros(N)), rho_var)

@@ -57,7 +57,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import eig2
 from metrology.measure.beyond import beyond_second_order
-from metrology.measure.budget import PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Source, combine
+from metrology.measure.budget import PANEL_SHAPE, READING_NOISE, SPIN, SPIN_READ, SURFACE_MODEL, Budget, Source, combine
 from metrology.measure.estimator import SurfaceFit, drill_axis, fit_tilt
 from metrology.measure.normals import HoleNormals
 from metrology.measure.panel_terms import PanelTerms, free_spin, panel_sources, shape_basis
@@ -227,15 +227,16 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     # reading noise and calibration as the micro-plane's (one code: a flat panel gives its budget exactly)
     A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, np.ascontiguousarray(d.T), cov, sigma)
     u = layout.direction
-    shape_src, spin_src, rho_var = panel_sources(fit, g2, axis, terms, A0, A1)
+    shape_src, spin_src, read_src, rho_var = panel_sources(fit, g2, axis, terms, A0, A1)
     rho_bound = None
     if free:
         spin_src, rho_bound = free_spin(fit, g2, axis, dev, A0, A1)
     rem = surface_remainder(fit, u, None if beyond is None else beyond.u_height)  # truncation, faceting, position
-    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, Source(SURFACE_MODEL, rem.cov)))
+    budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, read_src, Source(SURFACE_MODEL, rem.cov)))
     un = combine(budget)
     angle, u_angle, U95 = un.angle, un.u, un.U95
-    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SURFACE_MODEL) ** 2)
+    panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2
+                          + un.of(SURFACE_MODEL) ** 2)
     misfit = np.full(N, np.nan)
     misfit_z = np.full(N, np.nan)
     twist = None

@@ -19,7 +19,10 @@ Where the panel is a STEP read with its B-rep (the ``step-exact`` extra: ``panel
 face at the drill point instead (:meth:`~metrology.panel.brep.BRepSurface.local_surface`: the point
 projected on the face, its second fundamental form ``Hess`` along the normal turned toward the head,
 ``K = -Hess`` in the same frame ``(e1, e2, n)``); the cubic fit still gives the curvature's gradient
-(the position term) and the footprint's edge check, and ``u_shape`` has no faceting term.
+(the position term) and the footprint's edge check, and ``u_shape`` has no faceting term. Where the
+footprint needs terms beyond the quartic (:mod:`metrology.panel.footprint`), the quartic and degrees 5-8
+come from the faces' own points over the disc (:meth:`~metrology.panel.brep.BRepSurface.disc_points`;
+a STEP's tessellation has no vertex near a tight crest), their residual the hole's ``u_height``.
 """
 
 from __future__ import annotations
@@ -168,9 +171,10 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
         # the curvature a missing sample's reason names: the vertices' where the rays missed
         Kv = -np.stack([np.stack([vcoef[:, 3], vcoef[:, 4]], 1), np.stack([vcoef[:, 4], vcoef[:, 5]], 1)], axis=1)
         Kr = np.where(vok[:, None, None], Kv, Kl)
-    else:
-        u_height = np.zeros(len(P))
-        Kr = Kl
+    else:  # the B-rep: beyond second order from its own faces' points over the disc, where the footprint needs it
+        higher, u_height = _brep_beyond(panel.surface, P, n, e1, e2, rho, hess, higher, miss.any(1))
+        E = np.stack([e1, e2], axis=1)  # the curvature a missing sample's reason names: the B-rep's own
+        Kr = -np.einsum("mai,mij,mbj->mab", E, hess, E)
     c1, c2, c3, c4 = coef[:, 6], coef[:, 7], coef[:, 8], coef[:, 9]
     grad = np.sqrt(c1 * c1 + c2 * c2 + 2 * (c2 * c2 + c3 * c3) + c3 * c3 + c4 * c4)  # |dK/ds|_F, 1/mm^2
     u_pos = grad * position_mm / 3.0
@@ -205,6 +209,37 @@ def _cubic_design(s_, t_):
     """The full cubic's 10 columns at local coordinates ``s_, t_`` (mm, any shape): ``(..., 10)``."""
     return np.stack([np.ones_like(s_), s_, t_, 0.5 * s_ * s_, s_ * t_, 0.5 * t_ * t_, s_ ** 3 / 6, s_ * s_ * t_ / 2,
                      s_ * t_ * t_ / 2, t_ ** 3 / 6], axis=-1)
+
+
+def _brep_beyond(surface, P, n, e1, e2, rho, hess, higher, miss):
+    """``(higher, u_height)`` on a STEP's B-rep: where the footprint needs terms beyond the quartic (the remainder a
+    sphere of the hole's largest curvature leaves at ``rho``, :data:`metrology.panel.footprint.NEEDED_MM`), the
+    quartic and degrees 5-8 fitted to points of the faces themselves over the disc (``surface.disc_points``), as the
+    mesh path fits them to its vertices; elsewhere ``higher`` (the ray-cast cubic's) and no remainder."""
+    from types import SimpleNamespace
+
+    from metrology.panel.footprint import NEEDED_MM, extra_exponents, remainder_terms
+
+    E = np.stack([e1, e2], axis=1)
+    k = principal_curvatures(np.nan_to_num(-np.einsum("mai,mij,mbj->mab", E, hess, E)))
+    need = np.flatnonzero((np.abs(k).max(1) ** 5 * rho ** 6 / 16.0 > NEEDED_MM) & ~miss)
+    u_height = np.zeros(len(P))
+    if need.size == 0 or not hasattr(surface, "disc_points"):
+        return higher, u_height
+    higher = higher.copy()
+    full = np.zeros((len(P), len(extra_exponents())))
+    for i, pts in zip(need, surface.disc_points(P[need], n[need], e1[need], e2[need], rho)):
+        one = slice(i, i + 1)  # each hole on its own points (two holes' samplings mixed leave lines of equal t)
+        cloud = SimpleNamespace(mesh=SimpleNamespace(vertices=pts))
+        vcoef, _, vok = _vertex_cubic(cloud, P[one], n[one], e1[one], e2[one], rho)
+        extra, u_one = remainder_terms(cloud, P[one], n[one], e1[one], e2[one], rho,
+                                       np.where(vok[:, None], vcoef, np.nan), k[one])
+        if vok[0]:
+            higher[i] = vcoef[0, 6:]
+        if extra is not None:
+            full[i] = extra[0]
+        u_height[i] = u_one[0]
+    return np.concatenate([higher, full], axis=1), u_height
 
 
 def _vertex_cubic(panel, P, n, e1, e2, rho):

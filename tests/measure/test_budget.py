@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SURFACE_MODEL, Budget, Kind, Source,
-                                      combine)
-from metrology.measure.magnitude import K95, normal_uniform_u95
+from metrology.measure.budget import (CALIBRATION, PANEL_SHAPE, READING_NOISE, SPIN, SPIN_READ, SURFACE_MODEL,
+                                      Budget, Kind, Source, combine)
+from metrology.measure.magnitude import K95, normal_spread_u95, normal_uniform_u95
 from metrology.measure.normals import hole_normals
 from metrology.measure.surface import surface_hole_normals
 from tests.measure.helpers import calibrated_layout, cast_plane, standoff_point, tilted_normals
@@ -104,7 +104,7 @@ def test_both_fitters_return_one_budget_of_named_sources():
     plane = hole_normals(lay, d)
     surf, _ = surface_hole_normals(lay, d, np.zeros((len(d), 3, 3)))
     assert plane.budget.names[:2] == (READING_NOISE, CALIBRATION)
-    assert surf.budget.names == (READING_NOISE, CALIBRATION, PANEL_SHAPE, SPIN, SURFACE_MODEL)
+    assert surf.budget.names == (READING_NOISE, CALIBRATION, PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL)
     for h in (plane, surf):
         un = combine(h.budget)
         np.testing.assert_array_equal(un.U95, h.U95)
@@ -141,6 +141,22 @@ def test_a_uniform_source_takes_the_normal_plus_uniform_rule():
     un = combine(b)
     assert un.u[0] == pytest.approx(np.hypot(sd, a / np.sqrt(3.0)), rel=1e-9)
     assert un.U95[0] == pytest.approx(normal_uniform_u95(np.array([sd]), np.array([a]))[0], rel=1e-9)
+
+
+@pytest.mark.parametrize("kind,var", [(Kind.ARCSINE, 0.5), (Kind.EDGE, 1.0)])
+def test_a_spread_source_takes_its_shape_s_rule(kind, var):
+    g = np.array([[0.05, 0.0]])
+    sd, a = 1e-4, 3e-4
+    noise = Source(READING_NOISE, np.array([[sd ** 2 * (1 + 0.0025) ** 2, 0.0, 0.0]]))
+    un = combine(Budget(g, (noise, Source(SPIN, np.zeros((1, 3)), kind, np.array([a])))))
+    assert un.u[0] == pytest.approx(np.hypot(sd, a * np.sqrt(var)), rel=1e-9)
+    assert un.U95[0] == pytest.approx(normal_spread_u95(np.array([sd]), np.array([a]), kind.value)[0], rel=1e-9)
+    # beside a uniform one (the spin read) the wider shape takes both half-widths
+    both = combine(Budget(g, (noise, Source(SPIN, np.zeros((1, 3)), kind, np.array([a])),
+                              Source(SPIN_READ, np.zeros((1, 3)), Kind.UNIFORM, np.array([a])))))
+    assert both.U95[0] == pytest.approx(normal_spread_u95(np.array([sd]), np.array([2 * a]), kind.value)[0], rel=1e-9)
+    uniform = combine(Budget(g, (noise, Source(SPIN, np.zeros((1, 3)), Kind.UNIFORM, np.array([a])))))
+    assert un.U95[0] > uniform.U95[0]
 
 
 def test_engines_and_panel_sources_each_behind_one_protocol():

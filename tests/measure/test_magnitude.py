@@ -109,6 +109,25 @@ def test_normal_plus_uniform_u95_holds_95_percent(sigma, a):
         assert q == pytest.approx(0.95 * a, rel=1e-6)
 
 
+@pytest.mark.parametrize("shape", ["arcsine", "edge"])
+@pytest.mark.parametrize("sigma,a", [(1.0, 0.0), (1.0, 1.0), (1.0, 3.0), (0.3, 2.0), (0.05, 1.0)])
+def test_normal_plus_spread_u95_holds_95_percent(shape, sigma, a):
+    """arcsine: a sine between the bounds, its phase uniform; edge: any distribution within them, checked at its worst
+    (at a bound) and on a uniform and an arcsine spread (at least 95 %)."""
+    rng = np.random.default_rng(4)
+    q = M.normal_spread_u95(np.array([sigma]), np.array([a]), shape)[0]
+    x = rng.normal(0.0, 1.0, 1_000_000) * sigma
+    sine = a * np.sin(rng.uniform(-0.5 * np.pi, 0.5 * np.pi, x.size))
+    if shape == "arcsine":
+        assert np.mean(np.abs(x + sine) <= q) == pytest.approx(0.95, abs=0.002)
+    else:
+        assert np.mean(np.abs(x + a) <= q) == pytest.approx(0.95, abs=0.002)
+        assert np.mean(np.abs(x + sine) <= q) >= 0.948
+        assert np.mean(np.abs(x + rng.uniform(-a, a, x.size)) <= q) >= 0.948
+    if a == 0:
+        assert q == pytest.approx(K95 * sigma, rel=1e-3)
+
+
 def _adjusted(layout, kind="flat", R=None, n=6000, seed=5):
     """Holes the forward simulator drills and adjusts (its own micro-plane controller, the head's
     true layout as the cell's): the after-readings and the true angle after."""
@@ -192,8 +211,10 @@ def test_with_the_commanded_pose_the_heads_spin_leaves_u95():
     posed = ok & (np.arange(len(ok)) >= 100)
     cover0 = np.mean(np.abs(a0 - t0)[ok] <= U0[ok])
     cover1 = np.mean(np.abs(a1 - t1)[posed] <= U1[posed])
-    # without the pose the uniform spin dominates U95 (94.4 % here; K95 on the combined u gave 97.6 %)
-    assert 0.935 <= cover0 <= 0.965, cover0
+    # without the pose the spin's bound dominates U95, taken as any spin within it (measure.spin.SPIN_BOUND_MODEL):
+    # it holds, and over-covers a spin the simulator draws uniformly per hole (99.4 % here; as a uniform 94.4 %, which
+    # a spin drifting or held near the bound under-covers: docs/spin.md)
+    assert 0.95 <= cover0 <= 0.997, cover0
     # with it: 93.7 % here (2900 holes, +-0.4 %; the same head unspun 94.5 %: the ring's 3 spots 50 mm
     # out on R 500 see the surface's 4th-order term, which the fit leaves out)
     assert 0.925 <= cover1 <= 0.965, cover1
