@@ -382,7 +382,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
                                                      *((after.angle, after.U95) if after is not None else (nan, nan)))
     whole = unmodelled.copy()  # the hole itself not measured (not in the table, off the edge, a repeat): nor before
     whole[dup] = True
-    before_angle, before_u = blanked(nm & (~judge_after | whole), before.angle, before.U95)  # not measured: blank (docs)
+    before_angle, before_u = blanked(nm & (~judge_after | whole), before.angle, before.U95)  # blank (docs)
     out = result_table(layout, table, ids, code,
                        reason_column(verdict_reasons(code, judge_after), reason),
                        before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)

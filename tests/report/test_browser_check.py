@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(shutil.which("chromium") is None, reason="needs a chromium binary (a developer's check)")
+pytestmark = pytest.mark.skipif(shutil.which("chromium") is None,
+                                reason="needs a chromium binary (a developer's check)")
 
 
 def _checker():
