@@ -270,7 +270,7 @@ def measure_section(report):
         from metrology.report.panel_map import panel_map_figure
 
         figs.insert(0, figure_from_matplotlib(panel_map_figure(report.panel_map, report.tolerance_deg),
-                                              "The panel's holes coloured by their judged angle (deg, the scale beneath); "
+                                              "The panel's holes coloured by their judged angle (deg, the scale beneath), over the panel (grey); "
                                               "ringed red: holes that fail; grey crosses: holes not measured or not "
                                               "in the log."))
     limits = _limits(report)
