@@ -396,6 +396,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if after is not None:
         unknown = nm & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
+        unknown &= ~unmodelled  # not in the table, off the edge: not measured for that, not for a gross reading
     spin_free = on_convention = spin_bound = None
     if placed is not None:  # how each judged hole's spin was taken
         spin_free, on_convention, spin_bound = (
