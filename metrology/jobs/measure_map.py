@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["HoleAngles", "MAP_COLUMNS", "holes_collector"]
+__all__ = ["HoleAngles", "MAP_COLUMNS", "holes_collector", "panel_box"]
 
 #: the per-hole result columns the map reads
 MAP_COLUMNS = ("hole_id", "angle_deg", "angle_after_deg", "status")
@@ -16,9 +16,10 @@ class HoleAngles:
     """Each table hole's judged angle (deg) and status, its last pass in the log kept; memory of the
     table's size, whatever the log's. ``write(table)`` takes a batch of per-hole results."""
 
-    def __init__(self, surfaces, source: str, point=None):
+    def __init__(self, surfaces, source: str, point=None, box=None):
         self.surfaces = surfaces
         self.source = source
+        self.box = box  # the panel's vertices' corners, mm, panel frame (None: not drawn)
         self.point = surfaces.point if point is None else point  # (m, 3) mm, panel frame
         m = len(surfaces.ids)
         self.angle = np.full(m, np.nan)
@@ -56,7 +57,7 @@ class HoleAngles:
         from metrology.report.panel_map import PanelMap
 
         return PanelMap(tuple(self.surfaces.ids), np.asarray(self.point, float), self.angle,
-                        self.status.astype(str), self.source)
+                        self.status.astype(str), self.source, self.box)
 
 
 def holes_collector(surfaces, panel, points, units=None):
@@ -68,4 +69,16 @@ def holes_collector(surfaces, panel, points, units=None):
     from metrology.jobs.measure_panel import read_table_in_mm
 
     point = surfaces.point if surfaces.point is not None else read_table_in_mm(points, units).point
-    return HoleAngles(surfaces, display_name(panel if panel is not None else points), point)
+    return HoleAngles(surfaces, display_name(panel if panel is not None else points), point, panel_box(panel, units))
+
+
+def panel_box(panel, units=None):
+    """``(lo, hi)``, (3,) mm, panel frame: a mesh panel's vertices' lowest and highest corner, for the map to draw
+    the panel under its holes; None without a panel, or for a STEP file (its tessellation is not redone for a
+    figure). Read only when a report is asked for."""
+    if panel is None or str(panel).lower().endswith((".step", ".stp")):
+        return None
+    from metrology.panel.mesh import load_panel
+
+    v = np.asarray(load_panel(panel, units).mesh.vertices, float)
+    return v.min(axis=0), v.max(axis=0)

@@ -383,7 +383,9 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     nan = np.full(N, np.nan)
     judged, judged_u, after_angle, after_u = blanked(nm := code == CODE[Status.NOT_MEASURED], judged, judged_u,
                                                      *((after.angle, after.U95) if after is not None else (nan, nan)))
-    before_angle, before_u = blanked(nm & ~judge_after, before.angle, before.U95)  # not measured: blank (docs)
+    whole = unmodelled.copy()  # the hole itself not measured (not in the table, off the edge, a repeat): nor before
+    whole[dup] = True
+    before_angle, before_u = blanked(nm & (~judge_after | whole), before.angle, before.U95)  # blank (docs)
     out = result_table(layout, table, ids, code,
                        reason_column(verdict_reasons(code, judge_after), reason),
                        before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
@@ -397,6 +399,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     if after is not None:
         unknown = nm & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
+        unknown &= ~unmodelled  # not in the table, off the edge: not measured for that, not for a gross reading
     spin_free = on_convention = spin_bound = None
     if placed is not None:  # how each judged hole's spin was taken
         spin_free, on_convention, spin_bound = (

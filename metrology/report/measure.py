@@ -56,13 +56,22 @@ def _q(fig, which: str, key: str) -> str:
     return "-" if not np.isfinite(v) else f"{v:.4g}"
 
 
+def _spin_words(cv) -> str:
+    """How U95 took the head's spin where the log has no pose: the convention's bound, every spin, or both (a
+    3-sensor log without the pose is judged over every spin: the bound alone would misstate it)."""
+    conv = f"the head's spin +-{cv.spin_deg:g} deg where the log has no pose"
+    if not cv.spin_free_holes:
+        return conv
+    every = f"a U95 over every spin for the {cv.spin_free_holes:,} holes whose spin is not known"
+    return f"{conv}, {every}" if cv.spin_on_convention_holes else every
+
+
 def _panel_terms(report) -> str:
     """What of the panel U95 carries: its known surface's terms, or the curvature bound."""
     cv = report.curvature
     if cv.known:  # each hole's surface known (--panel/--points)
         return (f" + each hole's curvature from {cv.source} (its fit; the drill point's position error "
-                f"{cv.position_error_mm:g} mm; the form tolerance {cv.form_tolerance_mm:g} mm; the head's spin "
-                f"+-{cv.spin_deg:g} deg where the log has no pose)")
+                f"{cv.position_error_mm:g} mm; the form tolerance {cv.form_tolerance_mm:g} mm; {_spin_words(cv)})")
     return f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm"
 
 
@@ -261,7 +270,7 @@ def measure_section(report):
         from metrology.report.panel_map import panel_map_figure
 
         figs.insert(0, figure_from_matplotlib(panel_map_figure(report.panel_map, report.tolerance_deg),
-                                              "The panel's holes coloured by their judged angle (deg, the scale beneath); "
+                                              "The panel's holes coloured by their judged angle (deg, the scale beneath), over the panel (grey); "
                                               "ringed red: holes that fail; grey crosses: holes not measured or not "
                                               "in the log."))
     limits = _limits(report)

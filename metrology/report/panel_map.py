@@ -7,10 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PanelMap", "panel_map_figure", "NOT_MEASURED_COLOUR", "FAILS_COLOUR"]
+__all__ = ["PanelMap", "panel_map_figure", "NOT_MEASURED_COLOUR", "FAILS_COLOUR", "PANEL_FILL", "PANEL_EDGE"]
 
-#: the marker colours of holes without a judged angle and of holes that fail
+#: the marker colours of holes without a judged angle and of holes that fail; the panel's box's fill and edge
 NOT_MEASURED_COLOUR = "#9e9e9e"
+PANEL_FILL, PANEL_EDGE = "#f2f2f2", "#bdbdbd"
 FAILS_COLOUR = "#d62728"
 
 
@@ -26,6 +27,8 @@ class PanelMap:
         log, or not measured)
     status : (m,) str, its status ("" : not in the log)
     source : str, the panel (or the table) as the report names it
+    box : ((3,), (3,)) float, mm, panel frame, the panel's vertices' lowest and highest corner (None: a table
+        alone, or a STEP panel, not tessellated again for a figure)
     """
 
     ids: tuple
@@ -33,6 +36,7 @@ class PanelMap:
     angle_deg: np.ndarray
     status: np.ndarray
     source: str
+    box: tuple | None = None
 
 
 def _axes(point):
@@ -51,6 +55,13 @@ def panel_map_figure(m: PanelMap, tolerance_deg: float):
     i, j = _axes(m.point)
     x, y = m.point[:, i], m.point[:, j]
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    if m.box is not None:  # the panel under its holes: where on the skin they are
+        from matplotlib.patches import Rectangle
+
+        lo, hi = (np.asarray(c, float) for c in m.box)
+        ax.add_patch(Rectangle((lo[i], lo[j]), hi[i] - lo[i], hi[j] - lo[j], facecolor=PANEL_FILL,
+                               edgecolor=PANEL_EDGE, linewidth=1.0, zorder=1))
+        ax.update_datalim([(lo[i], lo[j]), (hi[i], hi[j])])
     judged = np.isfinite(m.angle_deg)
     top = float(np.max(m.angle_deg[judged])) if judged.any() else tolerance_deg
     vmax = tolerance_deg if top > tolerance_deg / 2 else max(top, 1e-3)  # small angles: the scale spans them
