@@ -132,6 +132,7 @@ def run(args):
                **{f"cov_{k}": float(sel[k].mean()) if sel[k].size else None for k in keys},
                "median_err_conv_deg": float(np.median(err[conv])) if conv.any() else None,
                "median_U95_conv_deg": float(np.degrees(np.median(U[conv]))) if conv.any() else None,
+               "median_U95_rest_deg": float(np.degrees(np.median(U[rest]))) if rest.any() else None,
                "median_z_conv": float(np.nanmedian(mis[conv])) if conv.any() else None,
                "exact_conv_holes": int(conv_e.sum()), "seconds": round(time.perf_counter() - t0, 1)}
         rows.append(row)
