@@ -51,8 +51,8 @@ def register(app: typer.Typer) -> None:
         spin_deg: float = typer.Option(None, "--spin-deg", help="With --points, for a log without the robot's pose: the "
                                        "head's spin about the tool axis relative to the panel is within +-SPIN of the "
                                        "cell's convention (TCS x, y near the panel's x, y), deg; in U95. Not given: "
-                                       "+-2 where a redundant (4th) reading confirms the convention, else a U95 over "
-                                       "every spin."),
+                                       "+-2 where a redundant (4th) reading does not refute the convention (it cannot confirm it: "
+                                       "docs/spin.md), else a U95 over every spin."),
         units: Optional[str] = typer.Option(None, "--units", help="Unit of the panel file's and the hole table's "
                                             "coordinates: mm, cm, m or in (overrides what the panel file declares; "
                                             "STL/OBJ/PLY and tables declare none: mm)."),

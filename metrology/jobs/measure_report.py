@@ -236,8 +236,9 @@ class MeasureReport:
         else:
             checks.append(Check(f"curvature from {cv.source}", cv.holes, None, "holes", True, gate=False))
             if cv.spin_on_convention_holes or cv.spin_free_holes:
+                unstated = ", not refuted by the redundant reading, which cannot confirm it"
                 checks.append(Check(f"head's spin (no pose in the log): holes judged with it in the cell's convention "
-                                    f"(+-{cv.spin_deg:g} deg{'' if cv.spin_stated else ', confirmed by the redundant reading'}; "
+                                    f"(+-{cv.spin_deg:g} deg{'' if cv.spin_stated else unstated}; "
                                     f"log the commanded pose to know it)", cv.spin_on_convention_holes, None, "holes",
                                     True, gate=False))
                 checks.append(Check("head's spin not read (no redundant reading, or one blind to it): holes whose U95 "

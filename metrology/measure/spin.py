@@ -1,5 +1,5 @@
 """The head's spin about the tool axis with the panel known: from the robot's commanded pose, from a
-convention the redundant reading confirms, or not known: never assumed silently.
+convention the redundant reading does not refute, or not known: never assumed silently.
 
 The local surface's shape operator is put into the TCS by the head's rotation. The commanded pose
 (the log's ``pose_*`` columns) gives it whole. Without it metro can take the cell's convention (TCS
@@ -53,7 +53,8 @@ __all__ = ["SPIN_SIGMAS", "DEFAULT_SPIN_DEG", "SPIN_BOUND_MODEL", "SPIN_BOUND_NO
 #: per hole where it holds: a hole judged with the wider, every-spin U95 by mistake, never a wrong verdict)
 SPIN_SIGMAS = 4.0
 #: deg: the head's spin about the tool axis beyond the cell's convention where ``--spin-deg`` does not state it
-#: and a redundant reading confirms the convention (a cell's usual orientation error)
+#: and a redundant reading does not refute the convention (a cell's usual orientation error; it cannot confirm it: a
+#: second spin fits the same misfit, near 90 deg on a cross of spots on the diagonals: docs/spin.md)
 DEFAULT_SPIN_DEG = 2.0
 #: the spin read from the redundant reading (:func:`_read_spin`) enters U95 as uniform within +- this many of its
 #: standard uncertainties: 0.95 x 2 = 1.9, the 95 % of a normal (1.96) where it is the whole budget; its error comes
@@ -170,7 +171,7 @@ def _merge(m, parts):
 
 
 def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: bool) -> SpinJudged:
-    """Holes measured with their local surface known, the spin known, confirmed or bounded (module docstring).
+    """Holes measured with their local surface known, the spin known, not refuted or bounded (module docstring).
 
     Parameters
     ----------
