@@ -29,10 +29,13 @@ import _one_blas_thread  # noqa: F401  (first: one BLAS thread a job; same direc
 import numpy as np
 
 
-def jobs_for(per_kind: int, nulls: int, seed: int) -> list:
+def jobs_for(per_kind: int, nulls: int, seed: int, kinds=None) -> list:
+    """The cases: ``per_kind`` of each kind (of ``kinds`` only, if given: the same draws as in the full
+    study, for development), then ``nulls``."""
     from metrology.sim.forward.outside import OUTSIDE_KINDS
 
-    jobs = [("outside", k, (seed, 1, j, i)) for j, k in enumerate(OUTSIDE_KINDS) for i in range(per_kind)]
+    jobs = [("outside", k, (seed, 1, j, i)) for j, k in enumerate(OUTSIDE_KINDS) for i in range(per_kind)
+            if not kinds or k in kinds]
     jobs += [("null", ("tracker", "hand")[i % 2], (seed, 0, i)) for i in range(nulls)]
     return jobs
 
@@ -114,8 +117,9 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=540)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--kinds", default="", help="comma-separated kinds (development); all if empty")
     a = ap.parse_args(argv)
-    jobs = jobs_for(a.per_kind, a.nulls, a.seed)
+    jobs = jobs_for(a.per_kind, a.nulls, a.seed, [k for k in a.kinds.split(",") if k])
     t0 = time.time()
     records = []
 

@@ -18,7 +18,7 @@ from metrology.diagnosis import rules
 from metrology.core.stats import robust_sigma
 
 __all__ = ["covariates_for", "candidates_for", "flag_outliers", "flag_residuals", "Scoring", "CandidateResult",
-           "score_candidate", "Reference", "flag_given_rigid", "deleted_t", "steps_beside", "without_runs"]
+           "score_candidate", "Reference", "flag_given_rigid", "deleted_t", "steps_beside", "without_runs", "without_tails"]
 
 
 def covariates_for(ds: Dataset, layout_fit: SensorLayout, centre=None) -> Covariates:
@@ -179,7 +179,26 @@ def flag_residuals(residual, sigma):
     p_max = min(1.0, m * 2 * float(stats.norm.sf(zmax)))
     t = float(stats.norm.isf(rules.gross_level(m)))
     flags = np.isfinite(z) & (np.abs(z) > t)
-    return without_runs(flags, z), p_max
+    return without_tails(without_runs(flags, z), z, t), p_max
+
+
+def without_tails(flags, z, t):
+    """``flags (p, n)`` bool less a sensor's flags that are the tails of its noise
+    (:func:`~metrology.diagnosis.rules.tails_not_gross`: the rest of its readings heavier-tailed than
+    a normal, every flagged reading within reach of the threshold ``t``; ``z (p, n)`` the
+    standardised residuals, NaN at blanks), left to rule 21."""
+    from scipy import stats
+
+    out = flags.copy()
+    for i in range(flags.shape[1]):
+        f = flags[:, i]
+        rest = z[np.isfinite(z[:, i]) & ~f, i]
+        if not f.any() or len(rest) < 20:  # the kurtosis test's normal approximation needs 20
+            continue
+        p_shape = float(stats.kurtosistest(rest, alternative="greater").pvalue)
+        if rules.tails_not_gross(p_shape, float(np.max(np.abs(z[f, i]))), t):
+            out[:, i] = False
+    return out
 
 
 def without_runs(flags, z):

@@ -26,7 +26,7 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "needed_given_others", "crosstalk_better", "crosstalk_as_good", "random_pose_tried", "random_pose_significant",
            "random_pose_explains", "weak_evidence", "indistinguishable", "poorly_separated", "confidence_of_nothing", "confidence_of",
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
-           "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "MAX_EMPIRICAL", "search_tried",
+           "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "TAIL_REACH", "tails_not_gross", "MAX_EMPIRICAL", "search_tried",
            "search_in_sample", "search_tails_in_sample", "search_held_out", "room_for_another_term",
            "empirical_better", "empirical_as_good", "empirical_indistinguishable", "search_beside"]
 
@@ -67,6 +67,26 @@ def persists(run_length: int) -> bool:
     before the end named ``outliers`` on 9 readings, and no ``shift``). Two gross readings in a row
     stay gross; three of one sign on one sensor among a run's few gross readings is not chance."""
     return int(run_length) >= GROSS_RUN
+
+
+#: 1. a flagged reading within this many flagging thresholds may be the edge of the sensor's own noise
+#: (a contaminated normal whose broad part is up to 3 times its core puts its largest of 150 readings
+#: within ~3 x 3.4 = 10 core sigmas; the flagging threshold is 3.9-4.3 sigmas for 100-1000 readings)
+TAIL_REACH = 3.0
+
+
+def tails_not_gross(p_shape_rest: float, z_flagged_max: float, threshold: float) -> bool:
+    """1. The readings flagged on one sensor are the tails of its noise, not gross, where the rest of
+    its readings (the flagged left out) are heavier-tailed than a normal (the kurtosis test, one-sided,
+    ``p_shape_rest < ALPHA_HELDOUT``, rule 21's shape level) and every flagged reading stands within
+    ``TAIL_REACH`` flagging thresholds (``z_flagged_max`` the largest flagged ``|r| / s``, ``threshold``
+    the flagging level in the same units). Reason: the ``outliers`` family claims isolated gross
+    readings (a scratch, a dropped frame: a reading lost, its error unrelated to the noise's scale;
+    the catalogue's are 0.1-2 mm on noise of microns) on noise otherwise normal; a heavy-tailed noise
+    puts its largest readings just past the threshold and overpopulates the tail below it (issue 54:
+    heavy-tailed noise named ``outliers`` high). Left unflagged, they are judged with every other
+    reading by rule 21 (the residuals' distribution)."""
+    return p_shape_rest < ALPHA_HELDOUT and z_flagged_max <= TAIL_REACH * threshold
 
 
 # -- 2. a candidate is significant ----------------------------------------------------------------
@@ -369,5 +389,6 @@ THRESHOLDS = {
     "lr_one_sensor": LR_ONE_SENSOR,
     "alpha_datum_plane": ALPHA_DATUM_PLANE,
     "gross_run": GROSS_RUN,
+    "tail_reach": TAIL_REACH,
     "max_empirical": MAX_EMPIRICAL,
 }
