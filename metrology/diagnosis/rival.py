@@ -38,7 +38,8 @@ TRIES = 5
 #: temperature, are the run's clock as well: a warm-up moves both): a term of none of them is of
 #: another family (rule 22's ``empirical_indistinguishable``)
 OWN_VARIABLES = {"scale": ("d",), "nonlinearity": ("d",), "incidence": ("incidence",),
-                 "drift": ("time", "pose_index", "temperature"), "shift": ("time", "pose_index")}
+                 "drift": ("time", "pose_index", "temperature"), "shift": ("time", "pose_index"),
+                 "plane_form": ("spot",)}
 
 
 @dataclass(frozen=True)
@@ -106,9 +107,13 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
             continue
         cause = Term("cause", (), _cause_columns(s.component, b.d0, b.cov, i), "shape", s.label)
         own = set(OWN_VARIABLES.get(s.component.name, VARIABLES))  # a family not listed: every variable its own
+        others = {x for c in chosen if c.label in named and c.label != s.label
+                  for x in OWN_VARIABLES.get(c.component.name, ())}
+        tries = [x for x in scored if not rules.rival_of_another_cause(x[2].variables, others)][:TRIES]
+        if not tries:
+            continue
         e_c = sen.heldout(cause.columns)
         best = tie = None
-        tries = scored[:TRIES]
         for _, _, t in tries:
             e_t = sen.heldout(t.columns)
             d = ((e_c**2 - e_t**2) / sen.s**2)[sen.fin]

@@ -28,7 +28,8 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
            "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "TAIL_REACH", "tails_not_gross", "MAX_EMPIRICAL", "search_tried",
            "search_in_sample", "search_tails_in_sample", "search_held_out", "room_for_another_term",
-           "empirical_better", "empirical_as_good", "empirical_indistinguishable", "search_beside"]
+           "empirical_better", "empirical_as_good", "empirical_indistinguishable", "rival_of_another_cause",
+           "search_beside"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
 #: a reading is gross when its standardised residual is beyond this family-wise level over the readings
@@ -368,6 +369,16 @@ def empirical_indistinguishable(gain: float, k_term: int, k_cause: int, own_vari
     variables (a product of the run's time with a near-constant, against a drift) is the cause in
     another dress and ties by chance half the time: only :func:`empirical_as_good` weighs it."""
     return not own_variable and k_term <= k_cause and gain > 0
+
+
+def rival_of_another_cause(term_variables, other_causes_variables) -> bool:
+    """22. A term that follows a variable another named cause's family is made of (``other_causes_variables``:
+    :data:`metrology.diagnosis.rival.OWN_VARIABLES` of every other cause named) is not weighed against the
+    cause. Reason: the comparison is made on the base residual, where the other causes' structure is still
+    there; a term of their variable fits it, and "predicts the cause's poses better" by what the other cause
+    explains (a datum form named beside a drift: a field over the plate beat ``drift@temp`` on its sensor,
+    and the drift, right, was made ``ambiguous``; tests/diagnosis/test_select.py)."""
+    return bool(set(term_variables) & set(other_causes_variables))
 
 
 def room_for_another_term(n_found: int) -> bool:

@@ -186,7 +186,8 @@ def test_demo_report_end_to_end(tmp_path):
     log), each step's own report beside it."""
     out = tmp_path / "demo.html"
     _ok(runner.invoke(app, ["demo", "--out", str(tmp_path / "o"), "--report", str(out)]))
-    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 9, "overall: passed")  # measure: 2 more
+    # fit-plane 1, calibrate 2, validate 1, diagnose 2, the calibration with diagnose's terms 2, normals 1, measure 2
+    text = check_page(out, [CAL.parent / "datum.ply", CAL, VAL, NOMINAL], 11, "overall: passed")
     for name in ("fit-plane", "calibrate", "validate", "diagnose", "normals", "measure"):
         assert f"(metro {name})" in text and (tmp_path / "o" / f"{name}.html").exists()
 
