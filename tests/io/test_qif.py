@@ -5,7 +5,6 @@ import hashlib
 import json
 import math
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -15,17 +14,19 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from metrology.io.layout import save_layout
+from tests.io.qif_schema import qif_schema
 from tests.measure.helpers import calibrated_layout, hole_log, write_log_csv
 
 xmlschema = pytest.importorskip("xmlschema")
 runner = CliRunner()
-XSD = Path(__file__).resolve().parents[1] / "data" / "qif3" / "QIFApplications" / "QIFDocument.xsd"
 Q = "{http://qifstandards.org/xsd/qif3}"
 
 
-@pytest.fixture(scope="module")
-def schema():
-    return xmlschema.XMLSchema(str(XSD))
+@pytest.fixture(scope="session")
+def schema(request):
+    # built once a worker, or read from pytest's cache when an earlier run built the same one
+    cache = getattr(request.config, "cache", None)  # None with -p no:cacheprovider
+    return qif_schema(xmlschema, cache.mkdir("metro-qif3-schema") if cache is not None else None)
 
 
 @pytest.fixture

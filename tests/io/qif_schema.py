@@ -1,0 +1,49 @@
+"""The QIF 3.0 XSD as an ``xmlschema`` object, built once and kept in pytest's cache.
+
+Building it (xmlschema reading the 23 XSD files of tests/data/qif3/ and checking them against the
+XSD meta-schema) costs ~9 s of CPU a process; loading the pickled object ~1.5 s. The pickle is keyed
+by the bytes of every XSD file and the versions of xmlschema and Python, so a changed schema or
+library builds afresh; an unreadable pickle is rebuilt. A clean clone (CI) builds it once per
+worker that runs a QIF test: the cache helps repeated local runs, not the first.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import sys
+from pathlib import Path
+
+QIF3 = Path(__file__).resolve().parents[1] / "data" / "qif3"
+XSD = QIF3 / "QIFApplications" / "QIFDocument.xsd"
+
+
+def _key(xmlschema) -> str:
+    h = hashlib.sha256(f"{xmlschema.__version__} {sys.version}".encode())
+    for p in sorted(QIF3.rglob("*.xsd")):
+        h.update(p.relative_to(QIF3).as_posix().encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()[:32]
+
+
+def qif_schema(xmlschema, cache_dir: Path | None):
+    """``xmlschema.XMLSchema`` of QIFDocument.xsd; from ``cache_dir`` when it holds this build."""
+    if cache_dir is None:
+        return xmlschema.XMLSchema(str(XSD))
+    path = Path(cache_dir) / f"qif3-{_key(xmlschema)}.pickle"
+    try:
+        with open(path, "rb") as f:
+            schema = pickle.load(f)
+        if isinstance(schema, xmlschema.XMLSchemaBase):
+            return schema
+    except Exception:  # absent, half-written by an older run, or from another build: built below
+        pass
+    schema = xmlschema.XMLSchema(str(XSD))
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            pickle.dump(schema, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)  # atomic: a concurrent worker reads the old state or the whole file
+    except OSError:
+        tmp.unlink(missing_ok=True)
+    return schema
