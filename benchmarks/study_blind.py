@@ -336,7 +336,11 @@ def summarize(records: list, det: dict) -> dict:
                    "named_catalogued": int(sum(bool(r["named"]) for r in nulls)), "ci95": clopper_pearson(k, len(nulls))}
     ooc = [r for r in records if r["kind"] == "ooc"]
     kc = sum(bool(r["named"]) for r in ooc)
-    out["ooc"] = {"n": len(ooc), "catalogued_named": int(kc), "ci95": clopper_pearson(kc, len(ooc)),
+    # named with confidence high or moderate (a catalogued cause that an uncatalogued rival ties is named `ambiguous`
+    # with the rival listed: tests/diagnosis/test_blind_forward.py::test_crosstalk_is_never_a_confident_gain_error)
+    kconf = sum(bool(r["named"]) and r["confidence"] in ("high", "moderate") for r in ooc)
+    out["ooc"] = {"n": len(ooc), "catalogued_named": int(kc), "catalogued_confident": int(kconf),
+                  "ci95": clopper_pearson(kc, len(ooc)),
                   "by_family": {f: dict(Counter(r["cause"] for r in ooc if r["family"] == f)) for f in OOC}}
     high = [r for r in records if r["kind"] in ("null", "single") and r["confidence"] == "high"]
     out["high_precision"] = {"n": len(high), "right": int(sum(map(_right_alone, high)))}
@@ -400,7 +404,8 @@ def report(s: dict) -> str:
     lines += ["", f"null false-cause rate: {_pct(n['false_cause'], n['n'])}, 95 % CP "
                   f"[{100 * n['ci95'][0]:.2f}, {100 * n['ci95'][1]:.2f}] % (catalogued named {n['named_catalogued']})"]
     o = s["ooc"]
-    lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])}, 95 % CP "
+    lines.append(f"out-of-catalogue named as a catalogued cause: {_pct(o['catalogued_named'], o['n'])} "
+                 f"(high or moderate: {o.get('catalogued_confident', 0)}), 95 % CP "
                  f"[{100 * o['ci95'][0]:.1f}, {100 * o['ci95'][1]:.1f}] %; {o['by_family']}")
     df = s.get("datum_flat")
     if df and df["n"]:
