@@ -55,3 +55,26 @@ def test_a_stated_radius_and_known_surfaces_are_read_as_attributes(report):
     assert "panel against its CAD (the log's commanded pose)" not in checks  # nothing checked: not shown
     d = known.to_dict()["curvature"]
     assert d["off_cad_max_hole"] == "H12" and d["spin_on_convention_holes"] == 30
+
+
+# The "uncertainty:" line says how U95 took the head's spin where the log has no pose: a 3-sensor log without the
+# pose is judged over every spin, and the line said "+-2 deg" alone (issue 49 item 3, the walk: 2,000 of 2,000
+# holes judged over every spin under a line naming the +-2 deg bound).
+def _spin_line(report, on_convention, free):
+    off = OffCad(4.0, 300, 0, 2e-4, 5e-4, None)
+    cad = CadCheck(0, 0, 0.5, 0.0, 0.0, None, 0.0, 0.0, None)
+    known = replace(report, curvature=KnownSurfaces("skin.stl", 77, 0.5, 0.0, 2.0, False, on_convention, free,
+                                                     off, cad))
+    (line,) = [x for x in measure_text(known).splitlines() if x.startswith("uncertainty:")]
+    return line
+
+
+def test_every_hole_over_every_spin_is_not_called_the_2_deg_bound(report):
+    line = _spin_line(report, 0, 2000)
+    assert "+-2 deg" not in line and "a U95 over every spin for the 2,000 holes whose spin is not known" in line
+
+
+def test_both_ways_are_named_and_the_bound_alone_where_no_hole_is_free(report):
+    both = _spin_line(report, 255, 1745)
+    assert "the head's spin +-2 deg where the log has no pose" in both and "every spin for the 1,745 holes" in both
+    assert "every spin" not in _spin_line(report, 30, 0) and "+-2 deg" in _spin_line(report, 30, 0)
