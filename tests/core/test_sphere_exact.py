@@ -13,7 +13,6 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from metrology.core.layout import SensorLayout
 from metrology.core.normals import angle_between, micro_plane_normal
 from metrology.core.sphere import fit_algebraic_sphere, micro_sphere_normal
 

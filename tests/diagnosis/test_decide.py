@@ -155,7 +155,6 @@ def test_no_datum_cloud_no_form_section():
 
 
 def test_fixture_hidden_is_diagnosed():
-    from pathlib import Path
 
     from metrology.jobs.diagnose import diagnose_files
 

@@ -8,7 +8,6 @@ of it), written through the public files and read as ``metro diagnose`` reads th
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from metrology.calibration.dataset import load_dataset
 from metrology.diagnosis.candidates import covariates_for

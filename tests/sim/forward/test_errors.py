@@ -1,7 +1,6 @@
 """Gross readings, blanks, cross-talk, periodic error and noise."""
 
 import numpy as np
-import pytest
 
 from metrology.sim.forward.errors import add_blanks, add_gross, add_noise, crosstalk_offset, periodic_offset
 

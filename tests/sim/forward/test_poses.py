@@ -1,7 +1,6 @@
 """Poses and rigid pose errors."""
 
 import numpy as np
-import pytest
 
 from metrology.sim.forward import draw_head, draw_poses, draw_surface, perturb_poses, tilt_of
 from metrology.core.frames import random_rotation
