@@ -44,6 +44,8 @@ def qif_schema(xmlschema, cache_dir: Path | None):
         with open(tmp, "wb") as f:
             pickle.dump(schema, f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, path)  # atomic: a concurrent worker reads the old state or the whole file
-    except OSError:
+    except (OSError, RecursionError, pickle.PicklingError, TypeError, AttributeError):
+        # not kept: the disk refused it, or this xmlschema's objects do not pickle (its lowest version allowed
+        # recurses too deep): the next run builds it again, as without a cache
         tmp.unlink(missing_ok=True)
     return schema
