@@ -110,7 +110,8 @@ def panel_sources(fit, g2, axis, terms, A0, A1, basis=None):
     rho_var = 0.0
     if terms is not None:
         uK2 = np.broadcast_to(np.asarray(terms.u_shape, float).reshape(-1), (N,)) ** 2
-        for dh in shape_basis(fit, g2, axis) if basis is None else basis:  # delta K in an orthonormal basis of the tangent plane's tensors
+        # delta K in an orthonormal basis of the tangent plane's tensors
+        for dh in shape_basis(fit, g2, axis) if basis is None else basis:
             v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
             C_shape[:, 0] += v0 * v0 * uK2
             C_shape[:, 1] += v0 * v1 * uK2
