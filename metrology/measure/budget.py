@@ -26,7 +26,7 @@ combiner reads every entry; nothing in it names a source.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
@@ -97,10 +97,13 @@ class Budget:
     ----------
     tilt : (N, 2) float, the slopes ``g = (g_x, g_y)`` of the normal in the TCS (``alpha = atan |g|``)
     sources : tuple of :class:`Source`, in the order they were added (the combiner sums in that order)
+    combined : Uncertainty or None, what :func:`combine` made of this budget, kept by the fitter that made both
+        (:func:`combine` returns it rather than combine again; a budget with another source is a new one, without)
     """
 
     tilt: np.ndarray
     sources: tuple
+    combined: "Uncertainty | None" = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.tilt)
@@ -129,14 +132,16 @@ class Budget:
         first = budgets[0]
         if len(budgets) == 1:
             return first
+        combined = None if any(b.combined is None for b in budgets) else Uncertainty.concat([b.combined for b in budgets])
         return Budget(np.concatenate([b.tilt for b in budgets]),
                       tuple(Source(s.name, np.concatenate([b.sources[j].cov for b in budgets]), s.kind,
                                    None if s.half_width is None else np.concatenate([b.sources[j].half_width for b in budgets]))
-                            for j, s in enumerate(first.sources)))
+                            for j, s in enumerate(first.sources)), combined)
 
     def rows(self, r) -> "Budget":
         """The holes ``r`` (an index)."""
-        return Budget(self.tilt[r], tuple(s.rows(r) for s in self.sources))
+        return Budget(self.tilt[r], tuple(s.rows(r) for s in self.sources),
+                      None if self.combined is None else self.combined.rows(r))
 
     @property
     def cov(self) -> np.ndarray:
@@ -171,6 +176,16 @@ class Uncertainty:
         """(N,) float, rad: the share of the source ``name``."""
         return self.share[:, self.names.index(name)]
 
+    @staticmethod
+    def concat(parts) -> "Uncertainty":
+        """The holes of ``parts`` (of the same sources) one after the other (each hole's combination is its own)."""
+        return Uncertainty(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("angle", "u", "U95")),
+                           parts[0].names, np.concatenate([p.share for p in parts]))
+
+    def rows(self, r) -> "Uncertainty":
+        """The holes ``r`` (an index)."""
+        return Uncertainty(self.angle[r], self.u[r], self.U95[r], self.names, self.share[r])
+
 
 def angle_gradient(gx, gy):
     """``(c_x, c_y)``, (N,) each: ``d alpha / d g = g / (|g| (1 + |g|^2))`` of the tilts ``g`` (0 at ``g = 0``)."""
@@ -190,8 +205,10 @@ def combine(budget: Budget) -> Uncertainty:
 
     Returns
     -------
-    Uncertainty
+    Uncertainty (``budget.combined`` where the budget has it: the same numbers, not made twice)
     """
+    if budget.combined is not None:
+        return budget.combined
     g = budget.tilt
     gx, gy = g[:, 0], g[:, 1]
     g2 = gx * gx + gy * gy

@@ -100,11 +100,11 @@ def spot_weights(layout, sigma_mm=None, valid=None):
     return w if valid is None else w * valid
 
 
-def _solve(wx, wy, wz, x, y, Gz, yt):
+def _solve(wx, wy, wz, x, y, Gz, yt, sxy):
     """``(g_x, g_y, c)`` minimising ``sum w (yt - g_x x - g_y y - G_z c)^2`` and the inverse's 6 entries
-    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0)."""
-    i00, i01, i02, i11, i12, i22 = inv3((wx * x).sum(0), (wx * y).sum(0), (wz * x).sum(0), (wy * y).sum(0),
-                                        (wz * y).sum(0), (wz * Gz).sum(0))
+    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sxy`` the sums of ``wx x``,
+    ``wx y``, ``wy y``, the same at every step: made once)."""
+    i00, i01, i02, i11, i12, i22 = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
     b0, b1, b2 = (wx * yt).sum(0), (wy * yt).sum(0), (wz * yt).sum(0)
     return (i00 * b0 + i01 * b1 + i02 * b2, i01 * b0 + i11 * b1 + i12 * b2, i02 * b0 + i12 * b1 + i22 * b2,
             (i00, i01, i02, i11, i12, i22))
@@ -157,8 +157,9 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
     wx, wy = w * x, w * y
     wz = np.broadcast_to(w, x.shape)  # w G_z, G_z = 1 (the micro-plane)
     Gz = 1.0
+    sxy = ((wx * x).sum(0), (wx * y).sum(0), (wy * y).sum(0))
     with np.errstate(divide="ignore", invalid="ignore"):
-        gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z)
+        gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z, sxy)
         gx0, gy0 = gx, gy
         k = None
         for it in range(1, steps + 1 if full else steps):
@@ -178,10 +179,9 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
             Gz = 1.0 + kz
             wz = w * Gz
             if it == steps:  # evaluated at the solution only (for the uncertainty)
-                inv = inv3((wx * x).sum(0), (wx * y).sum(0), (wz * x).sum(0), (wy * y).sum(0), (wz * y).sum(0),
-                           (wz * Gz).sum(0))
+                inv = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
                 break
-            gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z + (e + kz * c))
+            gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z + (e + kz * c), sxy)
     i00 = inv[0]
     ok = (valid.sum(0) >= 3) & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     f = sg / np.sqrt(1.0 + gx * gx + gy * gy)

@@ -268,8 +268,9 @@ def _moment(layout, d):
     a panel of curvature ``K`` moves the misfit by ``tr(K M) / 2``."""
     from metrology.measure.normals import _null_vector_4
 
-    p = layout.zero[:, None, :] + d.T[:, :, None] * layout.direction[:, None, :]  # (4, N, 3), mm, TCS
-    xc, yc = p[..., 0] - p[..., 0].mean(0), p[..., 1] - p[..., 1].mean(0)
+    E, u, dT = layout.zero, layout.direction, d.T
+    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]  # (4, N), mm, TCS: the spots' x, y
+    xc, yc = x - x.mean(0), y - y.mean(0)
     q = _null_vector_4(xc, yc)
     return np.stack([(q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)], axis=1)
 

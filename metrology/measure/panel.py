@@ -237,7 +237,8 @@ class HoleSurfaces:
         e = self._tcs["entries"]
         s00, s01, s02, s11, s12, s22, n0, n1, n2 = (x[rows] for x in e)
         T = np.asarray(tcs2panel, float)
-        r = [[T[:, j, i] for i in range(3)] for j in range(3)]  # r[j][i] = T_ji
+        Tt = np.ascontiguousarray(T.reshape(-1, 9).T)  # (9, h): each entry contiguous (read three times)
+        r = [[Tt[3 * j + i] for i in range(3)] for j in range(3)]  # r[j][i] = T_ji
         ntx, nty, ntz = (r[0][i] * n0 + r[1][i] * n1 + r[2][i] * n2 for i in range(3))  # the CAD's normal, TCS
         sg = -s
         ok = sg * ntz > 1e-6
@@ -276,9 +277,10 @@ class HoleSurfaces:
             self._tcs["frame"] = np.ascontiguousarray(self.frame.reshape(-1, 6).T)
         F = [x[rows] for x in self._tcs["frame"]]  # F[3 k + j]: e_k's component j
         axes = np.empty((2, 3, len(F[0])))
+        Rt = np.ascontiguousarray(R.reshape(-1, 9).T)  # (9, h): each entry contiguous
         for k in range(2):  # R^T e_k entry by entry over the holes (not an einsum with inner dims of 3)
             for i in range(3):
-                axes[k, i] = R[:, 0, i] * F[3 * k] + R[:, 1, i] * F[3 * k + 1] + R[:, 2, i] * F[3 * k + 2]
+                axes[k, i] = Rt[i] * F[3 * k] + Rt[3 + i] * F[3 * k + 1] + Rt[6 + i] * F[3 * k + 2]
         return axes.transpose(2, 0, 1), self.higher[rows], R  # (h, 2, 3), a view: each component contiguous
 
 

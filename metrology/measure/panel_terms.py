@@ -74,13 +74,14 @@ def shape_basis(fit, g2, axis):
     return [h * a1 * a1, h * a2 * a2, (sc / np.sqrt(2.0)) * a1 * a2]
 
 
-def free_spin(fit, g2, axis, dev, A0, A1):
+def free_spin(fit, g2, axis, dev, A0, A1, basis=None):
     """The spin's :class:`Source` where it is not known (``PanelTerms.free``): the shape's deviatoric part
     ``dev (N,)`` 1/mm, ``(k1 - k2) / 2``, at an unknown angle: ``delta K = dev (cos 2t B1 + sin 2t B2)``
     (``B1 = t1 t1 - t2 t2``, ``B2 = t1 t2 + t2 t1``) tilts by ``dev (cos 2t v1 + sin 2t v2)``: the angle's
     worst case that ellipse's major semi-axis (the length of the tilt's change), a bound; the 2-D spread ``dev^2 / 2 (v1 v1^T + v2 v2^T)`` (t uniform);
-    and the most it moves the redundant reading's misfit, ``dev |(q.dh1, q.dh2)|`` (N,) mm (n = 4, else None)."""
-    b = shape_basis(fit, g2, axis)
+    and the most it moves the redundant reading's misfit, ``dev |(q.dh1, q.dh2)|`` (N,) mm (n = 4, else None);
+    ``basis`` :func:`shape_basis` of the same fit where the caller has it."""
+    b = shape_basis(fit, g2, axis) if basis is None else basis
     dh = (b[0] - b[1], np.sqrt(2.0) * b[2])  # (n, N): the heights' change per unit B1, B2
     v = [((A0 * h).sum(0), (A1 * h).sum(0)) for h in dh]
     M = ((v[0][0] ** 2 + v[1][0] ** 2), (v[0][0] * v[0][1] + v[1][0] * v[1][1]), (v[0][1] ** 2 + v[1][1] ** 2))
@@ -96,11 +97,12 @@ def free_spin(fit, g2, axis, dev, A0, A1):
     return Source(SPIN, C, Kind.BOUND, half), rho
 
 
-def panel_sources(fit, g2, axis, terms, A0, A1):
+def panel_sources(fit, g2, axis, terms, A0, A1, basis=None):
     """The panel's sources (its shape's uncertainty, normal; the head's spin within ``+-spin``, shaped as
     ``terms.spin_kind``; the spin read, empty here: :func:`metrology.measure.spin.panel_normals` fills it) and the
     variance the spin gives the redundant reading's misfit (N,) mm^2 (0 without a spin; the uniform's: the convention's
-    test takes the misfit's reach to the spin's ends apart, ``spin._within_reach``)."""
+    test takes the misfit's reach to the spin's ends apart, ``spin._within_reach``); ``basis`` :func:`shape_basis` of
+    the same fit where the caller has it."""
     N = len(g2)
     kind = Kind.UNIFORM if terms is None else terms.spin_kind
     C_shape, C_spin = np.zeros((N, 3)), np.zeros((N, 3))
@@ -108,7 +110,8 @@ def panel_sources(fit, g2, axis, terms, A0, A1):
     rho_var = 0.0
     if terms is not None:
         uK2 = np.broadcast_to(np.asarray(terms.u_shape, float).reshape(-1), (N,)) ** 2
-        for dh in shape_basis(fit, g2, axis):  # delta K in an orthonormal basis of the tangent plane's tensors
+        # delta K in an orthonormal basis of the tangent plane's tensors
+        for dh in shape_basis(fit, g2, axis) if basis is None else basis:
             v0, v1 = (A0 * dh).sum(0), (A1 * dh).sum(0)
             C_shape[:, 0] += v0 * v0 * uK2
             C_shape[:, 1] += v0 * v1 * uK2

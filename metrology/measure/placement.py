@@ -77,8 +77,6 @@ def place(surf: "HoleSurfaces", table, layout: "SensorLayout") -> Placed:
         return Placed(key, table_row, shape, u_shape, spin, higher, convention, surf.spin_stated, pose)
     axis = drill_axis(layout)[2]
     posed = np.zeros(N, bool) if pose is None else np.isfinite(pose[0][:, 0, 0])  # a row NaN or finite
-    if surf.higher is not None:  # the CAD beyond second order at the spots (0 where no table row)
-        higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, surf.higher.shape[1])), np.full((N, 3, 3), np.nan))
     sel = (have & posed, have & ~posed)
     convention = sel[1]
     whole = [slice(None) if m.all() else m for m in sel]  # every row one way (the usual): no gathers
@@ -92,13 +90,15 @@ def place(surf: "HoleSurfaces", table, layout: "SensorLayout") -> Placed:
     if sel[1].any():  # the cell's convention (TCS x, y near the panel's x, y; spin within +-spin)
         w = whole[1]
         shape[w] = surf.shape_tcs(table_row[w], axis)
-    for k, m in enumerate(sel):
-        if higher is not None and m.any():
+    for k, m in enumerate(sel):  # the CAD beyond second order at the spots (0 where no table row)
+        if surf.higher is not None and m.any():
             w = whole[k]
             hx = surf.higher_tcs(table_row[w], axis, pose[0][w] if k == 0 else None)
             if isinstance(w, slice):  # every row: the arrays themselves, no copy
                 higher = Beyond(*hx)
             else:
+                if higher is None:
+                    higher = Beyond(np.zeros((N, 2, 3)), np.zeros((N, surf.higher.shape[1])), np.full((N, 3, 3), np.nan))
                 higher.axes[w], higher.higher[w], higher.tcs2panel[w] = hx
     u_shape = surf.u_shape[table_row] if have.all() else np.where(have, surf.u_shape[table_row], 0.0)
     if higher is not None and surf.u_height is not None:  # metrology.measure.remainder

@@ -36,6 +36,11 @@ def read_pose(table):
     return R, v[:, 3:]
 
 
+#: rows per slice of :func:`against_cad` (its (n, rows) temporaries stay in the processor's cache, as
+#: :data:`metrology.measure.surface.SLICE_ROWS`; each hole's numbers are its own, whatever the slice)
+SLICE_ROWS = 16384
+
+
 def against_cad(layout, d, normal, shape, surf, table_row, pose):
     """Each hole against its CAD: ``(angle (N,) rad, offset (N,) mm)``.
 
@@ -44,6 +49,19 @@ def against_cad(layout, d, normal, shape, surf, table_row, pose):
     axis (the spots, their height from the CAD's curvature taken off, fitted by a plane, met by the
     axis), against the table's nominal point, along the CAD's outward normal: a panel standing 1 mm
     proud of its CAD reads +1. NaN where a reading, the pose or the table row is missing."""
+    N = len(d)
+    if N <= SLICE_ROWS:
+        return _against_cad(layout, d, normal, shape, surf, table_row, pose)
+    ang, off = np.empty(N), np.empty(N)
+    R, origin = pose
+    for i in range(0, N, SLICE_ROWS):
+        s = slice(i, i + SLICE_ROWS)
+        ang[s], off[s] = _against_cad(layout, d[s], normal[s], shape[s], surf, table_row[s], (R[s], origin[s]))
+    return ang, off
+
+
+def _against_cad(layout, d, normal, shape, surf, table_row, pose):
+    """:func:`against_cad` of one slice."""
     from metrology.measure.normals import drill_axis
 
     R, origin = pose

@@ -96,17 +96,24 @@ def spot_geometry(fit, direction):
     spot, and the largest angle of incidence of a beam on it (module docstring).
 
     ``fit`` a full :class:`metrology.measure.surface.SurfaceFit` (``G (N, n, 3)``, ``g``), ``direction (n, 3)``
-    unit TCS the beams."""
-    G = fit.G  # (N, n, 3)
+    unit TCS the beams. Sensor-major ``(n, N)`` arrays, one per component (``G``'s own memory order), and the
+    largest turn and incidence taken of the sine and the cosine before their inverse (both monotonic): one
+    ``arcsin`` and one ``arccos`` per hole, not per spot."""
+    Gx, Gy, Gz = fit.G.transpose(2, 1, 0)  # (n, N) each
     g = fit.g
-    G0 = np.stack([-g[:, 0], -g[:, 1], np.ones(len(g))], axis=1)  # (N, 3), length rho
-    rho = np.sqrt(1.0 + g[:, 0] ** 2 + g[:, 1] ** 2)
-    v = G - G0[:, None, :]  # (N, n, 3): the tangent part
-    vn = np.sqrt((v * v).sum(2))  # (N, n)
-    sin = np.clip(vn / rho[:, None], 0.0, 1.0)
+    gx, gy = g[:, 0], g[:, 1]
+    rho = np.sqrt(1.0 + gx ** 2 + gy ** 2)
+    vx, vy, vz = Gx - (-gx), Gy - (-gy), Gz - 1.0  # the tangent part, G - (-g_x, -g_y, 1)
+    vn = np.sqrt(vx * vx + vy * vy + vz * vz)  # (n, N)
+    sin = np.clip(vn / rho, 0.0, 1.0)
     cos = np.sqrt(1.0 - sin * sin)
+    u = np.asarray(direction, float)
+    cos_inc = None
     with np.errstate(invalid="ignore", divide="ignore"):
-        vhat = np.where(vn[..., None] > 0, v / vn[..., None], 0.0)
-    normal = (G0 / rho[:, None])[:, None, :] * cos[..., None] + vhat * sin[..., None]  # (N, n, 3), unit
-    cos_inc = np.abs((normal * np.asarray(direction, float)[None]).sum(2))
-    return np.arcsin(sin).max(1), np.arccos(np.clip(cos_inc, 0.0, 1.0)).max(1)
+        for k, (vk, g0) in enumerate(((vx, -gx), (vy, -gy), (vz, 1.0))):
+            hat = np.where(vn > 0, vk / vn, 0.0)
+            nk = (g0 / rho) * cos + hat * sin  # the spot's unit normal, component k
+            term = nk * u[:, k, None]
+            cos_inc = term if cos_inc is None else cos_inc + term
+    cos_inc = np.abs(cos_inc)
+    return np.arcsin(sin.max(0)), np.arccos(np.clip(cos_inc, 0.0, 1.0).min(0))

@@ -50,7 +50,7 @@ share ``a`` the 95 % half-width of a normal plus a uniform on ``+-a``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -227,14 +227,17 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     # reading noise and calibration as the micro-plane's (one code: a flat panel gives its budget exactly)
     A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, np.ascontiguousarray(d.T), cov, sigma)
     u = layout.direction
-    shape_src, spin_src, read_src, rho_var = panel_sources(fit, g2, axis, terms, A0, A1)
+    basis = shape_basis(fit, g2, axis) if terms is not None or n == 4 else None  # one for every use below
+    shape_src, spin_src, read_src, rho_var = panel_sources(fit, g2, axis, terms, A0, A1, basis)
     rho_bound = None
     if free:
-        spin_src, rho_bound = free_spin(fit, g2, axis, dev, A0, A1)
+        spin_src, rho_bound = free_spin(fit, g2, axis, dev, A0, A1, basis)
     rem = surface_remainder(fit, u, None if beyond is None else beyond.u_height)  # truncation, faceting, position
     budget = Budget(g.copy(), (noise, cal, shape_src, spin_src, read_src, Source(SURFACE_MODEL, rem.cov)))
     un = combine(budget)
-    angle, u_angle, U95 = un.angle, un.u, un.U95
+    budget = replace(budget, combined=un)  # kept: the spin's share is read from it again (metrology.measure.spin)
+    bad = ~fit.ok
+    angle, u_angle, U95 = un.angle.copy(), un.u.copy(), un.U95.copy()  # their not-ok rows blanked below, not un's
     panel_share = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2
                           + un.of(SURFACE_MODEL) ** 2)
     misfit = np.full(N, np.nan)
@@ -242,7 +245,6 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     twist = None
     if n == 4:
         qv = fit.null.T  # (n, N)
-        basis = shape_basis(fit, g2, axis)
         s_b = [(qv * b).sum(0) for b in basis]  # d rho / d x_b: the shape change the redundant reading sees
         sb2 = s_b[0] * s_b[0] + s_b[1] * s_b[1] + s_b[2] * s_b[2]
         extra = 0.0
@@ -265,7 +267,6 @@ def surface_hole_normals(layout: SensorLayout, d, shape, terms: PanelTerms | Non
     with np.errstate(invalid="ignore"):
         nm, pm = fit.normal, fit.plane_normal
         correction = np.arccos(np.clip(nm[:, 0] * pm[:, 0] + nm[:, 1] * pm[:, 1] + nm[:, 2] * pm[:, 2], -1.0, 1.0))
-    bad = ~fit.ok
     for arr in (angle, u_angle, U95, correction):
         arr[bad] = np.nan
     normal[bad] = np.nan

@@ -174,3 +174,22 @@ def test_engines_and_panel_sources_each_behind_one_protocol():
     for cls in (TableNormals, CadPanel):
         assert list(inspect.signature(cls.surfaces).parameters) == \
             list(inspect.signature(SurfaceSource.surfaces).parameters), cls
+
+
+def test_a_budget_keeps_its_combination_and_a_new_source_drops_it():
+    """The panel fit keeps what :func:`combine` made of its budget (the spin's share reads it again): the same bits
+    as combining afresh, for the whole and for rows and halves joined; a budget with one more source is new."""
+    lay = calibrated_layout()
+    d = _plane_readings(lay, 600, (0.0, 5.0), seed=5)  # near 0 (the length's rule) and far from it
+    K = np.zeros((len(d), 3, 3))
+    K[:, 0, 0], K[:, 1, 1] = 1 / 500, -1 / 900
+    parts = [surface_hole_normals(lay, d[s], K[s])[0].budget for s in (slice(0, 250), slice(250, 600))]
+    whole = Budget.concat(parts)
+    for b in (parts[0], whole, whole.rows(np.arange(100, 500, 3))):
+        assert b.combined is not None and combine(b) is b.combined
+        fresh = combine(Budget(b.tilt, b.sources))
+        for f in ("angle", "u", "U95", "share"):
+            np.testing.assert_array_equal(getattr(b.combined, f), getattr(fresh, f))
+    widened = whole.with_source(Source("layout effect terms", np.full((len(whole), 3), 1e-8)))
+    assert widened.combined is None
+    assert not np.array_equal(combine(widened).u, whole.combined.u)  # combined afresh, with the new source
