@@ -88,4 +88,4 @@ def test_the_edge_texts_are_fixed_and_only_on_failing_or_undecided_holes():
     for c, e, t in zip(code, edge, got):
         judged = c in (CODE[Status.FAILS], CODE[Status.UNDECIDED])
         assert (EDGE_TEXT in t) == (e and judged) and (t != "") == judged
-    assert not any(ch.isdigit() for ch in EDGE_TEXT)
+    assert not any(ch.isdigit() for ch in EDGE_TEXT.replace("U95", ""))
