@@ -8,8 +8,6 @@ forward simulator, judged by the truth (the drilled hole's true angle):
   by any angle: a hole drilled within tolerance is not reported failed.
 """
 
-from dataclasses import replace
-
 import numpy as np
 
 from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
