@@ -11,6 +11,9 @@
 #   4-sensor holes weighted by 1/(sigma u_z)^2; calflat's U95 by <= 9e-4 deg, --panel/--points angles by
 #   <= 1e-3 deg and their fit_residual_um's sign flipped (one sign, the micro-plane's); equal weights (flat,
 #   part1, dask) and 3 sensors by rounding (<= 2e-14 deg); no status changes.
+# - issue 51 item 5, rules 2b and 3b (benchmarks/results/gross_issue51_item5.md): without --panel/--points, the U95
+#   of a 4-sensor pose whose misfit is beyond 6 sigmas within the R 500 bound (flat: 35 before, 80 after, the
+#   nominal layout's head 15-30 um off it; follow alike); no status changes there; --panel/--points byte-identical.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

@@ -14,7 +14,7 @@ import numpy as np
 
 from metrology.measure.batch import CODE, Status
 
-__all__ = ["VERDICT_TEXTS", "verdict_reasons", "reason_column"]
+__all__ = ["VERDICT_TEXTS", "EDGE_TEXT", "verdict_reasons", "reason_column"]
 
 #: why a failing or undecided hole is so (ISO 14253-1), as measured (the log has no after-readings for it) and
 #: after the attitude adjustment: ``VERDICT_TEXTS[status][after]``
@@ -23,16 +23,23 @@ VERDICT_TEXTS = {
     Status.UNDECIDED: ("as measured: angle +- U95 straddles the tolerance",
                        "after the adjustment: angle +- U95 straddles the tolerance"),
 }
-#: the column's distinct verdict values: "" (nothing to say) then each text of :data:`VERDICT_TEXTS`
-_VALUES = ("", *(t for pair in VERDICT_TEXTS.values() for t in pair))
+#: what a failing or undecided hole's text adds where its U95 covers one sensor's offset (rule 2b,
+#: :data:`metrology.measure.holes.EDGE_SIGMAS`)
+EDGE_TEXT = (" (U95 covers one sensor's offset: the redundant reading's misfit is beyond the noise, within the "
+             "radius bound, and one reading offset by a burr or a chip gives it as well as the panel's curvature)")
+#: the column's distinct verdict values: "" (nothing to say), each text of :data:`VERDICT_TEXTS`, then each with
+#: :data:`EDGE_TEXT`
+_VALUES = ("", *(t for pair in VERDICT_TEXTS.values() for t in pair),
+           *(t + EDGE_TEXT for pair in VERDICT_TEXTS.values() for t in pair))
 
 
-def verdict_reasons(code, judge_after):
+def verdict_reasons(code, judge_after, edge=None):
     """pyarrow StringArray (N,): each failing or undecided hole's :data:`VERDICT_TEXTS`; "" for the others.
 
     Parameters
     ----------
     code : (N,) int8, each hole's status code; judge_after : (N,) bool, judged after the adjustment
+    edge : (N,) bool or None, the judged U95 covers one sensor's offset (rule 2b): :data:`EDGE_TEXT` added
     """
     import pyarrow as pa
 
@@ -40,6 +47,8 @@ def verdict_reasons(code, judge_after):
     for k, status in enumerate(VERDICT_TEXTS):
         mask = code == CODE[status]
         index[mask] = 1 + 2 * k + judge_after[mask]
+    if edge is not None:
+        index[edge & (index > 0)] += 2 * len(VERDICT_TEXTS)
     values = pa.array(_VALUES, pa.string())
     return values.take(pa.Array.from_buffers(pa.int8(), len(index), [None, pa.py_buffer(index)]))
 
