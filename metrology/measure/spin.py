@@ -41,6 +41,10 @@ import numpy as np
 
 from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL, Kind, combine
 from metrology.measure.magnitude import SPREAD_VARIANCE
+from metrology.measure.fit_rows import merge as _merge
+from metrology.measure.fit_rows import put as _put
+from metrology.measure.fit_rows import rows as _rows
+from metrology.measure.fit_rows import with_rows as _with
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -107,6 +111,10 @@ SPIN_BOUND_NOTE = ("U95 rests on the bound of the head's spin (not read): it hol
 #: on 12 perturbed, calibrated Table 6 heads, free spin, no pose (benchmarks/results/spin_convention_calibrated.md,
 #: "After the fix"): the holes left on the convention covered 54.6 % before (R 500)
 SPIN_ALIAS_SHARE = 0.1
+#: how a hole the alias matters at is judged: ``"every"`` spin (as 3 sensors with nothing stated), or ``"admitted"``,
+#: at the convention with the tilt's change to the farthest spin the reading admits as an edge term
+#: (:func:`metrology.measure.spin_alias.widen`)
+SPIN_ALIAS_JUDGE = "every"
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)
@@ -145,7 +153,13 @@ class SpinJudged:
     stated: bool = True
 
     def free_reason(self, i: int) -> str:
-        """The reason column's words for hole ``i`` judged over every spin (``free[i]``): why, and the fix."""
+        """The reason column's words for hole ``i`` judged over every spin (``free[i]``) or over the spins its
+        reading admits (``alias[i]`` finite): why, and the fix."""
+        if np.isfinite(self.alias[i]) and not self.free[i]:
+            return (f"the cell's convention is not stated (--spin-deg) and the redundant reading cannot tell it from a "
+                    f"spin of {np.degrees(self.alias[i]):+.0f} deg, where the curvature tilts the normal "
+                    f"{np.degrees(self.alias_reach[i]):.2g} deg otherwise: U95 covers both (log the robot's commanded "
+                    "pose to know the spin, or state the cell's convention with --spin-deg)")
         if np.isfinite(self.z[i]):
             why = (f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
                    f"by {self.z[i]:.1f} sigmas at the assumed spin)")
@@ -182,25 +196,6 @@ def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
     return concat_normals([p[0] for p in parts]), PanelFit.concat([p[1] for p in parts])
 
 
-def _merge(m, parts):
-    """HoleNormals and extra of ``m`` holes from ``parts``, each ``(index, normals, extra)``."""
-    first = parts[0][1]
-    fields = {}
-    for f in first.__dataclass_fields__:
-        if f == "budget" or getattr(first, f) is None:
-            fields[f] = None
-            continue
-        v = getattr(first, f)
-        a = np.empty((m,) + v.shape[1:], v.dtype)
-        for idx, h, _ in parts:
-            a[idx] = getattr(h, f)
-        fields[f] = a
-    extra = parts[0][2].blank(m)
-    for idx, _, e in parts:
-        extra.put(idx, e)
-    return HoleNormals(**fields), extra
-
-
 def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: bool) -> SpinJudged:
     """Holes measured with their local surface known, the spin known, not refuted or bounded (module docstring).
 
@@ -229,6 +224,7 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     z, alias, alias_reach = nan.copy(), nan.copy(), nan.copy()
     free = free0.copy()
     held = None
+    change = np.zeros((m, 2))
     if a.size:
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
         test = np.abs(extra.panel_misfit_z)
@@ -241,12 +237,21 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         z[a[off]] = extra.panel_misfit_z[off]
         c = np.flatnonzero(convention[a] & ~off) if redundant and not stated else np.zeros(0, int)
         if c.size:  # the convention not refuted but not stated either: where its alias tilts otherwise, every spin
-            psi, reach = _alias(sub, dd[a[c]], shape[a[c]], u_shape[a[c]], spin[a[c]],
-                                None if higher is None else higher.rows(a[c]), _rows(h, c))
+            psi, reach, d = _alias(sub, dd[a[c]], shape[a[c]], u_shape[a[c]], spin[a[c]],
+                                   None if higher is None else higher.rows(a[c]), _rows(h, c))
             wide = reach > SPIN_ALIAS_SHARE * h.U95[c]
-            free[a[c[wide]]], alias[a[c[wide]]], alias_reach[a[c[wide]]] = True, psi[wide], reach[wide]
-            off[c[wide]] = True
-            held = (a[c[wide]], _rows(h, c[wide]), extra.rows(c[wide]))
+            w = a[c[wide]]
+            alias[w], alias_reach[w], change[w] = psi[wide], reach[wide], d[wide]
+            if SPIN_ALIAS_JUDGE == "every":
+                free[w] = True
+                off[c[wide]] = True
+                held = (w, _rows(h, c[wide]), extra.rows(c[wide]))
+            elif w.size:  # the spins admitted: the fit at the alias itself beside the harmonic model's change
+                K, hi = _spun(shape[w], None if higher is None else higher.rows(w), psi[wide])
+                fa = _fit(sub, dd[w], K, u_shape[w], np.zeros(w.size), hi)[0].budget.tilt - h.budget.tilt[c[wide]]
+                more = (fa * fa).sum(1) > (d[wide] ** 2).sum(1)
+                change[w] = np.where(more[:, None], fa, d[wide])
+                alias_reach[w] = np.sqrt((change[w] ** 2).sum(1))
         keep = ~off
         read = keep & convention[a] & (spin[a] > 0) if redundant else np.zeros(a.size, bool)
         if read.any():  # the convention holds: the spin read from the redundant reading
@@ -266,15 +271,20 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
             extra.panel_misfit[k], extra.panel_misfit_z[k] = held[2].panel_misfit, held[2].panel_misfit_z
         parts.append((b, h, extra))
     share = np.zeros(m)
-    for idx, hp, _ in parts:
-        share[idx] = _spin_share(hp)
+    for j, (idx, hp, ep) in enumerate(parts):
+        k = np.flatnonzero(np.isfinite(alias[idx]) & ~free[idx])
+        if k.size:  # the alias's holes judged over the spins admitted: its tilt's change an edge term
+            from metrology.measure.spin_alias import widen
+
+            parts[j] = (idx, widen(hp, k, change[idx[k]]), ep)
+        share[idx] = _spin_share(parts[j][1])
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
-    return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE), alias,
-                      alias_reach, stated)
+    bound = convention & ~free & ~np.isfinite(alias) & (share > SPIN_BOUND_SHARE)
+    return SpinJudged(h, extra, free, convention & ~free, z, bound, alias, alias_reach, stated)
 
 
 def _alias(sub, dd, shape, u_shape, spin, higher, h0):
-    """``(psi, reach)`` (h,) rad of :func:`metrology.measure.spin_alias.alias_reach` for holes fitted at the
+    """``(psi, reach, change)`` of :func:`metrology.measure.spin_alias.alias_reach` for holes fitted at the
     convention's spin (``h0``): two more fits, the head turned by 45 and 90 deg."""
     from metrology.measure.spin_alias import alias_reach
 
@@ -432,49 +442,3 @@ def _spin_ends(h, hp, hm, read):
         if h.curvature_bound is not None else None
     return replace(h, u_angle=np.where(bad, np.nan, un.u), U95=np.where(bad, np.nan, un.U95), budget=b,
                    curvature_bound=panel)
-
-
-#: HoleNormals fields rule 2 reads: kept from the fit at the convention's spin, with its doubt (the misfit read
-#: at the spin found is 0 by construction: the redundant reading is spent on the spin)
-_RULE2 = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
-
-
-def _with(e0, r, e):
-    """A copy of ``e0`` (PanelFit) with the holes ``r`` from ``e``."""
-    out = e0.rows(np.arange(len(e0.correction)))
-    out.put(r, e)
-    return out
-
-
-def _put(h0, r, h, everything=False):
-    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields unless
-    ``everything``)."""
-    from metrology.measure.budget import Budget
-
-    fields = {}
-    for f in h0.__dataclass_fields__:
-        v0, v = getattr(h0, f), getattr(h, f)
-        if (f in _RULE2 and not everything) or v0 is None or v is None:
-            fields[f] = v0
-        elif f == "budget":
-            tilt = v0.tilt.copy()
-            tilt[r] = v.tilt
-            srcs = []
-            for s0, s in zip(v0.sources, v.sources):
-                cov, hw = s0.cov.copy(), None if s0.half_width is None else s0.half_width.copy()
-                cov[r] = s.cov
-                if hw is not None:
-                    hw[r] = s.half_width
-                srcs.append(type(s0)(s0.name, cov, s0.kind, hw))
-            fields[f] = Budget(tilt, tuple(srcs))
-        else:
-            a = v0.copy()
-            a[r] = v
-            fields[f] = a
-    return HoleNormals(**fields)
-
-
-def _rows(h, sel):
-    return HoleNormals(**{f: None if getattr(h, f) is None else
-                          (getattr(h, f).rows(sel) if f == "budget" else getattr(h, f)[sel])
-                          for f in h.__dataclass_fields__})
