@@ -81,10 +81,6 @@ def run(args):
     from study_measure import calibrate_head
     from study_tight_radii import all_heads, one_log
 
-    from metrology.measure import spin as spin_rules
-
-    if args.alias_judge:
-        spin_rules.SPIN_ALIAS_JUDGE = args.alias_judge
     rng0 = np.random.default_rng(args.seed)
     nominal = all_heads(rng0)[args.head]
     range_mm = np.array([30.0, 70.0])
@@ -184,8 +180,6 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=49)
     ap.add_argument("--true-spin-deg", type=float, default=180.0, help="the head's true spin uniform within +-this")
     ap.add_argument("--stated", action="store_true", help="the convention stated (--spin-deg 2), as before the fix")
-    ap.add_argument("--alias-judge", choices=("every", "admitted"), default=None,
-                    help="metrology.measure.spin.SPIN_ALIAS_JUDGE for this run (default: metro's)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     out = run(args)

@@ -190,7 +190,7 @@ def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings,
     h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
     out.extra.put(rs, j.extra)
     out.spin_free[rs], out.convention[rs], out.spin_bound[rs] = j.free, j.convention, j.bound
-    for i in np.flatnonzero(j.free | np.isfinite(j.alias)).tolist():  # rare where the log has the pose or a --spin-deg
+    for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
         prior = out.reason.get(int(rows[i]))
         out.reason[int(rows[i])] = (prior + "; " if prior else "") + j.free_reason(i)
     for i in np.flatnonzero(j.bound).tolist():  # what such a U95 assumes (measure.spin.SPIN_BOUND_MODEL), said per hole

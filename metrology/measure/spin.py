@@ -111,10 +111,6 @@ SPIN_BOUND_NOTE = ("U95 rests on the bound of the head's spin (not read): it hol
 #: on 12 perturbed, calibrated Table 6 heads, free spin, no pose (benchmarks/results/spin_convention_calibrated.md,
 #: "After the fix"): the holes left on the convention covered 54.6 % before (R 500)
 SPIN_ALIAS_SHARE = 0.1
-#: how a hole the alias matters at is judged: ``"every"`` spin (as 3 sensors with nothing stated), or ``"admitted"``,
-#: at the convention with the tilt's change to the farthest spin the reading admits as an edge term
-#: (:func:`metrology.measure.spin_alias.widen`)
-SPIN_ALIAS_JUDGE = "every"
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)
@@ -153,13 +149,7 @@ class SpinJudged:
     stated: bool = True
 
     def free_reason(self, i: int) -> str:
-        """The reason column's words for hole ``i`` judged over every spin (``free[i]``) or over the spins its
-        reading admits (``alias[i]`` finite): why, and the fix."""
-        if np.isfinite(self.alias[i]) and not self.free[i]:
-            return (f"the cell's convention is not stated (--spin-deg) and the redundant reading cannot tell it from a "
-                    f"spin of {np.degrees(self.alias[i]):+.0f} deg, where the curvature tilts the normal "
-                    f"{np.degrees(self.alias_reach[i]):.2g} deg otherwise: U95 covers both (log the robot's commanded "
-                    "pose to know the spin, or state the cell's convention with --spin-deg)")
+        """The reason column's words for hole ``i`` judged over every spin (``free[i]``): why, and the fix."""
         if np.isfinite(self.z[i]):
             why = (f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
                    f"by {self.z[i]:.1f} sigmas at the assumed spin)")
@@ -224,7 +214,6 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     z, alias, alias_reach = nan.copy(), nan.copy(), nan.copy()
     free = free0.copy()
     held = None
-    change = np.zeros((m, 2))
     if a.size:
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
         test = np.abs(extra.panel_misfit_z)
@@ -237,21 +226,13 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         z[a[off]] = extra.panel_misfit_z[off]
         c = np.flatnonzero(convention[a] & ~off) if redundant and not stated else np.zeros(0, int)
         if c.size:  # the convention not refuted but not stated either: where its alias tilts otherwise, every spin
-            psi, reach, d = _alias(sub, dd[a[c]], shape[a[c]], u_shape[a[c]], spin[a[c]],
-                                   None if higher is None else higher.rows(a[c]), _rows(h, c))
+            psi, reach = _alias(sub, dd[a[c]], shape[a[c]], u_shape[a[c]], spin[a[c]],
+                                None if higher is None else higher.rows(a[c]), _rows(h, c))
             wide = reach > SPIN_ALIAS_SHARE * h.U95[c]
             w = a[c[wide]]
-            alias[w], alias_reach[w], change[w] = psi[wide], reach[wide], d[wide]
-            if SPIN_ALIAS_JUDGE == "every":
-                free[w] = True
-                off[c[wide]] = True
-                held = (w, _rows(h, c[wide]), extra.rows(c[wide]))
-            elif w.size:  # the spins admitted: the fit at the alias itself beside the harmonic model's change
-                K, hi = _spun(shape[w], None if higher is None else higher.rows(w), psi[wide])
-                fa = _fit(sub, dd[w], K, u_shape[w], np.zeros(w.size), hi)[0].budget.tilt - h.budget.tilt[c[wide]]
-                more = (fa * fa).sum(1) > (d[wide] ** 2).sum(1)
-                change[w] = np.where(more[:, None], fa, d[wide])
-                alias_reach[w] = np.sqrt((change[w] ** 2).sum(1))
+            free[w], alias[w], alias_reach[w] = True, psi[wide], reach[wide]
+            off[c[wide]] = True
+            held = (w, _rows(h, c[wide]), extra.rows(c[wide]))
         keep = ~off
         read = keep & convention[a] & (spin[a] > 0) if redundant else np.zeros(a.size, bool)
         if read.any():  # the convention holds: the spin read from the redundant reading
@@ -271,20 +252,15 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
             extra.panel_misfit[k], extra.panel_misfit_z[k] = held[2].panel_misfit, held[2].panel_misfit_z
         parts.append((b, h, extra))
     share = np.zeros(m)
-    for j, (idx, hp, ep) in enumerate(parts):
-        k = np.flatnonzero(np.isfinite(alias[idx]) & ~free[idx])
-        if k.size:  # the alias's holes judged over the spins admitted: its tilt's change an edge term
-            from metrology.measure.spin_alias import widen
-
-            parts[j] = (idx, widen(hp, k, change[idx[k]]), ep)
-        share[idx] = _spin_share(parts[j][1])
+    for idx, hp, _ in parts:
+        share[idx] = _spin_share(hp)
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
-    bound = convention & ~free & ~np.isfinite(alias) & (share > SPIN_BOUND_SHARE)
-    return SpinJudged(h, extra, free, convention & ~free, z, bound, alias, alias_reach, stated)
+    return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE), alias,
+                      alias_reach, stated)
 
 
 def _alias(sub, dd, shape, u_shape, spin, higher, h0):
-    """``(psi, reach, change)`` of :func:`metrology.measure.spin_alias.alias_reach` for holes fitted at the
+    """``(psi, reach)`` (h,) rad of :func:`metrology.measure.spin_alias.alias_reach` for holes fitted at the
     convention's spin (``h0``): two more fits, the head turned by 45 and 90 deg."""
     from metrology.measure.spin_alias import alias_reach
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GRID_DEG", "harmonic", "alias_reach", "widen"]
+__all__ = ["GRID_DEG", "harmonic", "alias_reach"]
 
 #: deg: the grid over the half-turn on which the admitted spins are sought beside the misfit's roots (an arc narrower
 #: than this is found through its root)
@@ -41,9 +41,9 @@ def _at(abc, psi):
 
 
 def alias_reach(rho, tilt, sd, sigmas, spin):
-    """``(psi, reach, change)``: per hole, the admitted spin (h,) rad in ``(-90, 90]`` deg whose tilt is farthest from
-    the tilt at the nearer end of ``+-spin``, that distance (h,) rad (0 where every admitted spin lies within
-    ``+-spin``, ``psi`` then NaN) and the tilt's change (h, 2) rad, TCS.
+    """``(psi, reach)``: per hole, the admitted spin (h,) rad in ``[-90, 90)`` deg whose tilt is farthest from the
+    tilt at the nearer end of ``+-spin``, and that distance (h,) rad (0 where every admitted spin lies within
+    ``+-spin``, ``psi`` then NaN).
 
     Parameters
     ----------
@@ -64,7 +64,7 @@ def alias_reach(rho, tilt, sd, sigmas, spin):
     least = phi + np.where(A > 0, np.pi, 0.0)  # 2 psi of the misfit's least |rho|
     cands = [0.5 * (phi + arc), 0.5 * (phi - arc), 0.5 * least]
     cands += [np.full(h, g) for g in np.radians(np.arange(-90.0, 90.0, GRID_DEG))]
-    best, where, change = np.zeros(h), np.full(h, np.nan), np.zeros((h, 2))
+    best, where = np.zeros(h), np.full(h, np.nan)
     for psi in cands:
         psi = (psi + 0.5 * np.pi) % np.pi - 0.5 * np.pi
         with np.errstate(invalid="ignore"):
@@ -72,35 +72,6 @@ def alias_reach(rho, tilt, sd, sigmas, spin):
         d = _at(T, psi) - _at(T, np.clip(psi, -spin, spin))
         n = np.where(ok, np.sqrt((d * d).sum(1)), 0.0)
         more = n > best
-        best, where, change = np.where(more, n, best), np.where(more, psi, where), np.where(more[:, None], d, change)
-    return where, best, change
+        best, where = np.where(more, n, best), np.where(more, psi, where)
+    return where, best
 
-
-def widen(h, k, change):
-    """``h`` (HoleNormals with its budget) with the holes ``k`` judged over the spins their redundant reading admits:
-    the spin's source (:data:`~metrology.measure.budget.SPIN`, its bound's kind) at least the tilt's ``change``
-    (k, 2) rad to the farthest of them, as :func:`metrology.measure.spin._spin_ends` takes the spin's ends."""
-    from dataclasses import replace
-
-    from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL, Budget, combine
-    from metrology.measure.magnitude import SPREAD_VARIANCE
-
-    b = h.budget
-    src = b.source(SPIN)
-    a = np.sqrt((change * change).sum(1))
-    cov, hw = src.cov.copy(), src.half_width.copy()
-    more = a > hw[k]
-    d, kk = change[more], k[more]
-    cov[kk] = np.stack([d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2], 1) * SPREAD_VARIANCE[src.kind.value]
-    hw[kk] = a[more]
-    b = Budget(b.tilt, tuple(replace(src, cov=cov, half_width=hw) if s.name == SPIN else s for s in b.sources))
-    un = combine(b.rows(k))
-    u, U95 = h.u_angle.copy(), h.U95.copy()
-    ok = np.isfinite(h.angle[k])
-    u[k], U95[k] = np.where(ok, un.u, np.nan), np.where(ok, un.U95, np.nan)
-    out = replace(h, u_angle=u, U95=U95, budget=b)
-    if h.curvature_bound is not None:
-        panel = h.curvature_bound.copy()
-        panel[k] = np.sqrt(un.of(PANEL_SHAPE) ** 2 + un.of(SPIN) ** 2 + un.of(SPIN_READ) ** 2 + un.of(SURFACE_MODEL) ** 2)
-        out = replace(out, curvature_bound=panel)
-    return out
