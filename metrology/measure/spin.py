@@ -164,14 +164,19 @@ class SpinJudged:
         return f"{why}: judged with a U95 that covers every spin ({fix})"
 
 
-def _spin_share(h) -> np.ndarray:
+def _spin_share(h, on) -> np.ndarray:
     """(m,) float, the spin's share of the angle's variance, ``u_spin^2 / u^2`` (:func:`metrology.measure.budget.
-    combine`; a spin that moves the tilt across the angle's gradient does not count), 0 where there is no budget."""
-    if h.budget is None:
-        return np.zeros(len(h.angle))
-    un = combine(h.budget)
+    combine`; a spin that moves the tilt across the angle's gradient does not count), at the holes ``on`` (m,) bool
+    (the convention's: only they can rest on its bound; a log with the pose combines nothing again), 0 elsewhere and
+    where there is no budget."""
+    share = np.zeros(len(h.angle))
+    k = np.flatnonzero(on)
+    if h.budget is None or not k.size:
+        return share
+    un = combine(h.budget if k.size == len(share) else h.budget.rows(k))
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.nan_to_num((un.of(SPIN) / un.u) ** 2)
+        share[k] = np.nan_to_num((un.of(SPIN) / un.u) ** 2)
+    return share
 
 
 def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
@@ -208,7 +213,7 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
                                 _rows(h, c), extra.rows(c), read=False)
             h, extra = _put(h, c, hc, everything=True), _with(extra, c, ec)
         return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan,
-                          convention & (_spin_share(h) > SPIN_BOUND_SHARE), nan, nan, stated)
+                          convention & (_spin_share(h, convention) > SPIN_BOUND_SHARE), nan, nan, stated)
     a = np.flatnonzero(~free0)
     parts = []
     z, alias, alias_reach = nan.copy(), nan.copy(), nan.copy()
@@ -253,7 +258,7 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
         parts.append((b, h, extra))
     share = np.zeros(m)
     for idx, hp, _ in parts:
-        share[idx] = _spin_share(hp)
+        share[idx] = _spin_share(hp, convention[idx] & ~free[idx])
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
     return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE), alias,
                       alias_reach, stated)
