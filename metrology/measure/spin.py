@@ -18,6 +18,9 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is under :data:`SPIN_READ_MAX` of ``+-spin``; the
   spin's term in U95 is taken from the fits at its ends (:func:`_spin_ends`); rule 2 keeps the
   misfit at the convention's spin with its doubt, and allows the most the spin moves it (to its ends);
+- **a redundant reading, the convention not stated** (no ``--spin-deg``): the reading can refute the convention,
+  never confirm it (its misfit takes the same value at an alias spin): where a spin it admits beyond ``+-spin``
+  tilts the normal over :data:`SPIN_ALIAS_SHARE` of U95 otherwise, the spin not known, as with 3 readings;
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
 - **on the convention, the spin not read** (3 readings, or a redundant reading blind to the spin): the
