@@ -14,6 +14,10 @@
 # - issue 51 item 5, rules 2b and 3b (benchmarks/results/gross_issue51_item5.md): without --panel/--points, the U95
 #   of a 4-sensor pose whose misfit is beyond 6 sigmas within the R 500 bound (flat: 35 before, 80 after, the
 #   nominal layout's head 15-30 um off it; follow alike); no status changes there; --panel/--points byte-identical.
+# - issue 49 item 3, the unstated convention's alias (metrology/measure/spin.py SPIN_ALIAS_SHARE, docs/spin.md):
+#   wing_nopose only (4 sensors, no pose, no --spin-deg): 1641 of 2000 holes' before-readings judged over every spin
+#   (angle_deg, U95_angle_deg: median 0.0079 -> 0.0224 deg; their reason), the rest's reason "" for null, the after's
+#   angle by <= 2e-6 deg (the spin it keeps from before), the summary's means by <= 2e-7 deg; no status changes.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

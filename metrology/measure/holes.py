@@ -215,11 +215,7 @@ def _on_surface(out: _Measured, rows, mask, sub, dd, placed, settings: Settings,
     out.spin_free[rs], out.convention[rs], out.spin_bound[rs] = j.free, j.convention, j.bound
     for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
         prior = out.reason.get(int(rows[i]))
-        out.reason[int(rows[i])] = (prior + "; " if prior else "") + (
-            f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
-            f"by {j.z[i]:.1f} sigmas at the assumed spin)" if np.isfinite(j.z[i]) else
-            "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)") + (
-            ": judged with a U95 that covers every spin (log the robot's commanded pose to know it)")
+        out.reason[int(rows[i])] = (prior + "; " if prior else "") + j.free_reason(i)
     for i in np.flatnonzero(j.bound).tolist():  # what such a U95 assumes (measure.spin.SPIN_BOUND_MODEL), said per hole
         prior = out.reason.get(int(rows[i]))
         out.reason[int(rows[i])] = (prior + "; " if prior else "") + SPIN_BOUND_NOTE

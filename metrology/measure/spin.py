@@ -18,6 +18,9 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   ``+-`` :data:`SPIN_READ_WIDTH` ``u_psi``), where that is under :data:`SPIN_READ_MAX` of ``+-spin``; the
   spin's term in U95 is taken from the fits at its ends (:func:`_spin_ends`); rule 2 keeps the
   misfit at the convention's spin with its doubt, and allows the most the spin moves it (to its ends);
+- **a redundant reading, the convention not stated** (no ``--spin-deg``): the reading can refute the convention,
+  never confirm it (its misfit takes the same value at an alias spin): where a spin it admits beyond ``+-spin``
+  tilts the normal over :data:`SPIN_ALIAS_SHARE` of U95 otherwise, the spin not known, as with 3 readings;
 - **no redundancy** (3 readings): the convention where it is stated (``--spin-deg``), else the spin not
   known;
 - **on the convention, the spin not read** (3 readings, or a redundant reading blind to the spin): the
@@ -41,6 +44,10 @@ import numpy as np
 
 from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL, Kind, combine
 from metrology.measure.magnitude import SPREAD_VARIANCE
+from metrology.measure.fit_rows import merge as _merge
+from metrology.measure.fit_rows import put as _put
+from metrology.measure.fit_rows import rows as _rows
+from metrology.measure.fit_rows import with_rows as _with
 from metrology.measure.normals import HoleNormals, concat_normals
 
 if TYPE_CHECKING:
@@ -98,6 +105,15 @@ SPIN_BOUND_MODEL = Kind.EDGE
 #: the reason column's note on a hole whose U95 rests on the spin's bound (:data:`SPIN_BOUND_SHARE`): what it assumes
 SPIN_BOUND_NOTE = ("U95 rests on the bound of the head's spin (not read): it holds for any spin within the bound, "
                    "wherever it sits (log the robot's commanded pose to know it)")
+#: without the pose and with the convention **not stated** (``--spin-deg``), a redundant reading that does not refute it
+#: cannot confirm it either: it admits a second spin (``rho = A + B cos 2 psi + C sin 2 psi`` has two roots; near
+#: 90 deg on Table 6's diagonal cross) and, on a reading blind to the spin, the whole half-turn
+#: (:func:`metrology.measure.spin_alias.alias_reach`). Where the tilt at a spin it admits beyond ``+-spin`` lies farther
+#: than this share of U95 from the tilt within ``+-spin``, the hole is judged over every spin, as a 3-sensor head with
+#: nothing stated is: a tilt off by 0.1 U95 (0.2 sigma) still covers 94.6 % of a normal's, by 0.25 U95 92 %. Measured
+#: on 12 perturbed, calibrated Table 6 heads, free spin, no pose (benchmarks/results/spin_convention_calibrated.md,
+#: "After the fix"): the holes left on the convention covered 54.6 % before (R 500)
+SPIN_ALIAS_SHARE = 0.1
 #: rad: the spin's ends bound what it does within them (the shape turned by psi moves as sin 2 psi: monotone to
 #: 45 deg, and within 2 % of linear to 10); beyond this spin the first-order terms alone are taken
 SPIN_ENDS_MAX = np.radians(10.0)
@@ -119,6 +135,10 @@ class SpinJudged:
     convention : (m,) bool, judged with the spin in the cell's convention (no pose: the convention assumed)
     z : (m,) float, the convention's misfit in sigmas where the test refused it (NaN elsewhere)
     bound : (m,) bool, on the convention with the spin not read, its term over :data:`SPIN_BOUND_SHARE` of U95^2
+    alias : (m,) float, rad, where the convention was not stated and its alias judged the hole over every spin
+        (:data:`SPIN_ALIAS_SHARE`): the spin admitted whose tilt lies farthest from the convention's (NaN elsewhere)
+    alias_reach : (m,) float, rad, that tilt's distance from the convention's (NaN elsewhere)
+    stated : bool, the convention was stated (``--spin-deg``)
     """
 
     normals: HoleNormals
@@ -127,16 +147,39 @@ class SpinJudged:
     convention: np.ndarray
     z: np.ndarray
     bound: np.ndarray
+    alias: np.ndarray
+    alias_reach: np.ndarray
+    stated: bool = True
+
+    def free_reason(self, i: int) -> str:
+        """The reason column's words for hole ``i`` judged over every spin (``free[i]``): why, and the fix."""
+        if np.isfinite(self.z[i]):
+            why = (f"the head's spin is not the cell's convention here (the redundant reading misses the CAD's surface "
+                   f"by {self.z[i]:.1f} sigmas at the assumed spin)")
+        elif np.isfinite(self.alias[i]):
+            why = (f"the cell's convention is not stated (--spin-deg) and the redundant reading cannot tell it from a "
+                   f"spin of {np.degrees(self.alias[i]):+.0f} deg, where the curvature tilts the normal "
+                   f"{np.degrees(self.alias_reach[i]):.2g} deg otherwise (over {SPIN_ALIAS_SHARE:g} of U95)")
+        else:
+            why = "the head's spin is not known (no pose_* columns, no --spin-deg, no redundant reading)"
+        fix = "log the robot's commanded pose to know it" + (", or state the cell's convention with --spin-deg"
+                                                             if np.isfinite(self.alias[i]) else "")
+        return f"{why}: judged with a U95 that covers every spin ({fix})"
 
 
-def _spin_share(h) -> np.ndarray:
+def _spin_share(h, on) -> np.ndarray:
     """(m,) float, the spin's share of the angle's variance, ``u_spin^2 / u^2`` (:func:`metrology.measure.budget.
-    combine`; a spin that moves the tilt across the angle's gradient does not count), 0 where there is no budget."""
-    if h.budget is None:
-        return np.zeros(len(h.angle))
-    un = combine(h.budget)
+    combine`; a spin that moves the tilt across the angle's gradient does not count), at the holes ``on`` (m,) bool
+    (the convention's: only they can rest on its bound; a log with the pose combines nothing again), 0 elsewhere and
+    where there is no budget."""
+    share = np.zeros(len(h.angle))
+    k = np.flatnonzero(on)
+    if h.budget is None or not k.size:
+        return share
+    un = combine(h.budget if k.size == len(share) else h.budget.rows(k))
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.nan_to_num((un.of(SPIN) / un.u) ** 2)
+        share[k] = np.nan_to_num((un.of(SPIN) / un.u) ** 2)
+    return share
 
 
 def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
@@ -149,25 +192,6 @@ def _fit(sub, dd, shape, u_shape, spin, higher, free=False):
 
     parts = [part(slice(i, i + CACHE_ROWS)) for i in range(0, len(dd), CACHE_ROWS)]
     return concat_normals([p[0] for p in parts]), PanelFit.concat([p[1] for p in parts])
-
-
-def _merge(m, parts):
-    """HoleNormals and extra of ``m`` holes from ``parts``, each ``(index, normals, extra)``."""
-    first = parts[0][1]
-    fields = {}
-    for f in first.__dataclass_fields__:
-        if f == "budget" or getattr(first, f) is None:
-            fields[f] = None
-            continue
-        v = getattr(first, f)
-        a = np.empty((m,) + v.shape[1:], v.dtype)
-        for idx, h, _ in parts:
-            a[idx] = getattr(h, f)
-        fields[f] = a
-    extra = parts[0][2].blank(m)
-    for idx, _, e in parts:
-        extra.put(idx, e)
-    return HoleNormals(**fields), extra
 
 
 def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: bool) -> SpinJudged:
@@ -192,11 +216,12 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
                                 _rows(h, c), extra.rows(c), read=False)
             h, extra = _put(h, c, hc, everything=True), _with(extra, c, ec)
         return SpinJudged(h, extra, np.zeros(m, bool), convention.copy(), nan,
-                          convention & (_spin_share(h) > SPIN_BOUND_SHARE))
+                          convention & (_spin_share(h, convention) > SPIN_BOUND_SHARE), nan, nan, stated)
     a = np.flatnonzero(~free0)
     parts = []
-    z = nan.copy()
+    z, alias, alias_reach = nan.copy(), nan.copy(), nan.copy()
     free = free0.copy()
+    held = None
     if a.size:
         h, extra = _fit(sub, dd[a], shape[a], u_shape[a], spin[a], None if higher is None else higher.rows(a))
         test = np.abs(extra.panel_misfit_z)
@@ -207,6 +232,15 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
                                        None if higher is None else higher.rows(a[near]), h.residual[near])
         free[a[off]] = True
         z[a[off]] = extra.panel_misfit_z[off]
+        c = np.flatnonzero(convention[a] & ~off) if redundant and not stated else np.zeros(0, int)
+        if c.size:  # the convention not refuted but not stated either: where its alias tilts otherwise, every spin
+            psi, reach = _alias(sub, dd[a[c]], shape[a[c]], u_shape[a[c]], spin[a[c]],
+                                None if higher is None else higher.rows(a[c]), _rows(h, c))
+            wide = reach > SPIN_ALIAS_SHARE * h.U95[c]
+            w = a[c[wide]]
+            free[w], alias[w], alias_reach[w] = True, psi[wide], reach[wide]
+            off[c[wide]] = True
+            held = (w, _rows(h, c[wide]), extra.rows(c[wide]))
         keep = ~off
         read = keep & convention[a] & (spin[a] > 0) if redundant else np.zeros(a.size, bool)
         if read.any():  # the convention holds: the spin read from the redundant reading
@@ -220,12 +254,31 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     b = np.flatnonzero(free)
     if b.size:
         h, extra = _fit(sub, dd[b], shape[b], u_shape[b], spin[b], None, free=True)
+        if held is not None and held[0].size:  # the alias's holes: the misfit the convention passed kept for rules 2-3
+            k = np.searchsorted(b, held[0])
+            h = _put(h, k, _put(held[1], np.arange(k.size), _rows(h, k)), everything=True)
+            extra.panel_misfit[k], extra.panel_misfit_z[k] = held[2].panel_misfit, held[2].panel_misfit_z
         parts.append((b, h, extra))
     share = np.zeros(m)
     for idx, hp, _ in parts:
-        share[idx] = _spin_share(hp)
+        share[idx] = _spin_share(hp, convention[idx] & ~free[idx])
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
-    return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE))
+    return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE), alias,
+                      alias_reach, stated)
+
+
+def _alias(sub, dd, shape, u_shape, spin, higher, h0):
+    """``(psi, reach)`` (h,) rad of :func:`metrology.measure.spin_alias.alias_reach` for holes fitted at the
+    convention's spin (``h0``): two more fits, the head turned by 45 and 90 deg."""
+    from metrology.measure.spin_alias import alias_reach
+
+    k = len(dd)
+    zero = np.zeros(k)
+    fits = [_fit(sub, dd, K, u_shape, zero, hi)[0] for K, hi in (_spun(shape, higher, np.full(k, p))
+                                                                  for p in (0.25 * np.pi, 0.5 * np.pi))]
+    sd = np.fmax(fits[0].residual_sd, fits[1].residual_sd)
+    return alias_reach((h0.residual, fits[0].residual, fits[1].residual),
+                       (h0.budget.tilt, fits[0].budget.tilt, fits[1].budget.tilt), sd, SPIN_SIGMAS, spin)
 
 
 def _within_reach(sub, dd, shape, u_shape, spin, higher, r0):
@@ -373,49 +426,3 @@ def _spin_ends(h, hp, hm, read):
         if h.curvature_bound is not None else None
     return replace(h, u_angle=np.where(bad, np.nan, un.u), U95=np.where(bad, np.nan, un.U95), budget=b,
                    curvature_bound=panel)
-
-
-#: HoleNormals fields rule 2 reads: kept from the fit at the convention's spin, with its doubt (the misfit read
-#: at the spin found is 0 by construction: the redundant reading is spent on the spin)
-_RULE2 = ("residual", "residual_z", "signature", "twist", "residual_sd", "residual_noise_sd", "misfit_bound")
-
-
-def _with(e0, r, e):
-    """A copy of ``e0`` (PanelFit) with the holes ``r`` from ``e``."""
-    out = e0.rows(np.arange(len(e0.correction)))
-    out.put(r, e)
-    return out
-
-
-def _put(h0, r, h, everything=False):
-    """A copy of ``h0`` (HoleNormals) with the holes ``r`` from ``h`` (but its :data:`_RULE2` fields unless
-    ``everything``)."""
-    from metrology.measure.budget import Budget
-
-    fields = {}
-    for f in h0.__dataclass_fields__:
-        v0, v = getattr(h0, f), getattr(h, f)
-        if (f in _RULE2 and not everything) or v0 is None or v is None:
-            fields[f] = v0
-        elif f == "budget":
-            tilt = v0.tilt.copy()
-            tilt[r] = v.tilt
-            srcs = []
-            for s0, s in zip(v0.sources, v.sources):
-                cov, hw = s0.cov.copy(), None if s0.half_width is None else s0.half_width.copy()
-                cov[r] = s.cov
-                if hw is not None:
-                    hw[r] = s.half_width
-                srcs.append(type(s0)(s0.name, cov, s0.kind, hw))
-            fields[f] = Budget(tilt, tuple(srcs))
-        else:
-            a = v0.copy()
-            a[r] = v
-            fields[f] = a
-    return HoleNormals(**fields)
-
-
-def _rows(h, sel):
-    return HoleNormals(**{f: None if getattr(h, f) is None else
-                          (getattr(h, f).rows(sel) if f == "budget" else getattr(h, f)[sel])
-                          for f in h.__dataclass_fields__})
