@@ -236,7 +236,8 @@ class MeasureReport:
         else:
             checks.append(Check(f"curvature from {cv.source}", cv.holes, None, "holes", True, gate=False))
             if cv.spin_on_convention_holes or cv.spin_free_holes:
-                unstated = ", not refuted by the redundant reading, which cannot confirm it"
+                unstated = (", not stated: kept only where the redundant reading does not refute it and its alias spin "
+                            "tilts the normal alike")
                 checks.append(Check(f"head's spin (no pose in the log): holes judged with it in the cell's convention "
                                     f"(+-{cv.spin_deg:g} deg{'' if cv.spin_stated else unstated}; "
                                     f"log the commanded pose to know it)", cv.spin_on_convention_holes, None, "holes",
@@ -245,7 +246,8 @@ class MeasureReport:
                                     f"rests on the +-{cv.spin_deg:g} deg bound (over half of it; it holds for any spin "
                                     "within the bound, wherever it sits; log the commanded pose)",
                                     cv.spin_bound_holes, None, "holes", True, gate=False))
-                checks.append(Check("head's spin not known: holes judged with a U95 over every spin",
+                why = "" if cv.spin_stated else " (the convention not stated: state --spin-deg or log the commanded pose)"
+                checks.append(Check(f"head's spin not known: holes judged with a U95 over every spin{why}",
                                     cv.spin_free_holes, None, "holes", True, gate=False))
             o, c = cv.off_cad, cv.cad
             if o.off_cad_holes:

@@ -72,7 +72,9 @@ def _panel_terms(report) -> str:
     if cv.known:  # each hole's surface known (--panel/--points)
         return (f" + each hole's curvature from {cv.source} (its fit; the drill point's position error "
                 f"{cv.position_error_mm:g} mm; the form tolerance {cv.form_tolerance_mm:g} mm; {_spin_words(cv)})")
-    return f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm"
+    return (f" + the micro-plane's curvature bias for a panel radius >= {report.min_radius_mm:g} mm (and where a "
+            f"4-sensor misfit beyond the noise lies within that bound, one sensor's offset it cannot be told from: "
+            f"rule 2b, docs/gross.md)")
 
 
 def _limits(report) -> list:
