@@ -372,7 +372,7 @@ def empirical_indistinguishable(gain: float, k_term: int, k_cause: int, own_vari
 
 
 def empirical_collinear(correlation: float, k_term: int, k_cause: int, own_variable: bool) -> bool:
-    """22. A term of a variable the cause's family does not follow (``own_variable`` False), of no more
+    """22. A term of a variable the cause's family does not follow (``own_variable`` False), of as many
     coefficients, whose column the cause's columns reproduce (``correlation``: the multiple correlation
     of the term on the cause's columns and a constant, over the sensor's readings) at ``CORR_CONFOUND``
     or closer: the cause stays named, ``ambiguous``, the term said beside it, whichever predicts the
@@ -382,8 +382,10 @@ def empirical_collinear(correlation: float, k_term: int, k_cause: int, own_varia
     that run; the measured ``T`` is the smoother column (the rate is its derivative, its noise
     amplified), so ``drift@temp`` wins held out whichever the head follows and was named ``high``
     on a rate effect (issue 54, dev seed 5501: |corr(T, dT/dt)| >= 0.997 on every such miss). The
-    data cannot tell them apart; the verdict says so (rule 15's level)."""
-    return not own_variable and k_term <= k_cause and abs(correlation) >= CORR_CONFOUND
+    data cannot tell them apart; the verdict says so (rule 15's level). A cause of more coefficients
+    (``drift@lag``: ``T - T_lag`` is close to ``tau dT/dt`` on any run) holds the term as one of its
+    curves: the family's claim stands, and only rule 22's held-out comparisons weigh it."""
+    return not own_variable and k_term == k_cause and abs(correlation) >= CORR_CONFOUND
 
 
 def rival_of_another_cause(term_variables, other_causes_variables) -> bool:

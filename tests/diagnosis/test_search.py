@@ -154,6 +154,7 @@ def test_the_tails_and_the_catalogues_rival_rules():
     assert rules.empirical_collinear(-0.999, 1, 1, False) and rules.empirical_collinear(0.96, 1, 1, False)
     assert not rules.empirical_collinear(0.9, 1, 1, False) and not rules.empirical_collinear(0.999, 1, 1, True)
     assert not rules.empirical_collinear(0.999, 2, 1, False)
+    assert not rules.empirical_collinear(0.999, 1, 3, False)  # drift@lag holds the rate as one of its curves
 
 
 def test_rule_22_knows_the_variables_of_every_family_it_compares():
