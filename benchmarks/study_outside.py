@@ -118,8 +118,13 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--json", default=None)
     ap.add_argument("--kinds", default="", help="comma-separated kinds (development); all if empty")
+    ap.add_argument("--interleave", action="store_true",
+                    help="the same draws, each kind's first, then each kind's second, ...: a run stopped early "
+                         "(the JSON is written after every case) has every kind alike")
     a = ap.parse_args(argv)
     jobs = jobs_for(a.per_kind, a.nulls, a.seed, [k for k in a.kinds.split(",") if k])
+    if a.interleave:
+        jobs = sorted(jobs, key=lambda j: (j[0] != "outside", j[2][-1], j[2][-2] if j[0] == "outside" else 0))
     t0 = time.time()
     records = []
 

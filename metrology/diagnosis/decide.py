@@ -401,7 +401,11 @@ def verdict_summary(v, tb) -> str:
     if tied or ties:  # rule 22's search terms and rule 12's crosstalk, each rival named, and the poses that separate
         return text + "; confidence ambiguous: " + "; ".join([
             *(f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) predicts held-out poses as "
-              f"well as {r.concerns[0]} (p = {r.value:.2g} that it predicts better)" for r in tied),
+              f"well as {r.concerns[0]} (p = {r.value:.2g} that it predicts better)" for r in tied
+              if r.statistic != "correlation"),
+            *(f"{r.concerns[1]} (a term of the run's variables, outside the catalogue) is the same curve as "
+              f"{r.concerns[0]} on this run (correlation {r.value:.3f}, at least {r.threshold:g})" for r in tied
+              if r.statistic == "correlation"),
             *(f"{', '.join(r.concerns[1:])} (a shift in proportion to another sensor's distance, crosstalk, outside "
               f"the catalogue) predicts held-out poses as well as {r.concerns[0]}" for r in ties)]) + (
             f"; poses that separate them: {', '.join(dict.fromkeys(r.outcome for r in ties))}" if ties else "") + tail

@@ -66,6 +66,22 @@ def _cause_columns(component, d0, cov, i):
     return np.where(np.isfinite(B), B, 0.0)
 
 
+def _collinearity(term, cause, fin) -> float:
+    """The multiple correlation of the term's columns ``(p, k)`` on the cause's ``(p, k_c)`` and a
+    constant, over the readings ``fin (p,)`` (the smallest over the term's columns; 0 where either is
+    constant): 1 where the cause's curve reproduces the term's (rule 22's ``empirical_collinear``)."""
+    X = np.column_stack([np.ones(int(fin.sum())), np.asarray(cause, float)[fin]])
+    out = 1.0
+    for y in np.asarray(term, float)[fin].T:
+        yc = y - y.mean()
+        ss = float(yc @ yc)
+        if not ss > 0:
+            return 0.0
+        res = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+        out = min(out, float(np.sqrt(max(0.0, 1.0 - float(res @ res) / ss))))
+    return out
+
+
 def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
     """``(v, rivals)``: the judgement ``v`` with rule 22 applied to the causes it names (``chosen``
     the selection's CandidateResults), ``rivals`` the RivalTerms found. A sole cause beaten: the
@@ -114,6 +130,7 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
             continue
         e_c = sen.heldout(cause.columns)
         best = tie = None
+        tie_corr = float('nan')
         for _, _, t in tries:
             e_t = sen.heldout(t.columns)
             d = ((e_c**2 - e_t**2) / sen.s**2)[sen.fin]
@@ -125,14 +142,21 @@ def empirical_rivals(ds, b, v, chosen, gross, folds) -> tuple:
             elif tie is None and rules.empirical_indistinguishable(g, t.columns.shape[1], cause.columns.shape[1],
                                                                    bool(own & set(t.variables))):
                 tie = RivalTerm(s.label, names[i], t.key, p, g, "empirical_indistinguishable")
+            elif tie is None and rules.empirical_collinear(corr := _collinearity(t.columns, cause.columns, sen.fin),
+                                                           t.columns.shape[1], cause.columns.shape[1],
+                                                           bool(own & set(t.variables))):
+                tie = RivalTerm(s.label, names[i], t.key, p, g, "empirical_collinear")
+                tie_corr = corr
         if best is not None:
             found.append(best)
             why.append(Reason(22, "empirical_better", Decision.EMPIRICAL_BETTER, (s.label, f"{best.sensor}: {best.term}"),
                               "p_better", best.p, rules.ALPHA_HELDOUT / len(tries), best.gain))
         elif tie is not None:
             ties.append(tie)
+            collinear = tie.rule == "empirical_collinear"  # its statistic the correlation, at rule 15's level
             why.append(Reason(22, tie.rule, Decision.EMPIRICAL_TIE, (s.label, f"{tie.sensor}: {tie.term}"),
-                              "p_better", tie.p, rules.ALPHA_HELDOUT / len(tries), tie.gain))
+                              "correlation" if collinear else "p_better", tie_corr if collinear else tie.p,
+                              rules.CORR_CONFOUND if collinear else rules.ALPHA_HELDOUT / len(tries), tie.gain))
     if not found:
         if not ties:
             return v, ()

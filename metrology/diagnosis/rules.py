@@ -28,7 +28,7 @@ __all__ = ["THRESHOLDS", "ALPHA_OUTLIER", "ALPHA_CANDIDATES", "ALPHA_HELDOUT", "
            "datum_agrees", "confidence_given_datum", "ALPHA_DATUM_PLANE", "DATUM_OFF_PRIOR_WIDEN",
            "datum_plane_off", "gross_given_others", "GROSS_RUN", "persists", "TAIL_REACH", "tails_not_gross", "MAX_EMPIRICAL", "search_tried",
            "search_in_sample", "search_tails_in_sample", "search_held_out", "room_for_another_term",
-           "empirical_better", "empirical_as_good", "empirical_indistinguishable", "rival_of_another_cause",
+           "empirical_better", "empirical_as_good", "empirical_indistinguishable", "empirical_collinear", "rival_of_another_cause",
            "search_beside"]
 
 # -- 1. gross readings ---------------------------------------------------------------------------
@@ -369,6 +369,23 @@ def empirical_indistinguishable(gain: float, k_term: int, k_cause: int, own_vari
     variables (a product of the run's time with a near-constant, against a drift) is the cause in
     another dress and ties by chance half the time: only :func:`empirical_as_good` weighs it."""
     return not own_variable and k_term <= k_cause and gain > 0
+
+
+def empirical_collinear(correlation: float, k_term: int, k_cause: int, own_variable: bool) -> bool:
+    """22. A term of a variable the cause's family does not follow (``own_variable`` False), of as many
+    coefficients, whose column the cause's columns reproduce (``correlation``: the multiple correlation
+    of the term on the cause's columns and a constant, over the sensor's readings) at ``CORR_CONFOUND``
+    or closer: the cause stays named, ``ambiguous``, the term said beside it, whichever predicts the
+    held-out poses better. Reason: physics, not the fit: through a first-order warm-up the
+    temperature's rate is affine in the temperature (``dT/dt = (T_end - T) / tau``), so a zero that
+    follows the air-to-head gradient (``dT/dt``) and one that follows ``T`` are the same curve in
+    that run; the measured ``T`` is the smoother column (the rate is its derivative, its noise
+    amplified), so ``drift@temp`` wins held out whichever the head follows and was named ``high``
+    on a rate effect (issue 54, dev seed 5501: |corr(T, dT/dt)| >= 0.997 on every such miss). The
+    data cannot tell them apart; the verdict says so (rule 15's level). A cause of more coefficients
+    (``drift@lag``: ``T - T_lag`` is close to ``tau dT/dt`` on any run) holds the term as one of its
+    curves: the family's claim stands, and only rule 22's held-out comparisons weigh it."""
+    return not own_variable and k_term == k_cause and abs(correlation) >= CORR_CONFOUND
 
 
 def rival_of_another_cause(term_variables, other_causes_variables) -> bool:

@@ -150,6 +150,11 @@ def test_the_tails_and_the_catalogues_rival_rules():
     assert rules.empirical_indistinguishable(0.4, 1, 1, False) and not rules.empirical_indistinguishable(-0.4, 1, 1, False)
     assert not rules.empirical_indistinguishable(5.0, 1, 1, True)  # the family's own variable: rule 22's as_good
     assert not rules.empirical_indistinguishable(5.0, 2, 1, False)  # more coefficients than the cause
+    # a term the cause's curve reproduces on the run (dT/dt through a warm-up, against drift@temp) ties, whatever its gain
+    assert rules.empirical_collinear(-0.999, 1, 1, False) and rules.empirical_collinear(0.96, 1, 1, False)
+    assert not rules.empirical_collinear(0.9, 1, 1, False) and not rules.empirical_collinear(0.999, 1, 1, True)
+    assert not rules.empirical_collinear(0.999, 2, 1, False)
+    assert not rules.empirical_collinear(0.999, 1, 3, False)  # drift@lag holds the rate as one of its curves
 
 
 def test_rule_22_knows_the_variables_of_every_family_it_compares():
@@ -208,6 +213,22 @@ def test_a_temperature_rate_through_a_warm_up_is_not_named_drift_high(tmp_path):
     assert d.confidence not in (Confidence.HIGH, Confidence.MODERATE), d.summary
     first = d.empirical.terms[0]
     assert first.sensor == case.effects[0].sensors[0] and first.variables == ("temperature_rate",), d.summary
+
+
+@pytest.mark.slow
+def test_a_temperature_rate_that_is_the_temperatures_curve_is_not_named_drift_high(tmp_path):
+    """Rule 22's ``empirical_collinear``: through a first-order warm-up ``dT/dt = (T_end - T) / tau``,
+    so ``drift@temp`` is the rate's curve (correlation 0.999 here); the measured ``T`` is the smoother
+    column and drift predicted held-out poses better, so it was named ``high`` (development seed 5501,
+    the kind's fifth draw). Now ``ambiguous``, and the search beside it names the rate."""
+    case = draw_outside(np.random.default_rng([5501, 1, 8, 4]), "temperature_rate")
+    assert case.temperature["shape"] == "warmup"
+    d = _diagnose(case, tmp_path)
+    assert d.confidence not in (Confidence.HIGH, Confidence.MODERATE), d.summary
+    assert any(r.rule == 22 and r.name == "empirical_collinear" for r in d.reasons), d.summary
+    first = d.empirical.terms[0]
+    assert first.sensor == case.effects[0].sensors[0] and first.variables == ("temperature_rate",), d.summary
+    assert "is the same curve as" in d.summary
 
 
 @pytest.mark.slow
