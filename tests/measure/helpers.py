@@ -117,11 +117,27 @@ def write_log_csv(cols, path):
 def calibrated_layout(noise=0.003):
     """Table 6's layout with a stated noise, a 40-60 mm range and a block-diagonal calibration
     covariance of 5 um / 0.01 deg (1 sigma)."""
-    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
     from metrology.core.layout import SensorLayout
+    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
 
     t6 = layout_from_table(TABLE6_NOMINAL)
     n = t6.n
     C = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, n))
     return SensorLayout(t6.names, t6.zero, t6.direction, np.full(n, noise), np.tile([40.0, 60.0], (n, 1)),
                         covariance=C)
+
+
+def table6_cell_spec(panel, seed=7, **kw):
+    """A forward-simulated cell's ``LogSpec``: the paper's Table 6 head (3 um noise) perturbed as a real one
+    (2-10 um, 0.001-0.01 deg, drawn by ``seed``), the cell's layout the nominal with a 5 um / 0.01 deg covariance, on ``panel``."""
+    from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
+    from metrology.sim.forward import perturb_layout
+    from metrology.sim.forward.log_spec import LogSpec
+
+    rng = np.random.default_rng(seed)
+    nominal = layout_from_table(TABLE6_NOMINAL, noise_mm=0.003)
+    nominal = nominal.with_params(nominal.zero, nominal.direction, range_mm=np.tile([30.0, 70.0], (4, 1)))
+    true = perturb_layout(rng, nominal, zero_error_mm=(0.002, 0.01), direction_error_deg=(0.001, 0.01))
+    cov = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, 4))
+    return LogSpec(true_layout=true, cell_layout=nominal.with_params(nominal.zero, nominal.direction, covariance=cov),
+                   panel=panel, **kw)

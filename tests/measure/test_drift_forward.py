@@ -4,27 +4,20 @@ cell's own adjustment; metrology/sim/forward/log), measured as `metro measure` m
 import numpy as np
 import pytest
 
-from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
 from metrology.io.holelog import batch_of
 from metrology.measure.chart import ARL_AT_DETECTABLE
 from metrology.measure.holes import Settings, measure_batch
 from metrology.measure.run import Feed, Watch
-from metrology.sim.forward import perturb_layout
 from metrology.sim.forward.log import simulate_cell
-from metrology.sim.forward.log_spec import LogSpec, SensorDrift, SensorShift
+from metrology.sim.forward.log_spec import SensorDrift, SensorShift
 from metrology.sim.forward.log_write import log_table
 from metrology.sim.forward.panels import make_panel
+from tests.measure.helpers import table6_cell_spec
 
 
 @pytest.fixture(scope="module")
 def spec():
-    rng = np.random.default_rng(4)
-    nominal = layout_from_table(TABLE6_NOMINAL, noise_mm=0.003)
-    nominal = nominal.with_params(nominal.zero, nominal.direction, range_mm=np.tile([30.0, 70.0], (4, 1)))
-    true = perturb_layout(rng, nominal, zero_error_mm=(0.002, 0.01), direction_error_deg=(0.001, 0.01))
-    cov = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, 4))
-    return LogSpec(true_layout=true, cell_layout=nominal.with_params(nominal.zero, nominal.direction, covariance=cov),
-                   panel=make_panel("flat"))
+    return table6_cell_spec(make_panel("flat"), seed=4)
 
 
 def _watch(spec, holes, seed):

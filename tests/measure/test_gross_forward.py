@@ -6,26 +6,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from metrology.core.paper import TABLE6_NOMINAL, layout_from_table
 from metrology.io.holelog import batch_of
 from metrology.measure.holes import OUTPUT_COLUMNS, Settings, Status, measure_batch
-from metrology.sim.forward import perturb_layout
 from metrology.sim.forward.log import simulate_cell
-from metrology.sim.forward.log_spec import LogSpec
 from metrology.sim.forward.log_write import log_table
 from metrology.sim.forward.panels import make_panel
+from tests.measure.helpers import table6_cell_spec
 
 TOL = np.radians(0.5)
 
 
 def _spec(panel):
-    rng = np.random.default_rng(7)
-    nominal = layout_from_table(TABLE6_NOMINAL, noise_mm=0.003)
-    nominal = nominal.with_params(nominal.zero, nominal.direction, range_mm=np.tile([30.0, 70.0], (4, 1)))
-    true = perturb_layout(rng, nominal, zero_error_mm=(0.002, 0.01), direction_error_deg=(0.001, 0.01))
-    cov = np.diag(np.tile([0.005 ** 2] * 3 + [np.radians(0.01) ** 2] * 2, 4))
-    return LogSpec(true_layout=true, cell_layout=nominal.with_params(nominal.zero, nominal.direction, covariance=cov),
-                   panel=panel)
+    return table6_cell_spec(panel)
 
 
 def _measure(spec, holes, seed, min_radius_mm=500.0):
