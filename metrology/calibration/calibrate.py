@@ -3,22 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 import numpy as np
 from metrology.calibration.dataset import Dataset
-from metrology.calibration.estimators import METHODS, Calibration, calibrate
+from metrology.calibration.estimators import DEFAULT_METHOD, METHODS, Calibration, calibrate
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis
 from metrology.core.tolerances import CORRELATION_REPORT, TARGET_TILT_DEG, TARGET_ZERO_MM
 from metrology.core.verdict import Check, Verdict
 from metrology.core.paper import EKF_PRESETS
 from metrology.calibration.identifiability import CHART_NAMES, identifiability
-
-
-#: the default estimator: on fixtures/measured, lsq and iekf recover the truth equally
-#: well (README "Estimators compared"); lsq is the fastest and its standard errors are
-#: scaled by the residual, so they stay honest when the stated noise is optimistic
-DEFAULT_METHOD = "lsq"
-
 
 #: model adequacy: a sensor's residuals are above its stated noise when the chi-square of its
 #: readings (dof = readings - 5) has a one-sided p below this (one false alarm in 1000 runs)
@@ -75,6 +69,14 @@ class CalibrationReport:
     certificate: object = None
     #: the head's effect terms estimated with the sensors (:class:`metrology.calibration.terms.TermFit`), or None
     terms: object = None
+
+    @cached_property
+    def convergence(self) -> list:
+        """:func:`~metrology.calibration.convergence.batch_convergence` of this run (a batch method): one refit per
+        pose count, computed once a report (``calibrate --report --plot`` draws it for the page and the plot file)."""
+        from metrology.calibration.convergence import batch_convergence
+
+        return batch_convergence(self.calibration.nominal, self.dataset.obs, self.calibration.method)
 
     @property
     def layout(self) -> SensorLayout:

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrology.calibration.calibrate import DEFAULT_METHOD
 from metrology.calibration.dataset import MIN_READINGS
-from metrology.calibration.estimators import calibrate
+from metrology.calibration.estimators import DEFAULT_METHOD, calibrate
 from metrology.core.layout import SensorLayout
 from metrology.core.model import readings
 from metrology.core.observations import Observations

@@ -24,7 +24,7 @@ import numpy as np
 
 
 from metrology.calibration.calibrate import CalibrationReport
-from metrology.calibration.convergence import batch_convergence, residual_table
+from metrology.calibration.convergence import residual_table
 from metrology.calibration.identifiability import CHART_NAMES, sigma_words
 from metrology.report.fit_report import FitSummary, correlations_from_cov, fit_report
 from metrology.report.plots import pyplot, save_figure
@@ -175,7 +175,7 @@ def convergence_figure(report: CalibrationReport, convergence=None):
             axes[i, 1].set_ylabel("direction-vector error [1]")
         title = f"{cal.method}: filter estimate after each measurement (dotted: stopping rule met)"
     else:
-        conv = report_convergence(report) if convergence is None else convergence
+        conv = report.convergence if convergence is None else convergence
         for i in range(n):
             k, th, se = conv[i]
             for j, p in enumerate(("x", "y", "z")):
@@ -203,27 +203,6 @@ def convergence_figure(report: CalibrationReport, convergence=None):
                           borderaxespad=0.2)
     fig.set_layout_engine("constrained")
     return fig
-
-
-#: :func:`report_convergence`'s results: id(report) -> (weak reference to the report, convergence)
-_CONVERGENCE: dict = {}
-
-
-def report_convergence(report: CalibrationReport) -> list:
-    """:func:`~metrology.calibration.convergence.batch_convergence` of ``report``'s run, computed once a
-    report: ``calibrate --report --plot`` draws the convergence figure for the page and for the plot
-    file (one refit per pose count: 97 fits for the demo's 100 poses), the same numbers both times. Kept
-    while the report lives (a weak reference; the same object, not an equal one)."""
-    import weakref
-
-    key = id(report)
-    hit = _CONVERGENCE.get(key)
-    if hit is not None and hit[0]() is report:
-        return hit[1]
-    cal = report.calibration
-    conv = batch_convergence(cal.nominal, report.dataset.obs, cal.method)
-    _CONVERGENCE[key] = (weakref.ref(report, lambda _ref, key=key: _CONVERGENCE.pop(key, None)), conv)
-    return conv
 
 
 #: the convergence plot's y range is set by the estimates and bands of the poses after this share of
