@@ -256,7 +256,9 @@ def load_panel(path, units=None) -> Panel:
     ValueError
         With the file name and what was wrong.
     """
-    import trimesh
+    from metrology.panel._trimesh import trimesh as deferred
+
+    trimesh = deferred()  # a STEP's library loaded only when a STEP is read
 
     path = str(path)
     if units is not None and units not in UNITS_MM:
