@@ -58,6 +58,13 @@ VERTEX_REACH = 2.0
 #: ... at least VERTEX_MIN of them (the quartic's 15 terms and 10 to spare), else the ray-cast heights
 #: (a mesh coarse for the footprint)
 VERTEX_MIN = 25
+#: up to this many holes x faces, the rays and closest points are trimesh's own (double precision, an r-tree;
+#: :data:`metrology.panel.rays.AUTO_ORDER` otherwise, Open3D first): loading Open3D's library costs 0.45-0.5 s
+#: CPU, trimesh's engine 1.3 ms a hole on the bundled 1250-face wing (Open3D's 0.14 ms after that import), so a
+#: table of 25 holes paid the import 8x what trimesh's rays cost; the break-even there (~390 holes, 490 000 holes
+#: x faces) taken at 30 %: meshes of more faces give a ray more candidates. Measured (eng_cost, 25-2000 holes):
+#: benchmarks/results/measure_panel_speed_issue49_r6.md
+DOUBLE_ENGINE_WORK = 150_000
 
 
 def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, form_mm: float = 0.0,
@@ -84,7 +91,8 @@ def panel_surfaces(panel, table, footprint_mm: float, position_mm: float = 0.5, 
     if len(table.point) >= 3 and ext_t * UNIT_RATIO < ext_p:
         raise ValueError(f"{table.source}: its {len(table.point)} holes span {ext_t:.4g} and the panel {shown} "
                          f"{ext_p:.4g}: the hole table is not in mm (metres?); x,y,z must be mm in the panel's frame")
-    caster = RayCaster(panel.mesh)
+    caster = RayCaster(panel.mesh, "trimesh" if len(table.point) * len(panel.mesh.faces) <= DOUBLE_ENGINE_WORK
+                       else "auto")
     tri, snapped = caster.closest(table.point)
     dist = np.linalg.norm(snapped - table.point, axis=1)
     off = np.flatnonzero(dist > POINT_OFF_MM)

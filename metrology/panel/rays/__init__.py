@@ -20,32 +20,34 @@ __all__ = ["RayCaster", "ENGINES", "AUTO_ORDER", "available_engines", "engine_cl
 
 def available_engines() -> list:
     """The ray engines usable here, among ``trimesh``, ``embree``, ``open3d``."""
-    out = ["trimesh"]
-    try:
-        from trimesh.ray import has_embree
+    return [e for e in ENGINES if _available(e)]
 
-        if has_embree:
-            out.append("embree")
-    except ImportError:
-        pass
-    try:
-        from metrology.io._o3d import open3d
 
-        open3d()
-        out.append("open3d")
-    except (ImportError, OSError):
-        pass
-    return out
+def _available(engine: str) -> bool:
+    """``engine`` usable here (only its own library imported: ``trimesh`` needs none beyond trimesh)."""
+    if engine == "embree":
+        try:
+            from trimesh.ray import has_embree
+        except ImportError:
+            return False
+        return bool(has_embree)
+    if engine == "open3d":
+        try:
+            from metrology.io._o3d import open3d
+
+            open3d()
+        except (ImportError, OSError):
+            return False
+    return True
 
 
 def engine_class(engine: str = "auto") -> type:
     """The :class:`RayCaster` subclass of ``engine`` (``auto``: the first of
     :data:`AUTO_ORDER` available here); ``ValueError`` naming the choices otherwise."""
-    engines = available_engines()
     if engine == "auto":
-        engine = next(e for e in AUTO_ORDER if e in engines)
+        engine = next(e for e in AUTO_ORDER if _available(e))
     if engine not in ENGINES:
         raise ValueError(f"engine must be auto, trimesh, embree or open3d, got {engine!r}")
-    if engine not in engines:
-        raise ValueError(f"ray engine {engine!r} is not available here (available: {', '.join(engines)})")
+    if not _available(engine):
+        raise ValueError(f"ray engine {engine!r} is not available here (available: {', '.join(available_engines())})")
     return ENGINES[engine]

@@ -119,8 +119,18 @@ class RayCaster:
         )
         return scene
 
+    def _closest_triangle(self, points):
+        """``(m,)`` int: the triangle nearest each point (Open3D's, float32 on centred coordinates)."""
+        from metrology.io._o3d import open3d
+
+        o3d = open3d()
+        if self._closest_scene is None:
+            self._closest_scene = self._open3d_scene()
+        ans = self._closest_scene.compute_closest_points(o3d.core.Tensor((points - self._centre).astype(np.float32)))
+        return ans["primitive_ids"].numpy().astype(np.int64)
+
     def closest(self, points):
-        """Closest points on the mesh (Open3D finds the triangle, refined in double).
+        """Closest points on the mesh (the engine finds the triangle, refined in double).
 
         Parameters
         ----------
@@ -133,12 +143,6 @@ class RayCaster:
         """
         import trimesh
 
-        from metrology.io._o3d import open3d
-
-        o3d = open3d()
-        if self._closest_scene is None:
-            self._closest_scene = self._open3d_scene()
         points = np.asarray(points, float).reshape(-1, 3)
-        ans = self._closest_scene.compute_closest_points(o3d.core.Tensor((points - self._centre).astype(np.float32)))
-        tri = ans["primitive_ids"].numpy().astype(np.int64)
+        tri = self._closest_triangle(points)
         return tri, trimesh.triangles.closest_point(self.triangles[tri], points)

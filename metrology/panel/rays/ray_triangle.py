@@ -1,4 +1,5 @@
-"""trimesh's pure-numpy engine (an r-tree of the triangles, double precision)."""
+"""trimesh's pure-numpy engine (an r-tree of the triangles, double precision): rays and closest points without
+Open3D."""
 
 from __future__ import annotations
 
@@ -19,3 +20,8 @@ class TriangleCaster(RayCaster):
 
     def _first_triangle(self, origins, directions):
         return np.asarray(self._impl.intersects_first(origins, directions), dtype=np.int64)
+
+    def _closest_triangle(self, points):
+        from trimesh.proximity import closest_point
+
+        return np.asarray(closest_point(self.mesh, points)[2], dtype=np.int64)
