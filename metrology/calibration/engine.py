@@ -245,11 +245,12 @@ class LeastSquares:
         J6 = jacobian_raw(self.nominal.zero[S] + th[S, :3], self.u0n + np.einsum("nk,nkj->nj", th[S, 3:], self.basis_n),
                           self.obs.normal, self.obs.offset)
         J0 = np.concatenate([J6[..., :3], np.einsum("pnj,nkj->pnk", J6[..., 3:], self.basis_n)], axis=-1)  # (p, s, 5)
-        g = np.ones_like(d0)
-        for c, v in zip(self.free, vals):
-            if c.uses_d0:
-                g += c.d_dd0(v, d0, self.cov)
-        J0 = J0 * g[:, S, None]
+        if any(c.uses_d0 for c in self.free):  # (else the factor is one)
+            g = np.ones_like(d0)
+            for c, v in zip(self.free, vals):
+                if c.uses_d0:
+                    g += c.d_dd0(v, d0, self.cov)
+            J0 = J0 * g[:, S, None]
         p, s = ok.shape
         Jb = np.zeros((p, s, nb))
         for a in range(s if nb else 0):
@@ -348,9 +349,12 @@ def gauss_newton(fun, jac, x0, loss, max_iter=GN_MAX_ITER, tol=GN_TOL):
     cost = cost_of(r)
     for _ in range(max_iter):
         J = jac(x)
-        w = np.ones_like(r) if loss == "linear" else 1.0 / np.sqrt(np.sqrt(1 + r * r))
-        Jw, rw = J * w[:, None], r * w
-        scale = np.linalg.norm(Jw, axis=0)
+        if loss == "linear":  # unit weights (what multiplying by ones gave)
+            Jw, rw = J, r
+        else:
+            w = 1.0 / np.sqrt(np.sqrt(1 + r * r))
+            Jw, rw = J * w[:, None], r * w
+        scale = np.sqrt(np.add.reduce(Jw * Jw, axis=0))  # np.linalg.norm(Jw, axis=0), without its checks
         scale = np.where(scale > 0, scale, 1.0)
         Js = Jw / scale
         step = -np.linalg.lstsq(Js, rw, rcond=1e-12)[0] / scale
