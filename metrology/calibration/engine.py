@@ -151,6 +151,7 @@ class LeastSquares:
         self.nb = 0 if self.hold else 5 * len(S)
         self.x0 = np.concatenate([np.zeros(0) if self.hold else self.theta0[S].ravel()] + [c.values for c in self.free])
         self._last = (None, None)  # the last prediction's x (bytes) and value: residual and jacobian ask at one x
+        self._last_r = (None, None)  # the same for the residual matrix (the solver, the result and its dof ask)
         self._charts()
         self._per_pose_columns()
 
@@ -221,11 +222,15 @@ class LeastSquares:
     def residual_matrix(self, x):
         """``(R (p, s), e)``: whitened residuals of the free sensors (zero where no reading) with
         the per-pose values ``e`` profiled out (None without)."""
+        key = x.tobytes()
+        if self._last_r[0] == key:
+            return self._last_r[1]
         _, _, d0, f, _ = self.predict(x)
         R = np.where(self.ok, (self.dS - d0[:, self.S] - f[:, self.S]) / self.sig, 0.0)
         e = None
         if self.e_columns is not None:
             R, e = self._project(R)
+        self._last_r = (key, (R, e))
         return R, e
 
     def residual(self, x):
