@@ -151,6 +151,7 @@ class LeastSquares:
         self.nb = 0 if self.hold else 5 * len(S)
         self.x0 = np.concatenate([np.zeros(0) if self.hold else self.theta0[S].ravel()] + [c.values for c in self.free])
         self._last = (None, None)  # the last prediction's x (bytes) and value: residual and jacobian ask at one x
+        self._last_r = (None, None)  # the same for the residual matrix (the solver, the result and its dof ask)
         self._charts()
         self._per_pose_columns()
 
@@ -221,11 +222,15 @@ class LeastSquares:
     def residual_matrix(self, x):
         """``(R (p, s), e)``: whitened residuals of the free sensors (zero where no reading) with
         the per-pose values ``e`` profiled out (None without)."""
+        key = x.tobytes()
+        if self._last_r[0] == key:
+            return self._last_r[1]
         _, _, d0, f, _ = self.predict(x)
         R = np.where(self.ok, (self.dS - d0[:, self.S] - f[:, self.S]) / self.sig, 0.0)
         e = None
         if self.e_columns is not None:
             R, e = self._project(R)
+        self._last_r = (key, (R, e))
         return R, e
 
     def residual(self, x):
@@ -245,11 +250,12 @@ class LeastSquares:
         J6 = jacobian_raw(self.nominal.zero[S] + th[S, :3], self.u0n + np.einsum("nk,nkj->nj", th[S, 3:], self.basis_n),
                           self.obs.normal, self.obs.offset)
         J0 = np.concatenate([J6[..., :3], np.einsum("pnj,nkj->pnk", J6[..., 3:], self.basis_n)], axis=-1)  # (p, s, 5)
-        g = np.ones_like(d0)
-        for c, v in zip(self.free, vals):
-            if c.uses_d0:
-                g += c.d_dd0(v, d0, self.cov)
-        J0 = J0 * g[:, S, None]
+        if any(c.uses_d0 for c in self.free):  # (else the factor is one)
+            g = np.ones_like(d0)
+            for c, v in zip(self.free, vals):
+                if c.uses_d0:
+                    g += c.d_dd0(v, d0, self.cov)
+            J0 = J0 * g[:, S, None]
         p, s = ok.shape
         Jb = np.zeros((p, s, nb))
         for a in range(s if nb else 0):
@@ -348,9 +354,12 @@ def gauss_newton(fun, jac, x0, loss, max_iter=GN_MAX_ITER, tol=GN_TOL):
     cost = cost_of(r)
     for _ in range(max_iter):
         J = jac(x)
-        w = np.ones_like(r) if loss == "linear" else 1.0 / np.sqrt(np.sqrt(1 + r * r))
-        Jw, rw = J * w[:, None], r * w
-        scale = np.linalg.norm(Jw, axis=0)
+        if loss == "linear":  # unit weights (what multiplying by ones gave)
+            Jw, rw = J, r
+        else:
+            w = 1.0 / np.sqrt(np.sqrt(1 + r * r))
+            Jw, rw = J * w[:, None], r * w
+        scale = np.sqrt(np.add.reduce(Jw * Jw, axis=0))  # np.linalg.norm(Jw, axis=0), without its checks
         scale = np.where(scale > 0, scale, 1.0)
         Js = Jw / scale
         step = -np.linalg.lstsq(Js, rw, rcond=1e-12)[0] / scale

@@ -365,8 +365,7 @@ class Nonlinearity(Component):
         out = []
         grid = np.linspace(-1.0, 1.0, 401)
         for k in cls.SHAPE_ORDERS:
-            c = np.zeros(k + 1)
-            c[k] = 1.0
+            c = np.eye(k + 1)[k]
             g = legendre.legval(grid, c)
             g = g - np.polyval(np.polyfit(grid, g, 1), grid)
             out.append(legendre.legval((2 * d - lo - hi) / (hi - lo), c) / float(g.max() - g.min()))
@@ -433,21 +432,21 @@ class Nonlinearity(Component):
                   + ("q" if self.inner_mm is not None else ""))
         return super().label + {0: spline, 3: "", 5: "@5"}[self.order]
 
-    def _spline(self, x, a=-1.0, b=1.0, inner=None):
-        """``(..., knots + 2)``: cubic B-splines on ``[a, b]`` (normalised units; interior knots
-        ``inner``, a tuple in the same units, or even) less their least-squares line there,
-        and their derivatives in ``x``."""
+    def _spline(self, x, a=-1.0, b=1.0, inner=None, deriv=True):
+        """``(..., n, knots + 2)``: cubic B-splines on ``[a, b]`` (normalised; interior knots ``inner`` or even) less
+        their least-squares line there, and their derivatives in ``x`` (NaN if not ``deriv``), on its sensors."""
         from scipy.interpolate import BSpline
 
         t, line, dline = _spline_setup(float(a), float(b), self.knots, inner)
         xf = np.asarray(x, float).ravel()
-        ok = np.isfinite(xf)  # a reading the model cannot place (NaN) has no basis value
+        # a reading the model cannot place (NaN) has no basis value, nor has another sensor's (its term is zero)
+        ok = np.isfinite(xf) & np.broadcast_to(self._mask(np.shape(x)[-1]), np.shape(x)).ravel()
         nb = len(t) - 4
         B = np.full((len(xf), nb), np.nan)
         dB = np.full((len(xf), nb), np.nan)
         if np.any(ok):
             B[ok] = BSpline.design_matrix(xf[ok], t, 3, extrapolate=True).toarray()
-        for j, dspline in enumerate(_spline_derivatives(float(a), float(b), self.knots, inner)):
+        for j, dspline in enumerate(_spline_derivatives(float(a), float(b), self.knots, inner) if deriv else ()):
             dB[ok, j] = dspline(xf[ok])  # derivative of each basis function (nb small)
         P = B - line[0][None, :] - xf[:, None] * line[1][None, :]
         dP = dB - dline[None, :]
@@ -465,7 +464,7 @@ class Nonlinearity(Component):
             if self.inner_mm is not None:
                 lo, hi = cov.range_mm[self.sensors[0]]
                 inner = tuple(float((2 * k - lo - hi) / (hi - lo)) for k in self.inner_mm)
-            return self._spline(x, *self._span_x(cov), inner)
+            return self._spline(x, *self._span_x(cov), inner, deriv)
         V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
         if not deriv:
             return V[..., 2:], None
