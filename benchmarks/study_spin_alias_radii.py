@@ -210,7 +210,7 @@ def run(args):
                 rng = np.random.default_rng([args.seed, hd, int(float(r)), list(CELLS).index(cell), 7])
                 spins = rng.uniform(-1.0, 1.0, args.holes) * np.radians(CELLS[cell])
                 ch, log, surf = one_log(rng, panel, span, true, cal, args.holes, spins, args.mesh_step)
-                b, calls = _spied(lambda: measure_batch(cal, log, Settings(surfaces=surf)))
+                b, calls = _spied(lambda cal=cal, log=log, surf=surf: measure_batch(cal, log, Settings(surfaces=surf)))
                 U = np.radians(b.columns.column("U95_angle_deg").to_numpy(zero_copy_only=False).astype(float))
                 ok = np.isfinite(b.angle_before) & np.isfinite(U)
                 err = np.abs(b.angle_before - ch.true_angle)
