@@ -274,7 +274,7 @@ def _free_beyond(sub, dd, shape, u_shape, higher, h, extra):
     (:func:`metrology.measure.spin_free.needs_beyond`)."""
     from metrology.measure.spin_free import free_beyond, needs_beyond
 
-    k = np.flatnonzero(needs_beyond(sub, dd, shape, h.U95))
+    k = np.flatnonzero(needs_beyond(sub, dd, shape, h))
     if not k.size:
         return h, extra
     hk, z = free_beyond(_fit, _spun, sub, dd[k], shape[k], u_shape[k], higher.rows(k), _rows(h, k))

@@ -17,7 +17,7 @@ over every spin added to the spin's (:data:`metrology.measure.budget.SPIN`, kind
 the redundant reading's misfit (``misfit_bound``) the most any of those spins' whole fits (the shape and the CAD
 beyond it turned with the head) moves it from the fit over every spin, over ``cos(2 pi / n)`` (the largest a
 ``2 psi`` harmonic reaches between ``n`` steps).
-Only where it can matter (:data:`FREE_BEYOND_SHARE`): elsewhere the holes are left as they were.
+Only where it can matter (:data:`FREE_BEYOND_SHARE`, :data:`FREE_BEYOND_SDS`): elsewhere the holes are left as they were.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 
 from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL, Budget, combine
 
-__all__ = ["FREE_BEYOND_SPINS", "FREE_BEYOND_SHARE", "needs_beyond", "free_beyond"]
+__all__ = ["FREE_BEYOND_SPINS", "FREE_BEYOND_SHARE", "FREE_BEYOND_SDS", "needs_beyond", "free_beyond"]
 
 #: spins over the whole turn at which the CAD beyond second order is fitted for a hole whose spin is not known: the
 #: mean of ``n`` equal steps is exact for harmonics under ``n psi`` (the footprint's terms reach degree 8), their
@@ -45,15 +45,27 @@ FREE_BEYOND_SPINS = 16
 FREE_BEYOND_SHARE = 0.5
 
 
-def needs_beyond(sub, dd, shape, U95):
-    """(h,) bool: the holes whose CAD beyond second order :func:`free_beyond` takes (:data:`FREE_BEYOND_SHARE`);
-    ``sub`` SensorLayout, ``dd`` (h, n) mm, ``shape`` (h, 3, 3) 1/mm TCS, ``U95`` (h,) rad over every spin."""
+#: and, with a redundant reading, where that sag ``k^3 r^4 / 8`` is over this many of the misfit's sd: the misfit's
+#: anisotropic part of it is not bounded by the fit over every spin, and rule 2 (4 sd beyond its bound) took it for a
+#: gross reading (cylinder R 100 under Table 6, a free spin: sag 63 um, 7.5 % of the holes refused; R 200 8 um, R 300
+#: 2 um: none). Under one sd, a fraction of it reaching the misfit moves the 4-sd test by a fraction of an sd
+FREE_BEYOND_SDS = 1.0
+
+
+def needs_beyond(sub, dd, shape, h):
+    """(h,) bool: the holes whose CAD beyond second order :func:`free_beyond` takes (:data:`FREE_BEYOND_SHARE`,
+    :data:`FREE_BEYOND_SDS`); ``sub`` SensorLayout, ``dd`` (h, n) mm, ``shape`` (h, 3, 3) 1/mm TCS, ``h`` HoleNormals
+    over every spin."""
     k00, k01, k11 = shape[:, 0, 0], shape[:, 0, 1], shape[:, 1, 1]
     k = np.abs(0.5 * (k00 + k11)) + np.sqrt(0.25 * (k00 - k11) ** 2 + k01 * k01)  # 1/mm, the largest |curvature|
     z, u = sub.zero, sub.direction
     r = np.hypot(z[None, :, 0] + dd * u[None, :, 0], z[None, :, 1] + dd * u[None, :, 1]).max(1)  # mm, the spots'
+    sag = k ** 3 * r ** 4 / 8.0  # mm
     with np.errstate(invalid="ignore"):
-        return k ** 3 * r ** 3 / 8.0 > FREE_BEYOND_SHARE * U95
+        need = sag / r > FREE_BEYOND_SHARE * h.U95
+        if h.residual_sd is not None:
+            need |= sag > FREE_BEYOND_SDS * h.residual_sd
+    return need
 
 
 def free_beyond(fit, spun, sub, dd, shape, u_shape, higher, h):
