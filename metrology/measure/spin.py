@@ -28,7 +28,8 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   wherever in the bound the spin sits; docs/spin.md);
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
   isotropic part (the mean curvature, the same at every spin) is fitted, and its deviatoric part, of
-  known size ``(k1 - k2) / 2`` and unknown direction, enters the budget as a bound over every spin;
+  known size ``(k1 - k2) / 2`` and unknown direction, enters the budget as a bound over every spin (at a tight
+  radius the CAD beyond second order likewise: :mod:`metrology.measure.spin_free`);
   the redundant reading's gross-reading allowance takes the most it moves the misfit.
 
 The reason column says which holes were judged with the spin not known, the summary how many rest on

@@ -31,8 +31,9 @@ from metrology.measure.budget import PANEL_SHAPE, SPIN, SPIN_READ, SURFACE_MODEL
 __all__ = ["FREE_BEYOND_SPINS", "FREE_BEYOND_SHARE", "FREE_BEYOND_SDS", "needs_beyond", "free_beyond"]
 
 #: spins over the whole turn at which the CAD beyond second order is fitted for a hole whose spin is not known: the
-#: mean of ``n`` equal steps is exact for harmonics under ``n psi`` (the footprint's terms reach degree 8), their
-#: largest departure within ``1 - cos(pi / 16)`` (2 %) of the 8th harmonic's peak, 32 fits a hole at a tight radius
+#: mean of ``n`` equal steps is exact for harmonics under ``n psi`` (the footprint's terms reach degree 8); the largest
+#: departure is sampled, a ``k psi`` harmonic's peak found to ``cos(k pi / n)`` (2 psi 92 %, 4 psi 71 %: the higher
+#: ones are the smaller terms); 32 fits a hole at a tight radius
 FREE_BEYOND_SPINS = 16
 
 #: a hole judged over every spin takes the CAD beyond second order (:func:`free_beyond`) where a sphere of its largest
