@@ -28,7 +28,8 @@ without a pose (rule 1b of :mod:`metrology.measure.holes`):
   wherever in the bound the spin sits; docs/spin.md);
 - **the spin not known** (:class:`metrology.measure.surface.PanelTerms` ``free``): the shape's
   isotropic part (the mean curvature, the same at every spin) is fitted, and its deviatoric part, of
-  known size ``(k1 - k2) / 2`` and unknown direction, enters the budget as a bound over every spin;
+  known size ``(k1 - k2) / 2`` and unknown direction, enters the budget as a bound over every spin (at a tight
+  radius the CAD beyond second order likewise: :mod:`metrology.measure.spin_free`);
   the redundant reading's gross-reading allowance takes the most it moves the misfit.
 
 The reason column says which holes were judged with the spin not known, the summary how many rest on
@@ -254,6 +255,8 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     b = np.flatnonzero(free)
     if b.size:
         h, extra = _fit(sub, dd[b], shape[b], u_shape[b], spin[b], None, free=True)
+        if higher is not None:  # a tight radius: the CAD beyond second order over every spin (spin_free)
+            h, extra = _free_beyond(sub, dd[b], shape[b], u_shape[b], higher.rows(b), h, extra)
         if held is not None and held[0].size:  # the alias's holes: the misfit the convention passed kept for rules 2-3
             k = np.searchsorted(b, held[0])
             h = _put(h, k, _put(held[1], np.arange(k.size), _rows(h, k)), everything=True)
@@ -265,6 +268,20 @@ def panel_normals(sub, dd, shape, u_shape, spin, higher, convention, stated: boo
     h, extra = _merge(m, parts) if len(parts) > 1 or parts[0][0].size != m else (parts[0][1], parts[0][2])
     return SpinJudged(h, extra, free, convention & ~free, z, convention & ~free & (share > SPIN_BOUND_SHARE), alias,
                       alias_reach, stated)
+
+
+def _free_beyond(sub, dd, shape, u_shape, higher, h, extra):
+    """``(h, extra)`` of holes judged over every spin with the CAD beyond second order where it can matter
+    (:func:`metrology.measure.spin_free.needs_beyond`)."""
+    from metrology.measure.spin_free import free_beyond, needs_beyond
+
+    k = np.flatnonzero(needs_beyond(sub, dd, shape, h))
+    if not k.size:
+        return h, extra
+    hk, z = free_beyond(_fit, _spun, sub, dd[k], shape[k], u_shape[k], higher.rows(k), _rows(h, k))
+    if z is not None:
+        extra.panel_misfit_z[k] = z
+    return _put(h, k, hk, everything=True), extra
 
 
 def _alias(sub, dd, shape, u_shape, spin, higher, h0):

@@ -17,9 +17,10 @@ from metrology.sim.forward.panels import make_panel
 from tests.measure.panel_fixtures import panel_mesh
 
 
-def _free_spin(stated_deg=None, spin_deg=180.0, holes=120, seed=49):
-    """``(batch, covered (N,) bool, true spin (N,) rad)``: a perturbed Table 6 head on a cylinder R 500's crest (axis
-    along x), the spin uniform within +-spin_deg per hole, measured with its true layout and the CAD, no pose."""
+def _free_spin(stated_deg=None, spin_deg=180.0, holes=120, seed=49, panel=("cylinder", 500.0), sensors=None, span=60.0):
+    """``(batch, covered (N,) bool, true spin (N,) rad)``: a perturbed Table 6 head (its ``sensors``, all if None) on
+    a ``panel``'s crest (a cylinder's axis along x; ``|x| <= span`` mm), the spin uniform within +-spin_deg per hole,
+    measured with its true layout and the CAD, no pose."""
     from dataclasses import replace
 
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
@@ -31,9 +32,10 @@ def _free_spin(stated_deg=None, spin_deg=180.0, holes=120, seed=49):
 
     rng = np.random.default_rng(seed)
     lay = perturb_layout(rng, load_layout(data_path("measured/nominal.toml")))
-    panel = make_panel("cylinder", 500.0, axis=(1.0, 0.0, 0.0))
+    lay = lay if sensors is None else lay.subset(list(sensors))
+    panel = make_panel(panel[0], panel[1], axis=(1.0, 0.0, 0.0)) if panel[0] == "cylinder" else make_panel(*panel)
     P = np.zeros((holes, 3))
-    P[:, 0] = np.linspace(-60.0, 60.0, holes)
+    P[:, 0] = np.linspace(-span, span, holes)
     P[:, 2] = panel.height(P[:, 0], P[:, 1])
     feed = -panel.normal_at(P)
     ids = tuple(f"H{i}" for i in range(holes))
@@ -74,3 +76,23 @@ def test_a_cell_that_keeps_its_convention_keeps_it_where_it_is_stated(stated):
         assert b.on_convention.all() and not b.spin_free.any()
     else:
         assert b.spin_free.mean() > 0.5, b.spin_free.mean()
+
+
+@pytest.mark.parametrize("panel,sensors", [(("sphere", 50.0), None), (("sphere", 50.0), ("L1", "L2", "L3")),
+                                           (("cylinder", 50.0), None)])
+def test_holes_judged_over_every_spin_keep_the_cad_beyond_second_order_at_a_tight_radius(panel, sensors):
+    """R 50 under Table 6: a fit over every spin without the CAD beyond second order tilted the normal on a sphere
+    0.12-0.20 deg against a U95 of 0.02 deg (no deviatoric part to cover it), and on a cylinder its misfit was taken
+    for a gross reading (19 % of a free spin's holes not measured): metrology.measure.spin_free. 3 sensors with nothing
+    stated: every hole judged over every spin; 4 sensors, a free spin: the holes the reading refutes or cannot tell
+    from an alias."""
+    b, covered, _ = _free_spin(spin_deg=180.0, holes=80, seed=6111, panel=panel, sensors=sensors,
+                               span=12.0 if panel[0] == "sphere" else 60.0)
+    judged = np.isfinite(b.angle_before)
+    assert judged.all(), [r for r, j in zip(b.columns.column("reason").to_pylist(), judged) if not j][:3]
+    free = b.spin_free if sensors is not None else np.array(
+        ["covers every spin" in (r or "") for r in b.columns.column("reason").to_pylist()])
+    if sensors is not None:
+        assert free.all()
+    assert covered[free].mean() >= 0.9 if free.sum() >= 10 else (~covered[free]).sum() <= 1, (free.sum(), covered[free])
+    assert covered.mean() >= 0.93, covered.mean()
