@@ -63,6 +63,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
+from metrology.io.arrays import to_numpy
 from metrology.io.holelog import CELL, PANEL, text_codes
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Labels, Status, blanked
 from metrology.measure.effects import apply_terms
@@ -327,7 +328,7 @@ def _poses_disagree(before, after, settings):
 def _readings(table, names, suffix=""):
     """(N, n) float, mm: the ``d_<sensor><suffix>`` columns, nulls as NaN."""
     cols = [table.column(f"d_{s}{suffix}") for s in names]
-    return np.stack([c.to_numpy(zero_copy_only=False).astype(float, copy=False) for c in cols], axis=1)
+    return np.stack([to_numpy(c).astype(float, copy=False) for c in cols], axis=1)
 
 
 def _duplicates(ids):

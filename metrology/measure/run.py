@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Iterator, Protocol
 import numpy as np
 
 from metrology.core.layout import SensorLayout
+from metrology.io.arrays import from_numpy, to_numpy
 from metrology.io.holelog import CELL, INTERNAL, PANEL, TIME_S, HoleLog, Partition, text_codes
 from metrology.io.names import utc
 from metrology.measure.chart import CusumChart
@@ -129,7 +130,7 @@ class Feed:
         if ch.index.size:
             sig[ch.index] = ch.signature
         return cls(log, part, first_row + np.arange(n), _str(t.column(CELL), batch.cell), _str(t.column(PANEL), batch.panel),
-                   t.column("hole_id").combine_chunks(), t.column(TIME_S).to_numpy(), charted, rho, sd, sig)
+                   t.column("hole_id").combine_chunks(), to_numpy(t.column(TIME_S)), charted, rho, sd, sig)
 
     @classmethod
     def concat(cls, feeds) -> "Feed | None":
@@ -192,9 +193,7 @@ class Watch:
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
                 chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors, by_panel=self.by_panel))
-                import pyarrow as pa
-
-                chart.update(f.hole_id.filter(pa.array(c)), f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c],
+                chart.update(f.hole_id.filter(from_numpy(c)), f.time_s[c], f.panel[c], f.rho_mm[c], f.noise_sd_mm[c],
                              f.signature[c])
 
     def join(self, other: "Watch") -> None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from metrology.io.arrays import to_numpy
 from metrology.io.holelog import CELL, PANEL, TIME_S, text_codes
 from metrology.measure.holes import CODE, STATUSES, HoleBatch, Status
 from metrology.measure.tally import (CAD_OFFSET_MM, OFF_CAD_SIGMAS, CadSums, Counts, Figures, GroupKey, OffCadSums,
@@ -98,7 +99,7 @@ def _groups(batch):
     t = batch.columns
     ci, cells = (batch.cell.codes, batch.cell.values) if batch.cell is not None else text_codes(t.column(CELL))
     pi, panels = (batch.panel.codes, batch.panel.values) if batch.panel is not None else text_codes(t.column(PANEL))
-    day = np.floor(t.column(TIME_S).to_numpy() / 86400.0).astype(np.int64)
+    day = np.floor(to_numpy(t.column(TIME_S)) / 86400.0).astype(np.int64)
     d0 = int(day.min()) if len(day) else 0
     nd = int(day.max()) - d0 + 1 if len(day) else 1
     code = (ci * len(panels) + pi) * nd + (day - d0)
