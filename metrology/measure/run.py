@@ -124,13 +124,16 @@ class Feed:
         ch = batch.chart
         charted = np.zeros(n, bool)
         charted[ch.index] = True
-        rho = np.full(n, np.nan)
-        sd = np.full(n, np.nan)
-        sig = np.full((n, ch.signature.shape[1] if ch.signature.ndim == 2 else 4), np.nan)
-        rho[ch.index] = ch.rho_mm
-        sd[ch.index] = ch.noise_sd_mm
-        if ch.index.size:
-            sig[ch.index] = ch.signature
+        if ch.index.size == n and ch.signature.ndim == 2:  # every hole charted: the chart's own arrays
+            rho, sd, sig = ch.rho_mm, ch.noise_sd_mm, ch.signature
+        else:
+            rho = np.full(n, np.nan)
+            sd = np.full(n, np.nan)
+            sig = np.full((n, ch.signature.shape[1] if ch.signature.ndim == 2 else 4), np.nan)
+            rho[ch.index] = ch.rho_mm
+            sd[ch.index] = ch.noise_sd_mm
+            if ch.index.size:
+                sig[ch.index] = ch.signature
         return cls(log, part, first_row + np.arange(n), _labels(t.column(CELL), batch.cell),
                    _labels(t.column(PANEL), batch.panel), t.column("hole_id").combine_chunks(), to_numpy(t.column(TIME_S)),
                    charted, rho, sd, sig)
@@ -209,8 +212,11 @@ class Watch:
             c = m & f.charted
             if len(self.sensors) == 4 and c.any():
                 chart = self.charts.setdefault(cell, CusumChart(str(cell), self.sensors, by_panel=self.by_panel))
-                chart.update(f.hole_id.filter(from_numpy(c)), f.time_s[c], panels[f.panel.codes[c]], f.rho_mm[c],
-                             f.noise_sd_mm[c], f.signature[c])
+                if c.all():  # every hole of the feed charted (one cell, 4 sensors read: the usual): no copies
+                    chart.update(f.hole_id, f.time_s, panels[f.panel.codes], f.rho_mm, f.noise_sd_mm, f.signature)
+                else:
+                    chart.update(f.hole_id.filter(from_numpy(c)), f.time_s[c], panels[f.panel.codes[c]], f.rho_mm[c],
+                                 f.noise_sd_mm[c], f.signature[c])
 
     def join(self, other: "Watch") -> None:
         """Take the charts of ``other``, a watch of other cells (a chain of a Dask run)."""
