@@ -18,6 +18,9 @@
 #   wing_nopose only (4 sensors, no pose, no --spin-deg): 1641 of 2000 holes' before-readings judged over every spin
 #   (angle_deg, U95_angle_deg: median 0.0079 -> 0.0224 deg; their reason), the rest's reason "" for null, the after's
 #   angle by <= 2e-6 deg (the spin it keeps from before), the summary's means by <= 2e-7 deg; no status changes.
+# - issue 49 item 4 (b), the results' Parquet encoding (metrology/io/holeout.py parquet_options,
+#   benchmarks/results/measure_speed_issue49_r6.md): part1/ and dask/ hold other bytes, the same tables
+#   (pyarrow.parquet.read_table(...).equals: python benchmarks/golden_diff.py OUT_BEFORE OUT_AFTER); the rest byte-identical.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

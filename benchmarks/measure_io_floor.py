@@ -2,8 +2,8 @@
 (``bench_measure.BASELINE``) against the same script reading the columns of the log ``metro measure`` reads (all but
 the commanded pose and the temperature, without a panel or a head term that needs them) and writing every column
 ``metro measure`` writes (its 13 result columns, the reason one fixed text per row, the log's columns that name
-the hole passed through: ``hole_id``, ``time``, ``cell``, ``panel``; dictionaries for the text columns, floats
-plain, the rest zstd, as ``metrology.io.holeout.parquet_options``), no uncertainty, verdict, drift watch or
+the hole passed through: ``hole_id``, ``time``, ``cell``, ``panel``; encoded as
+``metrology.io.holeout.parquet_options`` encodes them), no uncertainty, verdict, drift watch or
 summary: the floor a ratio of ``metro measure`` to the plain script stands on.
 
     python benchmarks/measure_io_floor.py LOG.parquet LAYOUT.toml [--repeat 4]
@@ -42,9 +42,11 @@ FLOOR = BASELINE.replace('columns=["hole_id", *sum(sets, [])]', READ).replace(
         cols[k] = b.column(k)
     t = pa.table(cols)
     if writer is None:
-        text = [f.name for f in t.schema if pa.types.is_string(f.type)]
-        comp = {f.name: "none" if pa.types.is_floating(f.type) else "zstd" for f in t.schema}
-        writer = pq.ParquetWriter(out, t.schema, compression=comp, use_dictionary=text)''')
+        text = [f.name for f in t.schema if pa.types.is_string(f.type) and f.name != "hole_id"]
+        comp = {f.name: "none" if pa.types.is_floating(f.type) or f.name == "time" else "zstd" for f in t.schema}
+        writer = pq.ParquetWriter(out, t.schema, compression=comp, use_dictionary=text,
+                                  column_encoding={"time": "DELTA_BINARY_PACKED"},
+                                  write_statistics=["time", "cell", "panel", "status"])''')
 
 
 def cpu(cmd) -> float:

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from metrology.io.arrays import from_numpy, strings, to_numpy
+
 __all__ = ["HoleLog", "CsvLog", "ParquetLog", "Partition", "open_log", "batch_of", "BATCH_ROWS", "LOG_SUFFIXES", "READING_RE", "INTERNAL", "TIME_S",
            "CELL", "PANEL", "NUMERIC", "HOLE_ID", "POINT_ID", "POSE_ROTATION", "POSE_POSITION", "table_key", "text_codes",
            "time_seconds"]
@@ -373,7 +375,7 @@ def _parquet_batches(log, part):
                     if k in table.column_names:
                         _check_key(log, part, table, k, v, first + start)
                     else:
-                        table = table.append_column(k, pa.array(np.full(table.num_rows, v, dtype=object), pa.string()))
+                        table = table.append_column(k, _repeat(v, table.num_rows))
                 yield table
             first += group.num_rows
             del group
@@ -387,7 +389,7 @@ def _check_key(log, part, table, key, value, first_row) -> None:
     import pyarrow.compute as pc
 
     col = table.column(key).cast(pa.string())
-    bad = pc.fill_null(pc.not_equal(col, value), True).to_numpy(zero_copy_only=False)
+    bad = to_numpy(pc.fill_null(pc.not_equal(col, value), True))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{log.locate(part, first_row + i)}: {key} = {col[i].as_py()!r} disagrees with its folder's "
@@ -401,9 +403,9 @@ def _time_seconds(log, part, col, first_row):
 
     t = col.type
     if pa.types.is_timestamp(t):
-        return pc.cast(col, pa.timestamp("ns", tz=t.tz)).cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9
+        return to_numpy(pc.cast(col, pa.timestamp("ns", tz=t.tz)).cast(pa.int64())) / 1e9
     if pa.types.is_integer(t) or pa.types.is_floating(t):
-        return col.cast(pa.float64()).to_numpy(zero_copy_only=False)
+        return to_numpy(col.cast(pa.float64()))
     if pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_dictionary(t):
         col = col.cast(pa.string()) if not pa.types.is_dictionary(t) else col.cast(pa.string())
         for target in (pa.float64(), pa.timestamp("ns", tz="UTC"), pa.timestamp("ns")):
@@ -411,8 +413,7 @@ def _time_seconds(log, part, col, first_row):
                 out = col.cast(target)
             except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
                 continue
-            return out.to_numpy(zero_copy_only=False) if target == pa.float64() else \
-                out.cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9
+            return to_numpy(out) if target == pa.float64() else to_numpy(out.cast(pa.int64())) / 1e9
         for i, v in enumerate(col.to_pylist()):  # the error path: find the value at fault
             ok = False
             for target in (pa.float64(), pa.timestamp("ns", tz="UTC"), pa.timestamp("ns")):
@@ -447,16 +448,21 @@ def _normalise(log, part, table, first_row):
     bad = np.flatnonzero(~np.isfinite(time_s))
     if bad.size:
         raise ValueError(f"{log.locate(part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
-    cols[TIME_S] = pa.array(time_s)
+    cols[TIME_S] = from_numpy(time_s)
     # one result schema whatever the log's format: time a timestamp (UTC, to the microsecond)
-    cols["time"] = pa.array(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
+    cols["time"] = from_numpy(np.round(time_s * 1e6).astype(np.int64), pa.timestamp("us", tz="UTC"))
     for c, name in (("cell", CELL), ("panel", PANEL)):
-        cols[name] = cols[c] if c in cols else pa.array(np.full(table.num_rows, "", dtype=object), pa.string())
+        cols[name] = cols[c] if c in cols else _repeat("", table.num_rows)
     nulls = cols["hole_id"].null_count
     if nulls:
-        i = int(np.flatnonzero(cols["hole_id"].is_null().to_numpy(zero_copy_only=False))[0])
+        i = int(np.flatnonzero(to_numpy(cols["hole_id"].is_null()))[0])
         raise ValueError(f"{log.locate(part, first_row + i)}: hole_id is blank")
     return pa.table(cols)
+
+
+def _repeat(value: str, n: int):
+    """A pyarrow StringArray of ``value`` on ``n`` rows (a dictionary of one value, decoded)."""
+    return strings([value]).take(from_numpy(np.zeros(n, np.int32)))
 
 
 def text_codes(col):
@@ -464,7 +470,7 @@ def text_codes(col):
     import pyarrow.compute as pc
 
     enc = pc.dictionary_encode(col).combine_chunks()
-    return enc.indices.to_numpy(zero_copy_only=False).astype(np.int64), enc.dictionary.to_pylist()
+    return to_numpy(enc.indices).astype(np.int64), enc.dictionary.to_pylist()
 
 
 def time_seconds(col) -> np.ndarray:

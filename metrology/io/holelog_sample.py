@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from metrology.io.arrays import to_numpy
 from metrology.io.holelog import POSE_POSITION, CsvLog, table_key
 
 __all__ = ["commanded_positions", "first_readings", "SAMPLE_ROWS"]
@@ -96,4 +97,4 @@ def _numbers(col) -> np.ndarray:
     if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
         col = pc.if_else(pc.match_substring_regex(col, r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$"),
                          pc.utf8_trim_whitespace(col), pa.scalar(None, pa.string()))
-    return np.asarray(col.cast(pa.float64()).to_numpy(zero_copy_only=False), float)
+    return np.asarray(to_numpy(col.cast(pa.float64())), float)

@@ -80,17 +80,37 @@ def clear_stale(path: Path) -> None:
                 pass
 
 
+#: the columns a results file keeps Parquet's statistics (each row group's min and max) of: what a reader selects
+#: row groups by (when, which cell and panel, which status); a measurement or an id has none (measured: the min and
+#: max of the floats and ``hole_id`` cost 0.04-0.05 s of CPU per million holes for a filter nobody pushes down)
+STATISTICS = ("time", "cell", "panel", "status")
+#: text columns whose values are unique per row: no dictionary (it is built and dropped at every page)
+UNIQUE_TEXT = ("hole_id",)
+
+
 def parquet_options(schema) -> dict:
-    """How a results file is encoded, column by column: dictionaries for the text columns only (a float
-    column of measurements has no repeats: trying a dictionary for it costs time for nothing); zstd for
-    every column but the floats, which are stored plain (their mantissas are noise: on a 1e6-hole results file
-    zstd on them saved 57.6 -> 50.7 MB for 0.29-0.34 -> 0.36-0.49 s of the write's CPU;
-    benchmarks/results/measure_verdicts_issue49_r3.md)."""
+    """How a results file is encoded, column by column (the table read back is the same whatever the encoding):
+
+    - a dictionary for the text columns with few values (status, reason, cell, ...), not for ``hole_id``
+      (:data:`UNIQUE_TEXT`) nor for the numbers (a float of measurements has no repeats: trying a dictionary for it
+      costs time for nothing);
+    - the floats stored plain, uncompressed (their mantissas are noise: on a 1e6-hole results file zstd on them
+      saved 57.6 -> 50.7 MB for 0.29-0.34 -> 0.36-0.49 s of the write's CPU; measure_verdicts_issue49_r3.md);
+    - ``time`` (microseconds, rising) delta-encoded, uncompressed: smaller than zstd made it (2.9 against 4.0 MB
+      per 1e6 holes) for a third of the CPU; every other column zstd;
+    - statistics for :data:`STATISTICS` alone.
+
+    Figures: benchmarks/results/measure_speed_issue49_r6.md."""
     import pyarrow as pa
 
-    text = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_dictionary(f.type)]
+    text = [f.name for f in schema if (pa.types.is_string(f.type) or pa.types.is_dictionary(f.type))
+            and f.name not in UNIQUE_TEXT]
+    delta = {f.name: "DELTA_BINARY_PACKED" for f in schema if f.name == "time" and pa.types.is_timestamp(f.type)}
     return {"use_dictionary": text,
-            "compression": {f.name: "none" if pa.types.is_floating(f.type) else "zstd" for f in schema}}
+            "compression": {f.name: "none" if pa.types.is_floating(f.type) or f.name in delta else "zstd"
+                            for f in schema},
+            "column_encoding": delta,
+            "write_statistics": [n for n in STATISTICS if n in schema.names]}
 
 
 class TableSink:

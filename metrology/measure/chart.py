@@ -265,7 +265,7 @@ class CusumChart:
         noise_sd_mm : (N,) float, mm, its sigma from the reading noise
         signature : (N, 4) float, ``d rho / d delta_k`` (mm per mm)
         """
-        panel = np.asarray(panel).astype(str)
+        panel = panel if isinstance(panel, np.ndarray) and panel.dtype.kind == "U" else np.asarray(panel).astype(str)
         seg = panel if self.by_panel else np.zeros(len(panel), dtype="<U1")
         N = len(rho_mm)
         i = 0

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from metrology.io.arrays import from_numpy, strings
 from metrology.io.holelog import NUMERIC
 from metrology.measure.batch import STATUSES
 
@@ -32,16 +33,12 @@ def passes_through(name: str) -> bool:
 
 def _num(x):
     """A float64 column, NaN (nothing to say) as null: blank in CSV."""
-    import pyarrow as pa
-
-    return pa.array(x, pa.float64(), from_pandas=True)
+    return from_numpy(np.asarray(x, np.float64), nan_is_null=True)
 
 
 def _labels(codes, labels):
     """A pyarrow string array of ``labels[codes]``."""
-    import pyarrow as pa
-
-    return pa.array(list(labels), pa.string()).take(pa.array(codes))
+    return strings(list(labels)).take(from_numpy(np.asarray(codes)))
 
 
 def _sensor_sets(layout: "SensorLayout", used, min_sensors: int):

@@ -63,6 +63,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2
+from metrology.io.arrays import to_numpy
 from metrology.io.holelog import CELL, PANEL, text_codes
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Labels, Status, blanked
 from metrology.measure.effects import apply_terms
@@ -173,10 +174,11 @@ def _measure(layout: SensorLayout, d, settings: Settings, placed: "Placed | None
         out.extra = PanelFit.blank(N)
         out.spin_free, out.convention, out.spin_bound = np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
     bad = finite & ~in_range
-    for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
+    for i in np.flatnonzero(_any_col(bad)):  # rare: name every reading left out
         out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
                                   for j in np.flatnonzero(bad[i]))
-    count = in_range.sum(1)
+    code = in_range @ (1 << np.arange(n))  # each hole's pattern of usable sensors
+    count = np.array([bin(p).count("1") for p in range(1 << n)])[code]
     few = count < MIN_SENSORS
     for i in np.flatnonzero(few):
         blank = [layout.names[j] for j in np.flatnonzero(~finite[i])]
@@ -184,13 +186,12 @@ def _measure(layout: SensorLayout, d, settings: Settings, placed: "Placed | None
         prior = out.reason.get(int(i), "")
         out.reason[int(i)] = why + (f"; {prior}" if prior else "")
     # one group per pattern of usable sensors (all, or all but one, in practice)
-    code = in_range @ (1 << np.arange(n))
     code[few] = -1
     for p in np.flatnonzero(np.bincount(code[~few], minlength=1 << n)):
         mask = ((p >> np.arange(n)) & 1).astype(bool)
         rows = np.flatnonzero(code == p)
         sub = layout.subset([layout.names[j] for j in np.flatnonzero(mask)]) if not mask.all() else layout
-        dd = d[np.ix_(rows, np.flatnonzero(mask))]
+        dd = d if mask.all() and len(rows) == N else d[np.ix_(rows, np.flatnonzero(mask))]  # every hole read whole: d
         if placed is not None:
             _on_surface(out, rows, mask, sub, dd, placed, settings, effects)
         else:  # in slices of CACHE_ROWS rows, each stored as it comes (its temporaries stay in the cache)
@@ -256,7 +257,7 @@ def _store(out: _Measured, rows, mask, sub, dd, h, settings: Settings, micro: bo
     out.residual[rs] = h.residual
     if h.signature is None:
         return
-    out.signature[np.ix_(rows, np.flatnonzero(mask))] = h.signature
+    out.signature[(rs, slice(None)) if mask.all() else np.ix_(rows, np.flatnonzero(mask))] = h.signature
     out.noise_sd[rs] = h.residual_noise_sd
     out.residual_sd[rs], out.twist[rs] = h.residual_sd, h.twist
     out.moment[rs] = h.moment if h.moment is not None else np.concatenate(
@@ -324,10 +325,18 @@ def _poses_disagree(before, after, settings):
     return out & np.isfinite(allowed) & np.isfinite(diff), diff, changed & np.isfinite(diff)
 
 
+def _any_col(m):
+    """(N,) bool, ``m.any(1)`` of ``m`` (N, n) bool by its columns (a reduction along a short row costs ten times)."""
+    out = m[:, 0].copy()
+    for j in range(1, m.shape[1]):
+        out |= m[:, j]
+    return out
+
+
 def _readings(table, names, suffix=""):
     """(N, n) float, mm: the ``d_<sensor><suffix>`` columns, nulls as NaN."""
     cols = [table.column(f"d_{s}{suffix}") for s in names]
-    return np.stack([c.to_numpy(zero_copy_only=False).astype(float, copy=False) for c in cols], axis=1)
+    return np.stack([to_numpy(c).astype(float, copy=False) for c in cols], axis=1)
 
 
 def _duplicates(ids):
@@ -433,9 +442,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     out = result_table(layout, table, ids, code,
                        reason_column(verdict_reasons(text_code, judge_after, edge), reason),
                        before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
-    full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
+    full4 = (layout.n == 4) & ~_any_col(~before.used) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
-    chart = ChartRows(idx, before.residual[idx], before.noise_sd[idx], before.signature[idx])
+    every = len(idx) == N  # every hole charted: the arrays themselves (a gather of every row copies them)
+    chart = ChartRows(idx, *(a if every else a[idx] for a in (before.residual, before.noise_sd, before.signature)))
     disagree = (before.disagree | (after.disagree & judge_after if after is not None else False) | poses) & ~unmodelled
     # holes not measured after the adjustment whose before-readings do not rule out a wrong turn of the
     # cell (a hole truly out of tolerance): rule 3's, and those whose before-readings were not sound

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from metrology.io.arrays import strings
 from metrology.measure.batch import CODE, Status
 
 __all__ = ["VERDICT_TEXTS", "EDGE_TEXT", "verdict_reasons", "reason_column"]
@@ -49,8 +50,7 @@ def verdict_reasons(code, judge_after, edge=None):
         index[mask] = 1 + 2 * k + judge_after[mask]
     if edge is not None:
         index[edge & (index > 0)] += 2 * len(VERDICT_TEXTS)
-    values = pa.array(_VALUES, pa.string())
-    return values.take(pa.Array.from_buffers(pa.int8(), len(index), [None, pa.py_buffer(index)]))
+    return strings(_VALUES).take(pa.Array.from_buffers(pa.int8(), len(index), [None, pa.py_buffer(index)]))
 
 
 def reason_column(verdict, notes: dict):

@@ -536,7 +536,7 @@ def test_dask_weighs_a_measured_partition_by_its_arrays(tmp_path):
     log = open_log(path, lay.names)
     piece, end = list(measure_partition(log, log.partitions[0], lay, Settings(), rows=True))
     f = piece.feed
-    arrays = sum(a.nbytes for a in (f.row, f.cell, f.panel, f.time_s, f.charted, f.rho_mm, f.noise_sd_mm,
+    arrays = sum(a.nbytes for a in (f.row, f.cell.codes, f.panel.codes, f.time_s, f.charted, f.rho_mm, f.noise_sd_mm,
                                     f.signature))
     assert sizeof(f) >= arrays + f.hole_id.nbytes > 2000 * 80
     assert sizeof(piece) >= sizeof(f) + piece.table.nbytes
