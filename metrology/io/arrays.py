@@ -20,6 +20,17 @@ _TYPES = {np.dtype(np.float64): "float64", np.dtype(np.int64): "int64", np.dtype
           np.dtype(np.int8): "int8"}
 
 
+def _dtype(t) -> np.dtype:
+    """The numpy dtype of the fixed-width numeric Arrow type ``t`` (what ``t.to_pandas_dtype()`` gives, which
+    imports pandas in pyarrow 14, the lowest version allowed)."""
+    import pyarrow as pa
+
+    if pa.types.is_boolean(t):
+        return np.dtype(bool)
+    kind = "f" if pa.types.is_floating(t) else "i" if pa.types.is_signed_integer(t) else "u"
+    return np.dtype(f"{kind}{t.bit_width // 8}")
+
+
 def _valid(arr) -> np.ndarray | None:
     """(n,) bool, the rows of the Arrow array ``arr`` that are not null (None: no null)."""
     if arr.null_count == 0:
@@ -43,7 +54,7 @@ def _one(arr) -> np.ndarray:
         dtype = np.dtype(f"datetime64[{t.unit}]")
         raw = np.dtype(np.int64)
     else:
-        dtype = raw = np.dtype(t.to_pandas_dtype())  # a numpy dtype; no pandas imported
+        dtype = raw = _dtype(t)
     out = np.frombuffer(arr.buffers()[1], raw, count=off + n)[off:].copy()
     valid = _valid(arr)
     if valid is None:
@@ -72,7 +83,7 @@ def to_numpy(col) -> np.ndarray:
     chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
     if not chunks:
         return np.empty(0, np.float64 if not pa.types.is_boolean(t) else bool).astype(
-            t.to_pandas_dtype() if not pa.types.is_timestamp(t) else f"datetime64[{t.unit}]")
+            _dtype(t) if not pa.types.is_timestamp(t) else f"datetime64[{t.unit}]")
     parts = [_one(c) for c in chunks]
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
