@@ -401,12 +401,10 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         judged[poses] = np.nan
         judged_u[poses] = np.nan
     code = _verdict(judged, judged_u, settings.tolerance, np.isfinite(before.angle) | judge_after)
-    text_code = code
+    unshown = None  # rule 3b's holes: undecided for a cause their note names, not the verdict's text
     if after is not None and placed is None:  # rule 3b: a failing hole whose misfit changed beyond the noise
         unshown = changed & (code == CODE[Status.FAILS])
         if unshown.any():
-            text_code = code.copy()
-            text_code[unshown] = CODE[Status.NOT_MEASURED]  # its note says why, not the verdict's text
             code[unshown] = CODE[Status.UNDECIDED]
             for i in np.flatnonzero(unshown).tolist():
                 reason[i] = (reason[i] + "; " if reason.get(i) else "") + (
@@ -431,7 +429,7 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     whole[dup] = True
     before_angle, before_u = blanked(nm & (~judge_after | whole), before.angle, before.U95)  # blank (docs)
     out = result_table(layout, table, ids, code,
-                       reason_column(verdict_reasons(text_code, judge_after, edge), reason),
+                       reason_column(verdict_reasons(code, judge_after, edge, noted=unshown), reason),
                        before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
     full4 = (layout.n == 4) & before.used.all(1) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
