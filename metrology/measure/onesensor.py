@@ -1,4 +1,4 @@
-"""Rule 2b's alternative (:mod:`metrology.measure.holes`): on a 4-sensor head without the panel, the tilt a
+"""Rule 2b's alternative (:mod:`metrology.measure.rules`): on a 4-sensor head without the panel, the tilt a
 hole's redundant misfit would give were it one sensor's offset, not the panel's curvature.
 
 One redundant reading gives one number, the misfit ``rho``. A panel of radius >= R within the bound

@@ -24,7 +24,7 @@ VERDICT_TEXTS = {
                        "after the adjustment: angle +- U95 straddles the tolerance"),
 }
 #: what a failing or undecided hole's text adds where its U95 covers one sensor's offset (rule 2b,
-#: :data:`metrology.measure.holes.EDGE_SIGMAS`)
+#: :data:`metrology.measure.rules.EDGE_SIGMAS`)
 EDGE_TEXT = (" (U95 covers one sensor's offset: the redundant reading's misfit is beyond the noise, within the "
              "radius bound, and one reading offset by a burr or a chip gives it as well as the panel's curvature)")
 #: the column's distinct verdict values: "" (nothing to say), each text of :data:`VERDICT_TEXTS`, then each with
