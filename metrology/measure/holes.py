@@ -148,16 +148,17 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         unknown = nm & judge_after & (poses | ~np.isfinite(before.angle))
         unknown[dup] = False
         unknown &= ~unmodelled  # not in the table, off the edge: not measured for that, not for a gross reading
-    spin_free = on_convention = spin_bound = None
+    spin_free = on_convention = spin_bound = spin_alias = None
     if placed is not None:  # how each judged hole's spin was taken
-        spin_free, on_convention, spin_bound = (
+        spin_free, on_convention, spin_bound, spin_alias = (
             (np.where(judge_after, getattr(after, f), getattr(before, f)) if after is not None else getattr(before, f))
-            & ~nm for f in ("spin_free", "convention", "spin_bound"))
+            & ~nm for f in ("spin_free", "convention", "spin_bound", "alias"))
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,
                      spin_free, on_convention,
                      *(Labels(*text_codes(out.column(c))) if c in out.column_names else None for c in (CELL, PANEL)),
-                     spin_bound=spin_bound)
+                     spin_bound=spin_bound, one_sensor=None if placed is not None else edge & ~nm,
+                     spin_alias=spin_alias)
 
 
 def _not_in_table(table, placed, surf, code, reason) -> np.ndarray:

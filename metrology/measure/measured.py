@@ -42,6 +42,7 @@ class Measured:
     spin_free: np.ndarray | None = None  # (N,) bool, with the panel known: judged with the spin not known
     convention: np.ndarray | None = None  # (N,) bool, with the panel known: the spin in the cell's convention
     spin_bound: np.ndarray | None = None  # (N,) bool, of those: the spin's bound over half U95^2 (measure.spin)
+    alias: np.ndarray | None = None  # (N,) bool, of spin_free: the convention's alias spin (SPIN_ALIAS_SHARE)
     edge: np.ndarray | None = None  # (N,) bool, rule 2b: U95 covers one sensor's offset
 
 
@@ -68,7 +69,7 @@ def measure_pose(layout: SensorLayout, d, settings: Settings, placed: "Placed | 
         from metrology.measure.surface import PanelFit
 
         out.extra = PanelFit.blank(N)
-        out.spin_free, out.convention, out.spin_bound = np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
+        out.spin_free, out.convention, out.spin_bound, out.alias = (np.zeros(N, bool) for _ in range(4))
     bad = finite & ~in_range
     for i in np.flatnonzero(bad.any(1)):  # rare: name every reading left out
         out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
@@ -110,6 +111,7 @@ def _on_surface(out: Measured, rows, mask, sub, dd, placed, settings: Settings, 
     h = j.normals if effects is None else effects.widen(j.normals, sub, rows, mask)
     out.extra.put(rs, j.extra)
     out.spin_free[rs], out.convention[rs], out.spin_bound[rs] = j.free, j.convention, j.bound
+    out.alias[rs] = np.isfinite(j.alias)
     for i in np.flatnonzero(j.free).tolist():  # rare where the log has the pose or the convention holds
         prior = out.reason.get(int(rows[i]))
         out.reason[int(rows[i])] = (prior + "; " if prior else "") + j.free_reason(i)
