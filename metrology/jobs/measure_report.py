@@ -145,8 +145,9 @@ class KnownSurfaces:
     off_cad : OffCad; cad : CadCheck
     spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2 (their U95 for
         any spin within the bound: ``spin_bound_model`` "edge", :data:`metrology.measure.spin.SPIN_BOUND_MODEL`)
-    spin_alias_holes : int, of ``spin_free_holes``: the convention not stated, those its alias spin sent there
-        (:data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
+    spin_alias_holes : int, holes whose readings, before the adjustment or the after-readings judged, the
+        convention's alias spin sent to every spin, the convention not stated (their reason says so;
+        :data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
     """
 
     source: str
@@ -260,10 +261,11 @@ class MeasureReport:
                 if not cv.spin_stated:
                     from metrology.measure.spin import SPIN_ALIAS_SHARE
 
-                    checks.append(Check("head's spin not known, of those: holes whose redundant reading cannot tell "
-                                        "the convention from an alias spin that tilts the normal over "
-                                        f"{SPIN_ALIAS_SHARE:g} of U95 otherwise", cv.spin_alias_holes, None, "holes",
-                                        True, gate=False))
+                    checks.append(Check("head's spin alias (the convention not stated): holes whose readings, before "
+                                        "the adjustment or those judged, were judged over every spin, the redundant "
+                                        "reading unable to tell the convention from a spin that tilts the normal over "
+                                        f"{SPIN_ALIAS_SHARE:g} of U95 otherwise (their reason says so)",
+                                        cv.spin_alias_holes, None, "holes", True, gate=False))
             o, c = cv.off_cad, cv.cad
             if o.off_cad_holes:
                 checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "

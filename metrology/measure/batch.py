@@ -94,8 +94,9 @@ class HoleBatch:
         :data:`metrology.measure.spin.SPIN_BOUND_SHARE` of U95^2
     one_sensor : (N,) bool or None, without the panel: judged with rule 2b's U95, which covers one sensor's offset
         (:data:`metrology.measure.rules.EDGE_SIGMAS`)
-    spin_alias : (N,) bool or None, with the panel known: of ``spin_free``, those the convention's alias spin sent
-        there (the convention not stated: :data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
+    spin_alias : (N,) bool or None, with the panel known: holes whose readings (before the adjustment, or the
+        after-readings judged) the convention's alias spin sent to every spin, their reason says so (the convention
+        not stated: :data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
     """
 
     columns: "pa.Table"

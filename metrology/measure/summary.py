@@ -179,7 +179,8 @@ class FleetSummary:
     on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
         (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known);
         spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read);
-        spin_alias : int, of ``spin_free`` those the convention's alias spin sent there (HoleBatch)
+        spin_alias : int, holes whose readings, before or judged after, the convention's alias spin sent to every
+        spin (HoleBatch)
     one_sensor : int, without the panel: holes judged with rule 2b's U95, over one sensor's offset (HoleBatch)
     off_cad : OffCadSums, with the panel known; vs_cad : CadSums, with the log's commanded pose
     """
