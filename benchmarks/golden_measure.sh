@@ -18,6 +18,11 @@
 #   wing_nopose only (4 sensors, no pose, no --spin-deg): 1641 of 2000 holes' before-readings judged over every spin
 #   (angle_deg, U95_angle_deg: median 0.0079 -> 0.0224 deg; their reason), the rest's reason "" for null, the after's
 #   angle by <= 2e-6 deg (the spin it keeps from before), the summary's means by <= 2e-7 deg; no status changes.
+# - the summary's counts of rule 2b's and the alias rule's holes (metrology/measure/summary.py, docs/gross.md, docs/spin.md):
+#   *.stdout only (--json): without --panel/--points curvature.one_sensor_offset_holes (flat 80, part1 and dask 3, calflat
+#   and flat3 0) and, on 4 sensors, a check line of it in verdict.checks; with them curvature.spin_alias_holes (wing_nopose
+#   1641, the others 0) and, on 4 sensors with the convention not stated (wing_nopose), a check line of it; every other
+#   file byte-identical.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

@@ -258,7 +258,7 @@ class MeasureReport:
                 why = "" if cv.spin_stated else " (the convention not stated: state --spin-deg or log the commanded pose)"
                 checks.append(Check(f"head's spin not known: holes judged with a U95 over every spin{why}",
                                     cv.spin_free_holes, None, "holes", True, gate=False))
-                if not cv.spin_stated:
+                if not cv.spin_stated and len(self.layout_names) == 4:  # the alias rule needs the redundant reading
                     from metrology.measure.spin import SPIN_ALIAS_SHARE
 
                     checks.append(Check("head's spin alias (the convention not stated): holes whose readings, before "
@@ -281,9 +281,9 @@ class MeasureReport:
                                     f"deg at {c.normal_vs_cad_max_hole})",
                                     c.cad_off_holes, None, "holes", True, gate=False))
         if isinstance(cv, RadiusBound) and len(self.layout_names) == 4 and cv.radius_mm < float("inf"):
-            checks.append(Check("one sensor's offset (rule 2b): holes whose U95 covers it, their redundant reading's "
-                                "misfit beyond the noise and within the radius bound (a burr under one spot gives it "
-                                "as well as the panel's curvature; give --panel/--points to tell them apart)",
+            checks.append(Check("one sensor's offset (rule 2b): holes judged with a U95 that covers it, the redundant "
+                                "reading's misfit beyond the noise and within the radius bound (a burr under one spot "
+                                "gives it as well as the panel's curvature; give --panel/--points to tell them apart)",
                                 cv.one_sensor_holes, None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 

@@ -128,10 +128,11 @@ def test_the_alias_count_has_its_line_where_the_convention_is_not_stated_and_its
     cv = KnownSurfaces("skin.stl", 60, 0.5, 0.0, 2.0, False, 60, 0, off, cad, 0, 41)
     assert _checks_of(cv)[ALIAS] == 41
     assert ALIAS not in _checks_of(replace(cv, spin_stated=True))
+    assert ALIAS not in _checks_of(cv, ("L1", "L2", "L3"))  # no redundant reading: no alias to tell
     assert cv.to_dict()["spin_alias_holes"] == 41
 
 
-def _checks_of(cv):
+def _checks_of(cv, names=("L1", "L2", "L3", "L4")):
     """The verdict's checks by name (before any ':') of a report whose curvature is ``cv`` (the rest made up)."""
     from types import SimpleNamespace
 
@@ -139,5 +140,5 @@ def _checks_of(cv):
 
     counts = SimpleNamespace(fails=0, undecided=0, not_measured=0)
     result = SimpleNamespace(alarms=(), summary=SimpleNamespace(unknown_after=0, counts=lambda: counts))
-    fake = MeasureReport(result, None, 0.5, 500.0, ("L1", "L2", "L3", "L4"), True, "one process", (), False, None, cv)
+    fake = MeasureReport(result, None, 0.5, 500.0, names, True, "one process", (), False, None, cv)
     return {c.name.split(":")[0]: c.value for c in fake.verdict.checks}
