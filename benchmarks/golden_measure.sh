@@ -21,6 +21,11 @@
 # - issue 49 item 4 (b), the results' Parquet encoding (metrology/io/holeout.py parquet_options,
 #   benchmarks/results/measure_speed_issue49_r6.md): part1/ and dask/ hold other bytes, the same tables
 #   (pyarrow.parquet.read_table(...).equals: python benchmarks/golden_diff.py OUT_BEFORE OUT_AFTER); the rest byte-identical.
+# - the summary's counts of rule 2b's and the alias rule's holes (metrology/measure/summary.py, docs/gross.md, docs/spin.md):
+#   *.stdout only (--json): without --panel/--points curvature.one_sensor_offset_holes (flat 80, part1 and dask 3, calflat
+#   and flat3 0) and, on 4 sensors, a check line of it in verdict.checks; with them curvature.spin_alias_holes (wing_nopose
+#   1641, the others 0) and, on 4 sensors with the convention not stated (wing_nopose), a check line of it; every other
+#   file byte-identical.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

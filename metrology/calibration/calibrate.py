@@ -242,7 +242,7 @@ def with_datum(cal, dataset):
     from scipy.linalg import block_diag
 
     from metrology.calibration.datum_prior import fit_with_datum
-    from metrology.calibration.estimators import _finish
+    from metrology.calibration.fitted import _finish
     from metrology.core.model import chart_cov_recentred
 
     move = cal.method == "lsq"

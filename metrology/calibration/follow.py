@@ -8,7 +8,7 @@ readings so far, each iteration relinearises every reading's model ``h(x) = d(x)
     M = P0^-1 + sum H^T H / R,   M x_{j+1} = sum H^T (z - h(x_j) + H x_j) / R   (a Cholesky solve),
 
 until the step is below ``tol`` (a Gauss-Newton step on the MAP cost: the passes of
-:func:`~metrology.calibration.estimators.iekf`, warm-started from the previous pose's estimate).
+:func:`~metrology.calibration.kalman.iekf`, warm-started from the previous pose's estimate).
 A one-pass recursive EKF would keep the Jacobians of its first, wrong estimates: on the bundled
 measured run its last estimate is 11 standard errors from the batch optimum; this one is the
 batch optimum on the poses so far after every pose.
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from metrology.calibration.estimators import DEFAULT_P0_SIGMA, linearise_sensor
+from metrology.calibration.kalman import DEFAULT_P0_SIGMA, linearise_sensor
 from metrology.calibration.uncertainty import normal_sensitivity, normal_sigma, residual_scaled_cov
 from metrology.core.frames import plane_in_tcs
 from metrology.core.layout import SensorLayout

@@ -2,14 +2,14 @@
 extended.toml --method ekf`` (or ``iekf``).
 
 The state of each sensor's filter (filterpy's ``ExtendedKalmanFilter``, one filter per sensor as
-:func:`metrology.calibration.estimators.ekf`) is its five chart parameters ``(x, y, z, a, b)``
+:func:`metrology.calibration.kalman.ekf`) is its five chart parameters ``(x, y, z, a, b)``
 followed by the parameters of the terms acting on it (each term is on one sensor, so the sensors'
 filters stay independent). The measurement function is the extended model,
 ``h(x) = d0(x) + sum_c B_c(d0, covariates) v_c`` (every catalogued term is linear in its values,
 :mod:`metrology.core.effects`), its Jacobian ``[g dd0/dchart, B_c]`` with ``g = 1 + sum_c df_c/dd0``,
 as the least-squares engine's (:class:`~metrology.calibration.engine.LeastSquares`).
 
-The prior: the chart's as the base filters' (:data:`~metrology.calibration.estimators.DEFAULT_P0_SIGMA`,
+The prior: the chart's as the base filters' (:data:`~metrology.calibration.kalman.DEFAULT_P0_SIGMA`,
 mean zero), the terms' mean their values in the layout and their covariance the layout's stated
 one (``[calibration]``: the terms' block; the layout's cross covariance of the terms with a chart
 fitted before is not carried, that chart is not this one's centre). The first pass is linearised at
@@ -69,7 +69,7 @@ def _h_and_H(nominal, i, comps, x, N, D, cov):
 def _pass(nominal, i, comps, obs, cov, rows, R, m0, P0, x_ref=None, Q=0.0):
     """One filterpy EKF pass over sensor ``i``'s readings ``rows`` from the prior ``N(m0, P0)``; linearised
     at the running estimate (``x_ref`` None) or at every measurement at ``x_ref``; ``Q`` the process noise
-    on every state (as :func:`metrology.calibration.estimators.ekf`'s)."""
+    on every state (as :func:`metrology.calibration.kalman.ekf`'s)."""
     from filterpy.kalman import ExtendedKalmanFilter
 
     k = len(m0)
@@ -116,24 +116,25 @@ def filter_with_terms(nominal, obs, cov, components, prior, method="ekf", sigma_
     components : the layout's terms (each on one sensor, its values the prior's mean)
     prior : HeadTerms, the layout's terms with their covariance (the prior's covariance)
     P0_sigma : (float, float) or None, the chart's prior 1 sigma (mm, rad); None: the base filters'
-    Q : float, ``ekf`` only, the process noise on every state, as :func:`metrology.calibration.estimators.ekf`
+    Q : float, ``ekf`` only, the process noise on every state, as :func:`metrology.calibration.kalman.ekf`
         (``iekf`` linearises each pass at the previous estimate with ``Q = 0``, as its base filter)
-    passes, tol : ``iekf`` only, as :func:`metrology.calibration.estimators.iekf`
+    passes, tol : ``iekf`` only, as :func:`metrology.calibration.kalman.iekf`
     stderr : ``"stated"`` (default) the filter's ``P``; ``"residual"`` what least squares reports,
         ``s^2 (J^T J)^-1`` over the sensor's chart and its fitted terms at the estimate, ``s`` the residuals'
         scatter (:func:`metrology.calibration.uncertainty.residual_scaled_cov`), returned as its sigma (as
-        :func:`metrology.calibration.estimators.iekf`'s)
+        :func:`metrology.calibration.kalman.iekf`'s)
     theta0 : (n, 5) float or None, where identifiability is judged (the base calibration)
     linearise : ``"base"`` (default): the first pass linearised at ``theta0`` and the terms' layout values
         (:data:`LINEARISE`); ``"running"``: at the running estimate from the nominal, as the base
-        :func:`metrology.calibration.estimators.ekf` (also where ``theta0`` is None)
+        :func:`metrology.calibration.kalman.ekf` (also where ``theta0`` is None)
 
     Returns
     -------
     ``(theta (n, 5), cov_full (5n + k, 5n + k) in the nominal chart, sigma (n,) mm, TermFit)`` as
     :func:`metrology.calibration.terms.fit_with_terms`
     """
-    from metrology.calibration.estimators import DEFAULT_P0_SIGMA, _pose_order, _prior, _sigma
+    from metrology.calibration.fitted import _pose_order, _sigma
+    from metrology.calibration.kalman import DEFAULT_P0_SIGMA, _prior
     from metrology.calibration.terms import TermFit, _recentre, carried_cov, corrected_obs, identify_terms
     from metrology.core.effects.terms import HeadTerms
 
@@ -212,7 +213,8 @@ def calibrate_terms(dataset, method="lsq", **opts):
     or a filter with its state extended by the terms: ``ekf``, ``iekf``, ``opts`` theirs): ``(Calibration
     whose layout carries the fitted terms, TermFit, the observations with the terms removed)``; the
     datum's covariance is the caller's (:func:`metrology.calibration.calibrate.calibrate_dataset`)."""
-    from metrology.calibration.estimators import _finish, calibrate
+    from metrology.calibration.estimators import calibrate
+    from metrology.calibration.fitted import _finish
     from metrology.calibration.terms import corrected_obs, dataset_covariates, fit_with_terms
     from metrology.core.model import chart_cov_recentred
 

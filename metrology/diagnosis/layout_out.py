@@ -105,7 +105,7 @@ def extend_layout(ds, diag, carried=None) -> ExtendedLayout:
     """The layout of ``ds``'s sensors refitted with the head terms ``diag`` names and the ``carried``
     ones (the input layout's HeadTerms, or None), jointly (module docstring)."""
     from metrology.calibration.terms import fit_with_terms
-    from metrology.calibration.estimators import _finish
+    from metrology.calibration.fitted import _finish
     from metrology.core.effects.terms import NOT_HEAD, is_head_term, why_not_a_head_term
     from metrology.core.model import chart_cov_recentred
 

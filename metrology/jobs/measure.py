@@ -411,12 +411,13 @@ def _curvature(o: MeasureOptions, result, surfaces, radius_source: str, shown_la
     from metrology.measure.spin import DEFAULT_SPIN_DEG
 
     if surfaces is None:
-        return RadiusBound(o.min_radius_mm, shown_layout if radius_source == "layout [panel] radius_mm" else None)
+        return RadiusBound(o.min_radius_mm, shown_layout if radius_source == "layout [panel] radius_mm" else None,
+                           result.summary.one_sensor)
     s = result.summary
     return KnownSurfaces(surfaces.source, len(surfaces.ids), o.position_error_mm, o.form_tolerance_mm,
                          DEFAULT_SPIN_DEG if o.spin_deg is None else o.spin_deg, surfaces.spin_stated,
                          s.on_convention, s.spin_free, OffCad(**s.off_cad_figures()), CadCheck(**s.vs_cad_figures()),
-                         s.spin_bound)
+                         s.spin_bound, s.spin_alias)
 
 
 def _write_report_html(o: MeasureOptions, report, log_path, layout_path) -> None:

@@ -63,10 +63,13 @@ class RadiusBound:
     radius_mm : float, mm
     stated_in : str or None, the layout whose ``[panel] radius_mm`` states it; None: assumed (the default
         or ``--min-radius-mm``)
+    one_sensor_holes : int, holes judged with rule 2b's U95: a 4-sensor misfit beyond the noise within the bound,
+        which one sensor's offset gives as well as the curvature (:data:`metrology.measure.rules.EDGE_SIGMAS`)
     """
 
     radius_mm: float
     stated_in: str | None = None
+    one_sensor_holes: int = 0
 
     #: each hole's surface is not known, only bounded
     known = False
@@ -82,8 +85,9 @@ class RadiusBound:
                 f"bound: the cell's panel radius {self.radius_mm:g} mm stated in {self.stated_in} [panel] radius_mm")
 
     def to_dict(self) -> dict:
-        return ({"assumed": True, "source": self.source} if self.assumed else
-                {"assumed": False, "source": self.source, "radius_mm": self.radius_mm})
+        bound = ({"assumed": True, "source": self.source} if self.assumed else
+                 {"assumed": False, "source": self.source, "radius_mm": self.radius_mm})
+        return {**bound, "one_sensor_offset_holes": self.one_sensor_holes}
 
 
 @dataclass(frozen=True)
@@ -141,6 +145,9 @@ class KnownSurfaces:
     off_cad : OffCad; cad : CadCheck
     spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2 (their U95 for
         any spin within the bound: ``spin_bound_model`` "edge", :data:`metrology.measure.spin.SPIN_BOUND_MODEL`)
+    spin_alias_holes : int, holes whose readings, before the adjustment or the after-readings judged, the
+        convention's alias spin sent to every spin, the convention not stated (their reason says so;
+        :data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
     """
 
     source: str
@@ -154,6 +161,7 @@ class KnownSurfaces:
     off_cad: OffCad
     cad: CadCheck
     spin_bound_holes: int = 0
+    spin_alias_holes: int = 0
 
     #: each hole's surface known; the bound is not assumed
     known, assumed = True, False
@@ -165,6 +173,7 @@ class KnownSurfaces:
                 "position_error_mm": self.position_error_mm, "form_tolerance_mm": self.form_tolerance_mm,
                 "spin_deg": self.spin_deg, "spin_stated": self.spin_stated, "spin_convention": SPIN_CONVENTION,
                 "spin_on_convention_holes": self.spin_on_convention_holes, "spin_free_holes": self.spin_free_holes,
+                "spin_alias_holes": self.spin_alias_holes,
                 "spin_bound_holes": self.spin_bound_holes, "spin_bound_model": SPIN_BOUND_MODEL.value,
                 **self.off_cad.to_dict(), **self.cad.to_dict()}
 
@@ -249,6 +258,14 @@ class MeasureReport:
                 why = "" if cv.spin_stated else " (the convention not stated: state --spin-deg or log the commanded pose)"
                 checks.append(Check(f"head's spin not known: holes judged with a U95 over every spin{why}",
                                     cv.spin_free_holes, None, "holes", True, gate=False))
+                if not cv.spin_stated and len(self.layout_names) == 4:  # the alias rule needs the redundant reading
+                    from metrology.measure.spin import SPIN_ALIAS_SHARE
+
+                    checks.append(Check("head's spin alias (the convention not stated): holes whose readings, before "
+                                        "the adjustment or those judged, were judged over every spin, the redundant "
+                                        "reading unable to tell the convention from a spin that tilts the normal over "
+                                        f"{SPIN_ALIAS_SHARE:g} of U95 otherwise (their reason says so)",
+                                        cv.spin_alias_holes, None, "holes", True, gate=False))
             o, c = cv.off_cad, cv.cad
             if o.off_cad_holes:
                 checks.append(Check(f"panel off its CAD: holes whose redundant reading sees the surface's shape off the "
@@ -263,6 +280,11 @@ class MeasureReport:
                                     f"{c.normal_vs_cad_mean_deg:.3f} deg, largest {c.normal_vs_cad_max_deg:.3f} "
                                     f"deg at {c.normal_vs_cad_max_hole})",
                                     c.cad_off_holes, None, "holes", True, gate=False))
+        if isinstance(cv, RadiusBound) and len(self.layout_names) == 4 and cv.radius_mm < float("inf"):
+            checks.append(Check("one sensor's offset (rule 2b): holes judged with a U95 that covers it, the redundant "
+                                "reading's misfit beyond the noise and within the radius bound (a burr under one spot "
+                                "gives it as well as the panel's curvature; give --panel/--points to tell them apart)",
+                                cv.one_sensor_holes, None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 
     def to_dict(self) -> dict:

@@ -92,6 +92,11 @@ class HoleBatch:
     cell, panel : Labels, each hole's cell and panel
     spin_bound : (N,) bool or None, of ``on_convention``: the spin not read, its bound over
         :data:`metrology.measure.spin.SPIN_BOUND_SHARE` of U95^2
+    one_sensor : (N,) bool or None, without the panel: judged with rule 2b's U95, which covers one sensor's offset
+        (:data:`metrology.measure.rules.EDGE_SIGMAS`)
+    spin_alias : (N,) bool or None, with the panel known: holes whose readings (before the adjustment, or the
+        after-readings judged) the convention's alias spin sent to every spin, their reason says so (the convention
+        not stated: :data:`metrology.measure.spin.SPIN_ALIAS_SHARE`)
     """
 
     columns: "pa.Table"
@@ -108,6 +113,8 @@ class HoleBatch:
     cell: Labels | None = None
     panel: Labels | None = None
     spin_bound: np.ndarray | None = None
+    one_sensor: np.ndarray | None = None
+    spin_alias: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.status)

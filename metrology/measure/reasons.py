@@ -25,7 +25,7 @@ VERDICT_TEXTS = {
                        "after the adjustment: angle +- U95 straddles the tolerance"),
 }
 #: what a failing or undecided hole's text adds where its U95 covers one sensor's offset (rule 2b,
-#: :data:`metrology.measure.holes.EDGE_SIGMAS`)
+#: :data:`metrology.measure.rules.EDGE_SIGMAS`)
 EDGE_TEXT = (" (U95 covers one sensor's offset: the redundant reading's misfit is beyond the noise, within the "
              "radius bound, and one reading offset by a burr or a chip gives it as well as the panel's curvature)")
 #: the column's distinct verdict values: "" (nothing to say), each text of :data:`VERDICT_TEXTS`, then each with
@@ -34,13 +34,15 @@ _VALUES = ("", *(t for pair in VERDICT_TEXTS.values() for t in pair),
            *(t + EDGE_TEXT for pair in VERDICT_TEXTS.values() for t in pair))
 
 
-def verdict_reasons(code, judge_after, edge=None):
+def verdict_reasons(code, judge_after, edge=None, noted=None):
     """pyarrow StringArray (N,): each failing or undecided hole's :data:`VERDICT_TEXTS`; "" for the others.
 
     Parameters
     ----------
     code : (N,) int8, each hole's status code; judge_after : (N,) bool, judged after the adjustment
     edge : (N,) bool or None, the judged U95 covers one sensor's offset (rule 2b): :data:`EDGE_TEXT` added
+    noted : (N,) bool or None, holes whose note says why they have their status, which no verdict text names
+        (rule 3b: undecided though angle - U95 > tolerance): "" here, the note alone in :func:`reason_column`
     """
     import pyarrow as pa
 
@@ -50,6 +52,8 @@ def verdict_reasons(code, judge_after, edge=None):
         index[mask] = 1 + 2 * k + judge_after[mask]
     if edge is not None:
         index[edge & (index > 0)] += 2 * len(VERDICT_TEXTS)
+    if noted is not None:
+        index[noted] = 0
     return strings(_VALUES).take(pa.Array.from_buffers(pa.int8(), len(index), [None, pa.py_buffer(index)]))
 
 

@@ -1,6 +1,6 @@
 """What the local surface model leaves over the head's footprint, per hole: a term of U95 (the budget's
 source "surface model") and the geometry that says whether the model holds at all (the footprint rule,
-:data:`metrology.measure.holes.MAX_SPOT_SLOPE_DEG`, :data:`metrology.measure.holes.MAX_INCIDENCE_DEG`).
+:data:`metrology.measure.rules.MAX_SPOT_TURN_DEG`, :data:`metrology.measure.rules.MAX_INCIDENCE_DEG`).
 
 **The term.** :func:`metrology.measure.surface.fit_surface` fits the spots to the panel's second-order
 surface; :mod:`metrology.measure.beyond` moves the readings by the CAD's height beyond it (the quartic, and

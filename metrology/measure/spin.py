@@ -5,7 +5,7 @@ The local surface's shape operator is put into the TCS by the head's rotation. T
 (the log's ``pose_*`` columns) gives it whole. Without it metro can take the cell's convention (TCS
 ``x, y`` near the panel's, the spin within ``+-spin``: ``--spin-deg``), but a cell that turns the
 head for reach breaks it, and the curvature then tilts the normal the wrong way. So, per hole
-without a pose (rule 1b of :mod:`metrology.measure.holes`):
+without a pose (rule 1b of :mod:`metrology.measure.rules`):
 
 - **a redundant reading** (4 sensors read): the hole is measured in the convention and its misfit to
   the CAD's surface there (``panel_misfit_z``: the redundant reading's misfit over its standard
@@ -120,7 +120,7 @@ SPIN_ALIAS_SHARE = 0.1
 SPIN_ENDS_MAX = np.radians(10.0)
 #: secant steps of the spin read from the misfit (the misfit is linear in the spin to (2 psi)^2 / 2: 2.4e-3 at 2 deg)
 SPIN_READ_STEPS = 2
-#: rows per call of the fit (as :data:`metrology.measure.holes.CACHE_ROWS`)
+#: rows per call of the fit (as :data:`metrology.measure.measured.CACHE_ROWS`)
 CACHE_ROWS = 16384
 
 

@@ -193,7 +193,10 @@ class FleetSummary:
     unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
         (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known);
-        spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read)
+        spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read);
+        spin_alias : int, holes whose readings, before or judged after, the convention's alias spin sent to every
+        spin (HoleBatch)
+    one_sensor : int, without the panel: holes judged with rule 2b's U95, over one sensor's offset (HoleBatch)
     off_cad : OffCadSums, with the panel known; vs_cad : CadSums, with the log's commanded pose
     """
 
@@ -208,6 +211,8 @@ class FleetSummary:
     on_convention: int = 0
     spin_free: int = 0
     spin_bound: int = 0
+    spin_alias: int = 0
+    one_sensor: int = 0
     off_cad: OffCadSums = field(default_factory=OffCadSums)
     vs_cad: CadSums = field(default_factory=CadSums)
 
@@ -267,6 +272,8 @@ class FleetSummary:
         self.on_convention += int(batch.on_convention.sum()) if batch.on_convention is not None else 0
         self.spin_free += int(batch.spin_free.sum()) if batch.spin_free is not None else 0
         self.spin_bound += int(batch.spin_bound.sum()) if batch.spin_bound is not None else 0
+        self.spin_alias += int(batch.spin_alias.sum()) if batch.spin_alias is not None else 0
+        self.one_sensor += int(batch.one_sensor.sum()) if batch.one_sensor is not None else 0
         self.off_cad = self.off_cad.merged(OffCadSums.of(t))
         self.vs_cad = self.vs_cad.merged(CadSums.of(t))
         self._worst(batch, judged, ok)
@@ -301,6 +308,8 @@ class FleetSummary:
         self.on_convention += other.on_convention
         self.spin_free += other.spin_free
         self.spin_bound += other.spin_bound
+        self.spin_alias += other.spin_alias
+        self.one_sensor += other.one_sensor
         self.off_cad = self.off_cad.merged(other.off_cad)
         self.vs_cad = self.vs_cad.merged(other.vs_cad)
         self.worst = sorted(self.worst + other.worst, key=WorstHole.order)[:WORST]

@@ -77,7 +77,7 @@ GN_STEPS = 3
 #: ring on the nacelle and saddle), 1e-4 of its U95; it saves a tenth of ``measure --panel``'s time
 PRELIMINARY_STEPS = 2
 #: rows per call of the fit in :func:`surface_normal`: its temporaries stay in the processor's cache (as
-#: :data:`metrology.measure.holes.CACHE_ROWS`; measured: 2e5 holes in one call ran at 2/3 of the rate)
+#: :data:`metrology.measure.measured.CACHE_ROWS`; measured: 2e5 holes in one call ran at 2/3 of the rate)
 SLICE_ROWS = 16384
 
 
@@ -152,7 +152,7 @@ class PanelFit:
     turn : (h, 3, 3) float, the turn about the axis applied (:mod:`metrology.measure.beyond`)
     spot_turn : (h,) float, rad, the most the fitted surface has turned at a spot from the hole's normal
     incidence : (h,) float, rad, the largest angle a beam meets the fitted surface at
-        (both :func:`metrology.measure.remainder.spot_geometry`: rule 1b of :mod:`metrology.measure.holes`)
+        (both :func:`metrology.measure.remainder.spot_geometry`: rule 1b of :mod:`metrology.measure.rules`)
     """
 
     correction: np.ndarray

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from metrology.calibration.estimators import DEFAULT_P0_SIGMA
-from metrology.core.effects.sensor import legendre23
+from metrology.core.effects.characteristic import legendre23
 from metrology.core.layout import SensorLayout
 from metrology.core.model import jacobian_tangent, readings
 
@@ -43,12 +43,12 @@ MAX_EXCHANGES = 200
 INCIDENCE_PRIOR_MM = 1.0
 
 #: prior 1-sigma (unitless) of a gain error ``k`` (bias ``k d0``:
-#: :class:`metrology.core.effects.sensor.Scale`) when the design also separates it; wide
+#: :class:`metrology.core.effects.characteristic.Scale`) when the design also separates it; wide
 #: against real gain errors (10^-4 to 10^-2)
 SCALE_PRIOR = 0.1
 
 #: prior 1-sigma (mm) of the bow and S-shape ``c2 P2(x) + c3 P3(x)`` of the characteristic
-#: (:class:`metrology.core.effects.sensor.Nonlinearity`); wide against datasheet linearity
+#: (:class:`metrology.core.effects.characteristic.Nonlinearity`); wide against datasheet linearity
 NONLINEARITY_PRIOR_MM = 1.0
 
 #: the extra columns a design may carry per sensor, in this order after the five of the chart:
@@ -92,7 +92,7 @@ def pose_information(layout: SensorLayout, normal, offset, sigma_mm, incidence=(
         ``tan^2(gamma)`` (``gamma`` the angle between the beam and the datum normal), ``"scale"``
         the gain term ``d0`` (the nominal reading, mm), ``"nonlinearity"`` the bow and S-shape
         ``P2(x), P3(x)`` of the reading normalised over the sensor's range (two columns, as
-        :class:`~metrology.core.effects.sensor.Nonlinearity`): the design then also tells those
+        :class:`~metrology.core.effects.characteristic.Nonlinearity`): the design then also tells those
         causes from the beam geometry and from each other. On a canted beam both follow the
         tilt (tilting toward the beam shortens the reading and lowers ``gamma``), so a plan
         that spreads tilts alone leaves ``k d0`` and ``c tan^2`` nearly collinear.

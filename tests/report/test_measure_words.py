@@ -44,7 +44,7 @@ def test_a_stated_radius_and_known_surfaces_are_read_as_attributes(report):
     stated = replace(report, curvature=RadiusBound(800.0, "cell.toml"))
     assert "curvature from bound: the cell's panel radius 800 mm stated in cell.toml" in measure_text(stated)
     assert stated.to_dict()["curvature"] == {"assumed": False, "radius_mm": 800.0, "source": (
-        "bound: the cell's panel radius 800 mm stated in cell.toml [panel] radius_mm")}
+        "bound: the cell's panel radius 800 mm stated in cell.toml [panel] radius_mm"), "one_sensor_offset_holes": 0}
     off = OffCad(4.0, 300, 7, 2e-4, 5e-4, "H12")
     cad = CadCheck(0, 0, 0.5, 0.0, 0.0, None, 0.0, 0.0, None)
     known = replace(report, curvature=KnownSurfaces("wing.stl", 400, 0.2, 0.05, 2.0, False, 30, 2, off, cad))

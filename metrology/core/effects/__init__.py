@@ -53,7 +53,8 @@ from __future__ import annotations
 
 from metrology.core.effects.base import REFERENCE_TEMP_C, SECONDS_PER_HOUR, VERDICTS, Component, Covariates
 from metrology.core.effects.model import ExtendedModel
-from metrology.core.effects.sensor import Drift, Incidence, Nonlinearity, Scale
+from metrology.core.effects.characteristic import Nonlinearity, Scale
+from metrology.core.effects.sensor import Drift, Incidence
 from metrology.core.effects.setup import Outliers, PlaneForm, PoseError
 from metrology.core.effects.shift import Shift
 

@@ -2,7 +2,7 @@
 
 A sensor with terms reads ``d = d0 + f(d0; theta, covariates)`` (mm) where ``d0`` is what the
 simple model of :mod:`metrology.core.model` predicts (the distance along its beam from its zero
-point) and ``f`` the sum of its terms (:mod:`metrology.core.effects.sensor`). Every consumer of a
+point) and ``f`` the sum of its terms (:mod:`metrology.core.effects`). Every consumer of a
 layout (measure, normals, the controller's ``surface_normal``, the drift watch, diagnose given an
 extended layout) hands the simple model ``d0``: :func:`correct_readings` inverts ``d = d0 + f(d0)``
 by fixed-point iteration (the terms change by ``f' ~ 1e-2`` per mm of reading: each step gains two
