@@ -26,6 +26,11 @@
 #   and flat3 0) and, on 4 sensors, a check line of it in verdict.checks; with them curvature.spin_alias_holes (wing_nopose
 #   1641, the others 0) and, on 4 sensors with the convention not stated (wing_nopose), a check line of it; every other
 #   file byte-identical.
+# - issue 49 item 4 (a), a small hole table's closest points by trimesh's double-precision engine (metrology/panel/holes.py
+#   DOUBLE_ENGINE_WORK, benchmarks/results/measure_panel_speed_issue49_r6.md): --panel/--points outputs by rounding, the
+#   closest triangle the true one where Open3D's float32 picked a neighbour (wing, wing3, wing_nopose, wing3_nopose,
+#   follow_wing: angle_deg <= 2e-9 deg, normal_vs_cad_deg <= 5e-7 deg; barrel <= 1e-14 deg; wing.qif a last digit);
+#   no status changes.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels
