@@ -67,6 +67,15 @@ class Labels:
     codes: np.ndarray
     values: list
 
+    @staticmethod
+    def concat(parts) -> Labels:
+        """The labels of ``parts`` one after the other, on one dictionary (each part's codes mapped into it)."""
+        at, codes = {}, []
+        for p in parts:
+            to = np.array([at.setdefault(v, len(at)) for v in p.values], np.int64)
+            codes.append(to[p.codes] if len(to) else p.codes.astype(np.int64))
+        return Labels(np.concatenate(codes), list(at))
+
 
 @dataclass(frozen=True)
 class HoleBatch:

@@ -149,7 +149,7 @@ class Feed:
         rest = (np.concatenate([getattr(f, k) for f in feeds]) for k in
                 ("time_s", "charted", "rho_mm", "noise_sd_mm", "signature"))
         return cls(feeds[0].log, feeds[0].part, np.concatenate([f.row for f in feeds]),
-                   _join([f.cell for f in feeds]), _join([f.panel for f in feeds]),
+                   Labels.concat([f.cell for f in feeds]), Labels.concat([f.panel for f in feeds]),
                    pa.concat_arrays([f.hole_id for f in feeds]), *rest)
 
 
@@ -157,15 +157,6 @@ def _labels(col, labels=None) -> Labels:
     """A string column with few values (cell, panel) by its dictionary (``labels``, where the batch has it
     already)."""
     return Labels(*text_codes(col)) if labels is None else labels
-
-
-def _join(parts) -> Labels:
-    """The labels of ``parts`` one after the other, on one dictionary (each part's codes mapped into it)."""
-    at, codes = {}, []
-    for p in parts:
-        to = np.array([at.setdefault(v, len(at)) for v in p.values], np.int64)
-        codes.append(to[p.codes] if len(to) else p.codes.astype(np.int64))
-    return Labels(np.concatenate(codes), list(at))
 
 
 @dataclass
