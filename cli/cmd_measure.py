@@ -95,6 +95,8 @@ def register(app: typer.Typer) -> None:
                              ("--points", points)):
             if value is not None and not Path(value).exists():  # one wording for every input (docs/cli.md)
                 fail(f"{value}: no such file ({label})")
+            if value is not None and label != "LOG" and Path(value).is_dir():  # a log may be a folder, these not
+                fail(f"{value}: a folder, not a file ({label})")
         if workers is not None and scheduler is not None:
             fail("--workers and --scheduler: give one (a new local cluster, or a running one)")
         panel_kw = {"panel": panel, "points": points, "position_error_mm": position_error_mm,

@@ -81,6 +81,8 @@ def register(app: typer.Typer) -> None:
                              ("--panel", panel if Path(str(panel)).suffix else None)):
             if value is not None and not Path(value).exists():  # one wording for every input (docs/cli.md)
                 fail(f"{value}: no such file ({label})")
+            if value is not None and Path(value).is_dir():
+                fail(f"{value}: a folder, not a file ({label})")
         with progress_bar("simulate-log") as progress:
             summary = simulate_log_files(
                 layout, out, truth=truth, true_layout_path=true_layout, holes=holes, cells=cells, panel=panel,

@@ -22,7 +22,10 @@ and refuses them when
 The refusal names the unit that would make every reading plausible (``in`` or ``m``, read with
 :data:`CANDIDATES`) and the fix (``--units``, or converting the files). Numbers that no other unit
 makes plausible either are let through (a dense test pattern is no unit's mistake), unless the panel
-is narrower than the footprint (nothing could be measured on it). Nothing here reads a file.
+is narrower than the footprint (nothing could be measured on it) or the log's commanded positions lie
+that far from their holes' points in every unit: then the table is another panel's whose hole_ids the
+log shares (H0001 is every table's first hole), or the positions are not in the panel's frame, and
+every hole would be judged on a surface it was not drilled on. Nothing here reads a file.
 """
 
 from __future__ import annotations
@@ -74,12 +77,20 @@ def _problems(scale, footprint_mm, standoff_mm, panel_sides, table_sides, pitch,
             table_sides[0] > TABLE_OVER_PANEL * panel_sides[0] + 1e-9:
         out.append(f"the holes spread {table_sides[0] * scale:.3g} mm, wider than the panel "
                    f"({panel_sides[0] * scale:.3g} mm)")
-    if pose_gap is not None:
-        gap = pose_gap(scale)
-        if np.isfinite(gap) and gap > POSE_REACH * standoff_mm + footprint_mm:
-            out.append(f"the log's commanded positions lie a median {gap:.3g} mm from their holes' points "
-                       f"(the stand-off is {standoff_mm:.3g} mm)")
+    gap = _far(None if pose_gap is None else (lambda s: pose_gap(s * scale)), footprint_mm, standoff_mm)
+    if gap is not None:
+        out.append(f"the log's commanded positions lie a median {gap:.3g} mm from their holes' points "
+                   f"(the stand-off is {standoff_mm:.3g} mm)")
     return out
+
+
+def _far(pose_gap, footprint_mm, standoff_mm):
+    """The median gap (mm) of the commanded positions from their holes' points where it is beyond
+    :data:`POSE_REACH` stand-offs plus the footprint (the files' numbers read as mm), else None."""
+    if pose_gap is None:
+        return None
+    gap = pose_gap(1.0)
+    return gap if np.isfinite(gap) and gap > POSE_REACH * standoff_mm + footprint_mm else None
 
 
 def _narrow(sides, footprint_mm) -> bool:
@@ -170,6 +181,11 @@ def check_panel_units(footprint_mm, standoff_mm, *, panel_extent=None, table_poi
         fix = (_pose_fix(likely[0][1], False) if likely else
                "check the files' unit (the layout and the log are in mm)")
         return f"{names}: read in {given} (--units {given}): {'; '.join(problems)}: {fix}"
+    far = _far(_at(gap, 1.0, 1.0), footprint_mm, standoff_mm)
+    if not likely and far is not None:  # no unit brings the positions to their holes: another panel's table
+        return (f"{log_name}: the log's commanded positions lie a median {far:.3g} mm from their holes' points in "
+                f"{names} (the stand-off is {standoff_mm:.3g} mm) and no unit brings them closer: is it this panel's "
+                f"table (hole_ids another table shares?), and are {', '.join(POSE_POSITION)} in the panel's frame?")
     if not likely and not (panel_sides is not None and _narrow(panel_sides, footprint_mm)):
         return None  # odd numbers, but no other unit explains them (a dense test pattern): not a unit's mistake
     files, poses = likely[0] if likely else (None, None)

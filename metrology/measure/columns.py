@@ -70,9 +70,16 @@ def result_table(layout: "SensorLayout", table, ids, code, reason, before, after
     N = len(code)
     nan = np.full(N, np.nan)
     before_angle, before_u, after_angle, after_u = shown
+    lost = None
+    if placed is not None:  # a hole not in the table, or whose footprint runs off the panel, has no local surface:
+        have = placed.table_row >= 0  # no normal nor panel figure (the micro-plane's would show as metro's)
+        lost = ~have
+        lost[have] = surf.problem[placed.table_row[have]] != ""
+        lost = lost if lost.any() else None
+    normal = before.normal if lost is None else np.where(lost[:, None], np.nan, before.normal)
     cols = {
         "hole_id": ids,
-        "normal_x": _num(before.normal[:, 0]), "normal_y": _num(before.normal[:, 1]), "normal_z": _num(before.normal[:, 2]),
+        "normal_x": _num(normal[:, 0]), "normal_y": _num(normal[:, 1]), "normal_z": _num(normal[:, 2]),
         "angle_deg": _num(np.degrees(before_angle)), "U95_angle_deg": _num(np.degrees(before_u)),
         "angle_after_deg": _num(np.degrees(after_angle)), "U95_after_deg": _num(np.degrees(after_u)),
         "fit_residual_um": _num(before.residual * 1e3),
@@ -88,9 +95,9 @@ def result_table(layout: "SensorLayout", table, ids, code, reason, before, after
         have = table_row >= 0
         k = surf.k[table_row] if have.all() else np.where(have[:, None], surf.k[table_row], np.nan)
         cols["k1_per_mm"], cols["k2_per_mm"] = _num(k[:, 0]), _num(k[:, 1])
-        cols["correction_deg"] = _num(np.degrees(before.extra.correction))
-        cols["panel_misfit_per_mm"] = _num(before.extra.panel_misfit)
-        cols["panel_misfit_z"] = _num(before.extra.panel_misfit_z)
+        cols["correction_deg"], cols["panel_misfit_per_mm"], cols["panel_misfit_z"] = (
+            _num(a if lost is None else np.where(lost, np.nan, a)) for a in (
+                np.degrees(before.extra.correction), before.extra.panel_misfit, before.extra.panel_misfit_z))
         if placed.pose is not None and surf.point is not None:
             vs_cad, offset = against_cad(layout, readings, before.normal, placed.shape, surf, table_row, placed.pose)
             cols["normal_vs_cad_deg"] = _num(np.degrees(vs_cad))

@@ -83,8 +83,10 @@ def fit_summaries(report: CalibrationReport) -> list:
         params = tuple((p, float(v), float(e), "mm") for p, v, e in zip(("x", "y", "z"), th[:3], se[:3]))
         params += tuple((p, float(np.rad2deg(np.arctan(v))), float(np.rad2deg(e)), "deg")
                         for p, v, e in zip(("tilt_e1", "tilt_e2"), th[3:], se[3:]))
-        out.append(FitSummary(f"{name} (zero error, beam tilt)", cal.method, n, 5, float(chi2), params,
-                              correlations_from_cov(cov, CHART_NAMES), sensor=name))
+        # the nominal's error about the nominal's chart: the certificate and the layout's direction_stderr_deg state
+        # the tilt about the calibrated direction's chart, another 1 sigma under the names e1, e2 (issue 51 item 9)
+        out.append(FitSummary(f"{name} (zero error, beam tilt about the nominal's e1, e2)", cal.method, n, 5,
+                              float(chi2), params, correlations_from_cov(cov, CHART_NAMES), sensor=name))
     return out
 
 

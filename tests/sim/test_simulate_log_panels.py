@@ -127,6 +127,8 @@ def _set(row, col, value):
     (_set(2, 6, "nan"), "row 2: hole H0002: k 'nan' is not finite"),
     (lambda rows: _set(2, 4, "0")(_set(2, 5, "0")(_set(2, 6, "0")(rows))), "row 2: hole H0002: feed direction i,j,k is the zero vector"),
     (_set(2, 6, "0.9997"), "row 2: hole H0002: feed (0.02895, -0.004557, 0.9996) points out of the CAD panel"),
+    (lambda rows: _set(2, 4, "0.04")(_set(2, 5, "0")(_set(2, 6, "-1.3")(rows))),
+     "row 2: hole H0002: feed direction i,j,k has length 1.30062, expected a unit vector (within 0.001)"),
     (_set(2, 3, "3.5"), "row 2: hole H0002: point (-50, -25, 3.5) mm is off the CAD panel (it is 4.17 mm"),
     (lambda rows: ["hole,x,y,z,i,j,k"] + rows[1:], "missing column(s) hole_id"),
 ])

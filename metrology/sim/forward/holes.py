@@ -1,7 +1,8 @@
 """A CAD/CAM hole table for the hole-log simulator: ``hole_id,x,y,z,i,j,k`` (CSV or Parquet).
 
 ``x, y, z`` the nominal drill point (mm, panel frame), ``i, j, k`` the drill's feed direction into
-the panel (normalised here; a zero or non-finite vector is refused). Read on its own (the
+the panel (a unit vector within :data:`FEED_UNIT_TOL`, normalised here; another length, a zero or a
+non-finite vector is refused). Read on its own (the
 simulator does not borrow :mod:`metrology.panel.points`), then checked against the CAD panel
 (:func:`check_table`): every point within :data:`ON_PANEL_MM` of the panel along its feed, every
 feed entering the panel (``feed . n < 0``), a table spanning more than :data:`MIN_SPAN_MM` (one
@@ -17,13 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["HoleTable", "read_hole_table", "check_table", "COLUMNS", "ON_PANEL_MM", "MIN_SPAN_MM"]
+__all__ = ["HoleTable", "read_hole_table", "check_table", "COLUMNS", "ON_PANEL_MM", "MIN_SPAN_MM", "FEED_UNIT_TOL"]
 
 COLUMNS = ("hole_id", "x", "y", "z", "i", "j", "k")
 #: a table point farther than this from the CAD panel along its feed is off the panel (mm)
 ON_PANEL_MM = 0.5
 #: a table of 2+ holes spanning less than this (bounding-box diagonal, mm) is not in mm
 MIN_SPAN_MM = 1.0
+#: a feed i,j,k is a unit vector to this (CAM writes 6+ digits; the table's contract, which metro measure holds it to)
+FEED_UNIT_TOL = 1e-3
 #: how far before the point the feed's ray starts when a point is checked on the panel (mm)
 _LEAD_MM = 50.0
 
@@ -112,6 +115,9 @@ def read_hole_table(path) -> HoleTable:
         norm = float(np.linalg.norm(f))
         if norm == 0:
             raise ValueError(f"{path}: row {r}: hole {hid}: feed direction i,j,k is the zero vector")
+        if abs(norm - 1.0) > FEED_UNIT_TOL:  # a column out of place, not a scale: as metro measure refuses it
+            raise ValueError(f"{path}: row {r}: hole {hid}: feed direction i,j,k has length {norm:.6g}, expected a "
+                             f"unit vector (within {FEED_UNIT_TOL:g})")
         ids.append(hid)
         vals.append(v[:3] + list(f / norm))
     a = np.array(vals, float)
