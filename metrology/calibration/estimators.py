@@ -22,6 +22,9 @@ batch least squares and the dispatch on a method's name (:data:`METHODS`).
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
+
 import numpy as np
 
 from metrology.calibration.fitted import Calibration, _finish, _pose_order
@@ -106,14 +109,48 @@ def lsq(nominal: SensorLayout, obs: Observations, loss="linear", f_scale=1.0) ->
     return _finish("lsq", nominal, obs, theta, cov, sig)
 
 
+#: sensor fits :func:`_lsq_base` keeps by the content of their problem (least recently used dropped
+#: first). The export screen (``calibration.sanity``) fits the data as read and again under each likely
+#: export mistake, and a mistake that moves two columns (or none of a sensor's) leaves the other
+#: sensors' problems as read; ``calibrate`` then fits what its screen fitted. A kept fit is the one the
+#: solver would return: the same inputs, the same arithmetic.
+LSQ_KEPT = 64
+_KEPT: OrderedDict = OrderedDict()
+
+
+def _problem_key(nominal, i, obs, loss, f_scale) -> bytes:
+    """A digest of everything sensor ``i``'s fit depends on: its nominal zero point and direction,
+    the datum in each pose's TCS, its readings, the loss and its scale."""
+    h = hashlib.blake2b(digest_size=20)
+    for a in (nominal.zero[i], nominal.direction[i], obs.normal, obs.offset, obs.d[:, i]):
+        a = np.ascontiguousarray(a, float)
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(f"{loss}:{float(f_scale)!r}".encode())
+    return h.digest()
+
+
 def _lsq_base(nominal, i, obs, loss="linear", f_scale=1.0):
     """Sensor ``i``'s base model by :class:`~metrology.calibration.engine.LeastSquares` (unit
-    weights: residuals in mm): ``(theta (5,), cov (5, 5), s mm)``."""
-    from metrology.calibration.engine import LeastSquares
-
+    weights: residuals in mm): ``(theta (5,), cov (5, 5), s mm)``; a problem solved before is
+    not solved again (:data:`LSQ_KEPT`)."""
     m = len(_pose_order(obs, i))
     if m < 5:
         raise ValueError(f"sensor {nominal.names[i]}: {m} readings, need at least 5 for 5 parameters")
+    key = _problem_key(nominal, i, obs, loss, f_scale)
+    if key not in _KEPT:
+        _KEPT[key] = _solve_base(nominal, i, obs, m, loss, f_scale)
+        if len(_KEPT) > LSQ_KEPT:
+            _KEPT.popitem(last=False)
+    _KEPT.move_to_end(key)
+    x, cov, s = _KEPT[key]
+    return x.copy(), cov.copy(), s
+
+
+def _solve_base(nominal, i, obs, m, loss, f_scale):
+    """:func:`_lsq_base`'s fit (``m`` the sensor's readings)."""
+    from metrology.calibration.engine import LeastSquares
+
     p = LeastSquares(nominal, obs, np.ones(nominal.n), sensors=[i])
     x = p.solve("lsq", loss, f_scale=f_scale, x_scale=LSQ_X_SCALE, xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
     if not np.all(np.isfinite(x)):

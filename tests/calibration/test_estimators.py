@@ -123,3 +123,33 @@ def test_estimators_do_not_modify_the_nominal_layout(rng):
     before = nominal.zero.copy(), nominal.direction.copy()
     calibrate(nominal, make_obs(rng, true, nominal), "lsq")
     assert np.array_equal(nominal.zero, before[0]) and np.array_equal(nominal.direction, before[1])
+
+
+def test_a_kept_lsq_fit_is_the_fit_of_its_own_problem(rng):
+    """lsq keeps each sensor's fit by the content of its problem (the export screen refits the
+    same sensors under each likely mistake, calibrate what its screen fitted): a sensor whose
+    readings, layout and datum are unchanged gets the fit a fresh solve gives, to the bit, whatever
+    the other columns hold; a changed column is solved afresh; and a caller writing into a
+    returned array does not change what is kept."""
+    import metrology.calibration.estimators as est
+
+    nominal, true = table2_layouts()
+    obs = make_obs(rng, true, nominal)
+    est._KEPT.clear()
+    est.lsq(nominal, obs)
+    x, cov, _ = est._lsq_base(nominal, 0, obs)
+    x0 = x.copy()
+    x[:], cov[:] = 99.0, 99.0  # a caller's write: not into the store
+    np.testing.assert_array_equal(est._lsq_base(nominal, 0, obs)[0], x0)
+    changed = obs.d.copy()
+    changed[:, 1] = np.roll(changed[:, 1], 7)  # another sensor's column, as a swapped export moves one
+    obs2 = Observations(obs.normal, obs.offset, changed)
+    kept = len(est._KEPT)
+    again = est.lsq(nominal, obs2)
+    assert len(est._KEPT) == kept + 1  # sensor 1's problem only was new
+    est._KEPT.clear()
+    fresh = est.lsq(nominal, obs2)
+    np.testing.assert_array_equal(again.theta, fresh.theta)
+    np.testing.assert_array_equal(again.cov, fresh.cov)
+    np.testing.assert_array_equal(again.residual_rms, fresh.residual_rms)
+    assert not np.allclose(fresh.theta[1], est.lsq(nominal, obs).theta[1])  # the changed column: its own fit
