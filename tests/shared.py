@@ -30,7 +30,8 @@ def shared_root(tmp_path_factory) -> Path:
 
 
 @contextlib.contextmanager
-def _locked(path: Path):
+def locked(path: Path):
+    """An exclusive lock on ``path`` (created) while the block runs; none without ``fcntl``."""
     with open(path, "a+b") as f:
         if fcntl is not None:
             fcntl.flock(f, fcntl.LOCK_EX)
@@ -46,7 +47,7 @@ def once_a_run(tmp_path_factory, name: str, make):
     folder of the shared root for the files it writes (their paths may be in the value)."""
     root = shared_root(tmp_path_factory)
     path = root / f"once-{name}.pickle"
-    with _locked(root / f"once-{name}.lock"):
+    with locked(root / f"once-{name}.lock"):
         if path.is_file():
             return pickle.loads(path.read_bytes())
         folder = root / f"once-{name}"
