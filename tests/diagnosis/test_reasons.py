@@ -12,11 +12,9 @@ H = DATA_DIR / "hidden"
 
 
 @pytest.fixture(scope="module")
-def hidden():
-    """The bundled hidden run (a temperature drift on L3), diagnosed once."""
-    from metrology.jobs.diagnose import diagnose_files
-
-    return diagnose_files(H / "export.csv", H / "plane.json", H / "layout.toml")
+def hidden(hidden_diagnosis):
+    """The bundled hidden run (a temperature drift on L3), diagnosed once a run (tests/conftest.py)."""
+    return hidden_diagnosis
 
 
 def test_the_hidden_drift_has_its_trail_in_the_order_the_rules_fired(hidden):

@@ -1,12 +1,10 @@
 """The typed results: a cause, its size and rivals, and the JSON made from them at the edge."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-import metrology
 from metrology.diagnosis.results import (Cause, Confidence, Confounding, Discrepancy, HeldOutFigures, Outcome, Rival, Size,
                                          StepFigures)
 
@@ -38,12 +36,10 @@ def test_outcome_and_confidence_are_string_enums():
 # -- the diagnosis holds typed results; the JSON made from them keeps its keys ---------------------
 
 @pytest.fixture(scope="module")
-def hidden():
-    """The README's ``--explain`` example: the bundled run that hides a temperature drift on L3."""
-    from metrology.jobs.diagnose import diagnose_files
-
-    h = Path(metrology.__file__).parent / "data" / "hidden"
-    return diagnose_files(h / "export.csv", h / "plane.json", h / "layout.toml")
+def hidden(hidden_diagnosis):
+    """The README's ``--explain`` example: the bundled run that hides a temperature drift on L3
+    (diagnosed once a run, tests/conftest.py)."""
+    return hidden_diagnosis
 
 
 def test_the_diagnosis_holds_typed_results_not_dicts(hidden):

@@ -4,8 +4,8 @@ Building it (xmlschema reading the 23 XSD files of tests/data/qif3/) costs ~3.6 
 when the XSD files are also checked against the XSD meta-schema (:data:`BUILD`); loading the pickled object
 ~1.5 s. The pickle is keyed
 by the bytes of every XSD file and the versions of xmlschema and Python, so a changed schema or
-library builds afresh; an unreadable pickle is rebuilt. A clean clone (CI) builds it once per
-worker that runs a QIF test: the cache helps repeated local runs, not the first.
+library builds afresh; an unreadable pickle is rebuilt. A clean clone (CI) builds it once a run:
+a worker that asks while another builds it waits for the build (a lock beside the pickle) and reads it.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ import os
 import pickle
 import sys
 from pathlib import Path
+
+from tests.shared import locked
 
 QIF3 = Path(__file__).resolve().parents[1] / "data" / "qif3"
 XSD = QIF3 / "QIFApplications" / "QIFDocument.xsd"
@@ -37,6 +39,11 @@ def qif_schema(xmlschema, cache_dir: Path | None):
     if cache_dir is None:
         return xmlschema.XMLSchema(str(XSD), validation=BUILD)
     path = Path(cache_dir) / f"qif3-{_key(xmlschema)}.pickle"
+    with locked(path.with_suffix(".lock")):  # a second worker asking meanwhile waits and reads the pickle
+        return _read_or_build(xmlschema, path)
+
+
+def _read_or_build(xmlschema, path: Path):
     try:
         with open(path, "rb") as f:
             schema = pickle.load(f)
