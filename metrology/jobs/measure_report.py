@@ -143,7 +143,8 @@ class KnownSurfaces:
     spin_on_convention_holes, spin_free_holes : int, holes judged with the spin in the cell's convention, and
         with a U95 over every spin
     off_cad : OffCad; cad : CadCheck
-    spin_bound_holes : int, of the convention's: the spin not read, its bound over half their U95^2 (their U95 for
+    spin_bound_holes : int, holes whose readings (before or judged after) rest on the spin's bound, as their reason
+        says: the spin not read, its bound over half their U95^2 (their U95 for
         any spin within the bound: ``spin_bound_model`` "edge", :data:`metrology.measure.spin.SPIN_BOUND_MODEL`)
     spin_alias_holes : int, holes whose readings, before the adjustment or the after-readings judged, the
         convention's alias spin sent to every spin, the convention not stated (their reason says so;

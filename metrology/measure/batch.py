@@ -99,8 +99,9 @@ class HoleBatch:
     on_convention : (N,) bool or None, with the panel known: judged with the head's spin taken from the cell's
         convention (no pose in the log)
     cell, panel : Labels, each hole's cell and panel
-    spin_bound : (N,) bool or None, of ``on_convention``: the spin not read, its bound over
-        :data:`metrology.measure.spin.SPIN_BOUND_SHARE` of U95^2
+    spin_bound : (N,) bool or None, with the panel known: holes whose readings (before the adjustment, or the
+        judged after) rest on the spin's bound, the spin not read and its bound over
+        :data:`metrology.measure.spin.SPIN_BOUND_SHARE` of U95^2 (as their reason says)
     one_sensor : (N,) bool or None, without the panel: judged with rule 2b's U95, which covers one sensor's offset
         (:data:`metrology.measure.rules.EDGE_SIGMAS`)
     spin_alias : (N,) bool or None, with the panel known: holes whose readings (before the adjustment, or the

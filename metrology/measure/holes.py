@@ -152,11 +152,12 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
         unknown &= ~unmodelled  # not in the table, off the edge: not measured for that, not for a gross reading
     spin_free = on_convention = spin_bound = spin_alias = None
     if placed is not None:  # how each judged hole's spin was taken
-        spin_free, on_convention, spin_bound = (
+        spin_free, on_convention = (
             (np.where(judge_after, getattr(after, f), getattr(before, f)) if after is not None else getattr(before, f))
-            & ~nm for f in ("spin_free", "convention", "spin_bound"))
-        # the alias rule's holes as their reason names them: the before-readings' note stays where the after-readings
-        # are judged (these keep the spin from before: on the convention)
+            & ~nm for f in ("spin_free", "convention"))
+        # the spin bound's and the alias rule's holes as their reason names them: the before-readings' note stays
+        # where the after-readings are judged (these keep the spin from before: on the convention)
+        spin_bound = (before.spin_bound | (after.spin_bound & judge_after if after is not None else False)) & ~nm
         spin_alias = (before.alias | (after.alias & judge_after if after is not None else False)) & ~whole
     return HoleBatch(out, code, judged, judged_u, before.angle,
                      after.angle if after is not None else np.full(N, np.nan), chart, disagree, unknown,

@@ -193,7 +193,7 @@ class FleetSummary:
     unknown_after : int, holes not measured after the adjustment whose before-readings do not rule out a wrong turn (HoleBatch)
     on_convention : int, with the panel known: holes judged with the head's spin taken from the cell's convention
         (no pose in the log); spin_free : int, those judged with a U95 over every spin (its spin not known);
-        spin_bound : int, of ``on_convention`` those whose U95 rests on the spin's bound (the spin not read);
+        spin_bound : int, holes whose readings, before or judged after, rest on the spin's bound (not read);
         spin_alias : int, holes whose readings, before or judged after, the convention's alias spin sent to every
         spin (HoleBatch)
     one_sensor : int, without the panel: holes judged with rule 2b's U95, over one sensor's offset (HoleBatch)
