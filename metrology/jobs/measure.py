@@ -11,14 +11,12 @@ import numpy as np
 
 from metrology.core.progress import ProgressFn
 from metrology.jobs.measure_map import holes_collector
-from metrology.jobs.measure_report import (SCHEMA, CadCheck, ChartSettings, KnownSurfaces, MeasureReport, OffCad,
-                                          RadiusBound, Sources)
+from metrology.jobs.measure_report import (MISFIT_SHARE, SCHEMA, CadCheck, ChartSettings, KnownSurfaces,
+                                          MeasureReport, OffCad, RadiusBound, Sources)
 from metrology.jobs.measure_panel import check_join, hole_surfaces, layout_panel
 
 __all__ = ["MeasureReport", "MeasureOptions", "measure_files", "SCHEMA"]
 
-#: a log in which more than this share of holes have readings that disagree does not fit the layout
-MISFIT_SHARE = 0.5
 
 
 #: the median hole's farthest spot (zero + reading x direction, TCS) may lie at most this many times the head's reach

@@ -8,6 +8,12 @@ from typing import TYPE_CHECKING
 
 from metrology.core.verdict import Check, Verdict
 
+#: a log in which more than this share of holes have readings that disagree does not fit the layout (the run is
+#: refused: :func:`metrology.jobs.measure._check_fit`); without the panel, more than this share of holes judged by
+#: rule 2b names the layout beside the curvature (a curved panel within the bound and a layout not this head's
+#: calibration both give most holes such a misfit; only the panel tells them apart)
+MISFIT_SHARE = 0.5
+
 if TYPE_CHECKING:
     from metrology.measure.run import MeasureResult
     from metrology.measure.tally import Counts
@@ -282,9 +288,13 @@ class MeasureReport:
                                     f"deg at {c.normal_vs_cad_max_hole})",
                                     c.cad_off_holes, None, "holes", True, gate=False))
         if isinstance(cv, RadiusBound) and len(self.layout_names) == 4 and cv.radius_mm < float("inf"):
+            most = cv.one_sensor_holes > MISFIT_SHARE * self.result.rows
             checks.append(Check("one sensor's offset (rule 2b): holes judged with a U95 that covers it, the redundant "
                                 "reading's misfit beyond the noise and within the radius bound (a burr under one spot "
-                                "gives it as well as the panel's curvature; give --panel/--points to tell them apart)",
+                                "gives it as well as the panel's curvature" + (
+                                    "; in most holes, a layout that is not this head's calibration (a nominal layout? "
+                                    "another head's?) gives it too" if most else "") +
+                                "; give --panel/--points to tell them apart)",
                                 cv.one_sensor_holes, None, "holes", True, gate=False))
         return Verdict(tuple(checks))
 
