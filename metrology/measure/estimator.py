@@ -64,6 +64,7 @@ class SurfaceFit:
     h_res : (h, n) float, mm, the heights' misfit at the solution
     Kt : (h, 3, 3) float, 1/mm, the shape operator turned onto the fitted tangent plane (``K_m``; None for the
         micro-plane)
+    spots : (x, y), each (n, h) float, mm, TCS, sensor-major: the spots' coordinates (None unless ``full``)
     """
 
     normal: np.ndarray
@@ -78,6 +79,7 @@ class SurfaceFit:
     null: np.ndarray | None
     h_res: np.ndarray | None
     Kt: np.ndarray | None
+    spots: tuple | None = None
 
 
 def spot_weights(layout, sigma_mm=None, valid=None):
@@ -100,11 +102,11 @@ def spot_weights(layout, sigma_mm=None, valid=None):
     return w if valid is None else w * valid
 
 
-def _solve(wx, wy, wz, x, y, Gz, yt, sxy):
+def _solve(wx, wy, wz, yt, sums):
     """``(g_x, g_y, c)`` minimising ``sum w (yt - g_x x - g_y y - G_z c)^2`` and the inverse's 6 entries
-    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sxy`` the sums of ``wx x``,
-    ``wx y``, ``wy y``, the same at every step: made once)."""
-    i00, i01, i02, i11, i12, i22 = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
+    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sums`` the normal matrix's 6
+    entries, the sums of ``wx x, wx y, wz x, wy y, wz y, wz G_z``)."""
+    i00, i01, i02, i11, i12, i22 = inv3(*sums)
     b0, b1, b2 = (wx * yt).sum(0), (wy * yt).sum(0), (wz * yt).sum(0)
     return (i00 * b0 + i01 * b1 + i02 * b2, i01 * b0 + i11 * b1 + i12 * b2, i02 * b0 + i12 * b1 + i22 * b2,
             (i00, i01, i02, i11, i12, i22))
@@ -155,11 +157,10 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
     y = E[:, 1, None] + dT * u[:, 1, None]
     z = E[:, 2, None] + dT * u[:, 2, None]
     wx, wy = w * x, w * y
-    wz = np.broadcast_to(w, x.shape)  # w G_z, G_z = 1 (the micro-plane)
-    Gz = 1.0
+    wz = w  # w G_z, G_z = 1 (the micro-plane): w G_z x is wx, its sums wx's (a flat panel's G_z is 1.0 exactly)
     sxy = ((wx * x).sum(0), (wx * y).sum(0), (wy * y).sum(0))
     with np.errstate(divide="ignore", invalid="ignore"):
-        gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z, sxy)
+        gx, gy, c, inv = _solve(wx, wy, wz, z, (sxy[0], sxy[1], wx.sum(0), sxy[2], wy.sum(0), _rows_sum(w)))
         gx0, gy0 = gx, gy
         k = None
         for it in range(1, steps + 1 if full else steps):
@@ -178,18 +179,22 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
             e = 0.5 * (x * kx + y * ky + zq * kz)
             Gz = 1.0 + kz
             wz = w * Gz
+            sums = (sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
             if it == steps:  # evaluated at the solution only (for the uncertainty)
-                inv = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
+                inv = inv3(*sums)
                 break
-            gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z + (e + kz * c), sxy)
+            gx, gy, c, inv = _solve(wx, wy, wz, z + (e + kz * c), sums)
     i00 = inv[0]
     ok = (valid.sum(0) >= 3) & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
     f = sg / np.sqrt(1.0 + gx * gx + gy * gy)
     normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
+    if gx0 is gx:  # the micro-plane: the first step is the fit
+        plane = normal.copy()
+    else:
+        f0 = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = np.array([-gx0 * f0, -gy0 * f0, f0]).T
     normal[~ok] = np.nan
     g = np.array([gx, gy]).T  # (h, 2), a view of (2, h)
-    f0 = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
-    plane = np.array([-gx0 * f0, -gy0 * f0, f0]).T
     if not full:
         return SurfaceFit(normal, g, c, ok, plane, None, None, None, None, None, None, None)
     i00, i01, i02, i11, i12, i22 = inv
@@ -202,7 +207,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
     hres = zq - gx * x - gy * y  # the heights' misfit (and the curvature's height)
     if k is None:  # the micro-plane: G = (-g_x, -g_y, 1) at every spot (spot_slopes), the spots as read
         G = q = Kt = None
-        null = null_vector_cols(x, y, np.ones_like(x)) if n == 4 else None
+        null = _null_vector_plane(x, y) if n == 4 else None
     else:
         hres = hres + e
         Kt = np.array([[k[0], k[1], k[2]], [k[1], k[3], k[4]], [k[2], k[4], k[5]]]).transpose(2, 0, 1)  # K_m, (h, 3, 3)
@@ -210,7 +215,25 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         q = np.stack([x, y, zq]).transpose(2, 1, 0)
         null = null_vector_cols(x, y, Gz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
     return SurfaceFit(normal, g, c, ok, plane, A.transpose(2, 0, 1), G, q, np.broadcast_to(w, x.shape).T, null,
-                      hres.T, Kt)
+                      hres.T, Kt, (x, y))
+
+
+def _rows_sum(a):
+    """``a.sum(0)`` of a sensor-major array, its rows added in order (as a sum over the sensors of (n, h) arrays is)."""
+    out = a[0].copy()
+    for r in a[1:]:
+        out += r
+    return out
+
+
+def _null_vector_plane(x, y):
+    """(h, 4) :func:`metrology.core.sym3.null_vector_cols` ``(x, y, 1)``, its products by the column of ones left
+    out (a flat panel's ``G_z`` is 1.0 exactly: the same numbers)."""
+    def det(i, j, k):
+        return x[i] * (y[j] - y[k]) - y[i] * (x[j] - x[k]) + (x[j] * y[k] - x[k] * y[j])
+
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
+    return (q / np.sqrt((q * q).sum(0))).T
 
 
 def spot_slopes(fit: SurfaceFit):
