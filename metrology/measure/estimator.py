@@ -228,9 +228,14 @@ def _rows_sum(a):
 
 def _null_vector_plane(x, y):
     """(h, 4) :func:`metrology.core.sym3.null_vector_cols` ``(x, y, 1)``, its products by the column of ones left
-    out (a flat panel's ``G_z`` is 1.0 exactly: the same numbers)."""
+    out (a flat panel's ``G_z`` is 1.0 exactly: the same numbers) and each pair's terms made once."""
+    pair = {}
+    for j, k in ((2, 3), (1, 3), (1, 2)):
+        pair[j, k] = (y[j] - y[k], x[j] - x[k], x[j] * y[k] - x[k] * y[j])
+
     def det(i, j, k):
-        return x[i] * (y[j] - y[k]) - y[i] * (x[j] - x[k]) + (x[j] * y[k] - x[k] * y[j])
+        dy, dx, c = pair[j, k]
+        return x[i] * dy - y[i] * dx + c
 
     q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
     return (q / np.sqrt((q * q).sum(0))).T

@@ -57,6 +57,28 @@ def _block_diagonal(cov, n):
     return not np.any(off)
 
 
+#: a spot slope's products, ``G_a G_b`` for the six entries ``(a, b)`` of a symmetric 3 x 3 matrix (the off-diagonal
+#: ones counted twice in :func:`_spot_forms`)
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _spot_forms(layout, cov):
+    """Each sensor's calibration block as a quadratic form in the spot's slope ``G``: ``r^T C_ii r = G^T (P_0 +
+    d P_1 + d^2 P_2) G`` (``r = L(d) G``, ``L = [I; d e1^T; d e2^T]``), the six entries of each ``P_k`` (the
+    off-diagonal ones doubled) as (n, 1) arrays, None where every sensor's is 0 (a term left out is an exact 0)."""
+    n = layout.n
+    e = direction_basis(layout.direction)  # (n, 2, 3): the chart axes of each calibrated beam
+    B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])  # (n, 5, 5)
+    P0 = B[:, :3, :3]
+    P1 = B[:, :3, 3:] @ e + np.transpose(e, (0, 2, 1)) @ B[:, 3:, :3]
+    P2 = np.transpose(e, (0, 2, 1)) @ B[:, 3:, 3:] @ e
+    out = []
+    for P in (P0, P1, P2):
+        entries = [(1.0 if a == b else 2.0) * P[:, a, b, None] for a, b in _PAIRS]
+        out.append([c if np.any(c) else None for c in entries])
+    return out
+
+
 def calibration_source(layout, cov, dT, G, A0, A1):
     """The calibration's :class:`Source` and each spot's own height variance ``r_i^T C_ii r_i`` ((n, N),
     its sensor's 5 x 5 block: the redundant reading's share).
@@ -64,26 +86,33 @@ def calibration_source(layout, cov, dT, G, A0, A1):
     Parameters
     ----------
     layout : SensorLayout, n sensors; cov : (5n, 5n) float, mm and rad, the calibration's covariance
-    dT : (n, N) float, mm, the readings; G : three (n, N) or (N,) arrays, ``G_i`` by component
+    dT : (n, N) float, mm, the readings; G : three (n, N) or (N,) arrays (or 1.0 for ``G_z``), ``G_i`` by component
     A0, A1 : (n, N), the tilt's change per unit height
 
     A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: the spots are then
-    independent (an elementwise quadratic form per spot); any other covariance is propagated whole.
+    independent (a quadratic form per spot, :func:`_spot_forms`: its terms in ``G`` made per hole where ``G`` is
+    the micro-plane's, one per hole); any other covariance is propagated whole.
     """
     n = layout.n
-    e = direction_basis(layout.direction)  # (n, 2, 3): the chart axes of each calibrated beam
     Gx, Gy, Gz = G
-    r = [Gx, Gy, Gz] + [dT * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
-    B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])[..., None]  # (n, 5, 5, 1)
+    forms = _spot_forms(layout, cov)
+    d2 = dT * dT
     q = 0.0
-    for k in range(5):  # r^T B r over the symmetric entries
-        t = B[:, k, k] * r[k]
-        for m in range(k + 1, 5):
-            t = t + 2.0 * B[:, k, m] * r[m]
-        q = q + r[k] * t
+    for j, (a, b) in enumerate(_PAIRS):
+        coef = None  # P_0 + d P_1 + d^2 P_2 of this entry, the terms that are 0 left out
+        for P, dk in ((forms[0][j], None), (forms[1][j], dT), (forms[2][j], d2)):
+            if P is not None:
+                t = P if dk is None else dk * P
+                coef = t if coef is None else coef + t
+        if coef is None:
+            continue
+        m = G[a] * G[b]
+        q = q + (coef if isinstance(m, float) and m == 1.0 else coef * m)  # x 1.0 is exact: G_z = 1 left out
     q = np.broadcast_to(q, dT.shape)
     if _block_diagonal(cov, n):
         return Source(CALIBRATION, tilt_cov(A0, A1, q)), q
+    e = direction_basis(layout.direction)
+    r = [Gx, Gy, Gz] + [dT * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
     N = dT.shape[1]
     rows = np.stack([np.broadcast_to(x, dT.shape) for x in r], axis=-1).transpose(1, 0, 2)  # (N, n, 5)
     Sx = (rows * A0.T[:, :, None]).reshape(N, -1)
