@@ -56,7 +56,8 @@ class SurfaceFit:
     ok : (h,) bool, 3+ finite readings and a well-posed fit
     plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the first step)
     (the rest are None unless ``full``)
-    A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
+    A : (h, 2, n) float, the slopes' change per unit change of each height ``h_i`` (the rows of ``g`` of
+        the pose's map; the offset's row is not made)
     G : (h, n, 3) float, ``dh_i / dS_i`` (None for the micro-plane: :func:`spot_slopes`)
     q : (h, n, 3) float, mm, ``S_i - c e_z`` (None for the micro-plane)
     w : (h, n) float, the weights (0 for a blank)
@@ -198,8 +199,8 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
     if not full:
         return SurfaceFit(normal, g, c, ok, plane, None, None, None, None, None, None, None)
     i00, i01, i02, i11, i12, i22 = inv
-    A = np.empty((3, n, h))  # A = M^-1 J^T W, J = -(x, y, G_z)
-    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
+    A = np.empty((2, n, h))  # the slopes' rows of A = M^-1 J^T W, J = -(x, y, G_z) (the offset's is read by nothing)
+    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12))):
         np.multiply(wx, -a0, out=A[r])
         A[r] -= wy * a1
         A[r] -= wz * a2
