@@ -16,6 +16,7 @@ and the tilt's covariance from independent heights of variance ``q_i`` is ``sum_
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,18 +66,30 @@ _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 def _spot_forms(layout, cov):
     """Each sensor's calibration block as a quadratic form in the spot's slope ``G``: ``r^T C_ii r = G^T (P_0 +
     d P_1 + d^2 P_2) G`` (``r = L(d) G``, ``L = [I; d e1^T; d e2^T]``), the six entries of each ``P_k`` (the
-    off-diagonal ones doubled) as (n, 1) arrays, None where every sensor's is 0 (a term left out is an exact 0)."""
-    n = layout.n
-    e = direction_basis(layout.direction)  # (n, 2, 3): the chart axes of each calibrated beam
+    off-diagonal ones doubled) as (n, 1) arrays, None where every sensor's is 0 (a term left out is an exact 0).
+    Made once per layout and covariance (a run asks for the same ones every slice of every batch)."""
+    u = np.ascontiguousarray(layout.direction, float)
+    c = np.ascontiguousarray(cov, float)
+    return _forms(u.tobytes(), c.tobytes(), layout.n)
+
+
+@functools.lru_cache(maxsize=16)
+def _forms(u_bytes, cov_bytes, n):
+    u = np.frombuffer(u_bytes, float).reshape(n, 3)
+    cov = np.frombuffer(cov_bytes, float).reshape(5 * n, 5 * n)
+    e = direction_basis(u)  # (n, 2, 3): the chart axes of each calibrated beam
     B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])  # (n, 5, 5)
+    eT = np.transpose(e, (0, 2, 1))
     P0 = B[:, :3, :3]
-    P1 = B[:, :3, 3:] @ e + np.transpose(e, (0, 2, 1)) @ B[:, 3:, :3]
-    P2 = np.transpose(e, (0, 2, 1)) @ B[:, 3:, 3:] @ e
+    P1 = B[:, :3, 3:] @ e + eT @ B[:, 3:, :3]
+    P2 = eT @ B[:, 3:, 3:] @ e
     out = []
     for P in (P0, P1, P2):
         entries = [(1.0 if a == b else 2.0) * P[:, a, b, None] for a, b in _PAIRS]
-        out.append([c if np.any(c) else None for c in entries])
-    return out
+        for x in entries:
+            x.setflags(write=False)  # shared by every call
+        out.append(tuple(x if np.any(x) else None for x in entries))
+    return tuple(out)
 
 
 def calibration_source(layout, cov, dT, G, A0, A1):
