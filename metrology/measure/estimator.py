@@ -186,11 +186,13 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
                 break
             gx, gy, c, inv = _solve(wx, wy, wz, z + (e + kz * c), sums)
     i00 = inv[0]
-    ok = (valid.sum(0) >= 3) & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    ok = np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    if not whole or n < 3:
+        ok &= valid.sum(0) >= 3
     f = sg / np.sqrt(1.0 + gx * gx + gy * gy)
     normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
-    if gx0 is gx:  # the micro-plane: the first step is the fit
-        plane = normal.copy()
+    if gx0 is gx:  # the micro-plane: the first step is the fit (the same array where no row is blanked below)
+        plane = normal if ok.all() else normal.copy()
     else:
         f0 = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
         plane = np.array([-gx0 * f0, -gy0 * f0, f0]).T

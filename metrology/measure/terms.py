@@ -186,7 +186,7 @@ def redundancy(null, res, Gu, sigma, q_cal, extra_var=0.0) -> Redundancy:
         sd = np.sqrt(((sig * sigma[:, None]) ** 2).sum(0))
         with np.errstate(invalid="ignore", divide="ignore"):
             z = residual / sd
-        return Redundancy(residual, z, np.ascontiguousarray(sig.T), sd,
+        return Redundancy(residual, z, sig.T, sd,
                           np.sqrt(sd * sd + (null * null * q_cal).sum(0) + extra_var))
     if n > 4:
         v = (Gu * sigma[:, None]) ** 2
