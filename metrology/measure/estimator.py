@@ -34,10 +34,24 @@ import numpy as np
 
 from metrology.core.sym3 import inv3, null_vector_cols, turned_tangent
 
-__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "spot_slopes", "drill_axis", "PLANE_STEPS"]
+__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "spot_slopes", "drill_axis", "rows_dot", "PLANE_STEPS"]
 
 #: steps of the micro-plane: one weighted solve (the weights do not depend on the fit)
 PLANE_STEPS = 1
+
+
+_DOT = {2: "ij,ij->j", 3: "ij,ij,ij->j"}
+
+
+def rows_dot(*arrays):
+    """(h,) float: ``(a * b).sum(0)`` (or ``(a * b * c).sum(0)``) of sensor-major ``(n, h)`` arrays (or ``(n, 1)``),
+    in one pass and without the product's temporary: the same numbers, each hole's products summed over the
+    sensors in their order (a single hole's two columns einsum would take as one contiguous dot, its own
+    order of sums: there the product, whose sum is the rows' in order)."""
+    if max(a.shape[1] for a in arrays) == 1:
+        p = arrays[0] * arrays[1]
+        return (p if len(arrays) == 2 else p * arrays[2]).sum(0)
+    return np.einsum(_DOT[len(arrays)], *arrays)
 
 
 def drill_axis(layout) -> np.ndarray:
@@ -108,7 +122,7 @@ def _solve(wx, wy, wz, yt, sums):
     (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sums`` the normal matrix's 6
     entries, the sums of ``wx x, wx y, wz x, wy y, wz y, wz G_z``)."""
     i00, i01, i02, i11, i12, i22 = inv3(*sums)
-    b0, b1, b2 = (wx * yt).sum(0), (wy * yt).sum(0), (wz * yt).sum(0)
+    b0, b1, b2 = rows_dot(wx, yt), rows_dot(wy, yt), rows_dot(wz, yt)
     return (i00 * b0 + i01 * b1 + i02 * b2, i01 * b0 + i11 * b1 + i12 * b2, i02 * b0 + i12 * b1 + i22 * b2,
             (i00, i01, i02, i11, i12, i22))
 
@@ -159,7 +173,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
     z = E[:, 2, None] + dT * u[:, 2, None]
     wx, wy = w * x, w * y
     wz = w  # w G_z, G_z = 1 (the micro-plane): w G_z x is wx, its sums wx's (a flat panel's G_z is 1.0 exactly)
-    sxy = ((wx * x).sum(0), (wx * y).sum(0), (wy * y).sum(0))
+    sxy = (rows_dot(wx, x), rows_dot(wx, y), rows_dot(wy, y))
     with np.errstate(divide="ignore", invalid="ignore"):
         gx, gy, c, inv = _solve(wx, wy, wz, z, (sxy[0], sxy[1], wx.sum(0), sxy[2], wy.sum(0), _rows_sum(w)))
         gx0, gy0 = gx, gy
@@ -180,7 +194,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
             e = 0.5 * (x * kx + y * ky + zq * kz)
             Gz = 1.0 + kz
             wz = w * Gz
-            sums = (sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
+            sums = (sxy[0], sxy[1], rows_dot(wz, x), sxy[2], rows_dot(wz, y), rows_dot(wz, Gz))
             if it == steps:  # evaluated at the solution only (for the uncertainty)
                 inv = inv3(*sums)
                 break
@@ -241,7 +255,7 @@ def _null_vector_plane(x, y):
         return x[i] * dy - y[i] * dx + c
 
     q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
-    return (q / np.sqrt((q * q).sum(0))).T
+    return (q / np.sqrt(rows_dot(q, q))).T
 
 
 def spot_slopes(fit: SurfaceFit):

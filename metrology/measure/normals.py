@@ -69,7 +69,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2, one_sign2
 from metrology.measure.budget import CURVATURE, READING_NOISE, SMALL_ANGLE_SIGMAS, Budget, Kind, Source, angle_gradient, combine
-from metrology.measure.estimator import PLANE_STEPS, drill_axis, fit_tilt
+from metrology.measure.estimator import PLANE_STEPS, drill_axis, fit_tilt, rows_dot
 from metrology.measure.magnitude import K95
 from metrology.measure.terms import reading_sigma, reading_sources, redundancy
 
@@ -210,7 +210,7 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
 
 def _moments(w, xx, xy, yy):
     """``sum_i w_i r_i r_i^T`` as its entries ``(xx, xy, yy)``, (N,) each (``w`` and the spots' products (n, N))."""
-    return (w * xx).sum(0), (w * xy).sum(0), (w * yy).sum(0)
+    return rows_dot(w, xx), rows_dot(w, xy), rows_dot(w, yy)
 
 
 def _null_vector_4(xc, yc):

@@ -23,7 +23,7 @@ import numpy as np
 
 from metrology.core.model import direction_basis
 from metrology.measure.budget import CALIBRATION, READING_NOISE, Source
-from metrology.measure.estimator import spot_slopes
+from metrology.measure.estimator import rows_dot, spot_slopes
 
 __all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "reading_sources", "redundancy",
            "Redundancy"]
@@ -38,11 +38,10 @@ def reading_sigma(layout, sigma_mm=None) -> np.ndarray:
 def tilt_cov(A0, A1, q) -> np.ndarray:
     """(N, 3): the tilt's covariance ``(00, 01, 11)`` from independent heights of variance ``q (n, N)``,
     ``A0, A1 (n, N)`` the tilt's change per unit height."""
-    a0 = A0 * q
     out = np.empty((A0.shape[1], 3))
-    out[:, 0] = (a0 * A0).sum(0)
-    out[:, 1] = (a0 * A1).sum(0)
-    out[:, 2] = (A1 * q * A1).sum(0)
+    out[:, 0] = rows_dot(A0, q, A0)
+    out[:, 1] = rows_dot(A0, q, A1)
+    out[:, 2] = rows_dot(A1, q, A1)
     return out
 
 
@@ -181,13 +180,14 @@ def redundancy(null, res, Gu, sigma, q_cal, extra_var=0.0) -> Redundancy:
     terms)."""
     n, N = res.shape
     if n == 4:
-        residual = (null * res).sum(0)
+        residual = rows_dot(null, res)
         sig = null * Gu  # d rho / d delta_k
-        sd = np.sqrt(((sig * sigma[:, None]) ** 2).sum(0))
+        t = sig * sigma[:, None]
+        sd = np.sqrt(rows_dot(t, t))
         with np.errstate(invalid="ignore", divide="ignore"):
             z = residual / sd
         return Redundancy(residual, z, sig.T, sd,
-                          np.sqrt(sd * sd + (null * null * q_cal).sum(0) + extra_var))
+                          np.sqrt(sd * sd + rows_dot(null, null, np.broadcast_to(q_cal, null.shape)) + extra_var))
     if n > 4:
         v = (Gu * sigma[:, None]) ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
