@@ -187,11 +187,14 @@ class Uncertainty:
         return Uncertainty(self.angle[r], self.u[r], self.U95[r], self.names, self.share[r])
 
 
-def angle_gradient(gx, gy):
-    """``(c_x, c_y)``, (N,) each: ``d alpha / d g = g / (|g| (1 + |g|^2))`` of the tilts ``g`` (0 at ``g = 0``)."""
-    g2 = gx * gx + gy * gy
+def angle_gradient(gx, gy, gn=None, g2=None):
+    """``(c_x, c_y)``, (N,) each: ``d alpha / d g = g / (|g| (1 + |g|^2))`` of the tilts ``g`` (0 at ``g = 0``);
+    ``gn = |g|`` and ``g2 = |g|^2`` where the caller has them."""
+    if g2 is None:
+        g2 = gx * gx + gy * gy
+        gn = np.sqrt(g2)
     with np.errstate(invalid="ignore", divide="ignore"):
-        k = 1.0 / (np.sqrt(g2) * (1.0 + g2))
+        k = 1.0 / (gn * (1.0 + g2))
     k = np.where(np.isfinite(k), k, 0.0)
     return gx * k, gy * k
 
@@ -218,11 +221,12 @@ def combine(budget: Budget) -> Uncertainty:
     if budget.combined is not None:
         return budget.combined
     g = budget.tilt
-    gx, gy = g[:, 0], g[:, 1]
+    gx, gy = np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1])
     g2 = gx * gx + gy * gy
     gn = np.sqrt(g2)
     angle = np.arctan(gn)
-    cx, cy = angle_gradient(gx, gy)
+    cx, cy = angle_gradient(gx, gy, gn, g2)
+    cxx, cxy, cyy = cx * cx, 2 * cx * cy, cy * cy  # c^T C c = cxx C_00 + cxy C_01 + cyy C_11, for every source
     N = len(g)
     share2 = []  # (N,) each, rad^2: each source's variance along the angle
     spreads = {}  # Kind -> (N,) rad, the half-widths of the spreads within bounds
@@ -230,7 +234,7 @@ def combine(budget: Budget) -> Uncertainty:
     for s in budget.sources:
         if s.kind is Kind.NORMAL:
             C = s.cov
-            share2.append(cx * cx * C[:, 0] + 2 * cx * cy * C[:, 1] + cy * cy * C[:, 2])
+            share2.append(cxx * C[:, 0] + cxy * C[:, 1] + cyy * C[:, 2])
         else:
             share2.append(s.half_width ** 2 * (1.0 / 3.0 if s.kind is Kind.BOUND else SPREAD_VARIANCE[s.kind.value]))
             if s.kind is Kind.BOUND:

@@ -60,7 +60,7 @@ def measure_pose(layout: SensorLayout, d, settings: Settings, placed: "Placed | 
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
-    in_range = finite & (d >= lo[None]) & (d <= hi[None])
+    in_range = (d >= lo[None]) & (d <= hi[None])  # a blank (NaN) compares False
     out = Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     {}, np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
