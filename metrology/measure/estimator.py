@@ -168,9 +168,7 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         dT = np.where(valid, dT, 0.0)
     w = spot_weights(layout, sigma_mm, None if whole else valid)
     E, u = layout.zero, layout.direction
-    x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
-    y = E[:, 1, None] + dT * u[:, 1, None]
-    z = E[:, 2, None] + dT * u[:, 2, None]
+    x, y, z = (_spot_axis(E[:, k, None], dT, u[:, k, None]) for k in range(3))  # (n, h), mm, TCS
     wx, wy = w * x, w * y
     wz = w  # w G_z, G_z = 1 (the micro-plane): w G_z x is wx, its sums wx's (a flat panel's G_z is 1.0 exactly)
     sxy = (rows_dot(wx, x), rows_dot(wx, y), rows_dot(wy, y))
@@ -220,12 +218,16 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         np.multiply(wx, -a0, out=A[r])
         A[r] -= wy * a1
         A[r] -= wz * a2
-    zq = z - c
-    hres = zq - gx * x - gy * y  # the heights' misfit (and the curvature's height)
+    t = gx * x  # the heights' misfit (and the curvature's height) (z - c) - g_x x - g_y y, in place
+    hres = z - c
+    hres -= t
+    np.multiply(gy, y, out=t)
+    hres -= t
     if k is None:  # the micro-plane: G = (-g_x, -g_y, 1) at every spot (spot_slopes), the spots as read
         G = q = Kt = None
         null = _null_vector_plane(x, y) if n == 4 else None
     else:
+        zq = z - c
         hres = hres + e
         Kt = np.array([[k[0], k[1], k[2]], [k[1], k[3], k[4]], [k[2], k[4], k[5]]]).transpose(2, 0, 1)  # K_m, (h, 3, 3)
         G = np.stack([kx - gx, ky - gy, Gz]).transpose(2, 1, 0)  # (h, n, 3), views of (3, n, h)
@@ -233,6 +235,13 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         null = null_vector_cols(x, y, Gz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
     return SurfaceFit(normal, g, c, ok, plane, A.transpose(2, 0, 1), G, q, np.broadcast_to(w, x.shape).T, null,
                       hres.T, Kt, (x, y))
+
+
+def _spot_axis(E, dT, u):
+    """``E + d u`` (n, h) of one axis, made in place (the same numbers as ``E + dT * u``)."""
+    out = dT * u
+    out += E
+    return out
 
 
 def _rows_sum(a):

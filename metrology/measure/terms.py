@@ -91,6 +91,21 @@ def _forms(u_bytes, cov_bytes, n):
     return tuple(out)
 
 
+def _added(acc, term, fresh):
+    """``acc + term`` (``term`` where ``acc`` is None), in place where one of them is a new array of the sum's
+    shape (``fresh``: ``term`` is; ``acc`` is whenever it came from here with that shape): the same numbers."""
+    if acc is None:
+        return term if fresh else np.array(term)
+    shape = np.broadcast_shapes(acc.shape, term.shape)
+    if acc.shape == shape:
+        acc += term
+        return acc
+    if fresh and term.shape == shape:
+        term += acc
+        return term
+    return acc + term
+
+
 def calibration_source(layout, cov, dT, G, A0, A1):
     """The calibration's :class:`Source` and each spot's own height variance ``r_i^T C_ii r_i`` ((n, N),
     its sensor's 5 x 5 block: the redundant reading's share).
@@ -109,17 +124,18 @@ def calibration_source(layout, cov, dT, G, A0, A1):
     Gx, Gy, Gz = G
     forms = _spot_forms(layout, cov)
     d2 = dT * dT
-    q = 0.0
+    q = None
     for j, (a, b) in enumerate(_PAIRS):
         coef = None  # P_0 + d P_1 + d^2 P_2 of this entry, the terms that are 0 left out
         for P, dk in ((forms[0][j], None), (forms[1][j], dT), (forms[2][j], d2)):
             if P is not None:
-                t = P if dk is None else dk * P
-                coef = t if coef is None else coef + t
+                coef = _added(coef, P if dk is None else dk * P, dk is not None)
         if coef is None:
             continue
         m = G[a] * G[b]
-        q = q + (coef if isinstance(m, float) and m == 1.0 else coef * m)  # x 1.0 is exact: G_z = 1 left out
+        one = isinstance(m, float) and m == 1.0  # x 1.0 is exact: G_z = 1 left out
+        q = _added(q, coef if one else coef * m, not one or coef.shape == dT.shape)
+    q = 0.0 if q is None else q
     q = np.broadcast_to(q, dT.shape)
     if _block_diagonal(cov, n):
         return Source(CALIBRATION, tilt_cov(A0, A1, q)), q
