@@ -31,6 +31,10 @@
 #   closest triangle the true one where Open3D's float32 picked a neighbour (wing, wing3, wing_nopose, wing3_nopose,
 #   follow_wing: angle_deg <= 2e-9 deg, normal_vs_cad_deg <= 5e-7 deg; barrel <= 1e-14 deg; wing.qif a last digit);
 #   no status changes.
+# - issue 49 item 4 (b), r7: the budget's arithmetic reordered (benchmarks/results/measure_speed_issue49_r7.md): the
+#   U95 columns only, at rounding level: flat/part1/dask/calflat/flat3/flat3inf U95_angle_deg and U95_after_deg by
+#   <= 1.8e-15 deg (flat3's after; the others <= 6e-16), the --json summaries' U95_deg and follow's per-hole U95 by
+#   <= 9e-16 deg; angles, normals, misfits, statuses, reasons, counts and every --panel/--points output byte-identical.
 set -e
 WD=$(realpath -m "$1"); O=$(realpath -m "$2"); mkdir -p "$WD" "$O"
 W=$(cd "$(dirname "$0")/.." && pwd)/metrology/data; L=$W/measured/nominal.toml; P=$W/panels

@@ -17,15 +17,22 @@ def eig2(a00, a01, a11):
     return mean + disc, mean - disc
 
 
+def _mean_disc(a00, a01, a11):
+    """``(|mean|, disc)``: the eigenvalues are ``mean +- disc`` (:func:`eig2`)."""
+    return np.abs(0.5 * (a00 + a11)), np.sqrt(0.25 * (a00 - a11) ** 2 + a01 * a01)
+
+
 def nuclear2(a00, a01, a11):
-    """The nuclear norm ``|l1| + |l2|`` of symmetric 2 x 2 matrices (arrays)."""
-    l1, l2 = eig2(a00, a01, a11)
-    return np.abs(l1) + np.abs(l2)
+    """The nuclear norm ``|l1| + |l2|`` of symmetric 2 x 2 matrices (arrays): ``2 max(|mean|, disc)`` (one sign:
+    ``|l1 + l2|``; two: ``l1 - l2``), without the eigenvalues."""
+    m, disc = _mean_disc(a00, a01, a11)
+    return 2.0 * np.maximum(m, disc)
 
 
 def one_sign2(a00, a01, a11):
     """``max(sum of the positive, -sum of the negative eigenvalues)`` of symmetric 2 x 2 matrices ``M``
     (arrays): the largest ``|tr(K M)|`` over positive (or negative) semidefinite ``K`` of eigenvalues
-    within 1 (a panel that curves one way, any orientation)."""
-    l1, l2 = eig2(a00, a01, a11)
-    return np.maximum(np.maximum(l1, 0) + np.maximum(l2, 0), -(np.minimum(l1, 0) + np.minimum(l2, 0)))
+    within 1 (a panel that curves one way, any orientation). ``|mean| + max(|mean|, disc)``: ``|l1 + l2|``
+    where both have one sign (``disc <= |mean|``), else ``max(l1, -l2) = |mean| + disc``."""
+    m, disc = _mean_disc(a00, a01, a11)
+    return m + np.maximum(m, disc)

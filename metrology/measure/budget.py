@@ -187,13 +187,24 @@ class Uncertainty:
         return Uncertainty(self.angle[r], self.u[r], self.U95[r], self.names, self.share[r])
 
 
-def angle_gradient(gx, gy):
-    """``(c_x, c_y)``, (N,) each: ``d alpha / d g = g / (|g| (1 + |g|^2))`` of the tilts ``g`` (0 at ``g = 0``)."""
-    g2 = gx * gx + gy * gy
+def angle_gradient(gx, gy, gn=None, g2=None):
+    """``(c_x, c_y)``, (N,) each: ``d alpha / d g = g / (|g| (1 + |g|^2))`` of the tilts ``g`` (0 at ``g = 0``);
+    ``gn = |g|`` and ``g2 = |g|^2`` where the caller has them."""
+    if g2 is None:
+        g2 = gx * gx + gy * gy
+        gn = np.sqrt(g2)
     with np.errstate(invalid="ignore", divide="ignore"):
-        k = 1.0 / (np.sqrt(g2) * (1.0 + g2))
+        k = 1.0 / (gn * (1.0 + g2))
     k = np.where(np.isfinite(k), k, 0.0)
     return gx * k, gy * k
+
+
+def _summed(sources, k):
+    """(N,) the entry ``k`` of the sources' covariances summed in their order."""
+    out = sources[0].cov[:, k].copy()
+    for s in sources[1:]:
+        out += s.cov[:, k]
+    return out
 
 
 def combine(budget: Budget) -> Uncertainty:
@@ -210,52 +221,56 @@ def combine(budget: Budget) -> Uncertainty:
     if budget.combined is not None:
         return budget.combined
     g = budget.tilt
-    gx, gy = g[:, 0], g[:, 1]
+    gx, gy = np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1])
     g2 = gx * gx + gy * gy
     gn = np.sqrt(g2)
     angle = np.arctan(gn)
-    cx, cy = angle_gradient(gx, gy)
+    cx, cy = angle_gradient(gx, gy, gn, g2)
+    cxx, cxy, cyy = cx * cx, 2 * cx * cy, cy * cy  # c^T C c = cxx C_00 + cxy C_01 + cyy C_11, for every source
     N = len(g)
-    share2 = np.empty((N, len(budget.sources)))
+    share2 = []  # (N,) each, rad^2: each source's variance along the angle
     spreads = {}  # Kind -> (N,) rad, the half-widths of the spreads within bounds
     bounded = np.zeros(N, bool)
-    for j, s in enumerate(budget.sources):
+    for s in budget.sources:
         if s.kind is Kind.NORMAL:
             C = s.cov
-            share2[:, j] = cx * cx * C[:, 0] + 2 * cx * cy * C[:, 1] + cy * cy * C[:, 2]
+            share2.append(cxx * C[:, 0] + cxy * C[:, 1] + cyy * C[:, 2])
         else:
-            share2[:, j] = s.half_width ** 2 * (1.0 / 3.0 if s.kind is Kind.BOUND else SPREAD_VARIANCE[s.kind.value])
+            share2.append(s.half_width ** 2 * (1.0 / 3.0 if s.kind is Kind.BOUND else SPREAD_VARIANCE[s.kind.value]))
             if s.kind is Kind.BOUND:
                 bounded |= s.half_width > 0
             else:
                 spreads[s.kind] = spreads.get(s.kind, 0.0) + s.half_width
-    var = share2[:, 0].copy()
-    for j in range(1, share2.shape[1]):
-        var += share2[:, j]
+    var = share2[0].copy()
+    for v in share2[1:]:
+        var += v
     u = np.sqrt(var)
     U95 = K95 * u
-    # a spread within bounds: the 95 % half-width of the normal plus the spread, the bounds of every spread added and
-    # taken as the widest shape present (edge, then arcsine, then uniform: the safe side where a hole has several)
-    a = sum(spreads.values(), np.zeros(N))
-    rest = np.sqrt(np.maximum(var - sum(h ** 2 * SPREAD_VARIANCE[k.value] for k, h in spreads.items()), 0.0))
-    done = np.zeros(N, bool)
-    for kind in (Kind.EDGE, Kind.ARCSINE, Kind.UNIFORM):
-        take = ~done & (spreads[kind] > 0) if kind in spreads else done & False
-        if take.any():
-            U95[take] = normal_spread_u95(rest[take], a[take], kind.value)
-            done |= take
-    # near 0 the angle is the length of the 2-D tilt (metrology.measure.magnitude)
-    C = budget.cov
+    if spreads:
+        # a spread within bounds: the 95 % half-width of the normal plus the spread, the bounds of every spread added
+        # and taken as the widest shape present (edge, then arcsine, then uniform: the safe side where a hole has several)
+        a = sum(spreads.values(), np.zeros(N))
+        rest = np.sqrt(np.maximum(var - sum(h ** 2 * SPREAD_VARIANCE[k.value] for k, h in spreads.items()), 0.0))
+        done = np.zeros(N, bool)
+        for kind in (Kind.EDGE, Kind.ARCSINE, Kind.UNIFORM):
+            take = ~done & (spreads[kind] > 0) if kind in spreads else done & False
+            if take.any():
+                U95[take] = normal_spread_u95(rest[take], a[take], kind.value)
+                done |= take
+    # near 0 the angle is the length of the 2-D tilt (metrology.measure.magnitude): its covariance in angle (rad^2),
+    # the sources summed in order entry by entry (as Budget.cov)
     scale = (1.0 + g2) ** 2
-    Ca = np.empty((N, 2, 2))  # rad^2: the tilt's covariance in angle
-    Ca[:, 0, 0], Ca[:, 0, 1], Ca[:, 1, 1] = C[:, 0] / scale, C[:, 1] / scale, C[:, 2] / scale
-    Ca[:, 1, 0] = Ca[:, 0, 1]
-    s2d = np.sqrt(eig2(Ca[:, 0, 0], Ca[:, 0, 1], Ca[:, 1, 1])[0])  # rad: the major axis's standard deviation
+    c00, c01, c11 = (_summed(budget.sources, k) / scale for k in range(3))
+    s2d = np.sqrt(eig2(c00, c01, c11)[0])  # rad: the major axis's standard deviation
     still = (angle < SMALL_ANGLE_SIGMAS * 2.0 * u) & (angle < SMALL_ANGLE_SIGMAS * s2d)
     u[still] = s2d[still]
     near = np.where(bounded, still, angle < X_MAX * s2d)
     if np.any(near):
         with np.errstate(invalid="ignore", divide="ignore"):
             tilt = g[near] * np.where(gn[near] > 0, angle[near] / gn[near], 1.0)[:, None]  # rad, length = angle
-        U95[near] = magnitude_u95(tilt, Ca[near])
+        Ca = np.empty((int(near.sum()), 2, 2))
+        Ca[:, 0, 0], Ca[:, 0, 1], Ca[:, 1, 1] = c00[near], c01[near], c11[near]
+        Ca[:, 1, 0] = Ca[:, 0, 1]
+        U95[near] = magnitude_u95(tilt, Ca)
+    share2 = np.stack(share2, axis=1)
     return Uncertainty(angle, u, U95, budget.names, np.sqrt(share2))

@@ -11,6 +11,7 @@ import numpy as np
 from metrology.io.arrays import from_numpy, strings
 from metrology.io.holelog import NUMERIC
 from metrology.measure.batch import STATUSES
+from metrology.measure.measured import patterns
 
 if TYPE_CHECKING:
     from metrology.core.layout import SensorLayout
@@ -44,10 +45,10 @@ def _labels(codes, labels):
 def _sensor_sets(layout: "SensorLayout", used, min_sensors: int):
     """Each hole's ``sensors_used`` from ``used`` (N, n) bool: the names of the sensors its normal rests on, ""
     for fewer than ``min_sensors`` (no plane)."""
-    patterns = used @ (1 << np.arange(layout.n))
+    code = patterns(used)
     names = [" ".join(nm for j, nm in enumerate(layout.names) if (p >> j) & 1) if bin(p).count("1") >= min_sensors
              else "" for p in range(1 << layout.n)]
-    return _labels(patterns, names)
+    return _labels(code, names)
 
 
 def result_table(layout: "SensorLayout", table, ids, code, reason, before, after, shown, placed: "Placed | None",

@@ -119,7 +119,7 @@ def effects_slope_cov(layout, d, normal, jac, C_tt, gain):
     dT = d.T  # (n, N)
     e = direction_basis(u)  # (n, 2, 3)
     # P_i: the slopes' change per unit height of point i, the micro-plane estimator's own map (its weights), (n, N)
-    A = fit_tilt(layout, d).A  # (N, 3, n): the pose's change per unit change of each height, sign opposite
+    A = fit_tilt(layout, d).A  # (N, 2, n): the slopes' change per unit change of each height, sign opposite
     P = (-A[:, 0, :].T, -A[:, 1, :].T)
     v = [np.zeros((len(d), jac.shape[2])), np.zeros((len(d), jac.shape[2]))]
     # only the sensors the terms act on or correlate with (a term's own sensor, in a joint fit) contribute

@@ -34,10 +34,24 @@ import numpy as np
 
 from metrology.core.sym3 import inv3, null_vector_cols, turned_tangent
 
-__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "spot_slopes", "drill_axis", "PLANE_STEPS"]
+__all__ = ["SurfaceFit", "fit_tilt", "spot_weights", "spot_slopes", "drill_axis", "rows_dot", "PLANE_STEPS"]
 
 #: steps of the micro-plane: one weighted solve (the weights do not depend on the fit)
 PLANE_STEPS = 1
+
+
+_DOT = {2: "ij,ij->j", 3: "ij,ij,ij->j"}
+
+
+def rows_dot(*arrays):
+    """(h,) float: ``(a * b).sum(0)`` (or ``(a * b * c).sum(0)``) of sensor-major ``(n, h)`` arrays (or ``(n, 1)``),
+    in one pass and without the product's temporary: the same numbers, each hole's products summed over the
+    sensors in their order (a single hole's two columns einsum would take as one contiguous dot, its own
+    order of sums: there the product, whose sum is the rows' in order)."""
+    if max(a.shape[1] for a in arrays) == 1:
+        p = arrays[0] * arrays[1]
+        return (p if len(arrays) == 2 else p * arrays[2]).sum(0)
+    return np.einsum(_DOT[len(arrays)], *arrays)
 
 
 def drill_axis(layout) -> np.ndarray:
@@ -56,7 +70,8 @@ class SurfaceFit:
     ok : (h,) bool, 3+ finite readings and a well-posed fit
     plane_normal : (h, 3) float, unit, TCS, toward the head: the micro-plane's (the first step)
     (the rest are None unless ``full``)
-    A : (h, 3, n) float, the pose's change per unit change of each height ``h_i``
+    A : (h, 2, n) float, the slopes' change per unit change of each height ``h_i`` (the rows of ``g`` of
+        the pose's map; the offset's row is not made)
     G : (h, n, 3) float, ``dh_i / dS_i`` (None for the micro-plane: :func:`spot_slopes`)
     q : (h, n, 3) float, mm, ``S_i - c e_z`` (None for the micro-plane)
     w : (h, n) float, the weights (0 for a blank)
@@ -64,6 +79,7 @@ class SurfaceFit:
     h_res : (h, n) float, mm, the heights' misfit at the solution
     Kt : (h, 3, 3) float, 1/mm, the shape operator turned onto the fitted tangent plane (``K_m``; None for the
         micro-plane)
+    spots : (x, y), each (n, h) float, mm, TCS, sensor-major: the spots' coordinates (None unless ``full``)
     """
 
     normal: np.ndarray
@@ -78,6 +94,7 @@ class SurfaceFit:
     null: np.ndarray | None
     h_res: np.ndarray | None
     Kt: np.ndarray | None
+    spots: tuple | None = None
 
 
 def spot_weights(layout, sigma_mm=None, valid=None):
@@ -100,12 +117,12 @@ def spot_weights(layout, sigma_mm=None, valid=None):
     return w if valid is None else w * valid
 
 
-def _solve(wx, wy, wz, x, y, Gz, yt, sxy):
+def _solve(wx, wy, wz, yt, sums):
     """``(g_x, g_y, c)`` minimising ``sum w (yt - g_x x - g_y y - G_z c)^2`` and the inverse's 6 entries
-    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sxy`` the sums of ``wx x``,
-    ``wx y``, ``wy y``, the same at every step: made once)."""
-    i00, i01, i02, i11, i12, i22 = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
-    b0, b1, b2 = (wx * yt).sum(0), (wy * yt).sum(0), (wz * yt).sum(0)
+    (``wx = w x``, ``wy = w y``, ``wz = w G_z``; sums over the sensors, axis 0; ``sums`` the normal matrix's 6
+    entries, the sums of ``wx x, wx y, wz x, wy y, wz y, wz G_z``)."""
+    i00, i01, i02, i11, i12, i22 = inv3(*sums)
+    b0, b1, b2 = rows_dot(wx, yt), rows_dot(wy, yt), rows_dot(wz, yt)
     return (i00 * b0 + i01 * b1 + i02 * b2, i01 * b0 + i11 * b1 + i12 * b2, i02 * b0 + i12 * b1 + i22 * b2,
             (i00, i01, i02, i11, i12, i22))
 
@@ -151,15 +168,12 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
         dT = np.where(valid, dT, 0.0)
     w = spot_weights(layout, sigma_mm, None if whole else valid)
     E, u = layout.zero, layout.direction
-    x = E[:, 0, None] + dT * u[:, 0, None]  # (n, h), mm, TCS
-    y = E[:, 1, None] + dT * u[:, 1, None]
-    z = E[:, 2, None] + dT * u[:, 2, None]
+    x, y, z = (_spot_axis(E[:, k, None], dT, u[:, k, None]) for k in range(3))  # (n, h), mm, TCS
     wx, wy = w * x, w * y
-    wz = np.broadcast_to(w, x.shape)  # w G_z, G_z = 1 (the micro-plane)
-    Gz = 1.0
-    sxy = ((wx * x).sum(0), (wx * y).sum(0), (wy * y).sum(0))
+    wz = w  # w G_z, G_z = 1 (the micro-plane): w G_z x is wx, its sums wx's (a flat panel's G_z is 1.0 exactly)
+    sxy = (rows_dot(wx, x), rows_dot(wx, y), rows_dot(wy, y))
     with np.errstate(divide="ignore", invalid="ignore"):
-        gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z, sxy)
+        gx, gy, c, inv = _solve(wx, wy, wz, z, (sxy[0], sxy[1], wx.sum(0), sxy[2], wy.sum(0), _rows_sum(w)))
         gx0, gy0 = gx, gy
         k = None
         for it in range(1, steps + 1 if full else steps):
@@ -178,39 +192,79 @@ def fit_tilt(layout, d, shape=None, steps: int = PLANE_STEPS, sigma_mm=None, ful
             e = 0.5 * (x * kx + y * ky + zq * kz)
             Gz = 1.0 + kz
             wz = w * Gz
+            sums = (sxy[0], sxy[1], rows_dot(wz, x), sxy[2], rows_dot(wz, y), rows_dot(wz, Gz))
             if it == steps:  # evaluated at the solution only (for the uncertainty)
-                inv = inv3(sxy[0], sxy[1], (wz * x).sum(0), sxy[2], (wz * y).sum(0), (wz * Gz).sum(0))
+                inv = inv3(*sums)
                 break
-            gx, gy, c, inv = _solve(wx, wy, wz, x, y, Gz, z + (e + kz * c), sxy)
+            gx, gy, c, inv = _solve(wx, wy, wz, z + (e + kz * c), sums)
     i00 = inv[0]
-    ok = (valid.sum(0) >= 3) & np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    ok = np.isfinite(i00) & np.isfinite(gx) & np.isfinite(gy)
+    if not whole or n < 3:
+        ok &= valid.sum(0) >= 3
     f = sg / np.sqrt(1.0 + gx * gx + gy * gy)
     normal = np.array([-gx * f, -gy * f, f]).T  # (h, 3), a view of (3, h)
+    if gx0 is gx:  # the micro-plane: the first step is the fit (the same array where no row is blanked below)
+        plane = normal if ok.all() else normal.copy()
+    else:
+        f0 = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
+        plane = np.array([-gx0 * f0, -gy0 * f0, f0]).T
     normal[~ok] = np.nan
     g = np.array([gx, gy]).T  # (h, 2), a view of (2, h)
-    f0 = sg / np.sqrt(1.0 + gx0 * gx0 + gy0 * gy0)
-    plane = np.array([-gx0 * f0, -gy0 * f0, f0]).T
     if not full:
         return SurfaceFit(normal, g, c, ok, plane, None, None, None, None, None, None, None)
     i00, i01, i02, i11, i12, i22 = inv
-    A = np.empty((3, n, h))  # A = M^-1 J^T W, J = -(x, y, G_z)
-    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))):
+    A = np.empty((2, n, h))  # the slopes' rows of A = M^-1 J^T W, J = -(x, y, G_z) (the offset's is read by nothing)
+    for r, (a0, a1, a2) in enumerate(((i00, i01, i02), (i01, i11, i12))):
         np.multiply(wx, -a0, out=A[r])
         A[r] -= wy * a1
         A[r] -= wz * a2
-    zq = z - c
-    hres = zq - gx * x - gy * y  # the heights' misfit (and the curvature's height)
+    t = gx * x  # the heights' misfit (and the curvature's height) (z - c) - g_x x - g_y y, in place
+    hres = z - c
+    hres -= t
+    np.multiply(gy, y, out=t)
+    hres -= t
     if k is None:  # the micro-plane: G = (-g_x, -g_y, 1) at every spot (spot_slopes), the spots as read
         G = q = Kt = None
-        null = null_vector_cols(x, y, np.ones_like(x)) if n == 4 else None
+        null = _null_vector_plane(x, y) if n == 4 else None
     else:
+        zq = z - c
         hres = hres + e
         Kt = np.array([[k[0], k[1], k[2]], [k[1], k[3], k[4]], [k[2], k[4], k[5]]]).transpose(2, 0, 1)  # K_m, (h, 3, 3)
         G = np.stack([kx - gx, ky - gy, Gz]).transpose(2, 1, 0)  # (h, n, 3), views of (3, n, h)
         q = np.stack([x, y, zq]).transpose(2, 1, 0)
         null = null_vector_cols(x, y, Gz) if n == 4 else None  # its sign: the cofactors of (1, x, y) (normals.py)
     return SurfaceFit(normal, g, c, ok, plane, A.transpose(2, 0, 1), G, q, np.broadcast_to(w, x.shape).T, null,
-                      hres.T, Kt)
+                      hres.T, Kt, (x, y))
+
+
+def _spot_axis(E, dT, u):
+    """``E + d u`` (n, h) of one axis, made in place (the same numbers as ``E + dT * u``)."""
+    out = dT * u
+    out += E
+    return out
+
+
+def _rows_sum(a):
+    """``a.sum(0)`` of a sensor-major array, its rows added in order (as a sum over the sensors of (n, h) arrays is)."""
+    out = a[0].copy()
+    for r in a[1:]:
+        out += r
+    return out
+
+
+def _null_vector_plane(x, y):
+    """(h, 4) :func:`metrology.core.sym3.null_vector_cols` ``(x, y, 1)``, its products by the column of ones left
+    out (a flat panel's ``G_z`` is 1.0 exactly: the same numbers) and each pair's terms made once."""
+    pair = {}
+    for j, k in ((2, 3), (1, 3), (1, 2)):
+        pair[j, k] = (y[j] - y[k], x[j] - x[k], x[j] * y[k] - x[k] * y[j])
+
+    def det(i, j, k):
+        dy, dx, c = pair[j, k]
+        return x[i] * dy - y[i] * dx + c
+
+    q = np.stack([det(1, 2, 3), -det(0, 2, 3), det(0, 1, 3), -det(0, 1, 2)])
+    return (q / np.sqrt(rows_dot(q, q))).T
 
 
 def spot_slopes(fit: SurfaceFit):

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from metrology.measure.placement import Placed
     from metrology.measure.surface import PanelFit
 
-__all__ = ["Measured", "measure_pose", "CACHE_ROWS"]
+__all__ = ["Measured", "measure_pose", "CACHE_ROWS", "patterns", "any_col"]
 
 
 @dataclass
@@ -60,7 +60,7 @@ def measure_pose(layout: SensorLayout, d, settings: Settings, placed: "Placed | 
     N, n = d.shape
     lo, hi = layout.range_mm[:, 0], layout.range_mm[:, 1]
     finite = np.isfinite(d)
-    in_range = finite & (d >= lo[None]) & (d <= hi[None])
+    in_range = (d >= lo[None]) & (d <= hi[None])  # a blank (NaN) compares False
     out = Measured(np.full((N, 3), np.nan), np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan),
                     np.full(N, np.nan), np.full((N, n), np.nan), in_range,
                     {}, np.zeros(N, bool), np.full(N, np.nan), np.full(N, np.nan),
@@ -74,7 +74,7 @@ def measure_pose(layout: SensorLayout, d, settings: Settings, placed: "Placed | 
     for i in np.flatnonzero(any_col(bad)):  # rare: name every reading left out
         out.reason[int(i)] = "; ".join(f"{layout.names[j]} = {d[i, j]:.4f} mm outside its range [{lo[j]:g}, {hi[j]:g}] mm"
                                   for j in np.flatnonzero(bad[i]))
-    code = in_range @ (1 << np.arange(n))  # each hole's pattern of usable sensors
+    code = patterns(in_range)  # each hole's pattern of usable sensors
     count = np.array([bin(p).count("1") for p in range(1 << n)])[code]
     few = count < MIN_SENSORS
     for i in np.flatnonzero(few):
@@ -183,6 +183,15 @@ def _moment(layout, d):
     xc, yc = x - x.mean(0), y - y.mean(0)
     q = _null_vector_4(xc, yc)
     return np.stack([(q * xc * xc).sum(0), (q * yc * yc).sum(0), (q * xc * yc).sum(0)], axis=1)
+
+
+def patterns(m):
+    """(N,) int64, each row's pattern of ``m`` (N, n) bool as bits (sensor ``j`` bit ``j``), by its columns (``m @ (1 <<
+    arange(n))``: a product of booleans is no BLAS product, and costs ten times)."""
+    out = m[:, 0].astype(np.int64)
+    for j in range(1, m.shape[1]):
+        out |= m[:, j].astype(np.int64) << j
+    return out
 
 
 def any_col(m):

@@ -69,7 +69,7 @@ import numpy as np
 from metrology.core.layout import SensorLayout
 from metrology.core.sym2 import nuclear2, one_sign2
 from metrology.measure.budget import CURVATURE, READING_NOISE, SMALL_ANGLE_SIGMAS, Budget, Kind, Source, angle_gradient, combine
-from metrology.measure.estimator import PLANE_STEPS, drill_axis, fit_tilt
+from metrology.measure.estimator import PLANE_STEPS, drill_axis, fit_tilt, rows_dot
 from metrology.measure.magnitude import K95
 from metrology.measure.terms import reading_sigma, reading_sources, redundancy
 
@@ -177,8 +177,9 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     dT = np.ascontiguousarray(d.T)
     A0, A1, Gu, noise, cal, q_cal = reading_sources(layout, fit, dT, cov, sigma)
     gx, gy = fit.g[:, 0], fit.g[:, 1]
-    E, u = layout.zero, layout.direction
-    x, y = E[:, 0, None] + dT * u[:, 0, None], E[:, 1, None] + dT * u[:, 1, None]  # (n, N), mm, TCS: the spots
+    x, y = fit.spots  # (n, N), mm, TCS: the spots
+    # the spots' second moments (n, N) each, read by the curvature bound and the misfit's moment alike
+    xx, xy, yy = (x * x, x * y, y * y) if np.isfinite(min_radius_mm) or n == 4 else (None, None, None)
     # the curvature bias bound: the worst one-signed quadric panel of radii >= min_radius_mm along the
     # angle's gradient; near 0, a round spread of the rectangular variance per axis (a worst case), stated
     # in angle (rad^2): the budget's slopes^2 are that times (1 + |g|^2)^2
@@ -186,8 +187,9 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     if np.isfinite(min_radius_mm):
         g2 = gx * gx + gy * gy
         cx, cy = angle_gradient(gx, gy)
-        bound = _one_sign(cx * A0 + cy * A1, x, y) / (2.0 * min_radius_mm)
-        b2 = (_one_sign(A0, x, y) ** 2 + _one_sign(A1, x, y) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
+        m0, m1 = _moments(A0, xx, xy, yy), _moments(A1, xx, xy, yy)  # sum_i A_i r_i r_i^T of each slope
+        bound = one_sign2(*(cx * a + cy * b for a, b in zip(m0, m1))) / (2.0 * min_radius_mm)  # linear in A
+        b2 = (one_sign2(*m0) ** 2 + one_sign2(*m1) ** 2) / (2.0 * min_radius_mm) ** 2 / 3.0
         curve[:, 0] = curve[:, 2] = b2 * (1.0 + g2) ** 2
     else:
         bound = np.zeros(N)
@@ -196,9 +198,9 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
     if n == 4:
         q = fit.null.T  # (4, N), unit, orthogonal to 1, x, y
         red = redundancy(q, fit.h_res.T, Gu, sigma, q_cal)
-        moment = np.empty((N, 3))  # q is orthogonal to 1, x, y: the spots' centroid drops out
-        moment[:, 0], moment[:, 1], moment[:, 2] = (q * x * x).sum(0), (q * y * y).sum(0), (q * x * y).sum(0)
-        twist = nuclear2(moment[:, 0], moment[:, 2], moment[:, 1])
+        mxx, mxy, myy = _moments(q, xx, xy, yy)  # q is orthogonal to 1, x, y: the spots' centroid drops out
+        moment = np.stack([mxx, myy, mxy], axis=1)
+        twist = nuclear2(mxx, mxy, myy)
     else:
         red = redundancy(None, fit.h_res.T, Gu, sigma, q_cal)
         twist = moment = None
@@ -206,10 +208,9 @@ def hole_normals(layout: SensorLayout, d, covariance=None, sigma_mm=None, min_ra
                        red.signature, bound, twist, red.sd, red.noise_sd, budget, moment=moment)
 
 
-def _one_sign(w, x, y):
-    """(N,) :func:`metrology.core.sym2.one_sign2` of ``sum_i w_i r_i r_i^T`` (``w, x, y`` (n, N))."""
-    return one_sign2((w * x * x).sum(0), (w * x * y).sum(0), (w * y * y).sum(0))
-
+def _moments(w, xx, xy, yy):
+    """``sum_i w_i r_i r_i^T`` as its entries ``(xx, xy, yy)``, (N,) each (``w`` and the spots' products (n, N))."""
+    return rows_dot(w, xx), rows_dot(w, xy), rows_dot(w, yy)
 
 
 def _null_vector_4(xc, yc):

@@ -255,7 +255,11 @@ class FleetSummary:
         cp_of = np.array([cps.index(k[0]) for k in keys])[g] if len(g) else np.zeros(0, int)
         nb, C = len(EDGES_DEG), len(cps)
         hists = []
-        for ang in (batch.angle_before, batch.angle_after, np.where(ok, batch.judged, np.nan)):
+        shown = np.where(ok, batch.judged, np.nan)
+        for ang in (batch.angle_before, batch.angle_after, shown):
+            if ang is shown and np.array_equal(shown, batch.angle_before, equal_nan=True):
+                hists.append(hists[0])  # judged before the adjustment, every hole: the same angles, the same counts
+                continue
             a = np.degrees(ang)
             f = np.isfinite(a)
             hists.append(np.bincount(cp_of[f] * nb + _bins(a[f]), minlength=C * nb).reshape(C, nb))
@@ -280,6 +284,8 @@ class FleetSummary:
 
     def _worst(self, batch, judged, ok) -> None:
         idx = np.flatnonzero(ok)
+        if len(self.worst) >= WORST:  # below the WORST-th kept, a hole cannot enter (a tie may: its order decides)
+            idx = idx[judged[idx] >= self.worst[WORST - 1].angle_deg]
         if not idx.size:
             return
         cand = idx

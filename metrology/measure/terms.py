@@ -16,13 +16,14 @@ and the tilt's covariance from independent heights of variance ``q_i`` is ``sum_
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from metrology.core.model import direction_basis
 from metrology.measure.budget import CALIBRATION, READING_NOISE, Source
-from metrology.measure.estimator import spot_slopes
+from metrology.measure.estimator import rows_dot, spot_slopes
 
 __all__ = ["reading_sigma", "tilt_cov", "noise_source", "calibration_source", "reading_sources", "redundancy",
            "Redundancy"]
@@ -37,11 +38,10 @@ def reading_sigma(layout, sigma_mm=None) -> np.ndarray:
 def tilt_cov(A0, A1, q) -> np.ndarray:
     """(N, 3): the tilt's covariance ``(00, 01, 11)`` from independent heights of variance ``q (n, N)``,
     ``A0, A1 (n, N)`` the tilt's change per unit height."""
-    a0 = A0 * q
     out = np.empty((A0.shape[1], 3))
-    out[:, 0] = (a0 * A0).sum(0)
-    out[:, 1] = (a0 * A1).sum(0)
-    out[:, 2] = (A1 * q * A1).sum(0)
+    out[:, 0] = rows_dot(A0, q, A0)
+    out[:, 1] = rows_dot(A0, q, A1)
+    out[:, 2] = rows_dot(A1, q, A1)
     return out
 
 
@@ -57,6 +57,55 @@ def _block_diagonal(cov, n):
     return not np.any(off)
 
 
+#: a spot slope's products, ``G_a G_b`` for the six entries ``(a, b)`` of a symmetric 3 x 3 matrix (the off-diagonal
+#: ones counted twice in :func:`_spot_forms`)
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _spot_forms(layout, cov):
+    """Each sensor's calibration block as a quadratic form in the spot's slope ``G``: ``r^T C_ii r = G^T (P_0 +
+    d P_1 + d^2 P_2) G`` (``r = L(d) G``, ``L = [I; d e1^T; d e2^T]``), the six entries of each ``P_k`` (the
+    off-diagonal ones doubled) as (n, 1) arrays, None where every sensor's is 0 (a term left out is an exact 0).
+    Made once per layout and covariance (a run asks for the same ones every slice of every batch)."""
+    u = np.ascontiguousarray(layout.direction, float)
+    c = np.ascontiguousarray(cov, float)
+    return _forms(u.tobytes(), c.tobytes(), layout.n)
+
+
+@functools.lru_cache(maxsize=16)
+def _forms(u_bytes, cov_bytes, n):
+    u = np.frombuffer(u_bytes, float).reshape(n, 3)
+    cov = np.frombuffer(cov_bytes, float).reshape(5 * n, 5 * n)
+    e = direction_basis(u)  # (n, 2, 3): the chart axes of each calibrated beam
+    B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])  # (n, 5, 5)
+    eT = np.transpose(e, (0, 2, 1))
+    P0 = B[:, :3, :3]
+    P1 = B[:, :3, 3:] @ e + eT @ B[:, 3:, :3]
+    P2 = eT @ B[:, 3:, 3:] @ e
+    out = []
+    for P in (P0, P1, P2):
+        entries = [(1.0 if a == b else 2.0) * P[:, a, b, None] for a, b in _PAIRS]
+        for x in entries:
+            x.setflags(write=False)  # shared by every call
+        out.append(tuple(x if np.any(x) else None for x in entries))
+    return tuple(out)
+
+
+def _added(acc, term, fresh):
+    """``acc + term`` (``term`` where ``acc`` is None), in place where one of them is a new array of the sum's
+    shape (``fresh``: ``term`` is; ``acc`` is whenever it came from here with that shape): the same numbers."""
+    if acc is None:
+        return term if fresh else np.array(term)
+    shape = np.broadcast_shapes(acc.shape, term.shape)
+    if acc.shape == shape:
+        acc += term
+        return acc
+    if fresh and term.shape == shape:
+        term += acc
+        return term
+    return acc + term
+
+
 def calibration_source(layout, cov, dT, G, A0, A1):
     """The calibration's :class:`Source` and each spot's own height variance ``r_i^T C_ii r_i`` ((n, N),
     its sensor's 5 x 5 block: the redundant reading's share).
@@ -64,26 +113,34 @@ def calibration_source(layout, cov, dT, G, A0, A1):
     Parameters
     ----------
     layout : SensorLayout, n sensors; cov : (5n, 5n) float, mm and rad, the calibration's covariance
-    dT : (n, N) float, mm, the readings; G : three (n, N) or (N,) arrays, ``G_i`` by component
+    dT : (n, N) float, mm, the readings; G : three (n, N) or (N,) arrays (or 1.0 for ``G_z``), ``G_i`` by component
     A0, A1 : (n, N), the tilt's change per unit height
 
     A calibration fits each sensor from its own readings, so ``cov`` is block diagonal: the spots are then
-    independent (an elementwise quadratic form per spot); any other covariance is propagated whole.
+    independent (a quadratic form per spot, :func:`_spot_forms`: its terms in ``G`` made per hole where ``G`` is
+    the micro-plane's, one per hole); any other covariance is propagated whole.
     """
     n = layout.n
-    e = direction_basis(layout.direction)  # (n, 2, 3): the chart axes of each calibrated beam
     Gx, Gy, Gz = G
-    r = [Gx, Gy, Gz] + [dT * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
-    B = np.stack([cov[5 * i:5 * i + 5, 5 * i:5 * i + 5] for i in range(n)])[..., None]  # (n, 5, 5, 1)
-    q = 0.0
-    for k in range(5):  # r^T B r over the symmetric entries
-        t = B[:, k, k] * r[k]
-        for m in range(k + 1, 5):
-            t = t + 2.0 * B[:, k, m] * r[m]
-        q = q + r[k] * t
+    forms = _spot_forms(layout, cov)
+    d2 = dT * dT
+    q = None
+    for j, (a, b) in enumerate(_PAIRS):
+        coef = None  # P_0 + d P_1 + d^2 P_2 of this entry, the terms that are 0 left out
+        for P, dk in ((forms[0][j], None), (forms[1][j], dT), (forms[2][j], d2)):
+            if P is not None:
+                coef = _added(coef, P if dk is None else dk * P, dk is not None)
+        if coef is None:
+            continue
+        m = G[a] * G[b]
+        one = isinstance(m, float) and m == 1.0  # x 1.0 is exact: G_z = 1 left out
+        q = _added(q, coef if one else coef * m, not one or coef.shape == dT.shape)
+    q = 0.0 if q is None else q
     q = np.broadcast_to(q, dT.shape)
     if _block_diagonal(cov, n):
         return Source(CALIBRATION, tilt_cov(A0, A1, q)), q
+    e = direction_basis(layout.direction)
+    r = [Gx, Gy, Gz] + [dT * (Gx * e[:, k, 0, None] + Gy * e[:, k, 1, None] + Gz * e[:, k, 2, None]) for k in range(2)]
     N = dT.shape[1]
     rows = np.stack([np.broadcast_to(x, dT.shape) for x in r], axis=-1).transpose(1, 0, 2)  # (N, n, 5)
     Sx = (rows * A0.T[:, :, None]).reshape(N, -1)
@@ -139,13 +196,14 @@ def redundancy(null, res, Gu, sigma, q_cal, extra_var=0.0) -> Redundancy:
     terms)."""
     n, N = res.shape
     if n == 4:
-        residual = (null * res).sum(0)
+        residual = rows_dot(null, res)
         sig = null * Gu  # d rho / d delta_k
-        sd = np.sqrt(((sig * sigma[:, None]) ** 2).sum(0))
+        t = sig * sigma[:, None]
+        sd = np.sqrt(rows_dot(t, t))
         with np.errstate(invalid="ignore", divide="ignore"):
             z = residual / sd
-        return Redundancy(residual, z, np.ascontiguousarray(sig.T), sd,
-                          np.sqrt(sd * sd + (null * null * q_cal).sum(0) + extra_var))
+        return Redundancy(residual, z, sig.T, sd,
+                          np.sqrt(sd * sd + rows_dot(null, null, np.broadcast_to(q_cal, null.shape)) + extra_var))
     if n > 4:
         v = (Gu * sigma[:, None]) ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
