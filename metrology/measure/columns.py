@@ -52,7 +52,7 @@ def _sensor_sets(layout: "SensorLayout", used, min_sensors: int):
 
 
 def result_table(layout: "SensorLayout", table, ids, code, reason, before, after, shown, placed: "Placed | None",
-                 surf, readings, min_sensors: int):
+                 surf, readings, min_sensors: int, no_surface=None):
     """pyarrow.Table: a batch's results as written.
 
     Parameters
@@ -65,18 +65,16 @@ def result_table(layout: "SensorLayout", table, ids, code, reason, before, after
     placed : Placed or None, the surfaces (the panel known); surf : HoleSurfaces or None
     readings : (N, n) float, mm, the readings before (the check against the CAD)
     min_sensors : int, the fewest readings that give a plane (fewer: ``sensors_used`` blank)
+    no_surface : (N,) bool or None, with the panel known: the holes with no local surface (not in the table, or
+        their footprint off the panel; ``holes._not_in_table``): no normal nor panel figure (the micro-plane's
+        would show as metro's)
     """
     import pyarrow as pa
 
     N = len(code)
     nan = np.full(N, np.nan)
     before_angle, before_u, after_angle, after_u = shown
-    lost = None
-    if placed is not None:  # a hole not in the table, or whose footprint runs off the panel, has no local surface:
-        have = placed.table_row >= 0  # no normal nor panel figure (the micro-plane's would show as metro's)
-        lost = ~have
-        lost[have] = surf.problem[placed.table_row[have]] != ""
-        lost = lost if lost.any() else None
+    lost = no_surface if no_surface is not None and no_surface.any() else None
     normal = before.normal if lost is None else np.where(lost[:, None], np.nan, before.normal)
     cols = {
         "hole_id": ids,

@@ -137,7 +137,8 @@ def measure_batch(layout: SensorLayout, table, settings: Settings) -> HoleBatch:
     before_angle, before_u = blanked(nm & (~judge_after | whole), before.angle, before.U95)  # blank (docs)
     out = result_table(layout, table, ids, code,
                        reason_column(verdict_reasons(code, judge_after, edge, noted=unshown), reason),
-                       before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS)
+                       before, after, (before_angle, before_u, after_angle, after_u), placed, surf, d, MIN_SENSORS,
+                       no_surface=unmodelled if placed is not None else None)
     full4 = (layout.n == 4) & ~any_col(~before.used) & np.isfinite(before.residual) & np.isfinite(before.angle)
     idx = np.flatnonzero(full4)
     every = len(idx) == N  # every hole charted: the arrays themselves (a gather of every row copies them)
