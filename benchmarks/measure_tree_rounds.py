@@ -3,7 +3,10 @@ interleaved, every hole failing (``--tolerance-deg 0.1``) and conforming (``10``
 figure on a shared machine (``bench_measure.py --sections verdicts`` measures this tree alone).
 
     git archive main | tar -x -C MAIN && python -m compileall -q MAIN/metrology MAIN/cli
-    env -u PYTHONDONTWRITEBYTECODE python benchmarks/measure_tree_rounds.py MAIN WORKDIR ROUNDS OUT.json
+    env -u PYTHONDONTWRITEBYTECODE python benchmarks/measure_tree_rounds.py MAIN WORKDIR ROUNDS OUT.json [METRO]
+
+or, installed as a user installs them (clean venvs, ``uv pip install --compile-bytecode TREE``), each venv's
+``metro`` executable for MAIN and METRO (this tree's side), run with the plain script under this Python.
 
 WORKDIR holds ``log_before.parquet`` and ``calibrated.toml`` (``bench_measure.py --sections verdicts --workdir``
 makes them). Each tree runs as ``python -c "sys.path.insert(0, TREE); cli.main.main()"``. Each process's CPU is
@@ -20,6 +23,8 @@ from bench_measure import BASELINE, interleaved  # noqa: E402
 
 
 def metro(tree):
+    if Path(tree).is_file():  # an installed ``metro``
+        return [str(tree)]
     return [sys.executable, "-c", f"import sys; sys.path.insert(0, {str(tree)!r}); from cli.main import main; "
                                   f"sys.argv[0] = 'metro'; sys.exit(main())"]
 
@@ -28,7 +33,8 @@ def main():
     other, work, rounds, out = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
     log, lay, res = work / "log_before.parquet", work / "calibrated.toml", work / "holes_rounds.parquet"
     cmds = {"plain": [sys.executable, "-c", BASELINE, str(log), str(lay), str(res)]}
-    for tag, tree in (("main", other), ("new", HERE.parent)):
+    mine = Path(sys.argv[5]) if len(sys.argv) > 5 else HERE.parent
+    for tag, tree in (("main", other), ("new", mine)):
         for tol, what in (("0.1", "fail"), ("10", "conform")):
             cmds[f"{tag}_{what}"] = [*metro(tree), "-q", "measure", str(log), "--layout", str(lay), "--out", str(res),
                                      "--tolerance-deg", tol]
