@@ -44,7 +44,8 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 8. **verdicts** (``--sections verdicts``): the log of 2. without its after-readings, measured with every
    hole failing (``--tolerance-deg 0.1``) and with every hole conforming (``--tolerance-deg 10``),
    against the plain script of 2. on the same file, ``--repeat`` rounds in turn: each round's CPU
-   ratios and their median (goal: <= 1.2x);
+   ratios (each process's CPU from ``os.wait4``; the order reversed every other round), their median with its 95 %
+   bootstrap interval, and the rounds <= 1.2 (goal: <= 1.2x; ``interleaved``);
 9. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
