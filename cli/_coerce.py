@@ -19,9 +19,9 @@ import re
 
 #: what Python's ``float()`` and pydantic's lax ``float`` read the same: a plain decimal (no ``_``, no
 #: spaces, no ``inf``/``nan``: those go to pydantic)
-_FLOAT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?")
+_FLOAT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?", re.ASCII)
 #: an ``int`` as both read it: no sign but ``-``, no leading zero, short of any digit limit
-_INT = re.compile(r"-?(?:0|[1-9]\d{0,17})")
+_INT = re.compile(r"-?(?:0|[1-9]\d{0,17})", re.ASCII)
 #: "not handled here": typer's own coercion decides
 _TYPER = object()
 

@@ -31,9 +31,10 @@ def _outcome(coerce, value, param, ctx):
 
 @pytest.mark.parametrize("name, values", [
     ("tolerance_deg", ["0.1", "10", "-3", "+2.5", "1.", ".5", "1e-3", "2E+2", "1e400", "0.1000000000000000055511151231257827",
-                       "inf", "-Infinity", "nan", "1_0", " 1", "1 ", "abc", "", "0x10", "1e", 0.5, 0, True]),
+                       "inf", "-Infinity", "nan", "1_0", " 1", "1 ", "abc", "", "0x10", "1e", "\u0663", "1\n", 0.5, 0,
+                       True]),
     ("opcua_queue", ["20000", "0", "-7", "007", "-0", "+5", "1_000", "1.0", "1e3", " 3", "x", "",
-                     "123456789012345678", "1234567890123456789", 20000, 2.0, False]),
+                     "123456789012345678", "1234567890123456789", "\u0663", 20000, 2.0, False]),
     ("scheduler", ["tcp://h:1", "", "-", " a ", b"bytes", 3]),
     ("layout", ["calibrated.toml", "dir", "missing.toml", "", ".", "-", "a/../calibrated.toml", b"calibrated.toml"]),
     ("units", ["mm", "in"]),
