@@ -44,7 +44,8 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 8. **verdicts** (``--sections verdicts``): the log of 2. without its after-readings, measured with every
    hole failing (``--tolerance-deg 0.1``) and with every hole conforming (``--tolerance-deg 10``),
    against the plain script of 2. on the same file, ``--repeat`` rounds in turn: each round's CPU
-   ratios and their median (goal: <= 1.2x);
+   ratios (each process's CPU from ``os.wait4``; the order reversed every other round), their median with its 95 %
+   bootstrap interval, and the rounds <= 1.2 (goal: <= 1.2x; ``interleaved``);
 9. ``--big N``: a partitioned log of N holes, 1e6 a partition (generated in ``--workdir``, never
    committed), measured in one process: wall time, and peak RSS against that of its first
    partition alone (1e6 holes, the same row groups; goal: within 1.2x).
@@ -199,11 +200,65 @@ def process(cmd, repeat, cpu=None):
     return best, rss / 1024.0
 
 
+def child_cpu(cmd, codes=(0, 1)) -> float:
+    """CPU seconds (user + system) of the process ``cmd`` alone, from ``os.wait4``'s rusage of that child (no
+    wrapper interpreter between: ``RUN`` timed the command from a second Python process)."""
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_ENV)
+    _, status, ru = os.wait4(p.pid, 0)
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode not in codes:
+        raise RuntimeError(f"{cmd} exited {p.returncode}")
+    return ru.ru_utime + ru.ru_stime
+
+
+#: the bootstrap of a median ratio: resamples, and its generator's seed (the interval is the same on a re-run)
+BOOT_RESAMPLES, BOOT_SEED = 4000, 49
+
+
+def median_interval(x, level: float = 0.95) -> tuple:
+    """The median of ``x`` (one ratio a round) and its percentile-bootstrap ``level`` interval (rounds resampled)."""
+    x = np.asarray(x, float)
+    rng = np.random.default_rng(BOOT_SEED)
+    m = np.median(x[rng.integers(0, len(x), (BOOT_RESAMPLES, len(x)))], axis=1)
+    lo, hi = np.quantile(m, [(1 - level) / 2, (1 + level) / 2])
+    return float(np.median(x)), float(lo), float(hi)
+
+
+def interleaved(cmds: dict, repeat: int, ratios: dict, goal: float = 1.2, codes=(0, 1)) -> dict:
+    """``repeat`` rounds of every command of ``cmds`` (name -> argv), run in turn, the order reversed every other
+    round (a slow spell of the shared machine then falls on each command's position alike); each round's CPU
+    seconds (:func:`child_cpu`), its load average before and after, and ``ratios`` (name -> (numerator,
+    denominator)) per round (a process must exit with one of ``codes``); then each ratio's median, range, 95 % bootstrap interval of the median and the rounds
+    at or below ``goal``."""
+    for cmd in cmds.values():  # a warm-up: the bytecode written, the files in the page cache
+        child_cpu(cmd, codes)
+    rounds, names = [], list(cmds)
+    for k in range(repeat):
+        load0 = os.getloadavg()[0]
+        cpu = {name: child_cpu(cmds[name], codes) for name in (names if k % 2 == 0 else names[::-1])}
+        rounds.append({**cpu, **{r: cpu[a] / cpu[b] for r, (a, b) in ratios.items()},
+                       "load": [load0, os.getloadavg()[0]]})
+        print(" ".join(f"{n} {v:.3f}" for n, v in rounds[-1].items() if n != "load"), "| load %.1f-%.1f"
+              % tuple(rounds[-1]["load"]), file=sys.stderr, flush=True)
+    out = {"rounds": rounds}
+    for r in ratios:
+        x = [d[r] for d in rounds]
+        med, lo, hi = median_interval(x)
+        out[f"median_{r}"] = med
+        out[f"{r}_range"] = [min(x), max(x)]
+        out[f"{r}_median_ci95"] = [lo, hi]
+        out[f"{r}_rounds_at_or_below_{goal}"] = sum(v <= goal for v in x)
+    for n in cmds:
+        out[f"median_{n}_cpu_s"] = float(np.median([d[n] for d in rounds]))
+    out["load_range"] = [min(min(d["load"]) for d in rounds), max(max(d["load"]) for d in rounds)]
+    return out
+
+
 def verdicts(log, layout, repeat, metro) -> dict:
     """``metro measure`` on the log without its after-readings, every hole failing (``--tolerance-deg 0.1``:
     the angles are 0.5-5 deg) and every hole conforming (``--tolerance-deg 10``), against the plain
     pyarrow+numpy micro-plane script on the same file; ``repeat`` rounds run in turn (the machine is
-    shared: each round's ratios of CPU times, and their median)."""
+    shared: each round's ratios of CPU times, their median and its bootstrap interval: :func:`interleaved`)."""
     import pyarrow.parquet as pq
 
     t = pq.read_table(log)
@@ -211,24 +266,13 @@ def verdicts(log, layout, repeat, metro) -> dict:
     pq.write_table(t.drop_columns([c for c in t.column_names if c.endswith("_after")]), before,
                    row_group_size=1 << 18)
     out = log.with_name("holes_before.parquet")
-    cmds = (("baseline", [sys.executable, "-c", BASELINE, str(before), str(layout), str(out)]),
-            ("all_fail", [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out", str(out),
-                          "--tolerance-deg", "0.1"]),
-            ("all_conform", [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out", str(out),
-                             "--tolerance-deg", "10"]))
-    for _, cmd in cmds:  # a warm-up: the bytecode written
-        process(cmd, 1)
-    rounds = []
-    for _ in range(repeat):
-        cpu = {}
-        for name, cmd in cmds:
-            c = []
-            process(cmd, 1, c)
-            cpu[name] = c[0]
-        rounds.append({**cpu, "ratio_all_fail": cpu["all_fail"] / cpu["baseline"],
-                       "ratio_all_conform": cpu["all_conform"] / cpu["baseline"]})
-    return {"rounds": rounds, "median_ratio_all_fail": float(np.median([r["ratio_all_fail"] for r in rounds])),
-            "median_ratio_all_conform": float(np.median([r["ratio_all_conform"] for r in rounds]))}
+    cmds = {"baseline": [sys.executable, "-c", BASELINE, str(before), str(layout), str(out)],
+            "all_fail": [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out", str(out),
+                         "--tolerance-deg", "0.1"],
+            "all_conform": [*metro, "-q", "measure", str(before), "--layout", str(layout), "--out", str(out),
+                            "--tolerance-deg", "10"]}
+    return interleaved(cmds, repeat, {"ratio_all_fail": ("all_fail", "baseline"),
+                                      "ratio_all_conform": ("all_conform", "baseline")})
 
 
 def _free_port():

@@ -131,12 +131,15 @@ class TableSink:
         return self
 
     def write(self, table) -> None:
-        import pyarrow as pa
-        import pyarrow.csv as pcsv
-        import pyarrow.parquet as pq
-
         if self._writer is None:
+            import pyarrow as pa
+
             self._schema = table.schema
+            parquet = self.path is not None and self.path.suffix.lower() == ".parquet"
+            if parquet:
+                import pyarrow.parquet as pq
+            else:  # pyarrow.csv loaded for a CSV alone
+                import pyarrow.csv as pcsv
             if self.path is None:
                 self._writer = pcsv.CSVWriter(pa.PythonFile(sys.stdout.buffer, mode="w"), table.schema)
             else:
@@ -146,7 +149,7 @@ class TableSink:
                 os.close(fd)
                 self._tmp = tmp
                 self._writer = (pq.ParquetWriter(tmp, table.schema, **parquet_options(table.schema))
-                                if self.path.suffix.lower() == ".parquet" else pcsv.CSVWriter(tmp, table.schema))
+                                if parquet else pcsv.CSVWriter(tmp, table.schema))
         elif table.schema != self._schema:
             table = table.cast(self._schema)
         self._writer.write_table(table)

@@ -33,13 +33,29 @@ U95 from every source, as for any other.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from metrology.core.effects.apply import INCIDENCE_PASSES, Corrected, micro_normals, remove_terms
 from metrology.core.model import direction_basis
 
+if TYPE_CHECKING:
+    from metrology.core.effects.apply import Corrected
+
 __all__ = ["EFFECTS", "Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "effects_slope_cov", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
+
+_FROM_APPLY = ("INCIDENCE_PASSES", "micro_normals")
+
+
+def __getattr__(name):
+    """The names this module passes on from :mod:`metrology.core.effects.apply`, imported on first use:
+    a layout without terms (the usual) never loads the terms' classes (``metro measure``'s start)."""
+    if name in _FROM_APPLY:
+        from metrology.core.effects import apply
+
+        return getattr(apply, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: the calibration's covariance given the terms is taken as block diagonal (sensors independent) when the
 #: layout's is and its cross-sensor entries are below this share of its largest (rounding of the joint fit)
@@ -152,6 +168,8 @@ def apply_terms(layout, d, table=None, temp_c=None, what="the log", shape=None) 
                              f"needs the temperature of every hole")
         col = table.column(TEMPERATURE_COLUMN)
         temp_c = np.asarray(col.cast("float64").to_numpy(zero_copy_only=False), float)
+    from metrology.core.effects.apply import remove_terms  # a layout with terms only (not `measure`'s usual path)
+
     return Applied((corr := remove_terms(layout, d, temp_c, what, shape)).d, corr, layout)
 
 
