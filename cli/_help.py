@@ -48,14 +48,7 @@ def _rich_help() -> bool:
 
 
 class _Fixed:
-    """The metavar fix, shared by the command and the group (the root) classes; the plain values'
-    coercion without pydantic (:mod:`cli._coerce`)."""
-
-    def parse_args(self, ctx, args):
-        from ._coerce import quicken
-
-        quicken(self.get_params(ctx))
-        return super().parse_args(ctx, args)
+    """The metavar fix, shared by the command and the group (the root) classes."""
 
     def get_params(self, ctx):
         params = super().get_params(ctx)  # with --help and the completion options added by typer
