@@ -18,12 +18,15 @@ linear map of the residual.
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
+
 import numpy as np
 
 from metrology.core.effects import ExtendedModel
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings
 
-__all__ = ["LeastSquares", "gauss_newton", "geometry", "RIGID_GAUGE_WEIGHT", "ABSORBED_COLUMN_RTOL",
+__all__ = ["LeastSquares", "gauss_newton", "geometry", "clear_held", "RIGID_GAUGE_WEIGHT", "ABSORBED_COLUMN_RTOL",
            "ABSORBED_RTOL", "INVALID_RESIDUAL"]
 
 #: weight of the rigid-head gauge rows (whitened residual units per unit of the normalised mode)
@@ -104,6 +107,39 @@ def _absorbed_modes(Jp) -> np.ndarray:
     return vt[sv < ABSORBED_RTOL * sv[0]]
 
 
+#: held readings (:func:`_held_readings`) kept, least recently used dropped first
+HELD_READINGS_KEPT = 512
+_HELD: OrderedDict = OrderedDict()
+
+
+def _held_readings(nominal, theta0, normal, offset):
+    """``(p, n)`` mm, read-only: every sensor's readings at the chart errors ``theta0 (n, 5)`` on
+    the planes ``normal (p, 3)``, ``offset (p,)`` (TCS). Every candidate posed on one fold starts
+    from the same ``theta0``: kept by the content of the inputs (a hit is what the call computes)."""
+    h = hashlib.blake2b(digest_size=20)
+    for a in (nominal.zero, nominal.direction, theta0, normal, offset):
+        a = np.ascontiguousarray(a, float)
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    key = h.digest()
+    d = _HELD.get(key)
+    if d is not None:
+        _HELD.move_to_end(key)
+        return d
+    zero_all, u_all = geometry(nominal, theta0)
+    d = readings(zero_all, u_all, normal, offset)[0]
+    d.flags.writeable = False
+    _HELD[key] = d
+    if len(_HELD) > HELD_READINGS_KEPT:
+        _HELD.popitem(last=False)
+    return d
+
+
+def clear_held() -> None:
+    """Forget the kept held readings (:func:`_held_readings`; a new data set's diagnosis)."""
+    _HELD.clear()
+
+
 class LeastSquares:
     """The least-squares problem of the base model plus ``components`` on ``obs``.
 
@@ -159,8 +195,7 @@ class LeastSquares:
         """What does not change with ``x``: the readings of the sensors held at ``theta0``, the
         chart bases, and the basis of every term that does not depend on ``d0``."""
         nominal, S = self.nominal, self.S
-        zero_all, u_all = geometry(nominal, self.theta0)
-        self.d_full0 = readings(zero_all, u_all, self.obs.normal, self.obs.offset)[0]
+        self.d_full0 = _held_readings(nominal, self.theta0, self.obs.normal, self.obs.offset)
         self.u0S = nominal.direction[S]
         self.basis0 = direction_basis(self.u0S)
         self.u0n = self.u0S / np.linalg.norm(self.u0S, axis=1, keepdims=True)  # the Jacobian's chart (as jacobian_tangent)

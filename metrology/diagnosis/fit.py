@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from metrology.calibration.engine import LeastSquares, gauss_newton, geometry
+from metrology.calibration.engine import LeastSquares, clear_held, gauss_newton, geometry
 from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
 from metrology.core.model import PARAMS_TANGENT, direction_from_tangent
@@ -58,6 +58,7 @@ def clear_all() -> None:
     """Forget every kept result (a benchmark timing one diagnosis as a fresh process runs it)."""
     for store in _STORES:
         store.clear()
+    clear_held()
 
 
 def content_key(*values) -> bytes:

@@ -71,3 +71,28 @@ def test_name_clash_and_two_per_pose_components_refused(case):
     with pytest.raises(ValueError, match="per-pose"):
         LeastSquares(ds.layout, ds.obs, np.ones(4), (PoseError((), n_poses=p), PoseError((), n_poses=p, tilts=True)),
                      cov=cov)
+
+
+def test_held_readings_are_kept_by_layout_start_and_planes(case):
+    """The held sensors' readings at ``theta0`` are kept across problems (every candidate on a
+    fold starts there): a kept one is the readings of its own start and planes, read-only."""
+    from metrology.calibration.engine import clear_held, geometry
+    from metrology.core.model import readings
+
+    ds, cov = case
+    clear_held()
+    th = np.random.default_rng(2).normal(0, 1e-3, (ds.layout.n, 5))
+    a = LeastSquares(ds.layout, ds.obs, np.full(4, 0.003), (), sensors=[0], theta0=th)
+    b = LeastSquares(ds.layout, ds.obs, np.full(4, 0.003), (Scale((2,), [1e-3], names=ds.layout.names),), theta0=th, cov=cov)
+    assert b.d_full0 is a.d_full0  # kept, not recomputed
+    np.testing.assert_array_equal(a.d_full0, readings(*geometry(ds.layout, th), ds.obs.normal, ds.obs.offset)[0])
+    with pytest.raises(ValueError):
+        a.d_full0[0, 0] = 1.0  # no caller can change another's
+    th2 = th.copy()
+    th2[3, 0] += 0.01
+    c = LeastSquares(ds.layout, ds.obs, np.full(4, 0.003), (), sensors=[0], theta0=th2)
+    assert not np.array_equal(c.d_full0[:, 3], a.d_full0[:, 3])  # another start: its own readings
+    half = ds.obs.select(np.arange(10))
+    d = LeastSquares(ds.layout, half, np.full(4, 0.003), (), sensors=[0], theta0=th)
+    np.testing.assert_array_equal(d.d_full0, a.d_full0[:10])  # other planes: their own (the same values)
+    assert d.d_full0.shape == (10, ds.layout.n)

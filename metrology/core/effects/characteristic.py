@@ -233,9 +233,10 @@ class Nonlinearity(Component):
                   + ("q" if self.inner_mm is not None else ""))
         return super().label + {0: spline, 3: "", 5: "@5"}[self.order]
 
-    def _spline(self, x, a=-1.0, b=1.0, inner=None, deriv=True):
+    def _spline(self, x, a=-1.0, b=1.0, inner=None, deriv=True, value=True):
         """``(..., n, knots + 2)``: cubic B-splines on ``[a, b]`` (normalised; interior knots ``inner`` or even) less
-        their least-squares line there, and their derivatives in ``x`` (NaN if not ``deriv``), on its sensors."""
+        their least-squares line there (NaN if not ``value``), and their derivatives in ``x`` (NaN if not
+        ``deriv``), on its sensors."""
         from scipy.interpolate import BSpline
 
         t, line, dline = _spline_setup(float(a), float(b), self.knots, inner)
@@ -245,7 +246,7 @@ class Nonlinearity(Component):
         nb = len(t) - 4
         B = np.full((len(xf), nb), np.nan)
         dB = np.full((len(xf), nb), np.nan)
-        if np.any(ok):
+        if value and np.any(ok):
             B[ok] = BSpline.design_matrix(xf[ok], t, 3, extrapolate=True).toarray()
         for j, dspline in enumerate(_spline_derivatives(float(a), float(b), self.knots, inner) if deriv else ()):
             dB[ok, j] = dspline(xf[ok])  # derivative of each basis function (nb small)
@@ -255,9 +256,10 @@ class Nonlinearity(Component):
         # nb - 2 independent columns remain after removing the line: drop the first and last
         return P[:, 1:-1].reshape(shape), dP[:, 1:-1].reshape(shape)
 
-    def _legendre(self, x, cov, deriv=True):
+    def _legendre(self, x, cov, deriv=True, value=True):
         """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
-        spline's columns for ``order=0``; none if not ``deriv``, with Legendre columns)."""
+        spline's columns for ``order=0``; none if not ``deriv``, with Legendre columns; the
+        spline's values NaN if not ``value``: the derivative alone skips its design matrix)."""
         from numpy.polynomial import legendre
 
         if self.order == 0:
@@ -265,7 +267,7 @@ class Nonlinearity(Component):
             if self.inner_mm is not None:
                 lo, hi = cov.range_mm[self.sensors[0]]
                 inner = tuple(float((2 * k - lo - hi) / (hi - lo)) for k in self.inner_mm)
-            return self._spline(x, *self._span_x(cov), inner, deriv)
+            return self._spline(x, *self._span_x(cov), inner, deriv, value)
         V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
         if not deriv:
             return V[..., 2:], None
@@ -294,6 +296,6 @@ class Nonlinearity(Component):
     def d_dd0(self, values, d0, cov):
         x, dx = self._x(d0, cov)
         g = values[0] if self.with_gain else 0.0
-        _, dP = self._legendre(x, cov)
+        _, dP = self._legendre(x, cov, value=False)
         deriv = g + (dP @ np.asarray(values[-self._n_shape:], float)) * dx[None, :]
         return np.where(self._mask(d0.shape[1])[None, :], deriv, 0.0)
