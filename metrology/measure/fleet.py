@@ -15,7 +15,7 @@ import contextlib
 from typing import Iterator
 
 from metrology.core.layout import SensorLayout
-from metrology.io.holelog import HoleLog
+from metrology.io.holelog_reader import HoleLog
 from metrology.measure.holes import Settings
 from metrology.measure.run import Feed, Piece, Watch, measure_partition
 
