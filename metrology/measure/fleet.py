@@ -227,10 +227,10 @@ class DaskEngine:
         # workers) whatever the workers' speeds: without it a worker starved of CPU held the chain back while the
         # other measured on (up to 5 feeds held at load 14 on 2 cores); `ahead`, the cluster's threads, keeps every
         # thread measuring while the chain keeps up
-        ahead = max(sum(client.nthreads().values()), 1)
         chains = list(_chains(log).values())
         chain_of = {i: k for k, chain in enumerate(chains) for i in chain}
         with _one_line():
+            ahead = max(sum(client.nthreads().values()), 1)
             links, small = [[] for _ in chains], []  # each chain's watch links so far; each partition's small piece
             for i, (n, part) in enumerate(zip(names, log.partitions)):
                 chain = links[chain_of[i]]

@@ -220,6 +220,9 @@ def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
                 pass
 
         class Client:
+            def nthreads(self):
+                return {"tcp://127.0.0.1:1": 1}
+
             def submit(self, *args, **kwargs):
                 return Future()
 
