@@ -194,7 +194,7 @@ def _known_log(rng, kind, R, spec_kw, holes, cal, axis_groups, bundled, pose=Fal
 
     import pyarrow as pa
 
-    from metrology.io.holelog import CELL, PANEL, TIME_S
+    from metrology.io.holelog_schema import CELL, PANEL, TIME_S
     from metrology.jobs.measure_panel import footprint_mm, panel_hole_surfaces
     from metrology.jobs.simulate_log import metro_controller
     from metrology.measure.panel import HoleSurfaces, HoleTable

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from metrology.io.arrays import to_numpy
-from metrology.io.holelog import POSE_POSITION, CsvLog, table_key
+from metrology.io.holelog_csv import CsvLog
+from metrology.io.holelog_schema import POSE_POSITION, table_key
 
 __all__ = ["commanded_positions", "first_readings", "SAMPLE_ROWS"]
 
@@ -23,7 +24,7 @@ SAMPLE_ROWS = 4096
 
 def commanded_positions(log, rows: int = SAMPLE_ROWS):
     """``(keys (m,) str, positions (m, 3) float, as written (mm by the columns' names), panel frame)`` of the
-    first ``rows`` rows of ``log`` (a :class:`metrology.io.holelog.HoleLog`) that carry the columns; None when
+    first ``rows`` rows of ``log`` (a :class:`metrology.io.holelog_reader.HoleLog`) that carry the columns; None when
     the log has no ``pose_x_mm`` .. ``pose_z_mm``. A value that is not a number reads NaN (the reader names it)."""
     keys, xyz, left = [], [], rows
     for part in log.partitions:

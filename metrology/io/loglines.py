@@ -1,5 +1,5 @@
 """A hole log's lines already read from a stream (``metro measure --follow``): read by
-:mod:`metrology.io.holelog`'s CSV reader from memory, so they come out as a file's batch does (the
+:mod:`metrology.io.holelog_csv`'s reader from memory, so they come out as a file's batch does (the
 same column types, checks and one-line errors), each error naming its line of the stream.
 """
 
@@ -8,7 +8,10 @@ from __future__ import annotations
 import io
 from dataclasses import dataclass
 
-from metrology.io.holelog import NUMERIC, CsvLog, Partition, batch_of
+from metrology.io.holelog import batch_of
+from metrology.io.holelog_csv import CsvLog
+from metrology.io.holelog_reader import Partition
+from metrology.io.holelog_schema import NUMERIC
 
 __all__ = ["LinesLog", "lines_log", "read_lines", "check_header", "header_line"]
 
@@ -70,7 +73,7 @@ def check_header(header, sensors, display: str) -> None:
 
 def read_lines(header, lines, numbers, sensors, display: str):
     """``lines`` (str, each ending with its newline) under ``header``: the normalised pyarrow Table a
-    log file's batch is (:meth:`metrology.io.holelog.HoleLog.batches`); ``numbers`` (int) are
+    log file's batch is (:meth:`metrology.io.holelog_reader.HoleLog.batches`); ``numbers`` (int) are
     their line numbers in the stream, which errors name. ValueError (one line) on a value that is
     not what its column holds."""
     import pyarrow as pa

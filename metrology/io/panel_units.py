@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrology.io.holelog import POSE_POSITION
+from metrology.io.holelog_schema import POSE_POSITION
 
 __all__ = ["check_panel_units", "pose_rows", "log_positions", "nearest_spacing", "FOOTPRINT_FIT", "MIN_PITCH_MM", "MAX_PITCH_MM",
            "TABLE_OVER_PANEL", "POSE_REACH", "CANDIDATES", "FLAT_DEPTH"]

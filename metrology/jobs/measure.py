@@ -142,7 +142,7 @@ class MeasureOptions:
     report_html : path or None, the HTML report; command : str or None, the command line it shows
     fail_on_drift : bool, a drift alarm fails the verdict
     log_display : str or None, how outputs name the log (``<stdin>``)
-    batch_rows : int or None, rows per batch (None: :data:`metrology.io.holelog.BATCH_ROWS`)
+    batch_rows : int or None, rows per batch (None: :data:`metrology.io.holelog_reader.BATCH_ROWS`)
     chart_by_panel : bool, a new drift-chart baseline at each panel
     qif : path or None, the per-hole results also as a QIF 3.0 Results document
     dfq : path or None, the per-hole results also as a Q-DAS DFQ file (:mod:`metrology.jobs.plant`)
@@ -238,7 +238,8 @@ def measure_files(log_path, layout_path, options: MeasureOptions | None = None, 
 
 def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progress) -> MeasureReport:
     """:func:`measure_files` with the engine being started (``engine()`` returns it when it is up)."""
-    from metrology.io.holelog import BATCH_ROWS, open_log
+    from metrology.io.holelog import open_log
+    from metrology.io.holelog_reader import BATCH_ROWS
     from metrology.io.holeout import PartitionedOutput, TableSink, check_out, is_file_out
     from metrology.io.layout import load_layout
     from metrology.io.names import display_name
@@ -342,12 +343,12 @@ def _measure_files(log_path, layout_path, o: MeasureOptions, engine, warn, progr
 
 
 def _unread(log, layout, surfaces):
-    """``log`` with the columns this run does not read (:attr:`~metrology.io.holelog.HoleLog.skip`): metro's
-    numeric inputs (:data:`~metrology.io.holelog.NUMERIC`; not written to the results) but the commanded pose
+    """``log`` with the columns this run does not read (:attr:`~metrology.io.holelog_reader.HoleLog.skip`): metro's
+    numeric inputs (:data:`~metrology.io.holelog_schema.NUMERIC`; not written to the results) but the commanded pose
     with the panel known and the temperature a head term needs."""
     import dataclasses
 
-    from metrology.io.holelog import NUMERIC
+    from metrology.io.holelog_schema import NUMERIC
     from metrology.measure.pose import POSE_COLUMNS
 
     need = set(POSE_COLUMNS) if surfaces is not None else set()

@@ -4,7 +4,7 @@ alarm) as soon as its line arrives.
 The log is a CSV with its header first (the columns of ``metro measure``'s log), from standard
 input (``-``) or a file read to its end. A thread reads the stream's complete lines as they come;
 the measuring takes every line already read (at most :data:`MAX_BATCH`) as one batch: read by
-:mod:`metrology.io.holelog`'s CSV reader (:func:`metrology.io.loglines.read_lines`), measured by
+:mod:`metrology.io.holelog_csv`'s reader (:func:`metrology.io.loglines.read_lines`), measured by
 :func:`metrology.measure.holes.measure_batch` at once (the panel's local surface where
 ``--panel``/``--points`` or the layout's ``[panel]`` give it), fed to the drift watch, answered in
 order. A slow trickle is answered line by line (each line is alone when it is measured); a fast
@@ -222,7 +222,7 @@ class _Run:
     """The measuring of one followed log: the drift watch, its snapshot, what was answered."""
 
     def __init__(self, layout, settings, name, on_hole, on_alarm, panel: bool):
-        from metrology.io.holelog import CsvLog
+        from metrology.io.holelog_csv import CsvLog
         from metrology.measure.holes import Status
         from metrology.measure.run import Watch
 
@@ -390,7 +390,7 @@ class _Run:
 
 def _answers(batch, numbers, panel: bool):
     """Each hole's answer (a dict, the JSON line), in order."""
-    from metrology.io.holelog import TIME_S
+    from metrology.io.holelog_schema import TIME_S
     from metrology.measure.holes import STATUSES
 
     t = batch.columns

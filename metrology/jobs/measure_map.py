@@ -28,7 +28,7 @@ class HoleAngles:
     def write(self, table) -> None:
         import pyarrow as pa
 
-        from metrology.io.holelog import table_key
+        from metrology.io.holelog_schema import table_key
 
         rows = self.surfaces.rows(table.column(table_key(table.column_names)).cast(pa.string()))
 

@@ -186,7 +186,7 @@ def check_join(log, surfaces, table_display) -> None:
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from metrology.io.holelog import HOLE_ID, table_key
+    from metrology.io.holelog_schema import HOLE_ID, table_key
 
     known = pa.array(surfaces.ids, pa.string())
     rows, first, key = 0, None, HOLE_ID

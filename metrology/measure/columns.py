@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from metrology.io.arrays import from_numpy, strings
-from metrology.io.holelog import NUMERIC
+from metrology.io.holelog_schema import NUMERIC
 from metrology.measure.batch import STATUSES
 from metrology.measure.measured import patterns
 

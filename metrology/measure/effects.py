@@ -174,7 +174,7 @@ def apply_terms(layout, d, table=None, temp_c=None, what="the log", shape=None) 
 
 
 def check_log(layout, log) -> None:
-    """Refuse a hole log (:class:`metrology.io.holelog.HoleLog`) that lacks a covariate the layout's
+    """Refuse a hole log (:class:`metrology.io.holelog_reader.HoleLog`) that lacks a covariate the layout's
     terms need, naming the column and the partition, before a hole is measured."""
     if layout.effects is None or "temperature_c" not in layout.effects.needs():
         return

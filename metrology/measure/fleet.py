@@ -15,7 +15,7 @@ import contextlib
 from typing import Iterator
 
 from metrology.core.layout import SensorLayout
-from metrology.io.holelog import HoleLog
+from metrology.io.holelog_reader import HoleLog
 from metrology.measure.holes import Settings
 from metrology.measure.run import Feed, Piece, Watch, measure_partition
 
@@ -129,11 +129,12 @@ def _forkserver() -> bool:
     return True
 
 
-def _task(log, part, layout, settings, output, rows):
+def _task(log, part, layout, settings, output, rows, after=None):
     """One partition measured on a worker: one :class:`Piece` (its pieces joined: the summaries
     merged in order, as :func:`measure_log` merges a partition's pieces; the feed and rows
     concatenated). The per-hole results go to the partition's file (a folder output), or back to
-    the client (``rows``: a one-file output)."""
+    the client (``rows``: a one-file output). ``after``, unread: the watch link the partition waits for
+    (:meth:`DaskEngine.pieces`)."""
     import pyarrow as pa
 
     pieces = list(measure_partition(log, part, layout, settings, output=output, rows=rows))
@@ -221,18 +222,28 @@ class DaskEngine:
                by_panel: bool = False) -> Iterator[Piece]:
         client = self.client
         names = [f"{i}-{part.relative}" for i, part in enumerate(log.partitions)]
+        # a chain's partition is measured once its watch has been fed the partition `ahead` before it, so that of
+        # the partitions before it at most `ahead` - 1 are measured and not yet watched (their feeds held on the
+        # workers) whatever the workers' speeds: without it a worker starved of CPU held the chain back while the
+        # other measured on (up to 5 feeds held at load 14 on 2 cores); `ahead`, the cluster's threads, keeps every
+        # thread measuring while the chain keeps up
+        chains = list(_chains(log).values())
+        chain_of = {i: k for k, chain in enumerate(chains) for i in chain}
         with _one_line():
-            measured = [client.submit(_task, log, part, layout, settings, output, rows, pure=False,
-                                      key=f"metro-measure-{n}") for n, part in zip(names, log.partitions)]
-            small = [client.submit(_small, m, pure=False, key=f"metro-small-{n}") for n, m in zip(names, measured)]
-            self._watches = []
-            for chain in _chains(log).values():
-                w = None
-                for i in chain:
-                    w = client.submit(_watch_step, w, measured[i], layout.names, by_panel, pure=False,
-                                      key=f"metro-watch-{names[i]}")
-                self._watches.append(w)
-            del measured  # the scheduler keeps each until its small result and its watch link have it
+            ahead = max(sum(client.nthreads().values()), 1)
+            links, small = [[] for _ in chains], []  # each chain's watch links so far; each partition's small piece
+            for i, (n, part) in enumerate(zip(names, log.partitions)):
+                chain = links[chain_of[i]]
+                after = chain[-ahead] if len(chain) >= ahead else None
+                measured = client.submit(_task, log, part, layout, settings, output, rows, after, pure=False,
+                                         key=f"metro-measure-{n}")
+                small.append(client.submit(_small, measured, pure=False, key=f"metro-small-{n}"))
+                chain.append(client.submit(_watch_step, chain[-1] if chain else None, measured, layout.names,
+                                           by_panel, pure=False, key=f"metro-watch-{n}"))
+            self._watches = [chain[-1] for chain in links if chain]
+            # the scheduler keeps each until its small result and its watch link (and the partition `ahead` after
+            # it) have it
+            measured = chain = after = links = None
             for fut in small:  # in the log's order: the rows of a one-file output are written so
                 piece = fut.result()
                 fut.release()

@@ -16,7 +16,7 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.io.arrays import to_numpy
-from metrology.io.holelog import CELL, PANEL, text_codes
+from metrology.io.holelog_schema import CELL, PANEL, text_codes
 from metrology.measure.batch import CODE, STATUSES, ChartRows, HoleBatch, Labels, Status, blanked
 from metrology.measure.columns import OUTPUT_COLUMNS, result_table
 from metrology.measure.effects import apply_terms

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from metrology.io.holelog import table_key
+from metrology.io.holelog_schema import table_key
 from metrology.measure.beyond import Beyond
 from metrology.measure.normals import drill_axis
 from metrology.measure.pose import read_pose

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from metrology.core.sym3 import smallest_eigvec
-from metrology.io.holelog import POSE_POSITION, POSE_ROTATION
+from metrology.io.holelog_schema import POSE_POSITION, POSE_ROTATION
 
 __all__ = ["POSE_COLUMNS", "read_pose", "against_cad"]
 

@@ -19,7 +19,8 @@ import numpy as np
 
 from metrology.core.layout import SensorLayout
 from metrology.io.arrays import from_numpy, to_numpy
-from metrology.io.holelog import CELL, INTERNAL, PANEL, TIME_S, HoleLog, Partition, text_codes
+from metrology.io.holelog_reader import HoleLog, Partition
+from metrology.io.holelog_schema import CELL, INTERNAL, PANEL, TIME_S, text_codes
 from metrology.io.names import utc
 from metrology.measure.batch import Labels
 from metrology.measure.chart import CusumChart
@@ -114,7 +115,7 @@ class Feed:
         """The feed of ``batch``, whose first hole is row ``first_row`` of ``part``'s file (``log`` a
         name: holes in memory, errors name their rows in it as in a Parquet file's)."""
         if isinstance(log, str):
-            from metrology.io.holelog import ParquetLog
+            from metrology.io.holelog_parquet import ParquetLog
 
             log = ParquetLog(log, (), (), display=log)
         if part is None:

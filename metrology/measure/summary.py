@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from metrology.io.arrays import to_numpy
-from metrology.io.holelog import CELL, PANEL, TIME_S, text_codes
+from metrology.io.holelog_schema import CELL, PANEL, TIME_S, text_codes
 from metrology.measure.holes import CODE, STATUSES, HoleBatch, Status
 from metrology.measure.tally import (CAD_OFFSET_MM, OFF_CAD_SIGMAS, CadSums, Counts, Figures, GroupKey, OffCadSums,
                                      Quantiles, WorstHole)

@@ -39,6 +39,12 @@ DRAIN_S, DRAIN_IDLE_S = 120.0, 15.0
 #: a cell's LastResult and LastCorrection are written at most this often (s; and once the results stop
 #: coming): each write costs as much as an event, and the events carry every result
 LAST_EVERY_S = 0.05
+#: s of announcing at most before the server's loop answers its sessions (a client's keepalive Read, its Publish
+#: requests): results are handed over a batch at once (``measure --follow``: up to 256 holes; a whole log's
+#: table), and firing a batch's events in one pass held the loop for all of them (1150 holes in 5 batches, one
+#: client, load 10-11 on 2 cores: the loop's longest pause 0.28-0.47 s, 0.07-0.09 s sliced; the client's Read
+#: 0.45-0.58 s, 0.14-0.20 s), where a client's keepalive waits 1 s (asyncua's default)
+SLICE_S = 0.01
 #: severity (1-1000) of a drift alarm as first raised, and once sized on its new baseline
 SEVERITY_RAISED, SEVERITY_SIZED = 700, 800
 
@@ -292,7 +298,7 @@ class PlantServer:
             self._ready.set()
             return
         self._ready.set()
-        checked = wrote = time.monotonic()
+        checked = wrote = sliced = time.monotonic()
         last = {}  # each cell's last result not yet written to its LastResult / LastCorrection
         try:
             closing, getter = False, None
@@ -311,6 +317,9 @@ class PlantServer:
                     for hole in ((item,) if kind == "hole" else item if kind == "holes" else ()):
                         cell, fields = await self._hole(hole)
                         last[cell] = fields
+                        if time.monotonic() - sliced > SLICE_S:  # the sessions' requests answered meanwhile
+                            await asyncio.sleep(0)
+                            sliced = time.monotonic()
                     if kind == "alarm":
                         await self._alarm(item)
                 if last and (closing or first is None or time.monotonic() - wrote >= LAST_EVERY_S):

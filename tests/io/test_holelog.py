@@ -8,7 +8,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from metrology.io.holelog import INTERNAL, TIME_S, open_log
+from metrology.io.holelog import open_log
+from metrology.io.holelog_schema import INTERNAL, TIME_S
 from metrology.io.holeout import is_file_out, PartitionedOutput, TableSink, check_out
 
 SENSORS = ("L1", "L2", "L3", "L4")

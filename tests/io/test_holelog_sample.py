@@ -1,5 +1,5 @@
 """metrology.io.holelog_sample reads a log's first rows through the log's own reader (a CSV file, lines in memory,
-Parquet), and the log's column names live in metrology.io.holelog alone."""
+Parquet), and the log's column names live in metrology.io.holelog_schema alone."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ import pyarrow as pa
 import pyarrow.csv as pcsv
 import pyarrow.parquet as pq
 
-from metrology.io.holelog import HOLE_ID, NUMERIC, POINT_ID, POSE_POSITION, POSE_ROTATION, open_log, table_key
+from metrology.io.holelog import open_log
 from metrology.io.holelog_sample import commanded_positions, first_readings
+from metrology.io.holelog_schema import HOLE_ID, NUMERIC, POINT_ID, POSE_POSITION, POSE_ROTATION, table_key
 from metrology.io.loglines import lines_log
 
 HEADER = ("hole_id", "time", "d_L1", "d_L2", "d_L3", "point_id", "pose_x_mm", "pose_y_mm", "pose_z_mm")

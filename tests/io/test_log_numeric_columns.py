@@ -5,7 +5,8 @@ schema test passes with that cast reverted, since the results carry no pose)."""
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from metrology.io.holelog import NUMERIC, open_log
+from metrology.io.holelog import open_log
+from metrology.io.holelog_schema import NUMERIC
 
 SENSORS = ("L1", "L2", "L3", "L4")
 POSE = ("pose_rx_deg", "pose_ry_deg", "pose_rz_deg", "pose_x_mm", "pose_y_mm", "pose_z_mm")

@@ -220,6 +220,9 @@ def test_a_cluster_that_loses_the_run_is_a_one_line_error(fleet, tmp_path):
                 pass
 
         class Client:
+            def nthreads(self):
+                return {"tcp://127.0.0.1:1": 1}
+
             def submit(self, *args, **kwargs):
                 return Future()
 
@@ -480,7 +483,10 @@ def test_each_partitions_drift_watch_link_follows_its_measuring_so_the_feeds_hel
     behind it, so the workers hold the per-hole feeds of 0-2 partitions waiting for the watch
     (with two such runs at once on 2 cores too). At Dask's 1.1 the chain fell behind and stayed
     behind: 4-6 partitions' feeds held all through the second half (15 at the end of a log of
-    600-hole partitions). The results are the single process's."""
+    600-hole partitions). Whatever the workers' speeds: a partition is measured once the watch has
+    been fed the partition two (the cluster's threads) before it; without that, a worker starved of
+    CPU (load 13-14 on 2 cores) held the chain back while the other measured on, 4-11 feeds held and
+    this test failed. The results are the single process's."""
     from distributed import get_task_stream
 
     from metrology.io.holelog import open_log

@@ -183,7 +183,7 @@ def _spun_batch(with_pose):
     """The cell of :func:`_spun_cell` measured, its log with or without the commanded pose."""
     import pyarrow as pa
 
-    from metrology.io.holelog import CELL, PANEL, TIME_S
+    from metrology.io.holelog_schema import CELL, PANEL, TIME_S
     from metrology.measure.holes import Settings, measure_batch
 
     lay, ch, surf, ids = _spun_cell()

@@ -216,7 +216,7 @@ def _batch_on(lay, panel, cad, holes=800, patch=40.0, seed=2, mesh_half=150.0, *
     P[:, 2] = cad.height(P[:, 0], P[:, 1])
     table = HoleTable(ids, P, -cad.normal_at(P), "holes.csv")
     surf = panel_hole_surfaces(Panel(panel_mesh(cad, half_mm=mesh_half, step_mm=3.0)), table, 55.0, **kw)
-    from metrology.io.holelog import CELL, PANEL, TIME_S
+    from metrology.io.holelog_schema import CELL, PANEL, TIME_S
 
     cols = {"hole_id": list(ids), CELL: ["C1"] * holes, PANEL: ["P1"] * holes,
             TIME_S: (1.8e9 + np.arange(holes)).astype(float)}

@@ -36,7 +36,7 @@ def _inputs(n_sensors, spin_deg, stated=None, holes=1200, seed=5, pose=False, ra
     """``(layout, log table, Settings, the forward simulator's cell)`` of :func:`_measured`."""
     import pyarrow as pa
 
-    from metrology.io.holelog import CELL, PANEL, TIME_S
+    from metrology.io.holelog_schema import CELL, PANEL, TIME_S
     from metrology.jobs.measure_panel import panel_hole_surfaces
     from metrology.measure.holes import Settings
     from metrology.measure.panel import HoleTable

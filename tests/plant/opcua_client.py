@@ -44,13 +44,22 @@ class Collector:
         (self.results if f.get("Sequence") is not None else self.alarms).append(f)
 
 
+#: s between the client's checks that the server is alive, and how long each waits for its answer (a Read of
+#: the server's state): asyncua's default, 1 s, is a deadline on the server's answer, and on a loaded test machine
+#: (load 10-14 on 2 cores) the server's process or the client's own, busy decoding a publish of hundreds of events,
+#: missed it: the client took the server for dead, disconnected, and the test lost the rest of the log ("client is
+#: disconnected", 5 or 773 of 1150 results). The tests here check what arrives, not how soon
+#: (``benchmarks/bench_plant.py`` times that); a server that does not answer still fails them, 30 s later.
+WATCHDOG_S = 30.0
+
+
 async def connect(url: str, timeout_s: float = 120.0, proc=None):
     """A connected client, retrying while the server starts (the server process ``proc`` still alive)."""
     from asyncua import Client
 
     end = time.monotonic() + timeout_s
     while True:
-        c = Client(url, timeout=30)
+        c = Client(url, timeout=30, watchdog_intervall=WATCHDOG_S)
         try:
             await c.connect()
             return c
