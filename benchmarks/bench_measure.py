@@ -12,9 +12,10 @@ On a hole log drawn by the independent forward simulator (Table 6 head, flat pan
 2. **whole process**: ``metro measure LOG.parquet --layout L --out holes.parquet`` against a plain
    script that reads the same file with pyarrow, fits the 4-point planes before and after the
    adjustment with batched numpy (the same closed-form least squares, normals only: no
-   uncertainty, verdict, drift watch or summary) and writes the normals (its batches made with
-   ``pa.Table.from_arrays``, as metro makes its own: ``pa.table(dict)`` imports pandas where pandas is
-   installed, 0.4-0.6 s of the script's CPU, benchmarks/results/measure_speed_issue49_r8.md) (best wall time of
+   uncertainty, verdict, drift watch or summary) and writes the normals (where pandas is installed, pyarrow
+   imports it for the script's first numpy conversion, ~0.5 s of its CPU, which metro's buffer conversions in
+   ``metrology/io/arrays.py`` do not pay: a ratio depends on the environment; say which,
+   benchmarks/results/measure_speed_issue49_r8_merged.md) (best wall time of
    ``--repeat``, run in turn; its CPU time, which the other jobs on a shared machine disturb
    less; peak RSS). Goal: <= 1.5x;
 3. **Dask**: a partitioned log of ``--dask-holes`` holes (40 partitions) with ``--workers 1`` and
@@ -111,7 +112,7 @@ for b in pf.iter_batches(batch_size=1 << 18, columns=["hole_id", *sum(sets, [])]
         d = np.stack([b.column(c).to_numpy(zero_copy_only=False) for c in cs], axis=1)
         for axis, v in zip("xyz", normals(d)):
             cols[f"normal{'_after' * k}_{axis}"] = v
-    t = pa.Table.from_arrays(list(cols.values()), names=list(cols))  # not pa.table(dict): it imports pandas
+    t = pa.table(cols)
     if writer is None:
         writer = pq.ParquetWriter(out, t.schema)
     writer.write_table(t)
