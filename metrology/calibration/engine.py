@@ -18,11 +18,9 @@ linear map of the residual.
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
-
 import numpy as np
 
+from metrology.calibration.kept import Kept, array_key
 from metrology.core.effects import ExtendedModel
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings
 
@@ -109,30 +107,19 @@ def _absorbed_modes(Jp) -> np.ndarray:
 
 #: held readings (:func:`_held_readings`) kept, least recently used dropped first
 HELD_READINGS_KEPT = 512
-_HELD: OrderedDict = OrderedDict()
+_HELD = Kept(HELD_READINGS_KEPT)
 
 
 def _held_readings(nominal, theta0, normal, offset):
     """``(p, n)`` mm, read-only: every sensor's readings at the chart errors ``theta0 (n, 5)`` on
     the planes ``normal (p, 3)``, ``offset (p,)`` (TCS). Every candidate posed on one fold starts
     from the same ``theta0``: kept by the content of the inputs (a hit is what the call computes)."""
-    h = hashlib.blake2b(digest_size=20)
-    for a in (nominal.zero, nominal.direction, theta0, normal, offset):
-        a = np.ascontiguousarray(a, float)
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
-    key = h.digest()
-    d = _HELD.get(key)
-    if d is not None:
-        _HELD.move_to_end(key)
+    def compute():
+        d = readings(*geometry(nominal, theta0), normal, offset)[0]
+        d.flags.writeable = False
         return d
-    zero_all, u_all = geometry(nominal, theta0)
-    d = readings(zero_all, u_all, normal, offset)[0]
-    d.flags.writeable = False
-    _HELD[key] = d
-    if len(_HELD) > HELD_READINGS_KEPT:
-        _HELD.popitem(last=False)
-    return d
+
+    return _HELD.get(array_key(nominal.zero, nominal.direction, theta0, normal, offset), compute)
 
 
 def clear_held() -> None:

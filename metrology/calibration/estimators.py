@@ -22,13 +22,11 @@ batch least squares and the dispatch on a method's name (:data:`METHODS`).
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
-
 import numpy as np
 
 from metrology.calibration.fitted import Calibration, _finish, _pose_order
 from metrology.calibration.kalman import DEFAULT_P0_SIGMA, ekf, ekf_paper, iekf
+from metrology.calibration.kept import Kept, array_key
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent
 from metrology.core.observations import Observations
@@ -115,19 +113,14 @@ def lsq(nominal: SensorLayout, obs: Observations, loss="linear", f_scale=1.0) ->
 #: sensors' problems as read; ``calibrate`` then fits what its screen fitted. A kept fit is the one the
 #: solver would return: the same inputs, the same arithmetic.
 LSQ_KEPT = 64
-_KEPT: OrderedDict = OrderedDict()
+_KEPT = Kept(LSQ_KEPT)
 
 
 def _problem_key(nominal, i, obs, loss, f_scale) -> bytes:
     """A digest of everything sensor ``i``'s fit depends on: its nominal zero point and direction,
     the datum in each pose's TCS, its readings, the loss and its scale."""
-    h = hashlib.blake2b(digest_size=20)
-    for a in (nominal.zero[i], nominal.direction[i], obs.normal, obs.offset, obs.d[:, i]):
-        a = np.ascontiguousarray(a, float)
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
-    h.update(f"{loss}:{float(f_scale)!r}".encode())
-    return h.digest()
+    return array_key(nominal.zero[i], nominal.direction[i], obs.normal, obs.offset, obs.d[:, i],
+                     text=f"{loss}:{float(f_scale)!r}")
 
 
 def _lsq_base(nominal, i, obs, loss="linear", f_scale=1.0):
@@ -137,13 +130,8 @@ def _lsq_base(nominal, i, obs, loss="linear", f_scale=1.0):
     m = len(_pose_order(obs, i))
     if m < 5:
         raise ValueError(f"sensor {nominal.names[i]}: {m} readings, need at least 5 for 5 parameters")
-    key = _problem_key(nominal, i, obs, loss, f_scale)
-    if key not in _KEPT:
-        _KEPT[key] = _solve_base(nominal, i, obs, m, loss, f_scale)
-        if len(_KEPT) > LSQ_KEPT:
-            _KEPT.popitem(last=False)
-    _KEPT.move_to_end(key)
-    x, cov, s = _KEPT[key]
+    x, cov, s = _KEPT.get(_problem_key(nominal, i, obs, loss, f_scale),
+                          lambda: _solve_base(nominal, i, obs, m, loss, f_scale))
     return x.copy(), cov.copy(), s
 
 
