@@ -231,7 +231,8 @@ class DfqHoles:
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        from metrology.io.holelog_schema import table_key, time_seconds
+        from metrology.io.holelog_reader import time_seconds
+        from metrology.io.holelog_schema import table_key
 
         m = table.num_rows
         if m == 0:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from metrology.io.holelog_schema import normalise
+from metrology.io.holelog_schema import column_seconds, normalise
 
-__all__ = ["HoleLog", "Partition", "BATCH_ROWS", "short"]
+__all__ = ["HoleLog", "Partition", "BATCH_ROWS", "short", "time_seconds"]
 
 #: rows per batch: a few tens of MB of readings, large enough for numpy to run at full speed
 BATCH_ROWS = 1 << 18
@@ -114,3 +114,11 @@ class HoleLog:
 def short(exc) -> str:
     """The first line of an exception's message (its type's name where it has none): what a one-line error quotes."""
     return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def time_seconds(col):
+    """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results file's: a number,
+    timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``; an error names the row as a log's would
+    (``<results> row 3``)."""
+    display = "<results>"
+    return column_seconds(HoleLog(display, (), (), display=display), Partition(display, display), col, 0)

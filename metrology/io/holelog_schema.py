@@ -26,7 +26,7 @@ from metrology.io.arrays import from_numpy, strings, to_numpy
 
 __all__ = ["READING_RE", "INTERNAL", "TIME_S", "CELL", "PANEL", "NUMERIC", "HOLE_ID", "POINT_ID", "POSE_ROTATION",
            "POSE_POSITION", "table_key", "is_numeric", "check_columns", "normalise", "repeat", "text_codes",
-           "time_seconds"]
+           "column_seconds"]
 
 #: what a reading looks like in a CSV (blank: no reading)
 READING_RE = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$|^\s*$|^(?i:nan)$"
@@ -79,8 +79,10 @@ def check_columns(log, part, names) -> None:
                          f"(expected d_<sensor>_after for every sensor, or none)")
 
 
-def _time_seconds(log, part, col, first_row):
-    """float64 seconds since 1970-01-01 UTC from a number, timestamp or ISO 8601 string column."""
+def column_seconds(log, part, col, first_row):
+    """(N,) float64 seconds since 1970-01-01 UTC of ``time`` column ``col`` (numbers, timestamps or ISO 8601
+    text), rows of ``log``'s partition ``part`` from its 0-based row ``first_row`` on; ValueError (one line naming
+    the row, by ``log.locate``) on a value that is none of those."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -130,7 +132,7 @@ def normalise(log, part, table, first_row):
         elif c in ("hole_id", "cell", "panel"):
             col = col.cast(pa.string())
         cols[c] = col
-    time_s = _time_seconds(log, part, table.column("time"), first_row)
+    time_s = column_seconds(log, part, table.column("time"), first_row)
     bad = np.flatnonzero(~np.isfinite(time_s))
     if bad.size:
         raise ValueError(f"{log.locate(part, first_row + int(bad[0]))}: time is blank, expected ISO 8601 or seconds")
@@ -157,21 +159,3 @@ def text_codes(col):
 
     enc = pc.dictionary_encode(col).combine_chunks()
     return to_numpy(enc.indices).astype(np.int64), enc.dictionary.to_pylist()
-
-
-class _Results:
-    """How an error names a row of a results file's ``time`` column (:func:`time_seconds`)."""
-
-    display = "<results>"
-
-    def where(self, part) -> str:
-        return self.display
-
-    def locate(self, part, row: int) -> str:
-        return f"{self.display} row {row + 1}"
-
-
-def time_seconds(col) -> np.ndarray:
-    """(N,) float seconds since 1970-01-01 UTC of a ``time`` column already read once (a results
-    file's: a number, timestamp or ISO 8601 string column), as a batch's ``_metro_time_s``."""
-    return _time_seconds(_Results(), None, col, 0)

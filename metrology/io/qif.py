@@ -108,7 +108,7 @@ def _times(col):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from metrology.io.holelog_schema import time_seconds
+    from metrology.io.holelog_reader import time_seconds
 
     s = time_seconds(col)
     us = pa.array(np.round(s * 1e6).astype(np.int64)).cast(pa.timestamp("us", tz="UTC"))
