@@ -154,7 +154,7 @@ def bench(m, repeat, workdir):
     )
     t_metro, t_o3d, t_svd, t_one = times["metro"], times["o3d"], times["svd"], times["one"]
     fit, (model, _), n_svd = outs["metro"], outs["o3d"], outs["svd"]
-    del cloud
+    cloud = None  # Open3D's copy of the cloud freed before the next size (the closure holds the name)
 
     off = fit.plane.offset - (d_true if fit.plane.normal @ n_true > 0 else -d_true)
     rows = [

@@ -123,7 +123,6 @@ writer.close()
 def make_log(workdir: Path, holes: int, parts: int, seed: int = 1, single: bool = True, cells: int = 1):
     """A log of ``holes`` holes (forward simulator) as one file and as ``parts`` partitions (with
     ``cells`` > 1: ``cell=C<k>/part=<n>``, the key in the folder names only); the layout."""
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from metrology.core.paper import TABLE6_NOMINAL, layout_from_table

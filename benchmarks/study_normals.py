@@ -94,7 +94,7 @@ def table_radius(m, seed):
 
 
 def table_tilt(m, seed):
-    out = [f"\n**Error vs tilt** (noise 0.005 mm; mean / max, deg)\n"]
+    out = ["\n**Error vs tilt** (noise 0.005 mm; mean / max, deg)\n"]
     tilts = (0.0, 0.5, 1.0, 2.0, 5.0)
     for ln, layout in LAYOUTS.items():
         out.append(f"\n{ln} layout\n")
@@ -109,8 +109,8 @@ def table_tilt(m, seed):
 
 def table_noise(m, seed):
     noises = (0.0, 0.002, 0.005, 0.01, 0.02)
-    out = [f"\n**Error vs reading noise** (tilt 1 deg; mean / max, deg; sphere: MAP with the 100 mm prior, "
-           f"sphere exact: the interpolating sphere, no prior)\n"]
+    out = ["\n**Error vs reading noise** (tilt 1 deg; mean / max, deg; sphere: MAP with the 100 mm prior, "
+           "sphere exact: the interpolating sphere, no prior)\n"]
     for ln, layout in LAYOUTS.items():
         out.append(f"\n{ln} layout\n")
         out.append("| panel | method | " + " | ".join(f"{s:g} mm" for s in noises) + " |")
@@ -127,7 +127,7 @@ def table_noise(m, seed):
 def table_symmetric(m, seed):
     """The nominal (symmetric) heads: four spots nearly concyclic, the sphere's worst case."""
     noms = {"Table 6 nominal": table6_layouts()[0], "Table 2 nominal": table2_layouts()[0]}
-    out = [f"\n**Symmetric heads** (the nominal layouts; tilt 1 deg; mean / max, deg)\n"]
+    out = ["\n**Symmetric heads** (the nominal layouts; tilt 1 deg; mean / max, deg)\n"]
     out.append("| panel | layout | noise (mm) | plane | sphere (100 mm prior) | sphere exact |")
     out.append("|---|---|---|---|---|---|")
     for name in ("flat", "sphere R800", "sphere R300", "cyl R800"):
@@ -140,9 +140,9 @@ def table_symmetric(m, seed):
 
 
 def table_loop(m, seed):
-    out = [f"\n**Attitude loop** (initial tilt 3 deg, noise 0.005 mm, tolerance 0.5 deg, robot: 0.02 deg "
-           f"repeatability, 3 % rotation scale error, 0.05 mm TCP; adjustments mean / max, converged %, "
-           f"true final deviation mean / max deg)\n"]
+    out = ["\n**Attitude loop** (initial tilt 3 deg, noise 0.005 mm, tolerance 0.5 deg, robot: 0.02 deg "
+           "repeatability, 3 % rotation scale error, 0.05 mm TCP; adjustments mean / max, converged %, "
+           "true final deviation mean / max deg)\n"]
     out.append("| panel | layout | plane: adjustments | plane: converged | plane: final dev | sphere: adjustments | sphere: converged | sphere: final dev |")
     out.append("|---|---|---|---|---|---|---|---|")
     for name in PANELS:

@@ -42,7 +42,7 @@ from metrology.core.model import direction_basis
 if TYPE_CHECKING:
     from metrology.core.effects.apply import Corrected
 
-__all__ = ["EFFECTS", "Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "effects_slope_cov", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]
+__all__ = ["EFFECTS", "Applied", "apply_terms", "check_log", "surface_normal", "micro_normals", "effects_slope_cov", "INCIDENCE_PASSES", "TEMPERATURE_COLUMN"]  # noqa: F822 (micro_normals, INCIDENCE_PASSES: by __getattr__)
 
 _FROM_APPLY = ("INCIDENCE_PASSES", "micro_normals")
 
