@@ -18,7 +18,6 @@ def _layout():
              Scale((1,), [0.005], np.array([1e-4]), names),
              Drift((2,), [0.003], np.array([1e-4]), names, variable="temp", ref=20.5),
              Incidence((3,), [0.02], np.array([1e-3]), names))
-    k = 5
     rng = np.random.default_rng(0)
     A = rng.normal(size=(25, 25)) * 1e-4
     full = A @ A.T

@@ -117,7 +117,7 @@ def test_table1_scenario():
     Student-t (offset) and F (normal) quantile of the same 99.73 % probability."""
     from scipy import stats
 
-    zs, chi2, ok_d, ok_n = [], [], 0, 0
+    zs, ok_d, ok_n = [], 0, 0
     for seed in range(300):
         pts, truth = table1_points(np.random.default_rng(seed))
         fit = fit_plane_robust(pts, seed=seed)
