@@ -48,11 +48,19 @@ PARAMS_RAW = ("x", "y", "z", "m", "n", "q")
 
 
 def _geometry(zero, direction, normal, offset):
-    """Broadcast inputs; return (s, nu, unorm) with shapes (p, n)."""
+    """Broadcast inputs; return (s, nu, unorm, direction, normal) with s, nu (p, n), unorm (1, n).
+
+    Called ~60,000 times a diagnosis on a few sensors and ~100 poses, so per-call overhead counts:
+    ``unorm`` is ``np.linalg.norm(direction, axis=1)`` without its dispatch (the same sum, so the same
+    bits), and ``atleast_2d``/``atleast_1d`` are called only where they change something."""
     zero = np.asarray(zero, dtype=float)
     direction = np.asarray(direction, dtype=float)
-    normal = np.atleast_2d(np.asarray(normal, dtype=float))
-    offset = np.atleast_1d(np.asarray(offset, dtype=float))
+    normal = np.asarray(normal, dtype=float)
+    if normal.ndim < 2:
+        normal = np.atleast_2d(normal)
+    offset = np.asarray(offset, dtype=float)
+    if offset.ndim < 1:
+        offset = np.atleast_1d(offset)
     if zero.ndim != 2 or zero.shape[-1] != 3:
         raise ValueError(f"zero: expected shape (n, 3), got {zero.shape}")
     if direction.shape != zero.shape:
@@ -61,8 +69,8 @@ def _geometry(zero, direction, normal, offset):
         raise ValueError(f"plane: normal (p, 3) and offset (p,) expected, got {normal.shape}, {offset.shape}")
     s = -(normal @ zero.T + offset[:, None])  # (p, n): signed distance of E behind the plane
     nu = normal @ direction.T  # (p, n)
-    unorm = np.linalg.norm(direction, axis=1)[None, :]  # (1, n)
-    return s, nu, unorm
+    unorm = np.sqrt(np.add.reduce(direction * direction, axis=1))[None, :]  # (1, n)
+    return s, nu, unorm, direction, normal
 
 
 def readings(zero, direction, normal, offset):
@@ -87,8 +95,8 @@ def readings(zero, direction, normal, offset):
         False where the beam is parallel to the plane (|cos| < ``BEAM_PARALLEL_COS``),
         the intersection lies behind the sensor, or an input is not finite.
     """
-    s, nu, unorm = _geometry(zero, direction, normal, offset)
-    cos = np.divide(nu, unorm, out=np.zeros_like(nu), where=unorm > 0)
+    s, nu, unorm, _, _ = _geometry(zero, direction, normal, offset)
+    cos = np.divide(nu, unorm, out=np.zeros(nu.shape), where=unorm > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         d = s * unorm / nu
     valid = np.isfinite(d) & (np.abs(cos) >= BEAM_PARALLEL_COS) & (d >= 0)
@@ -106,9 +114,7 @@ def jacobian_raw(zero, direction, normal, offset):
         ``dd/d(x, y, z)`` (unitless) and ``dd/d(m, n, q)`` (mm per unit of direction).
         Its null space always contains ``(0, 0, 0, u)``: scaling the direction.
     """
-    direction = np.asarray(direction, dtype=float)
-    normal = np.atleast_2d(np.asarray(normal, dtype=float))
-    s, nu, unorm = _geometry(zero, direction, normal, offset)
+    s, nu, unorm, direction, normal = _geometry(zero, direction, normal, offset)
     with np.errstate(divide="ignore", invalid="ignore"):
         d = s * unorm / nu
         dE = -(unorm / nu)[..., None] * normal[:, None, :]  # (p, n, 3)

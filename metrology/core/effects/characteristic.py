@@ -259,7 +259,8 @@ class Nonlinearity(Component):
     def _legendre(self, x, cov, deriv=True, value=True):
         """``(..., order - 1)``: ``P2(x) .. P_order(x)``, and their derivatives in ``x`` (the
         spline's columns for ``order=0``; none if not ``deriv``, with Legendre columns; the
-        spline's values NaN if not ``value``: the derivative alone skips its design matrix)."""
+        values NaN (spline) or None (Legendre) if not ``value``: the derivative alone skips its
+        design matrix or Vandermonde matrix)."""
         from numpy.polynomial import legendre
 
         if self.order == 0:
@@ -268,11 +269,12 @@ class Nonlinearity(Component):
                 lo, hi = cov.range_mm[self.sensors[0]]
                 inner = tuple(float((2 * k - lo - hi) / (hi - lo)) for k in self.inner_mm)
             return self._spline(x, *self._span_x(cov), inner, deriv, value)
-        V = legendre.legvander(x, self.order)  # (..., order + 1): P0 .. P_order
+        # (..., order + 1): P0 .. P_order; not made when only the derivatives are asked for (d_dd0)
+        V = legendre.legvander(x, self.order)[..., 2:] if value else None
         if not deriv:
-            return V[..., 2:], None
+            return V, None
         dV = legendre.legvander(x, self.order - 1) @ _legendre_derivatives(self.order)
-        return V[..., 2:], dV[..., 2:]
+        return V, dV[..., 2:]
 
     def _x(self, d0, cov):
         lo, hi = cov.range_mm[:, 0], cov.range_mm[:, 1]
