@@ -143,11 +143,14 @@ def test_check_out(tmp_path):
     assert INTERNAL
 
 
-def test_two_runs_into_one_folder_at_once_are_refused(tmp_path):
+def test_two_runs_into_one_folder_at_once_are_refused(tmp_path, monkeypatch):
+    from metrology.io import holeout
+
+    monkeypatch.setattr(holeout, "LOCK_WAIT_S", 0.3)  # the wait's length is not what is checked (5 s idle otherwise)
     first = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
     first.begin()
     second = PartitionedOutput(tmp_path / "o", {"tolerance_deg": 0.5})
-    with pytest.raises(ValueError, match=r"another run is writing into it \(pid \d+ on .*; if none is, remove"):
+    with pytest.raises(ValueError, match=r"another run is writing into it \(pid \d+ on .*; waited 0.3 s; if none is, remove"):
         second.begin()
     first.release()
     second.begin()  # the first has ended: the folder is free
