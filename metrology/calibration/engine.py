@@ -22,7 +22,7 @@ import numpy as np
 
 from metrology.calibration.kept import Kept, array_key
 from metrology.core.effects import ExtendedModel
-from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings
+from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings, vector_norm
 
 __all__ = ["LeastSquares", "gauss_newton", "geometry", "clear_held", "RIGID_GAUGE_WEIGHT", "ABSORBED_COLUMN_RTOL",
            "ABSORBED_RTOL", "INVALID_RESIDUAL"]
@@ -185,8 +185,7 @@ class LeastSquares:
         self.d_full0 = _held_readings(nominal, self.theta0, self.obs.normal, self.obs.offset)
         self.u0S = nominal.direction[S]
         self.basis0 = direction_basis(self.u0S)
-        # the Jacobian's chart (as jacobian_tangent; np.linalg.norm's sum of squares without its dispatch)
-        self.u0n = self.u0S / np.sqrt(np.add.reduce(self.u0S * self.u0S, axis=1, keepdims=True))
+        self.u0n = self.u0S / vector_norm(self.u0S, axis=1, keepdims=True)  # the Jacobian's chart (as jacobian_tangent)
         self.basis_n = direction_basis(self.u0n)
         self.fixed = [None if c.uses_d0 else c.basis(self.d_full0, self.cov) for c in self.free]
 
@@ -385,7 +384,7 @@ def gauss_newton(fun, jac, x0, loss, max_iter=GN_MAX_ITER, tol=GN_TOL):
         else:
             w = 1.0 / np.sqrt(np.sqrt(1 + r * r))
             Jw, rw = J * w[:, None], r * w
-        scale = np.sqrt(np.add.reduce(Jw * Jw, axis=0))  # np.linalg.norm(Jw, axis=0), without its checks
+        scale = vector_norm(Jw, axis=0)
         scale = np.where(scale > 0, scale, 1.0)
         Js = Jw / scale
         step = -np.linalg.lstsq(Js, rw, rcond=1e-12)[0] / scale

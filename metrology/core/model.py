@@ -34,6 +34,7 @@ __all__ = [
     "readings",
     "jacobian_raw",
     "direction_basis",
+    "vector_norm",
     "direction_from_tangent",
     "tangent_from_direction",
     "jacobian_tangent",
@@ -47,12 +48,18 @@ __all__ = [
 PARAMS_RAW = ("x", "y", "z", "m", "n", "q")
 
 
+def vector_norm(v, axis=-1, keepdims=False):
+    """``np.linalg.norm(v, axis=axis, keepdims=keepdims)`` of a float array without its dispatch: the same sum of
+    squares, so the same bits. For the small arrays of the calibration's and the diagnosis' inner loops
+    (``readings`` is called ~60,000 times a diagnosis), where the dispatch costs more than the sum."""
+    return np.sqrt(np.add.reduce(v * v, axis=axis, keepdims=keepdims))
+
+
 def _geometry(zero, direction, normal, offset):
     """Broadcast inputs; return (s, nu, unorm, direction, normal) with s, nu (p, n), unorm (1, n).
 
     Called ~60,000 times a diagnosis on a few sensors and ~100 poses, so per-call overhead counts:
-    ``unorm`` is ``np.linalg.norm(direction, axis=1)`` without its dispatch (the same sum, so the same
-    bits), and ``atleast_2d``/``atleast_1d`` are called only where they change something."""
+    ``unorm`` by :func:`vector_norm`, and ``atleast_2d``/``atleast_1d`` called only where they change something."""
     zero = np.asarray(zero, dtype=float)
     direction = np.asarray(direction, dtype=float)
     normal = np.asarray(normal, dtype=float)
@@ -69,7 +76,7 @@ def _geometry(zero, direction, normal, offset):
         raise ValueError(f"plane: normal (p, 3) and offset (p,) expected, got {normal.shape}, {offset.shape}")
     s = -(normal @ zero.T + offset[:, None])  # (p, n): signed distance of E behind the plane
     nu = normal @ direction.T  # (p, n)
-    unorm = np.sqrt(np.add.reduce(direction * direction, axis=1))[None, :]  # (1, n)
+    unorm = vector_norm(direction, axis=1)[None, :]  # (1, n)
     return s, nu, unorm, direction, normal
 
 

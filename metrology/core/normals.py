@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from metrology.core.model import vector_norm
 from metrology.core.tolerances import UNIT_NORM
 
 __all__ = [
@@ -42,7 +43,7 @@ def projection_points(zero, direction, d):
     """
     zero = np.asarray(zero, dtype=float)
     direction = np.asarray(direction, dtype=float)
-    norms = _norm(direction, axis=1)
+    norms = vector_norm(direction, axis=1)
     if np.any(np.abs(norms - 1.0) > UNIT_NORM):
         raise ValueError(f"Eq. 17 needs unit beam directions, got norms {np.round(norms, 9).tolist()}")
     d = np.atleast_2d(np.asarray(d, dtype=float))
@@ -51,15 +52,9 @@ def projection_points(zero, direction, d):
 
 def _orient(n, toward):
     """Flip normals ``(p, 3)`` so that ``n . toward >= 0``; normalise."""
-    n = n / _norm(n, axis=-1, keepdims=True)
+    n = n / vector_norm(n, axis=-1, keepdims=True)
     sign = np.where(np.add.reduce(n * toward, axis=-1, keepdims=True) < 0, -1.0, 1.0)
     return n * sign
-
-
-def _norm(v, axis, keepdims=False):
-    """``np.linalg.norm(v, axis=axis)`` of a float array without its dispatch: the same sum of
-    squares, so the same bits (a held-out fold asks for a few thousand small normals)."""
-    return np.sqrt(np.add.reduce(v * v, axis=axis, keepdims=keepdims))
 
 
 def _cross(a, b):
@@ -92,7 +87,7 @@ def normal_eq18(S, toward=(0.0, 0.0, 1.0)):
     # S21 x S41, S21 x S32, S32 x S43, S41 x S43 as one (..., 4, 3) array
     edge = S[..., [1, 3, 2, 3], :] - S[..., [0, 0, 1, 2], :]
     corners = _cross(edge[..., [0, 0, 2, 1], :], edge[..., [1, 2, 3, 3], :])
-    corners = corners / _norm(corners, axis=-1, keepdims=True)
+    corners = corners / vector_norm(corners, axis=-1, keepdims=True)
     return _orient(sum(corners[..., i, :] for i in range(4)) / 4.0, np.asarray(toward, dtype=float))
 
 
