@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrology.calibration.kept import Kept, array_key
+from metrology.calibration.kept import Kept, content_key
 from metrology.core.effects import ExtendedModel
 from metrology.core.model import direction_basis, direction_from_tangent, jacobian_raw, readings, vector_norm
 
@@ -119,7 +119,7 @@ def _held_readings(nominal, theta0, normal, offset):
         d.flags.writeable = False
         return d
 
-    return _HELD.get(array_key(nominal.zero, nominal.direction, theta0, normal, offset), compute)
+    return _HELD.get(content_key(nominal.zero, nominal.direction, theta0, normal, offset), compute)
 
 
 def clear_held() -> None:

@@ -26,7 +26,7 @@ import numpy as np
 
 from metrology.calibration.fitted import Calibration, _finish, _pose_order
 from metrology.calibration.kalman import DEFAULT_P0_SIGMA, ekf, ekf_paper, iekf
-from metrology.calibration.kept import Kept, array_key
+from metrology.calibration.kept import Kept, content_key
 from metrology.core.layout import SensorLayout
 from metrology.core.model import direction_basis, direction_from_tangent
 from metrology.core.observations import Observations
@@ -119,8 +119,8 @@ _KEPT = Kept(LSQ_KEPT)
 def _problem_key(nominal, i, obs, loss, f_scale) -> bytes:
     """A digest of everything sensor ``i``'s fit depends on: its nominal zero point and direction,
     the datum in each pose's TCS, its readings, the loss and its scale."""
-    return array_key(nominal.zero[i], nominal.direction[i], obs.normal, obs.offset, obs.d[:, i],
-                     text=f"{loss}:{float(f_scale)!r}")
+    return content_key(nominal.zero[i], nominal.direction[i], obs.normal, obs.offset, obs.d[:, i], loss,
+                       float(f_scale))
 
 
 def _lsq_base(nominal, i, obs, loss="linear", f_scale=1.0):

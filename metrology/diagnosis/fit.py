@@ -11,7 +11,8 @@ No fit computed twice: the results of the diagnosis' fits are kept by the conten
 A diagnosis fits the same model to the same poses many times over: every one-sensor candidate's
 k-fold refits the other sensors' base model on each fold, and a selection scores a candidate
 again given the same causes. :func:`memoised` keeps a function's results in a bounded store
-keyed by a digest of everything the result depends on (:func:`content_key`: the bytes and shape
+keyed by a digest of everything the result depends on
+(:func:`~metrology.calibration.kept.content_key`: the bytes and shape
 of every array, the class and fields of every dataclass, the ``repr`` of every other value), so
 a hit returns what the call would have computed. The arrays of a kept result are made read-only:
 a caller that wrote into a shared result would raise instead of changing another's.
@@ -21,14 +22,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
 import inspect
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from metrology.calibration.engine import LeastSquares, clear_held, gauss_newton, geometry
+from metrology.calibration.kept import Kept, content_key
 from metrology.core.effects import Covariates, ExtendedModel
 from metrology.core.layout import SensorLayout
 from metrology.core.model import PARAMS_TANGENT, direction_from_tangent
@@ -37,7 +37,7 @@ from metrology.diagnosis.stats import Battery, NoiseTests, battery_rng, noise_te
 
 __all__ = ["FitData", "FitOptions", "Fit", "fit", "fit_any", "with_base", "gauss_newton", "geometry", "dof_per_sensor", "judged_residuals",
            "residual_battery",
-           "content_key", "memoised", "freeze", "clear_all", "new_store", "MAX_KEPT"]
+           "memoised", "freeze", "clear_all", "new_store", "MAX_KEPT"]
 
 
 # -- no fit computed twice: results kept by the content of their inputs ------------------------
@@ -47,9 +47,9 @@ MAX_KEPT = 4096
 _STORES: list = []  # every memoised function's store (clear_all)
 
 
-def new_store() -> OrderedDict:
-    """An empty store of kept results that :func:`clear_all` clears too."""
-    store: OrderedDict = OrderedDict()
+def new_store(size: int = MAX_KEPT) -> Kept:
+    """An empty store of at most ``size`` kept results that :func:`clear_all` clears too."""
+    store = Kept(size)
     _STORES.append(store)
     return store
 
@@ -59,57 +59,6 @@ def clear_all() -> None:
     for store in _STORES:
         store.clear()
     clear_held()
-
-
-def content_key(*values) -> bytes:
-    """A digest of ``values``: arrays by dtype, shape and bytes; dataclasses by class and fields;
-    tuples, lists and dicts by their items; anything else by ``repr``."""
-    h = hashlib.blake2b(digest_size=20)
-    _feed(h, values)
-    return h.digest()
-
-
-def _feed(h, v):
-    if isinstance(v, np.ndarray):
-        h.update(f"a{v.dtype.str}{v.shape}".encode())
-        h.update(np.ascontiguousarray(v).tobytes())
-    elif dataclasses.is_dataclass(v) and not isinstance(v, type):
-        h.update(_dataclass_digest(v))
-    elif isinstance(v, (tuple, list)):
-        h.update(b"(")
-        for a in v:
-            _feed(h, a)
-        h.update(b")")
-    elif isinstance(v, dict):
-        h.update(b"{")
-        for k in sorted(v, key=repr):
-            _feed(h, k)
-            _feed(h, v[k])
-        h.update(b"}")
-    else:
-        h.update(f"{type(v).__qualname__}:{v!r};".encode())
-
-
-def _dataclass_digest(v) -> bytes:
-    """The digest of a dataclass instance by class and fields; a frozen one's is kept on the
-    instance (its fields cannot be rebound), so the covariates and fold subsets keyed again at
-    every fit are read once. The contract: an array inside a frozen instance passed to a
-    memoised function is not written to afterwards (the diagnosis writes into none; an
-    instance's digest read afresh at every call costs 16 % of a diagnosis)."""
-    frozen = type(v).__dataclass_params__.frozen and hasattr(v, "__dict__")
-    if frozen and _DIGEST in v.__dict__:
-        return v.__dict__[_DIGEST]
-    h = hashlib.blake2b(digest_size=20)
-    h.update(f"d{type(v).__module__}.{type(v).__qualname__}(".encode())
-    for f in dataclasses.fields(v):
-        _feed(h, getattr(v, f.name))
-    d = h.digest()
-    if frozen:
-        object.__setattr__(v, _DIGEST, d)
-    return d
-
-
-_DIGEST = "_memo_content_digest"
 
 
 def freeze(v):
@@ -127,7 +76,7 @@ def freeze(v):
 
 def memoised(fn):
     """Decorator: keep the results of ``fn`` by the content of every argument it is called with
-    (bound to its signature, defaults applied, passed to :func:`content_key`), at most
+    (bound to its signature, defaults applied, passed to :func:`~metrology.calibration.kept.content_key`), at most
     :data:`MAX_KEPT` of them. An argument given as a list where an array was given before is a
     different key (a miss, never a wrong hit)."""
     sig = inspect.signature(fn)
@@ -137,16 +86,7 @@ def memoised(fn):
     def inner(*args, **kwargs):
         bound = sig.bind(*args, **kwargs)
         bound.apply_defaults()
-        key = content_key(tuple(bound.arguments.values()))
-        hit = store.get(key)
-        if hit is not None:
-            store.move_to_end(key)
-            return hit
-        out = freeze(fn(*args, **kwargs))
-        store[key] = out
-        if len(store) > MAX_KEPT:
-            store.popitem(last=False)
-        return out
+        return store.get(content_key(tuple(bound.arguments.values())), lambda: freeze(fn(*args, **kwargs)))
 
     inner.cache_clear = store.clear
     inner.uncached = fn

@@ -10,7 +10,8 @@ from metrology.core.effects import Outliers
 from metrology.core.model import readings
 from metrology.calibration.dataset import Dataset
 from metrology.calibration.engine import LeastSquares
-from metrology.diagnosis.fit import Fit, FitData, _fit_result, content_key, fit_any, freeze, geometry, memoised, new_store, with_base
+from metrology.calibration.kept import content_key
+from metrology.diagnosis.fit import Fit, FitData, _fit_result, fit_any, freeze, geometry, memoised, new_store, with_base
 from metrology.diagnosis.foldfit import FoldBatch
 
 __all__ = ["folds", "heldout_eval", "HeldOut", "kfold", "beyond_span", "Problem"]
@@ -184,23 +185,21 @@ def _fold_fits(nominal, sigma, components, theta0, sets):
             for cs, (_, _, obs_t, cov_t) in zip(comps, sets)]
 
 
-_TRAINING = new_store()  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)
+_TRAINING = new_store(8)  # content key of (obs, cov, k) -> its folds' training sets (the last few data sets)
 
 
 def _training_sets(obs, cov, k):
     """``[(test, train, obs of train, cov of train)]`` per fold: made once per data set, so the
     fits of every candidate on a fold see the same objects (their content keyed once)."""
-    key = content_key(obs, cov, int(k))
-    if key not in _TRAINING:
-        if len(_TRAINING) >= 8:
-            _TRAINING.popitem(last=False)
+    def make():
         p = obs.n_poses
         sets = []
         for test in folds(p, k):
             train = np.setdiff1d(np.arange(p), test)
             sets.append((test, train, obs.select(train), cov.select(train)))
-        _TRAINING[key] = freeze(sets)
-    return _TRAINING[key]
+        return freeze(sets)
+
+    return _TRAINING.get(content_key(obs, cov, int(k)), make)
 
 
 @dataclass(frozen=True)

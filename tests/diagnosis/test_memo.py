@@ -7,9 +7,9 @@ import pytest
 
 from metrology.core.effects import Drift, Nonlinearity, PoseError
 from metrology.diagnosis import covariates_for
-from metrology.diagnosis.fit import FitData, FitOptions, fit, fit_any
+from metrology.calibration.kept import content_key
+from metrology.diagnosis.fit import FitData, FitOptions, clear_all, fit, fit_any
 from metrology.diagnosis.heldout import _solve_per_pose, kfold
-from metrology.diagnosis.fit import clear_all, content_key
 from metrology.sim.synth import HiddenEffect
 
 from .helpers import FOLDS, run
